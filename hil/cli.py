@@ -1,0 +1,64 @@
+"""`hil`: the command line. Each subcommand lives in the room that owns it.
+
+A command module provides `configure(parser)` (adds its arguments) and `main(args) -> int`.
+Modules are imported only when their command runs, so `hil --help` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# name -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "run": ("hil.plan.cli", "run plans on a bench (default: every shipped plan, virtual bench)"),
+    "drive": ("hil.faces.cli", "run one virtual ASDA-A3 as its own process on given transports"),
+    "check": ("hil.timing.cli", "re-check timing specs on a recording, offline"),
+    "report": ("hil.report.cli", "render an HTML report from a recording"),
+    "inspect": ("hil.record.cli", "summarise (and repair) an MCAP recording"),
+    "export": ("hil.record.export_cli", "export a recording's CAN traffic (candump, python-can)"),
+    "gateway": ("hil.gateway.cli", "export a bench's buses over zenoh"),
+}
+
+
+def _load(name: str):
+    return importlib.import_module(COMMANDS[name][0])
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hil",
+        description="Hardware-in-the-loop test harness for servo drives "
+        "(real benches or the built-in virtual Delta ASDA-A3).",
+    )
+    from hil import __version__
+
+    parser.add_argument("--version", action="version", version=f"hil {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    wanted = None
+    if argv:
+        wanted = next((a for a in argv if not a.startswith("-")), None)
+    for name, (_module, help_text) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        if name == wanted:  # only the command being run pays for its imports
+            _load(name).configure(p)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(argv)
+    args = parser.parse_args(argv)
+    if not args.command:
+        parser.print_help()
+        return 2
+    try:
+        return int(_load(args.command).main(args) or 0)
+    except KeyboardInterrupt:
+        print("hil: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,62 @@
+"""Events the model emits to whoever subscribed (faces, recorder). `t` is model time in ns."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class DoChanged:
+    """A DO line changed electrical level (True = output transistor conducting)."""
+
+    t: int
+    n: int
+    level: bool
+    function: str  # e.g. "BRKR", "ABSR", "" when unmapped
+
+
+@dataclass(frozen=True, slots=True)
+class FdbkChanged:
+    """The STO feedback output FDBK changed (True = closed / short)."""
+
+    t: int
+    closed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class StateChanged:
+    """The CiA 402 state changed (names as in CiA 402, e.g. "OPERATION ENABLED")."""
+
+    t: int
+    old: str
+    new: str
+
+
+@dataclass(frozen=True, slots=True)
+class AlarmChanged:
+    """An alarm or warning became active (active=True) or was cleared."""
+
+    t: int
+    code: str  # "AL500"
+    active: bool
+    emcy_code: int  # CiA 301/402 error code for the EMCY producer (0 when cleared/unknown)
+
+
+@dataclass(frozen=True, slots=True)
+class ParamChanged:
+    """A parameter's stored value changed (name like "P3.000")."""
+
+    t: int
+    name: str
+    value: int
+
+
+@dataclass(frozen=True, slots=True)
+class PowerCycled:
+    """The drive was power cycled (battery: whether the absolute encoder kept its data)."""
+
+    t: int
+    battery: bool
+
+
+DriveEvent = DoChanged | FdbkChanged | StateChanged | AlarmChanged | ParamChanged | PowerCycled

@@ -1,0 +1,74 @@
+"""The model's time base: integer nanoseconds and a deterministic event scheduler.
+
+The model never reads a wall clock. Whoever owns the drive advances time: a test calls
+`Drive.advance(10 * MS)`, the real-time runner calls `Drive.advance_to(monotonic_ns())`.
+Timers scheduled for the same instant fire in the order they were scheduled.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+NS = 1
+US = 1_000
+MS = 1_000_000
+S = 1_000_000_000
+
+
+def ms(value: float) -> int:
+    """Milliseconds to integer nanoseconds."""
+    return round(value * MS)
+
+
+@dataclass(order=True)
+class Timer:
+    """A scheduled callback; `cancel()` it to stop it firing."""
+
+    deadline: int
+    seq: int
+    callback: Callable[[], None] = field(compare=False)
+    cancelled: bool = field(default=False, compare=False)
+
+    def cancel(self) -> None:
+        self.cancelled = True
+
+
+class Scheduler:
+    """Timer heap on an injected clock (ns). `now` only moves forward."""
+
+    def __init__(self, t0: int = 0) -> None:
+        self.now: int = t0
+        self._heap: list[Timer] = []
+        self._seq = itertools.count()
+
+    def at(self, deadline: int, callback: Callable[[], None]) -> Timer:
+        """Run `callback` when time reaches `deadline` (ns, absolute)."""
+        timer = Timer(max(deadline, self.now), next(self._seq), callback)
+        heapq.heappush(self._heap, timer)
+        return timer
+
+    def after(self, delay: int, callback: Callable[[], None]) -> Timer:
+        """Run `callback` `delay` ns from now."""
+        return self.at(self.now + delay, callback)
+
+    def next_deadline(self) -> int | None:
+        """Deadline of the earliest live timer, or None."""
+        heap = self._heap
+        while heap and heap[0].cancelled:
+            heapq.heappop(heap)
+        return heap[0].deadline if heap else None
+
+    def run_due(self) -> int:
+        """Fire every live timer whose deadline is <= now; return how many fired."""
+        fired = 0
+        heap = self._heap
+        while heap and heap[0].deadline <= self.now:
+            timer = heapq.heappop(heap)
+            if not timer.cancelled:
+                timer.cancelled = True
+                timer.callback()
+                fired += 1
+        return fired
