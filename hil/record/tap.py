@@ -1,0 +1,37 @@
+"""What a transport calls to have its traffic recorded. The recorder implements `Tap`.
+
+Timestamps are integer ns. `t` is when the harness saw the traffic (`time.time_ns()` on
+the wall clock the recorder uses); `source_t` is the source's own timestamp (hardware, model
+or gateway capture time) when it has one, else None.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+
+class Tap(Protocol):
+    def can(self, bus: str, frame: Any, direction: str, t: int, source_t: int | None) -> None:
+        """A CAN frame (a `can.Message`), direction "rx" or "tx"."""
+
+    def serial(
+        self, port: str, data: bytes, direction: str, t: int, source_t: int | None,
+        gaps_us: list[int] | None = None,
+    ) -> None:
+        """A chunk of RS-485 bytes, with the gaps between them where known."""
+
+    def dio(self, name: str, line: str, level: bool, t: int, source_t: int | None) -> None:
+        """A DI/DO/STO line level (electrical: True = closed/conducting)."""
+
+
+class NullTap:
+    """A tap that records nothing (the default)."""
+
+    def can(self, bus, frame, direction, t, source_t):  # noqa: D102
+        pass
+
+    def serial(self, port, data, direction, t, source_t, gaps_us=None):  # noqa: D102
+        pass
+
+    def dio(self, name, line, level, t, source_t):  # noqa: D102
+        pass
