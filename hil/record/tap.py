@@ -27,11 +27,11 @@ class Tap(Protocol):
 class NullTap:
     """A tap that records nothing (the default)."""
 
-    def can(self, bus, frame, direction, t, source_t):  # noqa: D102
+    def can(self, bus, frame, direction, t, source_t):
         pass
 
-    def serial(self, port, data, direction, t, source_t, gaps_us=None):  # noqa: D102
+    def serial(self, port, data, direction, t, source_t, gaps_us=None):
         pass
 
-    def dio(self, name, line, level, t, source_t):  # noqa: D102
+    def dio(self, name, line, level, t, source_t):
         pass
