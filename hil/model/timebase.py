@@ -72,3 +72,13 @@ class Scheduler:
                 timer.callback()
                 fired += 1
         return fired
+
+    def advance_to(self, t: int) -> None:
+        """Fire timers in deadline order, each at its own deadline, then set `now = t`."""
+        while True:
+            nxt = self.next_deadline()
+            if nxt is None or nxt > t:
+                break
+            self.now = max(self.now, nxt)
+            self.run_due()
+        self.now = max(self.now, t)

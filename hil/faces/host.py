@@ -1,0 +1,101 @@
+"""Runs a model drive in real time and shares it safely between faces.
+
+`DriveHost` owns the lock every face holds while it touches the drive, and a ticker thread
+that advances the model clock to the monotonic clock every `period_s` (1 ms by default,
+absolute deadlines: feasibility §7) and then calls each face's `tick(now_ns)`.
+Model time starts at 0 when the host starts; `wall_ns(t)` maps it to epoch ns for records.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+
+class DriveHost:
+    """Real-time owner of one `Drive`: lock, ticker thread, tick callbacks."""
+
+    def __init__(self, drive: Any, *, period_s: float = 0.001) -> None:
+        self.drive = drive
+        self.lock = threading.RLock()
+        self.period_s = period_s
+        self._ticks: list[Callable[[int], None]] = []
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._mono0 = time.monotonic_ns() - drive.now
+        self._wall0 = time.time_ns() - drive.now
+        self.errors: list[BaseException] = []
+
+    # -- time --------------------------------------------------------------------------------
+    def model_now(self) -> int:
+        """Model time that corresponds to the monotonic clock now."""
+        return time.monotonic_ns() - self._mono0
+
+    def wall_ns(self, t_model: int) -> int:
+        """Epoch ns of a model timestamp (for `publish_time`)."""
+        return self._wall0 + t_model
+
+    # -- faces -------------------------------------------------------------------------------
+    def add_tick(self, fn: Callable[[int], None]) -> None:
+        """Call `fn(model_now_ns)` after each model advance, under the lock."""
+        with self.lock:
+            self._ticks.append(fn)
+
+    def remove_tick(self, fn: Callable[[int], None]) -> None:
+        with self.lock:
+            if fn in self._ticks:
+                self._ticks.remove(fn)
+
+    def call(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """Bring the model up to now, then run `fn` under the lock."""
+        with self.lock:
+            self._advance()
+            return fn(*args, **kwargs)
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def start(self) -> DriveHost:
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="drive-host", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def __enter__(self) -> DriveHost:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _advance(self) -> None:
+        now = self.model_now()
+        if now > self.drive.now:
+            self.drive.advance_to(now)
+
+    def _run(self) -> None:
+        period = int(self.period_s * 1e9)
+        deadline = time.monotonic_ns()
+        while not self._stop.is_set():
+            deadline += period
+            with self.lock:
+                try:
+                    self._advance()
+                    now = self.drive.now
+                    for fn in list(self._ticks):
+                        fn(now)
+                except Exception as exc:  # a face bug must not stop the drive clock
+                    self.errors.append(exc)
+                    if len(self.errors) > 100:
+                        del self.errors[:50]
+            delay = deadline - time.monotonic_ns()
+            if delay > 0:
+                time.sleep(delay / 1e9)
+            elif delay < -50 * period:  # fell far behind (suspended?): resynchronise
+                deadline = time.monotonic_ns()

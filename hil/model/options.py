@@ -1,0 +1,92 @@
+"""Every choice the manual leaves open, and every deliberate deviation, as named options.
+
+Two kinds of fields:
+
+* **choices** resolve an ambiguity or gap of the ASDA-A3 manual; the default is the reading
+  documented in `docs/manual-choices.md` with its manual line. A real drive may prove another
+  reading right: set the option in the bench file instead of editing code.
+* **deviations** (prefix `dev_`) make the virtual drive deliberately *wrong*, so tests can
+  prove that the timing checker catches a drive that breaks the manual. They default to the
+  faithful behaviour (0 / False / None).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+# STO FDBK output per (STO_A on, STO_B on): True = closed. As printed in the state table
+# §3.10.3, L2454-2468 ("Open, Close, Open, Open"), which the digest flags as doubtful.
+FDBK_AS_PRINTED: dict[tuple[bool, bool], bool] = {
+    (True, True): False,
+    (True, False): True,
+    (False, True): False,
+    (False, False): False,
+}
+# Alternative reading: FDBK closes whenever STO has cut the torque (any channel lost).
+FDBK_STO_ACTIVE: dict[tuple[bool, bool], bool] = {
+    (True, True): False,
+    (True, False): True,
+    (False, True): True,
+    (False, False): True,
+}
+
+
+@dataclass
+class ModelOptions:
+    """Choices and deviation knobs of the virtual drive (see docs/manual-choices.md)."""
+
+    # --- brake, §2.9 ---
+    # Negative P1.043 on a normal servo off is never defined (L8503-8516). "brake_first":
+    # BRKR drops at once and torque is held |P1.043| ms longer; "as_zero": treated as 0.
+    negative_p1043: str = "brake_first"
+    # Reference event of P1.043: the servo-off instant (L1361) rather than SRDY off (L8510).
+    # "Below P1.038" is a level test, so a motor already at rest engages at once (L1362).
+    # --- STO, §3.10 ---
+    sto_torque_cut_ms: float = 1.0  # hardware cuts torque "within 20 ms" (L2474)
+    sto_both_lost_ms: float = 10.0  # both lost 10 ms -> AL500 (L2478)
+    sto_one_lost_ms: float = 1000.0  # one lost 1 s -> AL501 / AL502 (L2482, L2487)
+    # Torque returns when both channels are back before any alarm (gap in §3.10.4, L2482).
+    sto_resume_after_dropout: bool = True
+    fdbk_table: dict[tuple[bool, bool], bool] = field(
+        default_factory=lambda: dict(FDBK_AS_PRINTED)
+    )
+    # --- servo on / CiA 402 ---
+    # Servo-on request = DI.SON or the CiA 402 state OPERATION ENABLED (both routes exist
+    # on an A3-M; the manual does not say one disables the other).
+    son_sources: tuple[str, ...] = ("DI", "CANOPEN")
+    # SON held through an alarm reset re-enables the servo (SON is level-triggered, L15079).
+    son_level_reenables: bool = True
+    # --- timing of the model's outputs ---
+    motion_step_ms: float = 1.0  # integration substep while anything moves
+    state_publish_ms: float = 10.0  # ground-truth snapshots when recorded
+    # --- deviations (deliberately wrong drive) ---
+    dev_brake_on_delay_ms: float = 0.0  # added to P1.042 (e.g. 5: BRKR 5 ms late)
+    dev_brake_off_delay_ms: float = 0.0  # added to the P1.043 rule
+    dev_ignore_speed_rule: bool = False  # BRKR off waits P1.043 even when stopped
+    dev_sto_both_lost_ms: float | None = None  # e.g. 15: AL500 acknowledged after 15 ms
+    dev_sto_one_lost_ms: float | None = None  # e.g. 500: AL501 too early
+    dev_al501_cleared_by_arst: bool = False  # AL501/AL502 wrongly cleared by ARST
+    dev_arst_on_falling_edge: bool = False  # alarm reset on the wrong edge
+    dev_emgs_ignores_negative_rule: bool = False  # negative P1.043 honoured on EMGS stops
+    extra: dict[str, Any] = field(default_factory=dict)  # options of other rooms (homing, abs)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any] | None, where: str = "options") -> ModelOptions:
+        """Build from a bench file's `options:` mapping; unknown keys are an error."""
+        data = dict(data or {})
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(
+                f"{where}: unknown model option(s) {', '.join(unknown)}; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        if "fdbk_table" in data and isinstance(data["fdbk_table"], str):
+            tables = {"as_printed": FDBK_AS_PRINTED, "sto_active": FDBK_STO_ACTIVE}
+            if data["fdbk_table"] not in tables:
+                raise ValueError(f"{where}.fdbk_table: one of {', '.join(tables)}")
+            data["fdbk_table"] = dict(tables[data["fdbk_table"]])
+        if data.get("negative_p1043", "brake_first") not in ("brake_first", "as_zero"):
+            raise ValueError(f"{where}.negative_p1043: 'brake_first' or 'as_zero'")
+        return cls(**data)

@@ -1,0 +1,127 @@
+"""Safe Torque Off, two channels (section 3.10, L2378-2515). A3-M only (L2384).
+
+* Either channel lost: the hardware cuts motor current within 20 ms (L2474);
+  `ModelOptions.sto_torque_cut_ms` (default 1 ms) is when the model's power stage drops.
+* Both channels lost for 10 ms: servo off + AL500 (L2478). Clearable by ARST / P0.001 = 0 /
+  6040h fault reset once both channels are back (L2493, L20199).
+* One channel lost (or A and B out of step) for 1 s: servo off + AL501 (A lost) or AL502
+  (B lost) (L2482, L2487, L20203, L20209); cleared only by a power cycle (L20205, L20211).
+* Restored signals never clear an alarm by themselves (L2493).
+
+The printed state table (L2454-2468) maps the alarms the other way round; the notes and
+chapter 13 agree with the mapping above (see docs/manual-choices.md). When both channels
+drop with a skew, the 1 s discrepancy timer stops once both are low: AL500 takes over.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from hil.model.options import ModelOptions
+from hil.model.timebase import Scheduler, Timer, ms
+
+
+class Sto:
+    """STO_A / STO_B inputs, torque cut, AL500/AL501/AL502 and the FDBK output."""
+
+    def __init__(
+        self,
+        sched: Scheduler,
+        raise_alarm: Callable[[str], None],
+        set_cause: Callable[[str, bool], None],
+        on_torque_cut: Callable[[bool], None],
+        on_fdbk: Callable[[bool], None],
+        options: ModelOptions,
+    ) -> None:
+        self._sched = sched
+        self._raise = raise_alarm
+        self._set_cause = set_cause
+        self._on_cut = on_torque_cut
+        self._on_fdbk = on_fdbk
+        self._opt = options
+        self.a = True  # 24 V present on STO_A
+        self.b = True
+        self.torque_cut = False
+        self.fdbk = options.fdbk_table[(True, True)]
+        self._cut_timer: Timer | None = None
+        self._both_timer: Timer | None = None
+        self._one_timer: Timer | None = None
+
+    @property
+    def ok(self) -> bool:
+        """Both channels present and torque not cut."""
+        return self.a and self.b and not self.torque_cut
+
+    def set_channel(self, channel: str, on: bool) -> None:
+        """Electrical level of STO_A ("A") or STO_B ("B"): True = 24 V present."""
+        ch = channel.upper().removeprefix("STO_")
+        if ch not in ("A", "B"):
+            raise ValueError(f"unknown STO channel {channel!r}: use 'A' or 'B'")
+        if (self.a if ch == "A" else self.b) == on:
+            return
+        if ch == "A":
+            self.a = on
+        else:
+            self.b = on
+        self._update()
+
+    def reset(self) -> None:
+        """Power cycle: timers gone, state from the current inputs."""
+        for t in (self._cut_timer, self._both_timer, self._one_timer):
+            if t:
+                t.cancel()
+        self._cut_timer = self._both_timer = self._one_timer = None
+        self.torque_cut = False
+        self._on_cut(False)
+        self._update()
+
+    # -- internals -------------------------------------------------------------------------
+    def _update(self) -> None:
+        a, b = self.a, self.b
+        fdbk = self._opt.fdbk_table[(a, b)]
+        if fdbk != self.fdbk:
+            self.fdbk = fdbk
+            self._on_fdbk(fdbk)
+        self._set_cause("AL500", not a and not b)
+        self._set_cause("AL501", not a and b)
+        self._set_cause("AL502", a and not b)
+        lost = not (a and b)
+        # hardware torque cut (L2474)
+        if lost and not self.torque_cut and self._cut_timer is None:
+            self._cut_timer = self._sched.after(ms(self._opt.sto_torque_cut_ms), self._cut)
+        if not lost:
+            if self._cut_timer:
+                self._cut_timer.cancel()
+                self._cut_timer = None
+            if self.torque_cut and self._opt.sto_resume_after_dropout:
+                self.torque_cut = False
+                self._on_cut(False)
+        # both lost for 10 ms -> AL500 (L2478)
+        if not a and not b:
+            if self._both_timer is None:
+                both = self._opt.dev_sto_both_lost_ms or self._opt.sto_both_lost_ms
+                self._both_timer = self._sched.after(ms(both), lambda: self._alarm("AL500"))
+        elif self._both_timer:
+            self._both_timer.cancel()
+            self._both_timer = None
+        # exactly one lost for 1 s -> AL501 (A) / AL502 (B) (L2482, L2487)
+        if a != b:
+            if self._one_timer is None:
+                one = self._opt.dev_sto_one_lost_ms or self._opt.sto_one_lost_ms
+                code = "AL501" if not a else "AL502"
+                self._one_timer = self._sched.after(ms(one), lambda: self._alarm(code))
+        elif self._one_timer:
+            self._one_timer.cancel()
+            self._one_timer = None
+
+    def _cut(self) -> None:
+        self._cut_timer = None
+        self.torque_cut = True
+        self._on_cut(True)
+
+    def _alarm(self, code: str) -> None:
+        if code == "AL500":
+            self._both_timer = None
+        else:
+            self._one_timer = None
+        self._raise(code)
