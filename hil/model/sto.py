@@ -22,19 +22,21 @@ from hil.model.timebase import Scheduler, Timer, ms
 
 
 class Sto:
-    """STO_A / STO_B inputs, torque cut, AL500/AL501/AL502 and the FDBK output."""
+    """STO_A / STO_B inputs, torque cut, AL500/AL501/AL502 and the FDBK output.
+
+    `set_cause(code, present)` is the alarm manager's: present=True raises the alarm (the
+    timers above decide when), present=False says the condition behind it has ended.
+    """
 
     def __init__(
         self,
         sched: Scheduler,
-        raise_alarm: Callable[[str], None],
         set_cause: Callable[[str, bool], None],
         on_torque_cut: Callable[[bool], None],
         on_fdbk: Callable[[bool], None],
         options: ModelOptions,
     ) -> None:
         self._sched = sched
-        self._raise = raise_alarm
         self._set_cause = set_cause
         self._on_cut = on_torque_cut
         self._on_fdbk = on_fdbk
@@ -82,9 +84,14 @@ class Sto:
         if fdbk != self.fdbk:
             self.fdbk = fdbk
             self._on_fdbk(fdbk)
-        self._set_cause("AL500", not a and not b)
-        self._set_cause("AL501", not a and b)
-        self._set_cause("AL502", a and not b)
+        # a condition that ended is no longer a cause (the alarm, if raised, stays)
+        for code, cond in (
+            ("AL500", not a and not b),
+            ("AL501", not a and b),
+            ("AL502", a and not b),
+        ):
+            if not cond:
+                self._set_cause(code, False)
         lost = not (a and b)
         # hardware torque cut (L2474)
         if lost and not self.torque_cut and self._cut_timer is None:
@@ -124,4 +131,4 @@ class Sto:
             self._both_timer = None
         else:
             self._one_timer = None
-        self._raise(code)
+        self._set_cause(code, True)  # raises the alarm; the cause is present now

@@ -108,12 +108,16 @@ class StoRig:
         self.fdbk: list[bool] = []
         self.sto = Sto(
             self.sched,
-            lambda c: self.alarms.append((self.sched.now, c)),
-            self.causes.__setitem__,
+            self._cause,
             lambda v: self.cuts.append((self.sched.now, v)),
             self.fdbk.append,
             options or ModelOptions(),
         )
+
+    def _cause(self, code: str, present: bool) -> None:
+        if present and not self.causes.get(code):
+            self.alarms.append((self.sched.now, code))
+        self.causes[code] = present
 
     def at(self, t: int) -> None:
         self.sched.advance_to(t)

@@ -1,0 +1,439 @@
+"""Digital inputs and outputs: function mapping, a/b contacts, filter, software DI, P0.046.
+
+Inputs: DI1-DI10 (physical contacts) and VDI11-VDI13, mapped by P2.010-P2.017, P2.036-P2.040.
+Outputs: DO1-DO6, mapped by P2.018-P2.022, P2.041. Mapping parameter layout (L9238-9256,
+L9323-9339): low byte YX = function code (table 8.1 / 8.2), digit Z = contact: 0 = b (NC),
+1 = a (NO). A DI function is active when an a-contact is closed or a b-contact is open; a DO
+conducts when its function is true (a) or false (b).
+
+Mapping changes need a power cycle (L9256, L9339): the mapping in effect is read at
+construction and at `power_cycle()`. Choices: docs/choices/alarms-dio.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from hil.model.errors import UnknownFunction
+from hil.model.events import DoChanged
+from hil.model.params import ParameterStore
+from hil.model.timebase import MS, Scheduler, Timer
+
+
+@dataclass(frozen=True, slots=True)
+class Function:
+    code: int
+    symbol: str
+    trigger: str  # "level" | "rising" | "both" ...
+    line: str  # manual line(s)
+
+
+def _table(rows: list[tuple[int, str, str, str]]) -> dict[int, Function]:
+    return {code: Function(code, sym, trig, line) for code, sym, trig, line in rows}
+
+
+# Table 8.1, DI functions (L15075-15255); 0 = DI disabled (L15255).
+DI_FUNCTIONS: dict[int, Function] = _table(
+    [
+        (0x01, "SON", "level", "L15079"),
+        (0x02, "ARST", "rising", "L15082"),
+        (0x03, "GAINUP", "level", "L15085"),
+        (0x04, "CCLR", "rising/level", "L15088"),
+        (0x05, "ZCLAMP", "level", "L15091"),
+        (0x06, "CMDINV", "level", "L15094"),
+        (0x08, "CTRG", "rising", "L15098"),
+        (0x09, "TRQLM", "level", "L15101"),
+        (0x0A, "CTRY", "rising", "L15104"),
+        (0x0C, "VPL", "level", "L15107"),
+        (0x0D, "VPRS", "level", "L15113"),
+        (0x0E, "FEC", "rising", "L15117"),
+        (0x10, "SPDLM", "level", "L15121"),
+        (0x11, "POS0", "level", "L15123"),
+        (0x12, "POS1", "level", "L15125"),
+        (0x13, "POS2", "level", "L15127"),
+        (0x1A, "POS3", "level", "L15129"),
+        (0x1B, "POS4", "level", "L15130"),
+        (0x1C, "POS5", "level", "L15131"),
+        (0x1E, "POS6", "level", "L15133"),
+        (0x1D, "ABSE", "level", "L15137"),
+        (0x1F, "ABSC", "rising", "L15141"),
+        (0x14, "SPD0", "level", "L15151"),
+        (0x15, "SPD1", "level", "L15155"),
+        (0x16, "TCM0", "level", "L15162"),
+        (0x17, "TCM1", "level", "L15165"),
+        (0x18, "S-P", "level", "L15172"),
+        (0x19, "S-T", "level", "L15176"),
+        (0x20, "T-P", "level", "L15180"),
+        (0x21, "EMGS", "level", "L15184"),
+        (0x22, "NL", "level", "L15188"),
+        (0x23, "PL", "level", "L15191"),
+        (0x24, "ORGP", "both", "L15194"),
+        (0x27, "SHOM", "rising", "L15197"),
+        (0x2B, "PT-PR", "level", "L15200"),
+        (0x35, "ALGN", "rising", "L15203"),
+        (0x36, "CAM", "both", "L15206"),
+        (0x37, "JOGU", "level", "L15209"),
+        (0x38, "JOGD", "level", "L15212"),
+        (0x39, "EV1", "both", "L15219"),
+        (0x3A, "EV2", "both", "L15224"),
+        (0x3B, "EV3", "both", "L15229"),
+        (0x3C, "EV4", "both", "L15234"),
+        (0x43, "GNUM0", "level", "L15239"),
+        (0x44, "GNUM1", "level", "L15239"),
+        (0x45, "INHP", "level", "L15244"),
+        (0x46, "STP", "rising", "L15249"),
+        (0x47, "PFQS", "rising", "L15253"),
+    ]
+)
+# Functions that only exist through the absolute handshake overlay (L15145).
+OVERLAY_DI_SYMBOLS = ("ABSQ",)
+
+# Table 8.2, DO functions (L15259-15415); 0 = DO disabled (L15405).
+DO_FUNCTIONS: dict[int, Function] = _table(
+    [
+        (0x01, "SRDY", "level", "L15263"),
+        (0x02, "SON", "level", "L15266"),
+        (0x03, "ZSPD", "level", "L15269"),
+        (0x04, "TSPD", "level", "L15272"),
+        (0x05, "TPOS", "level", "L15275"),
+        (0x06, "TQL", "level", "L15278"),
+        (0x07, "ALRM", "level", "L15282"),
+        (0x08, "BRKR", "level", "L15286"),
+        (0x09, "HOME", "level", "L15290"),
+        (0x0D, "ABSW", "level", "L15294"),
+        (0x0E, "IDXD", "level", "L15298"),
+        (0x10, "OLW", "level", "L15304"),
+        (0x11, "WARN", "level", "L15307"),
+        (0x12, "OVF", "level", "L15310"),
+        (0x13, "SNL", "level", "L15313"),
+        (0x14, "SPL", "level", "L15316"),
+        (0x15, "Cmd_OK", "level", "L15319"),
+        (0x16, "CAP_OK", "level", "L15323"),
+        (0x17, "MC_OK", "level", "L15326"),
+        (0x18, "CAM_AREA1", "level", "L15329"),
+        (0x19, "SP_OK", "level", "L15332"),
+        (0x1A, "CAM_AREA2", "level", "L15335"),
+        (0x2C, "Zon1", "level", "L15336-15347"),
+        (0x2D, "Zon2", "level", "L15336-15347"),
+        (0x2E, "Zon3", "level", "L15336-15347"),
+        (0x2F, "Zon4", "level", "L15336-15347"),
+        *[(0x30 + n, f"SPO_{n:X}", "level", "L15353-15403") for n in range(16)],
+    ]
+)
+OVERLAY_DO_SYMBOLS = ("ABSR", "ABSD")  # L15409, L15413
+
+DI_SYMBOLS = {f.symbol: f.code for f in DI_FUNCTIONS.values()}
+DO_SYMBOLS = {f.symbol: f.code for f in DO_FUNCTIONS.values()}
+
+# Mapping parameters: DI1-DI8, DI9-DI10, VDI11-VDI13 (L9238, L9558-9594).
+DI_PARAMS = (
+    "P2.010", "P2.011", "P2.012", "P2.013", "P2.014", "P2.015", "P2.016", "P2.017",
+    "P2.036", "P2.037", "P2.038", "P2.039", "P2.040",
+)  # fmt: skip
+DO_PARAMS = ("P2.018", "P2.019", "P2.020", "P2.021", "P2.022", "P2.041")
+N_PHYSICAL_DI = 10
+N_DI = len(DI_PARAMS)  # 13 incl. VDI11-13
+N_DO = len(DO_PARAMS)
+
+# P0.046 status bits (L7460-7475).
+P0046_BITS = {
+    "SRDY": 0, "SON": 1, "ZSPD": 2, "TSPD": 3, "TPOS": 4, "TQL": 5, "ALRM": 6, "BRKR": 7,
+    "HOME": 8, "OLW": 9, "WARN": 10,
+}  # fmt: skip
+
+FILTER_MODES = ("stable", "delay")
+
+
+class UnknownSymbol(UnknownFunction):
+    """A function symbol that table 8.1 / 8.2 does not define."""
+
+    def __init__(self, kind: str, symbol: str) -> None:
+        Exception.__init__(
+            self, f"unknown {kind} function symbol {symbol!r} (table 8.{1 if kind == 'DI' else 2})"
+        )
+        self.kind = kind
+        self.code = -1
+        self.symbol = symbol
+
+
+def decode_mapping(kind: str, value: int, where: str) -> tuple[int, bool]:
+    """(function code, a_contact) from a P2.0xx value; raises UnknownFunction naming `where`."""
+    code = value & 0xFF
+    table = DI_FUNCTIONS if kind == "DI" else DO_FUNCTIONS
+    if code and code not in table:
+        raise UnknownFunction(kind, code, where)
+    return code, bool((value >> 8) & 0xF)
+
+
+class DigitalIO:
+    """DI/DO logic of one drive. Electrical levels in, electrical levels out."""
+
+    def __init__(
+        self,
+        params: ParameterStore,
+        scheduler: Scheduler,
+        emit: Callable[[DoChanged], None] | None = None,
+        name: str = "drive",
+        *,
+        filter_mode: str = "stable",
+    ) -> None:
+        if filter_mode not in FILTER_MODES:
+            raise ValueError(f"filter_mode {filter_mode!r} not one of {FILTER_MODES}")
+        self.params = params
+        self.scheduler = scheduler
+        self.emit = emit or (lambda event: None)
+        self.name = name
+        self.filter_mode = filter_mode
+        self._raw = [False] * N_PHYSICAL_DI  # contact level at the terminal
+        self._accepted = [False] * N_PHYSICAL_DI  # after the P2.009 filter
+        self._pending: list[Timer | None] = [None] * N_PHYSICAL_DI
+        self._sdi = params.stored("P4.007")
+        self._di_map: list[tuple[int, bool]] = [(0, True)] * N_DI
+        self._do_map: list[tuple[int, bool]] = [(0, True)] * N_DO
+        self._di_state: dict[str, bool] = {}
+        self._do_state: dict[str, bool] = {}
+        self._do_level = [False] * N_DO
+        self._subs: dict[str, list[Callable[[bool], None]]] = {}
+        self._overlay_di: dict[int, str] = {}
+        self._overlay_do: dict[int, str] = {}
+        self._held: dict[str, bool] = {}
+        for p in DI_PARAMS:
+            params.on_validate(p, lambda n, v: decode_mapping("DI", v, n))
+        for p in DO_PARAMS:
+            params.on_validate(p, lambda n, v: decode_mapping("DO", v, n))
+        params.on_write("P3.006", lambda *_: self._update_di())
+        params.on_write("P4.007", self._on_sdi)
+        params.on_write("P4.006", lambda *_: self._update_spo())
+        params.on_read("P4.007", self.di_word)
+        self._apply_mapping()
+
+    # -- mapping --------------------------------------------------------------------------
+
+    def _apply_mapping(self) -> None:
+        self._di_map = [decode_mapping("DI", self.params.get(p), p) for p in DI_PARAMS]
+        self._do_map = [decode_mapping("DO", self.params.get(p), p) for p in DO_PARAMS]
+        self._update_di()
+        self._update_spo()
+        self._update_do()
+
+    def power_cycle(self) -> None:
+        """Re-read the mapping (L9256, L9339), P4.006/P4.007 after their ■ revert."""
+        self._sdi = self.params.stored("P4.007")
+        self.clear_overlay()
+        self._apply_mapping()
+
+    def di_function(self, n: int) -> str:
+        """Symbol of the function mapped to DI n in effect ("" when disabled)."""
+        code, _ = self._di_map[self._di_index(n)]
+        return DI_FUNCTIONS[code].symbol if code else ""
+
+    def do_function(self, n: int) -> str:
+        """Symbol DO n shows now (overlay included; "" when disabled)."""
+        idx = self._do_index(n)
+        if n in self._overlay_do:
+            return self._overlay_do[n]
+        code, _ = self._do_map[idx]
+        return DO_FUNCTIONS[code].symbol if code else ""
+
+    # -- DI side --------------------------------------------------------------------------
+
+    def set_input(self, n: int, closed: bool) -> None:
+        """Physical DI n (1-10) electrical level: True = contact closed (24 V)."""
+        i = self._physical_index(n)
+        closed = bool(closed)
+        pending = self._pending[i]
+        if pending is not None and not pending.cancelled and pending.deadline <= self.scheduler.now:
+            pending.cancel()  # due at this very instant: accept it before the new change
+            self._accept(i, not self._accepted[i])
+        self._raw[i] = closed
+        delay = self.params.get("P2.009") * MS  # L9229-9236
+        if self.filter_mode == "delay":
+            if delay == 0:
+                self._accept(i, closed)
+            else:
+                self.scheduler.after(delay, lambda: self._accept(i, closed))
+            return
+        if pending is not None:
+            pending.cancel()
+            self._pending[i] = None
+        if closed == self._accepted[i]:
+            return
+        if delay == 0:
+            self._accept(i, closed)
+        else:
+            self._pending[i] = self.scheduler.after(delay, lambda: self._accept(i, closed))
+
+    def input_level(self, n: int) -> bool:
+        """Physical terminal level of DI n as last set (before the filter)."""
+        return self._raw[self._physical_index(n)]
+
+    def contact(self, n: int) -> bool:
+        """Contact state of DI n (1-13) after filter and P3.006/P4.007 source selection."""
+        i = self._di_index(n)
+        if (self.params.get("P3.006") >> i) & 1:
+            return bool((self._sdi >> i) & 1)  # software SDI (L10585-10606)
+        return self._accepted[i] if i < N_PHYSICAL_DI else False
+
+    def di_word(self) -> int:
+        """P4.007 as read: the mixed final DI contact states (L10897-10906)."""
+        return sum(1 << i for i in range(N_DI) if self.contact(i + 1))
+
+    def function_active(self, function: str | int) -> bool:
+        """Logical state of a DI function by symbol ("SON") or code (0x01)."""
+        symbol = self._di_symbol(function)
+        return self._di_state.get(symbol, False)
+
+    def on_function(self, function: str | int, fn: Callable[[bool], None]) -> Callable[[], None]:
+        """fn(active) on every change of a DI function; returns an unsubscribe callable."""
+        symbol = self._di_symbol(function)
+        self._subs.setdefault(symbol, []).append(fn)
+        return lambda: self._subs[symbol].remove(fn)
+
+    def _accept(self, i: int, closed: bool) -> None:
+        self._pending[i] = None
+        if self._accepted[i] != closed:
+            self._accepted[i] = closed
+            self._update_di()
+
+    def _on_sdi(self, name: str, old: int, new: int) -> None:
+        self._sdi = new
+        self._update_di()
+
+    def _update_di(self) -> None:
+        state: dict[str, bool] = {}
+        for i, (code, a_contact) in enumerate(self._di_map):
+            n = i + 1
+            if n in self._overlay_di:
+                sym = self._overlay_di[n]
+                state[sym] = state.get(sym, False) or self.contact(n)
+                if code:
+                    held = DI_FUNCTIONS[code].symbol
+                    state[held] = state.get(held, False) or self._held.get(held, False)
+                continue
+            if not code:
+                continue
+            sym = DI_FUNCTIONS[code].symbol
+            active = self.contact(n) == a_contact
+            state[sym] = state.get(sym, False) or active
+        old = self._di_state
+        self._di_state = state
+        for sym in set(old) | set(state):
+            before, after = old.get(sym, False), state.get(sym, False)
+            if before != after:
+                for fn in list(self._subs.get(sym, ())):
+                    fn(after)
+
+    # -- DO side --------------------------------------------------------------------------
+
+    def set_do_function(self, symbol: str, active: bool) -> None:
+        """The drive reports a DO function state (SRDY, SON, ZSPD, BRKR, ALRM, ABSR, ...)."""
+        if symbol not in DO_SYMBOLS and symbol not in OVERLAY_DO_SYMBOLS:
+            raise UnknownSymbol("DO", symbol)
+        active = bool(active)
+        if self._do_state.get(symbol, False) == active:
+            return
+        self._do_state[symbol] = active
+        if symbol in P0046_BITS:
+            self._update_p0046()
+        self._update_do()
+
+    def do_function_state(self, symbol: str) -> bool:
+        return self._do_state.get(symbol, False)
+
+    def do_level(self, n: int) -> bool:
+        """DO n (1-6) electrical level: True = output transistor conducting."""
+        return self._do_level[self._do_index(n)]
+
+    def do_levels(self) -> list[bool]:
+        return list(self._do_level)
+
+    def _update_spo(self) -> None:
+        word = self.params.get("P4.006")  # SPO_0..SPO_F = P4.006 bits (L15353-15403)
+        changed = False
+        for bit in range(16):
+            sym, val = f"SPO_{bit:X}", bool((word >> bit) & 1)
+            if self._do_state.get(sym, False) != val:
+                self._do_state[sym] = val
+                changed = True
+        if changed:
+            self._update_do()
+
+    def _update_do(self) -> None:
+        for i, (code, a_contact) in enumerate(self._do_map):
+            n = i + 1
+            if n in self._overlay_do:
+                sym = self._overlay_do[n]
+                level = self._do_state.get(sym, False)  # overlay outputs act as a-contacts
+            elif code:
+                sym = DO_FUNCTIONS[code].symbol
+                level = self._do_state.get(sym, False) == a_contact
+            else:
+                sym, level = "", False
+            if level != self._do_level[i]:
+                self._do_level[i] = level
+                self.emit(DoChanged(self.scheduler.now, n, level, sym))
+        word = sum(1 << i for i, lvl in enumerate(self._do_level) if lvl)
+        self.params.set_internal("P4.009", word)
+
+    def _update_p0046(self) -> None:
+        word = sum(1 << bit for sym, bit in P0046_BITS.items() if self._do_state.get(sym))
+        self.params.set_internal("P0.046", word)
+
+    # -- absolute handshake overlay (L15137, L16503-16521) ----------------------------------
+
+    def overlay(self, di4: str = "ABSQ", do2: str = "ABSR", do3: str = "ABSD") -> None:
+        """While ABSE is on, DI4 feeds ABSQ and DO2/DO3 show ABSR/ABSD.
+
+        The function normally mapped to DI4 holds the state it had (L15137).
+        """
+        code, _ = self._di_map[3]
+        if code:
+            sym = DI_FUNCTIONS[code].symbol
+            self._held[sym] = self._di_state.get(sym, False)
+        self._overlay_di = {4: di4}
+        self._overlay_do = {2: do2, 3: do3}
+        self._update_di()
+        self._update_do()
+
+    def clear_overlay(self) -> None:
+        if not self._overlay_di and not self._overlay_do:
+            return
+        self._overlay_di = {}
+        self._overlay_do = {}
+        self._held = {}
+        self._update_di()
+        self._update_do()
+
+    @property
+    def overlay_active(self) -> bool:
+        return bool(self._overlay_di or self._overlay_do)
+
+    # -- helpers --------------------------------------------------------------------------
+
+    def _di_symbol(self, function: str | int) -> str:
+        if isinstance(function, int):
+            if function not in DI_FUNCTIONS:
+                raise UnknownFunction("DI", function)
+            return DI_FUNCTIONS[function].symbol
+        if function in DI_SYMBOLS or function in OVERLAY_DI_SYMBOLS:
+            return function
+        raise UnknownSymbol("DI", str(function))
+
+    @staticmethod
+    def _physical_index(n: int) -> int:
+        if not isinstance(n, int) or not 1 <= n <= N_PHYSICAL_DI:
+            raise ValueError(f"DI{n}: physical inputs are DI1..DI{N_PHYSICAL_DI}")
+        return n - 1
+
+    @staticmethod
+    def _di_index(n: int) -> int:
+        if not isinstance(n, int) or not 1 <= n <= N_DI:
+            raise ValueError(f"DI{n}: inputs are DI1..DI10 and VDI11..VDI13")
+        return n - 1
+
+    @staticmethod
+    def _do_index(n: int) -> int:
+        if not isinstance(n, int) or not 1 <= n <= N_DO:
+            raise ValueError(f"DO{n}: outputs are DO1..DO{N_DO}")
+        return n - 1

@@ -1,0 +1,465 @@
+"""Drive parameters P0.xxx-P7.xxx: the chapter 8 table, validation, retention, addressing.
+
+The table lives in `fixtures/drive/a3_parameters.csv` (columns: fixtures/drive/README.md).
+Values are raw integers in communication units, as Modbus and SDO carry them.
+
+Attributes (§8.1, L6719-6723): ★ read-only, ▲ not writable while Servo On,
+● takes effect after a power cycle, ■ not retained at power-off.
+
+Addressing: Modbus address of Pg.n = (g << 8) + 2*n, low word first (L7156, L8492);
+CANopen index = 0x2000 + (g << 8) + n (Pa-bc <=> 2aBCh, L18154-18156).
+Choices on ambiguous points: docs/choices/parameters.md.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from hil.model.errors import (
+    OutOfRange,
+    ProtectedParameter,
+    ReadOnly,
+    ServoOnLocked,
+    UnknownParameter,
+)
+
+WriteHook = Callable[[str, int, int], None]
+ReadHook = Callable[[], int]
+ChangeListener = Callable[[str, int], None]
+Validator = Callable[[str, int], None]
+
+_NAME_RE = re.compile(r"^\s*P([0-7])[.\-](\d{1,3})\s*$", re.IGNORECASE)
+
+# P2.071 (absolute position reset) is writable only after P2.008 = 271 (L10081, L16454).
+PROTECTED_KEYS: dict[str, tuple[str, int]] = {"P2.071": ("P2.008", 271)}
+# P0.001: writing 0 clears the alarm (= DI.ARST); 0x0001-0xFFFF are display only (L7079-7083).
+WRITE_ZERO_ONLY = frozenset({"P0.001"})
+
+
+def parse_name(name: str) -> tuple[int, int]:
+    """ "P1.042" -> (1, 42). Also accepts "P1-42" / "p1.42". Raises UnknownParameter."""
+    m = _NAME_RE.match(name) if isinstance(name, str) else None
+    if not m:
+        raise UnknownParameter(
+            str(name), "not a parameter name (expected P<group 0-7>.<nnn>, e.g. P1.042)"
+        )
+    group, index = int(m.group(1)), int(m.group(2))
+    if index > 0xFF:
+        raise UnknownParameter(str(name), f"index {index} > 255")
+    return group, index
+
+
+def canonical(name: str) -> str:
+    """ "p1-42" -> "P1.042"."""
+    group, index = parse_name(name)
+    return f"P{group}.{index:03d}"
+
+
+def _int(text: str) -> int:
+    text = text.strip()
+    return int(text, 16) if text.lower().startswith(("0x", "-0x")) else int(text)
+
+
+@dataclass(frozen=True, slots=True)
+class ParamSpec:
+    """One row of the parameter table (values in communication units)."""
+
+    param: str  # "P1.042"
+    name: str  # English name
+    default: int
+    min: int
+    max: int
+    unit: str
+    size: int  # 16 or 32
+    read_only: bool  # ★
+    servo_off_only: bool  # ▲
+    power_cycle: bool  # ●
+    not_retained: bool  # ■
+    hex: bool
+    lines: str  # "<8.2 row>/<8.3 entry>" manual lines
+    note: str = ""
+
+    @property
+    def group(self) -> int:
+        return int(self.param[1])
+
+    @property
+    def index(self) -> int:
+        return int(self.param[3:])
+
+    @property
+    def modbus_address(self) -> int:
+        """Address of the low word; the high word is at +1 (L7156)."""
+        return (self.group << 8) + 2 * self.index
+
+    @property
+    def od_index(self) -> int:
+        """CANopen object index (sub 0): P1.044 -> 0x212C (L18154-18156)."""
+        return 0x2000 + (self.group << 8) + self.index
+
+    @property
+    def signed(self) -> bool:
+        return self.min < 0
+
+    @property
+    def retained(self) -> bool:
+        return not self.not_retained
+
+    def format(self, value: int) -> str:
+        """Human display, hex when the manual displays it as hex."""
+        if self.hex and value >= 0:
+            return f"0x{value:0{self.size // 4}X}"
+        return str(value)
+
+    def to_words(self, value: int) -> tuple[int, int]:
+        """(low, high) 16-bit words; 16-bit parameters read their high word as sign extension."""
+        raw = value & 0xFFFFFFFF
+        return raw & 0xFFFF, raw >> 16
+
+    def from_words(self, low: int, high: int) -> int:
+        """Value from two words (for 16-bit parameters only the low word counts)."""
+        if self.size == 16:
+            raw = low & 0xFFFF
+            return raw - 0x10000 if self.signed and raw & 0x8000 else raw
+        raw = ((high & 0xFFFF) << 16) | (low & 0xFFFF)
+        return raw - 0x100000000 if self.signed and raw & 0x80000000 else raw
+
+    @classmethod
+    def from_row(cls, row: dict[str, str]) -> ParamSpec:
+        try:
+            param = canonical(row["param"])
+            return cls(
+                param=param,
+                name=row["name"],
+                default=_int(row["default"]),
+                min=_int(row["min"]),
+                max=_int(row["max"]),
+                unit=row.get("unit", ""),
+                size=int(row["size"]),
+                read_only=row["read_only"].strip() == "1",
+                servo_off_only=row["servo_off_only"].strip() == "1",
+                power_cycle=row["power_cycle"].strip() == "1",
+                not_retained=row["not_retained"].strip() == "1",
+                hex=row.get("hex", "0").strip() == "1",
+                lines=row.get("lines", ""),
+                note=row.get("note", ""),
+            )
+        except (KeyError, ValueError) as exc:
+            raise ValueError(f"bad parameter row {row!r}: {exc}") from exc
+
+
+class ParamTable:
+    """The chapter 8 parameter table, indexed by name, Modbus address and OD index."""
+
+    def __init__(self, specs: Iterable[ParamSpec]) -> None:
+        self._by_name: dict[str, ParamSpec] = {}
+        self._by_addr: dict[int, ParamSpec] = {}
+        self._by_od: dict[int, ParamSpec] = {}
+        for spec in specs:
+            if spec.param in self._by_name:
+                raise ValueError(f"{spec.param}: duplicate row in parameter table")
+            if not spec.min <= spec.default <= spec.max:
+                raise ValueError(f"{spec.param}: default {spec.default} outside min/max")
+            self._by_name[spec.param] = spec
+            self._by_addr[spec.modbus_address] = spec
+            self._by_od[spec.od_index] = spec
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str] | None = None) -> ParamTable:
+        """Load the CSV (default: fixtures/drive/a3_parameters.csv)."""
+        if path is None:
+            from hil.paths import fixture
+
+            path = fixture("drive", "a3_parameters.csv")
+        with open(path, newline="", encoding="utf-8") as f:
+            return cls(ParamSpec.from_row(row) for row in csv.DictReader(f))
+
+    def __contains__(self, name: object) -> bool:
+        try:
+            return canonical(str(name)) in self._by_name
+        except UnknownParameter:
+            return False
+
+    def __iter__(self) -> Iterator[ParamSpec]:
+        return iter(self._by_name.values())
+
+    def __len__(self) -> int:
+        return len(self._by_name)
+
+    def spec(self, name: str) -> ParamSpec:
+        key = canonical(name)
+        try:
+            return self._by_name[key]
+        except KeyError:
+            raise UnknownParameter(key, "not in the chapter 8 parameter table (reserved?)")
+
+    def by_modbus_address(self, address: int) -> ParamSpec:
+        """The parameter whose low or high word is at `address`."""
+        spec = self._by_addr.get(address & ~1)
+        if spec is None:
+            raise UnknownParameter(f"address 0x{address:04X}", "not a parameter word")
+        return spec
+
+    def by_od_index(self, index: int) -> ParamSpec:
+        spec = self._by_od.get(index)
+        if spec is None:
+            raise UnknownParameter(f"object 0x{index:04X}", "no parameter at this OD index")
+        return spec
+
+
+class ParameterStore:
+    """Parameter values as the drive keeps them.
+
+    `read()` is what communication returns (the last value written); `get()` is the value in
+    effect, which differs for ● parameters written but not yet power cycled (L6722).
+    """
+
+    def __init__(
+        self,
+        table: ParamTable | None = None,
+        *,
+        retained_path: Path | None = None,
+        autosave: bool = True,
+    ) -> None:
+        self.table = table if table is not None else ParamTable.load()
+        self.retained_path = Path(retained_path) if retained_path is not None else None
+        self.autosave = autosave
+        self.servo_on: Callable[[], bool] = lambda: False
+        self._stored: dict[str, int] = {}
+        self._effective: dict[str, int] = {}
+        self._write_hooks: dict[str, list[WriteHook]] = {}
+        self._read_hooks: dict[str, ReadHook] = {}
+        self._validators: dict[str, list[Validator]] = {}
+        self._listeners: list[ChangeListener] = []
+        self._set_all_defaults()
+        if self.retained_path is not None and self.retained_path.exists():
+            self._load_retained()
+
+    # -- access ------------------------------------------------------------------------------
+
+    def spec(self, name: str) -> ParamSpec:
+        return self.table.spec(name)
+
+    def read(self, name: str) -> int:
+        """Value as read over communication (live values through on_read hooks)."""
+        spec = self.table.spec(name)
+        hook = self._read_hooks.get(spec.param)
+        return int(hook()) if hook is not None else self._stored[spec.param]
+
+    def get(self, name: str) -> int:
+        """Value in effect (● parameters: the value from the last power cycle)."""
+        spec = self.table.spec(name)
+        hook = self._read_hooks.get(spec.param)
+        return int(hook()) if hook is not None else self._effective[spec.param]
+
+    def stored(self, name: str) -> int:
+        """The stored (last written) value, bypassing on_read hooks."""
+        return self._stored[self.table.spec(name).param]
+
+    def pending(self) -> dict[str, int]:
+        """● parameters written but not yet in effect: name -> written value."""
+        return {k: v for k, v in self._stored.items() if self._effective[k] != v}
+
+    def check_write(self, name: str, value: int) -> ParamSpec:
+        """Validate a write like the drive does; raise the precise ParamError, else the spec."""
+        spec = self.table.spec(name)
+        if spec.read_only:
+            raise ReadOnly(spec.param, "read-only (★, L6719)")
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise OutOfRange(spec.param, f"value {value!r} is not an integer")
+        if spec.param in WRITE_ZERO_ONLY and value != 0:
+            raise OutOfRange(
+                spec.param, f"only 0 (alarm reset) may be written, got {value} (L7079-7083)"
+            )
+        if not spec.min <= value <= spec.max:
+            raise OutOfRange(
+                spec.param,
+                f"{spec.format(value)} outside {spec.format(spec.min)}..{spec.format(spec.max)}"
+                f" (min {spec.min}, max {spec.max})",
+            )
+        if spec.servo_off_only and self.servo_on():
+            raise ServoOnLocked(spec.param, "not writable while Servo On (▲, L6720)")
+        key = PROTECTED_KEYS.get(spec.param)
+        if key is not None and self._stored[key[0]] != key[1]:
+            raise ProtectedParameter(
+                spec.param, f"write {key[0]} = {key[1]} first (L10081, L16454)"
+            )
+        for validate in self._validators.get(spec.param, ()):
+            validate(spec.param, value)
+        return spec
+
+    def write(self, name: str, value: int) -> None:
+        """Write as communication / panel does: validated, then write hooks fire."""
+        spec = self.check_write(name, value)
+        self._commit(spec, value)
+
+    def set_internal(self, name: str, value: int) -> None:
+        """Drive-side update (monitor values, P0.001, P4.000 history ...): no attribute checks.
+
+        Takes effect at once (also for ● parameters); write hooks do not fire.
+        """
+        spec = self.table.spec(name)
+        value = int(value)
+        old = self._stored[spec.param]
+        self._stored[spec.param] = value
+        self._effective[spec.param] = value
+        if old != value:
+            self._notify(spec.param, value)
+
+    # -- hooks -------------------------------------------------------------------------------
+
+    def on_write(self, name: str, fn: WriteHook) -> Callable[[], None]:
+        """Call fn(name, old, new) after every successful write() of `name`; returns remover."""
+        key = self.table.spec(name).param
+        self._write_hooks.setdefault(key, []).append(fn)
+        return lambda: self._write_hooks[key].remove(fn)
+
+    def on_read(self, name: str, fn: ReadHook) -> None:
+        """Compute `name` on every read()/get()/Modbus read (live monitor values)."""
+        self._read_hooks[self.table.spec(name).param] = fn
+
+    def on_validate(self, name: str, fn: Validator) -> None:
+        """fn(name, value) runs before every write() of `name` and may raise a ModelError."""
+        self._validators.setdefault(self.table.spec(name).param, []).append(fn)
+
+    def subscribe(self, fn: ChangeListener) -> Callable[[], None]:
+        """fn(name, value) on every stored-value change (for ParamChanged events)."""
+        self._listeners.append(fn)
+        return lambda: self._listeners.remove(fn)
+
+    # -- Modbus words ------------------------------------------------------------------------
+
+    def by_modbus_address(self, address: int) -> ParamSpec:
+        return self.table.by_modbus_address(address)
+
+    def by_od_index(self, index: int) -> ParamSpec:
+        return self.table.by_od_index(index)
+
+    def modbus_read(self, address: int, count: int) -> list[int]:
+        """`count` 16-bit words from `address` (every parameter spans two words, low first)."""
+        if count < 0:
+            raise ValueError(f"negative word count {count}")
+        words: list[int] = []
+        for addr in range(address, address + count):
+            spec = self.table.by_modbus_address(addr)
+            low, high = spec.to_words(self.read(spec.param))
+            words.append(high if addr & 1 else low)
+        return words
+
+    def modbus_write(self, address: int, words: Iterable[int]) -> None:
+        """Write 16-bit words from `address`; all parameters touched are validated first.
+
+        A 32-bit parameter written by one half only combines it with its current other half
+        (the drive stores the half). For a 16-bit parameter the low word is the value and a
+        high-word write is accepted and ignored. docs/choices/parameters.md.
+        """
+        halves: dict[str, dict[int, int]] = {}
+        specs: dict[str, ParamSpec] = {}
+        order: list[str] = []
+        for offset, word in enumerate(words):
+            addr = address + offset
+            if not 0 <= word <= 0xFFFF:
+                raise OutOfRange(f"address 0x{addr:04X}", f"word {word} is not 16-bit")
+            spec = self.table.by_modbus_address(addr)
+            if spec.param not in halves:
+                halves[spec.param] = {}
+                specs[spec.param] = spec
+                order.append(spec.param)
+            halves[spec.param][addr & 1] = word
+        plan: list[tuple[ParamSpec, int]] = []
+        for key in order:
+            spec, got = specs[key], halves[key]
+            if spec.size == 16 and 0 not in got:
+                continue  # only the (ignored) high word of a 16-bit parameter
+            cur_low, cur_high = spec.to_words(self._stored[key])
+            value = spec.from_words(got.get(0, cur_low), got.get(1, cur_high))
+            plan.append((self.check_write(key, value), value))
+        for spec, value in plan:
+            self._commit(spec, value)
+
+    # -- power cycle and retention ----------------------------------------------------------
+
+    def power_cycle(self) -> list[str]:
+        """● values take effect, ■ values revert to default; returns names whose value changed."""
+        changed: list[str] = []
+        for spec in self.table:
+            key = spec.param
+            if spec.not_retained:
+                if self._stored[key] != spec.default or self._effective[key] != spec.default:
+                    changed.append(key)
+                    self._stored[key] = spec.default
+                    self._effective[key] = spec.default
+                    self._notify(key, spec.default)
+            elif self._effective[key] != self._stored[key]:
+                self._effective[key] = self._stored[key]
+                changed.append(key)
+        if self.retained_path is not None:
+            self.save()
+        return changed
+
+    def reset_defaults(self) -> None:
+        """Every parameter back to its default, in effect at once (P2.008 = 10 + power cycle)."""
+        for spec in self.table:
+            if self._stored[spec.param] != spec.default:
+                self._stored[spec.param] = spec.default
+                self._notify(spec.param, spec.default)
+            self._effective[spec.param] = spec.default
+        if self.retained_path is not None and self.autosave:
+            self.save()
+
+    def save(self, path: Path | None = None) -> None:
+        """Write retained (non-■) values that differ from default to JSON."""
+        path = Path(path) if path is not None else self.retained_path
+        if path is None:
+            raise ValueError("no retained_path to save parameters to")
+        data = {
+            spec.param: self._stored[spec.param]
+            for spec in self.table
+            if spec.retained and self._stored[spec.param] != spec.default
+        }
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        tmp.write_text(json.dumps({"parameters": data}, indent=1, sort_keys=True))
+        os.replace(tmp, path)
+
+    def _load_retained(self) -> None:
+        assert self.retained_path is not None
+        try:
+            data = json.loads(self.retained_path.read_text())["parameters"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{self.retained_path}: not a parameter file ({exc})") from exc
+        for name, value in data.items():
+            spec = self.table.spec(name)
+            if spec.retained and spec.min <= int(value) <= spec.max:
+                self._stored[spec.param] = int(value)
+                self._effective[spec.param] = int(value)
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _set_all_defaults(self) -> None:
+        for spec in self.table:
+            self._stored[spec.param] = spec.default
+            self._effective[spec.param] = spec.default
+
+    def _commit(self, spec: ParamSpec, value: int) -> None:
+        key = spec.param
+        old = self._stored[key]
+        self._stored[key] = value
+        if not spec.power_cycle:
+            self._effective[key] = value
+        if old != value:
+            self._notify(key, value)
+            if self.autosave and self.retained_path is not None and spec.retained:
+                self.save()
+        for hook in list(self._write_hooks.get(key, ())):
+            hook(key, old, value)
+
+    def _notify(self, key: str, value: int) -> None:
+        for fn in list(self._listeners):
+            fn(key, value)
