@@ -1,0 +1,720 @@
+"""The virtual A3's CANopen face: a CiA 301 slave (NMT, heartbeat, guarding, SDO, PDO, SYNC,
+EMCY) on a python-can bus, in front of a `Drive` (2000h-2FFFh and 6000h-6FFFh objects).
+
+Built on python-can only: canopen.LocalNode lacks NMT gating, PDO behaviour and EMCY/1001h/
+1003h handling (feasibility §3). Choices where the manual is silent: docs/choices/canopen.md.
+
+Threading: `start()` runs one receive thread. Every frame is handled while holding `lock`
+(the DriveHost's RLock), and so is every timer step. Timers (heartbeat, event timers,
+inhibit times, guarding, SDO timeout) run in `tick(now_ns)`: either from our own thread
+(`own_timer=True`, default, clock = time.monotonic_ns) or from the host's 1 ms ticker
+(`own_timer=False`, pass `clock=host.model_now` and `host.add_tick(slave.tick)`).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+
+from hil.faces.canopen_od import Entry, ObjectDictionary
+from hil.model import errors as E
+from hil.model.errors import ObjectError
+from hil.model.events import AlarmChanged, PowerCycled
+from hil.protocol import canopen as P
+
+log = logging.getLogger(__name__)
+
+US = 1_000
+MS = 1_000_000
+
+# P3.001 digit Z -> bit rate (L10529-L10533; Z=3 is 800 kbit/s there, 750 kbit/s in L16844).
+BITRATES = {0: 125_000, 1: 250_000, 2: 500_000, 3: 750_000, 4: 1_000_000}
+
+# Harness default PDOs (option pdo_defaults="harness"); the manual ships none (L17980-L18024).
+HARNESS_PDOS: dict[tuple[int, int], int] = {
+    (0x1400, 2): 255,
+    (0x1600, 1): 0x60400010,
+    (0x1600, 2): 0x60600008,
+    (0x1600, 0): 2,
+    (0x1800, 2): 255,
+    (0x1800, 5): 10,  # event timer 10 ms: BaseNode402 needs a cyclic statusword (feas. §3.3)
+    (0x1A00, 1): 0x60410010,
+    (0x1A00, 2): 0x60610008,
+    (0x1A00, 0): 2,
+}
+
+
+@dataclass
+class _PdoRun:
+    """Run-time state of one PDO (configuration lives in the OD values)."""
+
+    last_data: bytes | None = None
+    last_sent: int | None = None
+    sync_count: int = 0
+    pending: bytes | None = None  # synchronous RPDO waiting for the next SYNC
+
+
+@dataclass
+class _Transfer:
+    """A segmented SDO transfer in progress."""
+
+    upload: bool
+    entry: Entry
+    toggle: int = 0
+    data: bytearray = field(default_factory=bytearray)
+    size: int | None = None
+    started: int = 0
+
+
+class CanopenSlave:
+    """CiA 301 slave for one drive. See the module docstring for threading."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        drive: Any,
+        *,
+        node_id: int | None = None,
+        lock: threading.RLock | None = None,
+        od: ObjectDictionary | None = None,
+        pdo_defaults: str = "harness",
+        own_timer: bool = True,
+        clock: Callable[[], int] = time.monotonic_ns,
+        sdo_timeout_ms: int = 1000,
+        block_transfer: bool = False,
+        on_alarm: Callable[[str], None] | None = None,
+        on_nmt_reset: Callable[[str], None] | None = None,
+    ) -> None:
+        if pdo_defaults not in ("harness", "manual"):
+            raise ValueError(f"pdo_defaults: {pdo_defaults!r} is not 'harness' or 'manual'")
+        if block_transfer:
+            raise ValueError("block_transfer: the A3 supports expedited SDO only (L16942)")
+        self.bus = bus
+        self.drive = drive
+        self.lock = lock or threading.RLock()
+        self.od = od or ObjectDictionary.a3()
+        self.pdo_defaults = pdo_defaults
+        self.own_timer = own_timer
+        self.clock = clock
+        self.sdo_timeout_ns = sdo_timeout_ms * MS
+        self.on_alarm = on_alarm or getattr(drive, "raise_alarm", None)
+        self.on_nmt_reset = on_nmt_reset or getattr(drive, "nmt_reset", None)
+        self._fixed_node_id = node_id
+        self.node_id = 0
+        self.bitrate = 0
+        self.state = "INITIALISING"
+        self.stats = {"rx": 0, "tx": 0, "sdo_aborts": 0, "pdo_errors": 0, "tx_errors": 0}
+        self._values: dict[tuple[int, int], Any] = {}
+        self._pdo: dict[int, _PdoRun] = {}
+        self._transfer: _Transfer | None = None
+        self._hb_next: int | None = None
+        self._hb_consumer_deadline: int | None = None
+        self._life_deadline: int | None = None
+        self._guard_toggle = 0
+        self._history_cleared: tuple | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._unsubscribe: Callable[[], None] | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> CanopenSlave:
+        """Subscribe to drive events, boot (boot-up frame, PRE-OPERATIONAL), start the thread."""
+        with self.lock:
+            self._unsubscribe = self.drive.subscribe(self._on_event)
+            self._reset("power-on")
+        self._stop.clear()
+        self._thread = threading.Thread(
+            target=self._run, name=f"canopen-{self.node_id}", daemon=True
+        )
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop the thread and unsubscribe (the bus stays open: its owner closes it)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+
+    def __enter__(self) -> CanopenSlave:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                msg = self.bus.recv(timeout=0.001 if self.own_timer else 0.05)
+            except Exception:  # a closed bus ends the thread
+                if self._stop.is_set():
+                    return
+                log.exception("CAN receive failed")
+                time.sleep(0.01)
+                continue
+            with self.lock:
+                if msg is not None:
+                    self.handle_frame(msg)
+                if self.own_timer:
+                    self.tick(self.clock())
+
+    # ------------------------------------------------------------------ sending
+    def _send(self, can_id: int, data: bytes = b"", remote: bool = False) -> None:
+        try:
+            self.bus.send(
+                can.Message(
+                    arbitration_id=can_id, data=data, is_extended_id=False, is_remote_frame=remote
+                )
+            )
+            self.stats["tx"] += 1
+        except Exception:  # a full or closed bus must not kill the slave
+            self.stats["tx_errors"] += 1
+
+    # ------------------------------------------------------------------ NMT
+    def _reset(self, kind: str) -> None:
+        """Power-on / reset node / reset communication: reload 1xxx, boot-up, PRE-OP."""
+        self.state = "INITIALISING"
+        if self._fixed_node_id is not None:
+            self.node_id = self._fixed_node_id
+        else:
+            self.node_id = self._param(0x2300, 0x7F) & 0x7F  # P3.000 (L10496)
+        if kind in ("power-on", "power cycle") or not self.bitrate:
+            z = (self._param(0x2301, 0x0203) >> 8) & 0xF  # P3.001 Z needs power cycle (L10544)
+            self.bitrate = BITRATES.get(z, 500_000)
+        if not 1 <= self.node_id <= 127:
+            log.error("node id %d out of 1..127 (P3.000, L10496): using 127", self.node_id)
+            self.node_id = 127
+        self._values = {}
+        for (index, sub), e in self.od.entries.items():
+            if not (0x2000 <= index <= 0x2FFF or 0x6000 <= index <= 0x6FFF):
+                self._values[(index, sub)] = e.default_for(self.node_id)
+        if self.pdo_defaults == "harness":
+            self._values.update(HARNESS_PDOS)
+        self._pdo = {n: _PdoRun() for n in range(8)}
+        self._transfer = None
+        self._hb_next = None
+        self._hb_consumer_deadline = None
+        self._life_deadline = None
+        self._guard_toggle = 0
+        self._send(P.HEARTBEAT + self.node_id, bytes([P.STATE_BOOTUP]))  # boot-up
+        self._set_state("PRE-OPERATIONAL")
+        self._restart_heartbeat(self.clock())
+
+    def _param(self, index: int, default: int) -> int:
+        try:
+            return int(self.drive.read_object(index, 0))
+        except Exception:  # fake drives may not carry P3.xxx
+            return default
+
+    def _set_state(self, state: str) -> None:
+        if state == "OPERATIONAL" and self.state != "OPERATIONAL":
+            for run in self._pdo.values():
+                run.last_data = None
+                run.last_sent = None
+                run.pending = None
+        self.state = state
+
+    def _on_nmt(self, data: bytes) -> None:
+        if len(data) != 2 or data[1] not in (0, self.node_id):
+            return
+        cs = data[0]
+        if cs == P.NMT_START:
+            self._set_state("OPERATIONAL")
+        elif cs == P.NMT_STOP:
+            self._set_state("STOPPED")
+        elif cs == P.NMT_PRE_OPERATIONAL:
+            self._set_state("PRE-OPERATIONAL")
+        elif cs in (P.NMT_RESET_NODE, P.NMT_RESET_COMMUNICATION):
+            kind = "reset node" if cs == P.NMT_RESET_NODE else "reset communication"
+            if self.on_nmt_reset is not None:
+                self.on_nmt_reset(kind)  # drive decides AL401 (servo on) and alarm clearing
+            self._reset(kind)
+
+    def _restart_heartbeat(self, now: int) -> None:
+        period = self._values.get((0x1017, 0), 0)
+        self._hb_next = now + period * MS if period else None
+
+    def _comm_error(self, alarm: str) -> None:
+        """Heartbeat consumer / life guarding timeout: AL180 and 1029h (L17806-L17838)."""
+        if self.on_alarm is not None:
+            self.on_alarm(alarm)
+        behaviour = self._values.get((0x1029, 1), 0)
+        if behaviour == 0 and self.state == "OPERATIONAL":
+            self._set_state("PRE-OPERATIONAL")
+        elif behaviour == 2:
+            self._set_state("STOPPED")
+
+    # ------------------------------------------------------------------ frames
+    def handle_frame(self, msg: can.Message) -> None:
+        """Dispatch one received frame (call with `lock` held). Never raises."""
+        try:
+            self._handle(msg)
+        except Exception:  # malformed traffic must never stop the slave
+            log.exception("frame 0x%X %s not handled", msg.arbitration_id, bytes(msg.data).hex())
+
+    def _handle(self, msg: can.Message) -> None:
+        if msg.is_extended_id or msg.is_error_frame or self.state == "INITIALISING":
+            return
+        self.stats["rx"] += 1
+        cid = msg.arbitration_id
+        data = bytes(msg.data)
+        nid = self.node_id
+        now = self.clock()
+        if cid == P.NMT:
+            self._on_nmt(data)
+            return
+        if cid == P.HEARTBEAT + nid:
+            if msg.is_remote_frame:
+                self._on_guard(now)
+            return
+        if self.state == "STOPPED":
+            self._on_heartbeat_in(cid, data, now, msg.is_remote_frame)
+            return  # STOPPED: NMT and error control only (L17089-L17095)
+        if cid == self._values.get((0x1200, 1), P.SDO_RX + nid) & 0x7FF:
+            if not msg.is_remote_frame:
+                self._on_sdo(data, now)
+            return
+        if cid == self._values.get((0x1005, 0), 0x80) & 0x7FF:
+            if self.state == "OPERATIONAL":
+                self._on_sync(now)
+            return
+        if self._on_heartbeat_in(cid, data, now, msg.is_remote_frame):
+            return
+        if self.state != "OPERATIONAL":
+            return
+        for n in range(4):
+            cob = self._values[(0x1400 + n, 1)]
+            if not cob & 0x80000000 and cid == cob & 0x7FF and not msg.is_remote_frame:
+                self._on_rpdo(n, data)
+            tcob = self._values[(0x1800 + n, 1)]
+            if msg.is_remote_frame and not tcob & 0xC0000000 and cid == tcob & 0x7FF:
+                self._send_tpdo(n, now, force=True)
+
+    def _on_guard(self, now: int) -> None:
+        state = {"STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}.get(self.state, 0)
+        self._send(P.HEARTBEAT + self.node_id, bytes([self._guard_toggle << 7 | state]))
+        self._guard_toggle ^= 1
+        guard, factor = self._values.get((0x100C, 0), 0), self._values.get((0x100D, 0), 0)
+        self._life_deadline = now + guard * factor * MS if guard and factor else None
+
+    def _on_heartbeat_in(self, cid: int, data: bytes, now: int, remote: bool) -> bool:
+        if remote or not (0x701 <= cid <= 0x77F):
+            return False
+        watch = self._values.get((0x1016, 1), 0)
+        node, t_ms = (watch >> 16) & 0x7F, watch & 0xFFFF
+        if node and t_ms and cid == P.HEARTBEAT + node and data:
+            # A boot-up restarts monitoring; it starts with the first heartbeat (CiA 301).
+            self._hb_consumer_deadline = None if data[0] == 0 else now + t_ms * MS
+        return True
+
+    # ------------------------------------------------------------------ timers
+    def tick(self, now: int) -> None:
+        """Timers: heartbeat, guarding, event-driven TPDOs (change, inhibit, event timer),
+        SDO timeout. Call with `lock` held (the host does) about every millisecond."""
+        try:
+            self._tick(now)
+        except Exception:
+            log.exception("CANopen tick failed")
+
+    def _tick(self, now: int) -> None:
+        if self.state == "INITIALISING":
+            return
+        if self._hb_next is not None and now >= self._hb_next:
+            state = {"STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}[self.state]
+            self._send(P.HEARTBEAT + self.node_id, bytes([state]))
+            period = self._values.get((0x1017, 0), 0) * MS
+            self._hb_next = self._hb_next + period if period else None
+            if self._hb_next is not None and self._hb_next <= now:
+                self._hb_next = now + period  # we were late: do not burst
+        if self._hb_consumer_deadline is not None and now > self._hb_consumer_deadline:
+            self._hb_consumer_deadline = None
+            self._comm_error("AL180")
+        if self._life_deadline is not None and now > self._life_deadline:
+            self._life_deadline = None
+            self._comm_error("AL180")
+        if self._transfer is not None and now - self._transfer.started > self.sdo_timeout_ns:
+            e = self._transfer.entry
+            self._transfer = None
+            self._sdo_abort(e.index, e.sub, E.ABORT_TIMEOUT)
+        if self.state != "OPERATIONAL":
+            return
+        for n in range(4):
+            if self._tpdo_active(n) and self._values[(0x1800 + n, 2)] >= 254:
+                self._event_tpdo(n, now)
+
+    # ------------------------------------------------------------------ PDO
+    def _mapping(self, map_index: int) -> list[tuple[int, int, int]]:
+        count = self._values[(map_index, 0)]
+        out = []
+        for s in range(1, count + 1):
+            v = self._values[(map_index, s)]
+            out.append((v >> 16, (v >> 8) & 0xFF, v & 0xFF))
+        return out
+
+    def _tpdo_active(self, n: int) -> bool:
+        return not self._values[(0x1800 + n, 1)] & 0x80000000 and self._values[(0x1A00 + n, 0)] > 0
+
+    def _read_mapped(self, index: int, sub: int) -> int:
+        if index == 0x1001:
+            return self._error_register()
+        if index < 0x2000:
+            v = self._values.get((index, sub), 0)
+            return v if isinstance(v, int) else 0
+        return int(self.drive.read_object(index, sub))
+
+    def _tpdo_data(self, n: int) -> bytes | None:
+        acc, bits = 0, 0
+        for index, sub, length in self._mapping(0x1A00 + n):
+            try:
+                value = self._read_mapped(index, sub)
+            except ObjectError:
+                self.stats["pdo_errors"] += 1
+                return None
+            acc |= (value & ((1 << length) - 1)) << bits
+            bits += length
+        return acc.to_bytes((bits + 7) // 8, "little")
+
+    def _send_tpdo(
+        self, n: int, now: int, *, force: bool = False, data: bytes | None = None
+    ) -> None:
+        if data is None:
+            data = self._tpdo_data(n)
+        if data is None:
+            return
+        run = self._pdo[4 + n]
+        self._send(self._values[(0x1800 + n, 1)] & 0x7FF, data)
+        run.last_data = data
+        run.last_sent = now
+
+    def _event_tpdo(self, n: int, now: int) -> None:
+        run = self._pdo[4 + n]
+        inhibit = self._values[(0x1800 + n, 3)] * 100 * US
+        timer = self._values[(0x1800 + n, 5)] * MS
+        if run.last_sent is not None and now - run.last_sent < inhibit:
+            return
+        data = self._tpdo_data(n)
+        if data is None:
+            return
+        due = timer and run.last_sent is not None and now - run.last_sent >= timer
+        if data != run.last_data or due:
+            self._send_tpdo(n, now, data=data)
+
+    def _on_sync(self, now: int) -> None:
+        for n in range(4):  # TPDOs sample at SYNC (L17055-L17057)
+            if not self._tpdo_active(n):
+                continue
+            tt = self._values[(0x1800 + n, 2)]
+            run = self._pdo[4 + n]
+            if tt == 0:
+                data = self._tpdo_data(n)
+                if data is not None and data != run.last_data:
+                    self._send_tpdo(n, now, data=data)
+            elif 1 <= tt <= 240:
+                run.sync_count += 1
+                if run.sync_count >= tt:
+                    run.sync_count = 0
+                    self._send_tpdo(n, now)
+        for n in range(4):  # RPDOs of the previous cycle apply at this SYNC (L17051-L17053)
+            run = self._pdo[n]
+            if run.pending is not None:
+                data, run.pending = run.pending, None
+                self._apply_rpdo(n, data)
+
+    def _on_rpdo(self, n: int, data: bytes) -> None:
+        if self._values[(0x1600 + n, 0)] == 0:
+            return
+        if self._values[(0x1400 + n, 2)] <= 240:
+            self._pdo[n].pending = data
+        else:
+            self._apply_rpdo(n, data)
+
+    def _apply_rpdo(self, n: int, data: bytes) -> None:
+        mapping = self._mapping(0x1600 + n)
+        if sum(m[2] for m in mapping) > 8 * len(data):
+            self.stats["pdo_errors"] += 1  # too short: not processed (CiA 301 EMCY 8210h)
+            return
+        acc, bits = int.from_bytes(data, "little"), 0
+        for index, sub, length in mapping:
+            raw = (acc >> bits) & ((1 << length) - 1)
+            bits += length
+            e = self.od.entries.get((index, sub))
+            if e is not None and e.type in P_SIGNED and raw >= 1 << (length - 1):
+                raw -= 1 << length
+            try:
+                self.drive.write_object(index, sub, raw)
+            except ObjectError:
+                self.stats["pdo_errors"] += 1
+
+    # ------------------------------------------------------------------ EMCY
+    def _error_register(self) -> int:
+        try:
+            return int(self.drive.alarms.error_register) & 0xFF
+        except AttributeError:
+            return 0
+
+    def _on_event(self, ev: Any) -> None:
+        """Drive events (delivered under the host lock)."""
+        try:
+            if isinstance(ev, AlarmChanged):
+                self._emcy(ev)
+            elif isinstance(ev, PowerCycled):
+                self._reset("power cycle")
+        except Exception:
+            log.exception("drive event %r not handled", ev)
+
+    def _emcy(self, ev: AlarmChanged) -> None:
+        """EMCY (L17061-L17069): code, 1001h, Delta alarm code in bytes 3-4 (little-endian)."""
+        cob = self._values.get((0x1014, 0), 0x80 + self.node_id)
+        if cob & 0x80000000 or self.state not in ("PRE-OPERATIONAL", "OPERATIONAL"):
+            return
+        code = ev.emcy_code if ev.active else 0
+        alarm = 0
+        if ev.active and ev.code.upper().startswith("AL"):
+            try:
+                alarm = int(ev.code[2:], 16)
+            except ValueError:
+                alarm = 0
+        data = bytes([code & 0xFF, code >> 8 & 0xFF, self._error_register()])
+        data += alarm.to_bytes(2, "little") + bytes(3)
+        self._send(cob & 0x7FF, data)
+
+    def _history(self) -> list[int]:
+        try:
+            hist = [int(h) for h in self.drive.alarms.error_history][:5]
+        except AttributeError:
+            return []
+        if self._history_cleared is not None:
+            if tuple(hist) == self._history_cleared:
+                return []
+            if self._history_cleared and self._history_cleared[0] in hist:
+                return hist[: hist.index(self._history_cleared[0])]
+            self._history_cleared = None
+        return hist
+
+    # ------------------------------------------------------------------ SDO
+    def _sdo_send(self, data: bytes) -> None:
+        self._send(self._values.get((0x1200, 2), P.SDO_TX + self.node_id) & 0x7FF, data)
+
+    def _sdo_abort(self, index: int, sub: int, code: int) -> None:
+        self.stats["sdo_aborts"] += 1
+        self._sdo_send(P.sdo_abort(index, sub, code))
+
+    def _on_sdo(self, data: bytes, now: int) -> None:
+        if len(data) != 8:  # CiA 301: SDO frames are 8 bytes
+            padded = data.ljust(4, b"\0")
+            self._transfer = None
+            self._sdo_abort(padded[1] | padded[2] << 8, padded[3], E.ABORT_COMMAND)
+            return
+        cs = data[0] >> 5
+        index, sub = data[1] | data[2] << 8, data[3]
+        if cs == P.CCS_ABORT:
+            self._transfer = None
+            return
+        if cs in (P.CCS_DOWNLOAD_SEGMENT, P.CCS_UPLOAD_SEGMENT):
+            self._on_segment(cs, data, now)
+            return
+        self._transfer = None
+        try:
+            if cs == P.CCS_INITIATE_UPLOAD:
+                self._initiate_upload(index, sub, now)
+            elif cs == P.CCS_INITIATE_DOWNLOAD:
+                self._initiate_download(index, sub, data, now)
+            else:  # block transfers (5, 6) and 7: the A3 does expedited only (L16942)
+                raise ObjectError(index, sub, E.ABORT_COMMAND, "command specifier not supported")
+        except ObjectError as exc:
+            self._transfer = None
+            self._sdo_abort(index, sub, exc.abort_code)
+
+    def _initiate_upload(self, index: int, sub: int, now: int) -> None:
+        e = self.od.get(index, sub)
+        if not e.readable:
+            raise ObjectError(index, sub, E.ABORT_WRITE_ONLY, "write-only object")
+        raw = self._read_bytes(e)
+        if len(raw) <= 4 and raw:
+            self._sdo_send(P.sdo_expedited_upload_response(index, sub, raw))
+            return
+        self._transfer = _Transfer(upload=True, entry=e, data=bytearray(raw), started=now)
+        size = len(raw).to_bytes(4, "little")
+        self._sdo_send(bytes([0x41, index & 0xFF, index >> 8, sub]) + size)
+
+    def _initiate_download(self, index: int, sub: int, data: bytes, now: int) -> None:
+        e = self.od.get(index, sub)
+        if not e.writable:
+            raise ObjectError(index, sub, E.ABORT_READ_ONLY, "read-only object")
+        expedited, sized = bool(data[0] & 2), bool(data[0] & 1)
+        if expedited:
+            n = 4 - ((data[0] >> 2) & 3) if sized else (e.size or 4)
+            self._write_bytes(e, data[4 : 4 + n])
+            self._sdo_send(P.sdo_download_response(index, sub))
+            return
+        size = int.from_bytes(data[4:8], "little") if sized else None
+        if size is not None and e.size is not None and size != e.size:
+            code = E.ABORT_LENGTH_HIGH if size > e.size else E.ABORT_LENGTH_LOW
+            raise ObjectError(index, sub, code, f"{size} bytes for a {e.size}-byte object")
+        self._transfer = _Transfer(upload=False, entry=e, size=size, started=now)
+        self._sdo_send(P.sdo_download_response(index, sub))
+
+    def _on_segment(self, cs: int, data: bytes, now: int) -> None:
+        t = self._transfer
+        toggle = (data[0] >> 4) & 1
+        if t is None or t.upload != (cs == P.CCS_UPLOAD_SEGMENT):
+            self._transfer = None
+            self._sdo_abort(0, 0, E.ABORT_COMMAND)
+            return
+        e = t.entry
+        if toggle != t.toggle:
+            self._transfer = None
+            self._sdo_abort(e.index, e.sub, E.ABORT_TOGGLE)
+            return
+        t.started = now
+        t.toggle ^= 1
+        if t.upload:
+            chunk, t.data = bytes(t.data[:7]), t.data[7:]
+            last = not t.data
+            n = 7 - len(chunk)
+            self._sdo_send(bytes([toggle << 4 | n << 1 | int(last)]) + chunk + bytes(n))
+            if last:
+                self._transfer = None
+            return
+        n = (data[0] >> 1) & 7
+        t.data += data[1 : 8 - n]
+        if not data[0] & 1:
+            self._sdo_send(bytes([0x20 | toggle << 4]) + bytes(7))
+            return
+        self._transfer = None
+        try:
+            if t.size is not None and len(t.data) != t.size:
+                raise ObjectError(e.index, e.sub, E.ABORT_LENGTH, "size indicated != size sent")
+            self._write_bytes(e, bytes(t.data))
+        except ObjectError as exc:
+            self._sdo_abort(e.index, e.sub, exc.abort_code)
+            return
+        self._sdo_send(bytes([0x20 | toggle << 4]) + bytes(7))
+
+    # ------------------------------------------------------------------ object access
+    def read(self, index: int, sub: int) -> int | bytes:
+        """Value of an object as an SDO upload sees it (call with `lock` held)."""
+        e = self.od.get(index, sub)
+        raw = self._read_bytes(e)
+        return raw if e.size is None else e.decode(raw)
+
+    def _read_bytes(self, e: Entry) -> bytes:
+        index, sub = e.index, e.sub
+        if 0x2000 <= index <= 0x2FFF or 0x6000 <= index <= 0x6FFF:
+            return e.encode(int(self.drive.read_object(index, sub)))
+        if index == 0x1001:
+            return e.encode(self._error_register())
+        if index == 0x1003:
+            hist = self._history()
+            if sub == 0:
+                return e.encode(len(hist))
+            return e.encode(hist[sub - 1] if sub <= len(hist) else 0)
+        value = self._values.get((index, sub), 0)
+        if e.size is None:
+            return bytes(value) if not isinstance(value, int) else b""
+        return e.encode(value or 0)
+
+    def _write_bytes(self, e: Entry, raw: bytes) -> None:
+        index, sub = e.index, e.sub
+        if e.size is None:
+            self._values[(index, sub)] = bytes(raw)
+            return
+        if len(raw) != e.size:
+            code = E.ABORT_LENGTH_HIGH if len(raw) > e.size else E.ABORT_LENGTH_LOW
+            raise ObjectError(index, sub, code, f"{len(raw)} bytes for a {e.size}-byte object")
+        value = e.decode(raw)
+        if value < 0 and e.min is not None and e.min >= 0:
+            value += 1 << (8 * e.size)  # hex parameters are carried unsigned
+        if e.max is not None and value > e.max:
+            raise ObjectError(index, sub, E.ABORT_VALUE_HIGH, f"{value} > max {e.max}")
+        if e.min is not None and value < e.min:
+            raise ObjectError(index, sub, E.ABORT_VALUE_LOW, f"{value} < min {e.min}")
+        if 0x2000 <= index <= 0x2FFF or 0x6000 <= index <= 0x6FFF:
+            self.drive.write_object(index, sub, value)
+            return
+        self._write_comm(e, value)
+
+    def _write_comm(self, e: Entry, value: int) -> None:
+        index, sub = e.index, e.sub
+        if index == 0x1003:
+            if value != 0:
+                raise ObjectError(index, sub, E.ABORT_VALUE_RANGE, "only 0 clears 1003h")
+            clear = getattr(getattr(self.drive, "alarms", None), "clear_error_history", None)
+            if callable(clear):
+                clear()
+            else:
+                self._history_cleared = tuple(self._history())
+            return
+        if 0x1400 <= index <= 0x1403 or 0x1800 <= index <= 0x1803:
+            self._write_pdo_comm(index, sub, value)
+        elif 0x1600 <= index <= 0x1603 or 0x1A00 <= index <= 0x1A03:
+            self._write_pdo_map(index, sub, value)
+        self._values[(index, sub)] = value
+        now = self.clock()
+        if index == 0x1017:
+            self._restart_heartbeat(now)
+        elif index == 0x1016:
+            self._hb_consumer_deadline = None
+        elif index in (0x100C, 0x100D):
+            self._life_deadline = None
+
+    def _write_pdo_comm(self, index: int, sub: int, value: int) -> None:
+        rx = index < 0x1800
+        old = self._values[(index, 1)]
+        valid = not old & 0x80000000
+        if sub == 1:
+            if value & 0x20000000 or value & 0x1FFFF800:
+                raise ObjectError(index, sub, E.ABORT_VALUE_RANGE, "29-bit COB-IDs unsupported")
+            if valid and not value & 0x80000000 and (value & 0x7FF) != (old & 0x7FF):
+                raise ObjectError(
+                    index, sub, E.ABORT_VALUE_RANGE, "COB-ID change while the PDO is valid"
+                )
+            n = index & 3
+            self._pdo[n if rx else 4 + n] = _PdoRun()
+        elif sub == 2:
+            if 241 <= value <= 251 or (rx and value in (252, 253)):
+                raise ObjectError(index, sub, E.ABORT_VALUE_RANGE, f"transmission type {value}")
+        elif sub == 3 and valid and not rx:
+            raise ObjectError(index, sub, E.ABORT_DATA_STATE, "inhibit time while PDO valid")
+
+    def _write_pdo_map(self, index: int, sub: int, value: int) -> None:
+        rx = index < 0x1A00
+        comm = (0x1400 if rx else 0x1800) + (index & 3)
+        if not self._values[(comm, 1)] & 0x80000000:
+            raise ObjectError(index, sub, E.ABORT_DATA_STATE, "mapping change while PDO valid")
+        if sub == 0:
+            total = 0
+            for s in range(1, value + 1):
+                total += self._check_map_entry(index, s, self._values[(index, s)], rx)
+            if total > 64:
+                raise ObjectError(index, sub, E.ABORT_PDO_LENGTH, f"{total} bits > 64 (L18024)")
+            return
+        if self._values[(index, 0)] != 0:
+            raise ObjectError(index, sub, E.ABORT_DATA_STATE, "mapping change while sub0 != 0")
+        if value:
+            self._check_map_entry(index, sub, value, rx)
+
+    def _check_map_entry(self, index: int, sub: int, value: int, rx: bool) -> int:
+        t_index, t_sub, bits = value >> 16, (value >> 8) & 0xFF, value & 0xFF
+        try:
+            target = self.od.get(t_index, t_sub)
+        except ObjectError as exc:
+            raise ObjectError(index, sub, E.ABORT_NO_OBJECT, f"maps {exc}") from None
+        ok = target.pdo and target.bits == bits and (target.writable if rx else target.readable)
+        if not ok:
+            raise ObjectError(
+                index, sub, E.ABORT_NOT_MAPPABLE, f"{t_index:04X}h sub {t_sub} cannot be mapped"
+            )
+        return bits
+
+
+P_SIGNED = {"INTEGER8", "INTEGER16", "INTEGER32"}

@@ -1,0 +1,270 @@
+"""CANopen (CiA 301) frame vocabulary: COB-ID classes, SDO command specifiers, frame decoding.
+
+Pure: no bus import. `describe_frame` is what the recorder uses to decode a raw frame; it
+never raises, whatever the bytes (a malformed frame is described with an `error` field).
+"""
+
+from __future__ import annotations
+
+import struct
+
+# Function codes (COB-ID bits 10..7) -- a3-comms §2.3, L16873-L16899.
+NMT = 0x000
+SYNC = 0x080
+EMCY = 0x080
+TPDO_BASE = (0x180, 0x280, 0x380, 0x480)
+RPDO_BASE = (0x200, 0x300, 0x400, 0x500)
+SDO_TX = 0x580  # server -> client
+SDO_RX = 0x600  # client -> server
+HEARTBEAT = 0x700
+
+# NMT command specifiers (CiA 301; the manual's figure is missing, a3-comms §2.4).
+NMT_START = 0x01
+NMT_STOP = 0x02
+NMT_PRE_OPERATIONAL = 0x80
+NMT_RESET_NODE = 0x81
+NMT_RESET_COMMUNICATION = 0x82
+NMT_COMMANDS = {
+    NMT_START: "start",
+    NMT_STOP: "stop",
+    NMT_PRE_OPERATIONAL: "enter pre-operational",
+    NMT_RESET_NODE: "reset node",
+    NMT_RESET_COMMUNICATION: "reset communication",
+}
+
+# NMT states as heartbeat / guarding byte (L17105-L17111).
+STATE_BOOTUP = 0
+STATE_STOPPED = 4
+STATE_OPERATIONAL = 5
+STATE_PRE_OPERATIONAL = 127
+NMT_STATES = {
+    STATE_BOOTUP: "BOOTUP",
+    STATE_STOPPED: "STOPPED",
+    STATE_OPERATIONAL: "OPERATIONAL",
+    STATE_PRE_OPERATIONAL: "PRE-OPERATIONAL",
+}
+
+# SDO command specifiers (bits 7..5 of byte 0).
+CCS_DOWNLOAD_SEGMENT = 0
+CCS_INITIATE_DOWNLOAD = 1
+CCS_INITIATE_UPLOAD = 2
+CCS_UPLOAD_SEGMENT = 3
+CCS_ABORT = 4
+CCS_BLOCK_UPLOAD = 5
+CCS_BLOCK_DOWNLOAD = 6
+SCS_UPLOAD_SEGMENT = 0
+SCS_DOWNLOAD_SEGMENT = 1
+SCS_INITIATE_UPLOAD = 2
+SCS_INITIATE_DOWNLOAD = 3
+SCS_ABORT = 4
+SCS_BLOCK_DOWNLOAD = 5
+SCS_BLOCK_UPLOAD = 6
+CCS_NAMES = {
+    0: "download segment",
+    1: "initiate download",
+    2: "initiate upload",
+    3: "upload segment",
+    4: "abort",
+    5: "block upload",
+    6: "block download",
+}
+SCS_NAMES = {
+    0: "upload segment",
+    1: "download segment",
+    2: "initiate upload",
+    3: "initiate download",
+    4: "abort",
+    5: "block download",
+    6: "block upload",
+}
+
+# CiA 301 table 22 abort texts (the manual's list, L17024-L17042, is a subset).
+ABORT_TEXTS = {
+    0x05030000: "Toggle bit not alternated",
+    0x05040000: "SDO protocol timed out",
+    0x05040001: "Client/server command specifier not valid or unknown",
+    0x05040002: "Invalid block size",
+    0x05040003: "Invalid sequence number",
+    0x05040004: "CRC error",
+    0x05040005: "Out of memory",
+    0x06010000: "Unsupported access to an object",
+    0x06010001: "Attempt to read a write only object",
+    0x06010002: "Attempt to write a read only object",
+    0x06020000: "Object does not exist in the object dictionary",
+    0x06040041: "Object cannot be mapped to the PDO",
+    0x06040042: "The number and length of the objects to be mapped would exceed PDO length",
+    0x06040043: "General parameter incompatibility reason",
+    0x06040047: "General internal incompatibility in the device",
+    0x06060000: "Access failed due to a hardware error",
+    0x06070010: "Data type does not match, length of service parameter does not match",
+    0x06070012: "Data type does not match, length of service parameter too high",
+    0x06070013: "Data type does not match, length of service parameter too low",
+    0x06090011: "Sub-index does not exist",
+    0x06090030: "Invalid value for parameter (download only)",
+    0x06090031: "Value of parameter written too high (download only)",
+    0x06090032: "Value of parameter written too low (download only)",
+    0x06090036: "Maximum value is less than minimum value",
+    0x060A0023: "Resource not available: SDO connection",
+    0x08000000: "General error",
+    0x08000020: "Data cannot be transferred or stored to the application",
+    0x08000021: "Data cannot be transferred or stored to the application because of local control",
+    0x08000022: "Data cannot be transferred or stored to the application because of the present "
+    "device state",
+    0x08000023: "Object dictionary dynamic generation fails or no object dictionary is present",
+    0x08000024: "No data available",
+}
+
+
+def abort_text(code: int) -> str:
+    """CiA 301 text of an SDO abort code ("unknown abort code" if not in the table)."""
+    return ABORT_TEXTS.get(code, "unknown abort code")
+
+
+def classify(can_id: int) -> tuple[str, int | None]:
+    """(kind, node) of an 11-bit COB-ID per the CiA 301 pre-defined connection set."""
+    node = can_id & 0x7F
+    fc = can_id & 0x780
+    if can_id == NMT:
+        return "nmt", None
+    if can_id == SYNC:
+        return "sync", None
+    if can_id == 0x100:
+        return "time", None
+    if fc == 0x080:
+        return "emcy", node
+    for i, base in enumerate(TPDO_BASE):
+        if fc == base:
+            return f"tpdo{i + 1}", node
+    for i, base in enumerate(RPDO_BASE):
+        if fc == base:
+            return f"rpdo{i + 1}", node
+    if fc == SDO_TX:
+        return "sdo_tx", node
+    if fc == SDO_RX:
+        return "sdo_rx", node
+    if fc == HEARTBEAT:
+        return "heartbeat", node
+    return "unknown", None
+
+
+# --- SDO frame builders (8 bytes each) ---------------------------------------------------
+
+
+def sdo_abort(index: int, sub: int, code: int) -> bytes:
+    return struct.pack("<BHBI", 0x80, index & 0xFFFF, sub & 0xFF, code & 0xFFFFFFFF)
+
+
+def sdo_expedited_upload_response(index: int, sub: int, data: bytes) -> bytes:
+    """43h/47h/4Bh/4Fh + data (4/3/2/1 bytes) -- L17011-L17016."""
+    n = 4 - len(data)
+    return bytes([0x43 | (n << 2), index & 0xFF, index >> 8, sub]) + data + bytes(n)
+
+
+def sdo_download_response(index: int, sub: int) -> bytes:
+    """60h -- L16972."""
+    return struct.pack("<BHBI", 0x60, index, sub, 0)
+
+
+def sdo_expedited_download(index: int, sub: int, data: bytes) -> bytes:
+    """23h/27h/2Bh/2Fh request (L16960-L16964)."""
+    n = 4 - len(data)
+    return bytes([0x23 | (n << 2), index & 0xFF, index >> 8, sub]) + data + bytes(n)
+
+
+def sdo_upload_request(index: int, sub: int) -> bytes:
+    """40h request (L17003-L17005)."""
+    return struct.pack("<BHBI", 0x40, index, sub, 0)
+
+
+def _u32(data: bytes, at: int = 4) -> int:
+    return int.from_bytes(data[at : at + 4].ljust(4, b"\0"), "little")
+
+
+def _describe_sdo(data: bytes, client: bool) -> dict:
+    out: dict = {}
+    if not data:
+        out["error"] = "empty SDO frame"
+        return out
+    cs = data[0] >> 5
+    if len(data) != 8:
+        out["error"] = f"SDO frame with DLC {len(data)} (expected 8)"
+    if client:
+        out["ccs"] = cs
+        out["command"] = CCS_NAMES.get(cs, "unknown")
+    else:
+        out["scs"] = cs
+        out["command"] = SCS_NAMES.get(cs, "unknown")
+    has_mux = (client and cs in (1, 2, 4, 5, 6)) or (not client and cs in (2, 3, 4))
+    if has_mux and len(data) >= 4:
+        out["index"] = data[1] | data[2] << 8
+        out["sub"] = data[3]
+    if cs == 4:
+        code = _u32(data)
+        out["abort_code"] = code
+        out["abort_text"] = abort_text(code)
+        return out
+    initiate = (client and cs == 1) or (not client and cs == 2)
+    if initiate:
+        e, s = bool(data[0] & 2), bool(data[0] & 1)
+        out["expedited"] = e
+        if e:
+            n = 4 - ((data[0] >> 2) & 3) if s else 4
+            raw = bytes(data[4 : 4 + n])
+            out["data"] = raw.hex()
+            out["value"] = int.from_bytes(raw, "little")
+        elif s:
+            out["size"] = _u32(data)
+    elif (client and cs == 0) or (not client and cs == 0):
+        n = (data[0] >> 1) & 7
+        out["toggle"] = (data[0] >> 4) & 1
+        out["last"] = bool(data[0] & 1)
+        out["data"] = bytes(data[1 : 8 - n]).hex()
+    elif (client and cs == 3) or (not client and cs == 1):
+        out["toggle"] = (data[0] >> 4) & 1
+    return out
+
+
+def describe_frame(can_id: int, data: bytes, *, remote: bool = False) -> dict:
+    """Decode one CAN frame into a flat dict (kind, node and the fields of its protocol)."""
+    try:
+        data = bytes(data)
+        kind, node = classify(can_id)
+        out: dict = {"kind": kind, "node": node, "cob_id": can_id, "dlc": len(data)}
+        if remote:
+            out["remote"] = True
+            if kind == "heartbeat":
+                out["kind"] = "node_guard_request"
+            return out
+        if kind == "nmt":
+            if len(data) >= 2:
+                out["command"] = NMT_COMMANDS.get(data[0], "unknown")
+                out["cs"] = data[0]
+                out["target"] = data[1]
+            else:
+                out["error"] = f"NMT frame with DLC {len(data)} (expected 2)"
+        elif kind == "heartbeat":
+            if data:
+                state = data[0] & 0x7F
+                out["state"] = NMT_STATES.get(state, f"unknown ({state})")
+                out["toggle"] = data[0] >> 7
+            else:
+                out["error"] = "heartbeat without data"
+        elif kind == "emcy":
+            if len(data) >= 3:
+                out["error_code"] = data[0] | data[1] << 8
+                out["error_register"] = data[2]
+                alarm = int.from_bytes(data[3:5].ljust(2, b"\0"), "little")
+                out["alarm"] = f"AL{alarm:03X}" if alarm else ""
+                out["manufacturer"] = bytes(data[3:8]).hex()
+            else:
+                out["error"] = f"EMCY frame with DLC {len(data)} (expected 8)"
+        elif kind == "sync":
+            if data:
+                out["counter"] = data[0]
+        elif kind in ("sdo_rx", "sdo_tx"):
+            out.update(_describe_sdo(data, client=kind == "sdo_rx"))
+        elif kind.startswith(("tpdo", "rpdo")):
+            out["data"] = data.hex()
+        return out
+    except Exception as exc:  # the recorder must never crash on a frame
+        return {"kind": "unknown", "node": None, "cob_id": can_id, "error": repr(exc)}

@@ -1,0 +1,113 @@
+"""Cia402Driver against the CANopen slave + fake drive on a virtual bus."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "faces"))
+from fake_drive import Bench
+
+from hil.drivers.cia402 import (
+    Cia402Driver,
+    Cia402Fault,
+    Cia402ModeError,
+    Cia402Timeout,
+    SdoError,
+    decode_state,
+)
+
+NODE = 7
+
+
+@pytest.fixture
+def rig():
+    b = Bench(NODE)
+    drv = Cia402Driver(b.network(), NODE, timeouts={"state": 0.3, "fault_reset": 0.2})
+    yield b, drv
+    b.close()
+
+
+def test_decode_state_masks():
+    # L18321-L18331
+    assert decode_state(0x0250) == "SWITCH ON DISABLED"
+    assert decode_state(0x0231) == "READY TO SWITCH ON"
+    assert decode_state(0x0237) == "OPERATION ENABLED"
+    assert decode_state(0x0217) == "QUICK STOP ACTIVE"
+    assert decode_state(0x0218) == "FAULT"
+
+
+def test_power_states(rig):
+    b, drv = rig
+    drv.enable_operation()
+    assert b.drive.state == "OPERATION ENABLED"
+    assert [w[2] for w in b.drive.writes if w[0] == 0x6040] == [0x06, 0x07, 0x0F]  # L17150
+    drv.quick_stop()
+    assert drv.state == "QUICK STOP ACTIVE"
+    drv.enable_operation()
+    drv.shutdown()
+    assert drv.state == "READY TO SWITCH ON"
+    drv.disable_voltage()
+    assert drv.state == "SWITCH ON DISABLED"
+
+
+def test_pp_move_and_homing(rig):
+    b, drv = rig
+    drv.move_to(100_000, velocity=10_000, accel=200, decel=200)
+    assert b.drive.objects[(0x6064, 0)] == 100_000
+    assert b.drive.objects[(0x6061, 0)] == 1
+    sw = drv.home(35, speeds=(100, 20), accel=100)
+    assert sw & 0x1000 and b.drive.objects[(0x6098, 0)] == 35
+
+
+def test_fault_reset(rig):
+    b, drv = rig
+    drv.enable_operation()
+    with b.lock:
+        b.drive.alarm("AL009", 0x8611, True)
+    with pytest.raises(Cia402Fault, match="saw FAULT"):
+        drv.enable_operation()
+    with b.lock:
+        b.drive.alarm("AL009", 0, False)
+    drv.fault_reset()
+    assert drv.state == "SWITCH ON DISABLED"
+
+
+def test_timeout_message_says_expected_and_seen(rig):
+    b, drv = rig
+    with b.lock:
+        b.drive.alarm("AL011", 0x7305, True)  # the cause stays: reset cannot clear it
+    with pytest.raises(Cia402Timeout) as info:
+        drv.fault_reset()
+    msg = str(info.value)
+    assert "expected SWITCH ON DISABLED after fault reset" in msg
+    assert "timeouts['fault_reset']" in msg and "saw state FAULT (statusword 0x0018)" in msg
+    assert info.value.elapsed >= 0.2 and info.value.state == "FAULT"
+
+
+def test_set_mode_never_swallows(rig):
+    b, drv = rig
+    with pytest.raises(Cia402ModeError, match="unknown mode 'CSP'"):
+        drv.set_mode("CSP")
+    b.drive.write_object = _no_echo(b.drive.write_object)
+    with pytest.raises(Cia402ModeError, match=r"expected 6061h = 3 \(PV\).*saw 0"):
+        drv.set_mode("PV")
+
+
+def _no_echo(write):
+    def w(index, sub, value):
+        if index == 0x6060:
+            return
+        write(index, sub, value)
+
+    return w
+
+
+def test_sdo_error_names_abort(rig):
+    _, drv = rig
+    with pytest.raises(SdoError, match=r"3000h sub 0: abort 0x06020000 \(Object does not exist"):
+        drv.read(0x3000, 0)
+    with pytest.raises(ValueError, match="unknown names"):
+        Cia402Driver(None, 1, timeouts={"nope": 1})

@@ -1,0 +1,36 @@
+"""The checked-in EDS equals a fresh generation, and canopen can load it."""
+
+from __future__ import annotations
+
+import canopen
+
+from hil.faces.canopen_od import ObjectDictionary, parameter_index
+from hil.faces.eds import EDS_PATH, generate
+
+
+def test_checked_in_eds_is_fresh():
+    assert EDS_PATH.read_text(encoding="utf-8") == generate(), (
+        "fixtures/drive/a3.eds is stale: run `python -m hil.faces.eds`"
+    )
+
+
+def test_canopen_import_od_reads_it():
+    od = canopen.import_od(str(EDS_PATH), node_id=10)
+    assert od[0x1000].default == 0x07020192  # L17482-L17508
+    assert od[0x1018][1].default == 0x1DD and od[0x1018][2].default == 0x6000  # L17784/92
+    assert od[0x1200][1].default == 0x60A and od[0x1200][2].default == 0x58A  # L17877-85
+    assert od[0x1014].default == 0x8A  # L17704-L17708
+    assert od[0x6502].default == 0x6D  # L19259
+    assert od[0x6040].default == 0x0004  # L18212
+    assert od[0x6061].access_type == "ro"  # ⚠ resolved, docs/choices/canopen.md
+
+
+def test_parameter_objects():
+    # Pa.bc <=> 2aBCh, BC = bc in hex (L18156)
+    assert parameter_index("P3.000") == 0x2300
+    assert parameter_index("P1.044") == 0x212C
+    assert parameter_index("P7.001") == 0x2701
+    od = ObjectDictionary.a3()
+    if (0x2300, 0) in od:  # a3_parameters.csv present
+        assert od.get(0x2300, 0).type == "INTEGER16" and od.get(0x2300, 0).pdo
+        assert od.get(0x212C, 0).type == "INTEGER32"
