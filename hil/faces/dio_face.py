@@ -1,0 +1,57 @@
+"""The drive's DI/DO face: its digital lines on a DI/DO transport (role "drive").
+
+Inputs seen on the port (`DI<n>`, `STO_A`, `STO_B`, electrical levels) go to the model;
+the model's DO and FDBK changes are published on the port. a/b-contact logic stays inside
+the drive, as on hardware (DESIGN.md, DI/DO over zenoh).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hil.model.events import DoChanged, FdbkChanged
+
+N_DO = 6
+
+
+class DioFace:
+    """Connects a `DioPort(role="drive")` to a `Drive` owned by a `DriveHost`."""
+
+    def __init__(self, port: Any, host: Any) -> None:
+        self.port = port
+        self.host = host
+        self.errors: list[str] = []
+        with host.lock:
+            drive = host.drive
+            for n in range(1, N_DO + 1):
+                port.set(f"DO{n}", drive.do(n))
+            port.set("FDBK", drive.fdbk())
+            self._unsub_drive = drive.subscribe(self._on_event)
+            for line, level in port.levels().items():
+                if not port.owns(line):
+                    self._apply(line, level)
+        self._unsub_port = port.subscribe(self._on_line)
+
+    def _on_event(self, event: object) -> None:
+        if isinstance(event, DoChanged):
+            self.port.set(f"DO{event.n}", event.level)
+        elif isinstance(event, FdbkChanged):
+            self.port.set("FDBK", event.closed)
+
+    def _on_line(self, line: str, level: bool, t: int) -> None:
+        self.host.call(self._apply, line, level)
+
+    def _apply(self, line: str, level: bool) -> None:
+        drive = self.host.drive
+        try:
+            if line in ("STO_A", "STO_B"):
+                drive.set_sto(line[-1], level)
+            elif line.startswith("DI"):
+                drive.set_di(int(line[2:]), level)
+        except (ValueError, KeyError) as exc:  # e.g. DI11 on the wire: not a terminal
+            self.errors.append(f"{line}: {exc}")
+
+    def close(self) -> None:
+        self._unsub_port()
+        with self.host.lock:
+            self._unsub_drive()

@@ -1,0 +1,470 @@
+"""The virtual Delta ASDA-A3: parameters, DI/DO, CiA 402, motion, brake, STO, alarms.
+
+`Drive` composes the components of this package and is the only class faces and tests
+talk to (docs/architecture.md). It is pure and deterministic: time moves only through
+`advance()` / `advance_to()`; motion is integrated in substeps of
+`ModelOptions.motion_step_ms` aligned to a fixed grid (so results do not depend on how the
+caller slices time), and every timer fires at its own deadline.
+
+Servo logic (choices in docs/manual-choices.md):
+* servo on when requested (DI.SON L15079, or CiA 402 OPERATION ENABLED), no servo-off alarm
+  (chapter 13 "servo state OFF" column), both STO channels present;
+* EMGS -> AL013 (WARN, servo off, clears itself when released: L15184, L19338, L19557);
+  NL/PL -> AL014/AL015 (WARN, servo stays on; motion towards the limit stops with the
+  P5.003 X/Y deceleration: L15188-15191, L8329, L11084-11100);
+* DO.SRDY while no ALM-class alarm (L15263), DO.SON while the servo is on (L15266),
+  ZSPD |v| < P1.038 (L15269), TSPD v > P1.039 (L15272), TPOS |error| < P1.054 (L15275),
+  ALRM/WARN from the alarm classes (L15282, L15307), BRKR from `brake.py`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from hil.model.alarms import AlarmManager, AlarmOptions
+from hil.model.brake import Brake
+from hil.model.cia402 import Cia402, Cia402Options
+from hil.model.dio import DigitalIO
+from hil.model.errors import (
+    ABORT_DATA_STATE,
+    ABORT_DATA_STORE,
+    ABORT_NO_OBJECT,
+    ABORT_READ_ONLY,
+    ABORT_VALUE_HIGH,
+    ABORT_VALUE_LOW,
+    ABORT_VALUE_RANGE,
+    ObjectError,
+    OutOfRange,
+    ParamError,
+    ProtectedParameter,
+    ReadOnly,
+    ServoOnLocked,
+    UnknownParameter,
+)
+from hil.model.events import (
+    AlarmChanged,
+    DriveEvent,
+    FdbkChanged,
+    ParamChanged,
+    PowerCycled,
+)
+from hil.model.mechanics import Mechanics
+from hil.model.motion import Axis, counts_to_puu
+from hil.model.options import ModelOptions
+from hil.model.params import ParameterStore
+from hil.model.sto import Sto
+from hil.model.timebase import Scheduler, ms
+
+MODE_NAMES = {0: "", 1: "PP", 3: "PV", 4: "PT", 6: "HM", 7: "IP"}
+
+# Physical wiring of the virtual bench's sensors: function -> (DI number, contact type).
+# Limit switches are normally closed (open at the limit), the home sensor normally open.
+DEFAULT_SENSORS: dict[str, tuple[int, str]] = {"NL": (6, "nc"), "PL": (7, "nc"), "ORGP": (9, "no")}
+
+
+class Drive:
+    """One virtual ASDA-A3 (A3-M: CANopen, RS-485, STO)."""
+
+    def __init__(
+        self,
+        *,
+        options: ModelOptions | None = None,
+        mechanics: Mechanics | None = None,
+        state_path: Path | str | None = None,
+        t0: int = 0,
+        name: str = "drive1",
+        inputs: dict[int, bool] | None = None,
+        sensors: dict[str, tuple[int, str]] | None = None,
+        params: dict[str, int] | None = None,
+    ) -> None:
+        self.name = name
+        self.options = options = options or ModelOptions()
+        self.sched = Scheduler(t0)
+        self.mech = mechanics or Mechanics()
+        self.state_path = Path(state_path) if state_path else None
+        if self.state_path:
+            self.state_path.mkdir(parents=True, exist_ok=True)
+        self._subs: list[Callable[[DriveEvent], None]] = []
+        self._step_ns = max(1, ms(options.motion_step_ms))
+        self.servo_on = False
+        self.powered = True
+
+        self.params = ParameterStore(
+            retained_path=self.state_path / "params.json" if self.state_path else None
+        )
+        self.params.servo_on = lambda: self.servo_on
+        self.params.subscribe(lambda n, v: self._emit(ParamChanged(self.sched.now, n, v)))
+        for name_, value in (params or {}).items():
+            self.params.write(name_, value)
+        if params:
+            self.params.power_cycle()  # bench-given values act like configured drives
+
+        override = {}
+        if options.dev_al501_cleared_by_arst:
+            override = {"AL501": "reset", "AL502": "reset"}
+        self.alarms = AlarmManager(
+            None, self.sched, self.params, self._on_alarm, AlarmOptions(override)
+        )
+        self.dio = DigitalIO(self.params, self.sched, self._emit, name=name)
+        self.axis = Axis(self.mech)
+        self.brake = Brake(
+            self.sched,
+            self.params.get,
+            lambda: self.axis.velocity_rpm,
+            lambda v: self._set_do("BRKR", v),
+            self._on_clamp,
+            options,
+            release_ms=self.mech.brake_release_ms,
+            engage_ms=self.mech.brake_engage_ms,
+        )
+        self.sto = Sto(
+            self.sched,
+            self.alarms.set_cause,
+            self._on_torque_cut,
+            lambda c: self._emit(FdbkChanged(self.sched.now, c)),
+            options,
+        )
+        self.cia402 = Cia402(
+            self.axis,
+            clock=lambda: self.sched.now,
+            emit=self._emit,
+            options=Cia402Options(**options.extra.get("cia402", {})),
+            fault_reset=self._fault_reset,
+            on_servo_request=lambda _on, _cause: self._update_servo(),
+            on_write=self._on_object_written,
+        )
+        self._step_hooks: list[Callable[[], None]] = []  # homing, absolute encoder
+        self._hold_timer = None
+        self._dout_cache: dict[str, bool] = {}
+        self.sensors = dict(DEFAULT_SENSORS if sensors is None else sensors)
+        self._sensor_state: dict[str, bool] = {}
+
+        self.dio.on_function("SON", lambda _a: self._update_servo())
+        self.dio.on_function("EMGS", lambda a: self.alarms.set_cause("AL013", a))
+        self.dio.on_function("NL", lambda a: self._on_limit("NL", a))
+        self.dio.on_function("PL", lambda a: self._on_limit("PL", a))
+        self.dio.on_function("ORGP", self.cia402.set_home_switch)
+        self.dio.on_function("ARST", self._on_arst)
+        self.params.on_write("P2.030", lambda *_: self._update_servo())
+
+        for n, closed in (inputs or {}).items():
+            self.dio.set_input(n, closed)
+        self._update_sensors(force=True)
+        self._boot()
+
+    # ------------------------------------------------------------------ public API
+    @property
+    def now(self) -> int:
+        return self.sched.now
+
+    def subscribe(self, fn: Callable[[DriveEvent], None]) -> Callable[[], None]:
+        """Call `fn(event)` for every model event; returns an unsubscribe callable."""
+        self._subs.append(fn)
+        return lambda: self._subs.remove(fn) if fn in self._subs else None
+
+    def advance(self, dt: int) -> None:
+        """Let `dt` ns of model time pass."""
+        self.advance_to(self.sched.now + dt)
+
+    def advance_to(self, t: int) -> None:
+        """Run the model up to time `t` (ns): timers at their deadlines, motion in substeps."""
+        sched = self.sched
+        while True:
+            nxt = sched.next_deadline()
+            stop = t if nxt is None or nxt > t else nxt
+            self._integrate_to(stop)
+            if nxt is None or nxt > t:
+                break
+            sched.run_due()
+        sched.now = max(sched.now, t)
+
+    def set_di(self, n: int, closed: bool) -> None:
+        """Physical DI n (1..10): True = contact closed (24 V)."""
+        self.dio.set_input(n, closed)
+
+    def set_sto(self, channel: str, on: bool) -> None:
+        """STO channel "A"/"B" (or "STO_A"/"STO_B"): True = 24 V present."""
+        self.sto.set_channel(channel, on)
+        self._update_servo()
+
+    def do(self, n: int) -> bool:
+        """DO n (1..6): True = output transistor conducting."""
+        return self.dio.do_level(n)
+
+    def fdbk(self) -> bool:
+        """STO FDBK output: True = closed."""
+        return self.sto.fdbk
+
+    def read_object(self, index: int, sub: int = 0) -> int:
+        """Value of a 2000h-2FFFh (parameter) or 6000h-6FFFh object."""
+        if 0x2000 <= index <= 0x2FFF:
+            if sub != 0:
+                raise ObjectError(index, sub, 0x06090011, "parameter objects have sub-index 0")
+            return self.params.read(self._param_of(index, sub))
+        if 0x6000 <= index <= 0x6FFF:
+            return self.cia402.read(index, sub)
+        raise ObjectError(index, sub, ABORT_NO_OBJECT, "object does not exist in the drive")
+
+    def write_object(self, index: int, sub: int, value: int) -> None:
+        """Write a 2000h-2FFFh or 6000h-6FFFh object; refusals carry the SDO abort code."""
+        if 0x2000 <= index <= 0x2FFF:
+            name = self._param_of(index, sub)
+            try:
+                self.params.write(name, value)
+            except ParamError as exc:
+                raise ObjectError(index, sub, _abort_for(exc, value), str(exc)) from exc
+            return
+        if 0x6000 <= index <= 0x6FFF:
+            self.cia402.write(index, sub, value)
+            self._update_servo()
+            return
+        raise ObjectError(index, sub, ABORT_NO_OBJECT, "object does not exist in the drive")
+
+    def power_cycle(self, *, battery: bool = True, off_for: int = 0) -> None:
+        """Switch the drive off (for `off_for` ns) and on again."""
+        self._servo_off("normal", None, immediate=True)
+        self.advance(off_for)
+        self.params.power_cycle()
+        self.dio.power_cycle()
+        self.alarms.power_cycle()
+        self.brake.reset()
+        self.sto.reset()
+        self.axis.set_power(False)
+        self._emit(PowerCycled(self.sched.now, battery))
+        self._boot()
+
+    def close(self) -> None:
+        """Save retained state (the process is going away)."""
+        if self.state_path:
+            self.params.save()
+
+    def snapshot(self) -> dict[str, Any]:
+        """Ground truth for the recorder: what a real bench cannot see directly."""
+        ax = self.axis
+        g44, g45 = self.params.get("P1.044"), self.params.get("P1.045")
+        return {
+            "t": self.sched.now,
+            "state": self.cia402.state,
+            "mode": MODE_NAMES.get(self.cia402.mode, str(self.cia402.mode)),
+            "servo_on": self.servo_on,
+            "torque_enabled": ax.power,
+            "position_puu": round(counts_to_puu(ax.user_position, g44, g45)),
+            "position_counts": round(ax.position),
+            "speed_rpm": round(ax.velocity_rpm, 3),
+            "torque_pct": round(ax.torque / 10.0, 2),
+            "following_error_counts": round(ax.following_error),
+            "brkr": self.brake.brkr,
+            "brake_released": not self.brake.clamped,
+            "sto_a": self.sto.a,
+            "sto_b": self.sto.b,
+            "alarms": list(self.alarms.active),
+            "statusword": self.cia402.statusword,
+            "do": [self.dio.do_level(n) for n in range(1, 7)],
+        }
+
+    # ------------------------------------------------------------------ internals
+    def _emit(self, event: DriveEvent) -> None:
+        for fn in list(self._subs):
+            fn(event)
+
+    def _boot(self) -> None:
+        """After power on: SRDY, outputs, and the CiA 402 automatic transitions 0/1."""
+        self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
+        self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
+        self._set_do("SRDY", not self.alarms.alrm)
+        self._set_do("ALRM", self.alarms.alrm)
+        self._set_do("WARN", self.alarms.warn)
+        self._set_do("SON", False)
+        self._set_do("BRKR", False)
+        self._refresh_speed_outputs()
+        self._mirror_params()
+        self.cia402.power_on()
+        self.cia402.set_voltage(True)
+        self._on_alarm(None)
+
+    def _mirror_params(self) -> None:
+        """Parameters the CiA 402 objects mirror: gear 6093h, max speed, limit ramps."""
+        self.cia402.set_gear(self.params.get("P1.044"), self.params.get("P1.045"))
+        self.cia402.set_max_speed(self.params.get("P1.055"))
+        self.cia402.limit_decel_ms = min(self._p5003_decel(0), self._p5003_decel(1))
+
+    def _on_object_written(self, index: int, sub: int, value: int) -> None:
+        if index == 0x6093 and sub in (1, 2):  # 6093h = P1.044 / P1.045 (L18838-18854)
+            name = "P1.044" if sub == 1 else "P1.045"
+            if self.params.read(name) != value:
+                self.params.set_internal(name, value)
+
+    def _param_of(self, index: int, sub: int) -> str:
+        try:
+            return self.params.by_od_index(index).param
+        except UnknownParameter as exc:
+            raise ObjectError(index, sub, ABORT_NO_OBJECT, str(exc)) from exc
+
+    def _set_do(self, symbol: str, active: bool) -> None:
+        if self._dout_cache.get(symbol) != active:
+            self._dout_cache[symbol] = active
+            self.dio.set_do_function(symbol, active)
+
+    # -- servo --------------------------------------------------------------------------
+    def _requested(self) -> bool:
+        src = self.options.son_sources
+        return (
+            ("DI" in src and self.dio.function_active("SON"))
+            or ("CANOPEN" in src and self.cia402.servo_enable_requested)
+            or self.params.get("P2.030") == 1  # forced software servo on (L9496)
+        )
+
+    def _update_servo(self) -> None:
+        if not self.powered:
+            return
+        blocked = self.alarms.servo_off_required or not (self.sto.a and self.sto.b)
+        want = self._requested() and not blocked
+        if want and not self.servo_on:
+            self._servo_on()
+        elif not want and self.servo_on:
+            if self.alarms.servo_off_required:
+                code = self.alarms.current
+                cause = "emgs" if "AL013" in self.alarms.active else "alarm"
+                self._servo_off(cause, code)
+            else:
+                self._servo_off("normal", None)
+
+    def _servo_on(self) -> None:
+        self.servo_on = True
+        if self._hold_timer:
+            self._hold_timer.cancel()
+            self._hold_timer = None
+        self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
+        self.axis.set_power(not self.sto.torque_cut)
+        self.axis.hold()
+        self._set_do("SON", True)
+        self.brake.servo_on()
+
+    def _servo_off(self, cause: str, alarm: str | None, immediate: bool = False) -> None:
+        if not self.servo_on:
+            return
+        self.servo_on = False
+        self._set_do("SON", False)
+        hold = 0 if immediate else self.brake.servo_off(cause, alarm)
+        if hold:  # negative P1.043: brake clamps first, torque held |P1.043| (options.py)
+            self._hold_timer = self.sched.after(hold, lambda: self.axis.set_power(False))
+        else:
+            self.axis.set_power(False)
+
+    def _on_torque_cut(self, cut: bool) -> None:
+        self.axis.set_power(self.servo_on and not cut)
+
+    def _on_clamp(self, clamped: bool) -> None:
+        self.axis.brake_clamped = clamped
+
+    def _fault_reset(self) -> bool:
+        """CiA 402 fault reset (6040h bit 7 edge, L18231): True if no servo-off alarm stays."""
+        remaining = self.alarms.reset("6040h")
+        return not remaining
+
+    def _on_arst(self, active: bool) -> None:
+        # ARST acts on the rising edge (L15082); deviation knob: the falling edge.
+        if active != self.options.dev_arst_on_falling_edge:
+            self.alarms.reset("di")
+            self._update_servo()
+
+    def _on_alarm(self, event: AlarmChanged | None) -> None:
+        if event is not None:
+            self._emit(event)
+        al = self.alarms
+        self._set_do("ALRM", al.alrm)
+        self._set_do("WARN", al.warn)
+        self._set_do("SRDY", not al.alrm)
+        specs = [al.table.spec(c) for c in al.active]
+        fault = any(sp.kind == "ALM" and sp.servo_off for sp in specs)
+        cur = al.current
+        self.cia402.error_code = al.table.spec(cur).emcy if cur else 0  # 603Fh
+        self.cia402.set_fault(fault)
+        self.cia402.set_warning(al.warn)
+        self._update_servo()
+
+    def _on_limit(self, which: str, active: bool) -> None:
+        self.alarms.set_cause("AL014" if which == "NL" else "AL015", active)
+        nl = self.dio.function_active("NL")
+        pl = self.dio.function_active("PL")
+        self.cia402.set_limits(nl, pl)
+        if active and self.servo_on:
+            v = self.axis.velocity
+            if (which == "PL" and v > 0) or (which == "NL" and v < 0) or self.axis.moving:
+                self.axis.ramp_stop(self._p5003_decel(0 if which == "PL" else 1))
+
+    def _p5003_decel(self, digit: int) -> float:
+        """Deceleration time (ms per 3000 rpm) of P5.003 digit `digit` (L11084-11100)."""
+        idx = (self.params.get("P5.003") >> (4 * digit)) & 0xF
+        return float(self.params.get(f"P5.{20 + idx:03d}"))
+
+    # -- motion -------------------------------------------------------------------------
+    def _needs_steps(self) -> bool:
+        ax = self.axis
+        return ax.moving or ax.velocity != 0.0
+
+    def _integrate_to(self, stop: int) -> None:
+        sched = self.sched
+        step = self._step_ns
+        while sched.now < stop:
+            if not self._needs_steps():
+                sched.now = stop
+                return
+            grid = (sched.now // step + 1) * step
+            nxt = grid if grid < stop else stop
+            self.axis.step(nxt - sched.now)
+            sched.now = nxt
+            self._after_step()
+
+    def _after_step(self) -> None:
+        self.brake.after_step()
+        self.cia402.after_step()
+        for hook in self._step_hooks:
+            hook()
+        self._refresh_speed_outputs()
+        self._update_sensors()
+        ax = self.axis
+        if ax.power and (
+            abs(ax.following_error) > self.params.get("P2.035")
+            or self.cia402.following_error_exceeded
+        ):
+            self.alarms.raise_alarm("AL009")  # position error excessive (L19539-19542)
+
+    def _refresh_speed_outputs(self) -> None:
+        ax = self.axis
+        rpm = ax.velocity_rpm
+        self._set_do("ZSPD", abs(rpm) < self.params.get("P1.038") / 10.0)
+        self._set_do("TSPD", rpm > self.params.get("P1.039"))
+        self._set_do("TPOS", abs(ax.following_error) < self.params.get("P1.054"))
+
+    def _update_sensors(self, force: bool = False) -> None:
+        if not self.sensors:
+            return
+        pos = self.axis.position
+        nl, pl = self.mech.limit_states(pos)
+        states = {"NL": nl, "PL": pl, "ORGP": self.mech.home_sensor(pos)}
+        for fn, (n, kind) in self.sensors.items():
+            act = states.get(fn, False)
+            if force or self._sensor_state.get(fn) != act:
+                self._sensor_state[fn] = act
+                self.dio.set_input(n, act if kind == "no" else not act)
+
+
+def _abort_for(exc: ParamError, value: int) -> int:
+    """SDO abort code for a refused parameter write (CiA 301 codes; a3-comms §2.13.2 ⚠)."""
+    if isinstance(exc, ReadOnly):
+        return ABORT_READ_ONLY
+    if isinstance(exc, OutOfRange):
+        return ABORT_VALUE_RANGE
+    if isinstance(exc, ServoOnLocked):
+        return ABORT_DATA_STATE
+    if isinstance(exc, ProtectedParameter):
+        return ABORT_DATA_STORE
+    if isinstance(exc, UnknownParameter):
+        return ABORT_NO_OBJECT
+    return ABORT_VALUE_HIGH if value > 0 else ABORT_VALUE_LOW
+
+
+__all__ = ["DEFAULT_SENSORS", "MODE_NAMES", "Drive"]
