@@ -1,0 +1,574 @@
+"""The virtual ASDA-A3's Modbus RTU/ASCII face (manual ch. 9, L15525-L16049; P3 group).
+
+Byte-level, clock-injected and independent of pymodbus's server (which answers unknown
+stations, loses back-to-back requests and ignores timing: spec/feasibility.md §4).
+
+    slave = ModbusSlave(store, station=1, send=line.write)
+    slave.feed(chunk, t_ns)   # bytes as they arrive; t_ns = arrival of the chunk's last byte
+    slave.tick(t_ns)          # ends RTU frames on silence, sends due replies, P3.004 timeout
+
+`store` is the drive's parameter store: `modbus_read(address, count) -> list[int]` and
+`modbus_write(address, words)`, raising `hil.model.errors.ParamError` subclasses. The face
+maps those to exception responses and decides no drive behaviour: the comm-timeout alarm
+(AL020) and any comm-error alarm (AL019) are the drive's, reached through `on_timeout` and
+`on_comm_error`. Every ambiguous choice is a field of `ModbusFaceOptions`, documented in
+docs/choices/modbus.md.
+
+`ModbusSlaveRunner(slave, line)` pumps a line object (`read(n, timeout)`, `write(data)`)
+in a thread; `FdLine(fd)` adapts a raw pty file descriptor to that interface.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import select
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
+
+from hil.model import errors
+from hil.protocol import modbus as mb
+
+# Parameter addresses the face itself reads (address = (group << 8) + 2 n, L6697).
+P3_000 = 0x0300  # station, low byte YX (L10495-L10507); ● power cycle (L7014)
+P3_001 = 0x0302  # baud, digit X = RS-485 (L10509-L10527); next frame (L16035)
+P3_002 = 0x0304  # protocol 0..8 (L10546-L10557); next frame (L16037)
+P3_004 = 0x0308  # comm timeout, s, 0 = off, "immediately" (L10571-L10578)
+P3_007 = 0x030E  # response delay (L10610-L10617); unit 0.5 ms (L10612) ⚠ 1 ms (L7020)
+
+S = 1_000_000_000
+
+
+class RegisterStore(Protocol):
+    def modbus_read(self, address: int, count: int) -> list[int]: ...
+
+    def modbus_write(self, address: int, words: list[int]) -> None: ...
+
+
+def _default_exception_codes() -> dict[type, int]:
+    return {
+        errors.UnknownParameter: mb.ILLEGAL_DATA_ADDRESS,
+        errors.OutOfRange: mb.ILLEGAL_DATA_VALUE,
+        errors.ReadOnly: mb.ILLEGAL_DATA_ADDRESS,
+        errors.ServoOnLocked: mb.SERVER_DEVICE_FAILURE,
+        errors.ProtectedParameter: mb.SERVER_DEVICE_FAILURE,
+        errors.ModelError: mb.SERVER_DEVICE_FAILURE,
+    }
+
+
+@dataclass
+class ModbusFaceOptions:
+    """Choices where the manual is silent or ambiguous (docs/choices/modbus.md)."""
+
+    # Frame-end silence and earliest reply: "t3.5" (Modbus serial spec, 1.75 ms fixed above
+    # 19200 baud) or "manual" (10 ms before and after a frame, L15703).
+    silence: Literal["t3.5", "manual"] = "t3.5"
+    fixed_t35_above_19200: bool = True
+    # Discard an RTU frame with an inter-character gap > t1.5 (std). Off: the manual does
+    # not state it and host jitter on a pty exceeds 750 µs.
+    enforce_t15: bool = False
+    # Find a valid frame after garbage / split two frames glued in one burst (by function
+    # length and CRC). Off: strictly one frame per silence-delimited burst.
+    resync: bool = True
+    # Station 0 (not in the manual): "execute" writes silently (std Modbus) or "ignore".
+    broadcast: Literal["execute", "ignore"] = "execute"
+    # Station in the reply to a request sent to 0xFF (L10507 says only "answers").
+    auto_reply_station: Literal["own", "echo"] = "own"
+    # P3.007 unit, ns: 0.5 ms (L10612) vs 1 ms (summary table L7020).
+    p3007_unit_ns: int = 500_000
+    # Exception code per refusal (the manual documents none); most specific class wins.
+    exception_codes: dict[type, int] = field(default_factory=_default_exception_codes)
+    max_read_words: int = mb.MAX_READ_WORDS  # L15634
+    max_write_words: int = mb.MAX_WRITE_WORDS  # L15781
+
+
+@dataclass(frozen=True)
+class LineSettings:
+    mode: mb.Mode
+    baud: int
+    char_format: mb.CharFormat
+
+    @property
+    def char_time_ns(self) -> int:
+        return mb.char_time_ns(self.baud, self.char_format)
+
+
+class ModbusSlave:
+    """A Delta A3 Modbus slave fed byte by byte with injected time (integer ns)."""
+
+    def __init__(
+        self,
+        registers: RegisterStore,
+        *,
+        station: int | None = None,
+        mode: mb.Mode | None = None,
+        baud: int | None = None,
+        char_format: mb.CharFormat | None = None,
+        send: Callable[[bytes], Any] | None = None,
+        on_timeout: Callable[[int], Any] | None = None,
+        on_comm_error: Callable[[int, str], Any] | None = None,
+        on_line_settings: Callable[[LineSettings], Any] | None = None,
+        lock: Any = None,
+        options: ModbusFaceOptions | None = None,
+        t0: int = 0,
+    ) -> None:
+        """Unset `station`/`mode`/`baud`/`char_format` come from P3.000/P3.002/P3.001 in
+        `registers` (defaults 0x7F, 8N2 RTU, 38400 if unreadable: L10496, L10547, L10510).
+        `lock` (e.g. `DriveHost.lock`) is held around every store access."""
+        self.registers = registers
+        self.options = options or ModbusFaceOptions()
+        self.send = send
+        self.on_timeout = on_timeout
+        self.on_comm_error = on_comm_error
+        self.on_line_settings = on_line_settings
+        self._lock = lock if lock is not None else contextlib.nullcontext()
+        self._explicit_station = station
+        self.station = self._load_station()
+        p3002 = self._param(P3_002)
+        st_mode, st_fmt = mb.P3002_PROTOCOLS.get(p3002 if p3002 is not None else 6, ("rtu", None))
+        p3001 = self._param(P3_001)
+        st_baud = mb.P3001_BAUD.get((p3001 if p3001 is not None else 3) & 0xF, 38400)
+        self.line = LineSettings(
+            mode or st_mode, baud or st_baud, char_format or st_fmt or mb.CharFormat()
+        )
+        self._next_line: LineSettings | None = None
+        self.stats: dict[str, int] = dict.fromkeys(
+            ("frames", "replies", "exceptions", "foreign", "broadcast", "bad_check",
+             "dropped", "timeouts"), 0,
+        )  # fmt: skip
+        self.errors: list[str] = []  # last few reasons a frame was dropped (for debugging)
+        self._buf = bytearray()
+        self._last_t: int | None = None
+        self._broken = False
+        self._in_ascii = False
+        self._outbox: list[tuple[int, bytes]] = []
+        self._now = t0
+        self._timeout_ref = t0
+        self._timeout_fired = False
+        self._timeout_enabled = False
+
+    # ------------------------------------------------------------------ config
+
+    def _param(self, address: int) -> int | None:
+        try:
+            with self._lock:
+                return self.registers.modbus_read(address, 1)[0] & 0xFFFF
+        except Exception:
+            return None
+
+    def _load_station(self) -> int:
+        if self._explicit_station is not None:
+            if not 1 <= self._explicit_station <= 0x7F:
+                raise ValueError(f"station {self._explicit_station}: P3.000 is 1..127 (L10497)")
+            return self._explicit_station
+        value = self._param(P3_000)
+        return (value & 0xFF) if value else 0x7F  # only the low byte YX (L10504)
+
+    def power_cycle(self) -> None:
+        """Re-read P3.000 (● takes effect after a power cycle, L7014, L6722) and reset the
+        receiver. An explicit `station=` argument keeps winning."""
+        self.station = self._load_station()
+        self._buf.clear()
+        self._outbox.clear()
+        self._last_t = None
+        self._in_ascii = False
+
+    @property
+    def mode(self) -> mb.Mode:
+        return self.line.mode
+
+    @property
+    def t15_t35_ns(self) -> tuple[int, int]:
+        return mb.silent_intervals_ns(
+            self.line.baud,
+            self.line.char_format,
+            fixed_above_19200=self.options.fixed_t35_above_19200,
+        )
+
+    @property
+    def silence_ns(self) -> int:
+        """Silence that ends an RTU frame and precedes the reply."""
+        if self.options.silence == "manual":
+            return mb.MANUAL_SILENCE_NS
+        return self.t15_t35_ns[1]
+
+    def response_delay_ns(self) -> int:
+        """P3.007 x unit (read at every request: no power cycle needed, L10610-L10617)."""
+        value = self._param(P3_007) or 0
+        return value * self.options.p3007_unit_ns
+
+    # ------------------------------------------------------------------ input
+
+    def feed(self, data: bytes, t_ns: int) -> None:
+        """Bytes from the line; `t_ns` = arrival of the last one (earlier ones are taken to
+        be back-to-back at the character time). Never raises on any byte content."""
+        self._now = max(self._now, t_ns)
+        n = len(data)
+        if not n:
+            self.tick(t_ns)
+            return
+        char = self.line.char_time_ns
+        for i, byte in enumerate(data):
+            t = t_ns - (n - 1 - i) * char
+            if self.line.mode == "rtu":
+                self._rtu_byte(byte, t, char)
+            else:
+                self._ascii_byte(byte, t)
+        self.tick(t_ns)
+
+    def feed_timed(self, data: bytes, times_ns: tuple[int, ...] | list[int]) -> None:
+        """Bytes with the time each character ended on the line (SerialLine.read_timed)."""
+        if len(times_ns) != len(data):
+            raise ValueError(f"{len(data)} bytes but {len(times_ns)} times")
+        char = self.line.char_time_ns
+        for byte, t in zip(data, times_ns, strict=True):
+            self._now = max(self._now, t)
+            if self.line.mode == "rtu":
+                self._rtu_byte(byte, t, char)
+            else:
+                self._ascii_byte(byte, t)
+        if times_ns:
+            self.tick(times_ns[-1])
+
+    def _rtu_byte(self, byte: int, t: int, char: int) -> None:
+        if self._buf and self._last_t is not None:
+            gap = t - char - self._last_t
+            if gap >= self.silence_ns:
+                self._end_rtu_frame()
+            elif self.options.enforce_t15 and gap > self.t15_t35_ns[0]:
+                self._broken = True
+        self._last_t = t
+        self._buf.append(byte)
+        if len(self._buf) > mb.MAX_RTU_ADU:
+            self._drop(f"RTU frame longer than {mb.MAX_RTU_ADU} bytes")
+            self._broken = True  # swallow the rest until silence
+            return
+        if not self._broken:
+            self._rtu_try_complete(t)
+
+    def _rtu_try_complete(self, t: int) -> None:
+        """Complete a request as soon as its length (by function) and CRC say so; with
+        `resync`, also one that ends here after leading garbage or a glued-on frame."""
+        buf = self._buf
+        n = len(buf)
+        first = max(0, n - mb.MAX_RTU_ADU) if self.options.resync else 0
+        for k in range(first, n - 7 if self.options.resync else min(1, n - 7)):
+            fn = buf[k + 1]
+            if fn in (mb.READ_HOLDING, mb.WRITE_SINGLE):
+                want = 8
+            elif fn == mb.WRITE_MULTIPLE:
+                want = 9 + buf[k + 6]
+            else:
+                continue
+            if want == n - k and _crc_ok(bytes(buf[k:])):
+                frame = bytes(buf[k:])
+                if k:
+                    self._note(f"skipped {k} bytes before a frame: {buf[:k].hex(' ')}")
+                self._buf.clear()
+                self._dispatch(frame, t)
+                return
+
+    def _end_rtu_frame(self) -> None:
+        """A silence ended the burst in the buffer: dispatch it if it is a valid frame."""
+        buf = bytes(self._buf)
+        t = self._now if self._last_t is None else self._last_t
+        self._buf.clear()
+        broken, self._broken = self._broken, False
+        if broken:
+            self._drop(f"RTU burst of {len(buf)} bytes broken (gap > t1.5 or overlong)")
+            return
+        if _crc_ok(buf):  # e.g. an unknown function: only the silence ends it
+            self._dispatch(buf, t)
+            return
+        self.stats["bad_check"] += 1
+        self._note(f"RTU burst without a valid CRC: {buf[:32].hex(' ')}")
+
+    def _ascii_byte(self, byte: int, t: int) -> None:
+        if byte == 0x3A:  # ':' starts a frame and restarts a broken one (L15617)
+            if self._in_ascii and len(self._buf) > 1:
+                self._drop(f"ASCII frame restarted by ':' after {len(self._buf)} chars")
+            self._buf[:] = b":"
+            self._in_ascii = True
+            return
+        if not self._in_ascii:
+            return  # noise between frames
+        self._buf.append(byte)
+        if len(self._buf) > mb.MAX_ASCII_ADU:
+            self._drop(f"ASCII frame longer than {mb.MAX_ASCII_ADU} chars")
+            self._buf.clear()
+            self._in_ascii = False
+        elif byte == 0x0A and self._buf.endswith(b"\r\n"):
+            adu = bytes(self._buf)
+            self._buf.clear()
+            self._in_ascii = False
+            self._dispatch(adu, t)
+
+    # ------------------------------------------------------------------ processing
+
+    def _dispatch(self, adu: bytes, t_end: int) -> None:
+        try:
+            station, pdu = mb.decode_adu(adu, self.line.mode)
+        except mb.FrameError as exc:
+            self.stats["bad_check"] += 1
+            self._note(str(exc))  # silence on a bad CRC / LRC
+            return
+        if station == mb.BROADCAST:
+            self.stats["broadcast"] += 1
+            if self.options.broadcast == "execute":
+                self._touch_timeout(t_end)
+                self._process(pdu, broadcast=True)
+                if not self._outbox:
+                    self._apply_line()
+            return
+        if station not in (self.station, mb.AUTO_REPLY):
+            self.stats["foreign"] += 1
+            return
+        self.stats["frames"] += 1
+        self._touch_timeout(t_end)
+        reply = self._process(pdu, broadcast=False)
+        if reply is None:
+            return
+        if station == mb.AUTO_REPLY and self.options.auto_reply_station == "echo":
+            reply_station = mb.AUTO_REPLY
+        else:
+            reply_station = self.station
+        due = t_end + self.silence_ns + self.response_delay_ns()
+        if self._outbox:
+            due = max(due, self._outbox[-1][0])
+        self._outbox.append((due, mb.encode_adu(reply_station, reply, self.line.mode)))
+
+    def _process(self, pdu: bytes, *, broadcast: bool) -> bytes | None:
+        """Execute one request; the reply PDU (None for broadcast)."""
+        fn = pdu[0] if pdu else 0
+        try:
+            req = mb.decode_request(
+                pdu, max_read=self.options.max_read_words, max_write=self.options.max_write_words
+            )
+            if req.function == mb.READ_HOLDING:
+                if broadcast:
+                    return None
+                with self._lock:
+                    values = self.registers.modbus_read(req.address, req.count)
+                if len(values) != req.count:
+                    raise errors.ModelError(f"store returned {len(values)} of {req.count} words")
+                reply = mb.read_response([v & 0xFFFF for v in values])
+            else:
+                with self._lock:
+                    self.registers.modbus_write(req.address, list(req.values))
+                self._after_write(req.address, req.count)
+                if req.function == mb.WRITE_SINGLE:
+                    reply = pdu
+                else:
+                    reply = mb.write_multiple_response(req.address, req.count)
+        except mb.PduError as exc:
+            return self._exception(fn, exc.code, str(exc), broadcast)
+        except Exception as exc:  # a store refusal, or a bug: answer, never crash the face
+            code = self._code_for(exc)
+            return self._exception(fn, code, f"{type(exc).__name__}: {exc}", broadcast)
+        if broadcast:
+            return None
+        self.stats["replies"] += 1
+        return reply
+
+    def _code_for(self, exc: Exception) -> int:
+        for cls in type(exc).__mro__:
+            if cls in self.options.exception_codes:
+                return self.options.exception_codes[cls]
+        return mb.SERVER_DEVICE_FAILURE
+
+    def _exception(self, fn: int, code: int, message: str, broadcast: bool) -> bytes | None:
+        self.stats["exceptions"] += 1
+        self._note(message)
+        if self.on_comm_error is not None:
+            self.on_comm_error(code, message)
+        return None if broadcast else mb.exception_response(fn, code)
+
+    def _after_write(self, address: int, count: int) -> None:
+        """P3.001 / P3.002 written: the next frame uses them (L16035, L16037)."""
+        if address <= P3_002 + 1 and address + count > P3_001:
+            p3001, p3002 = self._param(P3_001), self._param(P3_002)
+            mode, fmt = mb.P3002_PROTOCOLS.get(p3002, (self.line.mode, self.line.char_format))
+            baud = mb.P3001_BAUD.get(p3001 & 0xF, self.line.baud) if p3001 is not None else None
+            new = LineSettings(mode, baud or self.line.baud, fmt)
+            if new != self.line:
+                self._next_line = new  # applied once the reply to this write is sent
+
+    def _apply_line(self) -> None:
+        if self._next_line is not None:
+            self.line, self._next_line = self._next_line, None
+            self._buf.clear()
+            self._in_ascii = False
+            if self.on_line_settings is not None:
+                self.on_line_settings(self.line)
+
+    # ------------------------------------------------------------------ time
+
+    def tick(self, t_ns: int) -> list[bytes]:
+        """Advance to `t_ns`: end an RTU frame after the silence, send due replies (via
+        `send`), check the P3.004 timeout. Returns the ADUs sent."""
+        self._now = max(self._now, t_ns)
+        if (
+            self.line.mode == "rtu"
+            and self._buf
+            and self._last_t is not None
+            and t_ns - self._last_t >= self.silence_ns
+        ):
+            self._end_rtu_frame()
+        sent = []
+        while self._outbox and self._outbox[0][0] <= t_ns:
+            _, adu = self._outbox.pop(0)
+            sent.append(adu)
+            if self.send is not None:
+                self.send(adu)
+        if sent and not self._outbox:
+            self._apply_line()
+        self._check_timeout(t_ns)
+        return sent
+
+    def next_deadline(self) -> int | None:
+        """Earliest time `tick` has something to do (ns), or None."""
+        times = []
+        if self._outbox:
+            times.append(self._outbox[0][0])
+        if self.line.mode == "rtu" and self._buf and self._last_t is not None:
+            times.append(self._last_t + self.silence_ns)
+        if self._timeout_enabled and not self._timeout_fired:
+            limit = self._param(P3_004) or 0
+            if limit:
+                times.append(self._timeout_ref + limit * S)
+        return min(times) if times else None
+
+    def _touch_timeout(self, t: int) -> None:
+        self._timeout_ref = t
+        self._timeout_fired = False
+
+    def _check_timeout(self, t: int) -> None:
+        """P3.004 (s): non-zero enables it at once (L10578); no valid frame for this drive
+        for that long -> `on_timeout(t)` once (the drive raises AL020, L19598-L19602);
+        re-armed by the next valid frame."""
+        limit = self._param(P3_004) or 0
+        if not limit:
+            self._timeout_enabled = False
+            return
+        if not self._timeout_enabled:
+            self._timeout_enabled = True
+            self._timeout_ref = max(self._timeout_ref, t)
+            self._timeout_fired = False
+        if not self._timeout_fired and t - self._timeout_ref >= limit * S:
+            self._timeout_fired = True
+            self.stats["timeouts"] += 1
+            if self.on_timeout is not None:
+                self.on_timeout(t)
+
+    # ------------------------------------------------------------------ misc
+
+    def _drop(self, reason: str) -> None:
+        self.stats["dropped"] += 1
+        self._note(reason)
+        self._buf.clear()
+
+    def _note(self, reason: str) -> None:
+        self.errors.append(reason)
+        del self.errors[:-20]
+
+
+def _crc_ok(adu: bytes) -> bool:
+    return len(adu) >= 4 and mb.crc16(adu[:-2]) == (adu[-2] | adu[-1] << 8)
+
+
+# ---------------------------------------------------------------------- line pumping
+
+
+class FdLine:
+    """A raw file descriptor (e.g. a pty master) as a line: `read(n, timeout)`, `write`."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+
+    def read(self, n: int, timeout: float | None) -> bytes:
+        ready, _, _ = select.select([self.fd], [], [], timeout)
+        if not ready:
+            return b""
+        try:
+            return os.read(self.fd, n)
+        except OSError:  # EIO when the other end of a pty is closed
+            return b""
+
+    def write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(self.fd, view) :]
+
+
+class ModbusSlaveRunner:
+    """Pumps a line into a `ModbusSlave` in a daemon thread (wall clock `monotonic_ns`).
+
+    The line needs `read(n, timeout) -> bytes` and `write(data)` (hil.transport's
+    SerialLine, or `FdLine`). Use as a context manager or call `start()` / `stop()`.
+    """
+
+    def __init__(
+        self,
+        slave: ModbusSlave,
+        line: Any,
+        *,
+        clock: Callable[[], int] = time.monotonic_ns,
+        poll_s: float = 0.005,
+    ) -> None:
+        self.slave = slave
+        self.line = line
+        self.clock = clock
+        self.poll_s = poll_s
+        self.error: BaseException | None = None
+        if slave.send is None:
+            slave.send = line.write
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="modbus-slave", daemon=True)
+
+    def start(self) -> ModbusSlaveRunner:
+        self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    def __enter__(self) -> ModbusSlaveRunner:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        slave = self.slave
+        timed = hasattr(self.line, "read_timed")  # hil.transport.serial_line.SerialLine
+        try:
+            while not self._stop.is_set():
+                now = self.clock()
+                deadline = slave.next_deadline()
+                wait = self.poll_s
+                if deadline is not None:
+                    wait = min(wait, max(0.0, (deadline - now) / 1e9))
+                # one byte with the wait, then whatever else is there (lines whose read(n)
+                # waits for all n bytes would otherwise hold a request back)
+                if timed:
+                    frame = self.line.read_timed(1, wait)
+                    if frame is not None and frame.data:
+                        more = self.line.read_timed(511, 0)
+                        data, times = frame.data, tuple(frame.times_ns)
+                        if more is not None:
+                            data, times = data + more.data, times + tuple(more.times_ns)
+                        slave.feed_timed(data, times)
+                        continue
+                else:
+                    data = self.line.read(1, wait)
+                    if data:
+                        slave.feed(data + self.line.read(511, 0), self.clock())
+                        continue
+                slave.tick(self.clock())
+        except BaseException as exc:  # surfaced to the owner; the thread ends
+            self.error = exc

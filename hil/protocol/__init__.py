@@ -1,0 +1,1 @@
+"""Wire protocols shared by faces, drivers and the recorder (pure: no I/O, no clock)."""
