@@ -238,10 +238,21 @@ class DigitalIO:
 
     # -- DI side --------------------------------------------------------------------------
 
-    def set_input(self, n: int, closed: bool) -> None:
-        """Physical DI n (1-10) electrical level: True = contact closed (24 V)."""
+    def set_input(self, n: int, closed: bool, *, settled: bool = False) -> None:
+        """Physical DI n (1-10) electrical level: True = contact closed (24 V).
+
+        `settled=True` accepts the level at once (it was already stable when the drive
+        powered up), bypassing the P2.009 filter.
+        """
         i = self._physical_index(n)
         closed = bool(closed)
+        if settled:
+            if self._pending[i] is not None:
+                self._pending[i].cancel()
+                self._pending[i] = None
+            self._raw[i] = closed
+            self._accept(i, closed)
+            return
         pending = self._pending[i]
         if pending is not None and not pending.cancelled and pending.deadline <= self.scheduler.now:
             pending.cancel()  # due at this very instant: accept it before the new change

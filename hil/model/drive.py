@@ -150,7 +150,7 @@ class Drive:
         self.params.on_write("P2.030", lambda *_: self._update_servo())
 
         for n, closed in (inputs or {}).items():
-            self.dio.set_input(n, closed)
+            self.dio.set_input(n, closed, settled=True)  # present before power-up
         self._update_sensors(force=True)
         self._boot()
 
@@ -175,7 +175,7 @@ class Drive:
             nxt = sched.next_deadline()
             stop = t if nxt is None or nxt > t else nxt
             self._integrate_to(stop)
-            if nxt is None or nxt > t:
+            if sched.now >= t and (nxt is None or nxt > t):
                 break
             sched.run_due()
         sched.now = max(sched.now, t)
@@ -417,6 +417,9 @@ class Drive:
             self.axis.step(nxt - sched.now)
             sched.now = nxt
             self._after_step()
+            due = sched.next_deadline()
+            if due is not None and due < stop:  # a step scheduled something earlier
+                return
 
     def _after_step(self) -> None:
         self.brake.after_step()
@@ -440,6 +443,7 @@ class Drive:
         self._set_do("TPOS", abs(ax.following_error) < self.params.get("P1.054"))
 
     def _update_sensors(self, force: bool = False) -> None:
+        """Drive the sensor DIs from the axis position (force: at power-up, unfiltered)."""
         if not self.sensors:
             return
         pos = self.axis.position
@@ -449,7 +453,7 @@ class Drive:
             act = states.get(fn, False)
             if force or self._sensor_state.get(fn) != act:
                 self._sensor_state[fn] = act
-                self.dio.set_input(n, act if kind == "no" else not act)
+                self.dio.set_input(n, act if kind == "no" else not act, settled=force)
 
 
 def _abort_for(exc: ParamError, value: int) -> int:
