@@ -222,6 +222,18 @@ class Drive:
             return
         raise ObjectError(index, sub, ABORT_NO_OBJECT, "object does not exist in the drive")
 
+    def raise_alarm(self, code: str) -> None:
+        """An alarm a face detected (AL020 RS-485 timeout, AL180 heartbeat, ...)."""
+        self.alarms.raise_alarm(code)
+        if code == "AL020" and self.params.get("P3.003") == 1 and self.servo_on:
+            self.axis.ramp_stop(self._p5003_decel(5))  # P3.003 = 1: P5.003.B ramp (L10559)
+
+    def nmt_reset(self, kind: str) -> None:
+        """A CANopen NMT reset: AL401 if the servo is on (L20183-20187); resets CANopen alarms."""
+        if self.servo_on:
+            self.alarms.raise_alarm("AL401")
+        self.alarms.reset("nmt")
+
     def power_cycle(self, *, battery: bool = True, off_for: int = 0) -> None:
         """Switch the drive off (for `off_for` ns) and on again."""
         self._servo_off("normal", None, immediate=True)
