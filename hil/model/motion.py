@@ -1,0 +1,521 @@
+"""The motion axis: profile generator, position/velocity loop and rigid-body mechanics.
+
+`Axis(mechanics)` is a fixed-substep integrator. The drive calls `axis.step(dt_ns)` with
+dt <= 1 ms while `axis.moving` (or anything else) needs time; `step` allocates nothing and
+logs nothing (benchmarks/bench_model.py measures it).
+
+Units inside the axis are **physical encoder counts** (16777216 per rev, L18414) and
+counts/s; accessors give rpm and 0.1 % of rated torque. PUU conversions through the
+electronic gear are pure functions below (PUU = counts × P1.045 / P1.044, L16408); the user
+origin (`origin`, set by homing / absolute origin) separates physical counts from user
+counts: ``user = position - origin``.
+
+Acceleration and deceleration are given, as everywhere in the manual, as **the time in ms
+to go from 0 to 3000 rpm or from 3000 rpm to 0** (6083h/6084h/6085h/609Ah, P5.020-P5.035,
+L11330); it is a constant slope, so 1500 rpm stops in half that time (L4164).
+
+Public API (all that the drive, CiA 402 and homing use)::
+
+    axis = Axis(mech, kpp=100.0, feedforward=0.95, speed_bandwidth_hz=150.0)
+    axis.step(dt_ns)
+    # power stage and brake (owned by the drive: STO / servo-off / BRKR)
+    axis.set_power(on)             # on: bumpless, keeps the command; off: stop per stop_mode
+    axis.power                     # bool, torque available
+    axis.stop_mode = 0|1|2         # P1.032.Y (L8321-8327): 0 DB, 1 coast, 2 DB then coast
+    axis.zero_speed_rpm = 10.0     # P1.038 (used by stop_mode 2)
+    axis.brake_clamped = bool      # mechanical brake holds: velocity forced to 0
+    axis.set_torque_limits(pos_0p1, neg_0p1)   # 60E0h / 60E1h, 0.1 % of rated
+    axis.max_speed_rpm             # P1.055 / 6080h: caps every profile speed and torque mode
+    # commands (act while power is on; issued while off they wait for power)
+    axis.hold()                                  # keep the current demand position
+    axis.move_to(target_counts, speed_rpm, accel_ms, decel_ms)   # trapezoid, from current state
+    axis.run_velocity(rpm, accel_ms, decel_ms)
+    axis.run_torque(target_0p1, slope_ms)        # 6071h / 6087h (slope: ms for 0 -> 100 %)
+    axis.ramp_stop(decel_ms)                     # decelerate, then hold
+    axis.interpolate_to(target_counts, period_ns)   # IP: linear over one period
+    axis.set_user_position(user_counts)          # homing: redefine the origin
+    # state (cheap attributes / properties)
+    axis.position, axis.velocity, axis.demand, axis.demand_velocity   # counts, counts/s
+    axis.last_position             # feedback before the last step (for index_crossed)
+    axis.user_position, axis.user_demand          # counts relative to origin
+    axis.velocity_rpm, axis.demand_rpm, axis.torque, axis.torque_demand   # rpm, 0.1 %
+    axis.following_error           # counts (demand - feedback)
+    axis.moving, axis.at_target, axis.mode       # mode: 'hold' 'position' 'velocity' ...
+
+Control model: velocity-controlled modes (PV) command the speed directly; position modes
+run ``v_cmd = feedforward·v_demand + kpp·(demand - feedback)`` (P2.000-like gain, rad/s);
+the speed loop is a first-order lag of `speed_bandwidth_hz`. The resulting torque
+(J·α + load + gravity + friction) is clipped by the torque limits, so a too hard move
+lags and the following error grows. Power off: coast, or dynamic brake (torque ∝ speed).
+"""
+
+from __future__ import annotations
+
+import math
+
+from hil.model.mechanics import COUNTS_PER_REV, Mechanics
+
+# ---- pure conversions ----------------------------------------------------------------
+
+
+def counts_to_puu(counts: float, p1_044: int, p1_045: int) -> float:
+    """Encoder counts -> PUU: PUU = counts × P1.045 / P1.044 (L16408)."""
+    return counts * p1_045 / p1_044
+
+
+def puu_to_counts(puu: float, p1_044: int, p1_045: int) -> float:
+    """PUU -> encoder counts: counts = PUU × P1.044 / P1.045 (L16408)."""
+    return puu * p1_044 / p1_045
+
+
+def rpm_to_counts_per_s(rpm: float, cpr: int = COUNTS_PER_REV) -> float:
+    return rpm * cpr / 60.0
+
+
+def counts_per_s_to_rpm(cps: float, cpr: int = COUNTS_PER_REV) -> float:
+    return cps * 60.0 / cpr
+
+
+def puu_per_s_to_rpm(
+    puu_per_s: float, p1_044: int, p1_045: int, cpr: int = COUNTS_PER_REV
+) -> float:
+    """Profile velocity 6081h (PUU/s) -> rpm through the e-gear."""
+    return counts_per_s_to_rpm(puu_to_counts(puu_per_s, p1_044, p1_045), cpr)
+
+
+def rpm_to_puu_per_s(rpm: float, p1_044: int, p1_045: int, cpr: int = COUNTS_PER_REV) -> float:
+    return counts_to_puu(rpm_to_counts_per_s(rpm, cpr), p1_044, p1_045)
+
+
+def accel_from_ms(ms_per_3000rpm: float, cpr: int = COUNTS_PER_REV) -> float:
+    """Slope in counts/s² of a "ms from 0 to 3000 rpm" time (L11330). 0 ms = immediate."""
+    ms_ = max(float(ms_per_3000rpm), 1e-3)
+    return rpm_to_counts_per_s(3000.0, cpr) * 1000.0 / ms_
+
+
+def ramp_time_ms(delta_rpm: float, ms_per_3000rpm: float) -> float:
+    """Time to change speed by `delta_rpm` at a constant "T ms per 3000 rpm" slope (L4164)."""
+    return abs(delta_rpm) * ms_per_3000rpm / 3000.0
+
+
+# ---- the axis --------------------------------------------------------------------------
+
+_HOLD, _POS, _VEL, _TORQUE, _STOP, _INTERP = range(6)
+_MODE_NAMES = ("hold", "position", "velocity", "torque", "stop", "interpolated")
+
+_SETTLE_POS = 1.0  # counts: feedback snaps onto the demand below this error ...
+_SETTLE_VEL = 500.0  # counts/s (0.0018 rpm): ... and below this speed
+
+
+def _approach(v: float, vdes: float, acc: float, dec: float, dt: float) -> float:
+    """Move speed `v` towards `vdes`: `acc` while |v| grows, `dec` while it shrinks."""
+    if v == vdes:
+        return v
+    if (v > 0.0 and vdes < 0.0) or (v < 0.0 and vdes > 0.0):  # reverse: brake to 0 first
+        d = dec * dt
+        return v - d if v > d else (v + d if v < -d else 0.0)
+    if abs(vdes) > abs(v):
+        d = acc * dt
+        if vdes > v:
+            nv = v + d
+            return vdes if nv > vdes else nv
+        nv = v - d
+        return vdes if nv < vdes else nv
+    d = dec * dt
+    if vdes < v:
+        nv = v - d
+        return vdes if nv < vdes else nv
+    nv = v + d
+    return vdes if nv > vdes else nv
+
+
+class Axis:
+    """One motor axis on its mechanics. See the module docstring for the API."""
+
+    def __init__(
+        self,
+        mech: Mechanics | None = None,
+        *,
+        kpp: float = 100.0,
+        feedforward: float = 0.95,
+        speed_bandwidth_hz: float = 150.0,
+        zero_speed_rpm: float = 10.0,
+    ) -> None:
+        self.mech = mech = mech if mech is not None else Mechanics()
+        if kpp <= 0:
+            raise ValueError(f"Axis kpp: must be > 0 rad/s, got {kpp}")
+        if not 0.0 <= feedforward <= 1.0:
+            raise ValueError(f"Axis feedforward: must be in [0, 1], got {feedforward}")
+        if speed_bandwidth_hz <= 0:
+            raise ValueError(f"Axis speed_bandwidth_hz: must be > 0, got {speed_bandwidth_hz}")
+        self.cpr = mech.counts_per_rev
+        self.kpp = kpp
+        self.feedforward = feedforward
+        self._tau_v = 1.0 / (2.0 * math.pi * speed_bandwidth_hz)
+        self._alpha_dt = -1
+        self._alpha = 1.0
+        # counts/s² per N·m, and dynamic brake coefficient in N·m per counts/s
+        self._k = mech.counts_per_rad / mech.total_inertia
+        self._db = mech.dynamic_brake_torque / rpm_to_counts_per_s(mech.rated_speed, self.cpr)
+        self._ext = mech.load_torque + mech.gravity_torque
+        self._fric = mech.friction_torque
+        self._hs_neg, self._hs_pos = mech.hard_stop_counts
+        # feedback state
+        self.position = 0.0
+        self.last_position = 0.0
+        self.velocity = 0.0
+        self.torque_nm = 0.0
+        self.origin = 0.0
+        # demand state
+        self.demand = 0.0
+        self.demand_velocity = 0.0
+        self._mode = _HOLD
+        self._target = 0.0
+        self._vmax = 0.0
+        self._acc = 1.0
+        self._dec = 1.0
+        self._vtarget = 0.0
+        self._tq_target = 0.0  # N·m
+        self._tq_dem = 0.0  # N·m
+        self._tq_rate = math.inf  # N·m/s
+        self._ip_target = 0.0
+        self._ip_rate = 0.0
+        self._ip_rem = 0
+        # drive-side controls
+        self.power = False
+        self.brake_clamped = False
+        self.stop_mode = 1  # P1.032.Y: 0 DB, 1 coast, 2 DB then coast (L8321-8327)
+        self.zero_speed_rpm = zero_speed_rpm  # P1.038
+        self.max_speed_rpm = mech.rated_speed  # P1.055 default = rated speed (L6882)
+        self._tmax = 3.0 * mech.rated_torque
+        self._tmin = -3.0 * mech.rated_torque
+        self.moving = False
+
+    # ---- controls ----------------------------------------------------------------
+    def set_power(self, on: bool) -> None:
+        """Power stage on/off. On: demand := feedback (bumpless), the command stays.
+        Off: no torque; the stop follows `stop_mode`; the command resets to hold."""
+        on = bool(on)
+        if on == self.power:
+            return
+        self.power = on
+        self.demand = self.position
+        profiling = on and self._mode in (_POS, _VEL, _STOP)
+        self.demand_velocity = self.velocity if profiling else 0.0
+        self._tq_dem = 0.0
+        if not on:
+            self._mode = _HOLD
+            self.torque_nm = 0.0
+        elif self._mode == _STOP and self.velocity == 0.0:
+            self._mode = _HOLD
+        self.moving = self.moving or (on and self._mode != _HOLD)
+
+    def set_torque_limits(self, pos_0p1: float, neg_0p1: float) -> None:
+        """Torque limits 60E0h / 60E1h in 0.1 % of rated torque (both given as magnitudes)."""
+        rated = self.mech.rated_torque
+        self._tmax = abs(pos_0p1) * rated / 1000.0
+        self._tmin = -abs(neg_0p1) * rated / 1000.0
+
+    def hold(self) -> None:
+        """Stop the profile now and hold the current demand position."""
+        self._mode = _HOLD
+        self.demand_velocity = 0.0
+
+    def move_to(
+        self, target_counts: float, speed_rpm: float, accel_ms: float, decel_ms: float
+    ) -> None:
+        """Trapezoidal move of the demand to `target_counts` (physical), starting from the
+        current demand position and speed (so calling it during a move is a change-set-
+        immediately)."""
+        if self._mode not in (_POS, _HOLD, _STOP, _INTERP):
+            self.demand = self.position  # leaving a velocity/torque mode: start bumpless
+            self.demand_velocity = self.velocity
+        self._mode = _POS
+        self._target = float(target_counts)
+        vmax = min(abs(speed_rpm), self.max_speed_rpm)
+        self._vmax = rpm_to_counts_per_s(vmax, self.cpr)
+        self._acc = accel_from_ms(accel_ms, self.cpr)
+        self._dec = accel_from_ms(decel_ms, self.cpr)
+        self.moving = True
+
+    def run_velocity(self, rpm: float, accel_ms: float, decel_ms: float) -> None:
+        """Profile velocity: ramp the speed to `rpm` (capped by `max_speed_rpm`)."""
+        if self._mode == _TORQUE:
+            self.demand_velocity = self.velocity  # bumpless from the actual speed
+        lim = self.max_speed_rpm
+        rpm = max(-lim, min(lim, rpm))
+        self._mode = _VEL
+        self._vtarget = rpm_to_counts_per_s(rpm, self.cpr)
+        self._acc = accel_from_ms(accel_ms, self.cpr)
+        self._dec = accel_from_ms(decel_ms, self.cpr)
+        self.moving = True
+
+    def run_torque(self, target_0p1: float, slope_ms: float) -> None:
+        """Profile torque: ramp the torque demand to `target_0p1` (0.1 % of rated) with a
+        slope of `slope_ms` per 100 % (6087h, L18803-18817); 0 ms = step."""
+        rated = self.mech.rated_torque
+        if self._mode != _TORQUE:
+            self._tq_dem = self.torque_nm if self.power else 0.0
+        self._mode = _TORQUE
+        self._tq_target = target_0p1 * rated / 1000.0
+        self._tq_rate = math.inf if slope_ms <= 0 else rated * 1000.0 / slope_ms
+        self.moving = True
+
+    def ramp_stop(self, decel_ms: float) -> None:
+        """Decelerate at "decel_ms per 3000 rpm" to standstill, then hold the position."""
+        if self._mode in (_TORQUE, _VEL):
+            self.demand = self.position
+            self.demand_velocity = self.velocity
+        self._mode = _STOP
+        self._vtarget = 0.0
+        self._dec = accel_from_ms(decel_ms, self.cpr)
+        self._acc = self._dec
+        self.moving = True
+
+    def interpolate_to(self, target_counts: float, period_ns: int) -> None:
+        """IP mode: move the demand linearly to `target_counts` within `period_ns`."""
+        if period_ns <= 0:
+            raise ValueError(f"Axis.interpolate_to: period must be > 0 ns, got {period_ns}")
+        if self._mode in (_TORQUE, _VEL):
+            self.demand = self.position
+        self._mode = _INTERP
+        self._ip_target = float(target_counts)
+        self._ip_rate = (self._ip_target - self.demand) * 1e9 / period_ns
+        self._ip_rem = int(period_ns)
+        self.moving = True
+
+    def set_user_position(self, user_counts: float) -> None:
+        """Make the current feedback read `user_counts` (homing / origin setting)."""
+        self.origin = self.position - user_counts
+
+    # ---- accessors -----------------------------------------------------------------
+    @property
+    def mode(self) -> str:
+        return _MODE_NAMES[self._mode]
+
+    @property
+    def target(self) -> float:
+        """Active position target (physical counts) of the position profile."""
+        return self._target
+
+    @property
+    def user_position(self) -> float:
+        return self.position - self.origin
+
+    @property
+    def user_demand(self) -> float:
+        return self.demand - self.origin
+
+    @property
+    def velocity_rpm(self) -> float:
+        return self.velocity * 60.0 / self.cpr
+
+    @property
+    def demand_rpm(self) -> float:
+        return self.demand_velocity * 60.0 / self.cpr
+
+    @property
+    def target_rpm(self) -> float:
+        return self._vtarget * 60.0 / self.cpr
+
+    @property
+    def torque(self) -> float:
+        """Actual motor torque in 0.1 % of rated (6077h unit)."""
+        return self.torque_nm * 1000.0 / self.mech.rated_torque
+
+    @property
+    def torque_demand(self) -> float:
+        """Torque demand in 0.1 % of rated (6074h): the PT ramp output, else the actual."""
+        tq = self._tq_dem if self._mode == _TORQUE else self.torque_nm
+        return tq * 1000.0 / self.mech.rated_torque
+
+    @property
+    def following_error(self) -> float:
+        """Demand minus feedback, counts (0 in velocity/torque control)."""
+        return self.demand - self.position
+
+    @property
+    def at_target(self) -> bool:
+        """The command is fulfilled: position profile at its target, velocity/torque ramp at
+        its target value, IP segment finished, holding. A ramp stop is at target once held."""
+        m = self._mode
+        if m == _POS:
+            return self.demand == self._target and self.demand_velocity == 0.0
+        if m == _VEL:
+            return self.demand_velocity == self._vtarget
+        if m == _TORQUE:
+            return self._tq_dem == self._tq_target
+        if m == _INTERP:
+            return self._ip_rem <= 0
+        return m == _HOLD
+
+    # ---- the integrator ------------------------------------------------------------
+    def step(self, dt_ns: int) -> None:
+        """Advance the axis by `dt_ns` (<= 1 ms for accuracy)."""
+        if dt_ns <= 0:
+            return
+        dt = dt_ns * 1e-9
+        v = self.velocity
+        p = self.position
+        self.last_position = p
+        k = self._k
+        ext = self._ext
+        fr = self._fric
+        if self.power:
+            mode = self._mode
+            pd = self.demand
+            vd = self.demand_velocity
+            done = True
+            if mode == _POS:
+                tgt = self._target
+                r = tgt - pd
+                if r != 0.0 or vd != 0.0:
+                    dec = self._dec
+                    vdes = math.sqrt(2.0 * dec * abs(r))
+                    if vdes > self._vmax:
+                        vdes = self._vmax
+                    if r < 0.0:
+                        vdes = -vdes
+                    vd = _approach(vd, vdes, self._acc, dec, dt)
+                    ds = vd * dt
+                    if ds * r > 0.0 and abs(ds) >= abs(r) and abs(vd) <= abs(vdes) + dec * dt:
+                        pd = tgt
+                        vd = 0.0
+                    else:
+                        pd += ds
+                        done = False
+            elif mode in (_VEL, _STOP):
+                vd = _approach(vd, self._vtarget, self._acc, self._dec, dt)
+                pd += vd * dt
+                if mode == _STOP and vd == 0.0:
+                    self._mode = mode = _HOLD
+                else:
+                    done = False
+            elif mode == _INTERP:
+                rem = self._ip_rem
+                if rem > 0:
+                    use = dt_ns if dt_ns < rem else rem
+                    self._ip_rem = rem = rem - use
+                    if rem <= 0:
+                        pd = self._ip_target
+                    else:
+                        pd += self._ip_rate * use * 1e-9
+                        done = False
+                    vd = self._ip_rate
+                else:
+                    vd = 0.0
+
+            if mode == _TORQUE:
+                tq = self._tq_dem
+                tt = self._tq_target
+                if tq != tt:
+                    d = self._tq_rate * dt
+                    if tt > tq:
+                        tq = tt if tq + d >= tt else tq + d
+                    else:
+                        tq = tt if tq - d <= tt else tq - d
+                    self._tq_dem = tq
+                    done = False
+                if tq > self._tmax:
+                    tq = self._tmax
+                elif tq < self._tmin:
+                    tq = self._tmin
+                net = tq - ext
+                if v == 0.0:
+                    if -fr <= net <= fr:
+                        net = 0.0
+                    else:
+                        net -= fr if net > 0.0 else -fr
+                else:
+                    net -= fr if v > 0.0 else -fr
+                nv = v + net * k * dt
+                if v != 0.0 and nv * v < 0.0 and (tq - ext) * v <= 0.0:
+                    nv = 0.0
+                lim = self.max_speed_rpm * self.cpr / 60.0
+                if nv > lim or nv < -lim:  # speed-limited torque mode (P1.055)
+                    nv = lim if nv > 0.0 else -lim
+                    tq = (nv - v) / (k * dt) + ext + (fr if nv > 0.0 else -fr)
+                self.torque_nm = tq
+                vd = nv
+            else:
+                vcmd = vd if mode == _VEL else self.feedforward * vd + self.kpp * (pd - p)
+                if dt_ns != self._alpha_dt:
+                    self._alpha_dt = dt_ns
+                    self._alpha = 1.0 - math.exp(-dt / self._tau_v)
+                nv = v + (vcmd - v) * self._alpha
+                f = fr if nv > 0.0 else (-fr if nv < 0.0 else 0.0)
+                tq = (nv - v) / (k * dt) + ext + f
+                if tq > self._tmax:
+                    tq = self._tmax
+                    nv = v + (tq - ext - f) * k * dt
+                elif tq < self._tmin:
+                    tq = self._tmin
+                    nv = v + (tq - ext - f) * k * dt
+                self.torque_nm = tq
+        else:
+            # power off: coast or dynamic brake (implicit, always stable)
+            sm = self.stop_mode
+            c = 0.0
+            if sm == 0 or (sm == 2 and abs(v) * 60.0 / self.cpr >= self.zero_speed_rpm):
+                c = self._db * k * dt
+            if v == 0.0:
+                if -fr <= ext <= fr:
+                    nv = 0.0
+                else:
+                    net = -ext + (fr if ext > 0.0 else -fr)
+                    nv = net * k * dt / (1.0 + c)
+            else:
+                nv = (v + (-ext - (fr if v > 0.0 else -fr)) * k * dt) / (1.0 + c)
+                if nv * v < 0.0:
+                    nv = 0.0
+            mode = _HOLD
+            done = True
+            vd = 0.0
+            pd = p
+
+        if self.brake_clamped:
+            nv = 0.0
+        p += nv * dt
+        hs = self._hs_neg
+        if hs is not None and p < hs:
+            p = hs
+            if nv < 0.0:
+                nv = 0.0
+        hs = self._hs_pos
+        if hs is not None and p > hs:
+            p = hs
+            if nv > 0.0:
+                nv = 0.0
+
+        if not self.power:
+            pd = p
+            moving = nv != 0.0
+        elif mode in (_VEL, _TORQUE):
+            pd = p
+            if mode == _VEL and vd == 0.0 and -_SETTLE_VEL < nv < _SETTLE_VEL:
+                nv = 0.0
+            moving = not done or nv != 0.0 or vd != 0.0
+        else:
+            e = pd - p
+            if -_SETTLE_POS < e < _SETTLE_POS and -_SETTLE_VEL < nv < _SETTLE_VEL and vd == 0.0:
+                p = pd
+                nv = 0.0
+            moving = not done or nv != 0.0 or p != pd
+        self.position = p
+        self.velocity = nv
+        self.demand = pd
+        self.demand_velocity = vd
+        self.moving = moving
+
+
+__all__ = [
+    "Axis",
+    "accel_from_ms",
+    "counts_per_s_to_rpm",
+    "counts_to_puu",
+    "puu_per_s_to_rpm",
+    "puu_to_counts",
+    "ramp_time_ms",
+    "rpm_to_counts_per_s",
+    "rpm_to_puu_per_s",
+]
