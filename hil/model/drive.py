@@ -19,10 +19,12 @@ Servo logic (choices in docs/manual-choices.md):
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from hil.model.absolute import AbsoluteEncoder, AbsoluteOptions
 from hil.model.alarms import AlarmManager, AlarmOptions
 from hil.model.brake import Brake
 from hil.model.cia402 import Cia402, Cia402Options
@@ -141,6 +143,25 @@ class Drive:
         self.sensors = dict(DEFAULT_SENSORS if sensors is None else sensors)
         self._sensor_state: dict[str, bool] = {}
 
+        self.absolute = AbsoluteEncoder(
+            self.sched,
+            self.params,
+            set_cause=self.alarms.set_cause,
+            set_output=self.dio.set_do_function,
+            set_overlay=lambda on: self.dio.overlay() if on else self.dio.clear_overlay(),
+            read_absq=lambda: self.dio.function_active("ABSQ"),
+            speed_rpm=lambda: self.axis.velocity_rpm,
+            motor_counts=lambda: round(self.axis.position),
+            clear_position_error=self._clear_position_error,
+            options=AbsoluteOptions.from_dict(options.extra.get("absolute")),
+        )
+        self._abs_file = self.state_path / "absolute.json" if self.state_path else None
+        if self._abs_file and self._abs_file.exists():
+            self.absolute.restore(json.loads(self._abs_file.read_text()))
+        self._step_hooks.append(self.absolute.refresh)
+        for fn in ("ABSE", "ABSC", "ABSQ"):
+            self.dio.on_function(fn, getattr(self.absolute, f"on_{fn.lower()}"))
+
         self.dio.on_function("SON", lambda _a: self._update_servo())
         self.dio.on_function("EMGS", lambda a: self.alarms.set_cause("AL013", a))
         self.dio.on_function("NL", lambda a: self._on_limit("NL", a))
@@ -240,6 +261,8 @@ class Drive:
         self.advance(off_for)
         self.params.power_cycle()
         self.dio.power_cycle()
+        self.absolute.power_cycle(battery)
+        self.absolute.on_abse(self.dio.function_active("ABSE"))
         self.alarms.power_cycle()
         self.brake.reset()
         self.sto.reset()
@@ -251,6 +274,8 @@ class Drive:
         """Save retained state (the process is going away)."""
         if self.state_path:
             self.params.save()
+        if self._abs_file:
+            self._abs_file.write_text(json.dumps(self.absolute.to_dict()))
 
     def snapshot(self) -> dict[str, Any]:
         """Ground truth for the recorder: what a real bench cannot see directly."""
@@ -272,6 +297,8 @@ class Drive:
             "sto_a": self.sto.a,
             "sto_b": self.sto.b,
             "alarms": list(self.alarms.active),
+            "abs_turns": self.absolute.turns,
+            "abs_single_turn": self.absolute.single_turn,
             "statusword": self.cia402.statusword,
             "do": [self.dio.do_level(n) for n in range(1, 7)],
         }
@@ -364,6 +391,11 @@ class Drive:
             self._hold_timer = self.sched.after(hold, lambda: self.axis.set_power(False))
         else:
             self.axis.set_power(False)
+
+    def _clear_position_error(self) -> None:
+        """P0.049 = 2: the motor position becomes the command end point (L7477-7491)."""
+        self.axis.demand = self.axis.position
+        self.axis.hold()
 
     def _on_torque_cut(self, cut: bool) -> None:
         self.axis.set_power(self.servo_on and not cut)
