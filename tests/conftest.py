@@ -17,3 +17,9 @@ def free_port() -> int:
 @pytest.fixture
 def port() -> int:
     return free_port()
+
+
+@pytest.fixture
+def free_port_factory():
+    """A callable giving a fresh free loopback port each call."""
+    return free_port

@@ -96,7 +96,7 @@ def test_sto_both_channels(held_ms: int, alarm: bool) -> None:
 
 
 def test_al500_cleared_by_arst_rising_edge_only_after_restore() -> None:
-    drive, events = make()
+    drive, _ = make()
     servo_on_by_di(drive)
     drive.set_sto("A", False)
     drive.set_sto("B", False)
@@ -145,7 +145,7 @@ def test_deviation_al501_cleared_by_arst() -> None:
 
 def test_emgs_stop_and_auto_clear() -> None:
     # DI8 EMGS b-contact (P2.017 = 0x0021): opening the contact = emergency (L15184, L19338).
-    drive, events = make(**{"P1.043": -200})
+    drive, _ = make(**{"P1.043": -200})
     servo_on_by_di(drive)
     drive.advance(10 * MS)
     drive.set_di(8, False)
@@ -197,7 +197,7 @@ def test_pp_move_over_objects() -> None:
 
 def test_bad_input_is_refused_precisely() -> None:
     drive, _ = make()
-    with pytest.raises(UnknownParameter, match="P9.001"):
+    with pytest.raises(UnknownParameter, match=r"P9\.001"):
         drive.params.write("P9.001", 1)
     with pytest.raises(OutOfRange, match=r"P1\.042.*1000"):
         drive.params.write("P1.042", 1001)
