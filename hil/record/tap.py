@@ -15,7 +15,12 @@ class Tap(Protocol):
         """A CAN frame (a `can.Message`), direction "rx" or "tx"."""
 
     def serial(
-        self, port: str, data: bytes, direction: str, t: int, source_t: int | None,
+        self,
+        port: str,
+        data: bytes,
+        direction: str,
+        t: int,
+        source_t: int | None,
         gaps_us: list[int] | None = None,
     ) -> None:
         """A chunk of RS-485 bytes, with the gaps between them where known."""

@@ -1,0 +1,115 @@
+"""python-can io plugin: `.mcap` for `can.Logger` / `can.LogReader` / `can.logger` / `can.player`.
+
+Registered in pyproject.toml under the entry point groups `can.io.message_writer` and
+`can.io.message_reader` with the key ".mcap" (python-can 4.6 looks them up by suffix in
+`can.io.logger._update_writer_plugins` and `can.io.player._update_reader_plugins`).
+Files are ordinary hil recordings: frames go to `/can/<bus>/raw` (+ decoded CANopen).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import can
+from can.io.generic import MessageReader, MessageWriter
+
+from hil.record.reader import Recording
+from hil.record.recorder import Recorder
+
+
+def frame_from_json(obj: dict, timestamp: float, channel: Any) -> can.Message:
+    """A `can.Message` from a `hil.CanFrame` JSON object."""
+    return can.Message(
+        timestamp=timestamp,
+        arbitration_id=int(obj["id"]),
+        is_extended_id=bool(obj.get("ext", False)),
+        is_remote_frame=bool(obj.get("rtr", False)),
+        is_error_frame=bool(obj.get("err", False)),
+        is_fd=bool(obj.get("fd", False)),
+        bitrate_switch=bool(obj.get("brs", False)),
+        error_state_indicator=bool(obj.get("esi", False)),
+        dlc=int(obj.get("dlc", len(obj.get("data", "")) // 2)),
+        data=bytes.fromhex(obj.get("data", "")),
+        channel=channel,
+        is_rx=obj.get("dir", "rx") != "tx",
+        check=False,
+    )
+
+
+def can_buses(rec: Recording) -> list[str]:
+    """Bus names with a `/can/<bus>/raw` channel."""
+    return sorted(t[5:-4] for t in rec.topics() if t.startswith("/can/") and t.endswith("/raw"))
+
+
+def can_messages(
+    rec: Recording, bus: str | None = None, *, time: str = "log"
+) -> Iterator[tuple[str, can.Message]]:
+    """(bus, can.Message) for every recorded frame (of `bus`), timestamps from log_time or
+    publish_time, in file order."""
+    if time not in ("log", "publish"):
+        raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+    buses = can_buses(rec)
+    if bus is not None:
+        if bus not in buses:
+            raise ValueError(
+                f"bus {bus!r}: not in {rec.path} (buses: {', '.join(buses) or 'none'})"
+            )
+        buses = [bus]
+    names = {f"/can/{b}/raw": b for b in buses}
+    for topic, lt, pt, obj in rec.messages(list(names)):
+        b = names[topic]
+        yield b, frame_from_json(obj, (lt if time == "log" else pt) / 1e9, b)
+
+
+class McapCanWriter(MessageWriter):
+    """`can.Logger("x.mcap")`: frames to `/can/<channel>/raw`; log_time = message timestamp.
+
+    `channel` (keyword) names the bus when a message carries none (default "can0").
+    """
+
+    def __init__(self, file: Any, channel: str = "can0", **kwargs: Any) -> None:
+        if kwargs.get("append"):
+            raise ValueError(f"{file}: MCAP recordings cannot be appended to")
+        self.channel = str(channel)
+        self.recorder = Recorder(
+            file if hasattr(file, "write") else Path(file), metadata={"source": "python-can logger"}
+        )
+
+    def on_message_received(self, msg: can.Message) -> None:
+        bus = msg.channel if isinstance(msg.channel, str) and msg.channel else self.channel
+        t = int(msg.timestamp * 1e9) if msg.timestamp else time.time_ns()
+        self.recorder.can(bus, msg, "rx" if msg.is_rx else "tx", t, None)
+
+    def file_size(self) -> int:
+        return self.recorder.path.stat().st_size if self.recorder.path else 0
+
+    def stop(self) -> None:
+        self.recorder.close()
+
+
+class McapCanReader(MessageReader):
+    """`can.LogReader("x.mcap")`: every recorded CAN frame as a `can.Message`.
+
+    Keywords: `bus` (only that bus), `time` ("log" default, or "publish").
+    """
+
+    def __init__(self, file: Any, bus: str | None = None, time: str = "log", **kwargs: Any):
+        self.file = file
+        self.recording = Recording.open(file)
+        self.bus = bus
+        self.time = time
+        if time not in ("log", "publish"):
+            raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+        buses = can_buses(self.recording)
+        if bus is not None and bus not in buses:
+            raise ValueError(f"bus {bus!r}: not in {file} (buses: {', '.join(buses) or 'none'})")
+
+    def __iter__(self) -> Iterator[can.Message]:
+        for _bus, msg in can_messages(self.recording, self.bus, time=self.time):
+            yield msg
+
+    def stop(self) -> None:
+        pass

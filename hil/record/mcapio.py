@@ -1,0 +1,437 @@
+"""A lean MCAP writer and a tolerant record scanner (MCAP spec, as `mcap` 1.6.0 writes it).
+
+Why not `mcap.writer.Writer` on the hot path: its `add_message` builds a dataclass and a
+`BytesIO` record per message (~4.5 µs, feasibility §5), which eats most of the budget of a
+saturated CAN bus plus its decoded twin. Here a message is one `struct.pack` and two list
+appends; everything that is not per message (schema, channel, chunk, indexes, summary,
+footer) reuses `mcap.records`, so the bytes are those of the official writer.
+
+Crash safety: `flush()` closes the open chunk early and writes it, so every message added
+before a `flush()` survives a `kill -9` (the file then lacks only its summary and footer).
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from io import BytesIO
+from typing import IO, Any
+
+from mcap.data_stream import ReadDataStream, RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+
+try:
+    import zstandard
+except ImportError:  # pragma: no cover - zstandard ships with our mcap install
+    zstandard = None
+try:
+    import lz4.frame as lz4frame
+except ImportError:  # pragma: no cover
+    lz4frame = None
+
+MAGIC = b"\x89MCAP0\r\n"
+_MSG = struct.Struct("<BQHIQQ").pack  # opcode, record length, channel, sequence, log, publish
+_MSG_OVERHEAD = 31  # bytes of a Message record before its data
+_REC = struct.Struct("<BQ")
+_MSG_BODY = struct.Struct("<HIQQ")
+_CHUNK_HEAD = struct.Struct("<QQQI")
+
+
+class McapWriter:
+    """Minimal chunked MCAP writer. Not thread-safe: one owner thread calls it."""
+
+    def __init__(
+        self,
+        stream: IO[bytes],
+        *,
+        chunk_size: int = 64 * 1024,
+        compression: str = "zstd",
+        library: str = "hil",
+        profile: str = "",
+    ) -> None:
+        if compression == "zstd" and zstandard is None:
+            compression = "lz4" if lz4frame is not None else ""
+        if compression == "lz4" and lz4frame is None:
+            compression = ""
+        if compression not in ("zstd", "lz4", "", "none"):
+            raise ValueError(f"compression {compression!r}: must be 'zstd', 'lz4' or 'none'")
+        self.compression = "" if compression == "none" else compression
+        self._zstd = zstandard.ZstdCompressor(level=3) if self.compression == "zstd" else None
+        self._f = stream
+        self.chunk_size = chunk_size
+        self._schemas: list[Schema] = []
+        self._channels: list[Channel] = []
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._attachment_indexes: list[AttachmentIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._counts: dict[int, int] = {}
+        self.message_count = 0
+        self._t_min = 0
+        self._t_max = 0
+        self._metadata_count = 0
+        self._attachment_count = 0
+        self._reset_chunk()
+        self._pos = 0
+        self._write(MAGIC)
+        rb = RecordBuilder()
+        Header(profile=profile, library=library).write(rb)
+        self._write(rb.end())
+        self._finished = False
+
+    # -- internals -------------------------------------------------------------------------
+    def _write(self, data: bytes) -> None:
+        self._f.write(data)
+        self._pos += len(data)
+
+    def _reset_chunk(self) -> None:
+        self._parts: list[bytes] = []
+        self._size = 0
+        self._n = 0
+        self._c_min = 1 << 64
+        self._c_max = 0
+        self._index: dict[int, list[int]] = {}
+
+    def _chunk_record(self, data: bytes) -> None:
+        self._parts.append(data)
+        self._size += len(data)
+
+    # -- records -----------------------------------------------------------------------------
+    def add_schema(self, name: str, encoding: str, data: bytes) -> int:
+        schema = Schema(id=len(self._schemas) + 1, data=data, encoding=encoding, name=name)
+        self._schemas.append(schema)
+        rb = RecordBuilder()
+        schema.write(rb)
+        self._chunk_record(rb.end())
+        return schema.id
+
+    def add_channel(
+        self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str]
+    ) -> int:
+        channel = Channel(
+            id=len(self._channels) + 1,
+            topic=topic,
+            message_encoding=message_encoding,
+            metadata=dict(metadata),
+            schema_id=schema_id,
+        )
+        self._channels.append(channel)
+        self._counts[channel.id] = 0
+        rb = RecordBuilder()
+        channel.write(rb)
+        self._chunk_record(rb.end())
+        return channel.id
+
+    def add_message(
+        self, channel_id: int, log_time: int, publish_time: int, data: bytes, sequence: int = 0
+    ) -> None:
+        """Append one message to the open chunk (closes the chunk when it is full)."""
+        n = len(data)
+        offset = self._size
+        self._parts.append(_MSG(5, 22 + n, channel_id, sequence, log_time, publish_time))
+        self._parts.append(data)
+        self._size = offset + _MSG_OVERHEAD + n
+        self._n += 1
+        idx = self._index.get(channel_id)
+        if idx is None:
+            idx = self._index[channel_id] = []
+        idx.append(log_time)
+        idx.append(offset)
+        if log_time < self._c_min:
+            self._c_min = log_time
+        if log_time > self._c_max:
+            self._c_max = log_time
+        if self._size >= self.chunk_size:
+            self.close_chunk()
+
+    def close_chunk(self) -> None:
+        """Write the open chunk and its message indexes (no-op without messages)."""
+        if self._n == 0:
+            return
+        raw = b"".join(self._parts)
+        if self.compression == "zstd":
+            data = self._zstd.compress(raw)
+        elif self.compression == "lz4":
+            data = lz4frame.compress(raw)
+        else:
+            data = raw
+        chunk = Chunk(
+            compression=self.compression,
+            data=data,
+            message_start_time=self._c_min,
+            message_end_time=self._c_max,
+            uncompressed_crc=zlib.crc32(raw),
+            uncompressed_size=len(raw),
+        )
+        rb = RecordBuilder()
+        chunk.write(rb)
+        chunk_bytes = rb.end()
+        start = self._pos
+        self._write(chunk_bytes)
+        index_start = self._pos
+        offsets: dict[int, int] = {}
+        parts = []
+        pos = index_start
+        for cid, flat in self._index.items():
+            k = len(flat)
+            rec = struct.pack(f"<BQHI{k}Q", Opcode.MESSAGE_INDEX, 6 + 8 * k, cid, 8 * k, *flat)
+            offsets[cid] = pos
+            pos += len(rec)
+            parts.append(rec)
+            self._counts[cid] += k // 2
+        index_bytes = b"".join(parts)
+        self._write(index_bytes)
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=self._c_min,
+                message_end_time=self._c_max,
+                chunk_start_offset=start,
+                chunk_length=len(chunk_bytes),
+                message_index_offsets=offsets,
+                message_index_length=len(index_bytes),
+                compression=self.compression,
+                compressed_size=len(data),
+                uncompressed_size=len(raw),
+            )
+        )
+        if self.message_count == 0:
+            self._t_min = self._c_min
+        else:
+            self._t_min = min(self._t_min, self._c_min)
+        self._t_max = max(self._t_max, self._c_max)
+        self.message_count += self._n
+        self._reset_chunk()
+
+    def flush(self) -> None:
+        """Close the open chunk and push everything to the OS (survives kill -9)."""
+        self.close_chunk()
+        self._f.flush()
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        rb = RecordBuilder()
+        Metadata(name=name, metadata=dict(data)).write(rb)
+        rec = rb.end()
+        self._metadata_indexes.append(MetadataIndex(offset=self._pos, length=len(rec), name=name))
+        self._metadata_count += 1
+        self._write(rec)
+
+    def add_attachment(
+        self, name: str, media_type: str, data: bytes, log_time: int, create_time: int = 0
+    ) -> None:
+        rb = RecordBuilder()
+        Attachment(
+            create_time=create_time,
+            log_time=log_time,
+            name=name,
+            media_type=media_type,
+            data=data,
+        ).write(rb)
+        rec = rb.end()
+        self._attachment_indexes.append(
+            AttachmentIndex(
+                offset=self._pos,
+                length=len(rec),
+                log_time=log_time,
+                create_time=create_time,
+                data_size=len(data),
+                name=name,
+                media_type=media_type,
+            )
+        )
+        self._attachment_count += 1
+        self._write(rec)
+
+    def finish(self) -> None:
+        """Write data end, summary (schemas, channels, statistics, indexes) and footer."""
+        if self._finished:
+            return
+        self._finished = True
+        # Schemas/channels registered after the last message still belong in the data section.
+        if self._n == 0 and self._parts:
+            self._write(b"".join(self._parts))
+            self._reset_chunk()
+        self.close_chunk()
+        rb = RecordBuilder()
+        DataEnd(data_section_crc=0).write(rb)
+        self._write(rb.end())
+        summary_start = self._pos
+        sb = RecordBuilder()
+        offsets: list[SummaryOffset] = []
+
+        def group(opcode: Opcode, records: list[Any]) -> None:
+            if not records:
+                return
+            begin = sb.count
+            for r in records:
+                r.write(sb)
+            offsets.append(SummaryOffset(opcode, summary_start + begin, sb.count - begin))
+
+        group(Opcode.SCHEMA, self._schemas)
+        group(Opcode.CHANNEL, self._channels)
+        stats = Statistics(
+            message_count=self.message_count,
+            schema_count=len(self._schemas),
+            channel_count=len(self._channels),
+            attachment_count=self._attachment_count,
+            metadata_count=self._metadata_count,
+            chunk_count=len(self._chunk_indexes),
+            message_start_time=self._t_min,
+            message_end_time=self._t_max,
+            channel_message_counts=dict(self._counts),
+        )
+        group(Opcode.STATISTICS, [stats])
+        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
+        group(Opcode.ATTACHMENT_INDEX, self._attachment_indexes)
+        group(Opcode.METADATA_INDEX, self._metadata_indexes)
+        offset_start = summary_start + sb.count
+        for o in offsets:
+            o.write(sb)
+        summary = sb.end()
+        crc = zlib.crc32(summary)
+        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start), crc)
+        self._write(summary)
+        fb = RecordBuilder()
+        Footer(
+            summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc
+        ).write(fb)
+        self._write(fb.end())
+        self._write(MAGIC)
+        self._f.flush()
+
+
+# -- tolerant scanning -----------------------------------------------------------------------
+@dataclass
+class Scan:
+    """Everything readable in a (possibly truncated) MCAP byte string."""
+
+    schemas: dict[int, Schema]
+    channels: dict[int, Channel]
+    chunks: list[bytes]  # uncompressed chunk payloads, file order
+    loose: list[tuple[int, int, int, bytes]]  # messages outside chunks (cid, log, pub, data)
+    metadata: list[Metadata]
+    attachments: list[Attachment]
+    has_footer: bool
+    has_data_end: bool
+    error: str | None  # first broken record, or None
+    error_offset: int | None
+    size: int
+
+
+def _parse(cls: Any, body: bytes) -> Any:
+    return cls.read(ReadDataStream(BytesIO(body)))
+
+
+def decompress(compression: str, data: bytes, size: int) -> bytes:
+    if compression == "":
+        return data
+    if compression == "zstd":
+        if zstandard is None:
+            raise ValueError("chunk is zstd-compressed but zstandard is not installed")
+        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+    if compression == "lz4":
+        if lz4frame is None:
+            raise ValueError("chunk is lz4-compressed but lz4 is not installed")
+        return lz4frame.decompress(data)
+    raise ValueError(f"unknown chunk compression {compression!r}")
+
+
+def iter_chunk(buf: bytes, schemas: dict, channels: dict) -> Iterator[tuple[int, int, int, bytes]]:
+    """Messages of one uncompressed chunk; schema and channel records update the dicts."""
+    off = 0
+    n = len(buf)
+    unpack_rec = _REC.unpack_from
+    unpack_msg = _MSG_BODY.unpack_from
+    while off + 9 <= n:
+        op, ln = unpack_rec(buf, off)
+        body = off + 9
+        end = body + ln
+        if end > n:
+            raise ValueError(f"record at chunk offset {off} runs past the chunk end")
+        if op == 5:
+            cid, _seq, lt, pt = unpack_msg(buf, body)
+            yield cid, lt, pt, buf[body + 22 : end]
+        elif op == 3:
+            s = _parse(Schema, buf[body:end])
+            schemas[s.id] = s
+        elif op == 4:
+            c = _parse(Channel, buf[body:end])
+            channels[c.id] = c
+        off = end
+
+
+def scan(data: bytes) -> Scan:
+    """Read every complete record of `data`; stop at the first broken one and say where."""
+    out = Scan({}, {}, [], [], [], [], False, False, None, None, len(data))
+    if data[:8] != MAGIC:
+        raise ValueError("not an MCAP file (bad magic at offset 0)")
+    off = 8
+    n = len(data)
+    while off < n:
+        if off + 9 > n:
+            out.error, out.error_offset = f"truncated record header at offset {off}", off
+            break
+        op, ln = _REC.unpack_from(data, off)
+        body = off + 9
+        end = body + ln
+        if end > n:
+            out.error = f"record (opcode 0x{op:02x}) at offset {off} truncated: needs {ln} bytes"
+            out.error_offset = off
+            break
+        try:
+            if op == Opcode.CHUNK:
+                _c_min, _c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(data, body)
+                p = body + 28
+                (clen,) = struct.unpack_from("<I", data, p)
+                comp = data[p + 4 : p + 4 + clen].decode()
+                p += 4 + clen
+                (dlen,) = struct.unpack_from("<Q", data, p)
+                raw = decompress(comp, data[p + 8 : p + 8 + dlen], usize)
+                if ucrc and zlib.crc32(raw) != ucrc:
+                    raise ValueError("chunk CRC mismatch")
+                # validate structure now so a bad chunk is reported as the broken record
+                for _ in iter_chunk(raw, out.schemas, out.channels):
+                    pass
+                out.chunks.append(raw)
+            elif op == Opcode.MESSAGE:
+                cid, _seq, lt, pt = _MSG_BODY.unpack_from(data, body)
+                out.loose.append((cid, lt, pt, data[body + 22 : end]))
+            elif op == Opcode.SCHEMA:
+                s = _parse(Schema, data[body:end])
+                out.schemas[s.id] = s
+            elif op == Opcode.CHANNEL:
+                c = _parse(Channel, data[body:end])
+                out.channels[c.id] = c
+            elif op == Opcode.METADATA:
+                out.metadata.append(_parse(Metadata, data[body:end]))
+            elif op == Opcode.ATTACHMENT:
+                out.attachments.append(_parse(Attachment, data[body:end]))
+            elif op == Opcode.DATA_END:
+                out.has_data_end = True
+            elif op == Opcode.FOOTER:
+                if data[end : end + 8] != MAGIC:
+                    out.error = f"closing magic missing after the footer at offset {off}"
+                    out.error_offset = end
+                out.has_footer = True
+                break
+        except Exception as exc:  # a broken record ends the readable part
+            out.error = f"record (opcode 0x{op:02x}) at offset {off} unreadable: {exc}"
+            out.error_offset = off
+            break
+        off = end
+    return out

@@ -1,0 +1,207 @@
+"""Read a recording back: messages, time series and edges for the timing checker.
+
+`Recording.open()` reads every complete record and stops at the first broken one (a killed
+run has no summary and may end mid-record): `truncated` and `error` say what happened.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hil.record.mcapio import Scan, iter_chunk, scan
+
+_loads = json.loads
+
+
+class RecordingError(Exception):
+    """A file that cannot be read as a recording (message names the file and the reason)."""
+
+
+@dataclass(frozen=True)
+class ChannelInfo:
+    id: int
+    topic: str
+    schema: str
+    message_encoding: str
+    metadata: dict[str, str]
+
+
+@dataclass(frozen=True)
+class AttachmentInfo:
+    name: str
+    media_type: str
+    log_time: int
+    create_time: int
+    data: bytes
+
+
+def _get(obj: Any, field: str) -> Any:
+    """`field` of a decoded message; dotted paths (`a.b`) and list indexes (`a.0`) allowed."""
+    if field in obj:
+        return obj[field]
+    cur = obj
+    for part in field.split("."):
+        if isinstance(cur, dict):
+            if part not in cur:
+                raise KeyError(field)
+            cur = cur[part]
+        elif isinstance(cur, list):
+            cur = cur[int(part)]
+        else:
+            raise KeyError(field)
+    return cur
+
+
+class Recording:
+    """A readable view of an MCAP recording (complete or truncated)."""
+
+    def __init__(self, path: Path, sc: Scan) -> None:
+        self.path = path
+        self._scan = sc
+        self.channel_info: dict[int, ChannelInfo] = {}
+        for cid, ch in sc.channels.items():
+            schema = sc.schemas.get(ch.schema_id)
+            self.channel_info[cid] = ChannelInfo(
+                cid, ch.topic, schema.name if schema else "", ch.message_encoding, ch.metadata
+            )
+        self._by_topic = {c.topic: c.id for c in self.channel_info.values()}
+
+    @classmethod
+    def open(cls, path: str | os.PathLike) -> Recording:
+        """Read `path`; raises `RecordingError` (naming the file) if it is no MCAP at all."""
+        p = Path(path)
+        try:
+            data = p.read_bytes()
+        except OSError as exc:
+            raise RecordingError(f"{p}: cannot read: {exc.strerror or exc}") from exc
+        try:
+            sc = scan(data)
+        except ValueError as exc:
+            raise RecordingError(f"{p}: {exc}") from exc
+        return cls(p, sc)
+
+    # -- state of the file ----------------------------------------------------------------------
+    @property
+    def truncated(self) -> bool:
+        """True if the file has no footer (killed run) or ends in a broken record."""
+        return not self._scan.has_footer or self._scan.error is not None
+
+    @property
+    def error(self) -> str | None:
+        """The first broken record (offset and reason), or None."""
+        return self._scan.error
+
+    @property
+    def size(self) -> int:
+        return self._scan.size
+
+    # -- content --------------------------------------------------------------------------------
+    def topics(self) -> list[str]:
+        return sorted(self._by_topic)
+
+    def channels(self) -> list[ChannelInfo]:
+        """Channels sorted by topic (topic, schema name, encoding, metadata such as
+        `publish_time_source`)."""
+        return sorted(self.channel_info.values(), key=lambda c: c.topic)
+
+    def _raw(self, cids: set[int] | None) -> Iterator[tuple[int, int, int, bytes]]:
+        sc = self._scan
+        for cid, lt, pt, data in sc.loose:
+            if cids is None or cid in cids:
+                yield cid, lt, pt, data
+        schemas, channels = {}, {}
+        for chunk in sc.chunks:
+            if cids is None:
+                yield from iter_chunk(chunk, schemas, channels)
+            else:
+                for m in iter_chunk(chunk, schemas, channels):
+                    if m[0] in cids:
+                        yield m
+
+    def _cids(self, topics: Iterable[str] | str | None) -> set[int] | None:
+        if topics is None:
+            return None
+        if isinstance(topics, str):
+            topics = [topics]
+        return {self._by_topic[t] for t in topics if t in self._by_topic}
+
+    def raw_messages(
+        self, topics: Iterable[str] | str | None = None
+    ) -> Iterator[tuple[str, int, int, bytes]]:
+        """(topic, log_time, publish_time, undecoded bytes) in file order."""
+        names = {cid: c.topic for cid, c in self.channel_info.items()}
+        for cid, lt, pt, data in self._raw(self._cids(topics)):
+            yield names.get(cid, f"?{cid}"), lt, pt, data
+
+    def messages(
+        self, topics: Iterable[str] | str | None = None
+    ) -> Iterator[tuple[str, int, int, dict]]:
+        """(topic, log_time, publish_time, decoded JSON) in file order."""
+        names = {cid: c.topic for cid, c in self.channel_info.items()}
+        for cid, lt, pt, data in self._raw(self._cids(topics)):
+            try:
+                obj = _loads(data)
+            except ValueError as exc:
+                obj = {"error": f"undecodable message: {exc}", "raw": data.hex()}
+            yield names.get(cid, f"?{cid}"), lt, pt, obj
+
+    def counts(self) -> dict[str, int]:
+        """Messages per topic (topics without messages count 0)."""
+        out = dict.fromkeys(self._by_topic, 0)
+        names = {cid: c.topic for cid, c in self.channel_info.items()}
+        for cid, _lt, _pt, _d in self._raw(None):
+            t = names.get(cid, f"?{cid}")
+            out[t] = out.get(t, 0) + 1
+        return out
+
+    def series(self, topic: str, field: str, *, time: str = "publish") -> list[tuple[int, Any]]:
+        """[(t_ns, value)] of `field` on `topic`, sorted by time (`publish` or `log`).
+        Messages without the field are skipped."""
+        if time not in ("publish", "log"):
+            raise ValueError(f"time {time!r}: must be 'publish' or 'log'")
+        use_pub = time == "publish"
+        cids = self._cids(topic)
+        out: list[tuple[int, Any]] = []
+        if not cids:
+            return out
+        append = out.append
+        for _cid, lt, pt, data in self._raw(cids):
+            obj = _loads(data)
+            try:
+                v = obj[field] if field in obj else _get(obj, field)
+            except (KeyError, IndexError, ValueError):
+                continue
+            append((pt if use_pub else lt, v))
+        out.sort(key=lambda x: x[0])
+        return out
+
+    def edges(
+        self, topic: str, field: str = "level", *, time: str = "publish"
+    ) -> list[tuple[int, Any]]:
+        """[(t_ns, new_value)] where `field` changes; the first sample is included (it is
+        the initial level, a change from unknown)."""
+        out: list[tuple[int, Any]] = []
+        prev: Any = object()
+        for t, v in self.series(topic, field, time=time):
+            if v != prev:
+                out.append((t, v))
+                prev = v
+        return out
+
+    def metadata(self) -> dict[str, dict[str, str]]:
+        """Metadata records by name (a repeated name merges, later keys win)."""
+        out: dict[str, dict[str, str]] = {}
+        for m in self._scan.metadata:
+            out.setdefault(m.name, {}).update(m.metadata)
+        return out
+
+    def attachments(self) -> list[AttachmentInfo]:
+        return [
+            AttachmentInfo(a.name, a.media_type, a.log_time, a.create_time, a.data)
+            for a in self._scan.attachments
+        ]

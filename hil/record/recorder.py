@@ -1,0 +1,746 @@
+"""The recorder: every bus crossing and harness event into one MCAP file.
+
+Callers (transports, faces, runner) only append a tuple to a bounded queue; one writer
+thread encodes, decodes (CANopen, Modbus), pairs transactions and writes. The writer closes
+the open chunk at least every `flush_interval` s, so a `kill -9` loses at most that tail.
+A full queue never blocks the caller: the item is dropped and counted (`Recorder.drops`,
+and `drops` in the `hil.close` metadata record).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import importlib
+import json
+import logging
+import os
+import platform
+import subprocess
+import sys
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable, Mapping
+from functools import cache
+from pathlib import Path
+from typing import IO, Any
+
+from hil.record import topics
+from hil.record.mcapio import McapWriter
+from hil.record.modbus_pairing import AduAssembler, ModbusPairing, guess_mode
+from hil.record.schemas import SCHEMA_BYTES, schema_for_topic
+from hil.record.sdo_pairing import SdoPairing
+
+log_ = logging.getLogger(__name__)
+
+#: Values of the `publish_time_source` channel metadata key.
+SOURCES = ("model", "adapter", "gateway", "harness")
+VERDICT_STATUSES = ("pass", "fail", "inconclusive")
+_LOG_NAMES = {"debug": 1, "info": 2, "warning": 3, "warn": 3, "error": 4, "fatal": 5, "critical": 5}
+_DIRS = {"rx": "rx", "tx": "tx"}
+_CAN_FMT = '{"id":%d,%s,"dlc":%d,"data":"%s","dir":"%s"}'
+_J = ("false", "true")
+# "ext".."esi" pre-formatted for every flag combination (hot path: one dict lookup)
+_FLAGS = {
+    (a, b, c, d, e, f): f'"ext":{_J[a]},"rtr":{_J[b]},"err":{_J[c]},"fd":{_J[d]},'
+    f'"brs":{_J[e]},"esi":{_J[f]}'
+    for a in (False, True)
+    for b in (False, True)
+    for c in (False, True)
+    for d in (False, True)
+    for e in (False, True)
+    for f in (False, True)
+}
+_DECODE_CACHE_MAX = 4096
+
+
+def _default(o: Any) -> Any:
+    """json.dumps fallback: enums by name, bytes as hex, dataclasses as dicts, else str."""
+    if isinstance(o, enum.Enum):
+        return o.name
+    if isinstance(o, bytes | bytearray | memoryview):
+        return bytes(o).hex()
+    if dataclasses.is_dataclass(o) and not isinstance(o, type):
+        return dataclasses.asdict(o)
+    if isinstance(o, set | frozenset | tuple):
+        return list(o)
+    return str(o)
+
+
+_enc = json.JSONEncoder(separators=(",", ":"), default=_default, allow_nan=True).encode
+
+
+def dumps(obj: Any) -> bytes:
+    """Compact JSON bytes; never raises (unencodable input becomes an `error` object)."""
+    try:
+        return _enc(obj).encode()
+    except (ValueError, TypeError, RecursionError) as exc:
+        return _enc({"error": f"unencodable payload: {exc}"}).encode()
+
+
+@cache
+def versions() -> dict[str, str]:
+    """Versions of the stack and the git revision of the hil checkout (if any)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version(), "platform": platform.platform()}
+    for key, dist in (
+        ("hil", "hil"),
+        ("python-can", "python-can"),
+        ("canopen", "canopen"),
+        ("pymodbus", "pymodbus"),
+        ("zenoh", "eclipse-zenoh"),
+        ("mcap", "mcap"),
+    ):
+        try:
+            out[key] = version(dist)
+        except PackageNotFoundError:
+            out[key] = "not installed"
+    root = Path(__file__).resolve().parents[2]
+    try:
+        rev = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=2,
+            check=False,
+        )
+        out["git_revision"] = rev.stdout.strip() if rev.returncode == 0 else "unknown"
+    except (OSError, subprocess.SubprocessError):
+        out["git_revision"] = "unknown"
+    return out
+
+
+def _load(module: str, attr: str) -> tuple[Callable | None, str]:
+    try:
+        fn = getattr(importlib.import_module(module), attr)
+    except ImportError as exc:
+        return None, f"missing ({exc})"
+    except AttributeError:
+        return None, f"missing ({module} has no {attr})"
+    except Exception as exc:  # a broken decoder module must not stop the recording
+        return None, f"failed to import: {exc!r}"
+    return fn, f"{module}.{attr}"
+
+
+def _str_map(d: Mapping[str, Any]) -> dict[str, str]:
+    return {str(k): v if isinstance(v, str) else dumps(v).decode() for k, v in d.items()}
+
+
+def _plain(d: Any) -> dict:
+    """A dict copy of a mapping or dataclass instance (events keep their class as `type`)."""
+    if dataclasses.is_dataclass(d) and not isinstance(d, type):
+        out = {"type": type(d).__name__}
+        out.update({f.name: getattr(d, f.name) for f in dataclasses.fields(d)})
+        return out
+    if isinstance(d, Mapping):
+        return dict(d)
+    raise TypeError(f"expected a dict or dataclass instance, got {type(d).__name__}")
+
+
+class Recorder:
+    """MCAP recorder implementing the transport `Tap` protocol plus harness events.
+
+    Thread-safe: every public method may be called from any thread. Times are integer ns;
+    `t` defaults to `time.time_ns()`.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike | IO[bytes],
+        *,
+        metadata: Mapping[str, Any] | None = None,
+        chunk_size: int = 64 * 1024,
+        flush_interval: float = 0.05,
+        compression: str = "zstd",
+        max_queue: int = 262_144,
+        decode: bool = True,
+    ) -> None:
+        if not 0 < flush_interval <= 0.1:
+            raise ValueError(f"flush_interval {flush_interval} s: must be in (0, 0.1]")
+        if isinstance(path, str | os.PathLike):
+            self.path: Path | None = Path(path)
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._f: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+            self._own_file = True
+        else:
+            self.path, self._f, self._own_file = None, path, False
+        v = versions()
+        self._w = McapWriter(
+            self._f,
+            chunk_size=chunk_size,
+            compression=compression,
+            library=f"hil/{v.get('hil', '?')} mcap-python/{v.get('mcap', '?')}",
+        )
+        self.flush_interval = flush_interval
+        self.decode = decode
+        self.drops = 0  #: items refused because the queue was full or the recorder closed
+        self.errors = 0  #: items the writer thread failed to write
+        self.last_error: str | None = None
+        self._max_queue = max_queue
+        self._q: deque = deque()
+        self._lock = threading.Lock()
+        self._open = True
+        self._stopping = False
+        self._schema_ids: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._chan_meta: dict[str, dict[str, str]] = {}
+        self._can_ch: dict[str, tuple] = {}
+        self._serial_ch: dict[str, tuple] = {}
+        self._serial_modes: dict[str, str] = {}
+        self._verdicts: Counter[str] = Counter()
+        self._failed: list[str] = []
+        self._describe_frame: Callable | None = None
+        self._describe_adu: Callable | None = None
+        self._decoders: dict[str, str] = {}
+        self._decoders_loaded = False
+        self._h_can = self._do_can
+        self._h_serial = self._do_serial
+        self._h_bytes = self._do_bytes
+        start = {
+            "started_ns": str(time.time_ns()),
+            "pid": str(os.getpid()),
+            "host": platform.node(),
+            "argv": " ".join(sys.argv),
+        }
+        if metadata:
+            start.update(_str_map(metadata))
+        self._w.add_metadata("hil.run", start)
+        self._w.add_metadata("hil.versions", v)
+        self._w.flush()
+        self._thread = threading.Thread(target=self._run, name="hil-recorder", daemon=True)
+        self._thread.start()
+
+    # -- Tap protocol (hot path: append and return) ---------------------------------------------
+    def can(
+        self, bus: str, frame: Any, direction: str, t: int, source_t: int | None = None
+    ) -> None:
+        """A python-can `Message` seen on `bus` ("rx"/"tx" as seen by the harness)."""
+        if self._open and len(self._q) < self._max_queue:
+            self._q.append((self._h_can, bus, frame, direction, t, source_t))
+        else:
+            self._drop()
+
+    def serial(
+        self,
+        port: str,
+        data: bytes,
+        direction: str,
+        t: int,
+        source_t: int | None = None,
+        gaps_us: list[int] | None = None,
+    ) -> None:
+        """One RS-485 frame (an ADU, as delimited by the line silence) on `port`."""
+        if self._open and len(self._q) < self._max_queue:
+            self._q.append(
+                (
+                    self._h_serial,
+                    port,
+                    bytes(data),
+                    direction,
+                    t,
+                    source_t,
+                    None if gaps_us is None else list(gaps_us),
+                )
+            )
+        else:
+            self._drop()
+
+    def dio(self, name: str, line: str, level: bool, t: int, source_t: int | None = None) -> None:
+        """Electrical level of one DI/DO/STO line."""
+        self._put(
+            topics.dio(name, line),
+            "hil.DioLevel",
+            None,
+            b'{"level":true}' if level else b'{"level":false}',
+            t,
+            source_t,
+        )
+
+    # -- harness events --------------------------------------------------------------------------
+    def plan_step(
+        self,
+        step: str,
+        event: str = "start",
+        *,
+        status: str | None = None,
+        message: str = "",
+        plan: str | None = None,
+        index: int | None = None,
+        t: int | None = None,
+        **extra: Any,
+    ) -> None:
+        """A plan step starts (`event="start"`) or ends (`"end"`, with its status)."""
+        if event not in ("start", "end"):
+            raise ValueError(f"plan_step event {event!r}: must be 'start' or 'end'")
+        payload = {
+            "plan": plan,
+            "step": step,
+            "index": index,
+            "event": event,
+            "status": status,
+            "message": message,
+            **extra,
+        }
+        self._put(topics.PLAN_STEPS, "hil.PlanStep", "harness", dumps(payload), t, None)
+
+    def log(
+        self,
+        level: int | str,
+        message: str,
+        name: str = "hil",
+        *,
+        file: str = "",
+        line: int = 0,
+        t: int | None = None,
+    ) -> None:
+        """A harness log line in the foxglove.Log shape (level 1-5 or a logging level)."""
+        lvl = self._level(level)
+        t = time.time_ns() if t is None else t
+        payload = {
+            "timestamp": {"sec": t // 1_000_000_000, "nsec": t % 1_000_000_000},
+            "level": lvl,
+            "message": str(message),
+            "name": name,
+            "file": file,
+            "line": int(line),
+        }
+        self._put(topics.LOG, "foxglove.Log", "harness", dumps(payload), t, None)
+
+    def verdict(self, data: Any = None, /, *, t: int | None = None, **fields: Any) -> None:
+        """One judged timing constraint: a dict/dataclass and/or fields; needs `status`
+        pass | fail | inconclusive (plus e.g. spec, constraint, measured, limit, margin)."""
+        payload = _plain(data) if data is not None else {}
+        payload.update(fields)
+        status = str(payload.get("status", "")).lower()
+        if status not in VERDICT_STATUSES:
+            raise ValueError(
+                f"verdict status {payload.get('status')!r}: must be one of "
+                f"{', '.join(VERDICT_STATUSES)}"
+            )
+        payload["status"] = status
+        with self._lock:
+            self._verdicts[status] += 1
+            if status != "pass":
+                self._failed.append(str(payload.get("constraint") or payload.get("spec") or "?"))
+        self._put(topics.TIMING_VERDICTS, "hil.TimingVerdict", "harness", dumps(payload), t, None)
+
+    def safety(
+        self,
+        action: str,
+        reason: str,
+        *,
+        source: str = "runner",
+        t: int | None = None,
+        **extra: Any,
+    ) -> None:
+        """A safe-state action taken by the runner or the gateway."""
+        payload = {"action": action, "reason": reason, "source": source, **extra}
+        self._put(topics.SAFETY, "hil.SafetyAction", "harness", dumps(payload), t, None)
+
+    # -- virtual-bench ground truth ---------------------------------------------------------------
+    def drive_state(
+        self,
+        drive: str,
+        state: Mapping[str, Any],
+        *,
+        t: int | None = None,
+        source_t: int | None = None,
+    ) -> None:
+        """Model snapshot: CiA 402 `state` (recorded as a string), mode, position, ..."""
+        payload = _plain(state)
+        if "state" in payload and not isinstance(payload["state"], str):
+            s = payload["state"]
+            payload["state"] = s.name if isinstance(s, enum.Enum) else str(s)
+        self._put(topics.drive_state(drive), "hil.DriveState", "model", dumps(payload), t, source_t)
+
+    def drive_event(
+        self, drive: str, event: Any, *, t: int | None = None, source_t: int | None = None
+    ) -> None:
+        """A model event (dict, or an event dataclass from hil.model.events)."""
+        self._put(
+            topics.drive_events(drive), "hil.DriveEvent", "model", dumps(_plain(event)), t, source_t
+        )
+
+    def drive_params(
+        self,
+        drive: str,
+        values: Mapping[str, Any],
+        *,
+        snapshot: bool = False,
+        t: int | None = None,
+        source_t: int | None = None,
+    ) -> None:
+        """Parameter values as the drive reports them (`snapshot=True` for the full set)."""
+        payload = {"snapshot": snapshot, "values": dict(values)}
+        self._put(
+            topics.drive_params(drive), "hil.DriveParams", "model", dumps(payload), t, source_t
+        )
+
+    # -- generic ---------------------------------------------------------------------------------
+    def write(
+        self,
+        topic: str,
+        payload: Mapping[str, Any],
+        log_time: int | None = None,
+        publish_time: int | None = None,
+    ) -> None:
+        """Any JSON object on any topic (schema chosen from the topic, else `hil.Json`)."""
+        self._put(
+            topic, schema_for_topic(topic), None, dumps(_plain(payload)), log_time, publish_time
+        )
+
+    def declare_source(self, topic: str, source: str, **metadata: Any) -> None:
+        """Set a topic's `publish_time_source` and extra channel metadata (e.g.
+        `resolution_ns=1_000_000`), before its first message."""
+        if source not in SOURCES:
+            raise ValueError(f"publish_time_source {source!r}: must be one of {SOURCES}")
+        self._chan_meta[topic] = {"publish_time_source": source, **_str_map(metadata)}
+
+    def serial_mode(self, port: str, mode: str) -> None:
+        """Modbus framing of `port` ("rtu" or "ascii"); default: guessed per frame."""
+        if mode not in ("rtu", "ascii"):
+            raise ValueError(f"Modbus mode {mode!r} for port {port!r}: must be 'rtu' or 'ascii'")
+        self._serial_modes[port] = mode
+
+    def attach(
+        self,
+        name: str,
+        data: bytes,
+        media_type: str = "application/octet-stream",
+        *,
+        t: int | None = None,
+    ) -> None:
+        """A file attachment (bench file, plan, EDS ...)."""
+        t = time.time_ns() if t is None else t
+        self._control((self._do_attach, name, bytes(data), media_type, t))
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        """A metadata record; non-string values are stored as JSON text."""
+        self._control((self._do_metadata, name, _str_map(data)))
+
+    def flush(self, timeout: float = 10.0) -> bool:
+        """Wait until everything queued so far is written and flushed to the OS."""
+        if not self._thread.is_alive():
+            return False
+        done = threading.Event()
+        self._control((self._do_barrier, done))
+        return done.wait(timeout)
+
+    @property
+    def queued(self) -> int:
+        return len(self._q)
+
+    def close(self) -> None:
+        """Drain the queue, close open transactions, write `hil.close` and the summary."""
+        with self._lock:
+            if not self._open and self._stopping:
+                return
+            self._open = False
+            self._stopping = True
+        self._thread.join(timeout=60)
+        with self._lock:
+            self.drops += len(self._q)  # raced in after the writer stopped
+            self._q.clear()
+        for _raw, _dec, sdo_ch, pairing, _cache in self._can_ch.values():
+            for txn in pairing.pending():
+                self._safe(
+                    lambda txn=txn, c=sdo_ch: self._w.add_message(c, _now(), _now(), dumps(txn))
+                )
+        for port, ch in self._serial_ch.items():
+            self._safe(lambda port=port, ch=ch: self._close_serial(port, *ch))
+        closing = {
+            "closed_ns": str(time.time_ns()),
+            "drops": str(self.drops),
+            "errors": str(self.errors),
+            "last_error": self.last_error or "",
+            "messages": str(self._w.message_count + self._w._n),
+            "verdicts_total": str(sum(self._verdicts.values())),
+            **{f"verdicts_{s}": str(self._verdicts.get(s, 0)) for s in VERDICT_STATUSES},
+            "verdicts_not_passed": ", ".join(self._failed),
+            "decoders": json.dumps(self._decoders),
+        }
+        self._safe(lambda: self._w.add_metadata("hil.close", closing))
+        self._safe(self._w.finish)
+        if self._own_file:
+            self._f.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- internals (caller side) -------------------------------------------------------------
+    def _drop(self) -> None:
+        with self._lock:
+            self.drops += 1
+
+    def _put(
+        self,
+        topic: str,
+        schema: str,
+        source: str | None,
+        data: bytes,
+        t: int | None,
+        source_t: int | None,
+    ) -> None:
+        if t is None:
+            t = time.time_ns()
+        if self._open and len(self._q) < self._max_queue:
+            self._q.append((self._h_bytes, topic, schema, source, data, t, source_t))
+        else:
+            self._drop()
+
+    def _control(self, item: tuple) -> None:
+        if self._open:
+            self._q.append(item)  # control items are never dropped for space
+        else:
+            self._drop()
+
+    @staticmethod
+    def _level(level: int | str) -> int:
+        if isinstance(level, str):
+            lvl = _LOG_NAMES.get(level.lower())
+            if lvl is None:
+                raise ValueError(f"log level {level!r}: must be one of {sorted(_LOG_NAMES)}")
+            return lvl
+        if isinstance(level, int) and 0 <= level <= 5:
+            return level
+        if isinstance(level, int) and level >= 10:  # logging.DEBUG..CRITICAL
+            return min(5, level // 10)
+        raise ValueError(
+            f"log level {level!r}: must be 1-5 (foxglove.LogLevel) or a logging level (10-50)"
+        )
+
+    # -- writer thread ---------------------------------------------------------------------------
+    def _run(self) -> None:
+        q = self._q
+        pop = q.popleft
+        interval = self.flush_interval
+        next_flush = time.monotonic() + interval
+        dirty = False
+        while True:
+            n = 0
+            try:
+                while n < 4096:
+                    item = pop()
+                    try:
+                        item[0](item)
+                    except Exception as exc:
+                        self._error(exc)
+                    n += 1
+            except IndexError:
+                pass
+            if n:
+                dirty = True
+            now = time.monotonic()
+            if now >= next_flush:
+                if dirty:
+                    self._safe(self._w.flush)
+                    dirty = False
+                next_flush = now + interval
+            if n == 0:
+                if self._stopping and not q:
+                    break
+                time.sleep(0.002)
+
+    def _safe(self, fn: Callable[[], Any]) -> None:
+        try:
+            fn()
+        except Exception as exc:
+            self._error(exc)
+
+    def _error(self, exc: BaseException) -> None:
+        self.errors += 1
+        self.last_error = f"{type(exc).__name__}: {exc}"
+        if self.errors <= 10:
+            log_.warning("recorder: %s", self.last_error)
+
+    def _channel(self, topic: str, schema: str, source: str) -> int:
+        sid = self._schema_ids.get(schema)
+        if sid is None:
+            sid = self._schema_ids[schema] = self._w.add_schema(
+                schema, "jsonschema", SCHEMA_BYTES[schema]
+            )
+        meta = {"publish_time_source": source, **self._chan_meta.get(topic, {})}
+        cid = self._channels[topic] = self._w.add_channel(topic, "json", sid, meta)
+        return cid
+
+    def _load_decoders(self) -> None:
+        self._decoders_loaded = True
+        if not self.decode:
+            self._decoders = {"canopen": "disabled", "modbus": "disabled"}
+            return
+        self._describe_frame, self._decoders["canopen"] = _load(
+            "hil.protocol.canopen", "describe_frame"
+        )
+        self._describe_adu, self._decoders["modbus"] = _load("hil.protocol.modbus", "describe_adu")
+
+    def _do_bytes(self, item: tuple) -> None:
+        _, topic, schema, source, data, t, st = item
+        cid = self._channels.get(topic)
+        if cid is None:
+            cid = self._channel(topic, schema, source or ("harness" if st is None else "adapter"))
+        self._w.add_message(cid, t, t if st is None else st, data)
+
+    def _can_channels(self, bus: str, st: int | None) -> tuple:
+        if not self._decoders_loaded:
+            self._load_decoders()
+        src = "harness" if st is None else "adapter"
+        raw = self._channel(topics.can_raw(bus), "hil.CanFrame", src)
+        dec = None
+        if self._describe_frame is not None:
+            dec = self._channel(topics.canopen(bus), "hil.CanOpenFrame", src)
+        sdo = self._channel(topics.canopen_sdo(bus), "hil.SdoTransaction", src)
+        ch = self._can_ch[bus] = (raw, dec, sdo, SdoPairing(), {})
+        return ch
+
+    def _do_can(self, item: tuple) -> None:
+        _, bus, frame, direction, t, st = item
+        ch = self._can_ch.get(bus)
+        if ch is None:
+            ch = self._can_channels(bus, st)
+        raw_cid, dec_cid, sdo_cid, pairing, cache_ = ch
+        pt = t if st is None else st
+        d = _DIRS.get(direction) or json.dumps(str(direction))[1:-1]
+        data = bytes(frame.data or b"")
+        hx = data.hex()
+        cid = frame.arbitration_id
+        ext = frame.is_extended_id
+        err = frame.is_error_frame
+        w = self._w
+        rtr = frame.is_remote_frame
+        key = (ext, rtr, err, frame.is_fd, frame.bitrate_switch, frame.error_state_indicator)
+        flags = _FLAGS.get(key) or _FLAGS[tuple(bool(x) for x in key)]
+        w.add_message(raw_cid, t, pt, (_CAN_FMT % (cid, flags, frame.dlc, hx, d)).encode())
+        if ext or err:
+            return  # CANopen uses 11-bit identifiers
+        if dec_cid is not None:
+            key = (cid, rtr, data)
+            enc = cache_.get(key)
+            if enc is None:
+                enc = self._describe_can(cid, data, hx, key[1])
+                if len(cache_) >= _DECODE_CACHE_MAX:
+                    cache_.clear()
+                cache_[key] = enc
+            w.add_message(
+                dec_cid,
+                t,
+                pt,
+                b'{"dir":"%s",' % d.encode() + enc[1:]
+                if len(enc) > 2
+                else b'{"dir":"%s"}' % d.encode(),
+            )
+        if 0x580 < cid <= 0x67F:
+            for txn in pairing.feed(cid, data, pt):
+                w.add_message(sdo_cid, t, pt, dumps(txn))
+
+    def _describe_can(self, cid: int, data: bytes, hx: str, remote: bool) -> bytes:
+        try:
+            if remote:
+                out = self._describe_frame(cid, data, remote=True)
+            else:
+                out = self._describe_frame(cid, data)
+            if not isinstance(out, Mapping):
+                out = {"value": out}
+            enc = dumps(out)
+        except Exception as exc:
+            enc = dumps(
+                {
+                    "id": cid,
+                    "data": hx,
+                    "error": f"describe_frame failed: {type(exc).__name__}: {exc}",
+                }
+            )
+        return enc if enc[:1] == b"{" else dumps({"value": enc.decode()})
+
+    def _do_serial(self, item: tuple) -> None:
+        _, port, data, direction, t, st, gaps = item
+        ch = self._serial_ch.get(port)
+        if ch is None:
+            if not self._decoders_loaded:
+                self._load_decoders()
+            src = "harness" if st is None else "adapter"
+            ch = self._serial_ch[port] = (
+                self._channel(topics.rs485_raw(port), "hil.SerialChunk", src),
+                self._channel(topics.modbus(port), "hil.ModbusAdu", src),
+                ModbusPairing(),
+                AduAssembler(),
+            )
+        raw_cid, mb_cid, pairing, assembler = ch
+        pt = t if st is None else st
+        d = _DIRS.get(direction) or str(direction)
+        self._w.add_message(
+            raw_cid, t, pt, dumps({"dir": d, "data": data.hex(), "n": len(data), "gaps_us": gaps})
+        )
+        mode = self._serial_modes.get(port) or guess_mode(data)
+        for adu, adir, apt in assembler.feed(data, d, mode, pt):
+            self._modbus(mb_cid, pairing, adu, adir, mode, t, apt)
+
+    def _close_serial(
+        self, port: str, _raw: int, mb_ch: int, pairing: ModbusPairing, assembler: AduAssembler
+    ) -> None:
+        """End of recording: decode a half-received ADU, report unanswered requests."""
+        mode = self._serial_modes.get(port, "")
+        for adu, adir, apt in assembler.pending():
+            self._modbus(mb_ch, pairing, adu, adir, mode or guess_mode(adu), _now(), apt)
+        for rec in pairing.pending():
+            self._w.add_message(mb_ch, _now(), _now(), dumps({"mode": mode, "raw": "", **rec}))
+
+    def _modbus(
+        self, mb_cid: int, pairing: ModbusPairing, data: bytes, d: str, mode: str, t: int, pt: int
+    ) -> None:
+        info, unanswered = pairing.feed(data, mode, d, pt)
+        for rec in unanswered:
+            self._w.add_message(mb_cid, t, pt, dumps({"mode": mode, "raw": "", **rec}))
+        msg: dict[str, Any] = {"dir": d, "mode": mode, "raw": data.hex(), **info}
+        if self._describe_adu is not None:
+            try:
+                adu = self._describe_adu(data, mode)
+                msg["adu"] = adu if isinstance(adu, Mapping) else {"value": adu}
+                if isinstance(adu, Mapping) and adu.get("error") and "error" not in msg:
+                    msg["error"] = str(adu["error"])
+            except Exception as exc:
+                why = f"describe_adu failed: {type(exc).__name__}: {exc}"
+                msg["adu"] = {"error": why}
+                msg.setdefault("error", why)
+        self._w.add_message(mb_cid, t, pt, dumps(msg))
+
+    def _do_attach(self, item: tuple) -> None:
+        _, name, data, media_type, t = item
+        self._w.add_attachment(name, media_type, data, t)
+
+    def _do_metadata(self, item: tuple) -> None:
+        _, name, data = item
+        self._w.add_metadata(name, data)
+
+    def _do_barrier(self, item: tuple) -> None:
+        self._w.flush()
+        item[1].set()
+
+
+def _now() -> int:
+    return time.time_ns()
+
+
+class LogHandler(logging.Handler):
+    """A `logging.Handler` that writes records to `/log` (foxglove.Log)."""
+
+    def __init__(self, recorder: Recorder, level: int = logging.INFO) -> None:
+        super().__init__(level)
+        self.recorder = recorder
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self.recorder.log(
+                record.levelno,
+                record.getMessage(),
+                record.name,
+                file=record.pathname,
+                line=record.lineno,
+                t=int(record.created * 1e9),
+            )
+        except Exception:
+            self.handleError(record)

@@ -1,0 +1,62 @@
+"""Helpers for the recording tests (imported as `rec_helpers`)."""
+
+from __future__ import annotations
+
+import json
+from importlib.metadata import entry_points
+
+import can
+
+EP_TEXT = """[can.io.message_writer]
+.mcap = hil.record.canio:McapCanWriter
+
+[can.io.message_reader]
+.mcap = hil.record.canio:McapCanReader
+"""
+
+
+def frame(cid: int, data: bytes | str, ext: bool = False, **kw) -> can.Message:
+    if isinstance(data, str):
+        data = bytes.fromhex(data)
+    return can.Message(arbitration_id=cid, data=data, is_extended_id=ext, **kw)
+
+
+def canio_registered() -> bool:
+    return any(ep.name == ".mcap" for ep in entry_points(group="can.io.message_writer"))
+
+
+def schema_check(schema: dict, obj: dict) -> list[str]:
+    """A tiny JSON-schema subset check (type object, required, property types)."""
+    types = {
+        "object": dict,
+        "array": list,
+        "string": str,
+        "boolean": bool,
+        "null": type(None),
+        "integer": int,
+        "number": (int, float),
+    }
+    errs = []
+    for key in schema.get("required", []):
+        if key not in obj:
+            errs.append(f"missing {key}")
+    for key, sub in schema.get("properties", {}).items():
+        if key not in obj or "type" not in sub:
+            continue
+        allowed = sub["type"] if isinstance(sub["type"], list) else [sub["type"]]
+        ok = any(
+            isinstance(obj[key], types[a])
+            and not (a in ("integer", "number") and isinstance(obj[key], bool))
+            for a in allowed
+        )
+        if not ok:
+            errs.append(f"{key}={obj[key]!r} is not {allowed}")
+    if schema.get("additionalProperties") is False:
+        extra = set(obj) - set(schema.get("properties", {}))
+        if extra:
+            errs.append(f"extra keys {sorted(extra)}")
+    return errs
+
+
+def load_schema(data: bytes) -> dict:
+    return json.loads(data)

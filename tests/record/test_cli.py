@@ -1,0 +1,153 @@
+"""`hil inspect`, `hil export` and the python-can `.mcap` plugin."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import can
+from rec_helpers import frame
+
+from hil.cli import main as hil
+from hil.record.canio import McapCanReader, McapCanWriter
+from hil.record.export_cli import candump_line
+from hil.record.reader import Recording
+from hil.record.recorder import Recorder
+
+T0 = 1_700_000_000_123_456_000
+
+
+def make(path):
+    with Recorder(path) as rec:
+        rec.can("can0", frame(0x123, "DEADBEEF"), "rx", T0, None)
+        rec.can("can0", frame(0x1ABCDEF0, "01", ext=True), "tx", T0 + 1_000_000, None)
+        rec.can("can1", frame(0x701, b"", is_remote_frame=True), "tx", T0 + 2_000_000, None)
+        rec.can(
+            "can0",
+            frame(0x181, "0011", is_fd=True, bitrate_switch=True),
+            "rx",
+            T0 + 3_000_000,
+            None,
+        )
+        rec.can("can0", frame(0x181, b""), "rx", T0 + 500_000_000, None)
+        rec.dio("io", "DI1", True, T0, None)
+    return path
+
+
+def test_inspect_prints_summary(tmp_path, capsys):
+    p = make(tmp_path / "a.mcap")
+    assert hil(["inspect", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert "complete: footer and summary present" in out
+    assert "/can/can0/raw" in out and "hil.CanFrame" in out
+    assert "largest gaps: 497.000 ms" in out
+    assert "drops: 0" in out
+
+
+def test_inspect_truncated_and_repair(tmp_path, capsys):
+    p = make(tmp_path / "a.mcap")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(p.read_bytes()[: p.stat().st_size - 200])
+    out_p = tmp_path / "fixed.mcap"
+    assert hil(["inspect", str(cut), "--repair", str(out_p)]) == 0
+    out = capsys.readouterr().out
+    n = sum(Recording.open(p).counts().values())
+    assert "TRUNCATED" in out and f"repaired: {n} messages" in out
+    r = Recording.open(out_p)
+    assert not r.truncated and sum(r.counts().values()) == n
+
+
+def test_inspect_unreadable_names_the_file(tmp_path, capsys):
+    bad = tmp_path / "notes.txt"
+    bad.write_text("hello")
+    assert hil(["inspect", str(bad)]) == 2
+    assert f"{bad}: not an MCAP file" in capsys.readouterr().err
+    assert hil(["inspect", str(tmp_path / "missing.mcap")]) == 2
+    assert "missing.mcap: cannot read" in capsys.readouterr().err
+
+
+def test_export_candump(tmp_path, capsys):
+    p = make(tmp_path / "a.mcap")
+    out = tmp_path / "a.log"
+    assert hil(["export", str(p), "--format", "candump", "-o", str(out)]) == 0
+    assert out.read_text().splitlines() == [
+        "(1700000000.123456) can0 123#DEADBEEF",
+        "(1700000000.124456) can0 1ABCDEF0#01",
+        "(1700000000.125456) can1 701#R",
+        "(1700000000.126456) can0 181##10011",
+        "(1700000000.623456) can0 181#",
+    ]
+    assert hil(["export", str(p), "-f", "candump", "-o", str(out), "--bus", "can1"]) == 0
+    assert out.read_text() == "(1700000000.125456) can1 701#R\n"
+    assert hil(["export", str(p), "-f", "candump", "-o", str(out), "--bus", "can9"]) == 2
+    assert "bus 'can9'" in capsys.readouterr().err
+
+
+def test_candump_error_frame():
+    m = can.Message(arbitration_id=0x4, is_error_frame=True, data=bytes(8), timestamp=1.5)
+    assert candump_line("can0", m) == "(1.500000) can0 20000004#0000000000000000"
+
+
+def test_export_python_can_formats_read_back(tmp_path):
+    p = make(tmp_path / "a.mcap")
+    for fmt in ("asc", "blf", "csv"):
+        out = tmp_path / f"a.{fmt}"
+        assert hil(["export", str(p), "-f", fmt, "-o", str(out)]) == 0
+        back = list(can.LogReader(out))
+        assert [m.arbitration_id for m in back] == [0x123, 0x1ABCDEF0, 0x701, 0x181, 0x181], fmt
+        assert bytes(back[0].data) == bytes.fromhex("DEADBEEF")
+
+
+def test_python_can_logger_and_logreader(tmp_path, canio_entry_points):
+    p = tmp_path / "pc.mcap"
+    writer = can.Logger(p)
+    assert isinstance(writer, McapCanWriter)
+    sent = [
+        can.Message(
+            timestamp=1700000000.0 + i / 1000,
+            arbitration_id=0x181 + i,
+            is_extended_id=False,
+            data=bytes([i] * (i % 9)),
+            channel="vcan0",
+        )
+        for i in range(20)
+    ]
+    with writer:
+        for m in sent:
+            writer(m)
+    reader = can.LogReader(p)
+    assert isinstance(reader, McapCanReader)
+    back = list(reader)
+    assert len(back) == len(sent)
+    for a, b in zip(sent, back, strict=True):
+        assert a.equals(b, timestamp_delta=1e-6), (a, b)
+    assert Recording.open(p).topics()[0] == "/can/vcan0/raw"
+
+
+def test_can_player_replays_an_mcap(tmp_path, canio_entry_points):
+    p = make(tmp_path / "a.mcap")
+    env = dict(os.environ)
+    if canio_entry_points is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(canio_entry_points), env.get("PYTHONPATH", "")])
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "can.player",
+            "-i",
+            "virtual",
+            "-c",
+            "replay",
+            "-v",
+            "--ignore-timestamps",
+            str(p),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+        check=False,
+    )
+    assert res.returncode == 0, res.stderr
+    assert "1abcdef0" in res.stdout.lower() and "deadbeef" in res.stdout.lower().replace(" ", "")
