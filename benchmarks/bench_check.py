@@ -1,0 +1,117 @@
+"""Time `hil check` (all shipped specs) on a large synthetic recording vs a bare mcap read.
+
+    .venv/bin/python benchmarks/bench_check.py [--messages 500000]
+
+Writes a recording with the `mcap` package: drive state at 1 kHz, DI/DO/STO lines toggling
+through servo-on/off, STO and EMGS cycles, CANopen control/status words. Prints messages/s
+for a bare `mcap` reader pass (decode JSON too) and for the full check, and their ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+MS = 1_000_000
+
+
+def write(path: Path, n: int) -> int:
+    """About `n` messages: a 1 ms state stream plus edges every cycle of 1 s."""
+    count = 0
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("hil.Any", "jsonschema", b'{"type": "object"}')
+        chans: dict[str, int] = {}
+
+        def put(topic: str, t: int, payload: dict) -> None:
+            nonlocal count
+            if topic not in chans:
+                chans[topic] = w.register_channel(topic, "json", sid, {})
+            w.add_message(chans[topic], log_time=t, publish_time=t,
+                          data=json.dumps(payload).encode())
+            count += 1
+
+        put("/drive/drive1/params", 0, {"snapshot": True, "values": {
+            "P1.042": 150, "P1.043": 100, "P1.038": 100, "P2.009": 2}})
+        for line, lvl in (("DI1", False), ("DI5", False), ("DI8", True), ("DO1", True),
+                          ("DO6", False), ("STO_A", True), ("STO_B", True)):
+            put(f"/dio/drive1/{line}", 0, {"level": lvl})
+        t_ms = 0
+        while count < n:
+            cyc = t_ms // 1000
+            phase = t_ms % 1000
+            t = t_ms * MS
+            on = 100 + 2 <= phase < 600 + 2
+            put("/drive/drive1/state", t, {
+                "state": "OPERATION ENABLED" if on else "SWITCH ON DISABLED",
+                "servo_on": on, "torque_enabled": on, "brake_released": 252 <= phase < 602,
+                "speed_rpm": 1000.0 if 300 <= phase < 580 else 0.0,
+                "alarms": ["AL500"] if cyc % 4 == 3 and 710 <= phase < 902 else []})
+            put("/canopen/can0", t, {"statusword": 0x0237 if on else 0x0250,
+                                     "controlword": 0x0F if 100 <= phase < 600 else 0x06})
+            if phase == 100:
+                put("/dio/drive1/DI1", t, {"level": True})
+            if phase == 252:
+                put("/dio/drive1/DO6", t, {"level": True})
+            if phase == 600:
+                put("/dio/drive1/DI1", t, {"level": False})
+            if phase == 602:
+                put("/dio/drive1/DO6", t, {"level": False})
+            if cyc % 4 == 3 and phase in (700, 800):
+                for ch in ("STO_A", "STO_B"):
+                    put(f"/dio/drive1/{ch}", t, {"level": phase == 800})
+            if cyc % 4 == 3 and phase in (900, 950):
+                put("/dio/drive1/DI5", t, {"level": phase == 900})
+            t_ms += 1
+        w.finish()
+    return count
+
+
+def bare(path: Path) -> int:
+    n = 0
+    with open(path, "rb") as f:
+        for _schema, _channel, message in make_reader(f).iter_messages():
+            json.loads(message.data)
+            n += 1
+    return n
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--messages", type=int, default=500_000)
+    args = ap.parse_args()
+    from hil.timing.checker import check_all, summary
+    from hil.timing.source import RecordingSource
+    from hil.timing.spec import load_spec, shipped_specs
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "bench.mcap"
+        t0 = time.perf_counter()
+        n = write(path, args.messages)
+        print(f"wrote {n} messages ({path.stat().st_size / 1e6:.1f} MB) "
+              f"in {time.perf_counter() - t0:.1f} s")
+        t0 = time.perf_counter()
+        bare(path)
+        t_bare = time.perf_counter() - t0
+        specs = [load_spec(p) for p in shipped_specs()]
+        t0 = time.perf_counter()
+        src = RecordingSource(path)
+        t_load = time.perf_counter() - t0
+        verdicts = check_all(specs, src)
+        t_check = time.perf_counter() - t0
+    print(f"bare mcap read+json : {n / t_bare:12,.0f} msg/s ({t_bare:.2f} s)")
+    print(f"hil check (7 specs) : {n / t_check:12,.0f} msg/s ({t_check:.2f} s; "
+          f"of which reading {t_load:.2f} s)")
+    print(f"ratio check/bare    : {t_check / t_bare:.2f}x the time")
+    print(f"verdicts: {summary(verdicts)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,685 @@
+"""Evaluate a timing spec on recorded signals: pass / fail / inconclusive per constraint.
+
+Observation model: a change observed at t on a signal with resolution r happened in [t - r, t]
+(sampled or quantised late, never early). An interval d = t_to - t_from therefore lies in
+[d - r_to, d + r_from]; a verdict is `pass` when that whole range is inside the window,
+`fail` when it is wholly outside, otherwise `inconclusive`. Windows of `forbid`/`absent`/
+`present` are half-open [from + min, from + max). Times are integer ns; messages use ms.
+"""
+
+from __future__ import annotations
+
+import bisect
+import fnmatch
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from hil.record import topics as T
+from hil.timing.expr import ExprError, is_param
+from hil.timing.source import ParamTimeline, SignalSource, samples
+from hil.timing.spec import ConstraintDef, EventDef, SignalDef, Spec, WindowDef
+
+MS = 1_000_000
+NEG_INF = -(2**62)
+POS_INF = 2**62
+
+
+def _ms(ns: float) -> float:
+    return ns / MS
+
+
+def _dur(ns: int) -> str:
+    return f"{ns / 1e9:.1f} s" if ns >= 1_000_000_000 else f"{ns / MS:.1f} ms"
+
+
+def _ns(ms: float) -> int:
+    return round(ms * MS)
+
+
+@dataclass
+class Verdict:
+    """One judged constraint (one occurrence of its trigger)."""
+
+    spec: str
+    constraint: str
+    status: str  # pass | fail | inconclusive | skipped
+    message: str
+    occurrence: int = 0
+    kind: str = "window"
+    t_ns: int | None = None  # the trigger (or from-event) time
+    from_ns: int | None = None
+    to_ns: int | None = None
+    measured_ms: float | None = None
+    uncertainty_ms: tuple[float, float] = (0.0, 0.0)  # measured can be this much lower/higher
+    window_ms: tuple[float | None, float | None] = (None, None)
+    window_expr: str = ""
+    values: dict[str, Any] = field(default_factory=dict)  # parameters/constants used
+    margin_ms: float | None = None
+    source: str = ""
+
+    @property
+    def passed(self) -> bool:
+        return self.status in ("pass", "skipped")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["uncertainty_ms"] = list(self.uncertainty_ms)
+        d["window_ms"] = list(self.window_ms)
+        return d
+
+
+@dataclass(frozen=True)
+class Occ:
+    """An event occurrence observed at t (ns); it really happened in [t - res, t]."""
+
+    t: int
+    res: int = 0
+
+
+@dataclass(frozen=True)
+class Missing:
+    why: str
+
+
+@dataclass
+class Trace:
+    """A piecewise-constant signal: change points (times, values) and its resolution (ns)."""
+
+    name: str
+    times: list[int]
+    values: list[Any]
+    res: int
+
+    def value_before(self, t: int) -> Any:
+        """Value just before t (or at t when nothing earlier); None when unknown."""
+        i = bisect.bisect_left(self.times, t)
+        if i > 0:
+            return self.values[i - 1]
+        return self.values[0] if self.times and self.times[0] == t else None
+
+    def value_at(self, t: int) -> Any:
+        i = bisect.bisect_right(self.times, t)
+        return self.values[i - 1] if i > 0 else None
+
+    def edges(self, kind: str, value: Any = None) -> list[int]:
+        out = []
+        for i in range(1, len(self.times)):
+            a, b = self.values[i - 1], self.values[i]
+            if ((kind == "rise" and not a and b) or (kind == "fall" and a and not b)
+                    or (kind == "change" and a != b) or (kind == "becomes" and a != b
+                                                         and _eq(b, value))):
+                out.append(self.times[i])
+        return out
+
+
+def _eq(a: Any, b: Any) -> bool:
+    if a == b:
+        return True
+    return isinstance(a, str) and isinstance(b, str) and a.strip().lower() == b.strip().lower()
+
+
+class Context:
+    """Resolves a spec's signals and events on one source with one binding."""
+
+    def __init__(self, spec: Spec, source: SignalSource, params: ParamTimeline,
+                 binding: Mapping[str, str], constants: Mapping[str, Any] | None = None,
+                 resolution: Mapping[str, float] | None = None) -> None:
+        self.spec, self.source, self.params = spec, source, params
+        self.binding = dict(binding)
+        self.res_override = dict(resolution or {})  # topic glob -> ms (highest precedence)
+        self.const_over = dict(constants or {})
+        self._traces: dict[str, Trace] = {}
+        self._occs: dict[str, list[Occ]] = {}
+        end = source.end_time()
+        self.end = end if end is not None else 0
+
+    # --- names ------------------------------------------------------------------------
+    def env(self, t: int | None) -> dict[str, Any]:
+        """Parameters in force at t plus the spec's constants (overrides win)."""
+        env: dict[str, Any] = dict(self.params.at(t))
+        for name, e in self.spec.constants.items():
+            if name in self.const_over:
+                env[name] = self.const_over[name]
+            else:
+                env[name] = e.eval(env)
+        env.update(self.const_over)
+        return env
+
+    def fmt(self, text: str) -> str:
+        """Fill {drive}/{dio}/{bus}/{alarm} placeholders from the binding."""
+        def sub(m: re.Match) -> str:
+            if m.group(1) not in self.binding:
+                raise KeyError(f"placeholder {{{m.group(1)}}} is not bound (use --bind "
+                               f"{m.group(1)}=...)")
+            return self.binding[m.group(1)]
+
+        return re.sub(r"\{(\w+)\}", sub, text)
+
+    # --- signals ----------------------------------------------------------------------
+    def _resolution(self, topic: str, sig: SignalDef | None) -> int:
+        for pat, ms in self.res_override.items():
+            if fnmatch.fnmatchcase(topic, pat):
+                return _ns(ms)
+        src = self.source.resolution(topic)
+        if src is not None:
+            return int(src)
+        env = self.env(None)
+        if sig is not None and sig.resolution is not None:
+            return _ns(sig.resolution.eval(env))
+        default = None
+        for pat, e in self.spec.resolution.items():
+            if pat == "default":
+                default = e
+            elif fnmatch.fnmatchcase(topic, self.fmt(pat)):
+                return _ns(e.eval(env))
+        return _ns(default.eval(env)) if default is not None else 0
+
+    def trace(self, name: str) -> Trace:
+        if name not in self._traces:
+            self._traces[name] = self._build(name)
+        return self._traces[name]
+
+    def _signal_def(self, name: str) -> SignalDef:
+        if name in self.spec.signals:
+            return self.spec.signals[name]
+        if name.startswith("alarm:"):
+            return SignalDef(name=name[6:], kind="alarm", line=0, alarm=[name[6:]],
+                             topic="/drive/{drive}/state", field="alarms")
+        raise KeyError(f"unknown signal {name!r}")
+
+    def _build(self, name: str) -> Trace:
+        s = self._signal_def(name)
+        if s.kind in ("topic", "function", "line", "alarm"):
+            topic, fld, invert = self._where_from(s)
+            raw = samples(self.source, topic, fld, s.where)
+            res = self._resolution(topic, s)
+            if s.kind == "function" or s.kind == "line":
+                pts = [(t, bool(v) != invert) for t, v in raw]
+            elif s.kind == "alarm":
+                codes = [self.fmt(c) for c in s.alarm or []]
+                pts = [(t, _alarm_active(v, codes)) for t, v in raw]
+            else:
+                pts = raw
+            pts = self._transform(s, pts)
+            return self._held(s, _compress(s.name, pts, res))
+        if s.kind == "signal":
+            parent = self.trace(s.source or "")
+            pts = self._transform(s, list(zip(parent.times, parent.values, strict=True)))
+            return self._held(s, _compress(s.name, pts, parent.res))
+        parents = [self.trace(p) for p in s.parts]
+        return _combine(s.name, s.kind, parents)
+
+    def _where_from(self, s: SignalDef) -> tuple[str, str, bool]:
+        if s.kind == "function":
+            line = self.binding.get(s.function or "")
+            if not line:
+                raise KeyError(f"function {s.function} is not bound to a line")
+            ln, _, contact = line.partition(":")
+            return T.dio(self.binding["dio"], ln), "level", contact == "b"
+        if s.kind == "line":
+            return T.dio(self.binding["dio"], s.io_line or ""), "level", False
+        return self.fmt(s.topic or ""), s.field or "", False
+
+    def _transform(self, s: SignalDef, pts: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
+        tf = s.transforms
+        if not tf:
+            return pts
+        thresholds = self._thresholds(tf)
+        out = []
+        for t, v in pts:
+            if "map" in tf:
+                m = tf["map"]
+                v = m.get(v, m.get(str(v), v))
+            if "bit" in tf:
+                v = bool((int(v) >> tf["bit"]) & 1)
+            if "mask" in tf:
+                v = int(v) & tf["mask"]
+            if tf.get("abs"):
+                v = abs(v)
+            if "equals" in tf:
+                v = _eq(v, tf["equals"])
+            if "in" in tf:
+                v = any(_eq(v, x) for x in tf["in"])
+            if tf.get("nonempty"):
+                v = bool(v)
+            if thresholds:
+                lim = thresholds(t)
+                if "below" in tf:
+                    v = v < lim["below"]
+                elif "above" in tf:
+                    v = v > lim["above"]
+            out.append((t, v))
+        return out
+
+    def _held(self, s: SignalDef, tr: Trace) -> Trace:
+        """`held: D`: true only once the value has been true for D ms (an on-delay timer)."""
+        if "held" not in s.transforms:
+            return tr
+        pts: list[tuple[int, Any]] = []
+        for i, t in enumerate(tr.times):
+            if not tr.values[i]:
+                pts.append((t, False))
+                continue
+            nxt = tr.times[i + 1] if i + 1 < len(tr.times) else POS_INF
+            pts.append((t, False))
+            due = t + _ns(s.transforms["held"].eval(self.env(t)))
+            if due < nxt and due <= self.end:
+                pts.append((due, True))
+        return _compress(tr.name, pts, tr.res)
+
+    def _thresholds(self, tf: dict[str, Any]):
+        keys = [k for k in ("below", "above") if k in tf]  # `held` is applied after
+        if not keys:
+            return None
+        times = self.params.change_times() or [0]
+        vals = [{k: tf[k].eval(self.env(t)) for k in keys} for t in times]
+
+        def at(t: int) -> dict[str, float]:
+            return vals[max(0, bisect.bisect_right(times, t) - 1)]
+
+        return at
+
+    # --- events -----------------------------------------------------------------------
+    def occurrences(self, name: str) -> list[Occ]:
+        """All occurrences of an edge-type event over the whole source."""
+        if name not in self._occs:
+            ev = self.spec.events[name]
+            if ev.kind in ("rise", "fall", "change", "becomes", "raised", "cleared"):
+                tr = self.trace(ev.signal or "")
+                kind = {"raised": "rise", "cleared": "fall"}.get(ev.kind, ev.kind)
+                self._occs[name] = [Occ(t, tr.res) for t in tr.edges(kind, ev.value)]
+            else:
+                occ = Scope(self, 0, NEG_INF, POS_INF).resolve(name)
+                self._occs[name] = [occ] if isinstance(occ, Occ) else []
+        return self._occs[name]
+
+    def label(self, name: str) -> str:
+        ev = self.spec.events[name]
+        if ev.label:
+            return ev.label
+        sig = (ev.signal or "").removeprefix("alarm:")
+        verbs = {"rise": "rose", "fall": "fell", "change": "changed", "raised": "raised",
+                 "cleared": "cleared", "first_true": "true"}
+        if ev.kind in verbs:
+            return f"{sig} {verbs[ev.kind]}"
+        if ev.kind == "becomes":
+            return f"{sig} became {ev.value}"
+        if ev.kind == "at":
+            return f"{self.label(ev.refs[0])} + {ev.plus}"
+        return f"{ev.kind.replace('_', ' ')} ({', '.join(self.label(r) for r in ev.refs)})"
+
+    def expectation(self, name: str) -> str:
+        ev = self.spec.events[name]
+        sig = (ev.signal or "").removeprefix("alarm:")
+        return {
+            "rise": f"{sig} to rise", "fall": f"{sig} to fall", "change": f"{sig} to change",
+            "becomes": f"{sig} to become {ev.value}", "raised": f"{sig} to be raised",
+            "cleared": f"{sig} to clear", "first_true": f"{sig} to be true",
+        }.get(ev.kind, self.label(name))
+
+
+def _alarm_active(v: Any, codes: list[str]) -> bool:
+    items = [str(x) for x in v] if isinstance(v, list | tuple | set) else []
+    if "any" in codes:
+        return bool(items)
+    return any(c in items for c in codes)
+
+
+def _compress(name: str, pts: list[tuple[int, Any]], res: int) -> Trace:
+    pts = sorted(pts, key=lambda p: p[0])
+    times: list[int] = []
+    values: list[Any] = []
+    for t, v in pts:
+        if values and times[-1] == t:
+            values[-1] = v  # the later message at the same instant wins
+            if len(values) > 1 and values[-2] == v:
+                times.pop()
+                values.pop()
+        elif not values or values[-1] != v:
+            times.append(t)
+            values.append(v)
+    return Trace(name, times, values, res)
+
+
+def _combine(name: str, kind: str, parents: list[Trace]) -> Trace:
+    all_t = sorted({t for p in parents for t in p.times})
+    start = max((p.times[0] for p in parents if p.times), default=None)
+    if start is None or any(not p.times for p in parents):
+        return Trace(name, [], [], max(p.res for p in parents))
+    pts = []
+    for t in all_t:
+        if t < start:
+            continue
+        vals = [bool(p.value_at(t)) for p in parents]
+        v = all(vals) if kind == "all" else any(vals) if kind == "any" else not vals[0]
+        pts.append((t, v))
+    return _compress(name, pts, max(p.res for p in parents))
+
+
+class Scope:
+    """One occurrence of a constraint's trigger: events are searched in [start, end)."""
+
+    def __init__(self, ctx: Context, index: int, start: int, end: int,
+                 trigger: str | None = None, trigger_occ: Occ | None = None) -> None:
+        self.ctx, self.index, self.start, self.end = ctx, index, start, end
+        self.trigger, self.trigger_occ = trigger, trigger_occ
+        self._memo: dict[str, Occ | Missing] = {}
+
+    def resolve(self, name: str) -> Occ | Missing:
+        if name == self.trigger and self.trigger_occ is not None:
+            return self.trigger_occ
+        if name not in self._memo:
+            self._memo[name] = Missing("cycle")  # guarded by the loader; belt and braces
+            self._memo[name] = self._resolve(self.ctx.spec.events[name])
+        return self._memo[name]
+
+    def _horizon(self, ev: EventDef, anchor_t: int) -> int:
+        within = ev.within or self.ctx.spec.horizon
+        end = self.end
+        if within is not None:
+            end = min(end, anchor_t + _ns(within.eval(self.ctx.env(anchor_t))) + 1)
+        return end
+
+    def _resolve(self, ev: EventDef) -> Occ | Missing:
+        ctx = self.ctx
+        if ev.kind == "at":
+            base = self.resolve(ev.refs[0])
+            if isinstance(base, Missing):
+                return base
+            return Occ(base.t + _ns(ev.plus.eval(ctx.env(base.t))), base.res)  # type: ignore[union-attr]
+        if ev.kind in ("earliest_of", "latest_of"):
+            got = [self.resolve(r) for r in ev.refs]
+            occs = [o for o in got if isinstance(o, Occ)]
+            if (ev.kind == "latest_of" and len(occs) < len(got)) or not occs:
+                return next(o for o in got if isinstance(o, Missing))
+            pick = min if ev.kind == "earliest_of" else max
+            t = pick(o.t for o in occs)
+            lo = pick(o.t - o.res for o in occs)
+            return Occ(t, t - lo)
+        lo, hi, anchor = self.start, self.end, None
+        if ev.after:
+            a = self.resolve(ev.after)
+            if isinstance(a, Missing):
+                return a
+            anchor = a
+            lo, hi = a.t, self._horizon(ev, a.t)
+        if ev.before:
+            b = self.resolve(ev.before)
+            if isinstance(b, Missing):
+                return b
+            lo = NEG_INF if ev.within is None else b.t - _ns(ev.within.eval(ctx.env(b.t)))
+            occs = self._candidates(ev, lo, b.t + 1, b)
+            if occs:
+                return occs[-1]
+            return Missing(f"no {ctx.expectation(ev.name).replace(' to ', ' ', 1)} "
+                           f"before {ctx.label(ev.before)}")
+        occs = self._candidates(ev, lo, hi, anchor)
+        if occs:
+            return occs[0]
+        span = min(hi, ctx.end) - (anchor.t if anchor else max(lo, 0))
+        after = f" after {ctx.label(ev.after)}" if ev.after else ""
+        return Missing(f"expected {ctx.expectation(ev.name)}{after}; it never did in "
+                       f"{_dur(max(span, 0))}")
+
+    def _candidates(self, ev: EventDef, lo: int, hi: int, anchor: Occ | None) -> list[Occ]:
+        if ev.kind == "first_true":
+            tr = self.ctx.trace(ev.signal or "")
+            start = max(lo, tr.times[0]) if tr.times else lo
+            if tr.times and tr.value_at(start) and start < hi:
+                if anchor is not None and start == anchor.t:
+                    return [anchor]
+                return [Occ(start, tr.res)]
+            return [Occ(t, tr.res) for t in tr.edges("rise") if lo <= t < hi][:1]
+        occs = self.ctx.occurrences(ev.name)
+        ts = [o.t for o in occs]
+        return occs[bisect.bisect_left(ts, lo):bisect.bisect_left(ts, hi)]
+
+
+# --- constraints -----------------------------------------------------------------------
+
+
+def context(spec: Spec, source: SignalSource,
+            params: Mapping[str, Any] | ParamTimeline | None = None,
+            binding: Mapping[str, str] | None = None, constants: Mapping[str, Any] | None = None,
+            resolution: Mapping[str, float] | None = None) -> Context:
+    """The resolver `check` uses (also used by the renderer to draw the same signals)."""
+    bind = spec.binding(binding)
+    if isinstance(params, ParamTimeline):
+        timeline = params
+    else:
+        topic = T.drive_params(bind.get("drive", "drive1"))
+        timeline = ParamTimeline.from_source(source, topic, params)
+    return Context(spec, source, timeline, bind, constants, resolution)
+
+
+def check(spec: Spec, source: SignalSource, params: Mapping[str, Any] | ParamTimeline | None = None,
+          binding: Mapping[str, str] | None = None, constants: Mapping[str, Any] | None = None,
+          resolution: Mapping[str, float] | None = None) -> list[Verdict]:
+    """Judge every constraint of `spec` on `source`; one Verdict per constraint occurrence.
+
+    params: overrides (name -> value) over the parameters recorded on /drive/{drive}/params,
+    or a ready ParamTimeline. binding: placeholders and function->line (see Spec.binding).
+    resolution: topic glob -> ms, overriding what the source and the spec say.
+    """
+    ctx = context(spec, source, params, binding, constants, resolution)
+    out: list[Verdict] = []
+    for c in spec.constraints:
+        try:
+            out.extend(_judge_constraint(ctx, c))
+        except (KeyError, ExprError) as e:
+            msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
+            if isinstance(e, KeyError) and is_param(str(msg)):
+                msg = f"parameter {msg} is neither recorded nor given (--param {msg}=...)"
+            out.append(Verdict(spec.id, c.name, "inconclusive", f"cannot judge: {msg}",
+                               kind=c.kind, source=c.source))
+    return out
+
+
+def _judge_constraint(ctx: Context, c: ConstraintDef) -> list[Verdict]:
+    if c.for_each is None:
+        return [_judge(ctx, c, Scope(ctx, 0, NEG_INF, POS_INF))]
+    trig = ctx.occurrences(c.for_each)
+    if not trig:
+        return [Verdict(ctx.spec.id, c.name, "skipped",
+                        f"not applicable: no {ctx.label(c.for_each)} in the recording",
+                        kind=c.kind, source=c.source)]
+    out = []
+    for i, o in enumerate(trig):
+        end = trig[i + 1].t if i + 1 < len(trig) else POS_INF
+        out.append(_judge(ctx, c, Scope(ctx, i, o.t, end, c.for_each, o)))
+    return out
+
+
+def _judge(ctx: Context, c: ConstraintDef, sc: Scope) -> Verdict:
+    base = dict(spec=ctx.spec.id, constraint=c.name, occurrence=sc.index, kind=c.kind,
+                source=c.source)
+    ref_name = c.frm or c.at
+    ref = sc.resolve(ref_name) if ref_name else None
+    t_ref = sc.trigger_occ.t if sc.trigger_occ else (ref.t if isinstance(ref, Occ) else None)
+    if c.when is not None:
+        env = ctx.env(t_ref)
+        for n in c.when.names:
+            if n in ctx.spec.signals:
+                val = ctx.trace(n).value_at(t_ref) if t_ref is not None else None
+                if val is None:
+                    return Verdict(**base, status="inconclusive", t_ns=t_ref,
+                                   message=f"cannot evaluate `when: {c.when}`: {n} unknown then")
+                env[n] = val
+        if not c.when.eval(env):
+            used = ", ".join(f"{n} = {env[n]}" for n in sorted(c.when.names))
+            return Verdict(**base, status="skipped", t_ns=t_ref,
+                           message=f"not applicable: `{c.when}` is false ({used})")
+    if isinstance(ref, Missing):
+        status = "fail" if c.kind == "window" else "skipped"
+        return Verdict(**base, status=status, t_ns=t_ref, message=ref.why)
+    assert ref is not None
+    if c.kind == "window":
+        return _judge_window(ctx, c, sc, ref, base)
+    return _judge_forbid(ctx, c, sc, ref, base)
+
+
+def _window_values(ctx: Context, w: WindowDef, t: int) -> tuple[float | None, float | None, dict]:
+    env = ctx.env(t)
+    lo = float(w.min.eval(env)) if w.min is not None else None
+    hi = float(w.max.eval(env)) if w.max is not None else None
+    used = {n: env[n] for e in (w.min, w.max) if e for n in sorted(e.names)}
+    return lo, hi, used
+
+
+def _allowed(w: WindowDef, lo: float | None, hi: float | None, used: dict) -> str:
+    ps = ", ".join(f"{n} = {v:g}" for n, v in used.items() if is_param(n))
+    ps = f" ({ps})" if ps else ""
+    if lo is not None and hi is not None:
+        m1 = re.fullmatch(r"(.+?)\s*-\s*([^-+]+)", w.min.text) if w.min else None
+        m2 = re.fullmatch(r"(.+?)\s*\+\s*([^-+]+)", w.max.text) if w.max else None
+        if m1 and m2 and m1.groups() == m2.groups():
+            return f"{(lo + hi) / 2:.1f} ± {(hi - lo) / 2:.1f} ms{ps}"
+        return f"{lo:.1f} … {hi:.1f} ms{ps}"
+    if hi is not None:
+        return f"≤ {hi:.1f} ms{ps}"
+    return f"≥ {lo:.1f} ms{ps}"
+
+
+def _half_open(lo: float | None, hi: float | None, used: dict) -> str:
+    ps = ", ".join(f"{n} = {v:g}" for n, v in used.items() if is_param(n))
+    a = f"{lo:.1f}" if lo is not None else "0.0"
+    b = f"{hi:.1f}" if hi is not None else "∞"
+    return f"[{a}, {b}) ms" + (f" ({ps})" if ps else "")
+
+
+def _judge_window(ctx, c, sc, f: Occ, base) -> Verdict:
+    to = sc.resolve(c.to)
+    lo, hi, used = _window_values(ctx, c.window, f.t)
+    common = dict(base, t_ns=f.t, from_ns=f.t, window_ms=(lo, hi),
+                  window_expr=c.window.text(), values=used)
+    if isinstance(to, Missing):
+        return Verdict(**common, status="fail", message=to.why)
+    d = _ms(to.t - f.t)
+    dlo, dhi = d - _ms(to.res), d + _ms(f.res)
+    flo = -math.inf if lo is None else lo
+    fhi = math.inf if hi is None else hi
+    margin = min(d - flo, fhi - d)
+    head = f"{ctx.label(c.to)} {d:.1f} ms after {ctx.label(c.frm)}"
+    allowed = _allowed(c.window, lo, hi, used)
+    if dlo >= flo and dhi <= fhi:
+        status, tail = "pass", f"margin {margin:.1f} ms"
+    elif dhi < flo or dlo > fhi:
+        status = "fail"
+        tail = f"{d - fhi:.1f} ms late" if d > fhi else f"{flo - d:.1f} ms early"
+    else:
+        status = "inconclusive"
+        tail = (f"observation resolution (−{_ms(to.res):g}/+{_ms(f.res):g} ms) straddles "
+                f"the {'upper' if dhi > fhi else 'lower'} limit")
+    return Verdict(**common, status=status, to_ns=to.t, measured_ms=d,
+                   uncertainty_ms=(_ms(to.res), _ms(f.res)), margin_ms=margin,
+                   message=f"{head}; allowed {allowed}: {tail}")
+
+
+def _span(ctx, c, sc, f: Occ) -> tuple[int, int, int, int, float | None, float | None, dict]:
+    """Possible and sure window [lo, hi) in ns for forbid/absent/present."""
+    if c.at:
+        return f.t - f.res, f.t, f.t - f.res, f.t, None, None, {}
+    if c.window is not None:
+        lo, hi, used = _window_values(ctx, c.window, f.t)
+        wlo = _ns(lo) if lo is not None else 0
+        whi = _ns(hi) if hi is not None else POS_INF - f.t
+        return f.t - f.res + wlo, f.t + whi, f.t + wlo, f.t - f.res + whi, lo, hi, used
+    u = sc.resolve(c.until)
+    end = POS_INF if isinstance(u, Missing) else u.t
+    end_sure = POS_INF if isinstance(u, Missing) else u.t - u.res
+    return f.t - f.res, end, f.t, end_sure, 0.0, None, {}
+
+
+def _judge_forbid(ctx, c, sc, f: Occ, base) -> Verdict:
+    plo, phi, slo, shi, lo, hi, used = _span(ctx, c, sc, f)
+    common = dict(base, t_ns=f.t, from_ns=f.t, window_ms=(lo, hi), values=used,
+                  window_expr=c.window.text() if c.window else (f"until {c.until}" if c.until
+                                                               else f"at {c.at}"))
+    where = (f"at {ctx.label(c.at)}" if c.at else
+             f"before {ctx.label(c.until)}" if c.until and not c.window else
+             f"within {_half_open(lo, hi, used)} of {ctx.label(c.frm)}" if c.window else "")
+    if c.kind == "forbid":
+        ev = ctx.spec.events[c.target]
+        occs = (ctx.occurrences(c.target) if ev.kind in
+                ("rise", "fall", "change", "becomes", "raised", "cleared") else
+                [o for o in [sc.resolve(c.target)] if isinstance(o, Occ)])
+        status, hit = "pass", None
+        for o in occs:
+            if o.t - o.res >= slo and o.t < shi:
+                status, hit = "fail", o
+                break
+            if o.t >= plo and o.t - o.res < phi and status == "pass":
+                status, hit = "inconclusive", o
+        what = ctx.label(c.target)
+        if hit is None:
+            return Verdict(**common, status="pass", message=f"no {what} {where}")
+        d = _ms(hit.t - f.t)
+        return Verdict(**common, status=status, to_ns=hit.t, measured_ms=d,
+                       margin_ms=-abs(d) if status == "fail" else None,
+                       message=f"{what} {d:.1f} ms after {ctx.label(c.frm or c.at)}: "
+                       f"must not happen {where}"
+                       + ("" if status == "fail" else " (within the observation resolution)"))
+    # absent / present: the signal must be false / true over the window
+    tr = ctx.trace(c.target)
+    want = c.kind == "present"
+    surely_bad, maybe_bad = _bad_spans(tr, want, ctx.end)
+    if c.at:
+        status = "pass"
+        if any(a <= plo and b > phi for a, b in surely_bad):
+            status = "fail"
+        elif any(a <= phi and b > plo for a, b in maybe_bad):
+            status = "inconclusive"
+    else:
+        status = "pass"
+        if any(a < shi and b > slo for a, b in surely_bad):
+            status = "fail"
+        elif any(a < phi and b > plo for a, b in maybe_bad):
+            status = "inconclusive"
+    state = "true" if not want else "false"
+    if status == "pass":
+        verb = "was" if c.at else "stayed"
+        msg = f"{c.target} {verb} {'true' if want else 'false'} {where}"
+    else:
+        spans = surely_bad if status == "fail" else maybe_bad
+        lo_w = plo if (c.at or status != "fail") else slo
+        first = next((max(a, lo_w) for a, b in spans if b > lo_w), None)
+        offs = ""
+        if first is not None and c.frm and not c.at:
+            offs = f" ({_ms(first - f.t):.1f} ms after {ctx.label(c.frm)})"
+        msg = f"{c.target} was {state} {where}{offs}" + (
+            "" if status == "fail" else " — possibly, within the observation resolution")
+    return Verdict(**common, status=status, message=msg)
+
+
+Spans = list[tuple[int, int]]
+
+
+def _bad_spans(tr: Trace, want: bool, end: int) -> tuple[Spans, Spans]:
+    """Intervals where the signal is surely / possibly not `want` (unknown prefix = possibly)."""
+    surely, maybe = [], []
+    if not tr.times:
+        return [], [(NEG_INF, POS_INF)]
+    maybe.append((NEG_INF, tr.times[0]))
+    for i, t in enumerate(tr.times):
+        nxt = tr.times[i + 1] if i + 1 < len(tr.times) else POS_INF
+        if bool(tr.values[i]) != want:
+            surely.append((t, nxt - tr.res if nxt < POS_INF else POS_INF))
+            maybe.append((t - tr.res, nxt))
+    return surely, maybe
+
+
+def check_all(specs: list[Spec], source: SignalSource, **kw: Any) -> list[Verdict]:
+    out: list[Verdict] = []
+    for s in specs:
+        out.extend(check(s, source, **kw))
+    return out
+
+
+def summary(verdicts: list[Verdict]) -> dict[str, int]:
+    out = {s: 0 for s in ("pass", "fail", "inconclusive", "skipped")}
+    for v in verdicts:
+        out[v.status] += 1
+    return out

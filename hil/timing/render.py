@@ -1,0 +1,222 @@
+"""Expected vs observed timing diagrams: WaveJSON (for WaveDrom) and a self-contained SVG.
+
+Observed signals are drawn as steps on a time axis in ms; each judged window is a shaded
+band on the lane of the signal it constrains (green pass, red fail, amber inconclusive),
+labelled with its constraint and limits. No dependencies beyond the standard library.
+"""
+
+from __future__ import annotations
+
+import string
+from collections.abc import Mapping
+from typing import Any
+from xml.sax.saxutils import escape
+
+from hil.timing.checker import MS, Context, Trace, Verdict, context
+from hil.timing.source import SignalSource
+from hil.timing.spec import Spec
+
+COLORS = {"pass": "#2e7d32", "fail": "#c62828", "inconclusive": "#ef8f00", "skipped": "#888"}
+FILLS = {"pass": "#c8e6c9", "fail": "#ffcdd2", "inconclusive": "#ffe0b2", "skipped": "#eee"}
+
+
+def _lane_of(ctx: Context, v: Verdict) -> str | None:
+    """The signal a verdict constrains: its `to` event's signal or its target signal."""
+    c = next((c for c in ctx.spec.constraints if c.name == v.constraint), None)
+    if c is None:
+        return None
+    if c.kind in ("absent", "present"):
+        return c.target
+    ev = ctx.spec.events.get(c.target if c.kind == "forbid" else (c.to or ""))
+    while ev is not None and ev.signal is None and ev.refs:
+        ev = ctx.spec.events.get(ev.refs[0])
+    sig = ev.signal if ev else None
+    return sig.removeprefix("alarm:") if sig else None
+
+
+def _range(verdicts: list[Verdict], ctx: Context, occurrence: int | None) -> tuple[int, int]:
+    chosen = [v for v in verdicts if v.from_ns is not None and
+              (occurrence is None or v.occurrence == occurrence)]
+    bad = [v for v in chosen if v.status == "fail"]
+    chosen = bad or chosen
+    pts: list[int] = []
+    for v in chosen:
+        pts += [t for t in (v.from_ns, v.to_ns) if t is not None]
+        if v.window_ms[1] is not None and v.from_ns is not None:
+            pts.append(v.from_ns + int(v.window_ms[1] * MS))
+    if not pts:
+        ts = [t for n in ctx.spec.signals for t in _safe(ctx, n).times]
+        pts = ts or [0, 1]
+    lo, hi = min(pts), max(pts)
+    pad = max((hi - lo) // 5, 2 * MS)
+    return lo - pad, hi + pad
+
+
+def _safe(ctx: Context, name: str) -> Trace:
+    try:
+        return ctx.trace(name)
+    except KeyError:
+        return Trace(name, [], [], 0)
+
+
+def _lanes(ctx: Context) -> list[str]:
+    return list(ctx.spec.signals)
+
+
+def wavejson(spec: Spec, source: SignalSource, verdicts: list[Verdict],
+             params: Mapping[str, Any] | None = None, binding: Mapping[str, str] | None = None,
+             t_range: tuple[int, int] | None = None, occurrence: int | None = 0,
+             cycles: int = 100) -> dict[str, Any]:
+    """A WaveJSON dict: one lane per signal, one node lane for events, one edge per window."""
+    ctx = context(spec, source, params, binding)
+    lo, hi = t_range or _range(verdicts, ctx, occurrence)
+    step = max((hi - lo) / cycles, 1)
+    lanes: list[Any] = []
+    for name in _lanes(ctx):
+        tr = _safe(ctx, name)
+        wave, data, last = [], [], object()
+        for i in range(cycles):
+            v = tr.value_at(int(lo + (i + 1) * step))
+            if v is None:
+                ch = "x"
+            elif isinstance(v, bool):
+                ch = "1" if v else "0"
+            else:
+                ch = "="
+            if v is not None and v == last and i != 0:
+                ch = "."
+            elif ch == "=":
+                data.append(str(v))
+            wave.append(ch)
+            last = v
+        lane: dict[str, Any] = {"name": name, "wave": "".join(wave)}
+        if data:
+            lane["data"] = data
+        lanes.append(lane)
+    nodes = ["."] * cycles
+    edges: list[str] = []
+    letters = iter(string.ascii_letters)
+    for v in verdicts:
+        if v.from_ns is None or v.to_ns is None or (occurrence is not None and
+                                                     v.occurrence != occurrence):
+            continue
+        a, b = (int((t - lo) / step) for t in (v.from_ns, v.to_ns))
+        if not (0 <= a < cycles and 0 <= b < cycles):
+            continue
+        try:
+            na = nodes[a] if nodes[a] != "." else next(letters)
+            nodes[a] = na
+            nb = nodes[b] if nodes[b] != "." else next(letters)
+            nodes[b] = nb
+        except StopIteration:
+            break
+        mark = {"pass": "✓", "fail": "✗", "inconclusive": "?"}.get(v.status, "")
+        edges.append(f"{na}<->{nb} {v.measured_ms:.1f} ms {mark} {v.constraint}")
+    lanes.append({"name": "events", "node": "".join(nodes)})
+    return {
+        "signal": lanes,
+        "edge": edges,
+        "head": {"text": f"{spec.id}: {spec.title}"},
+        "foot": {"text": f"{spec.source} — 1 cycle = {step / MS:.3g} ms from "
+                         f"t = {lo / MS:.3f} ms"},
+        "config": {"hscale": 1},
+    }
+
+
+def svg(spec: Spec, source: SignalSource, verdicts: list[Verdict],
+        params: Mapping[str, Any] | None = None, binding: Mapping[str, str] | None = None,
+        t_range: tuple[int, int] | None = None, occurrence: int | None = 0,
+        width: int = 960) -> str:
+    """A self-contained SVG timing diagram (observed steps + expected window bands)."""
+    ctx = context(spec, source, params, binding)
+    lo, hi = t_range or _range(verdicts, ctx, occurrence)
+    names = _lanes(ctx)
+    left, right, top, lane_h = 150, 20, 40, 34
+    plot_w = width - left - right
+    height = top + lane_h * len(names) + 30 + 16 * len(verdicts)
+
+    def x(t: float) -> float:
+        return left + (min(max(t, lo), hi) - lo) / (hi - lo) * plot_w
+
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+           f'viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="11">',
+           f'<title>{escape(spec.id)}: {escape(spec.title)}</title>',
+           f'<rect width="{width}" height="{height}" fill="white"/>',
+           f'<text x="8" y="16" font-size="13" font-weight="bold">{escape(spec.title)}</text>',
+           f'<text x="8" y="30" fill="#555">{escape(spec.source)}</text>']
+    # time axis (ms relative to the range start)
+    axis_y = top + lane_h * len(names) + 4
+    out.append(f'<line x1="{left}" y1="{axis_y}" x2="{left + plot_w}" y2="{axis_y}" '
+               'stroke="#333"/>')
+    for i in range(11):
+        t = lo + (hi - lo) * i / 10
+        out.append(f'<line x1="{x(t):.1f}" y1="{top}" x2="{x(t):.1f}" y2="{axis_y}" '
+                   'stroke="#eee"/>')
+        out.append(f'<text x="{x(t):.1f}" y="{axis_y + 14}" text-anchor="middle">'
+                   f'{(t - lo) / MS:.1f}</text>')
+    out.append(f'<text x="{left + plot_w}" y="{axis_y + 26}" text-anchor="end">ms from '
+               f't = {lo / MS:.3f} ms</text>')
+    row = {n: i for i, n in enumerate(names)}
+    # expected windows as bands
+    shown = [v for v in verdicts if occurrence is None or v.occurrence == occurrence]
+    for v in shown:
+        lane = _lane_of(ctx, v)
+        if v.from_ns is None or lane not in row or v.status == "skipped":
+            continue
+        wlo = v.from_ns + int((v.window_ms[0] or 0) * MS)
+        whi = v.from_ns + int(v.window_ms[1] * MS) if v.window_ms[1] is not None else hi
+        y0 = top + row[lane] * lane_h + 2
+        w = max(x(whi) - x(wlo), 2)
+        out.append(f'<rect x="{x(wlo):.1f}" y="{y0}" width="{w:.1f}" height="{lane_h - 4}" '
+                   f'fill="{FILLS[v.status]}" stroke="{COLORS[v.status]}" opacity="0.8">'
+                   f'<title>{escape(v.message)}</title></rect>')
+    # observed signals
+    for name in names:
+        tr = _safe(ctx, name)
+        y0 = top + row[name] * lane_h
+        out.append(f'<text x="8" y="{y0 + lane_h / 2 + 4}">{escape(name)}</text>')
+        out.append(_steps(tr, x, lo, hi, y0 + 6, y0 + lane_h - 6))
+    # verdict markers and legend
+    ly = axis_y + 40
+    for v in shown:
+        col = COLORS[v.status]
+        if v.to_ns is not None and lo <= v.to_ns <= hi:
+            out.append(f'<line x1="{x(v.to_ns):.1f}" y1="{top}" x2="{x(v.to_ns):.1f}" '
+                       f'y2="{axis_y}" stroke="{col}" stroke-dasharray="3,2"/>')
+        out.append(f'<text x="8" y="{ly}" fill="{col}">[{v.status}] {escape(v.constraint)}: '
+                   f'{escape(v.message)}</text>')
+        ly += 16
+    out.append("</svg>")
+    return "\n".join(out)
+
+
+def _steps(tr: Trace, x, lo: int, hi: int, y_hi: float, y_lo: float) -> str:
+    if not tr.times:
+        return ""
+    booleans = all(isinstance(v, bool) for v in tr.values)
+    parts: list[str] = []
+    if booleans:
+        pts: list[str] = []
+        v0 = tr.value_at(lo)
+        y = y_hi if v0 else y_lo
+        start = max(lo, tr.times[0])
+        pts.append(f"{x(start):.1f},{y:.1f}")
+        for t, v in zip(tr.times, tr.values, strict=True):
+            if t <= start or t > hi:
+                continue
+            pts.append(f"{x(t):.1f},{y:.1f}")
+            y = y_hi if v else y_lo
+            pts.append(f"{x(t):.1f},{y:.1f}")
+        pts.append(f"{x(hi):.1f},{y:.1f}")
+        return (f'<polyline points="{" ".join(pts)}" fill="none" stroke="#1565c0" '
+                'stroke-width="1.5"/>')
+    bounds = [t for t in tr.times if lo < t < hi]
+    starts = [max(lo, tr.times[0]), *bounds]
+    for i, t in enumerate(starts):
+        end = starts[i + 1] if i + 1 < len(starts) else hi
+        v = tr.value_at(t)
+        parts.append(f'<rect x="{x(t):.1f}" y="{y_hi:.1f}" width="{max(x(end) - x(t), 1):.1f}" '
+                     f'height="{y_lo - y_hi:.1f}" fill="none" stroke="#1565c0"/>')
+        parts.append(f'<text x="{x(t) + 2:.1f}" y="{(y_hi + y_lo) / 2 + 4:.1f}">'
+                     f'{escape(str(v))[:16]}</text>')
+    return "".join(parts)

@@ -1,0 +1,267 @@
+"""Where the checker's samples come from: in-memory lists (tests, live) or an MCAP recording.
+
+A `SignalSource` gives, per topic, the recorded messages as (t_ns, dict) in time order, and
+per topic the observation resolution in ns when it knows it (recorded sampling period or
+timestamp granularity). Fields are read with dotted paths (`a.b`).
+"""
+
+from __future__ import annotations
+
+import bisect
+import fnmatch
+import json
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, Protocol
+
+from hil.record import topics as T
+
+_MISSING = object()
+
+
+class SignalSource(Protocol):
+    def messages(self, topic: str) -> list[tuple[int, dict]]:
+        """Messages of `topic` as (t_ns, payload dict), sorted by time ([] if none)."""
+
+    def resolution(self, topic: str) -> int | None:
+        """Observation resolution of `topic` in ns, or None when the source does not know."""
+
+    def topics(self) -> list[str]:
+        """Every topic the source holds."""
+
+    def end_time(self) -> int | None:
+        """Last timestamp in the source (ns), None when empty."""
+
+
+def get_field(msg: Any, path: str) -> Any:
+    """`msg["a"]["b"]` for path "a.b"; _MISSING when absent."""
+    cur = msg
+    for part in path.split("."):
+        if isinstance(cur, Mapping) and part in cur:
+            cur = cur[part]
+        else:
+            return _MISSING
+    return cur
+
+
+def samples(source: SignalSource, topic: str, field: str,
+            where: Mapping[str, Any] | None = None) -> list[tuple[int, Any]]:
+    """(t_ns, value) of `field` in `topic`, skipping messages without it or not matching
+    `where` (field -> required value)."""
+    cache = getattr(source, "_samples_cache", None)
+    key = (topic, field, tuple(sorted((where or {}).items(), key=repr)))
+    if cache is not None and key in cache:
+        return cache[key]
+    out = []
+    append = out.append
+    flat = "." not in field
+    for t, msg in source.messages(topic):
+        if where and any(get_field(msg, k) != v for k, v in where.items()):
+            continue
+        # fast path for a plain top-level field
+        val = msg.get(field, _MISSING) if flat and type(msg) is dict else get_field(msg, field)
+        if val is not _MISSING:
+            append((t, val))
+    if cache is not None:
+        cache[key] = out
+    return out
+
+
+class MemorySource:
+    """An in-memory source: `MemorySource.from_series({(topic, field): [(t, v), ...]})`."""
+
+    def __init__(self, messages: Mapping[str, list[tuple[int, dict]]] | None = None,
+                 resolutions: Mapping[str, int] | None = None) -> None:
+        self._msgs: dict[str, list[tuple[int, dict]]] = {}
+        for topic, lst in (messages or {}).items():
+            self._msgs[topic] = sorted(lst, key=lambda m: m[0])
+        self._res = dict(resolutions or {})
+        self._samples_cache: dict[tuple, list[tuple[int, Any]]] = {}
+
+    @classmethod
+    def from_series(cls, series: Mapping[tuple[str, str], list[tuple[int, Any]]],
+                    resolutions: Mapping[str, int] | None = None,
+                    params: Mapping[str, Any] | None = None, params_topic: str | None = None,
+                    ) -> MemorySource:
+        """One message per sample; `params` becomes one message at t=0 on `params_topic`."""
+        msgs: dict[str, list[tuple[int, dict]]] = {}
+        for (topic, field), lst in series.items():
+            for t, v in lst:
+                msgs.setdefault(topic, []).append((int(t), _nest(field, v)))
+        if params is not None:
+            topic = params_topic or T.drive_params("drive1")
+            msgs.setdefault(topic, []).insert(0, (0, dict(params)))
+        return cls(msgs, resolutions)
+
+    def add(self, topic: str, t: int, msg: dict) -> None:
+        """Append a message (live use: feed as it arrives, in time order)."""
+        self._samples_cache.clear()
+        lst = self._msgs.setdefault(topic, [])
+        if lst and t < lst[-1][0]:
+            bisect.insort(lst, (t, msg), key=lambda m: m[0])
+        else:
+            lst.append((t, msg))
+
+    def messages(self, topic: str) -> list[tuple[int, dict]]:
+        return self._msgs.get(topic, [])
+
+    def resolution(self, topic: str) -> int | None:
+        for pat, ns in self._res.items():
+            if fnmatch.fnmatchcase(topic, pat):
+                return ns
+        return None
+
+    def topics(self) -> list[str]:
+        return sorted(self._msgs)
+
+    def end_time(self) -> int | None:
+        ends = [lst[-1][0] for lst in self._msgs.values() if lst]
+        return max(ends) if ends else None
+
+
+def _nest(field: str, value: Any) -> dict:
+    out: dict = {}
+    cur = out
+    parts = field.split(".")
+    for p in parts[:-1]:
+        cur = cur.setdefault(p, {})
+    cur[parts[-1]] = value
+    return out
+
+
+class RecordingSource(MemorySource):
+    """Messages of an MCAP recording, read once through `hil.record.reader.Recording`.
+
+    `time="publish"` uses the source's own timestamps (default), `"log"` the harness's.
+    Resolution per topic comes from channel metadata key `resolution_ns`, or from a metadata
+    record `timing` with `resolution_ns` = JSON {topic: ns}.
+    """
+
+    def __init__(self, path: str | Path, topics: Iterable[str] | None = None,
+                 time: str = "publish") -> None:
+        from hil.record.reader import Recording  # the record room's reader
+
+        if time not in ("publish", "log"):
+            raise ValueError(f"time must be 'publish' or 'log', not {time!r}")
+        rec = Recording.open(str(path))
+        try:
+            msgs: dict[str, list[tuple[int, dict]]] = {}
+            wanted = list(topics) if topics is not None else None
+            for topic, log_t, pub_t, data in rec.messages(topics=wanted):
+                t = pub_t if time == "publish" and pub_t else log_t
+                msgs.setdefault(topic, []).append((int(t), data if isinstance(data, dict) else
+                                                   {"value": data}))
+            self.meta = _metadata(rec)
+            res = _resolutions(rec, self.meta)
+        finally:
+            close = getattr(rec, "close", None)
+            if close:
+                close()
+        super().__init__(msgs, res)
+        self.path = str(path)
+
+
+def _metadata(rec: Any) -> dict[str, dict[str, str]]:
+    """Normalise `Recording.metadata()` into {name: {key: value}}."""
+    try:
+        meta = rec.metadata()
+    except Exception:
+        return {}
+    if isinstance(meta, Mapping):
+        return {str(k): dict(v) if isinstance(v, Mapping) else {"value": v}
+                for k, v in meta.items()}
+    out: dict[str, dict[str, str]] = {}
+    for item in meta or []:
+        name, data = (item.name, item.metadata) if hasattr(item, "name") else item
+        out.setdefault(str(name), {}).update(dict(data))
+    return out
+
+
+def _resolutions(rec: Any, meta: dict[str, dict[str, str]]) -> dict[str, int]:
+    res: dict[str, int] = {}
+    raw = meta.get("timing", {}).get("resolution_ns")
+    if raw:
+        try:
+            res.update({k: int(v) for k, v in json.loads(raw).items()})
+        except (ValueError, AttributeError):
+            pass
+    chans = getattr(rec, "channels", None)
+    if chans is not None:
+        try:
+            chans = chans() if callable(chans) else chans
+            for ch in chans.values() if isinstance(chans, Mapping) else chans:
+                md = getattr(ch, "metadata", None) or (ch.get("metadata") if isinstance(ch, dict)
+                                                       else None)
+                topic = getattr(ch, "topic", None) or (ch.get("topic") if isinstance(ch, dict)
+                                                       else None)
+                if md and topic and "resolution_ns" in md:
+                    res[topic] = int(md["resolution_ns"])
+        except Exception:
+            pass
+    return res
+
+
+def recorded_specs(meta: Mapping[str, Mapping[str, str]]) -> tuple[list[str], dict[str, str]]:
+    """Spec ids/paths and binding a recording says it was checked with (metadata `timing`:
+    `specs` = JSON list, `binding` = JSON object)."""
+    tm = meta.get("timing", {})
+    specs, binding = [], {}
+    try:
+        specs = list(json.loads(tm["specs"])) if tm.get("specs") else []
+        binding = dict(json.loads(tm["binding"])) if tm.get("binding") else {}
+    except (ValueError, TypeError):
+        pass
+    return [str(s) for s in specs], {str(k): str(v) for k, v in binding.items()}
+
+
+def infer_places(topics: Iterable[str]) -> dict[str, str]:
+    """Placeholder values implied by the topics when unambiguous (one drive, one bus...)."""
+    found: dict[str, set[str]] = {"drive": set(), "dio": set(), "bus": set()}
+    for t in topics:
+        parts = t.split("/")
+        if len(parts) >= 4 and parts[1] == "drive":
+            found["drive"].add(parts[2])
+        elif len(parts) >= 4 and parts[1] == "dio":
+            found["dio"].add(parts[2])
+        elif len(parts) >= 3 and parts[1] == "canopen":
+            found["bus"].add(parts[2])
+    return {k: next(iter(v)) for k, v in found.items() if len(v) == 1}
+
+
+class ParamTimeline:
+    """Drive parameters over time: snapshot(s) from /drive/<name>/params plus overrides."""
+
+    def __init__(self, changes: list[tuple[int, Mapping[str, Any]]] | None = None,
+                 overrides: Mapping[str, Any] | None = None) -> None:
+        self._times: list[int] = []
+        self._states: list[dict[str, Any]] = []
+        cur: dict[str, Any] = {}
+        for t, d in sorted(changes or [], key=lambda c: c[0]):
+            cur = cur | {str(k): v for k, v in d.items()}
+            if self._times and self._times[-1] == t:
+                self._states[-1] = cur
+            else:
+                self._times.append(t)
+                self._states.append(cur)
+        self.overrides = dict(overrides or {})
+
+    @classmethod
+    def from_source(cls, source: SignalSource, topic: str,
+                    overrides: Mapping[str, Any] | None = None) -> ParamTimeline:
+        changes = []
+        for t, msg in source.messages(topic):
+            # recorder payload: {"snapshot": bool, "values": {name: value}}
+            d = msg.get("values", msg.get("params", msg)) if isinstance(msg, Mapping) else {}
+            if isinstance(d, Mapping):
+                changes.append((t, {k: v for k, v in d.items() if isinstance(v, int | float)}))
+        return cls(changes, overrides)
+
+    def at(self, t: int | None) -> dict[str, Any]:
+        """Values in force at `t` (the first snapshot also covers times before it)."""
+        if not self._states:
+            return dict(self.overrides)
+        i = 0 if t is None else max(0, bisect.bisect_right(self._times, t) - 1)
+        return self._states[i] | self.overrides
+
+    def change_times(self) -> list[int]:
+        return list(self._times)

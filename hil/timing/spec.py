@@ -1,0 +1,613 @@
+"""Timing specs: one YAML file per manual timing diagram (format in docs/timing.md).
+
+`load_spec(path)` returns a validated `Spec`; anything wrong raises `SpecError` whose message
+is `file:line: field: what is wrong` (field like `constraints[1].window.max`).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from dataclasses import field as _f
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hil.timing.expr import Expr, ExprError, is_param
+
+# Factory DI/DO assignment (a3-timing §0.1, L1860-1907, L9251-9336): function -> "LINE[:b]".
+# BRKR has no factory DO: the virtual bench maps it to DO6 with P2.041 = 0x0108 (a-contact).
+FACTORY_BINDING: dict[str, str] = {
+    "SON": "DI1",  # P2.010 = 0x0101 (L1860)
+    "CCLR": "DI2",
+    "ARST": "DI5",  # P2.014 = 0x0102 (L1860)
+    "NL": "DI6:b",  # P2.015 = 0x0022
+    "PL": "DI7:b",  # P2.016 = 0x0023
+    "EMGS": "DI8:b",  # P2.017 = 0x0021 (L6981, L1877, L2882; L9315 typo)
+    "SRDY": "DO1",  # P2.018 = 0x0101 (L1900)
+    "ZSPD": "DO2",  # P2.019 = 0x0103
+    "HOME": "DO3",  # P2.020 = 0x0109
+    "TPOS": "DO4",  # P2.021 = 0x0105
+    "ALRM": "DO5:b",  # P2.022 = 0x0007, b-contact
+    "BRKR": "DO6",  # P2.041 = 0x0108 on the virtual bench (docs/choices/timing.md)
+}
+DEFAULT_PLACES: dict[str, str] = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
+LINE_RE = re.compile(r"(DI\d{1,2}|DO\d|STO_A|STO_B|FDBK)(?::([ab]))?")
+PLACE_RE = re.compile(r"\{(\w+)\}")
+STATUSES = ("pass", "fail", "inconclusive", "skipped")
+
+
+class SpecError(ValueError):
+    """A malformed spec: `file:line: field: what is wrong`."""
+
+    def __init__(self, file: str, line: int, where: str, what: str) -> None:
+        self.file, self.line, self.where, self.what = file, line, where, what
+        super().__init__(f"{file}:{line}: {where}: {what}")
+
+
+# --- YAML with line numbers ------------------------------------------------------------
+
+
+class LDict(dict):
+    """A mapping that remembers its own line and each key's line (1-based)."""
+
+    line: int = 0
+    key_lines: dict[str, int]
+
+
+class LList(list):
+    line: int = 0
+    item_lines: list[int]
+
+
+def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str) -> Any:
+    line = node.start_mark.line + 1
+    if isinstance(node, yaml.MappingNode):
+        out = LDict()
+        out.line, out.key_lines = line, {}
+        for knode, vnode in node.value:
+            key = loader.construct_object(knode, deep=True)
+            kline = knode.start_mark.line + 1
+            if not isinstance(key, str | int | float):
+                raise SpecError(file, kline, where or "(top)", f"key {key!r} is not a name")
+            key = str(key)
+            if key in out:
+                raise SpecError(file, kline, _join(where, key), "duplicate key")
+            out.key_lines[key] = kline
+            out[key] = _build(vnode, loader, file, _join(where, key))
+        return out
+    if isinstance(node, yaml.SequenceNode):
+        lst = LList()
+        lst.line, lst.item_lines = line, []
+        for i, item in enumerate(node.value):
+            lst.item_lines.append(item.start_mark.line + 1)
+            lst.append(_build(item, loader, file, f"{where}[{i}]"))
+        return lst
+    return loader.construct_object(node, deep=True)
+
+
+def load_yaml(text: str, file: str = "<string>") -> Any:
+    """Parse YAML keeping line numbers (LDict/LList); syntax errors become SpecError."""
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            raise SpecError(file, 1, "(top)", "empty file")
+        return _build(node, loader, file, "")
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        raise SpecError(file, (mark.line + 1) if mark else 1, "(yaml)", str(e.problem)) from None
+    finally:
+        loader.dispose()
+
+
+def _join(where: str, key: str) -> str:
+    return f"{where}.{key}" if where else key
+
+
+# --- the spec model --------------------------------------------------------------------
+
+
+@dataclass
+class SignalDef:
+    """Where a signal comes from and how its samples are turned into values."""
+
+    name: str
+    kind: str  # topic | function | line | alarm | derived | all | any | not
+    line: int
+    topic: str | None = None
+    field: str | None = None
+    where: dict[str, Any] = _f(default_factory=dict)
+    function: str | None = None
+    io_line: str | None = None
+    alarm: list[str] | None = None  # codes; ["any"] = any alarm
+    source: str | None = None  # derived: the parent signal
+    parts: list[str] = _f(default_factory=list)  # all/any/not
+    transforms: dict[str, Any] = _f(default_factory=dict)  # map bit mask abs equals in below..
+    resolution: Expr | None = None
+
+
+@dataclass
+class EventDef:
+    name: str
+    kind: str  # rise fall change becomes raised cleared first_true at earliest_of latest_of
+    line: int
+    signal: str | None = None
+    value: Any = None
+    refs: list[str] = _f(default_factory=list)  # earliest_of/latest_of/at
+    plus: Expr | None = None
+    after: str | None = None
+    before: str | None = None
+    within: Expr | None = None
+    label: str = ""  # "BRKR rose", used in messages
+
+
+@dataclass
+class WindowDef:
+    min: Expr | None
+    max: Expr | None
+
+    def text(self) -> str:
+        lo = str(self.min) if self.min is not None else "-inf"
+        hi = str(self.max) if self.max is not None else "+inf"
+        return f"[{lo}, {hi}] ms"
+
+
+@dataclass
+class ConstraintDef:
+    name: str
+    kind: str  # window | forbid | absent | present
+    line: int
+    frm: str | None = None
+    to: str | None = None
+    until: str | None = None
+    at: str | None = None
+    target: str | None = None  # forbid: event; absent/present: signal
+    window: WindowDef | None = None
+    when: Expr | None = None
+    for_each: str | None = None
+    source: str = ""
+    note: str = ""
+
+
+@dataclass
+class Spec:
+    id: str
+    title: str
+    source: str
+    path: str
+    signals: dict[str, SignalDef]
+    events: dict[str, EventDef]
+    constraints: list[ConstraintDef]
+    for_each: str | None = None
+    bind: dict[str, str] = _f(default_factory=dict)
+    constants: dict[str, Expr] = _f(default_factory=dict)
+    resolution: dict[str, Expr] = _f(default_factory=dict)  # topic glob -> ms; "default"
+    horizon: Expr | None = None
+    notes: str = ""
+
+    def binding(self, overrides: dict[str, str] | None = None) -> dict[str, str]:
+        """Placeholders and function->line map: defaults < spec `bind` < overrides."""
+        out = dict(DEFAULT_PLACES) | dict(FACTORY_BINDING) | self.bind
+        return out | dict(overrides or {})
+
+
+# --- validation ------------------------------------------------------------------------
+
+_TRANSFORMS = {"map", "bit", "mask", "abs", "equals", "in", "below", "above", "nonempty", "held"}
+_SIGNAL_KEYS = {
+    "topic": {"topic", "field", "where", "resolution", *_TRANSFORMS},
+    "function": {"function", "resolution"},
+    "line": {"line", "resolution"},
+    "alarm": {"alarm", "topic", "field", "resolution"},
+    "signal": {"signal", *_TRANSFORMS},
+    "all": {"all"},
+    "any": {"any"},
+    "not": {"not"},
+}
+_EVENT_KINDS = ("rise", "fall", "change", "becomes", "raised", "cleared", "first_true", "at",
+                "earliest_of", "latest_of")
+_EVENT_MODS = {"after", "before", "within", "label"}
+_CONSTRAINT_KEYS = {"name", "from", "to", "until", "at", "window", "when", "for_each",
+                    "source", "note", "forbid", "absent", "present"}
+_TOP = {"id", "title", "source", "signals", "events", "constraints", "for_each", "bind",
+        "constants", "resolution", "horizon", "notes"}
+_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+class _V:
+    """Validation helper carrying the file name."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+
+    def err(self, line: int, where: str, what: str) -> SpecError:
+        return SpecError(self.file, line, where or "(top)", what)
+
+    def mapping(self, obj: Any, line: int, where: str) -> LDict:
+        if not isinstance(obj, LDict):
+            raise self.err(line, where, f"must be a mapping, got {_kind(obj)}")
+        return obj
+
+    def keys(self, d: LDict, allowed: set[str], where: str, required: tuple[str, ...] = ()):
+        for k in d:
+            if k not in allowed:
+                hint = ", ".join(sorted(allowed))
+                raise self.err(d.key_lines[k], _join(where, k), f"unknown key (allowed: {hint})")
+        for k in required:
+            if k not in d:
+                raise self.err(d.line, where, f"missing field {k!r}")
+
+    def text(self, d: LDict, key: str, where: str) -> str:
+        v = d[key]
+        if not isinstance(v, str) or not v.strip():
+            raise self.err(d.key_lines[key], _join(where, key), "must be a non-empty string")
+        return v.strip()
+
+    def expr(self, d: LDict, key: str, where: str) -> Expr:
+        v = d[key]
+        line = d.key_lines[key]
+        if isinstance(v, bool) or not isinstance(v, str | int | float):
+            raise self.err(line, _join(where, key), f"must be an expression, got {_kind(v)}")
+        try:
+            return Expr(v)
+        except ExprError as e:
+            raise self.err(line, _join(where, key), f"bad expression: {e}") from None
+
+    def name(self, v: Any, line: int, where: str) -> str:
+        if not isinstance(v, str) or not _NAME_RE.fullmatch(v):
+            raise self.err(line, where, f"{v!r} is not a name (letters, digits, _)")
+        return v
+
+
+def _kind(v: Any) -> str:
+    return {dict: "a mapping", list: "a list", LDict: "a mapping", LList: "a list"}.get(
+        type(v), f"{type(v).__name__} {v!r}"
+    )
+
+
+def parse_spec(data: Any, file: str = "<string>") -> Spec:
+    """Validate parsed YAML (from `load_yaml`) into a Spec."""
+    v = _V(file)
+    top = v.mapping(data, getattr(data, "line", 1), "(top)")
+    v.keys(top, _TOP, "", ("id", "title", "source", "signals", "events", "constraints"))
+    sid = v.name(top["id"], top.key_lines["id"], "id")
+    title, source = v.text(top, "title", ""), v.text(top, "source", "")
+    bind: dict[str, str] = {}
+    if "bind" in top:
+        b = v.mapping(top["bind"], top.key_lines["bind"], "bind")
+        for k, val in b.items():
+            if not isinstance(val, str):
+                raise v.err(b.key_lines[k], f"bind.{k}", "must be a string like DI1, DO5:b, drive1")
+            if k.isupper() and not LINE_RE.fullmatch(val):
+                raise v.err(b.key_lines[k], f"bind.{k}", f"{val!r} is not a line (DI1, DO6, DI8:b)")
+            bind[k] = val
+    constants: dict[str, Expr] = {}
+    if "constants" in top:
+        c = v.mapping(top["constants"], top.key_lines["constants"], "constants")
+        for k in c:
+            v.name(k, c.key_lines[k], f"constants.{k}")
+            constants[k] = v.expr(c, k, "constants")
+    resolution: dict[str, Expr] = {}
+    if "resolution" in top:
+        r = top["resolution"]
+        if isinstance(r, LDict):
+            for k in r:
+                resolution[k] = v.expr(r, k, "resolution")
+        else:
+            resolution["default"] = v.expr(top, "resolution", "")
+    horizon = v.expr(top, "horizon", "") if "horizon" in top else None
+
+    binding = dict(DEFAULT_PLACES) | FACTORY_BINDING | bind
+    signals = _signals(v, top, binding)
+    events = _events(v, top, signals)
+    for_each = None
+    if "for_each" in top:
+        for_each = _ref(v, top, "for_each", "", events, signals)
+    constraints = _constraints(v, top, events, signals, set(constants), for_each)
+    _check_names(v, top, constants, signals)
+    for s in signals.values():
+        for t, e in s.transforms.items():
+            bad = [n for n in getattr(e, "names", ()) if not is_param(n) and n not in constants]
+            if bad:
+                raise v.err(s.line, f"signals.{s.name}.{t}", f"unknown name {bad[0]!r}: use a "
+                            "parameter (P1.038) or a name from `constants:`")
+    return Spec(
+        id=sid, title=title, source=source, path=file, signals=signals, events=events,
+        constraints=constraints, for_each=for_each, bind=bind, constants=constants,
+        resolution=resolution, horizon=horizon, notes=str(top.get("notes", "") or ""),
+    )
+
+
+def _check_names(v: _V, top: LDict, constants: dict[str, Expr], signals) -> None:
+    """Every name in a window/plus/within/threshold is a parameter or a constant."""
+    for k, e in constants.items():
+        bad = [n for n in e.names if not is_param(n) and n not in constants]
+        if bad:
+            line = top["constants"].key_lines[k]
+            raise v.err(line, f"constants.{k}", f"unknown name {bad[0]!r}")
+
+
+def _signals(v: _V, top: LDict, binding: dict[str, str]) -> dict[str, SignalDef]:
+    sigs = v.mapping(top["signals"], top.key_lines["signals"], "signals")
+    out: dict[str, SignalDef] = {}
+    for name, d in sigs.items():
+        where = f"signals.{name}"
+        line = sigs.key_lines[name]
+        v.name(name, line, where)
+        d = v.mapping(d, line, where)
+        kinds = [k for k in _SIGNAL_KEYS if k in d]
+        if len(kinds) != 1:
+            raise v.err(line, where, "needs exactly one of: " + ", ".join(_SIGNAL_KEYS))
+        kind = kinds[0]
+        v.keys(d, _SIGNAL_KEYS[kind], where)
+        s = SignalDef(name=name, kind=kind, line=line)
+        if "resolution" in d:
+            s.resolution = v.expr(d, "resolution", where)
+        if kind == "topic":
+            s.topic = v.text(d, "topic", where)
+            if "field" not in d:
+                raise v.err(line, where, "missing field 'field' (the message field to read)")
+            s.field = v.text(d, "field", where)
+            if "where" in d:
+                s.where = dict(v.mapping(d["where"], d.key_lines["where"], f"{where}.where"))
+        elif kind == "function":
+            fn = v.text(d, "function", where)
+            if fn not in binding:
+                raise v.err(d.key_lines["function"], f"{where}.function",
+                            f"unknown function {fn!r}: add it to `bind:` (e.g. {fn}: DI3)")
+            s.function = fn
+        elif kind == "line":
+            ln = v.text(d, "line", where)
+            if not LINE_RE.fullmatch(ln):
+                raise v.err(d.key_lines["line"], f"{where}.line",
+                            f"{ln!r} is not a line (DI1..DI10, DO1..DO6, STO_A, STO_B, FDBK)")
+            s.io_line = ln
+        elif kind == "alarm":
+            a = d["alarm"]
+            codes = list(a) if isinstance(a, list) else [a]
+            for c in codes:
+                if not (isinstance(c, str) and (re.fullmatch(r"AL[0-9A-F]{3}", c) or c == "any"
+                                                 or PLACE_RE.fullmatch(c))):
+                    raise v.err(d.key_lines["alarm"], f"{where}.alarm",
+                                f"{c!r} is not an alarm code (AL500, any or {{alarm}})")
+            s.alarm = codes
+            s.topic = d.get("topic", "/drive/{drive}/state")
+            s.field = d.get("field", "alarms")
+        elif kind == "signal":
+            s.source = v.name(d["signal"], d.key_lines["signal"], f"{where}.signal")
+        elif kind in ("all", "any"):
+            parts = d[kind]
+            if not isinstance(parts, list) or len(parts) < 2:
+                raise v.err(d.key_lines[kind], f"{where}.{kind}", "must list two or more signals")
+            s.parts = [v.name(p, d.key_lines[kind], f"{where}.{kind}") for p in parts]
+        else:
+            s.parts = [v.name(d["not"], d.key_lines["not"], f"{where}.not")]
+        for t in _TRANSFORMS & set(d):
+            tw = f"{where}.{t}"
+            val = d[t]
+            if t in ("below", "above", "held"):
+                s.transforms[t] = v.expr(d, t, where)
+            elif t in ("bit", "mask") and (isinstance(val, bool) or not isinstance(val, int)):
+                raise v.err(d.key_lines[t], tw, f"must be an integer, got {_kind(val)}")
+            elif t == "map" and not isinstance(val, LDict):
+                raise v.err(d.key_lines[t], tw, "must be a mapping value -> value")
+            elif t in ("abs", "nonempty") and not isinstance(val, bool):
+                raise v.err(d.key_lines[t], tw, "must be true or false")
+            elif t == "in" and not isinstance(val, list):
+                raise v.err(d.key_lines[t], tw, "must be a list of values")
+            else:
+                s.transforms[t] = dict(val) if isinstance(val, LDict) else val
+        if "mask" in s.transforms and "equals" not in s.transforms:
+            raise v.err(d.key_lines["mask"], f"{where}.mask", "needs `equals:` beside it")
+        out[name] = s
+    for s in out.values():  # references between signals
+        for p in ([s.source] if s.source else []) + s.parts:
+            if p not in out:
+                raise v.err(s.line, f"signals.{s.name}", f"unknown signal {p!r}")
+    _no_cycles(v, out)
+    return out
+
+
+def _no_cycles(v: _V, sigs: dict[str, SignalDef]) -> None:
+    def deps(s: SignalDef) -> list[str]:
+        return ([s.source] if s.source else []) + s.parts
+
+    state: dict[str, int] = {}
+
+    def visit(n: str) -> None:
+        if state.get(n) == 2:
+            return
+        if state.get(n) == 1:
+            raise v.err(sigs[n].line, f"signals.{n}", "signal depends on itself")
+        state[n] = 1
+        for d in deps(sigs[n]):
+            visit(d)
+        state[n] = 2
+
+    for n in sigs:
+        visit(n)
+
+
+def _ref(v: _V, d: LDict, key: str, where: str, events: dict, signals) -> str:
+    """An event reference: a name, or an inline event mapping (registered anonymously)."""
+    val = d[key]
+    line = d.key_lines[key]
+    w = _join(where, key)
+    if isinstance(val, LDict):
+        name = f"{where or 'spec'}.{key}".replace("[", "_").replace("]", "")
+        events[name] = _event(v, name, val, line, w, signals, events)
+        return name
+    if not isinstance(val, str) or val not in events:
+        raise v.err(line, w, f"unknown event {val!r} (known: {', '.join(events) or 'none'})")
+    return val
+
+
+def _event(v: _V, name: str, d: LDict, line: int, where: str, signals, events) -> EventDef:
+    d = v.mapping(d, line, where)
+    kinds = [k for k in _EVENT_KINDS if k in d]
+    if len(kinds) != 1:
+        raise v.err(line, where, "needs exactly one of: " + ", ".join(_EVENT_KINDS))
+    kind = kinds[0]
+    allowed = {kind, *_EVENT_MODS} | ({"value"} if kind == "becomes" else set())
+    allowed |= {"plus"} if kind == "at" else set()
+    v.keys(d, allowed, where, ("value",) if kind == "becomes" else ())
+    ev = EventDef(name=name, kind=kind, line=line)
+    kl = d.key_lines[kind]
+    if kind in ("rise", "fall", "change", "becomes", "first_true"):
+        sig = d[kind]
+        if sig not in signals:
+            raise v.err(kl, f"{where}.{kind}", f"unknown signal {sig!r}")
+        ev.signal = sig
+        ev.value = d.get("value")
+    elif kind in ("raised", "cleared"):
+        code = d[kind]
+        if isinstance(code, str) and code in signals:
+            ev.signal = code
+        elif isinstance(code, str) and re.fullmatch(r"AL[0-9A-F]{3}", code):
+            ev.signal = f"alarm:{code}"  # implicit alarm signal from the drive state
+        else:
+            raise v.err(kl, f"{where}.{kind}", f"{code!r} is neither a signal nor an alarm code")
+    elif kind == "at":
+        ev.refs = [_ref(v, d, "at", where, events, signals)]
+        if "plus" not in d:
+            raise v.err(line, where, "missing field 'plus' (delay after the `at` event)")
+        ev.plus = v.expr(d, "plus", where)
+    else:
+        lst = d[kind]
+        if not isinstance(lst, list) or len(lst) < 2:
+            raise v.err(kl, f"{where}.{kind}", "must list two or more events")
+        for i, r in enumerate(lst):
+            if r not in events:
+                raise v.err(lst.item_lines[i], f"{where}.{kind}[{i}]", f"unknown event {r!r}")
+        ev.refs = list(lst)
+    for mod in ("after", "before"):
+        if mod in d:
+            setattr(ev, mod, _ref(v, d, mod, where, events, signals))
+    if ev.after and ev.before:
+        raise v.err(line, where, "use either `after` or `before`, not both")
+    if "within" in d:
+        ev.within = v.expr(d, "within", where)
+    ev.label = str(d.get("label", "") or "")
+    return ev
+
+
+def _events(v: _V, top: LDict, signals) -> dict[str, EventDef]:
+    evs = v.mapping(top["events"], top.key_lines["events"], "events")
+    out: dict[str, EventDef] = {}
+    # Two passes so that events may refer to events defined further down.
+    for name in evs:
+        v.name(name, evs.key_lines[name], f"events.{name}")
+        out[name] = EventDef(name=name, kind="?", line=evs.key_lines[name])
+    for name, d in evs.items():
+        out[name] = _event(v, name, d, evs.key_lines[name], f"events.{name}", signals, out)
+    _event_cycles(v, out)
+    return out
+
+
+def _event_cycles(v: _V, events: dict[str, EventDef]) -> None:
+    state: dict[str, int] = {}
+
+    def visit(n: str) -> None:
+        if state.get(n) == 2:
+            return
+        if state.get(n) == 1:
+            raise v.err(events[n].line, f"events.{n}", "event depends on itself")
+        state[n] = 1
+        e = events[n]
+        for r in [*e.refs, e.after, e.before]:
+            if r:
+                visit(r)
+        state[n] = 2
+
+    for n in list(events):
+        visit(n)
+
+
+def _constraints(v, top, events, signals, consts, spec_for_each) -> list[ConstraintDef]:
+    lst = top["constraints"]
+    if not isinstance(lst, LList) or not lst:
+        raise v.err(top.key_lines["constraints"], "constraints", "must be a non-empty list")
+    out = []
+    seen: set[str] = set()
+    for i, d in enumerate(lst):
+        where = f"constraints[{i}]"
+        line = lst.item_lines[i]
+        d = v.mapping(d, line, where)
+        v.keys(d, _CONSTRAINT_KEYS, where)
+        kinds = [k for k in ("forbid", "absent", "present") if k in d]
+        if len(kinds) > 1:
+            raise v.err(line, where, "use only one of forbid, absent, present")
+        kind = kinds[0] if kinds else "window"
+        name = v.text(d, "name", where) if "name" in d else f"#{i + 1}"
+        if name in seen:
+            raise v.err(d.key_lines.get("name", line), f"{where}.name", f"duplicate name {name!r}")
+        seen.add(name)
+        c = ConstraintDef(name=name, kind=kind, line=line)
+        c.source, c.note = str(d.get("source", "") or ""), str(d.get("note", "") or "")
+        for key in ("from", "to", "until", "at", "for_each"):
+            if key in d:
+                setattr(c, "frm" if key == "from" else key, _ref(v, d, key, where, events, signals))
+        c.for_each = c.for_each or spec_for_each
+        if "window" in d:
+            w = v.mapping(d["window"], d.key_lines["window"], f"{where}.window")
+            v.keys(w, {"min", "max"}, f"{where}.window")
+            if not w:
+                raise v.err(w.line, f"{where}.window", "needs `min`, `max` or both")
+            c.window = WindowDef(
+                v.expr(w, "min", f"{where}.window") if "min" in w else None,
+                v.expr(w, "max", f"{where}.window") if "max" in w else None,
+            )
+            for k in ("min", "max"):
+                e = getattr(c.window, k)
+                bad = [n for n in (e.names if e else ()) if not is_param(n) and n not in consts]
+                if bad:
+                    raise v.err(w.key_lines[k], f"{where}.window.{k}",
+                                f"unknown name {bad[0]!r}: use a parameter (P1.042) or a name "
+                                "from `constants:`")
+        if "when" in d:
+            c.when = v.expr(d, "when", where)
+            ok = consts | set(signals)
+            bad = [n for n in c.when.names if not is_param(n) and n not in ok]
+            if bad:
+                raise v.err(d.key_lines["when"], f"{where}.when", f"unknown name {bad[0]!r}")
+        if kind == "window":
+            for req in ("from", "to", "window"):
+                if req not in d:
+                    raise v.err(line, where, f"missing field {req!r}")
+        elif kind == "forbid":
+            c.target = _ref(v, d, "forbid", where, events, signals)
+            if "from" not in d or ("window" not in d and "until" not in d):
+                raise v.err(line, where, "forbid needs `from:` and a `window:` or `until:`")
+        else:
+            c.target = d[kind]
+            if c.target not in signals:
+                raise v.err(d.key_lines[kind], f"{where}.{kind}", f"unknown signal {c.target!r}")
+            if "at" not in d and not ("from" in d and ("window" in d or "until" in d)):
+                raise v.err(line, where, f"{kind} needs `at:` or `from:` with `window:`/`until:`")
+        if kind == "window" and "until" in d:
+            raise v.err(d.key_lines["until"], f"{where}.until", "only for forbid/absent/present")
+        out.append(c)
+    return out
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Load and validate one spec file."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise SpecError(str(p), 0, "(file)", f"cannot read: {e.strerror}") from None
+    return parse_spec(load_yaml(text, str(p)), str(p))
+
+
+def loads_spec(text: str, file: str = "<string>") -> Spec:
+    return parse_spec(load_yaml(text, file), file)
+
+
+def shipped_specs() -> list[Path]:
+    """The spec files shipped in fixtures/timing/."""
+    from hil.paths import fixture
+
+    return sorted(fixture("timing").glob("*.yaml"))

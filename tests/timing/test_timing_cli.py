@@ -1,0 +1,96 @@
+"""`hil check` on a real MCAP written with the `mcap` package (read via hil.record.reader)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hil.timing.cli import configure, main
+from hil.timing.source import RecordingSource
+
+pytest.importorskip("hil.record.reader")
+from mcap.writer import Writer
+
+MS = 1_000_000
+
+
+def write_mcap(path, brkr_ms: float, meta: dict | None = None) -> None:
+    """SON at 100 ms, servo on 2 ms later (P2.009 = 2), BRKR `brkr_ms` after (P1.042 = 150)."""
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("hil.Any", "jsonschema", b'{"type": "object"}')
+        chans = {}
+
+        def put(topic, t_ms, payload, res=None):
+            if topic not in chans:
+                md = {"resolution_ns": str(res)} if res is not None else {}
+                chans[topic] = w.register_channel(topic, "json", sid, md)
+            t = round(t_ms * MS)
+            w.add_message(chans[topic], log_time=t + 50_000, publish_time=t,
+                          data=json.dumps(payload).encode())
+
+        put("/drive/drive1/params", 0, {"snapshot": True, "values": {"P1.042": 150, "P2.009": 2}})
+        put("/dio/drive1/DI1", 0, {"level": False})
+        put("/dio/drive1/DO1", 0, {"level": True}, res=MS)
+        put("/dio/drive1/DO6", 0, {"level": False}, res=MS)
+        put("/drive/drive1/state", 0, {"servo_on": False, "alarms": []})
+        put("/dio/drive1/DI1", 100, {"level": True})
+        put("/drive/drive1/state", 102, {"servo_on": True, "alarms": []})
+        put("/dio/drive1/DO6", 102 + brkr_ms, {"level": True}, res=MS)
+        for name, data in (meta or {}).items():
+            w.add_metadata(name, data)
+        w.finish()
+
+
+def run(argv: list[str]) -> int:
+    import argparse
+
+    p = argparse.ArgumentParser()
+    configure(p)
+    return main(p.parse_args(argv))
+
+
+def test_recording_source_reads_params_and_channel_resolution(tmp_path):
+    path = tmp_path / "run.mcap"
+    write_mcap(path, 150)
+    src = RecordingSource(path)
+    assert src.resolution("/dio/drive1/DO6") == MS
+    assert src.messages("/dio/drive1/DI1")[-1] == (100 * MS, {"level": True})
+
+
+@pytest.mark.parametrize("brkr,code", [(150, 0), (155, 1), (152, 3)])
+def test_hil_check_exit_codes(tmp_path, capsys, brkr, code):
+    path = tmp_path / "run.mcap"
+    write_mcap(path, brkr)
+    assert run([str(path), "--spec", "servo_on_brake"]) == code
+    out = capsys.readouterr().out
+    assert "BRKR rises P1.042 after servo on" in out
+
+
+def test_hil_check_json_param_override_and_svg(tmp_path, capsys):
+    path = tmp_path / "run.mcap"
+    write_mcap(path, 155)
+    assert run([str(path), "--spec", "servo_on_brake", "--param", "P1.042=155", "--json",
+                "--svg", str(tmp_path / "svg")]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert {d["status"] for d in data} == {"pass"}
+    assert (tmp_path / "svg" / "servo_on_brake.svg").read_text().startswith("<svg")
+
+
+def test_hil_check_uses_the_specs_named_in_the_recording(tmp_path, capsys):
+    path = tmp_path / "run.mcap"
+    write_mcap(path, 150, meta={"timing": {"specs": json.dumps(["servo_on_brake"])}})
+    assert run([str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "servo_on_brake" in out and "sto" not in out.split("\n")[-1]
+
+
+def test_hil_check_bad_input(tmp_path, capsys):
+    assert run([str(tmp_path / "nope.mcap")]) == 2
+    path = tmp_path / "run.mcap"
+    write_mcap(path, 150)
+    assert run([str(path), "--spec", "no_such_spec"]) == 2
+    assert run([str(path), "--param", "P1.042"]) == 2
+    assert "no shipped spec" in capsys.readouterr().err

@@ -1,0 +1,44 @@
+"""Rendering: WaveJSON structure and a well-formed, self-contained SVG."""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+
+from hil.paths import fixture
+from hil.timing.checker import check
+from hil.timing.render import svg, wavejson
+from hil.timing.spec import load_spec
+
+from .test_timing_checker import servo_on
+
+SPEC = load_spec(fixture("timing", "servo_on_brake.yaml"))
+
+
+def test_svg_is_well_formed_and_marks_the_failure_red():
+    src = servo_on([155])
+    vs = check(SPEC, src)
+    text = svg(SPEC, src, vs)
+    root = ET.fromstring(text)
+    assert root.tag == "{http://www.w3.org/2000/svg}svg"
+    assert "http" not in text.replace("http://www.w3.org/2000/svg", "")  # no external refs
+    assert "#c62828" in text and "4.0 ms late" in text  # failing band/legend in red
+    names = [t.text for t in root.iter("{http://www.w3.org/2000/svg}text")]
+    assert {"SON", "BRKR", "servo_on"} <= set(names)
+
+
+def test_wavejson_structure():
+    src = servo_on([150])
+    vs = check(SPEC, src)
+    wj = wavejson(SPEC, src, vs, cycles=80)
+    assert set(wj) >= {"signal", "edge", "head", "foot"}
+    lanes = {lane["name"]: lane for lane in wj["signal"]}
+    assert set(SPEC.signals) <= set(lanes)
+    for name in SPEC.signals:
+        assert len(lanes[name]["wave"]) == 80 and set(lanes[name]["wave"]) <= set("01.x=")
+    assert "1" in lanes["BRKR"]["wave"]
+    nodes = lanes["events"]["node"]
+    for edge in wj["edge"]:
+        m = re.match(r"(\w)<->(\w) ", edge)
+        assert m and m[1] in nodes and m[2] in nodes and " ms " in edge
+    assert any("150.0 ms ✓" in e for e in wj["edge"])
