@@ -212,6 +212,11 @@ def _describe_sdo(data: bytes, client: bool) -> dict:
             raw = bytes(data[4 : 4 + n])
             out["data"] = raw.hex()
             out["value"] = int.from_bytes(raw, "little")
+            # flat fields the timing specs address (cia402_transitions.yaml)
+            if client and out.get("index") == 0x6040 and out.get("sub") == 0:
+                out["controlword"] = out["value"]
+            elif not client and out.get("index") == 0x6041 and out.get("sub") == 0:
+                out["statusword"] = out["value"]
         elif s:
             out["size"] = _u32(data)
     elif (client and cs == 0) or (not client and cs == 0):
