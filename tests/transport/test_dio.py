@@ -1,0 +1,214 @@
+"""DI/DO line sets: virtual, zenoh (DESIGN.md layout) and a Modbus TCP remote I/O module."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+
+import pytest
+
+from hil.transport.dio import is_input, open_dio, parse_mapping
+from hil.transport.urls import TransportUrlError
+
+pytestmark = pytest.mark.timeout(30)
+
+
+def test_line_names():
+    assert is_input("DI1") and is_input("STO_A") and is_input("STO_B")
+    assert not is_input("DO6") and not is_input("FDBK")
+    for bad in ("DI0", "do1", "STO_C", "X"):
+        with pytest.raises(ValueError, match=f"line {bad!r}"):
+            is_input(bad)
+
+
+def test_virtual_both_ways(tap):
+    harness = open_dio("virtual:vd1", role="harness", tap=tap, name="drive1")
+    drive = open_dio("virtual:vd1", role="drive")
+    try:
+        seen_by_drive, seen_by_harness = [], []
+        drive.subscribe(lambda *a: seen_by_drive.append(a))
+        unsub = harness.subscribe(lambda *a: seen_by_harness.append(a))
+        harness.set("STO_A", True)
+        harness.set("STO_A", True)  # no change, not published again
+        harness.set("DI1", True)
+        assert drive.get("STO_A") and drive.get("DI1") and not drive.get("STO_B")
+        assert [(line, lv) for line, lv, _ in seen_by_drive] == [("STO_A", True), ("DI1", True)]
+        drive.set("DO1", True)  # e.g. SRDY
+        t = harness.wait_for("DO1", True, 1.0)
+        assert seen_by_harness == [("DO1", True, t)]
+        unsub()
+        drive.set("DO1", False)
+        assert harness.wait_for("DO1", False, 1.0) >= t
+        assert len(seen_by_harness) == 1
+        assert harness.levels() == {"DI1": True, "DO1": False, "STO_A": True}
+    finally:
+        harness.close()
+        drive.close()
+    assert [(r[0], r[1], r[2]) for r in tap.dio_levels] == [
+        ("drive1", "STO_A", True), ("drive1", "DI1", True), ("drive1", "DO1", True),
+        ("drive1", "DO1", False)]
+
+
+def test_virtual_late_joiner_sees_levels():
+    drive = open_dio("virtual:vd2", role="drive")
+    drive.set("FDBK", True)
+    harness = open_dio("virtual:vd2", role="harness")
+    try:
+        assert harness.get("FDBK") is True
+    finally:
+        drive.close()
+        harness.close()
+
+
+def test_role_rules_and_errors():
+    harness = open_dio("virtual:vd3", role="harness", name="d3")
+    try:
+        with pytest.raises(ValueError, match="DO1 is driven by the drive side"):
+            harness.set("DO1", True)
+        with pytest.raises(ValueError, match="line 'DIX'"):
+            harness.set("DIX", True)
+        with pytest.raises(TimeoutError, match=r"d3: DO2 did not become 1 within 0.05 s "
+                                               r"\(never seen\)"):
+            harness.wait_for("DO2", True, 0.05)
+        harness.set("DI2", False)
+        with pytest.raises(TimeoutError, match=r"DI2 did not become 1 .*last seen 0"):
+            harness.wait_for("DI2", True, 0.01)
+    finally:
+        harness.close()
+    with pytest.raises(ValueError, match="role 'master'"):
+        open_dio("virtual:vd3", role="master")
+    with pytest.raises(ValueError, match="closed"):
+        harness.set("DI1", True)
+
+
+def test_zenoh_inputs_outputs_and_query(port, tap):
+    ep = f"tcp/127.0.0.1:{port}"
+    drive = open_dio(f"zenoh:tzd/drive1?listen={ep}", role="drive")
+    drive.set("DO3", True)  # before the harness exists: learnt by query
+    harness = open_dio(f"zenoh:tzd/drive1?connect={ep}", role="harness", tap=tap)
+    try:
+        assert harness.get("DO3") is True
+        got = []
+        drive.subscribe(lambda line, level, t: got.append((line, level)))
+        harness.set("STO_A", True)
+        harness.set("STO_B", True)
+        harness.set("DI4", True)
+        assert drive.wait_for("DI4", True, 2.0)
+        assert got == [("STO_A", True), ("STO_B", True), ("DI4", True)]
+        t_set = time.time_ns()
+        drive.set("FDBK", True)
+        assert harness.wait_for("FDBK", True, 2.0) >= t_set
+        fdbk = [r for r in tap.dio_levels if r[1] == "FDBK"]
+        assert fdbk and fdbk[0][4] is not None and fdbk[0][4] <= fdbk[0][3]  # source_t
+        # current levels answerable on request, from both sides, payload b"1"/b"0"
+        assert harness.query_levels() == {"DO3": True, "FDBK": True, "STO_A": True,
+                                          "STO_B": True, "DI4": True}
+        replies = {str(r.ok.key_expr): r.ok.payload.to_bytes()
+                   for r in harness.session.get("tzd/drive1/DO3", timeout=1.0) if r.ok}
+        assert replies == {"tzd/drive1/DO3": b"1"}
+    finally:
+        harness.close()
+        drive.close()
+
+
+# -- Modbus TCP remote I/O ---------------------------------------------------------------
+
+
+class IoModule:
+    """A pymodbus TCP server on 127.0.0.1 acting as a remote I/O module: coils are the
+    module's outputs (wired to the drive's DI), discrete inputs are wired to the drive's DO."""
+
+    def __init__(self, port: int):
+        from pymodbus.server import ModbusTcpServer
+        from pymodbus.simulator import DataType, SimData, SimDevice
+
+        self.di: dict[int, bool] = {}
+        self.coil_writes: list[tuple[int, bool]] = []
+
+        async def action(fc, start, address, count, regs, set_values):
+            if fc == 2:  # discrete inputs: 16 per register word
+                for r in range(len(regs)):
+                    regs[r] = sum(1 << b for b in range(16) if self.di.get((start + r) * 16 + b))
+            if fc == 5 and set_values is not None:
+                self.coil_writes.append((address, bool(set_values[0])))
+            return None
+
+        def bits():
+            return [SimData(0, count=32, values=False, datatype=DataType.BITS)]
+
+        regs = [SimData(0, count=1, values=0, datatype=DataType.REGISTERS)]
+        device = SimDevice(1, simdata=(bits(), bits(), regs, list(regs)), action=action)
+        self.loop = asyncio.new_event_loop()
+        started = threading.Event()
+
+        async def serve():
+            self.server = ModbusTcpServer(device, address=("127.0.0.1", port))
+            started.set()
+            await self.server.serve_forever()
+
+        self.thread = threading.Thread(target=self.loop.run_until_complete, args=(serve(),),
+                                       daemon=True)
+        self.thread.start()
+        assert started.wait(5)
+
+    def stop(self):
+        asyncio.run_coroutine_threadsafe(self.server.shutdown(), self.loop).result(5)
+        self.thread.join(5)
+        self.loop.close()
+
+
+@pytest.fixture
+def io_module(port):
+    module = IoModule(port)
+    yield module
+    module.stop()
+
+
+def _open_modbus(port, mapping, **kw):
+    deadline = time.monotonic() + 5
+    while True:  # the server may need a moment to listen
+        try:
+            return open_dio(f"modbus-tcp://127.0.0.1:{port}?unit=1&poll_ms=2",
+                            role="harness", mapping=mapping, **kw)
+        except TransportUrlError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+
+
+def test_modbus_tcp_dio(port, io_module, tap):
+    mapping = {"DI1": 0, "STO_A": "coil:8", "DO1": 0, "FDBK": "di:3"}
+    dio = _open_modbus(port, mapping, tap=tap, name="rio")
+    try:
+        dio.set("DI1", True)
+        dio.set("STO_A", True)
+        assert io_module.coil_writes == [(0, True), (8, True)]
+        io_module.di[3] = True  # the drive closed FDBK
+        assert dio.wait_for("FDBK", True, 2.0)
+        assert dio.get("DO1") is False
+        io_module.di[0] = True
+        assert dio.wait_for("DO1", True, 2.0)
+        with pytest.raises(ValueError, match="DI2 has no coil"):
+            dio.set("DI2", True)
+    finally:
+        dio.close()
+    assert ("rio", "FDBK", True) in [r[:3] for r in tap.dio_levels]
+
+
+def test_modbus_mapping_errors():
+    url = "modbus-tcp://127.0.0.1:1"
+    with pytest.raises(TransportUrlError, match="DO1: the harness sees it through a discrete"):
+        parse_mapping(url, {"DO1": "coil:1"})
+    with pytest.raises(TransportUrlError, match="mapping DI1"):
+        parse_mapping(url, {"DI1": "register:1"})
+    with pytest.raises(TransportUrlError, match="needs a mapping"):
+        parse_mapping(url, {})
+    with pytest.raises(TransportUrlError, match="only role='harness'"):
+        open_dio(f"{url}?unit=1", role="drive", mapping={"DI1": 0})
+
+
+def test_modbus_unreachable_names_url(port):
+    with pytest.raises(TransportUrlError, match=f"127.0.0.1:{port}"):
+        open_dio(f"modbus-tcp://127.0.0.1:{port}?timeout=0.2", role="harness",
+                 mapping={"DI1": 0})
