@@ -63,10 +63,12 @@ class Brake:
         self._cancel()
         p1043 = self._param("P1.043")  # ms, -1000..1000 (L8503-8516)
         fault_stop = cause == "emgs" or (cause == "alarm" and alarm != "AL022")
-        if p1043 < 0 and fault_stop and not self._opt.dev_emgs_ignores_negative_rule:
+        if fault_stop and self._opt.dev_emgs_ignores_negative_rule:
+            fault_stop = False  # deviation: the negative value is honoured on fault stops
+        if p1043 < 0 and fault_stop:
             p1043 = 0  # L8516: negative value ignored, acts as 0
         if p1043 < 0:
-            if self._opt.negative_p1043 == "as_zero" or fault_stop:
+            if self._opt.negative_p1043 == "as_zero":
                 p1043 = 0
             else:  # "brake_first": clamp now, hold torque |P1.043| ms
                 self._set(False)

@@ -231,11 +231,12 @@ def test_emgs_sequence():
         (dio("DI8"), "level"): [(0, True), (100, False), (500, True)],  # b-contact: open = EMGS
         (STATE, "alarms"): [(0, []), (102, ["AL013"]), (502, [])],
         (STATE, "servo_on"): [(0, True), (102, False)],
+        (STATE, "torque_enabled"): [(0, True), (102, False)],
         (STATE, "speed_rpm"): [(0, 1000.0), (150, 0.0)],
         (dio("DO6"), "level"): [(0, True), (102, False)],
     }, params={"P2.009": 2, "P1.043": -20, "P1.038": 100})
     vs = check(SPECS["emgs"], src)
-    assert [v.status for v in vs] == ["pass"] * 5, [v.message for v in vs]
+    assert [v.status for v in vs] == ["pass"] * 6, [v.message for v in vs]
 
 
 # --- CiA 402 (L18243-18331) -------------------------------------------------------------
