@@ -70,10 +70,33 @@ def through_cia402() -> tuple[float, int]:
     return time.perf_counter() - t0, moves
 
 
+def whole_drive() -> tuple[float, int]:
+    """The composed `Drive` (DI/DO, brake, STO, alarms, absolute encoder, CiA 402, axis)."""
+    from hil.model.drive import Drive
+
+    drive = Drive(inputs={8: True})
+    drive.write_object(0x6060, 0, 1)
+    drive.write_object(0x6081, 0, 5_000_000)
+    for cw in (0x06, 0x07, 0x0F):
+        drive.write_object(0x6040, 0, cw)
+    moves = 0
+    t0 = time.perf_counter()
+    end = SIM_S * 1000 * MS
+    while drive.now < end:
+        if not drive.axis.moving:
+            moves += 1
+            drive.write_object(0x607A, 0, 500000 * (moves % 2))
+            drive.write_object(0x6040, 0, 0x1F)
+            drive.write_object(0x6040, 0, 0x0F)
+        drive.advance(10 * MS)
+    return time.perf_counter() - t0, moves
+
+
 def main() -> None:
     base = baseline()
     print(f"baseline: {STEPS} no-op calls in {base * 1e3:.1f} ms")
-    for name, fn in (("axis", bare_axis), ("axis+cia402", through_cia402)):
+    for name, fn in (("axis", bare_axis), ("axis+cia402", through_cia402),
+                     ("whole Drive", whole_drive)):
         wall, moves = fn()
         print(
             f"{name:12s}: {SIM_S} s simulated ({moves} moves) in {wall * 1e3:.1f} ms wall; "

@@ -193,6 +193,9 @@ class ParamTable:
         return len(self._by_name)
 
     def spec(self, name: str) -> ParamSpec:
+        hit = self._by_name.get(name)  # fast path: canonical names (the hot path in the model)
+        if hit is not None:
+            return hit
         key = canonical(name)
         try:
             return self._by_name[key]
@@ -254,6 +257,9 @@ class ParameterStore:
 
     def get(self, name: str) -> int:
         """Value in effect (● parameters: the value from the last power cycle)."""
+        value = self._effective.get(name)  # fast path: a canonical name without a read hook
+        if value is not None and name not in self._read_hooks:
+            return value
         spec = self.table.spec(name)
         hook = self._read_hooks.get(spec.param)
         return int(hook()) if hook is not None else self._effective[spec.param]
