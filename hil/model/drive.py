@@ -137,7 +137,9 @@ class Drive:
             on_servo_request=lambda _on, _cause: self._update_servo(),
             on_write=self._on_object_written,
         )
-        self._step_hooks: list[Callable[[], None]] = []  # homing, absolute encoder
+        self._step_hooks: list[Callable[[], None]] = []  # after each motion substep
+        self._servo_on_hooks: list[Callable[[], None]] = []  # after the servo turned on
+        self._boot_hooks: list[Callable[[], None]] = []  # at power-up, before outputs settle
         self._hold_timer = None
         self._dout_cache: dict[str, bool] = {}
         self.sensors = dict(DEFAULT_SENSORS if sensors is None else sensors)
@@ -173,6 +175,9 @@ class Drive:
         for n, closed in (inputs or {}).items():
             self.dio.set_input(n, closed, settled=True)  # present before power-up
         self._update_sensors(force=True)
+        from hil.model.homing import attach_homing  # homing refers back to Drive
+
+        self.homing = attach_homing(self)
         self._boot()
 
     # ------------------------------------------------------------------ public API
@@ -310,6 +315,8 @@ class Drive:
 
     def _boot(self) -> None:
         """After power on: SRDY, outputs, and the CiA 402 automatic transitions 0/1."""
+        for hook in self._boot_hooks:
+            hook()
         self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
         self._set_do("SRDY", not self.alarms.alrm)
@@ -318,8 +325,8 @@ class Drive:
         self._set_do("SON", False)
         self._set_do("BRKR", False)
         self._refresh_speed_outputs()
-        self._mirror_params()
         self.cia402.power_on()
+        self._mirror_params()  # after power_on(), which resets 6093h to 1/1
         self.cia402.set_voltage(True)
         self._on_alarm(None)
 
@@ -380,6 +387,8 @@ class Drive:
         self.axis.hold()
         self._set_do("SON", True)
         self.brake.servo_on()
+        for hook in self._servo_on_hooks:
+            hook()
 
     def _servo_off(self, cause: str, alarm: str | None, immediate: bool = False) -> None:
         if not self.servo_on:
