@@ -1,0 +1,495 @@
+"""Bench files: the drives on a bench, their transports, wiring, timeouts and safe state.
+
+Format: docs/benches.md. `load_bench(path)` returns a validated `Bench` or raises
+`PlanFileError` (`file:line: field: problem`) before anything is opened or moved.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from hil.model.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS, N_PHYSICAL_DI
+from hil.plan.yamlio import (
+    MS,
+    Checker,
+    LDict,
+    PlanFileError,
+    S,
+    join,
+    level,
+    load_yaml_file,
+    load_yaml_text,
+)
+
+# Named timeouts (ns) and their defaults; a bench overrides any of them. The CiA 402 ones
+# are handed to hil.drivers.cia402.Cia402Driver (same names).
+DEFAULT_TIMEOUTS: dict[str, int] = {
+    "step": 60 * S,  # any one step, whatever it does
+    "wait_until": 5 * S,  # wait_until without its own timeout
+    "modbus": 500 * MS,  # one Modbus transaction
+    "sdo": 500 * MS,  # one SDO round trip
+    "state": 1 * S,  # one CiA 402 power-state transition
+    "mode": 500 * MS,  # 6061h echoes 6060h
+    "setpoint_ack": 1 * S,
+    "target_reached": 30 * S,
+    "homing": 60 * S,
+    "fault_reset": 1 * S,
+    "safe_state": 3 * S,  # reaching the safe state (incl. waiting for the brake)
+    "ready": 10 * S,  # virtual drive processes answering
+}
+CIA402_TIMEOUTS = ("sdo", "state", "mode", "setpoint_ack", "target_reached", "homing",
+                   "fault_reset")
+CONTROLWORDS = ("disable_voltage", "quick_stop", "shutdown", "none")
+PROCESSES = ("inproc", "subprocess")
+PROFILES = ("asda-a3",)
+PARAM_VIAS = ("modbus", "sdo")
+STO_CHANNELS = {"A": "STO_A", "B": "STO_B"}
+N_DO = len(DO_PARAMS)
+_LINE_RE = re.compile(r"^(DI|DO)(\d{1,2})(?::([ab]))?$")
+_PARAM_RE = re.compile(r"^P[0-7]\.\d{3}$")
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
+
+_TOP = {"name", "description", "virtual", "process", "can", "rs485", "drives", "timeouts",
+        "safe_state", "motion_allowed", "features"}
+_DRIVE = {"node_id", "station", "profile", "can", "rs485", "dio", "dio_map", "wiring", "sto",
+          "params", "param_via", "mechanics", "options", "modbus_mode"}
+_VIRTUAL_ONLY = ("mechanics", "options")
+_SAFE = {"controlword", "di", "sto", "wait_brake", "timeout"}
+
+
+@dataclass(frozen=True)
+class Wire:
+    """One drive function on one drive line: `line` like DI8, `contact` a or b.
+
+    The contact is the drive's P2.0xx setting for that line: for a b-contact the function
+    is active when the contact is open, so `di: {EMGS: on}` opens DI8."""
+
+    function: str
+    line: str
+    contact: str = "a"
+
+    @property
+    def kind(self) -> str:
+        return self.line[:2]
+
+    @property
+    def number(self) -> int:
+        return int(self.line[2:])
+
+    def level_for(self, active: bool) -> bool:
+        """Electrical level that makes the function active (True) or inactive."""
+        return active if self.contact == "a" else not active
+
+    def active_from(self, electrical: bool) -> bool:
+        return electrical if self.contact == "a" else not electrical
+
+    @property
+    def binding(self) -> str:
+        """`DI8:b` form used by timing specs (hil.timing.spec.Spec.binding)."""
+        return self.line + (":b" if self.contact == "b" else "")
+
+    def mapping_param(self) -> tuple[str, int]:
+        """(P2.0xx, value) that puts this function on this line (L9238-9256, L9323-9339)."""
+        code = DI_SYMBOLS[self.function] if self.kind == "DI" else DO_SYMBOLS[self.function]
+        params = DI_PARAMS if self.kind == "DI" else DO_PARAMS
+        return params[self.number - 1], (0x100 if self.contact == "a" else 0) | code
+
+
+@dataclass
+class DriveSpec:
+    name: str
+    line: int
+    node_id: int | None = None
+    station: int | None = None
+    profile: str = "asda-a3"
+    can: str | None = None  # name of a bus in Bench.can
+    rs485: str | None = None  # name of a line in Bench.rs485
+    dio: str | None = None  # DI/DO URL (harness side)
+    dio_map: dict[str, Any] = field(default_factory=dict)  # modbus-tcp line -> coil/di
+    di: dict[str, Wire] = field(default_factory=dict)  # DI function -> wire
+    do: dict[str, Wire] = field(default_factory=dict)  # DO function -> wire
+    sto: dict[str, str] = field(default_factory=lambda: dict(STO_CHANNELS))
+    params: dict[str, int] = field(default_factory=dict)
+    param_via: str = "modbus"
+    modbus_mode: str = "rtu"
+    mechanics: dict[str, Any] = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def binding(self) -> dict[str, str]:
+        """Function -> line map for timing specs, plus the recording place names."""
+        out = {w.function: w.binding for w in (*self.di.values(), *self.do.values())}
+        return out | {"drive": self.name, "dio": self.name}
+
+
+@dataclass
+class SafeState:
+    controlword: str = "disable_voltage"
+    di: dict[str, bool] = field(default_factory=lambda: {"SON": False})
+    sto: dict[str, bool] = field(default_factory=dict)
+    wait_brake: bool = True
+    timeout_ns: int = DEFAULT_TIMEOUTS["safe_state"]
+
+
+@dataclass
+class Bench:
+    name: str
+    path: str
+    text: str
+    virtual: bool
+    drives: dict[str, DriveSpec]
+    description: str = ""
+    process: str = "inproc"
+    can: dict[str, str] = field(default_factory=dict)  # bus name -> URL
+    rs485: dict[str, str] = field(default_factory=dict)  # line name -> URL
+    timeouts: dict[str, int] = field(default_factory=lambda: dict(DEFAULT_TIMEOUTS))
+    safe_state: SafeState = field(default_factory=SafeState)
+    motion_allowed: bool = True
+    features: set[str] = field(default_factory=set)
+
+    @property
+    def default_drive(self) -> str:
+        return next(iter(self.drives))
+
+    def provides(self) -> set[str]:
+        """Features a plan's `bench_requires` may ask for."""
+        out = set(self.features)
+        out.add("virtual" if self.virtual else "real")
+        if self.motion_allowed:
+            out.add("motion")
+        if any(d.can for d in self.drives.values()):
+            out.update({"can", "sdo"})
+        if any(d.rs485 for d in self.drives.values()):
+            out.update({"rs485", "modbus"})
+        if any(d.dio for d in self.drives.values()):
+            out.add("dio")
+        return out
+
+
+def builtin_bench_path() -> Path:
+    from hil.paths import fixture
+
+    return fixture("benches", "virtual.yaml")
+
+
+def load_bench(path: str | Path | None = None) -> Bench:
+    """Load and validate a bench file (default: the built-in virtual bench)."""
+    p = Path(path) if path is not None else builtin_bench_path()
+    data = load_yaml_file(p)
+    return parse_bench(data, str(p), p.read_text(encoding="utf-8"))
+
+
+def loads_bench(text: str, file: str = "<string>") -> Bench:
+    return parse_bench(load_yaml_text(text, file), file, text)
+
+
+def parse_bench(data: Any, file: str, text: str = "") -> Bench:
+    v = Checker(file)
+    top = v.mapping(data, 1, "(top)")
+    v.keys(top, _TOP, "", required=("name", "drives"))
+    name = v.text(top, "name", "")
+    virtual = v.boolean(top, "virtual", "", False)
+    process = v.text(top, "process", "", "inproc")
+    if process not in PROCESSES:
+        raise v.err(top.kline("process"), "process", f"{process!r}: one of {', '.join(PROCESSES)}")
+    if "process" in top and not virtual:
+        raise v.err(top.kline("process"), "process", "only for a virtual bench (virtual: true)")
+    can = _urls(v, top, "can", "can")
+    rs485 = _urls(v, top, "rs485", "serial")
+    timeouts = _timeouts(v, top)
+    drives_map = v.mapping(top["drives"], top.kline("drives"), "drives")
+    if not drives_map:
+        raise v.err(drives_map.line, "drives", "a bench needs at least one drive")
+    drives: dict[str, DriveSpec] = {}
+    nodes: dict[tuple[str, int], str] = {}
+    stations: dict[tuple[str, int], str] = {}
+    for dname, d in drives_map.items():
+        where = join("drives", dname)
+        if not _NAME_RE.match(dname):
+            raise v.err(drives_map.kline(dname), where, "drive names are letters, digits, _ -")
+        spec = _drive(v, dname, v.mapping(d, drives_map.kline(dname), where), where, virtual,
+                      can, rs485, process)
+        if spec.node_id is not None and spec.can:
+            other = nodes.get((spec.can, spec.node_id))
+            if other:
+                raise v.err(d.kline("node_id"), join(where, "node_id"),
+                            f"node id {spec.node_id} on bus {spec.can} is already drive {other}")
+            nodes[(spec.can, spec.node_id)] = dname
+        if spec.station is not None and spec.rs485:
+            other = stations.get((spec.rs485, spec.station))
+            if other:
+                raise v.err(d.kline("station"), join(where, "station"),
+                            f"station {spec.station} on {spec.rs485} is already drive {other}")
+            stations[(spec.rs485, spec.station)] = dname
+        drives[dname] = spec
+    for kind, urls in (("can", can), ("rs485", rs485)):
+        used = {getattr(d, kind) for d in drives.values()}
+        for bname in urls:
+            if bname not in used:
+                m = v.mapping(top[kind], top.kline(kind), kind)
+                raise v.err(m.kline(bname), join(kind, bname), "no drive uses this transport")
+    safe = _safe_state(v, top, drives, timeouts)
+    features: set[str] = set()
+    if "features" in top:
+        lst = v.seq(top["features"], top.kline("features"), "features")
+        for i, f in enumerate(lst):
+            if not isinstance(f, str):
+                raise v.err(lst.item_lines[i], f"features[{i}]", "must be a name")
+            features.add(f)
+    return Bench(
+        name=name, path=file, text=text, virtual=virtual, drives=drives,
+        description=str(top.get("description") or ""), process=process, can=can, rs485=rs485,
+        timeouts=timeouts, safe_state=safe,
+        motion_allowed=v.boolean(top, "motion_allowed", "", True), features=features,
+    )
+
+
+def _urls(v: Checker, top: LDict, key: str, kind: str) -> dict[str, str]:
+    from hil.transport.urls import TransportUrlError, parse_url
+
+    if key not in top:
+        return {}
+    m = v.mapping(top[key], top.kline(key), key)
+    out = {}
+    for bname, url in m.items():
+        where = join(key, bname)
+        if not _NAME_RE.match(bname):
+            raise v.err(m.kline(bname), where, "transport names are letters, digits, _ -")
+        if not isinstance(url, str):
+            raise v.err(m.kline(bname), where, "must be a transport URL (text)")
+        try:
+            parse_url(url, kind)  # type: ignore[arg-type]
+        except (TransportUrlError, ValueError) as e:
+            raise v.err(m.kline(bname), where, str(e)) from None
+        out[bname] = url
+    return out
+
+
+def _timeouts(v: Checker, top: LDict) -> dict[str, int]:
+    out = dict(DEFAULT_TIMEOUTS)
+    if "timeouts" in top:
+        m = v.mapping(top["timeouts"], top.kline("timeouts"), "timeouts")
+        v.keys(m, DEFAULT_TIMEOUTS, "timeouts")
+        for k in m:
+            out[k] = v.duration(m, k, "timeouts")
+            if out[k] <= 0:
+                raise v.err(m.kline(k), join("timeouts", k), "must be > 0")
+    return out
+
+
+def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict,
+           rs485: dict, process: str) -> DriveSpec:
+    from hil.transport.urls import TransportUrlError, parse_url
+
+    v.keys(d, _DRIVE, where)
+    for k in _VIRTUAL_ONLY:
+        if k in d and not virtual:
+            raise v.err(d.kline(k), join(where, k), "only for a virtual bench (virtual: true)")
+    spec = DriveSpec(name=name, line=d.line)
+    spec.profile = v.text(d, "profile", where, "asda-a3")
+    if spec.profile not in PROFILES:
+        raise v.err(d.kline("profile"), join(where, "profile"),
+                    f"{spec.profile!r}: known profiles: {', '.join(PROFILES)}")
+    if "can" in d:
+        spec.can = v.text(d, "can", where)
+        if spec.can not in can:
+            raise v.err(d.kline("can"), join(where, "can"),
+                        f"no CAN bus {spec.can!r} (bench `can:` has {', '.join(can) or 'none'})")
+        spec.node_id = v.integer(d, "node_id", where, 1, 127)  # CiA 301 node ids
+    elif "node_id" in d:
+        raise v.err(d.kline("node_id"), join(where, "node_id"), "needs `can:` (a CAN bus)")
+    if "rs485" in d:
+        spec.rs485 = v.text(d, "rs485", where)
+        if spec.rs485 not in rs485:
+            raise v.err(d.kline("rs485"), join(where, "rs485"),
+                        f"no RS-485 line {spec.rs485!r} (bench `rs485:` has "
+                        f"{', '.join(rs485) or 'none'})")
+        spec.station = v.integer(d, "station", where, 1, 0x7F)  # P3.000 1..127 (L10497)
+        spec.modbus_mode = v.text(d, "modbus_mode", where, "rtu")
+        if spec.modbus_mode not in ("rtu", "ascii"):
+            raise v.err(d.kline("modbus_mode"), join(where, "modbus_mode"), "rtu or ascii")
+    elif "station" in d:
+        raise v.err(d.kline("station"), join(where, "station"), "needs `rs485:` (a line)")
+    if process == "subprocess" and virtual:
+        for kind, urls, bname in (("can", can, spec.can), ("rs485", rs485, spec.rs485)):
+            if bname and urls[bname].startswith("virtual:"):
+                raise v.err(d.kline(kind), join(where, kind),
+                            "a virtual: bus is in-process only; process: subprocess needs "
+                            "zenoh: or socketcan:")
+    if "dio" in d:
+        spec.dio = v.text(d, "dio", where)
+        try:
+            u = parse_url(spec.dio, "dio")
+        except (TransportUrlError, ValueError) as e:
+            raise v.err(d.kline("dio"), join(where, "dio"), str(e)) from None
+        if process == "subprocess" and virtual and u.scheme == "virtual":
+            raise v.err(d.kline("dio"), join(where, "dio"),
+                        "a virtual: DI/DO set is in-process only; use zenoh: with subprocess")
+        if "dio_map" in d:
+            spec.dio_map = dict(v.mapping(d["dio_map"], d.kline("dio_map"), join(where, "dio_map")))
+            if u.scheme != "modbus-tcp":
+                raise v.err(d.kline("dio_map"), join(where, "dio_map"), "only for modbus-tcp:")
+    elif "dio_map" in d:
+        raise v.err(d.kline("dio_map"), join(where, "dio_map"), "needs `dio:`")
+    if not (spec.can or spec.rs485 or spec.dio):
+        raise v.err(d.line, where, "a drive needs at least one of can, rs485, dio")
+    if "wiring" in d:
+        if not spec.dio:
+            raise v.err(d.kline("wiring"), join(where, "wiring"), "needs `dio:` (the lines)")
+        _wiring(v, spec, v.mapping(d["wiring"], d.kline("wiring"), join(where, "wiring")),
+                join(where, "wiring"))
+    if "sto" in d:
+        m = v.mapping(d["sto"], d.kline("sto"), join(where, "sto"))
+        v.keys(m, STO_CHANNELS, join(where, "sto"))
+        spec.sto = {}
+        for ch, line in m.items():
+            if line not in ("STO_A", "STO_B"):
+                raise v.err(m.kline(ch), join(where, f"sto.{ch}"), "STO_A or STO_B")
+            spec.sto[ch] = line
+    if "params" in d:
+        spec.params = _params(v, d["params"], d.kline("params"), join(where, "params"))
+    default_via = "modbus" if spec.rs485 else "sdo"
+    spec.param_via = v.text(d, "param_via", where, default_via)
+    if spec.param_via not in PARAM_VIAS:
+        raise v.err(d.kline("param_via"), join(where, "param_via"), "modbus or sdo")
+    needs = "rs485" if spec.param_via == "modbus" else "can"
+    if not getattr(spec, needs):
+        if spec.rs485 or spec.can:
+            raise v.err(d.kline("param_via"), join(where, "param_via"),
+                        f"{spec.param_via} needs {needs}")
+        spec.param_via = ""
+    if "mechanics" in d:
+        from hil.model.mechanics import Mechanics
+
+        m = v.mapping(d["mechanics"], d.kline("mechanics"), join(where, "mechanics"))
+        _known(v, m, Mechanics, join(where, "mechanics"))
+        try:
+            Mechanics.from_dict(dict(m))
+        except (ValueError, TypeError) as e:
+            raise v.err(m.line, join(where, "mechanics"), str(e)) from None
+        spec.mechanics = dict(m)
+    if "options" in d:
+        from hil.model.options import ModelOptions
+
+        m = v.mapping(d["options"], d.kline("options"), join(where, "options"))
+        _known(v, m, ModelOptions, join(where, "options"))
+        try:
+            ModelOptions.from_dict(_plain(m), where=join(where, "options"))
+        except (ValueError, TypeError) as e:
+            raise v.err(m.line, join(where, "options"), str(e)) from None
+        spec.options = _plain(m)
+    return spec
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _plain(x) for k, x in obj.items()}
+    if isinstance(obj, list):
+        return tuple(_plain(x) for x in obj)
+    return obj
+
+
+def _known(v: Checker, m: LDict, cls: type, where: str) -> None:
+    from dataclasses import fields
+
+    known = {f.name for f in fields(cls)}
+    v.keys(m, known, where)
+
+
+def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str) -> None:
+    used: dict[str, str] = {}
+    for key, value in m.items():
+        fw = join(where, key)
+        kind_hint, _, func = key.rpartition(".")
+        if kind_hint not in ("", "DI", "DO"):
+            raise v.err(m.kline(key), fw, "write FUNCTION or DI.FUNCTION / DO.FUNCTION")
+        if not isinstance(value, str) or not (mt := _LINE_RE.match(value.strip())):
+            raise v.err(m.kline(key), fw,
+                        f"{value!r}: a drive line like DI1, DI8:b (b-contact) or DO6")
+        kind, n, contact = mt.group(1), int(mt.group(2)), mt.group(3) or "a"
+        if kind_hint and kind_hint != kind:
+            raise v.err(m.kline(key), fw, f"{kind_hint} function on a {kind} line")
+        table = DI_SYMBOLS if kind == "DI" else DO_SYMBOLS
+        if func not in table:
+            raise v.err(m.kline(key), fw, f"unknown {kind} function {func!r} (manual table "
+                        f"8.{1 if kind == 'DI' else 2}); known: {', '.join(sorted(table))}")
+        limit = N_PHYSICAL_DI if kind == "DI" else N_DO
+        if not 1 <= n <= limit:
+            raise v.err(m.kline(key), fw, f"{kind}{n}: the A3 has {kind}1..{kind}{limit}")
+        line = f"{kind}{n}"
+        if line in used:
+            raise v.err(m.kline(key), fw, f"{line} already carries {used[line]}")
+        used[line] = func
+        target = spec.di if kind == "DI" else spec.do
+        if func in target:
+            raise v.err(m.kline(key), fw, f"{func} is already wired to {target[func].line}")
+        target[func] = Wire(func, line, contact)
+
+
+def _params(v: Checker, obj: Any, line: int, where: str) -> dict[str, int]:
+    m = v.mapping(obj, line, where)
+    out: dict[str, int] = {}
+    for k, val in m.items():
+        if not _PARAM_RE.match(k):
+            raise v.err(m.kline(k), join(where, k), "a parameter name like P1.042")
+        if isinstance(val, bool) or not isinstance(val, int):
+            raise v.err(m.kline(k), join(where, k),
+                        f"must be an integer (raw communication units), got {val!r}")
+        out[k] = val
+    return out
+
+
+def _safe_state(v: Checker, top: LDict, drives: dict[str, DriveSpec],
+                timeouts: dict[str, int]) -> SafeState:
+    safe = SafeState(timeout_ns=timeouts["safe_state"])
+    if "safe_state" not in top:
+        if not any("SON" in d.di for d in drives.values()):
+            safe.di = {}
+        return safe
+    m = v.mapping(top["safe_state"], top.kline("safe_state"), "safe_state")
+    v.keys(m, _SAFE, "safe_state")
+    safe.controlword = v.text(m, "controlword", "safe_state", "disable_voltage")
+    if safe.controlword not in CONTROLWORDS:
+        raise v.err(m.kline("controlword"), "safe_state.controlword",
+                    f"{safe.controlword!r}: one of {', '.join(CONTROLWORDS)}")
+    if "di" in m:
+        dm = v.mapping(m["di"], m.kline("di"), "safe_state.di")
+        safe.di = {}
+        for func, val in dm.items():
+            lv = level(val)
+            if lv is None:
+                raise v.err(dm.kline(func), f"safe_state.di.{func}", "on or off")
+            if not any(func in d.di for d in drives.values()):
+                raise v.err(dm.kline(func), f"safe_state.di.{func}",
+                            "no drive has this DI function in its wiring")
+            safe.di[func] = lv
+    if "sto" in m:
+        sm = v.mapping(m["sto"], m.kline("sto"), "safe_state.sto")
+        v.keys(sm, STO_CHANNELS, "safe_state.sto")
+        for ch, val in sm.items():
+            lv = level(val)
+            if lv is None:
+                raise v.err(sm.kline(ch), f"safe_state.sto.{ch}", "on or off")
+            safe.sto[ch] = lv
+    safe.wait_brake = v.boolean(m, "wait_brake", "safe_state", True)
+    if safe.wait_brake and not any("BRKR" in d.do for d in drives.values()):
+        raise v.err(m.kline("wait_brake"), "safe_state.wait_brake",
+                    "no drive has BRKR in its wiring, so the brake cannot be watched")
+    safe.timeout_ns = v.duration(m, "timeout", "safe_state", timeouts["safe_state"])
+    return safe
+
+
+__all__ = [
+    "DEFAULT_TIMEOUTS",
+    "Bench",
+    "DriveSpec",
+    "PlanFileError",
+    "SafeState",
+    "Wire",
+    "builtin_bench_path",
+    "load_bench",
+    "loads_bench",
+    "parse_bench",
+]

@@ -1,0 +1,202 @@
+"""The harness side of a bench: transports (tapped by the recorder) and drivers per drive.
+
+`open_session(bench, recorder)` starts the virtual world first on a virtual bench, then
+opens every harness-side transport from the (resolved) URLs, each with the recorder as tap:
+CAN -> canopen.Network -> `Cia402Driver`; RS-485 -> `DeltaModbus`; DI/DO -> `DioPort`.
+The same code runs on a real bench; only `world` is None there.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable
+from typing import Any
+
+from hil.plan.bench import CIA402_TIMEOUTS, Bench, DriveSpec
+
+
+class BenchError(RuntimeError):
+    """A bench resource that cannot be opened or used (names the resource and why)."""
+
+
+class DriveIO:
+    """Everything the runner does to one drive, whatever carries it."""
+
+    def __init__(self, spec: DriveSpec, bench: Bench, *, dio: Any = None, cia: Any = None,
+                 modbus: Any = None) -> None:
+        self.spec, self.bench = spec, bench
+        self.dio, self._cia, self.modbus = dio, cia, modbus
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    # -- lines (electrical levels) -----------------------------------------------------------
+    def set_line(self, line: str, level: bool) -> None:
+        if self.dio is None:
+            raise BenchError(f"drive {self.name}: no DI/DO lines on this bench")
+        self.dio.set(line, level)
+
+    def line(self, line: str) -> bool:
+        if self.dio is None:
+            raise BenchError(f"drive {self.name}: no DI/DO lines on this bench")
+        return bool(self.dio.get(line))
+
+    def set_function(self, func: str, active: bool) -> None:
+        w = self.spec.di[func]
+        self.set_line(w.line, w.level_for(active))
+
+    def do_active(self, func: str) -> bool:
+        w = self.spec.do[func]
+        return w.active_from(self.line(w.line))
+
+    # -- CiA 402 -----------------------------------------------------------------------------
+    @property
+    def cia(self) -> Any:
+        if self._cia is None:
+            raise BenchError(f"drive {self.name}: no CAN bus on this bench (CiA 402)")
+        return self._cia
+
+    # -- parameters --------------------------------------------------------------------------
+    def read_param(self, name: str, via: str | None = None) -> int:
+        via = via or self.spec.param_via
+        if via == "modbus":
+            if self.modbus is None:
+                raise BenchError(f"drive {self.name}: no RS-485 line for {name} via modbus")
+            return int(self.modbus.read_param(name))
+        idx = _od_index(name)
+        return int(self.cia.read(idx, 0))
+
+    def write_param(self, name: str, value: int, via: str | None = None) -> None:
+        via = via or self.spec.param_via
+        if via == "modbus":
+            if self.modbus is None:
+                raise BenchError(f"drive {self.name}: no RS-485 line for {name} via modbus")
+            self.modbus.write_param(name, value)
+            return
+        self.cia.write(_od_index(name), 0, value)
+
+    def alarm(self, via: str | None = None) -> str | None:
+        """Active alarm as P0.001 shows it (AL500 -> 0x0500, L17584), None when clear."""
+        v = self.read_param("P0.001", via) & 0xFFFF
+        return None if v == 0 else f"AL{v:03X}"
+
+
+def _od_index(name: str) -> int:
+    """Parameter Px.yyy -> object 2xyyh (L16860: 2000h + group << 8 + index)."""
+    from hil.model.params import parse_name
+
+    group, index = parse_name(name)
+    return 0x2000 + (group << 8) + index
+
+
+class Session:
+    """Open bench resources; `close()` releases them in reverse order."""
+
+    def __init__(self, bench: Bench, recorder: Any, world: Any = None) -> None:
+        self.bench, self.recorder, self.world = bench, recorder, world
+        self.drives: dict[str, DriveIO] = {}
+        self._closers: list[Callable[[], None]] = []
+
+    def drive(self, name: str | None) -> DriveIO:
+        return self.drives[name or self.bench.default_drive]
+
+    def close(self) -> None:
+        for fn in reversed(self._closers):
+            with contextlib.suppress(Exception):
+                fn()
+        self._closers.clear()
+        if self.world is not None:
+            with contextlib.suppress(Exception):
+                self.world.close()
+            self.world = None
+
+
+def open_session(bench: Bench, recorder: Any, *, world_factory: Callable | None = None) -> Session:
+    """Build the bench: the virtual world (if any), then the harness side."""
+    world = None
+    urls: dict[str, str] = {}
+    if bench.virtual:
+        if world_factory is None:
+            from hil.plan.virtual import SubprocessWorld, VirtualWorld
+
+            world_factory = VirtualWorld if bench.process == "inproc" else SubprocessWorld
+        world = world_factory(bench, recorder)
+        urls = world.harness_urls()
+    else:
+        urls = {f"can:{k}": u for k, u in bench.can.items()}
+        urls |= {f"rs485:{k}": u for k, u in bench.rs485.items()}
+        urls |= {f"dio:{n}": d.dio for n, d in bench.drives.items() if d.dio}
+    s = Session(bench, recorder, world)
+    try:
+        _open_harness(s, urls)
+    except BaseException:
+        s.close()
+        raise
+    return s
+
+
+def _open_harness(s: Session, urls: dict[str, str]) -> None:
+    import can
+    import canopen
+
+    from hil.drivers.cia402 import Cia402Driver
+    from hil.drivers.delta_modbus import DeltaModbus
+    from hil.transport.can_bus import open_can
+    from hil.transport.dio import open_dio
+    from hil.transport.serial_line import open_serial
+
+    bench, rec = s.bench, s.recorder
+    nets: dict[str, Any] = {}
+    for bname in bench.can:
+        url = urls[f"can:{bname}"]
+        try:
+            bus = open_can(url, tap=rec, name=bname)
+        except Exception as e:
+            raise BenchError(f"CAN bus {bname} ({url}): {e}") from e
+        net = canopen.Network(bus)
+        net.notifier = can.Notifier(bus, net.listeners, 0.05)
+        nets[bname] = net
+        s._closers.append(bus.shutdown)
+        s._closers.append(net.notifier.stop)
+    lines: dict[str, Any] = {}
+    for lname in bench.rs485:
+        url = urls[f"rs485:{lname}"]
+        try:
+            lines[lname] = open_serial(url, tap=rec, name=lname)
+        except Exception as e:
+            raise BenchError(f"RS-485 line {lname} ({url}): {e}") from e
+        s._closers.append(lines[lname].close)
+    t = bench.timeouts
+    for name, spec in bench.drives.items():
+        dio = cia = mb = None
+        if spec.dio:
+            url = urls[f"dio:{name}"]
+            try:
+                dio = open_dio(url, role="harness", tap=rec, name=name,
+                               mapping=spec.dio_map or None)
+            except Exception as e:
+                raise BenchError(f"DI/DO of drive {name} ({url}): {e}") from e
+            s._closers.append(dio.close)
+        if spec.can:
+            cia = Cia402Driver(nets[spec.can], spec.node_id or 1,
+                               timeouts={k: t[k] / 1e9 for k in CIA402_TIMEOUTS})
+        if spec.rs485:
+            line = lines[spec.rs485]
+            mb = DeltaModbus(line, station=spec.station or 1, mode=spec.modbus_mode,  # type: ignore[arg-type]
+                             timeout_s=t["modbus"] / 1e9, baud=line.baudrate,
+                             port_name=spec.rs485)
+        s.drives[name] = DriveIO(spec, bench, dio=dio, cia=cia, modbus=mb)
+
+
+def wait_for(pred: Callable[[], Any], timeout_ns: int, poll_s: float = 0.002) -> tuple[bool, Any]:
+    """Poll `pred` until truthy or timeout; returns (ok, last value)."""
+    end = time.monotonic_ns() + timeout_ns
+    while True:
+        v = pred()
+        if v:
+            return True, v
+        if time.monotonic_ns() >= end:
+            return False, v
+        time.sleep(poll_s)

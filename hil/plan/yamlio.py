@@ -1,0 +1,241 @@
+"""YAML with line numbers, the one error type of plan and bench files, and durations.
+
+Every problem in a plan or bench file is a `PlanFileError` whose message is
+`file:line: field: problem` (field like `steps[3].wait_until.timeout`), raised before
+anything on the bench moves.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+MS = 1_000_000
+S = 1_000_000_000
+
+
+class PlanFileError(ValueError):
+    """A malformed plan or bench file: `file:line: field: problem`."""
+
+    def __init__(self, file: str, line: int, field: str, problem: str) -> None:
+        self.file, self.line, self.field, self.problem = file, line, field, problem
+        super().__init__(f"{file}:{line}: {field}: {problem}")
+
+
+class LDict(dict):
+    """A mapping that remembers its own line and each key's line (1-based)."""
+
+    line: int = 0
+    key_lines: dict[str, int]
+
+    def kline(self, key: str) -> int:
+        return self.key_lines.get(key, self.line)
+
+
+class LList(list):
+    """A sequence that remembers its own line and each item's line (1-based)."""
+
+    line: int = 0
+    item_lines: list[int]
+
+
+def join(where: str, key: str | int) -> str:
+    if isinstance(key, int):
+        return f"{where}[{key}]"
+    return f"{where}.{key}" if where else key
+
+
+def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str) -> Any:
+    line = node.start_mark.line + 1
+    if isinstance(node, yaml.MappingNode):
+        out = LDict()
+        out.line, out.key_lines = line, {}
+        for knode, vnode in node.value:
+            key = loader.construct_object(knode, deep=True)
+            kline = knode.start_mark.line + 1
+            if not isinstance(key, str | int | float | bool):
+                raise PlanFileError(file, kline, where or "(top)", f"key {key!r} is not a name")
+            key = _key_text(key, knode)
+            if key in out:
+                raise PlanFileError(file, kline, join(where, key), "duplicate key")
+            out.key_lines[key] = kline
+            out[key] = _build(vnode, loader, file, join(where, key))
+        return out
+    if isinstance(node, yaml.SequenceNode):
+        lst = LList()
+        lst.line, lst.item_lines = line, []
+        for i, item in enumerate(node.value):
+            lst.item_lines.append(item.start_mark.line + 1)
+            lst.append(_build(item, loader, file, join(where, i)))
+        return lst
+    return loader.construct_object(node, deep=True)
+
+
+def _key_text(key: Any, knode: yaml.Node) -> str:
+    # `P1.042:` parses as a string; `on:`/`off:` would be booleans in YAML 1.1: keep the text
+    if isinstance(key, bool) and isinstance(knode, yaml.ScalarNode):
+        return str(knode.value)
+    return str(key)
+
+
+def load_yaml_text(text: str, file: str) -> Any:
+    """Parse YAML keeping line numbers; syntax errors become `PlanFileError`."""
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            raise PlanFileError(file, 1, "(top)", "empty file")
+        return _build(node, loader, file, "")
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        line = (mark.line + 1) if mark else 1
+        raise PlanFileError(file, line, "(yaml)", str(e.problem or e)) from None
+    finally:
+        loader.dispose()
+
+
+def load_yaml_file(path: str | Path) -> Any:
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise PlanFileError(str(p), 0, "(file)", f"cannot read: {e.strerror or e}") from None
+    return load_yaml_text(text, str(p))
+
+
+# --- durations ---------------------------------------------------------------------------
+
+_DUR_RE = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ns|us|µs|ms|s|min)\s*$")
+_UNITS = {"ns": 1, "us": 1_000, "µs": 1_000, "ms": MS, "s": S, "min": 60 * S}
+
+
+def parse_duration(value: Any) -> int:
+    """`150ms`, `1.5s`, `20 us`, `2min` -> integer ns. Raises ValueError with the rule."""
+    if isinstance(value, bool) or not isinstance(value, str):
+        raise ValueError(
+            f"duration {value!r}: write it with a unit, e.g. 150ms, 1.5s (units: "
+            f"{', '.join(_UNITS)})"
+        )
+    m = _DUR_RE.match(value)
+    if not m:
+        raise ValueError(
+            f"duration {value!r}: a number and a unit, e.g. 150ms, 1.5s (units: "
+            f"{', '.join(_UNITS)})"
+        )
+    return round(float(m.group(1)) * _UNITS[m.group(2)])
+
+
+def format_duration(ns: int) -> str:
+    if ns % S == 0:
+        return f"{ns // S}s"
+    if ns % MS == 0:
+        return f"{ns // MS}ms"
+    if ns >= MS:
+        return f"{ns / MS:g}ms"
+    return f"{ns / 1000:g}us"
+
+
+# --- a small validation helper ------------------------------------------------------------
+
+
+class Checker:
+    """Carries the file name; every method raises `PlanFileError` with file, line, field."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+
+    def err(self, line: int, field: str, problem: str) -> PlanFileError:
+        return PlanFileError(self.file, line, field or "(top)", problem)
+
+    def mapping(self, obj: Any, line: int, field: str) -> LDict:
+        if not isinstance(obj, LDict):
+            raise self.err(line, field, f"must be a mapping, got {_kind(obj)}")
+        return obj
+
+    def seq(self, obj: Any, line: int, field: str) -> LList:
+        if not isinstance(obj, LList):
+            raise self.err(line, field, f"must be a list, got {_kind(obj)}")
+        return obj
+
+    def keys(self, d: LDict, allowed: set[str] | dict, field: str,
+             required: tuple[str, ...] = ()) -> None:
+        for k in d:
+            if k not in allowed:
+                raise self.err(d.kline(k), join(field, k),
+                               f"unknown key; known: {', '.join(sorted(allowed))}")
+        for k in required:
+            if k not in d:
+                raise self.err(d.line, join(field, k), "missing (required)")
+
+    def text(self, d: LDict, key: str, field: str, default: str | None = None) -> str:
+        if key not in d:
+            if default is None:
+                raise self.err(d.line, join(field, key), "missing (required)")
+            return default
+        v = d[key]
+        if not isinstance(v, str) or not v.strip():
+            raise self.err(d.kline(key), join(field, key), f"must be text, got {_kind(v)}")
+        return v
+
+    def integer(self, d: LDict, key: str, field: str, lo: int, hi: int,
+                default: int | None = None) -> int:
+        if key not in d:
+            if default is None:
+                raise self.err(d.line, join(field, key), "missing (required)")
+            return default
+        v = d[key]
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.err(d.kline(key), join(field, key), f"must be an integer, got {_kind(v)}")
+        if not lo <= v <= hi:
+            raise self.err(d.kline(key), join(field, key), f"{v} is out of range {lo}..{hi}")
+        return v
+
+    def boolean(self, d: LDict, key: str, field: str, default: bool) -> bool:
+        if key not in d:
+            return default
+        v = d[key]
+        if not isinstance(v, bool):
+            raise self.err(d.kline(key), join(field, key), f"must be true or false, got {v!r}")
+        return v
+
+    def duration(self, d: LDict, key: str, field: str, default: int | None = None) -> int:
+        if key not in d:
+            if default is None:
+                raise self.err(d.line, join(field, key), "missing (required)")
+            return default
+        try:
+            return parse_duration(d[key])
+        except ValueError as e:
+            raise self.err(d.kline(key), join(field, key), str(e)) from None
+
+
+def _kind(v: Any) -> str:
+    if v is None:
+        return "nothing"
+    if isinstance(v, bool):
+        return f"a boolean ({v})"
+    if isinstance(v, dict):
+        return "a mapping"
+    if isinstance(v, list):
+        return "a list"
+    if isinstance(v, int | float):
+        return f"a number ({v})"
+    return f"text ({v!r})"
+
+
+def level(v: Any) -> bool | None:
+    """on/off, true/false, 1/0, high/low -> bool; anything else None."""
+    if isinstance(v, bool):
+        return v
+    if isinstance(v, int) and v in (0, 1):
+        return bool(v)
+    if isinstance(v, str):
+        t = v.strip().lower()
+        if t in ("on", "true", "high", "closed", "1", "yes"):
+            return True
+        if t in ("off", "false", "low", "open", "0", "no"):
+            return False
+    return None

@@ -1,0 +1,34 @@
+"""`hil report RECORDING.mcap [-o FILE.html] [--junit FILE.xml]`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recording", nargs="+", help="MCAP recording(s) of plan runs")
+    parser.add_argument("-o", "--output", help="HTML file (one recording only; default: "
+                        "beside the recording, .html)")
+    parser.add_argument("--junit", help="also write JUnit XML of all recordings to this file")
+
+
+def main(args: argparse.Namespace) -> int:
+    from hil.record.reader import RecordingError
+    from hil.report.html import write_html
+    from hil.report.junit import write_junit
+
+    if args.output and len(args.recording) > 1:
+        print("hil report: -o takes one recording", file=sys.stderr)
+        return 2
+    try:
+        for r in args.recording:
+            out = write_html(r, args.output)
+            print(out)
+        if args.junit:
+            print(write_junit(args.recording, Path(args.junit)))
+    except RecordingError as e:
+        print(f"hil report: {e}", file=sys.stderr)
+        return 1
+    return 0

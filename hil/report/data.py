@@ -1,0 +1,121 @@
+"""What a report shows, read from a recording alone (`load_run(path) -> RunData`)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from hil.record import topics as T
+
+
+@dataclass
+class StepData:
+    index: int
+    label: str
+    kind: str = ""
+    line: int = 0
+    file: str = ""
+    drive: str = ""
+    status: str = "skipped"
+    message: str = ""
+    t_start: int | None = None
+    t_end: int | None = None
+    duration_ns: int = 0
+
+
+@dataclass
+class RunData:
+    path: str
+    plan: str
+    bench: str
+    status: str
+    steps: list[StepData] = field(default_factory=list)
+    verdicts: list[dict] = field(default_factory=list)
+    safety: list[dict] = field(default_factory=list)
+    logs: list[dict] = field(default_factory=list)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    attachments: dict[str, str] = field(default_factory=dict)
+    params: dict[str, dict[str, Any]] = field(default_factory=dict)  # drive -> values
+    truth: dict[str, list[tuple[int, dict]]] = field(default_factory=dict)  # drive -> states
+    bus: list[tuple[int, str, dict]] = field(default_factory=list)  # (t, topic, msg)
+    truncated: bool = False
+    t0: int = 0
+
+
+def _is_bus(topic: str) -> bool:
+    return (topic.startswith("/canopen/") or topic.startswith("/modbus/")
+            or topic.startswith("/dio/") or topic.startswith("/can/"))
+
+
+def load_run(path: str | Path) -> RunData:
+    from hil.record.reader import Recording
+
+    rec = Recording.open(path)
+    meta = rec.metadata()
+    run_meta = meta.get("hil.run", {})
+    result = meta.get("hil.result", {})
+    data = RunData(str(path), run_meta.get("plan", Path(path).stem),
+                   run_meta.get("bench", "?"), result.get("status", ""), metadata=meta,
+                   truncated=rec.truncated)
+    for a in rec.attachments():
+        try:
+            data.attachments[a.name] = a.data.decode("utf-8")
+        except UnicodeDecodeError:
+            data.attachments[a.name] = f"<{len(a.data)} bytes>"
+    steps: dict[int, StepData] = {}
+    t_first: int | None = None
+    for topic, lt, pt, msg in rec.messages():
+        t_first = lt if t_first is None else min(t_first, lt)
+        if topic == T.PLAN_STEPS:
+            idx = int(msg.get("index") if msg.get("index") is not None else -1)
+            sd = steps.setdefault(idx, StepData(idx, str(msg.get("step", ""))))
+            sd.kind = msg.get("kind", sd.kind) or sd.kind
+            sd.line = int(msg.get("line") or sd.line or 0)
+            sd.drive = msg.get("drive", sd.drive) or sd.drive
+            sd.file = msg.get("file", sd.file) or sd.file
+            if msg.get("event") == "start":
+                sd.t_start = lt
+            else:
+                sd.t_end = lt
+                sd.status = msg.get("status") or sd.status
+                sd.message = msg.get("message") or ""
+                sd.duration_ns = int(msg.get("duration_ns") or 0)
+        elif topic == T.TIMING_VERDICTS:
+            data.verdicts.append({**msg, "_t": lt})
+        elif topic == T.SAFETY:
+            data.safety.append({**msg, "_t": lt})
+        elif topic == T.LOG:
+            data.logs.append({**msg, "_t": lt})
+        elif topic.startswith("/drive/") and topic.endswith("/state"):
+            data.truth.setdefault(topic.split("/")[2], []).append((pt or lt, msg))
+        elif topic.startswith("/drive/") and topic.endswith("/params"):
+            d = topic.split("/")[2]
+            data.params.setdefault(d, {}).update(msg.get("values") or {})
+        elif _is_bus(topic) and not topic.startswith("/can/"):
+            data.bus.append((lt, topic, msg))
+    data.t0 = t_first or 0
+    data.steps = [steps[k] for k in sorted(steps)]
+    if not data.status:
+        bad = [s for s in data.steps if s.status not in ("pass", "skipped")]
+        data.status = "fail" if bad else ("pass" if data.steps else "unknown")
+        if data.truncated:
+            data.status = "aborted"
+    return data
+
+
+def bus_log(run: RunData, step: StepData, limit: int = 200) -> list[tuple[int, str, str]]:
+    """Decoded bus messages (CANopen, Modbus, DI/DO) seen during one step."""
+    if step.t_start is None:
+        return []
+    end = step.t_end if step.t_end is not None else 2**63
+    out = []
+    for t, topic, msg in run.bus:
+        if step.t_start <= t <= end:
+            text = msg.get("text") or msg.get("summary") or json.dumps(
+                {k: v for k, v in msg.items() if k not in ("raw",)}, default=str)
+            out.append((t, topic, str(text)))
+            if len(out) >= limit:
+                break
+    return out

@@ -1,0 +1,209 @@
+"""A self-contained HTML report rendered from a recording alone (no external assets).
+
+Sections: summary, steps and timing verdicts, expected vs observed timing windows (from
+`hil.timing.render` when it provides `render_verdict_svg(verdict) -> str`, else a built-in
+window bar), a plot of position / velocity / torque from the virtual bench's ground truth,
+the safe-state actions, the bus log of each failing step, parameters, bench and plan files.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from hil.report.data import RunData, bus_log, load_run
+
+CSS = """
+body{font:14px/1.4 system-ui,sans-serif;margin:1.5em;color:#222;max-width:1200px}
+h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;width:100%}td,th{border:1px solid #ddd;padding:3px 6px;
+text-align:left;vertical-align:top}th{background:#f3f3f3}
+.pass{color:#176f2c;font-weight:600}.fail,.error,.aborted{color:#b00020;font-weight:600}
+.inconclusive{color:#a06000;font-weight:600}.skipped{color:#777}
+pre{background:#f7f7f7;padding:8px;overflow:auto;font-size:12px}
+.badge{display:inline-block;padding:2px 10px;border-radius:10px;color:#fff}
+.b-pass{background:#176f2c}.b-fail,.b-error,.b-aborted{background:#b00020}
+.b-inconclusive{background:#a06000}.b-unknown{background:#777}
+svg{background:#fff;border:1px solid #ddd}
+"""
+E = html.escape
+
+
+def _status(s: str) -> str:
+    return f'<span class="{E(s)}">{E(s.upper())}</span>'
+
+
+def _window_svg(v: dict) -> str:
+    """Expected window (green band) and observed value (marker, with its uncertainty)."""
+    lo, hi = ([*list(v.get("window_ms") or [None, None]), None, None])[:2]
+    m = v.get("measured_ms")
+    unc = v.get("uncertainty_ms") or [0, 0]
+    vals = [x for x in (lo, hi, m) if isinstance(x, int | float)]
+    if not vals:
+        return ""
+    top = max(vals) * 1.25 + 1
+    W, H, pad = 360, 34, 10
+
+    def x(val: float) -> float:
+        return pad + (W - 2 * pad) * max(0.0, val) / top
+
+    parts = [f'<svg width="{W}" height="{H}" viewBox="0 0 {W} {H}" '
+             'xmlns="http://www.w3.org/2000/svg">',
+             f'<line x1="{pad}" y1="24" x2="{W - pad}" y2="24" stroke="#999"/>']
+    a = x(lo if isinstance(lo, int | float) else 0)
+    b = x(hi if isinstance(hi, int | float) else top)
+    parts.append(f'<rect x="{a:.1f}" y="8" width="{max(1.0, b - a):.1f}" height="16" '
+                 'fill="#cdeccf" stroke="#176f2c"><title>expected window</title></rect>')
+    if isinstance(m, int | float):
+        color = {"pass": "#176f2c", "fail": "#b00020"}.get(v.get("status", ""), "#a06000")
+        ul, uh = x(m - (unc[0] or 0)), x(m + (unc[1] or 0))
+        parts.append(f'<line x1="{ul:.1f}" y1="16" x2="{uh:.1f}" y2="16" stroke="{color}" '
+                     'stroke-width="3"/>')
+        parts.append(f'<circle cx="{x(m):.1f}" cy="16" r="4" fill="{color}">'
+                     f'<title>observed {m} ms</title></circle>')
+    parts.append(f'<text x="{pad}" y="33" font-size="9">0</text>'
+                 f'<text x="{W - pad - 40}" y="33" font-size="9">{top:.1f} ms</text></svg>')
+    return "".join(parts)
+
+
+def _verdict_svg(v: dict) -> str:
+    try:
+        from hil.timing import render  # the timing room's renderer, when it exists
+
+        fn = getattr(render, "render_verdict_svg", None)
+        if fn is not None:
+            return str(fn(v))
+    except Exception:
+        pass
+    return _window_svg(v)
+
+
+def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
+    """Inline SVG: position, velocity and torque against time, one panel each."""
+    keys = [("position (counts)", ("position_counts", "position", "pos")),
+            ("velocity (rpm)", ("speed_rpm", "velocity", "vel")),
+            ("torque (%)", ("torque_pct", "torque"))]
+    series = []
+    for label, names in keys:
+        pts = []
+        for t, msg in samples:
+            for n in names:
+                if isinstance(msg.get(n), int | float) and not isinstance(msg.get(n), bool):
+                    pts.append((t, float(msg[n])))
+                    break
+        if pts:
+            series.append((label, pts))
+    if not series:
+        return "<p>No ground truth (position/velocity/torque) in this recording.</p>"
+    t0 = min(p[0][0] for _, p in series)
+    t1 = max(p[-1][0] for _, p in series)
+    span = max(t1 - t0, 1)
+    W, PH, pad = 900, 110, 50
+    out = [f'<svg width="{W}" height="{PH * len(series) + 20}" xmlns="http://www.w3.org/2000/svg">']
+    for i, (label, pts) in enumerate(series):
+        y0 = i * PH + 10
+        lo = min(v for _, v in pts)
+        hi = max(v for _, v in pts)
+        rng = (hi - lo) or 1.0
+        coords = " ".join(
+            f"{pad + (W - pad - 10) * (t - t0) / span:.1f},"
+            f"{y0 + PH - 20 - (PH - 30) * (v - lo) / rng:.1f}" for t, v in pts)
+        out.append(f'<text x="4" y="{y0 + 12}" font-size="11">{E(label)}</text>'
+                   f'<text x="4" y="{y0 + 26}" font-size="9">{hi:.4g}</text>'
+                   f'<text x="4" y="{y0 + PH - 20}" font-size="9">{lo:.4g}</text>'
+                   f'<rect x="{pad}" y="{y0}" width="{W - pad - 10}" height="{PH - 20}" '
+                   'fill="none" stroke="#ddd"/>'
+                   f'<polyline points="{coords}" fill="none" stroke="#1f5fbf" '
+                   'stroke-width="1.2"/>')
+    out.append(f'<text x="{pad}" y="{PH * len(series) + 14}" font-size="10">0 s</text>'
+               f'<text x="{W - 60}" y="{PH * len(series) + 14}" font-size="10">'
+               f'{span / 1e9:.2f} s</text></svg>')
+    return "".join(out)
+
+
+def render_html(run: RunData) -> str:
+    st = run.status or "unknown"
+    h: list[str] = [
+        "<!DOCTYPE html><html><head><meta charset='utf-8'>",
+        f"<title>hil report: {E(run.plan)}</title><style>{CSS}</style></head><body>",
+        f"<h1>{E(run.plan)} <span class='badge b-{E(st)}'>{E(st.upper())}</span></h1>",
+        f"<p>Bench <b>{E(run.bench)}</b> · recording <code>{E(run.path)}</code>"
+        + (" · <b>recording truncated (killed run)</b>" if run.truncated else "") + "</p>",
+        "<h2>Steps</h2><table><tr><th>#</th><th>step</th><th>line</th><th>status</th>"
+        "<th>time</th><th>message</th></tr>",
+    ]
+    for s in run.steps:
+        n = s.index + 1 if s.index >= 0 else "-"
+        h.append(f"<tr><td>{n}</td><td>{E(s.label)}</td><td>{s.line or ''}</td>"
+                 f"<td>{_status(s.status)}</td><td>{s.duration_ns / 1e6:.1f} ms</td>"
+                 f"<td>{E(s.message)}</td></tr>")
+    h.append("</table>")
+    h.append("<h2>Timing verdicts: expected vs observed</h2>")
+    if run.verdicts:
+        h.append("<table><tr><th>spec</th><th>constraint</th><th>status</th><th>measured</th>"
+                 "<th>window</th><th>diagram</th><th>message</th></tr>")
+        for v in run.verdicts:
+            win = v.get("window_expr") or v.get("window_ms")
+            h.append(f"<tr><td>{E(str(v.get('spec', '')))}</td>"
+                     f"<td>{E(str(v.get('constraint', '')))}<br><small>"
+                     f"{E(str(v.get('source', '')))}</small></td>"
+                     f"<td>{_status(str(v.get('status', '')))}</td>"
+                     f"<td>{E(str(v.get('measured_ms')))} ms</td><td>{E(str(win))}</td>"
+                     f"<td>{_verdict_svg(v)}</td><td>{E(str(v.get('message', '')))}</td></tr>")
+        h.append("</table>")
+    else:
+        h.append("<p>No timing verdicts in this run.</p>")
+    h.append("<h2>Motion (virtual-bench ground truth)</h2>")
+    if run.truth:
+        for d, samples in run.truth.items():
+            h.append(f"<h3>{E(d)}</h3>{_plot(run, d, samples)}")
+    else:
+        h.append("<p>No ground truth in this recording (real bench).</p>")
+    h.append("<h2>Safe state</h2>")
+    if run.safety:
+        h.append("<table><tr><th>drive</th><th>action</th><th>ok</th><th>reason</th>"
+                 "<th>detail</th></tr>")
+        for a in run.safety:
+            h.append(f"<tr><td>{E(str(a.get('drive', '')))}</td><td>{E(str(a.get('action')))}"
+                     f"</td><td>{_status('pass' if a.get('ok') else 'fail')}</td>"
+                     f"<td>{E(str(a.get('reason', '')))}</td>"
+                     f"<td>{E(str(a.get('detail', '')))}</td></tr>")
+        h.append("</table>")
+    else:
+        h.append("<p>No safe-state actions recorded.</p>")
+    failing = [s for s in run.steps if s.status not in ("pass", "skipped")]
+    if failing:
+        h.append("<h2>Bus log of failing steps</h2>")
+        for s in failing:
+            rows = bus_log(run, s)
+            h.append(f"<h3>step {s.index + 1}: {E(s.label)}</h3>")
+            if not rows:
+                h.append("<p>No bus traffic during this step.</p>")
+                continue
+            h.append("<pre>" + "\n".join(
+                f"{(t - run.t0) / 1e6:10.3f} ms  {E(topic):<28} {E(text)}"
+                for t, topic, text in rows) + "</pre>")
+    h.append("<h2>Parameters</h2>")
+    for d, values in run.params.items():
+        shown = {k: v for k, v in sorted(values.items())}
+        h.append(f"<details><summary>{E(d)}: {len(shown)} parameters</summary><pre>"
+                 + E("\n".join(f"{k} = {v}" for k, v in shown.items())) + "</pre></details>")
+    for name in ("bench.yaml", "plan.yaml"):
+        if name in run.attachments:
+            h.append(f"<h2>{E(name)}</h2><pre>{E(run.attachments[name])}</pre>")
+    if run.logs:
+        h.append("<h2>Log</h2><pre>" + "\n".join(
+            f"{(lg['_t'] - run.t0) / 1e6:10.3f} ms  {E(str(lg.get('name', '')))}: "
+            f"{E(str(lg.get('message', '')))}" for lg in run.logs[-300:]) + "</pre>")
+    h.append("</body></html>\n")
+    return "\n".join(h)
+
+
+def write_html(recording: str | Path, out: str | Path | None = None) -> Path:
+    run = load_run(recording)
+    out = Path(out) if out is not None else Path(recording).with_suffix(".html")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(render_html(run), encoding="utf-8")
+    return out
+
+

@@ -1,0 +1,115 @@
+"""Runner end to end on a stand-in drive side (virtual DI/DO board): steps, progress,
+recording, safe state on failure, JUnit and HTML from the recording."""
+
+from __future__ import annotations
+
+import io
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from fakes import FAKE_BENCH, fake_session_factory
+
+from hil.plan.bench import loads_bench
+from hil.plan.plan import loads_plan
+from hil.plan.runner import run_plans, summary_table
+from hil.record import topics as T
+from hil.record.reader import Recording
+
+PASSING = """\
+name: brake_ok
+params: {P1.042: 30}
+steps:
+  - di: {SON: on}
+  - wait_until: {do: {BRKR: on}, timeout: 1s}
+  - expect: {do: {SRDY: on}}
+  - read: {P1.042: 30}
+  - di: {SON: off}
+  - wait_until: {do: {BRKR: off}, timeout: 1s}
+"""
+
+FAILING = """\
+name: brake_broken
+steps:
+  - di: {SON: on}
+  - wait: 20ms
+  - expect: {do: {BRKR: off}}
+  - di: {SON: off}
+"""
+
+
+def _run(tmp_path, text, **kw):
+    bench = loads_bench(FAKE_BENCH, "fake.yaml")
+    plan = loads_plan(text, f"{tmp_path}/p.yaml")
+    out = io.StringIO()
+    res = run_plans([plan], bench, tmp_path / "out", stream=out,
+                    session_factory=fake_session_factory(tmp_path, **kw))
+    return res[0], out.getvalue()
+
+
+def test_passing_plan_records_steps_and_reports(tmp_path):
+    r, progress = _run(tmp_path, PASSING)
+    assert r.passed, [(s.label, s.status, s.message) for s in r.steps]
+    assert [s.status for s in r.steps] == ["pass"] * 6
+    assert progress.count("PASS") == 6 and "[ 2/6]" in progress
+    rec = Recording.open(r.recording)
+    assert not rec.truncated
+    ends = [m for _, _, _, m in rec.messages(T.PLAN_STEPS) if m["event"] == "end"]
+    assert [m["index"] for m in ends] == [-1, 0, 1, 2, 3, 4, 5]  # params, then the steps
+    assert rec.edges(T.dio("drive1", "DI1"))[-2:][0][1] is True
+    # the safe state runs at the end of every plan, and is recorded
+    safety = [m for _, _, _, m in rec.messages(T.SAFETY)]
+    assert safety[-1]["action"] == "safe_state_reached"
+    assert safety[-1]["reason"] == "end of plan"
+    suite = ET.parse(r.junit).getroot().find("testsuite")
+    assert suite.get("tests") == "7" and suite.get("failures") == "0"
+    prop = {p.get("name"): p.get("value") for p in suite.iter("property")}
+    assert prop["recording"] == r.recording
+    html = Path(r.html).read_text(encoding="utf-8")
+    assert "brake_ok" in html and "PASS" in html and "<script" not in html
+    assert "summary" not in summary_table([r]) or True
+    assert "1/1 plans passed" in summary_table([r])
+
+
+def test_failing_plan_goes_safe_and_says_where(tmp_path):
+    r, progress = _run(tmp_path, FAILING)
+    assert r.status == "fail"
+    st = [s.status for s in r.steps]
+    assert st == ["pass", "pass", "fail", "skipped"]
+    assert "expected DO BRKR off, saw BRKR on" in r.steps[2].message
+    assert "not run: step 3 fail" in r.steps[3].message
+    rec = Recording.open(r.recording)
+    safety = [m for _, _, _, m in rec.messages(T.SAFETY)]
+    actions = [m["action"] for m in safety]
+    assert "DI SON off" in actions and actions[-1] == "safe_state_reached"
+    assert safety[-1]["reason"].startswith("step 3 (expect DO BRKR off) fail")
+    # SON really went off after the failure, and BRKR followed (brake engaged)
+    assert rec.edges(T.dio("drive1", "DI1"))[-1][1] is False
+    assert rec.edges(T.dio("drive1", "DO6"))[-1][1] is False
+    suite = ET.parse(r.junit).getroot().find("testsuite")
+    assert suite.get("failures") == "1" and suite.get("skipped") == "1"
+    assert "FAIL" in progress and "driven to its safe state" in progress
+    html = Path(r.html).read_text(encoding="utf-8")
+    assert "Bus log of failing steps" in html and "DI SON off" in html
+
+
+def test_safe_state_not_confirmed_is_recorded(tmp_path):
+    r, progress = _run(tmp_path, FAILING, break_brake=True)
+    assert r.safe is not None and not r.safe.ok
+    rec = Recording.open(r.recording)
+    last = [m for _, _, _, m in rec.messages(T.SAFETY)][-1]
+    assert last["action"] == "safe_state_not_confirmed"
+    assert "SAFE STATE NOT CONFIRMED" in progress
+
+
+def test_wait_until_timeout_fails_with_what_it_saw(tmp_path):
+    text = "name: t\nsteps:\n  - wait_until: {do: {BRKR: on}, timeout: 50ms}\n"
+    r, _ = _run(tmp_path, text)
+    assert r.status == "fail"
+    assert r.steps[0].message == "timeout 50 ms waiting for DO BRKR on; saw BRKR off"
+
+
+def test_virtual_only_steps_reach_the_world(tmp_path):
+    text = ("name: inj\nsteps:\n  - inject: {alarm: AL500}\n  - expect: {alarm: AL500}\n"
+            "  - power_cycle: {}\n  - expect: {alarm: none}\n")
+    r, _ = _run(tmp_path, text)
+    assert r.passed, [(s.label, s.status, s.message) for s in r.steps]
