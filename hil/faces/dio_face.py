@@ -32,11 +32,12 @@ class DioFace:
                     self._apply(line, level)
         self._unsub_port = port.subscribe(self._on_line)
 
-    def _on_event(self, event: object) -> None:
+    def _on_event(self, event: Any) -> None:
+        t = self.host.wall_ns(event.t)  # the model's own time of the change
         if isinstance(event, DoChanged):
-            self.port.set(f"DO{event.n}", event.level)
+            self.port.set(f"DO{event.n}", event.level, source_t=t)
         elif isinstance(event, FdbkChanged):
-            self.port.set("FDBK", event.closed)
+            self.port.set("FDBK", event.closed, source_t=t)
 
     def _on_line(self, line: str, level: bool, t: int) -> None:
         self.host.call(self._apply, line, level)

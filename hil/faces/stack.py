@@ -47,13 +47,13 @@ class DriveSpec:
 class VirtualDriveStack:
     """A running virtual drive: `Drive` + `DriveHost` + faces."""
 
-    def __init__(self, spec: DriveSpec) -> None:
+    def __init__(self, spec: DriveSpec, *, drive_factory: Any = None) -> None:
         self.spec = spec
         params = dict(spec.params)
         ident = spec.node_id or spec.station
         if ident is not None:
             params.setdefault("P3.000", ident)
-        self.drive = Drive(
+        self.drive = (drive_factory or Drive)(
             name=spec.name,
             options=spec.options,
             mechanics=spec.mechanics,

@@ -306,6 +306,9 @@ class Drive:
             "abs_single_turn": self.absolute.single_turn,
             "statusword": self.cia402.statusword,
             "do": [self.dio.do_level(n) for n in range(1, 7)],
+            # terminal levels DI1..DI10 (the bench's sensors drive some: ORGP, NL, PL)
+            "di": [self.dio.input_level(n) for n in range(1, 11)],
+            "homing_phase": self.homing.phase if hasattr(self, "homing") else "",
         }
 
     # ------------------------------------------------------------------ internals
@@ -394,12 +397,12 @@ class Drive:
         if not self.servo_on:
             return
         self.servo_on = False
-        self._set_do("SON", False)
+        self.axis.set_power(False)  # torque off first: every event below sees it off
         hold = 0 if immediate else self.brake.servo_off(cause, alarm)
         if hold:  # negative P1.043: brake clamps first, torque held |P1.043| (options.py)
+            self.axis.set_power(not self.sto.torque_cut)
             self._hold_timer = self.sched.after(hold, lambda: self.axis.set_power(False))
-        else:
-            self.axis.set_power(False)
+        self._set_do("SON", False)
 
     def _clear_position_error(self) -> None:
         """P0.049 = 2: the motor position becomes the command end point (L7477-7491)."""
@@ -424,8 +427,12 @@ class Drive:
             self._update_servo()
 
     def _on_alarm(self, event: AlarmChanged | None) -> None:
+        """React to an alarm change (outputs, CiA 402, servo), then tell subscribers."""
+        self._react_to_alarms()
         if event is not None:
             self._emit(event)
+
+    def _react_to_alarms(self) -> None:
         al = self.alarms
         self._set_do("ALRM", al.alrm)
         self._set_do("WARN", al.warn)

@@ -29,13 +29,7 @@ from typing import Any
 from hil.plan.bench import Bench, DriveSpec
 
 _seq = itertools.count()
-DriveFactory = Callable[[Any, Any], Any]
-
-
-def default_drive_factory(options: Any, mechanics: Any) -> Any:
-    from hil.model.drive import Drive  # the lead's module (docs/architecture.md)
-
-    return Drive(options=options, mechanics=mechanics)
+DriveFactory = Callable[..., Any]  # Drive(**kwargs) stand-in (tests)
 
 
 def _auto_name(kind: str) -> str:
@@ -80,39 +74,6 @@ def initial_params(spec: DriveSpec) -> dict[str, int]:
         out[p] = value
     out.update(spec.params)
     return out
-
-
-class DioFace:
-    """Drive-side DI/DO adapter: harness input levels -> Drive.set_di/set_sto, model DO and
-    FDBK changes -> output lines. (Seam: hil.faces' DI/DO face replaces this.)"""
-
-    def __init__(self, drive: Any, host: Any, port: Any) -> None:
-        self.drive, self.host, self.port = drive, host, port
-        self._unsub_port = port.subscribe(self._on_line)
-        self._unsub_drive = drive.subscribe(self._on_event)
-        with host.lock:
-            for n in range(1, 7):
-                port.set(f"DO{n}", bool(drive.do(n)))
-            port.set("FDBK", bool(drive.fdbk()))
-
-    def _on_line(self, line: str, level: bool, t: int) -> None:
-        if line.startswith("DI"):
-            self.host.call(self.drive.set_di, int(line[2:]), level)
-        elif line in ("STO_A", "STO_B"):
-            self.host.call(self.drive.set_sto, line[-1], level)
-
-    def _on_event(self, ev: Any) -> None:
-        name = type(ev).__name__
-        if name == "DoChanged":
-            self.port.set(f"DO{ev.n}", bool(ev.level))
-        elif name == "FdbkChanged":
-            self.port.set("FDBK", bool(ev.closed))
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self._unsub_port()
-        with contextlib.suppress(Exception):
-            self._unsub_drive()
 
 
 class GroundTruth:
@@ -168,73 +129,56 @@ def _fields(ev: Any) -> dict:
 
 
 class VirtualDrive:
-    """One in-process virtual drive with its faces."""
+    """One in-process virtual drive with its faces (`hil.faces.stack`) and ground truth."""
 
     def __init__(self, spec: DriveSpec, urls: dict[str, str], recorder: Any,
-                 factory: DriveFactory, bench: Bench) -> None:
-        from hil.faces.host import DriveHost
+                 factory: DriveFactory | None, bench: Bench) -> None:
+        from hil.faces.stack import DriveSpec as StackSpec
+        from hil.faces.stack import VirtualDriveStack
         from hil.model.mechanics import Mechanics
         from hil.model.options import ModelOptions
 
         self.spec = spec
-        self.closers: list[Callable[[], None]] = []
         options = ModelOptions.from_dict(dict(spec.options), where=f"drives.{spec.name}.options")
-        self.drive = factory(options, Mechanics.from_dict(dict(spec.mechanics)))
-        for name, value in initial_params(spec).items():
-            self._set_param(name, value)
-        self.drive.power_cycle(battery=True)  # mapping parameters take effect (L9256, L9339)
-        self.host = DriveHost(self.drive)
+        self.stack = VirtualDriveStack(StackSpec(
+            name=spec.name,
+            can=urls[f"can:{spec.can}"] if spec.can else None,
+            rs485=urls[f"rs485:{spec.rs485}"] if spec.rs485 else None,
+            dio=urls[f"dio:{spec.name}"] if spec.dio else None,
+            node_id=spec.node_id,
+            station=spec.station,
+            params=initial_params(spec),  # applied, then power cycled (L9256, L9339)
+            options=options,
+            mechanics=Mechanics.from_dict(dict(spec.mechanics)),
+            inputs=idle_inputs(spec),
+            modbus_mode=spec.modbus_mode,
+        ), drive_factory=factory)
+        self.drive, self.host = self.stack.drive, self.stack.host
         self.truth = GroundTruth(spec.name, self.drive, self.host, recorder,
-                                 getattr(options, "state_publish_ms", 10.0))
-        self.closers.append(self.truth.close)
-        if spec.can:
-            self._can(urls[f"can:{spec.can}"])
-        if spec.rs485:
-            self._rs485(urls[f"rs485:{spec.rs485}"])
+                                 options.state_publish_ms)
         if spec.dio:
-            self._dio(urls[f"dio:{spec.name}"])
-        self.host.start()
-        self.closers.insert(0, self.host.stop)
-
-    def _set_param(self, name: str, value: int) -> None:
-        store = self.drive.params
+            declare = getattr(recorder, "declare_source", None)
+            if declare is not None:  # DO levels carry the model's own time (exact to 1 µs)
+                for n in range(1, 7):
+                    declare(f"/dio/{spec.name}/DO{n}", "model", resolution_ns=1000)
+                declare(f"/dio/{spec.name}/FDBK", "model", resolution_ns=1000)
         try:
-            store.write(name, value)
-        except Exception:
-            store.set_internal(name, value)
-
-    def _can(self, url: str) -> None:
-        from hil.faces.canopen_slave import CanopenSlave
-        from hil.transport.can_bus import open_can
-
-        bus = open_can(url)
-        slave = CanopenSlave(bus, self.drive, node_id=self.spec.node_id, lock=self.host.lock,
-                             own_timer=False, clock=self.host.model_now)
-        self.host.add_tick(slave.tick)
-        slave.start()
-        self.closers += [slave.close, bus.shutdown]
-
-    def _rs485(self, url: str) -> None:
-        from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
-        from hil.transport.serial_line import open_serial
-
-        line = open_serial(url)
-        slave = ModbusSlave(self.drive.params, station=self.spec.station, lock=self.host.lock,
-                            mode=self.spec.modbus_mode)  # type: ignore[arg-type]
-        runner = ModbusSlaveRunner(slave, line).start()
-        self.closers += [runner.stop, line.close]
-
-    def _dio(self, url: str) -> None:
-        from hil.transport.dio import open_dio
-
-        port = open_dio(url, role="drive", name=f"{self.spec.name}-face")
-        face = DioFace(self.drive, self.host, port)
-        self.closers += [face.close, port.close]
+            self.stack.start()
+        except BaseException:
+            self.truth.close()
+            raise
 
     def close(self) -> None:
-        for fn in self.closers:
-            with contextlib.suppress(Exception):
-                fn()
+        with contextlib.suppress(Exception):
+            self.stack.stop()
+        with contextlib.suppress(Exception):
+            self.truth.close()
+
+
+def idle_inputs(spec: DriveSpec) -> dict[int, bool]:
+    """DI contacts at power-up as an idle bench's wiring leaves them: b-contacts closed."""
+    return {int(w.line[2:]): True for w in spec.di.values()
+            if w.contact == "b" and w.line.startswith("DI")}
 
 
 class VirtualWorld:
@@ -246,7 +190,7 @@ class VirtualWorld:
         self._tmp = tempfile.TemporaryDirectory(prefix="hil-bench-")
         self.urls = resolve_auto(bench, Path(self._tmp.name))
         self.drives: dict[str, VirtualDrive] = {}
-        factory = drive_factory or default_drive_factory
+        factory = drive_factory
         try:
             for name, spec in bench.drives.items():
                 self.drives[name] = VirtualDrive(spec, self.urls, recorder, factory, bench)

@@ -42,6 +42,7 @@ class ModelTap:
         self.bus = bus
         self.step_ns = step_ns
         self._last_state: dict[str, Any] | None = None
+        self._di: dict[int, bool] = {}  # last recorded DI terminal levels
         for topic in (topics.drive_state(self.name), topics.drive_events(self.name)):
             recorder.declare_source(topic, "model")
         # exact model timestamps (1 µs: the checker treats 0 as "not declared")
@@ -50,7 +51,7 @@ class ModelTap:
         values = {spec.param: drive.params.get(spec.param) for spec in drive.params.table}
         recorder.drive_params(self.name, values, snapshot=True, t=t, source_t=t)
         for n in range(1, 11):
-            self._line(f"DI{n}", drive.dio.input_level(n))
+            self._di_line(n, drive.dio.input_level(n))
         for n in range(1, 7):
             self._line(f"DO{n}", drive.do(n))
         self._line("STO_A", drive.sto.a)
@@ -61,7 +62,7 @@ class ModelTap:
 
     # -- stimuli -----------------------------------------------------------------------------
     def set_di(self, n: int, closed: bool) -> None:
-        self._line(f"DI{n}", closed)
+        self._di_line(n, closed)
         self.drive.set_di(n, closed)
         self._state()
 
@@ -99,6 +100,11 @@ class ModelTap:
         t = self._t()
         self.rec.dio(self.dio_name, line, bool(level), t, t)
 
+    def _di_line(self, n: int, level: bool) -> None:
+        if self._di.get(n) != bool(level):
+            self._di[n] = bool(level)
+            self._line(f"DI{n}", level)
+
     def _statusword(self) -> None:
         t = self._t()
         sw = self.drive.read_object(0x6041, 0)
@@ -110,6 +116,9 @@ class ModelTap:
         snap.pop("t", None)
         if snap != self._last_state:
             self._last_state = snap
+            # DI levels the model drives itself (bench sensors ORGP/NL/PL follow the axis)
+            for n, level in enumerate(snap.get("di", ()), start=1):
+                self._di_line(n, level)
             t = self._t()
             self.rec.drive_state(self.name, snap, t=t, source_t=t)
 

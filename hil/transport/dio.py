@@ -10,8 +10,9 @@ Two roles share the classes:
 Backends:
 - `virtual:<name>`: in-process board shared by every port of that name (thread-safe).
 - `zenoh:<key>?...`: `<key>/<line>` with payload b"1" / b"0" (the source's wall ns as an
-  8-byte little-endian attachment); a side publishes its lines on every change, and a
-  queryable on `<key>/**` answers each of its lines' current level (`query_levels()`).
+  8-byte little-endian attachment, then a gateway lease token where one is held); a side
+  publishes its lines on every change, and a queryable on `<key>/**` answers each of its
+  lines' current level (`query_levels()`).
 - `modbus-tcp://host:port?unit=1&poll_ms=5`: a remote I/O module (harness only); `mapping`
   gives each line its coil (inputs of the drive) or discrete input (outputs of the drive):
   `{"DI1": 0, "STO_A": "coil:8", "DO1": "di:0"}` (a bare int takes the line's natural kind).
@@ -33,7 +34,13 @@ import zenoh
 
 from hil.record.tap import Tap
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
-from hil.transport.zenoh_net import close_session, config_from, open_session, wait_connected
+from hil.transport.zenoh_net import (
+    close_session,
+    config_from,
+    lease_token,
+    open_session,
+    wait_connected,
+)
 
 Role = Literal["harness", "drive"]
 ROLES = ("harness", "drive")
@@ -73,8 +80,11 @@ class DioPort:
         """Whether this side drives `line` (harness: inputs; drive: outputs)."""
         return is_input(line) == (self.role == "harness")
 
-    def set(self, line: str, level: bool) -> None:
-        """Drive one of our lines; published if it changed (or was never set)."""
+    def set(self, line: str, level: bool, source_t: int | None = None) -> None:
+        """Drive one of our lines; published if it changed (or was never set).
+
+        `source_t` is when the source itself changed the level (wall ns; e.g. the model's
+        event time on a virtual drive); it travels with the level as its publish time."""
         self._check_open()
         if not self.owns(line):
             other = "harness" if self.role == "drive" else "drive"
@@ -88,9 +98,9 @@ class DioPort:
                 return
             self._levels[line] = (level, t)
             self._cond.notify_all()
-        self._publish(line, level, t)
+        self._publish(line, level, t if source_t is None else source_t)
         if self.tap is not None:
-            self.tap.dio(self.name, line, level, t, None)
+            self.tap.dio(self.name, line, level, t, source_t)
 
     def get(self, line: str) -> bool:
         """Last known level of any line (False = open / not conducting if never seen)."""
@@ -207,8 +217,9 @@ class VirtualDio(DioPort):
             b = _boards[self.board]
             b.levels[line] = (level, t)
             others = [p for p in b.ports if p is not self and p.role != self.role]
+        seen = time.time_ns()
         for p in others:
-            p._changed(line, level, t, None)
+            p._changed(line, level, seen, t)  # t: the publisher's (source) time
 
     def _close_backend(self) -> None:
         with _boards_lock:
@@ -273,8 +284,8 @@ class ZenohDio(DioPort):
         source_t = None
         if sample.attachment is not None:
             raw = sample.attachment.to_bytes()
-            if len(raw) == _T.size:
-                source_t = _T.unpack(raw)[0]
+            if len(raw) >= _T.size:  # source time, then a gateway lease token if any
+                source_t = _T.unpack_from(raw)[0]
         self._changed(line, payload == b"1", None, source_t)
 
     def _on_query(self, query: zenoh.Query) -> None:
@@ -305,7 +316,8 @@ class ZenohDio(DioPort):
                 f"{self.key}/{line}", express=True,
                 congestion_control=zenoh.CongestionControl.BLOCK,
                 allowed_destination=zenoh.Locality.REMOTE)
-        pub.put(b"1" if level else b"0", attachment=_T.pack(t))
+        key = f"{self.key}/{line}"
+        pub.put(b"1" if level else b"0", attachment=_T.pack(t) + (lease_token(key) or b""))
 
     def _close_backend(self) -> None:
         for entity in (self._sub, self._queryable, *self._pubs.values()):

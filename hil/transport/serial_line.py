@@ -42,6 +42,7 @@ from hil.transport.urls import SerialSettings, TransportUrl, TransportUrlError, 
 from hil.transport.zenoh_net import (
     close_session,
     config_from,
+    lease_token,
     open_session,
     wait_connected,
     wait_matching,
@@ -477,6 +478,7 @@ class ZenohLine(SerialLine):
         self.role = u.params.get("role", "master")
         self._prev_end_wall: int | None = None  # sender's end of its previous chunk
         out, inp = ("m2s", "s2m") if self.role == "master" else ("s2m", "m2s")
+        self._out_key = f"{u.target}/{out}"
         ep = u.zenoh()
         try:
             config = config_from(ep, allow_remote=allow_remote)
@@ -521,7 +523,7 @@ class ZenohLine(SerialLine):
         payload = pack_chunk(data, self.wall_ns(start), [e - start for e in ends_ns])
         if self._pub is None:
             raise OSError(errno.EBADF, f"serial line {self.name!r} is closed")
-        self._pub.put(payload)
+        self._pub.put(payload, attachment=lease_token(self._out_key))
 
     def _close_backend(self) -> None:
         for entity in (self._sub, self._pub):

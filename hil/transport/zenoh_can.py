@@ -12,8 +12,10 @@ sender time (int ns, `time.time_ns()` at send, or the message's own timestamp wi
 `preserve_timestamps=True`, e.g. a gateway forwarding hardware-stamped frames), then data.
 
 Received messages are `ZenohMessage`s: `timestamp` = receive time (`time.time()`), and
-`sender_time_ns` = the sender's time. Not a CAN simulator: no arbitration, no error
-frames or bus-off, no wire time; filters are python-can's software filters.
+`sender_time_ns` = the sender's time (behind a `hil gateway`: the bench's capture time).
+A gateway lease held in this process (zenoh_net.lease_token) rides as the sample
+attachment. Not a CAN simulator: no arbitration, no error frames or bus-off, no wire
+time; filters are python-can's software filters.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from can import BusABC, CanInitializationError, CanOperationError, CanProtocol, 
 from hil.transport.urls import check_zenoh_key
 from hil.transport.zenoh_net import (
     close_session,
+    lease_token,
     make_config,
     open_session,
     wait_connected,
@@ -183,7 +186,7 @@ class ZenohBus(BusABC):
         else:
             sender_ns = time.time_ns()
         try:
-            self._pub.put(pack(msg, sender_ns))
+            self._pub.put(pack(msg, sender_ns), attachment=lease_token(self._key))
         except zenoh.ZError as e:
             raise CanOperationError(f"{self.channel_info}: send failed: {e}") from None
         if self.receive_own_messages:

@@ -11,6 +11,13 @@
 - `start_router(port)`: the project's zenoh router as a subprocess (`python -m
   hil.transport.zenoh_router`) for more than two processes on one key; those processes use
   mode=client (peer mode through a router with gossip off gets no data, gotcha 3).
+- TLS: `tls/127.0.0.1:<port>` / `tls/localhost:<port>` endpoints count as loopback. A config
+  with a tls/ endpoint gets `transport/link/tls` from `tls=` or, by default, from the
+  environment (`HIL_ZENOH_TLS_ROOT_CA`, `HIL_ZENOH_TLS_CERT`, `HIL_ZENOH_TLS_KEY`), so a
+  runner's `zenoh:` URLs stay the same behind a TLS gateway (docs/gateway.md).
+- Lease tokens (`set_lease_token` / `lease_token`): a gateway lease held in this process
+  (hil.gateway.client) is attached to every sample the zenoh transports put under its bench
+  prefix; a gateway forwards only samples that carry the current holder's token.
 """
 
 from __future__ import annotations
@@ -24,7 +31,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import zenoh
@@ -34,7 +41,7 @@ from hil.transport.urls import ZenohEndpoints
 log = logging.getLogger(__name__)
 
 MODES = ("peer", "client", "router")
-_LOOPBACK = re.compile(r"^tcp/(127\.0\.0\.1|\[::1\]|localhost):(\d{1,5})$")
+_LOOPBACK = re.compile(r"^(?:tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):(\d{1,5})$")
 _ANY_TCP = re.compile(r"^(tcp|tls|quic)/(.+):(\d{1,5})$")
 
 
@@ -43,7 +50,7 @@ class ZenohConfigError(ValueError):
 
 
 def check_endpoint(endpoint: str, *, allow_remote: bool = False) -> str:
-    """Return `endpoint` if it is tcp/127.0.0.1, tcp/[::1] or tcp/localhost with a port."""
+    """Return `endpoint` if it is tcp/ or tls/ on 127.0.0.1, [::1] or localhost with a port."""
     m = _LOOPBACK.match(endpoint)
     if m and int(m.group(2)) < 65536:
         return endpoint
@@ -60,10 +67,13 @@ def make_config(
     listen: Iterable[str] = (),
     connect: Iterable[str] = (),
     allow_remote: bool = False,
+    tls: Mapping[str, object] | None = None,
 ) -> zenoh.Config:
     """An explicit zenoh config: nothing is left to zenoh's defaults that touches the net.
 
     An empty `listen` list is written too: a default peer listens on tcp/[::]:0.
+    `tls`: the `transport/link/tls` section (root_ca_certificate, listen_/connect_ private
+    key and certificate, enable_mtls); default for tls/ endpoints: `tls_from_env()`.
     """
     if mode not in MODES:
         raise ZenohConfigError(f"zenoh mode {mode!r}: must be one of {', '.join(MODES)}")
@@ -80,11 +90,70 @@ def make_config(
     c.insert_json5("scouting/delay", "0")  # else open() blocks ~500 ms (gotcha 2)
     c.insert_json5("listen/endpoints", json.dumps(listen))
     c.insert_json5("connect/endpoints", json.dumps(connect))
+    if tls is None and any(e.startswith("tls/") for e in (*listen, *connect)):
+        tls = tls_from_env()
+        if tls is None:
+            raise ZenohConfigError(f"zenoh tls/ endpoint(s) {', '.join(listen + connect)}: "
+                                   f"need TLS files; set {TLS_ENV['root_ca_certificate']} "
+                                   "(and the certificate/key variables for mutual TLS)")
+    if tls:
+        c.insert_json5("transport/link/tls", json.dumps(dict(tls)))
     return c
 
 
-def config_from(ep: ZenohEndpoints, *, allow_remote: bool = False) -> zenoh.Config:
-    return make_config(ep.mode, listen=ep.listen, connect=ep.connect, allow_remote=allow_remote)
+# Environment variables naming the TLS files of this process (runner side).
+TLS_ENV = {"root_ca_certificate": "HIL_ZENOH_TLS_ROOT_CA",
+           "certificate": "HIL_ZENOH_TLS_CERT", "private_key": "HIL_ZENOH_TLS_KEY"}
+
+
+def tls_from_env() -> dict[str, object] | None:
+    """`transport/link/tls` from HIL_ZENOH_TLS_ROOT_CA / _CERT / _KEY, or None if unset.
+
+    With a certificate and key, they serve both to connect (client auth, mutual TLS) and to
+    listen."""
+    ca = os.environ.get(TLS_ENV["root_ca_certificate"])
+    if not ca:
+        return None
+    out: dict[str, object] = {"root_ca_certificate": ca}
+    cert = os.environ.get(TLS_ENV["certificate"])
+    key = os.environ.get(TLS_ENV["private_key"])
+    if bool(cert) != bool(key):
+        raise ZenohConfigError(f"{TLS_ENV['certificate']} and {TLS_ENV['private_key']} "
+                               "must be set together")
+    if cert and key:
+        out.update(connect_certificate=cert, connect_private_key=key,
+                   listen_certificate=cert, listen_private_key=key, enable_mtls=True)
+    return out
+
+
+# -- lease tokens (hil.gateway) ------------------------------------------------------
+
+_lease_tokens: dict[str, bytes] = {}
+
+
+def set_lease_token(prefix: str, token: bytes | None) -> None:
+    """Attach `token` to every sample put under `<prefix>/` (None: stop)."""
+    with _lock:
+        if token is None:
+            _lease_tokens.pop(prefix, None)
+        else:
+            _lease_tokens[prefix] = bytes(token)
+
+
+def lease_token(key: str) -> bytes | None:
+    """The lease token for a key, if a lease on one of its prefixes is held here."""
+    if not _lease_tokens:
+        return None
+    for prefix, token in list(_lease_tokens.items()):
+        if key.startswith(prefix) and key[len(prefix):len(prefix) + 1] == "/":
+            return token
+    return None
+
+
+def config_from(ep: ZenohEndpoints, *, allow_remote: bool = False,
+                tls: Mapping[str, object] | None = None) -> zenoh.Config:
+    return make_config(ep.mode, listen=ep.listen, connect=ep.connect, allow_remote=allow_remote,
+                       tls=tls)
 
 
 # -- session registry ----------------------------------------------------------------
