@@ -475,19 +475,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
 
 
 def _idle_inputs(ctx: StepContext) -> None:
-    """Every wired DI function inactive and 24 V on both STO channels, as an idle bench's
-    wiring leaves them (b-contacts such as EMGS, NL, PL closed)."""
-    for d in ctx.session.drives.values():
-        if d.dio is None:
-            continue
-        now = time.time_ns()
-        for line, lv in sorted(d.dio.levels().items()):  # initial levels: known from t0
-            ctx.rec.dio(d.name, line, bool(lv), now, None)
-        for f in d.spec.di:
-            d.set_function(f, False)
-        for line in d.spec.sto.values():
-            d.set_line(line, True)
-    time.sleep(0.02)  # beyond the P2.009 DI filter (L9229-9236) before the first step
+    ctx.session.idle(ctx.rec)
 
 
 def _initial_params(ctx: StepContext, plan: Plan) -> None:

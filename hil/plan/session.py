@@ -102,6 +102,23 @@ class Session:
     def drive(self, name: str | None) -> DriveIO:
         return self.drives[name or self.bench.default_drive]
 
+    def idle(self, recorder: Any = None) -> None:
+        """Every wired DI function inactive and 24 V on both STO channels, as an idle bench's
+        wiring leaves them (b-contacts such as EMGS, NL, PL closed); every line's level is
+        recorded first, so the first edge of a test is an edge in the recording."""
+        rec = recorder or self.recorder
+        for d in self.drives.values():
+            if d.dio is None:
+                continue
+            now = time.time_ns()
+            for line, lv in sorted(d.dio.levels().items()):  # initial levels: known from t0
+                rec.dio(d.name, line, bool(lv), now, None)
+            for f in d.spec.di:
+                d.set_function(f, False)
+            for line in d.spec.sto.values():
+                d.set_line(line, True)
+        time.sleep(0.02)  # beyond the P2.009 DI filter (L9229-9236) before the first step
+
     def close(self) -> None:
         for fn in reversed(self._closers):
             with contextlib.suppress(Exception):
