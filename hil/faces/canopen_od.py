@@ -17,8 +17,9 @@ from hil.model.errors import (
     ABORT_NO_SUBINDEX,
     ObjectError,
 )
+from hil.paths import fixture
 
-FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "drive"
+FIXTURES = fixture("drive")  # checkout or installed wheel (hil.paths)
 OBJECTS_CSV = FIXTURES / "a3_objects.csv"
 PARAMETERS_CSV = FIXTURES / "a3_parameters.csv"
 
