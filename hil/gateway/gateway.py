@@ -78,7 +78,9 @@ class GatewayConfig:
     record: Path | None = None
     safe_on_release: bool = True
     backoff_s: tuple[float, float] = (0.05, 2.0)  # reopen delay: first, max (doubling)
-    serial_silence_chars: float = 2.0  # a chunk ends after this much idle line
+    # A chunk for the network ends after this much idle line; None: the line's Modbus t3.5,
+    # so one chunk is one ADU however the adapter or pty delivers the bytes.
+    serial_silence_s: float | None = None
     connect_timeout_s: float = 10.0
 
 
@@ -337,9 +339,9 @@ class SerialExport(_Export):
         line = self.line
         if line is None:
             return
-        silence = self.gw.config.serial_silence_chars * line.char_time_s
+        silence = self.gw.config.serial_silence_s
         try:
-            frame = line.read_frame(silence_s=max(silence, 0.0002), timeout=0.05)
+            frame = line.read_frame(silence_s=silence, timeout=0.05)  # None: t3.5
         except OSError as e:
             self._lost(e)
             return
