@@ -1,0 +1,136 @@
+"""The absolute handshake/origin specs on the whole model drive, and its deviation knobs.
+
+The Drive runs on the injected clock; the host-side `AbsPositionReader` talks to it through
+`ModelTap` (which records every DI it sets, every DO the drive changes, the parameters and
+the ground truth), and the checker reads the MCAP file back (issue 8: "deviation knobs
+(wrong checksum, T_R not enforced, bit order swapped) make the matching check fail").
+
+Absolute bench (docs/absolute.md): P2.069 = 1, ABSE = DI2, ABSC = DI3, ABSW = DO4, DI4/DO2/DO3
+idle (L16504). DI9 is wired to the bench's home cam, so ABSE/ABSC are not put there.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hil.drivers.abs_reader import AbsChecksumError, AbsPositionReader, ModelLines
+from hil.model.drive import Drive
+from hil.model.options import ModelOptions
+from hil.model.timebase import MS
+from hil.paths import fixture
+from hil.record.model_tap import ModelTap
+from hil.record.recorder import Recorder
+from hil.timing.checker import check
+from hil.timing.source import RecordingSource
+from hil.timing.spec import load_spec
+
+REV = 16_777_216
+ABS_PARAMS = {
+    "P2.069": 1, "P2.070": 1,  # absolute; DI/DO frame in turns + pulses (L10034, L10055)
+    "P2.011": 0x011D, "P2.012": 0x011F, "P2.021": 0x010D,  # DI2 ABSE, DI3 ABSC, DO4 ABSW
+    "P2.013": 0, "P2.019": 0, "P2.020": 0,  # DI4/DO2/DO3 idle (L16504)
+}  # fmt: skip
+BINDING = {"drive": "drive1", "dio": "drive1", "ABSE": "DI2", "ABSC": "DI3", "ABSW": "DO4"}
+
+
+class LateLines(ModelLines):
+    """The host answers bit `bit` of the first attempt `late_ms` late (ABSQ on)."""
+
+    def __init__(self, bit: int, late_ms: float, **kw) -> None:
+        super().__init__(**kw)
+        self.bit, self.late_ms, self.acks, self.done = bit, late_ms, 0, False
+
+    def set(self, line: str, level: bool) -> None:
+        if line == "DI2":
+            self.acks = 0
+        elif line == "DI4" and level and self.get("DO2"):
+            if self.acks == self.bit and not self.done:
+                self.done = True
+                self.clock.sleep(self.late_ms / 1000)
+            self.acks += 1
+        super().set(line, level)
+
+
+def run(tmp_path: Path, absolute: dict | None = None, late_bit: int | None = None):
+    """Origin by DI/DO at 0, a move to 3 rev + 1234 counts, one read. Returns (path, result)."""
+    path = tmp_path / "abs.mcap"
+    opts = ModelOptions(extra={"absolute": absolute or {}})
+    drive = Drive(options=opts, inputs={8: True}, params=ABS_PARAMS)
+    result: object = None
+    with Recorder(path) as rec:
+        tap = ModelTap(drive, rec)
+        kw = dict(
+            now=lambda: drive.now,
+            advance_to=lambda t: tap.advance(t - drive.now),
+            write=lambda line, level: tap.set_di(int(line[2:]), level),
+            read=lambda line: drive.do(int(line[2:])),
+            next_deadline=drive.sched.next_deadline,
+        )
+        lines = ModelLines(**kw) if late_bit is None else LateLines(late_bit, 250, **kw)
+        reader = AbsPositionReader(lines, abse="DI2", absc="DI3", absw="DO4", clock=lines.clock)
+        tap.advance(20 * MS)
+        reader.set_origin()
+        drive.axis.set_user_position(0.0)
+        drive.axis.position = drive.axis.last_position = float(3 * REV + 1234)  # moved
+        tap.advance(5 * MS)
+        try:
+            result = reader.read()
+        except AbsChecksumError as exc:
+            result = exc
+        tap.advance(20 * MS)
+        tap.close()
+    return path, result
+
+
+def verdicts(path: Path, spec_id: str) -> dict[str, dict[str, str]]:
+    spec = load_spec(fixture("timing", f"{spec_id}.yaml"))
+    out: dict[str, dict[str, str]] = {}
+    for v in check(spec, RecordingSource(path), binding=BINDING):
+        out.setdefault(v.constraint, {})[v.status] = v.message
+    return out
+
+
+def assert_passes(got: dict[str, dict[str, str]]) -> None:
+    bad = {n: s for n, s in got.items() if set(s) - {"pass", "skipped"}}
+    assert not bad, bad
+    assert any("pass" in s for s in got.values())
+
+
+def test_faithful_drive_passes_origin_and_handshake_specs(tmp_path: Path) -> None:
+    path, r = run(tmp_path)
+    assert (r.status, r.turns, r.position, r.attempts) == (0, 3, 1234, 1)  # type: ignore[union-attr]
+    assert_passes(verdicts(path, "abs_origin"))
+    got = verdicts(path, "abs_handshake")
+    assert_passes(got)
+    assert "pass" in got["T_Q - ABSR on after each request"]
+
+
+def test_late_host_gets_absw_and_the_retry_succeeds(tmp_path: Path) -> None:
+    path, r = run(tmp_path, late_bit=5)
+    assert r.attempts == 2 and "bit 5: ABSW on" in r.errors[0]  # type: ignore[union-attr]
+    got = verdicts(path, "abs_handshake")
+    assert "fail" in got["T_R - host raises ABSQ within 200 ms of ABSR on"]  # the host's fault
+    for rule in ("ABSW when T_R passes without ABSQ on", "ABSE off clears ABSW"):
+        assert set(got[rule]) == {"pass"}, got[rule]
+
+
+@pytest.mark.parametrize("knob", ["dev_bad_checksum", "dev_swap_bit_order"])
+def test_frame_knobs_fail_the_readers_checksum(tmp_path: Path, knob: str) -> None:
+    path, r = run(tmp_path, {knob: True})
+    assert isinstance(r, AbsChecksumError), r
+    assert "checksum mismatch" in str(r) and "L16476-16486" in str(r)
+    if knob == "dev_bad_checksum":
+        assert r.expected == r.received ^ 1  # the knob flips bit 0 of the checksum
+    assert_passes(verdicts(path, "abs_handshake"))  # the timing itself stays right
+
+
+def test_dev_no_t_r_fails_the_absw_rule(tmp_path: Path) -> None:
+    path, r = run(tmp_path, {"dev_no_t_r": True}, late_bit=5)
+    assert r.attempts == 1  # type: ignore[union-attr]  # no ABSW: the late answer went through
+    assert any("did not raise ABSW" in v for v in r.violations)  # type: ignore[union-attr]
+    got = verdicts(path, "abs_handshake")
+    rule = got["ABSW when T_R passes without ABSQ on"]
+    assert set(rule) == {"fail"}, rule
+    assert "expected ABSW to rise" in rule["fail"]
