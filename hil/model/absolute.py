@@ -276,6 +276,7 @@ class AbsoluteEncoder:
         hook_params: bool = True,
     ) -> None:
         self.scheduler = scheduler
+        self.on_origin: Callable[[], None] | None = None  # ABSC / P2.071 origin set
         self.params = params
         self.options = options or AbsoluteOptions()
         self.mem = memory or EncoderMemory()
@@ -460,6 +461,8 @@ class AbsoluteEncoder:
             self._evaluate()
             return False
         self._apply_origin(0)
+        if self.on_origin is not None:
+            self.on_origin()  # the drive's own coordinate follows (6064h = P6.001 here)
         return True
 
     def _apply_origin(self, offset: int) -> None:

@@ -53,7 +53,7 @@ from hil.model.events import (
     PowerCycled,
 )
 from hil.model.mechanics import Mechanics
-from hil.model.motion import Axis, counts_to_puu
+from hil.model.motion import Axis, counts_to_puu, puu_to_counts
 from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
 from hil.model.sto import Sto
@@ -160,6 +160,8 @@ class Drive:
         self._abs_file = self.state_path / "absolute.json" if self.state_path else None
         if self._abs_file and self._abs_file.exists():
             self.absolute.restore(json.loads(self._abs_file.read_text()))
+        self.absolute.on_origin = self._follow_absolute
+        self._follow_absolute()  # a restart keeps the absolute coordinate (L16391-16397)
         self._step_hooks.append(self.absolute.refresh)
         for fn in ("ABSE", "ABSC", "ABSQ"):
             self.dio.on_function(fn, getattr(self.absolute, f"on_{fn.lower()}"))
@@ -268,6 +270,7 @@ class Drive:
         self.dio.power_cycle()
         self.absolute.power_cycle(battery)
         self.absolute.on_abse(self.dio.function_active("ABSE"))
+        self._follow_absolute()
         self.alarms.power_cycle()
         self.brake.reset()
         self.sto.reset()
@@ -403,6 +406,13 @@ class Drive:
             self.axis.set_power(not self.sto.torque_cut)
             self._hold_timer = self.sched.after(hold, lambda: self.axis.set_power(False))
         self._set_do("SON", False)
+
+    def _follow_absolute(self) -> None:
+        """With a valid absolute coordinate, 6064h reads the absolute PUU (chapter 10)."""
+        enc = self.absolute
+        if enc.enabled and enc.coordinate_valid:
+            counts = puu_to_counts(enc.puu, self.params.get("P1.044"), self.params.get("P1.045"))
+            self.axis.set_user_position(counts)
 
     def _clear_position_error(self) -> None:
         """P0.049 = 2: the motor position becomes the command end point (L7477-7491)."""

@@ -237,3 +237,23 @@ def test_result_does_not_depend_on_how_time_is_sliced() -> None:
         return snap
 
     assert run(1 * MS) == run(50 * MS) == run(500 * MS)
+
+
+def test_6064h_follows_the_absolute_coordinate(tmp_path) -> None:
+    # Chapter 10: origin by P2.071 (after P2.008 = 271, L10074-10081) puts PUU = P6.001 there;
+    # the coordinate survives a restart of the process (battery-backed, L16391-16397).
+    drive = Drive(state_path=tmp_path, inputs={8: True}, params={"P2.069": 1, "P6.001": 500})
+    drive.params.write("P2.008", 271)
+    drive.params.write("P2.071", 1)
+    assert drive.read_object(0x6064) == 500
+    servo_on_by_di(drive)
+    drive.axis.move_to(drive.axis.position + 3 * 16777216, 600.0, 100.0, 100.0)
+    drive.advance(2 * S)
+    before = drive.read_object(0x6064)
+    assert abs(before - (500 + 300_000)) <= 2  # 3 rev at P1.045 = 100000 PUU/rev
+    drive.set_di(1, False)
+    drive.advance(10 * MS)
+    drive.close()
+    again = Drive(state_path=tmp_path, inputs={8: True})
+    assert abs(again.read_object(0x6064) - before) <= 1
+    assert again.absolute.coordinate_valid
