@@ -618,13 +618,26 @@ class Recorder:
         if ext or err:
             return  # CANopen uses 11-bit identifiers
         if dec_cid is not None:
-            key = (cid, rtr, data)
-            enc = cache_.get(key)
-            if enc is None:
-                enc = self._describe_can(cid, data, hx, key[1])
-                if len(cache_) >= _DECODE_CACHE_MAX:
-                    cache_.clear()
-                cache_[key] = enc
+            # PDO payloads change every frame: their decoding is a fixed prefix + the data
+            tmpl = None if rtr else cache_.get((cid, len(data)))
+            if tmpl is not None:
+                enc = tmpl + hx.encode() + b'"}'
+            else:
+                key = (cid, rtr, data)
+                enc = cache_.get(key)
+                if enc is None:
+                    enc = self._describe_can(cid, data, hx, key[1])
+                    if len(cache_) >= _DECODE_CACHE_MAX:
+                        cache_.clear()
+                    cache_[key] = enc
+                    suffix = b'"data":"' + hx.encode() + b'"}'
+                    if (
+                        0x180 <= cid < 0x580
+                        and not rtr
+                        and enc.endswith(suffix)
+                        and enc.count(b'"') == 14
+                    ):  # exactly kind/node/cob_id/dlc/data
+                        cache_[(cid, len(data))] = enc[: -len(hx) - 2]
             w.add_message(
                 dec_cid,
                 t,

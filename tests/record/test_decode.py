@@ -198,3 +198,25 @@ def test_split_rtu_frames_are_reassembled(tmp_path):
     assert [m["role"] for m in mb] == ["request", "response", "unknown"]
     assert mb[0]["raw"] == req.hex() and mb[1]["rtt_ns"] == 3_000_000
     assert "too short" in mb[2]["error"]
+
+
+def test_pdo_fast_path_equals_the_decoder(tmp_path) -> None:
+    """Changing PDO payloads use a cached prefix; the result must equal describe_frame."""
+    import can
+
+    from hil.protocol.canopen import describe_frame
+    from hil.record.reader import Recording
+    from hil.record.recorder import Recorder
+
+    frames = [can.Message(arbitration_id=0x185, data=bytes([i, i + 1, 2, 3, 4, 5, 6, 7]),
+                          is_extended_id=False) for i in range(50)]
+    frames.append(can.Message(arbitration_id=0x185, data=bytes([1, 2]), is_extended_id=False))
+    path = tmp_path / "pdo.mcap"
+    with Recorder(path) as rec:
+        for i, f in enumerate(frames):
+            rec.can("can0", f, "rx", 1_000_000 * (i + 1), None)
+    got = [m for _t, _l, _p, m in Recording.open(path).messages(["/canopen/can0"])]
+    assert len(got) == len(frames)
+    for f, m in zip(frames, got, strict=True):
+        m.pop("dir")
+        assert m == describe_frame(f.arbitration_id, bytes(f.data))
