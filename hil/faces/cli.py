@@ -52,7 +52,17 @@ def configure(p: argparse.ArgumentParser) -> None:
         "--bench",
         type=Path,
         metavar="FILE",
-        help="take mechanics and model options of the first drive of a bench file",
+        help="take mechanics, model options, parameters (wiring + params) and idle DI levels "
+        "of a bench drive (--drive; default: the bench's first drive)",
+    )
+    p.add_argument("--drive", metavar="NAME", help="which drive of --bench this process is")
+    p.add_argument(
+        "--control",
+        choices=("none", "stdio"),
+        default="none",
+        help="stdio: take JSON commands (power_cycle, inject, snapshot) on stdin and stream "
+        "ground truth as 'hil-ctl' JSON lines on stdout (used by the runner's subprocess "
+        "benches); stdin closing stops the drive",
     )
 
 
@@ -67,6 +77,41 @@ def _load_mapping(path: Path) -> dict:
     if not isinstance(data, dict):
         raise SystemExit(f"hil drive: {path}: expected a mapping of parameter names to values")
     return {str(k): int(v, 0) if isinstance(v, str) else int(v) for k, v in data.items()}
+
+
+def _from_bench(spec: DriveSpec, args: argparse.Namespace) -> str:
+    """Fill `spec` from a bench drive: mechanics, options, the wiring's mapping parameters
+    plus its params (command-line --params win), idle DI levels (b-contacts closed)."""
+    from hil.model.mechanics import Mechanics
+    from hil.model.options import ModelOptions
+    from hil.plan.bench import load_bench
+    from hil.plan.virtual import idle_inputs, initial_params
+    from hil.plan.yamlio import PlanFileError
+
+    if not args.bench:
+        return "--drive needs --bench FILE"
+    try:
+        bench = load_bench(args.bench)
+    except (OSError, PlanFileError) as e:
+        return str(e)
+    name = args.drive or bench.default_drive
+    if name not in bench.drives:
+        return (f"--drive {name}: bench {bench.name!r} has no such drive "
+                f"(drives: {', '.join(bench.drives)})")
+    d = bench.drives[name]
+    spec.name = name if args.name == "drive1" else args.name
+    spec.mechanics = Mechanics.from_dict(dict(d.mechanics))
+    spec.options = ModelOptions.from_dict(dict(d.options), where=f"drives.{name}.options")
+    spec.params = {**initial_params(d), **spec.params}
+    if not args.di:
+        spec.inputs = idle_inputs(d)
+    if spec.node_id is None:
+        spec.node_id = d.node_id
+    if spec.station is None:
+        spec.station = d.station
+    if spec.modbus_mode is None and d.rs485:
+        spec.modbus_mode = d.modbus_mode
+    return ""
 
 
 def _inputs(values: list[str]) -> dict[int, bool]:
@@ -94,13 +139,11 @@ def main(args: argparse.Namespace) -> int:
         inputs=_inputs(args.di) or {8: True},
         state_path=args.state,
     )
-    if args.bench:
-        from hil.plan.bench import load_bench
-
-        bench = load_bench(args.bench)
-        d = bench.drives[0]
-        spec.mechanics, spec.options = d.mechanics, d.options
-        spec.params = {**d.params, **spec.params}
+    if args.bench or args.drive:
+        err = _from_bench(spec, args)
+        if err:
+            print(f"hil drive: {err}", file=sys.stderr)
+            return 2
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -109,11 +152,20 @@ def main(args: argparse.Namespace) -> int:
     except Exception as exc:  # transport errors name the URL
         print(f"hil drive: {exc}", file=sys.stderr)
         return 1
+    control = None
     try:
+        if args.control == "stdio":
+            from hil.plan.virtual import StdioControl
+
+            control = StdioControl(stack, stop)
         print(f"hil drive: ready: {stack.describe()}", flush=True)
+        if control is not None:
+            control.start()
         while not stop.wait(0.2):
             pass
     finally:
+        if control is not None:
+            control.close()
         stack.stop()
         print("hil drive: stopped", flush=True)
     return 0

@@ -8,10 +8,13 @@ Model time starts at 0 when the host starts; `wall_ns(t)` maps it to epoch ns fo
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
 from typing import Any
+
+log = logging.getLogger(__name__)
 
 
 class DriveHost:
@@ -91,6 +94,9 @@ class DriveHost:
                     for fn in list(self._ticks):
                         fn(now)
                 except Exception as exc:  # a face bug must not stop the drive clock
+                    if not any(type(e) is type(exc) for e in self.errors):
+                        log.exception("drive host: tick failed (further %s are counted only)",
+                                      type(exc).__name__)
                     self.errors.append(exc)
                     if len(self.errors) > 100:
                         del self.errors[:50]

@@ -117,6 +117,12 @@ def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: set[str
         raise v.err(s.line, kw, f"drive {dname} has no CAN bus: CiA 402 needs `can:`")
     if s.kind in ("write", "read"):
         _check_via(v, s.line, kw, s.args["via"], d, dname)
+    if s.kind == "write" and s.args.get("expect_error") is not None:
+        from hil.plan.steps import check_expect_error
+
+        via = s.args["via"] or d.param_via
+        line = s.raw[s.kind].kline("expect_error") if hasattr(s.raw[s.kind], "kline") else s.line
+        check_expect_error(v, line, join(kw, "expect_error"), s.args["expect_error"], via)
     if s.kind in ("wait_until", "expect"):
         for c in s.args["conditions"]:
             if c.kind == "do" and c.key not in d.do:

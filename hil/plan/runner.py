@@ -179,11 +179,35 @@ def _x_sto_dropout(ctx: StepContext, s: Step, d: DriveIO) -> str:
 
 
 def _x_write(ctx: StepContext, s: Step, d: DriveIO) -> str:
+    want = s.args.get("expect_error")
+    if want is not None:
+        return _refused_write(s, d, want)
     for p, val in s.args["values"].items():
         d.write_param(p, val, s.args["via"])
         if not ctx.bench.virtual:  # a real drive has no ground truth: record what it took
             ctx.rec.drive_params(d.name, {p: val})
     return ""
+
+
+def _refused_write(s: Step, d: DriveIO, want: int) -> str:
+    """A write the drive must refuse with `want` (Modbus exception / SDO abort code)."""
+    from hil.plan.session import refusal_code
+
+    [(p, val)] = s.args["values"].items()
+    via = s.args["via"] or d.spec.param_via
+    what = "exception" if via == "modbus" else "abort"
+    try:
+        d.write_param(p, val, via)
+    except Exception as e:
+        got = refusal_code(e)
+        if got is None:
+            raise
+        if got != want:
+            raise StepFailed(f"{p} = {val} via {via}: refused with {what} 0x{got:X}, expected "
+                             f"0x{want:X} ({e})") from None
+        return f"{p} = {val} refused as expected: {e}"
+    raise StepFailed(f"{p} = {val} via {via} was accepted; expected a refusal with {what} "
+                     f"0x{want:X}")
 
 
 def _x_read(ctx: StepContext, s: Step, d: DriveIO) -> str:
@@ -315,14 +339,17 @@ def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
     spec = ctx.specs[s.args["spec"]]
     ctx.rec.flush()
     source = RecordingSource(ctx.rec.path)
-    verdicts = check(spec, source, params=s.args["params"] or None, binding=d.spec.binding())
+    binding = d.spec.binding()
+    verdicts = check(spec, source, params=s.args["params"] or None, binding=binding)
     counts: dict[str, int] = {}
     out = []
     for v in verdicts:
         vd = v.to_dict()
         counts[v.status] = counts.get(v.status, 0) + 1
         if v.status in ("pass", "fail", "inconclusive"):
-            ctx.rec.verdict(vd, plan=ctx.plan.name, step=s.index)
+            # binding + check_params: what `hil report` needs to redraw the diagram
+            ctx.rec.verdict(vd, plan=ctx.plan.name, step=s.index, binding=binding,
+                            check_params=s.args["params"] or {})
         out.append(vd)
     s.args["_verdicts"] = out
     text = ", ".join(f"{n} {k}" for k, n in sorted(counts.items())) or "no occurrence"
@@ -417,6 +444,13 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     rec.add_metadata("hil.bench", {"name": bench.name, "file": bench.path,
                                    "virtual": bench.virtual, "drives": list(bench.drives),
                                    "motion_allowed": bench.motion_allowed})
+    checked = sorted({s.args["spec"] for s in plan.steps if s.kind == "check_timing"})
+    if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding
+        import json
+
+        dspec = bench.drives[plan.drive or bench.default_drive]
+        rec.add_metadata("timing", {"specs": json.dumps(checked),
+                                    "binding": json.dumps(dspec.binding())})
     rec.attach("bench.yaml", bench.text.encode(), "application/yaml")
     rec.attach("plan.yaml", plan.text.encode(), "application/yaml")
     progress.plan(plan, bench)

@@ -83,6 +83,19 @@ class DriveIO:
         return None if v == 0 else f"AL{v:03X}"
 
 
+def refusal_code(exc: BaseException) -> int | None:
+    """The drive's own refusal in an error: Modbus exception code (ModbusExceptionError.code)
+    or SDO abort code (SdoError.abort_code); None for anything else (timeouts, local errors)."""
+    from hil.drivers.cia402 import SdoError
+    from hil.drivers.delta_modbus import ModbusExceptionError
+
+    if isinstance(exc, ModbusExceptionError):
+        return int(exc.code)
+    if isinstance(exc, SdoError) and exc.abort_code is not None:
+        return int(exc.abort_code)
+    return None
+
+
 def _od_index(name: str) -> int:
     """Parameter Px.yyy -> object 2xyyh (L16860: 2000h + group << 8 + index)."""
     from hil.model.params import parse_name

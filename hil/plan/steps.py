@@ -88,7 +88,8 @@ def describe(step: Step) -> str:
         return f"{k} " + ", ".join(f"{f} {w / 1e6:g}ms" for f, w in a["widths"].items())
     if k == "write":
         vals = ", ".join(f"{p}={v}" for p, v in a["values"].items())
-        return f"write {vals} via {a['via'] or '-'}"
+        refused = f" refused 0x{a['expect_error']:X}" if a.get("expect_error") else ""
+        return f"write {vals} via {a['via'] or '-'}{refused}"
     if k == "read":
         return f"read {', '.join(a['values'])} via {a['via'] or '-'}"
     if k == "state":
@@ -196,9 +197,42 @@ def _param_values(v: Checker, m: LDict, where: str, allow_none: bool) -> dict[st
     return out
 
 
+# Refusal codes a `write` may expect (`expect_error`): a Modbus exception code (1..255,
+# e.g. 03h illegal data value, a3-comms §1) or a CiA 301 SDO abort code (e.g. 0x06090031
+# value too high, L17024-17042).
+MODBUS_EXCEPTION = (1, 0xFF)
+SDO_ABORT = (0x05000000, 0xFFFFFFFF)
+
+
+def check_expect_error(v: Checker, line: int, where: str, code: int, via: str | None) -> None:
+    """The expected refusal code must be one the route can answer."""
+    if via == "modbus" and not MODBUS_EXCEPTION[0] <= code <= MODBUS_EXCEPTION[1]:
+        raise v.err(line, where, f"0x{code:X} is not a Modbus exception code (1..255, e.g. 3 = "
+                    "illegal data value) for via: modbus")
+    if via == "sdo" and not SDO_ABORT[0] <= code <= SDO_ABORT[1]:
+        raise v.err(line, where, f"{code} is not an SDO abort code (0x05000000..0xFFFFFFFF, "
+                    "e.g. 0x06090031 value too high) for via: sdo")
+
+
 def p_write(v, obj, line, where):
     m = v.mapping(obj, line, where)
-    return {"values": _param_values(v, m, where, False), "via": _via(v, m, where)}
+    via = _via(v, m, where)
+    fields = {k: x for k, x in m.items() if k != "expect_error"}
+    fm = LDict(fields)
+    fm.line, fm.key_lines = m.line, m.key_lines
+    out = {"values": _param_values(v, fm, where, False), "via": via, "expect_error": None}
+    if "expect_error" in m:
+        fw = join(where, "expect_error")
+        code = m["expect_error"]
+        if isinstance(code, bool) or not isinstance(code, int) or code <= 0:
+            raise v.err(m.kline("expect_error"), fw, f"{code!r}: the refusal code, a Modbus "
+                        "exception code (e.g. 3) or an SDO abort code (e.g. 0x06090031)")
+        if len(out["values"]) != 1:
+            raise v.err(m.kline("expect_error"), fw, "one parameter per refused write "
+                        f"(got {', '.join(out['values'])})")
+        check_expect_error(v, m.kline("expect_error"), fw, code, via)
+        out["expect_error"] = code
+    return out
 
 
 def p_read(v, obj, line, where):

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import json
 import os
 import subprocess
 import sys
@@ -36,14 +37,50 @@ def _auto_name(kind: str) -> str:
     return f"hil-{os.getpid()}-{next(_seq)}-{kind}"
 
 
+def free_loopback_port() -> int:
+    """A TCP port free on 127.0.0.1 right now (the OS picks it)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _auto_endpoints(query: str, ports: dict[str, int]) -> str:
+    """`listen=tcp/127.0.0.1:auto` -> a free loopback port (one per endpoint)."""
+    out = []
+    for item in query.split("&") if query else []:
+        k, eq, v = item.partition("=")
+        if k in ("listen", "connect"):
+            eps = []
+            for ep in v.split(","):
+                if ep.endswith(":auto"):
+                    if not ep.startswith("tcp/127.0.0.1:"):
+                        raise ValueError(f"{ep!r}: an auto port is only for tcp/127.0.0.1")
+                    ports.setdefault(ep, free_loopback_port())
+                    ep = f"{ep[:-5]}:{ports[ep]}"
+                eps.append(ep)
+            v = ",".join(eps)
+        out.append(f"{k}{eq}{v}")
+    return "&".join(out)
+
+
 def resolve_auto(bench: Bench, tmpdir: Path) -> dict[str, str]:
     """URL of each transport with `auto` targets made unique: keys `can:<bus>`,
-    `rs485:<line>`, `dio:<drive>`."""
+    `rs485:<line>`, `dio:<drive>`. `virtual:auto` gets a unique name, `pty:auto` a link in
+    `tmpdir`, `zenoh:auto` a unique key (`hil/<pid>-<n>/<kind>`), and a zenoh endpoint
+    `tcp/127.0.0.1:auto` a free loopback port."""
     out: dict[str, str] = {}
+    ports: dict[str, int] = {}
 
     def fix(url: str, kind: str) -> str:
         scheme, _, rest = url.partition(":")
         target, q, query = rest.partition("?")
+        if scheme == "zenoh":
+            query = _auto_endpoints(query, ports)
+            if target == "auto":
+                target = f"hil/{os.getpid()}-{next(_seq)}/{kind}"
+            return f"{scheme}:{target}{q}{query}"
         if target != "auto":
             return url
         target = str(tmpdir / f"{kind}-{next(_seq)}") if scheme == "pty" else _auto_name(kind)
@@ -60,9 +97,19 @@ def resolve_auto(bench: Bench, tmpdir: Path) -> dict[str, str]:
 
 
 def harness_side(url: str) -> str:
-    """The URL the harness opens for a drive-side URL: a pty's far end as a serial port."""
+    """The URL the harness opens for a drive-side URL: a pty's far end as a serial port; for
+    zenoh, the drive's `listen=` endpoints become the harness's `connect=` ones."""
     if url.startswith("pty:"):
         return "serial:" + url[4:]
+    if url.startswith("zenoh:"):
+        head, q, query = url.partition("?")
+        items = query.split("&") if query else []
+        listen = [i.partition("=")[2] for i in items if i.startswith("listen=")]
+        if not listen:
+            return url
+        rest = [i for i in items if not i.startswith(("listen=", "connect="))]
+        connect = [i.partition("=")[2] for i in items if i.startswith("connect=")]
+        return f"{head}?" + "&".join([f"connect={','.join(listen + connect)}", *rest])
     return url
 
 
@@ -229,22 +276,131 @@ class VirtualWorld:
             self._tmp.cleanup()
 
 
+CTL = "hil-ctl "  # prefix of control-channel lines on a `hil drive --control stdio` stdout
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple | set):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, int | float | str | bool) or x is None:
+        return x
+    return str(x)
+
+
+class _LineRecorder:
+    """What `GroundTruth` records, as `hil-ctl` JSON lines (the parent records them)."""
+
+    def __init__(self, write: Callable[[dict], None]) -> None:
+        self._write = write
+
+    def __getattr__(self, method: str) -> Callable[..., None]:
+        if method not in ("drive_state", "drive_event", "drive_params"):
+            raise AttributeError(method)
+
+        def call(*args: Any, **kw: Any) -> None:
+            self._write({"truth": method, "args": _jsonable(list(args)), "kw": _jsonable(kw)})
+
+        return call
+
+
+class StdioControl:
+    """Drive side of a subprocess bench's control channel (`hil drive --control stdio`).
+
+    stdin: one JSON command per line, `{"id": n, "op": "power_cycle", "battery": true,
+    "off_ns": 0}` | `{"id": n, "op": "inject", "options": {...}, "alarm": "AL009"}` |
+    `{"id": n, "op": "snapshot"}`; stdout: `hil-ctl {"reply": n, "ok": true, "result": ...}`
+    and the ground truth (`hil-ctl {"truth": "drive_state", ...}`) as `GroundTruth` records
+    it in process. EOF on stdin (the runner went away) stops the drive."""
+
+    def __init__(self, stack: Any, stop: threading.Event, stdin: Any = None,
+                 stdout: Any = None) -> None:
+        self.stack, self.stop = stack, stop
+        self._in = stdin or sys.stdin
+        self._out = stdout or sys.stdout
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self.truth: GroundTruth | None = None
+
+    def write(self, msg: dict) -> None:
+        line = CTL + json.dumps(msg, separators=(",", ":"))
+        with self._lock:
+            self._out.write(line + "\n")
+            self._out.flush()
+
+    def start(self) -> None:
+        st = self.stack
+        self.truth = GroundTruth(st.spec.name, st.drive, st.host, _LineRecorder(self.write),
+                                 st.spec.options.state_publish_ms)
+        self._thread = threading.Thread(target=self._serve, name="hil-drive-ctl", daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        for line in self._in:
+            line = line.strip()
+            if not line:
+                continue
+            try:
+                cmd = json.loads(line)
+                result = self.execute(cmd)
+                self.write({"reply": cmd.get("id"), "ok": True, "result": _jsonable(result)})
+            except Exception as e:  # a bad command must not kill the drive
+                rid = cmd.get("id") if isinstance(locals().get("cmd"), dict) else None
+                self.write({"reply": rid, "ok": False, "error": f"{type(e).__name__}: {e}"})
+        self.stop.set()
+
+    def execute(self, cmd: dict) -> Any:
+        drive, host = self.stack.drive, self.stack.host
+        op = cmd.get("op")
+        if op == "power_cycle":
+            off = int(cmd.get("off_ns") or 0)
+            if off:
+                time.sleep(off / 1e9)
+            host.call(drive.power_cycle, battery=bool(cmd.get("battery", True)))
+            return None
+        if op == "inject":
+            with host.lock:
+                for k, x in (cmd.get("options") or {}).items():
+                    setattr(drive.options, k, x)
+                if cmd.get("alarm"):
+                    drive.alarms.raise_alarm(cmd["alarm"])
+            return None
+        if op == "snapshot":
+            return host.call(drive.snapshot)
+        raise ValueError(f"unknown control op {op!r}; known: power_cycle, inject, snapshot")
+
+    def close(self) -> None:
+        if self.truth is not None:
+            self.truth.close()
+
+
 class SubprocessWorld:
     """Drive side as `hil drive` processes (one per drive), for zenoh/socketcan benches.
 
-    Seam: the `hil drive` command line is the faces room's; this passes
-    `--can URL --node-id N --rs485 URL --station N --dio URL --bench FILE --drive NAME`
-    and waits for a line containing `ready` (DESIGN.md)."""
+    Each process gets `--bench FILE --drive NAME --control stdio` plus its transports
+    (`--can URL --node-id N --rs485 URL --station N --dio URL`, `auto` targets resolved
+    here) and prints a line containing `ready` (DESIGN.md). Through the control channel the
+    runner power-cycles, injects and snapshots the drive, and records the ground truth the
+    process streams (same topics as in process)."""
 
-    def __init__(self, bench: Bench, recorder: Any, *, ready_timeout_s: float = 10.0) -> None:
-        self.bench = bench
+    def __init__(self, bench: Bench, recorder: Any, *, ready_timeout_s: float | None = None,
+                 reply_timeout_s: float = 5.0) -> None:
+        self.bench, self.rec = bench, recorder
+        self.reply_timeout_s = reply_timeout_s
+        ready = ready_timeout_s or bench.timeouts["ready"] / 1e9
         self._tmp = tempfile.TemporaryDirectory(prefix="hil-bench-")
         self.urls = resolve_auto(bench, Path(self._tmp.name))
         self.procs: dict[str, subprocess.Popen] = {}
+        self._ids = itertools.count(1)
+        self._replies: dict[int, dict] = {}
+        self._waiting: dict[int, threading.Event] = {}
+        self._lock = threading.Lock()
+        self._out: dict[str, list[str]] = {}
         try:
             for name, spec in bench.drives.items():
                 cmd = [sys.executable, "-m", "hil.cli", "drive", "--bench", bench.path,
-                       "--drive", name]
+                       "--drive", name, "--name", name, "--control", "stdio"]
                 if spec.can:
                     cmd += ["--can", self.urls[f"can:{spec.can}"], "--node-id", str(spec.node_id)]
                 if spec.rs485:
@@ -252,52 +408,99 @@ class SubprocessWorld:
                             "--station", str(spec.station)]
                 if spec.dio:
                     cmd += ["--dio", self.urls[f"dio:{name}"]]
-                p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True)
+                p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1)
                 self.procs[name] = p
-                self._wait_ready(name, p, ready_timeout_s)
+                self._wait_ready(name, p, ready)
         except BaseException:
             self.close()
             raise
 
-    @staticmethod
-    def _wait_ready(name: str, p: subprocess.Popen, timeout_s: float) -> None:
-        seen: list[str] = []
+    def _wait_ready(self, name: str, p: subprocess.Popen, timeout_s: float) -> None:
+        seen = self._out.setdefault(name, [])
         done = threading.Event()
 
         def pump() -> None:
             assert p.stdout is not None
             for line in p.stdout:
+                if line.startswith(CTL):
+                    self._control_line(name, line[len(CTL):])
+                    continue
                 seen.append(line.rstrip())
+                del seen[:-50]
                 if "ready" in line:
                     done.set()
             done.set()
 
-        threading.Thread(target=pump, daemon=True).start()
+        threading.Thread(target=pump, name=f"hil-drive-{name}-out", daemon=True).start()
         if not done.wait(timeout_s) or p.poll() is not None:
             raise RuntimeError(f"virtual drive {name}: `hil drive` not ready within "
                                f"{timeout_s:g} s; output: {' | '.join(seen[-5:]) or 'none'}")
+
+    def _control_line(self, name: str, text: str) -> None:
+        try:
+            msg = json.loads(text)
+        except ValueError:
+            return
+        if "truth" in msg:
+            fn = getattr(self.rec, str(msg["truth"]), None)
+            if fn is not None:
+                with contextlib.suppress(Exception):
+                    fn(*msg.get("args", []), **msg.get("kw", {}))
+            return
+        rid = msg.get("reply")
+        with self._lock:
+            ev = self._waiting.pop(rid, None) if isinstance(rid, int) else None
+            if ev is not None:
+                self._replies[rid] = msg
+        if ev is not None:
+            ev.set()
+
+    def _call(self, drive: str, op: str, **args: Any) -> Any:
+        p = self.procs.get(drive)
+        if p is None or p.poll() is not None or p.stdin is None:
+            raise RuntimeError(f"virtual drive {drive}: its `hil drive` process is not running")
+        rid = next(self._ids)
+        ev = threading.Event()
+        with self._lock:
+            self._waiting[rid] = ev
+        p.stdin.write(json.dumps({"id": rid, "op": op, **args}) + "\n")
+        p.stdin.flush()
+        if not ev.wait(self.reply_timeout_s + args.get("off_ns", 0) / 1e9):
+            with self._lock:
+                self._waiting.pop(rid, None)
+            raise RuntimeError(f"virtual drive {drive}: no answer to {op} within "
+                               f"{self.reply_timeout_s:g} s")
+        with self._lock:
+            reply = self._replies.pop(rid)
+        if not reply.get("ok"):
+            raise RuntimeError(f"virtual drive {drive}: {op}: {reply.get('error')}")
+        return reply.get("result")
 
     def harness_urls(self) -> dict[str, str]:
         return {k: harness_side(u) for k, u in self.urls.items()}
 
     def power_cycle(self, drive: str, battery: bool = True, off_ns: int = 0) -> None:
-        raise NotImplementedError("power_cycle on a subprocess drive: not wired yet")
+        self._call(drive, "power_cycle", battery=battery, off_ns=off_ns)
 
     def inject(self, drive: str, options: dict | None = None, alarm: str | None = None) -> None:
-        raise NotImplementedError("inject on a subprocess drive: not wired yet")
+        self._call(drive, "inject", options=options or {}, alarm=alarm)
 
     def snapshot(self, drive: str) -> dict:
-        return {}
+        return dict(self._call(drive, "snapshot") or {})
 
     def close(self) -> None:
         for p in self.procs.values():
             if p.poll() is None:
+                with contextlib.suppress(Exception):
+                    assert p.stdin is not None
+                    p.stdin.close()  # EOF on the control channel: the drive stops
                 p.terminate()
-                try:
-                    p.wait(5)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait(5)
+            try:
+                p.wait(5)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(5)
+        self.procs.clear()
         with contextlib.suppress(Exception):
             self._tmp.cleanup()

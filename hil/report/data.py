@@ -105,6 +105,35 @@ def load_run(path: str | Path) -> RunData:
     return data
 
 
+_NOISE = {"raw", "adu", "mode", "role", "data_hex", "frame"}
+
+
+def _brief(msg: dict, width: int = 160) -> str:
+    """One readable line per bus message: its own text if any, else `key=value` pairs."""
+    text = msg.get("text") or msg.get("summary")
+    adu = msg.get("adu")
+    if not text and isinstance(adu, dict):  # a decoded Modbus ADU (hil.record topics)
+        text = f"{msg.get('dir', '')} {adu.get('function_name') or adu.get('function')}"
+        if adu.get("address") is not None:
+            text += f" at {adu['address']:04X}h"
+        if adu.get("values"):
+            text += f" values {adu['values']}"
+        if adu.get("exception") is not None:
+            text += f" EXCEPTION {adu['exception']:02X}h {adu.get('exception_name') or ''}"
+        if msg.get("rtt_us"):
+            text += f" (rtt {msg['rtt_us'] / 1000:.1f} ms)"
+        text += f"  [{adu.get('raw', '')}]"
+    if not text:
+        parts = []
+        for k, v in msg.items():
+            if k in _NOISE or v in (None, "", [], {}):
+                continue
+            parts.append(f"{k}={json.dumps(v, default=str) if isinstance(v, dict | list) else v}")
+        text = " ".join(parts)
+    text = str(text)
+    return text if len(text) <= width else text[: width - 1] + "…"
+
+
 def bus_log(run: RunData, step: StepData, limit: int = 200) -> list[tuple[int, str, str]]:
     """Decoded bus messages (CANopen, Modbus, DI/DO) seen during one step."""
     if step.t_start is None:
@@ -113,9 +142,7 @@ def bus_log(run: RunData, step: StepData, limit: int = 200) -> list[tuple[int, s
     out = []
     for t, topic, msg in run.bus:
         if step.t_start <= t <= end:
-            text = msg.get("text") or msg.get("summary") or json.dumps(
-                {k: v for k, v in msg.items() if k not in ("raw",)}, default=str)
-            out.append((t, topic, str(text)))
+            out.append((t, topic, _brief(msg)))
             if len(out) >= limit:
                 break
     return out

@@ -1,8 +1,9 @@
 """A self-contained HTML report rendered from a recording alone (no external assets).
 
-Sections: summary, steps and timing verdicts, expected vs observed timing windows (from
-`hil.timing.render` when it provides `render_verdict_svg(verdict) -> str`, else a built-in
-window bar), a plot of position / velocity / torque from the virtual bench's ground truth,
+Sections: summary, steps and timing verdicts (each with a window bar: expected window and
+observed value), the timing diagrams of every checked spec (`hil.timing.render.svg`: the
+observed signals with the expected windows on them, redrawn from the recording), a plot of
+position / velocity / torque from the virtual bench's ground truth,
 the safe-state actions, the bus log of each failing step, parameters, bench and plan files.
 """
 
@@ -25,12 +26,20 @@ pre{background:#f7f7f7;padding:8px;overflow:auto;font-size:12px}
 .b-pass{background:#176f2c}.b-fail,.b-error,.b-aborted{background:#b00020}
 .b-inconclusive{background:#a06000}.b-unknown{background:#777}
 svg{background:#fff;border:1px solid #ddd}
+.diagram{overflow-x:auto}figure{margin:0.8em 0}figcaption{font-weight:600;margin:0.3em 0}
 """
 E = html.escape
 
 
 def _status(s: str) -> str:
     return f'<span class="{E(s)}">{E(s.upper())}</span>'
+
+
+def _ms(value: object) -> str:
+    """A measured interval for the table: 3 decimals, '–' for presence/absence rules."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return f"{value:.3f} ms"
+    return "–"
 
 
 def _window_svg(v: dict) -> str:
@@ -66,16 +75,66 @@ def _window_svg(v: dict) -> str:
     return "".join(parts)
 
 
-def _verdict_svg(v: dict) -> str:
-    try:
-        from hil.timing import render  # the timing room's renderer, when it exists
+MAX_DIAGRAMS = 6  # per checked spec: failing occurrences first
 
-        fn = getattr(render, "render_verdict_svg", None)
-        if fn is not None:
-            return str(fn(v))
-    except Exception:
-        pass
-    return _window_svg(v)
+
+def _spec_by_id() -> dict[str, object]:
+    from hil.plan.runner import timing_specs
+
+    return timing_specs()
+
+
+def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
+    """(title, svg) per checked spec and occurrence: the observed signals with the expected
+    windows drawn on them (`hil.timing.render.svg`), from the recording alone. A spec that
+    cannot be redrawn (unknown id, unreadable recording) gives a note instead of a diagram."""
+    from dataclasses import fields
+
+    from hil.timing.checker import Verdict
+    from hil.timing.render import svg
+    from hil.timing.source import RecordingSource
+
+    groups: dict[tuple[str, object], list[dict]] = {}
+    for v in run.verdicts:
+        groups.setdefault((str(v.get("spec", "")), v.get("step")), []).append(v)
+    if not groups:
+        return []
+    out: list[tuple[str, str]] = []
+    try:
+        specs = _spec_by_id()
+        source = RecordingSource(run.path)
+    except Exception as e:  # a truncated or foreign recording: the table still stands
+        return [("timing diagrams", f"<p>Diagrams not drawn: {E(str(e))}</p>")]
+    names = {f.name for f in fields(Verdict)}
+    for (sid, step), vds in groups.items():
+        spec = specs.get(sid)
+        label = f"{sid}" + (f" (step {int(step) + 1})" if isinstance(step, int) else "")
+        if spec is None:
+            out.append((label, f"<p>No timing spec {E(sid)} here: diagram not drawn.</p>"))
+            continue
+        verdicts = []
+        for vd in vds:
+            kw = {k: vd[k] for k in names if k in vd}
+            kw["uncertainty_ms"] = tuple(kw.get("uncertainty_ms") or (0.0, 0.0))
+            kw["window_ms"] = tuple(kw.get("window_ms") or (None, None))
+            verdicts.append(Verdict(**kw))
+        occs = sorted({v.occurrence for v in verdicts},
+                      key=lambda o: (not any(v.status == "fail" and v.occurrence == o
+                                             for v in verdicts), o))
+        binding = vds[0].get("binding") or None
+        params = vds[0].get("check_params") or None
+        for occ in occs[:MAX_DIAGRAMS]:
+            chosen = [v for v in verdicts if v.occurrence == occ]
+            try:
+                pic = svg(spec, source, chosen, params=params, binding=binding,
+                          occurrence=None, width=1100)
+            except Exception as e:
+                pic = f"<p>Diagram not drawn: {E(type(e).__name__)}: {E(str(e))}</p>"
+            out.append((f"{label}, occurrence {occ + 1}", pic))
+        if len(occs) > MAX_DIAGRAMS:
+            out.append((f"{label}: {len(occs) - MAX_DIAGRAMS} more occurrences",
+                        "<p>Not drawn (see the verdict table).</p>"))
+    return out
 
 
 def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
@@ -148,9 +207,13 @@ def render_html(run: RunData) -> str:
                      f"<td>{E(str(v.get('constraint', '')))}<br><small>"
                      f"{E(str(v.get('source', '')))}</small></td>"
                      f"<td>{_status(str(v.get('status', '')))}</td>"
-                     f"<td>{E(str(v.get('measured_ms')))} ms</td><td>{E(str(win))}</td>"
-                     f"<td>{_verdict_svg(v)}</td><td>{E(str(v.get('message', '')))}</td></tr>")
+                     f"<td>{_ms(v.get('measured_ms'))}</td><td>{E(str(win))}</td>"
+                     f"<td>{_window_svg(v)}</td><td>{E(str(v.get('message', '')))}</td></tr>")
         h.append("</table>")
+        h.append("<h2>Timing diagrams: observed signals and expected windows</h2>")
+        for title, pic in timing_diagrams(run):
+            h.append(f"<figure><figcaption>{E(title)}</figcaption>"
+                     f"<div class='diagram'>{pic}</div></figure>")
     else:
         h.append("<p>No timing verdicts in this run.</p>")
     h.append("<h2>Motion (virtual-bench ground truth)</h2>")
