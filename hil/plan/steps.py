@@ -21,7 +21,7 @@ COMMANDABLE = STATES[:-1]
 MODES = ("PP", "PV", "PT", "HM")
 VIAS = ("modbus", "sdo")
 STO = ("A", "B")
-COMMON = {"name", "drive", "note", "timeout"}
+COMMON = {"name", "drive", "note", "timeout", "imposed"}
 _PARAM_RE = re.compile(r"^P[0-7]\.\d{3}$")
 _ALARM_RE = re.compile(r"^AL[0-9A-F]{3}$")
 _INT32 = (-(2**31), 2**31 - 1)
@@ -59,6 +59,7 @@ class Step:
     drive: str | None = None
     timeout_ns: int | None = None
     note: str = ""
+    imposed_by_manual_ns: int = 0  # `imposed:` the manual's own delay inside this step
     raw: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -71,7 +72,10 @@ class Step:
 
     @property
     def imposed_ns(self) -> int:
-        """Delay the step itself imposes by design (waits, pulse widths)."""
+        """Delay the step imposes by design: waits, pulse widths, and the manual delay a
+        plan names on a step with `imposed:` (e.g. the 1 s of AL501 in a wait_until)."""
+        if self.imposed_by_manual_ns:
+            return self.imposed_by_manual_ns
         if self.kind == "wait":
             return self.args["duration"]
         if self.kind in ("pulse", "sto_dropout"):
@@ -456,6 +460,10 @@ def parse_step(v: Checker, obj: Any, index: int, line: int) -> Step:
         step.note = v.text(m, "note", where)
     if "drive" in m:
         step.drive = v.text(m, "drive", where)
+    if "imposed" in m:
+        step.imposed_by_manual_ns = v.duration(m, "imposed", where)
+        if step.imposed_by_manual_ns < 0:
+            raise v.err(m.kline("imposed"), join(where, "imposed"), "must be >= 0")
     if "timeout" in m:
         if kind == "wait_until":
             raise v.err(m.kline("timeout"), join(where, "timeout"),

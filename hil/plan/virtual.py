@@ -47,7 +47,8 @@ def free_loopback_port() -> int:
 
 
 def _auto_endpoints(query: str, ports: dict[str, int]) -> str:
-    """`listen=tcp/127.0.0.1:auto` -> a free loopback port (one per endpoint)."""
+    """`listen=tcp/127.0.0.1:auto` -> a free loopback port (the same endpoint written twice
+    in one URL gets the same port)."""
     out = []
     for item in query.split("&") if query else []:
         k, eq, v = item.partition("=")
@@ -71,13 +72,12 @@ def resolve_auto(bench: Bench, tmpdir: Path) -> dict[str, str]:
     `tmpdir`, `zenoh:auto` a unique key (`hil/<pid>-<n>/<kind>`), and a zenoh endpoint
     `tcp/127.0.0.1:auto` a free loopback port."""
     out: dict[str, str] = {}
-    ports: dict[str, int] = {}
 
     def fix(url: str, kind: str) -> str:
         scheme, _, rest = url.partition(":")
         target, q, query = rest.partition("?")
         if scheme == "zenoh":
-            query = _auto_endpoints(query, ports)
+            query = _auto_endpoints(query, {})  # each URL its own port(s)
             if target == "auto":
                 target = f"hil/{os.getpid()}-{next(_seq)}/{kind}"
             return f"{scheme}:{target}{q}{query}"
@@ -102,7 +102,7 @@ def harness_side(url: str) -> str:
     if url.startswith("pty:"):
         return "serial:" + url[4:]
     if url.startswith("zenoh:"):
-        head, q, query = url.partition("?")
+        head, _, query = url.partition("?")
         items = query.split("&") if query else []
         listen = [i.partition("=")[2] for i in items if i.startswith("listen=")]
         if not listen:

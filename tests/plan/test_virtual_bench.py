@@ -15,7 +15,8 @@ from hil.record.reader import Recording
 pytestmark = pytest.mark.integration
 
 PASSING = ["servo_on_off_brake", "param_access", "sto_both", "sto_short_dropout", "pp_move",
-           "cia402_power_states"]
+           "cia402_power_states", "servo_brake_settings", "alarm_reset", "limit_switches",
+           "pv_move", "sto_single_channel"]
 
 
 @pytest.mark.parametrize("name", PASSING)

@@ -1,0 +1,28 @@
+"""`auto` transport targets of virtual benches: unique names, keys and loopback ports."""
+
+from __future__ import annotations
+
+from hil.paths import fixture
+from hil.plan.bench import load_bench
+from hil.plan.virtual import harness_side, resolve_auto
+from hil.transport.urls import parse_url
+
+
+def test_zenoh_auto_gets_a_unique_key_and_a_free_loopback_port(tmp_path):
+    bench = load_bench(fixture("benches", "virtual-zenoh.yaml"))
+    a, b = resolve_auto(bench, tmp_path), resolve_auto(bench, tmp_path)
+    for urls in (a, b):
+        can, dio = parse_url(urls["can:can0"], "can"), parse_url(urls["dio:drive1"], "dio")
+        assert can.target != dio.target and "auto" not in can.target + dio.target
+        eps = can.zenoh().listen + dio.zenoh().listen
+        assert all(e.startswith("tcp/127.0.0.1:") and e.rsplit(":", 1)[1].isdigit() for e in eps)
+        assert len(set(eps)) == 2  # CAN and DI/DO each their own port
+        assert urls["rs485:rs485"].startswith(f"pty:{tmp_path}/")
+    assert a["can:can0"] != b["can:can0"]  # unique per run
+
+
+def test_harness_connects_where_the_drive_listens():
+    url = "zenoh:hil/1-0/can?listen=tcp/127.0.0.1:7447&mode=peer"
+    assert harness_side(url) == "zenoh:hil/1-0/can?connect=tcp/127.0.0.1:7447&mode=peer"
+    assert harness_side("pty:/tmp/x?baud=38400") == "serial:/tmp/x?baud=38400"
+    assert harness_side("zenoh:k?connect=tcp/127.0.0.1:1") == "zenoh:k?connect=tcp/127.0.0.1:1"
