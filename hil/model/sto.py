@@ -84,13 +84,10 @@ class Sto:
         if fdbk != self.fdbk:
             self.fdbk = fdbk
             self._on_fdbk(fdbk)
-        # a condition that ended is no longer a cause (the alarm, if raised, stays)
-        for code, cond in (
-            ("AL500", not a and not b),
-            ("AL501", not a and b),
-            ("AL502", a and not b),
-        ):
-            if not cond:
+        # a condition that ended is no longer a cause (the alarm, if raised, stays). AL500's
+        # cause ends only when both channels are back ("皆回復", L2493, L20199).
+        for code, gone in (("AL500", a and b), ("AL501", a), ("AL502", b)):
+            if gone:
                 self._set_cause(code, False)
         lost = not (a and b)
         # hardware torque cut (L2474)

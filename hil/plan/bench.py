@@ -53,6 +53,7 @@ _PARAM_RE = re.compile(r"^P[0-7]\.\d{3}$")
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
 
 _TOP = {"name", "description", "virtual", "process", "can", "rs485", "drives", "timeouts",
+        "timing",
         "safe_state", "motion_allowed", "features"}
 _DRIVE = {"node_id", "station", "profile", "can", "rs485", "dio", "dio_map", "wiring", "sto",
           "params", "param_via", "mechanics", "options", "modbus_mode"}
@@ -148,6 +149,9 @@ class Bench:
     safe_state: SafeState = field(default_factory=SafeState)
     motion_allowed: bool = True
     features: set[str] = field(default_factory=set)
+    # Timing-spec constants this bench overrides (e.g. a transport's input latency widens
+    # `fw_tol`): the same as `hil check --const NAME=VALUE`, in ms.
+    timing_constants: dict[str, float] = field(default_factory=dict)
 
     @property
     def default_drive(self) -> str:
@@ -243,7 +247,25 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
         description=str(top.get("description") or ""), process=process, can=can, rs485=rs485,
         timeouts=timeouts, safe_state=safe,
         motion_allowed=v.boolean(top, "motion_allowed", "", True), features=features,
+        timing_constants=_timing(v, top),
     )
+
+
+def _timing(v: Checker, top: LDict) -> dict[str, float]:
+    """`timing: {constants: {fw_tol: 3}}`: spec constants (ms) overridden on this bench."""
+    if "timing" not in top:
+        return {}
+    m = v.mapping(top["timing"], top.kline("timing"), "timing")
+    v.keys(m, {"constants"}, "timing")
+    if "constants" not in m:
+        return {}
+    c = v.mapping(m["constants"], m.kline("constants"), "timing.constants")
+    out = {}
+    for k, x in c.items():
+        if isinstance(x, bool) or not isinstance(x, int | float):
+            raise v.err(c.kline(k), join("timing.constants", k), f"{x!r}: a number of ms")
+        out[str(k)] = float(x)
+    return out
 
 
 def _urls(v: Checker, top: LDict, key: str, kind: str) -> dict[str, str]:

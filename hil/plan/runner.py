@@ -332,6 +332,13 @@ def _x_inject(ctx: StepContext, s: Step, d: DriveIO) -> str:
     return ""
 
 
+def _constants_for(spec: Any, overrides: dict[str, float]) -> dict[str, float] | None:
+    """The bench's constant overrides that this spec defines (others are ignored)."""
+    own = getattr(spec, "constants", {}) or {}
+    picked = {k: v for k, v in overrides.items() if k in own}
+    return picked or None
+
+
 def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
     from hil.timing.checker import check
     from hil.timing.source import RecordingSource
@@ -340,7 +347,8 @@ def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
     ctx.rec.flush()
     source = RecordingSource(ctx.rec.path)
     binding = d.spec.binding()
-    verdicts = check(spec, source, params=s.args["params"] or None, binding=binding)
+    verdicts = check(spec, source, params=s.args["params"] or None, binding=binding,
+                     constants=_constants_for(spec, ctx.bench.timing_constants))
     counts: dict[str, int] = {}
     out = []
     for v in verdicts:
@@ -450,7 +458,8 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
 
         dspec = bench.drives[plan.drive or bench.default_drive]
         rec.add_metadata("timing", {"specs": json.dumps(checked),
-                                    "binding": json.dumps(dspec.binding())})
+                                    "binding": json.dumps(dspec.binding()),
+                                    "constants": json.dumps(bench.timing_constants)})
     rec.attach("bench.yaml", bench.text.encode(), "application/yaml")
     rec.attach("plan.yaml", plan.text.encode(), "application/yaml")
     progress.plan(plan, bench)

@@ -102,7 +102,12 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: {args.recording}: no such file", file=sys.stderr)
         return 2
     try:
-        from hil.timing.source import RecordingSource, infer_places, recorded_specs
+        from hil.timing.source import (
+            RecordingSource,
+            infer_places,
+            recorded_constants,
+            recorded_specs,
+        )
 
         source = RecordingSource(args.recording, time=args.time)
     except ImportError as e:
@@ -119,9 +124,12 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: {e}", file=sys.stderr)
         return 2
     bind = infer_places(source.topics()) | rec_binding | binding
+    bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
     for spec in specs:
-        vs = check(spec, source, params=params, binding=bind, constants=consts, resolution=res)
+        own = {k: v for k, v in bench_consts.items() if k in spec.constants}
+        vs = check(spec, source, params=params, binding=bind, constants=(own | consts) or None,
+                   resolution=res)
         verdicts.extend(vs)
         if args.svg:
             from hil.timing.render import svg

@@ -214,6 +214,15 @@ def recorded_specs(meta: Mapping[str, Mapping[str, str]]) -> tuple[list[str], di
     return [str(s) for s in specs], {str(k): str(v) for k, v in binding.items()}
 
 
+def recorded_constants(meta: Mapping[str, Mapping[str, str]]) -> dict[str, float]:
+    """Spec constants the bench of the run overrode (metadata `timing`: `constants` JSON)."""
+    try:
+        raw = json.loads(meta.get("timing", {}).get("constants") or "{}")
+        return {str(k): float(v) for k, v in dict(raw).items()}
+    except (ValueError, TypeError):
+        return {}
+
+
 def infer_places(topics: Iterable[str]) -> dict[str, str]:
     """Placeholder values implied by the topics when unambiguous (one drive, one bus...)."""
     found: dict[str, set[str]] = {"drive": set(), "dio": set(), "bus": set()}

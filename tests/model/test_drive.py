@@ -257,3 +257,21 @@ def test_6064h_follows_the_absolute_coordinate(tmp_path) -> None:
     again = Drive(state_path=tmp_path, inputs={8: True})
     assert abs(again.read_object(0x6064) - before) <= 1
     assert again.absolute.coordinate_valid
+
+
+def test_arst_keeps_al500_while_one_channel_is_still_lost() -> None:
+    # L2493, L20199: AL500 can be reset only after both safety signals are back.
+    drive, _ = make()
+    drive.set_sto("A", False)
+    drive.set_sto("B", False)
+    drive.advance(20 * MS)
+    drive.set_sto("A", True)
+    drive.set_di(5, True)
+    drive.advance(5 * MS)
+    assert "AL500" in drive.alarms.active
+    drive.set_di(5, False)
+    drive.set_sto("B", True)
+    drive.advance(5 * MS)
+    drive.set_di(5, True)
+    drive.advance(5 * MS)
+    assert "AL500" not in drive.alarms.active
