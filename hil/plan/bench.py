@@ -53,7 +53,7 @@ _PARAM_RE = re.compile(r"^P[0-7]\.\d{3}$")
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
 
 _TOP = {"name", "description", "virtual", "process", "can", "rs485", "drives", "timeouts",
-        "timing",
+        "timing", "gateway",
         "safe_state", "motion_allowed", "features"}
 _DRIVE = {"node_id", "station", "profile", "can", "rs485", "dio", "dio_map", "wiring", "sto",
           "params", "param_via", "mechanics", "options", "modbus_mode"}
@@ -152,6 +152,7 @@ class Bench:
     # Timing-spec constants this bench overrides (e.g. a transport's input latency widens
     # `fw_tol`): the same as `hil check --const NAME=VALUE`, in ms.
     timing_constants: dict[str, float] = field(default_factory=dict)
+    gateway: GatewaySpec | None = None  # buses reached through a `hil gateway` (a lease)
 
     @property
     def default_drive(self) -> str:
@@ -170,6 +171,23 @@ class Bench:
         if any(d.dio for d in self.drives.values()):
             out.add("dio")
         return out
+
+
+@dataclass
+class GatewaySpec:
+    """`gateway: {lab, bench, connect, holder}`: the bench is exported by `hil gateway`.
+
+    Transports written as `gateway` (or `gateway?baud=...` for RS-485) are taken from the
+    lease: `zenoh:<lab>/<bench>/can/<bus>`, `.../rs485/<line>`, `.../dio/<drive>`."""
+
+    lab: str
+    bench: str
+    connect: list[str]
+    holder: str | None = None
+    mode: str = "peer"
+
+
+GATEWAY = "gateway"
 
 
 def builtin_bench_path() -> Path:
@@ -200,8 +218,12 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
         raise v.err(top.kline("process"), "process", f"{process!r}: one of {', '.join(PROCESSES)}")
     if "process" in top and not virtual:
         raise v.err(top.kline("process"), "process", "only for a virtual bench (virtual: true)")
-    can = _urls(v, top, "can", "can")
-    rs485 = _urls(v, top, "rs485", "serial")
+    gateway = _gateway(v, top)
+    if gateway is not None and virtual:
+        raise v.err(top.kline("gateway"), "gateway", "a virtual bench starts its own drives; "
+                    "a gateway exports a real bench (virtual: false)")
+    can = _urls(v, top, "can", "can", gateway is not None)
+    rs485 = _urls(v, top, "rs485", "serial", gateway is not None)
     timeouts = _timeouts(v, top)
     drives_map = v.mapping(top["drives"], top.kline("drives"), "drives")
     if not drives_map:
@@ -215,6 +237,9 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
             raise v.err(drives_map.kline(dname), where, "drive names are letters, digits, _ -")
         spec = _drive(v, dname, v.mapping(d, drives_map.kline(dname), where), where, virtual,
                       can, rs485, process)
+        if spec.dio == GATEWAY and gateway is None:
+            raise v.err(d.kline("dio"), join(where, "dio"),
+                        "`gateway` needs a top-level gateway: section")
         if spec.node_id is not None and spec.can:
             other = nodes.get((spec.can, spec.node_id))
             if other:
@@ -247,8 +272,30 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
         description=str(top.get("description") or ""), process=process, can=can, rs485=rs485,
         timeouts=timeouts, safe_state=safe,
         motion_allowed=v.boolean(top, "motion_allowed", "", True), features=features,
-        timing_constants=_timing(v, top),
+        timing_constants=_timing(v, top), gateway=gateway,
     )
+
+
+def _gateway(v: Checker, top: LDict) -> GatewaySpec | None:
+    if "gateway" not in top:
+        return None
+    m = v.mapping(top["gateway"], top.kline("gateway"), "gateway")
+    v.keys(m, {"lab", "bench", "connect", "holder", "mode"}, "gateway",
+           required=("lab", "bench", "connect"))
+    connect = m["connect"]
+    if isinstance(connect, str):
+        connect = [connect]
+    if not isinstance(connect, list) or not connect or not all(isinstance(c, str)
+                                                                 for c in connect):
+        raise v.err(m.kline("connect"), "gateway.connect", "one or more zenoh endpoints, "
+                    "e.g. tcp/127.0.0.1:7447")
+    mode = v.text(m, "mode", "gateway", "peer")
+    if mode not in ("peer", "client"):
+        raise v.err(m.kline("mode"), "gateway.mode", f"{mode!r}: peer or client")
+    holder = m.get("holder")
+    return GatewaySpec(lab=v.text(m, "lab", "gateway"), bench=v.text(m, "bench", "gateway"),
+                       connect=[str(c) for c in connect], mode=mode,
+                       holder=None if holder is None else str(holder))
 
 
 def _timing(v: Checker, top: LDict) -> dict[str, float]:
@@ -268,7 +315,7 @@ def _timing(v: Checker, top: LDict) -> dict[str, float]:
     return out
 
 
-def _urls(v: Checker, top: LDict, key: str, kind: str) -> dict[str, str]:
+def _urls(v: Checker, top: LDict, key: str, kind: str, gateway: bool = False) -> dict[str, str]:
     from hil.transport.urls import TransportUrlError, parse_url
 
     if key not in top:
@@ -281,6 +328,11 @@ def _urls(v: Checker, top: LDict, key: str, kind: str) -> dict[str, str]:
             raise v.err(m.kline(bname), where, "transport names are letters, digits, _ -")
         if not isinstance(url, str):
             raise v.err(m.kline(bname), where, "must be a transport URL (text)")
+        if url.partition("?")[0] == GATEWAY:
+            if not gateway:
+                raise v.err(m.kline(bname), where, "`gateway` needs a top-level gateway: section")
+            out[bname] = url
+            continue
         try:
             parse_url(url, kind)  # type: ignore[arg-type]
         except (TransportUrlError, ValueError) as e:
@@ -340,7 +392,9 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
                 raise v.err(d.kline(kind), join(where, kind),
                             "a virtual: bus is in-process only; process: subprocess needs "
                             "zenoh: or socketcan:")
-    if "dio" in d:
+    if "dio" in d and d["dio"] == GATEWAY:
+        spec.dio = GATEWAY  # from the gateway's lease (checked by parse_bench)
+    elif "dio" in d:
         spec.dio = v.text(d, "dio", where)
         try:
             u = parse_url(spec.dio, "dio")

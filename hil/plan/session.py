@@ -111,6 +111,13 @@ class Session:
         self.bench, self.recorder, self.world = bench, recorder, world
         self.drives: dict[str, DriveIO] = {}
         self._closers: list[Callable[[], None]] = []
+        self.lease: Any = None  # hil.gateway.client.Lease when the bench is behind a gateway
+
+    def check_lease(self) -> None:
+        """Raise BenchError when the gateway lease was lost (the gateway made the bench safe)."""
+        if self.lease is not None and self.lease.lost:
+            raise BenchError(f"lease of {self.lease.prefix} lost: the gateway drove the bench to "
+                             "its safe state; nothing more is sent")
 
     def drive(self, name: str | None) -> DriveIO:
         return self.drives[name or self.bench.default_drive]
@@ -160,11 +167,45 @@ def open_session(bench: Bench, recorder: Any, *, world_factory: Callable | None 
         urls |= {f"dio:{n}": d.dio for n, d in bench.drives.items() if d.dio}
     s = Session(bench, recorder, world)
     try:
+        if bench.gateway is not None:
+            urls = _lease_urls(s, urls)
         _open_harness(s, urls)
     except BaseException:
         s.close()
         raise
     return s
+
+
+def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
+    """Take the bench's lease from its gateway; `gateway` transports become zenoh URLs."""
+    from hil.gateway.client import LeaseRefused, acquire
+
+    gw = s.bench.gateway
+    assert gw is not None
+    try:
+        s.lease = acquire(gw.lab, gw.bench, holder=gw.holder, connect=gw.connect, mode=gw.mode)
+    except LeaseRefused as e:
+        raise BenchError(f"bench {gw.lab}/{gw.bench}: {e}") from e
+    except ConnectionError as e:
+        raise BenchError(f"bench {gw.lab}/{gw.bench}: gateway not reachable at "
+                         f"{', '.join(gw.connect)}: {e}") from e
+    s._closers.insert(0, s.lease.release)  # released last, after every transport closed
+    s.recorder.log("info", f"lease of {gw.lab}/{gw.bench} taken as {s.lease.holder}",
+                   name="hil.gateway")
+    out = dict(urls)
+    for key, url in urls.items():
+        base, _, query = url.partition("?")
+        if base != "gateway":
+            continue
+        kind, _, name = key.partition(":")
+        if kind == "can":
+            out[key] = s.lease.can_url(name)
+        elif kind == "rs485":
+            baud = dict(p.split("=", 1) for p in query.split("&") if "=" in p).get("baud")
+            out[key] = s.lease.serial_url(name, int(baud) if baud else None)
+        else:
+            out[key] = s.lease.dio_url(name)
+    return out
 
 
 def _open_harness(s: Session, urls: dict[str, str]) -> None:
