@@ -11,99 +11,27 @@ import re
 from pathlib import Path
 from typing import Any
 
-import yaml
+from hil.yamlio import FileError, LDict, LList, join
+from hil.yamlio import load_yaml_file as _load_file
+from hil.yamlio import load_yaml_text as _load_text
+
+__all__ = ["LDict", "LList", "join"]  # re-exported for the plan room
 
 MS = 1_000_000
 S = 1_000_000_000
 
 
-class PlanFileError(ValueError):
+class PlanFileError(FileError):
     """A malformed plan or bench file: `file:line: field: problem`."""
-
-    def __init__(self, file: str, line: int, field: str, problem: str) -> None:
-        self.file, self.line, self.field, self.problem = file, line, field, problem
-        super().__init__(f"{file}:{line}: {field}: {problem}")
-
-
-class LDict(dict):
-    """A mapping that remembers its own line and each key's line (1-based)."""
-
-    line: int = 0
-    key_lines: dict[str, int]
-
-    def kline(self, key: str) -> int:
-        return self.key_lines.get(key, self.line)
-
-
-class LList(list):
-    """A sequence that remembers its own line and each item's line (1-based)."""
-
-    line: int = 0
-    item_lines: list[int]
-
-
-def join(where: str, key: str | int) -> str:
-    if isinstance(key, int):
-        return f"{where}[{key}]"
-    return f"{where}.{key}" if where else key
-
-
-def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str) -> Any:
-    line = node.start_mark.line + 1
-    if isinstance(node, yaml.MappingNode):
-        out = LDict()
-        out.line, out.key_lines = line, {}
-        for knode, vnode in node.value:
-            key = loader.construct_object(knode, deep=True)
-            kline = knode.start_mark.line + 1
-            if not isinstance(key, str | int | float | bool):
-                raise PlanFileError(file, kline, where or "(top)", f"key {key!r} is not a name")
-            key = _key_text(key, knode)
-            if key in out:
-                raise PlanFileError(file, kline, join(where, key), "duplicate key")
-            out.key_lines[key] = kline
-            out[key] = _build(vnode, loader, file, join(where, key))
-        return out
-    if isinstance(node, yaml.SequenceNode):
-        lst = LList()
-        lst.line, lst.item_lines = line, []
-        for i, item in enumerate(node.value):
-            lst.item_lines.append(item.start_mark.line + 1)
-            lst.append(_build(item, loader, file, join(where, i)))
-        return lst
-    return loader.construct_object(node, deep=True)
-
-
-def _key_text(key: Any, knode: yaml.Node) -> str:
-    # `P1.042:` parses as a string; `on:`/`off:` would be booleans in YAML 1.1: keep the text
-    if isinstance(key, bool) and isinstance(knode, yaml.ScalarNode):
-        return str(knode.value)
-    return str(key)
 
 
 def load_yaml_text(text: str, file: str) -> Any:
     """Parse YAML keeping line numbers; syntax errors become `PlanFileError`."""
-    loader = yaml.SafeLoader(text)
-    try:
-        node = loader.get_single_node()
-        if node is None:
-            raise PlanFileError(file, 1, "(top)", "empty file")
-        return _build(node, loader, file, "")
-    except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark or e.context_mark
-        line = (mark.line + 1) if mark else 1
-        raise PlanFileError(file, line, "(yaml)", str(e.problem or e)) from None
-    finally:
-        loader.dispose()
+    return _load_text(text, file, PlanFileError)
 
 
 def load_yaml_file(path: str | Path) -> Any:
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise PlanFileError(str(p), 0, "(file)", f"cannot read: {e.strerror or e}") from None
-    return load_yaml_text(text, str(p))
+    return _load_file(path, PlanFileError)
 
 
 # --- durations ---------------------------------------------------------------------------

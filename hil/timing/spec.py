@@ -12,9 +12,8 @@ from dataclasses import field as _f
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from hil.timing.expr import Expr, ExprError, is_param
+from hil.yamlio import FileError, LDict, LList, join, load_yaml_text
 
 # Factory DI/DO assignment (a3-timing §0.1, L1860-1907, L9251-9336): function -> "LINE[:b]".
 # BRKR has no factory DO: the virtual bench maps it to DO6 with P2.041 = 0x0108 (a-contact).
@@ -38,72 +37,25 @@ PLACE_RE = re.compile(r"\{(\w+)\}")
 STATUSES = ("pass", "fail", "inconclusive", "skipped")
 
 
-class SpecError(ValueError):
-    """A malformed spec: `file:line: field: what is wrong`."""
+class SpecError(FileError):
+    """A malformed spec: `file:line: field: what is wrong` (`.where` / `.what` name them)."""
 
-    def __init__(self, file: str, line: int, where: str, what: str) -> None:
-        self.file, self.line, self.where, self.what = file, line, where, what
-        super().__init__(f"{file}:{line}: {where}: {what}")
+    @property
+    def where(self) -> str:
+        return self.field
 
-
-# --- YAML with line numbers ------------------------------------------------------------
-
-
-class LDict(dict):
-    """A mapping that remembers its own line and each key's line (1-based)."""
-
-    line: int = 0
-    key_lines: dict[str, int]
-
-
-class LList(list):
-    line: int = 0
-    item_lines: list[int]
-
-
-def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str) -> Any:
-    line = node.start_mark.line + 1
-    if isinstance(node, yaml.MappingNode):
-        out = LDict()
-        out.line, out.key_lines = line, {}
-        for knode, vnode in node.value:
-            key = loader.construct_object(knode, deep=True)
-            kline = knode.start_mark.line + 1
-            if not isinstance(key, str | int | float):
-                raise SpecError(file, kline, where or "(top)", f"key {key!r} is not a name")
-            key = str(key)
-            if key in out:
-                raise SpecError(file, kline, _join(where, key), "duplicate key")
-            out.key_lines[key] = kline
-            out[key] = _build(vnode, loader, file, _join(where, key))
-        return out
-    if isinstance(node, yaml.SequenceNode):
-        lst = LList()
-        lst.line, lst.item_lines = line, []
-        for i, item in enumerate(node.value):
-            lst.item_lines.append(item.start_mark.line + 1)
-            lst.append(_build(item, loader, file, f"{where}[{i}]"))
-        return lst
-    return loader.construct_object(node, deep=True)
+    @property
+    def what(self) -> str:
+        return self.problem
 
 
 def load_yaml(text: str, file: str = "<string>") -> Any:
     """Parse YAML keeping line numbers (LDict/LList); syntax errors become SpecError."""
-    loader = yaml.SafeLoader(text)
-    try:
-        node = loader.get_single_node()
-        if node is None:
-            raise SpecError(file, 1, "(top)", "empty file")
-        return _build(node, loader, file, "")
-    except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark or e.context_mark
-        raise SpecError(file, (mark.line + 1) if mark else 1, "(yaml)", str(e.problem)) from None
-    finally:
-        loader.dispose()
+    return load_yaml_text(text, file, SpecError)
 
 
 def _join(where: str, key: str) -> str:
-    return f"{where}.{key}" if where else key
+    return join(where, key)
 
 
 # --- the spec model --------------------------------------------------------------------
