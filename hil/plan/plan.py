@@ -7,15 +7,16 @@ bench (drives, wiring, virtual-only steps, motion, parameter access, timing spec
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from hil.plan.bench import Bench
+from hil.model.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS, N_PHYSICAL_DI
+from hil.plan.bench import Bench, DriveSpec, Wire
 from hil.plan.steps import MOTION, VIRTUAL_ONLY, Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
 
-_TOP = {"name", "description", "bench_requires", "drive", "params", "steps", "tags"}
+_TOP = {"name", "description", "bench_requires", "drive", "params", "options", "steps", "tags"}
 FEATURES = ("virtual", "real", "motion", "can", "sdo", "rs485", "modbus", "dio")
 
 
@@ -29,6 +30,7 @@ class Plan:
     bench_requires: list[str] = field(default_factory=list)
     drive: str | None = None
     params: dict[str, int] = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)  # virtual drives' model options
     tags: list[str] = field(default_factory=list)
     line: int = 1
     _lines: dict[str, int] = field(default_factory=dict)
@@ -66,15 +68,90 @@ def parse_plan(data: Any, file: str, text: str = "") -> Plan:
         plan.drive = v.text(top, "drive", "")
     if "params" in top:
         plan.params = _params(v, top["params"], top.kline("params"), "params")
+    if "options" in top:
+        from dataclasses import fields
+
+        from hil.model.options import ModelOptions
+
+        om = v.mapping(top["options"], top.kline("options"), "options")
+        v.keys(om, {f.name for f in fields(ModelOptions)}, "options")
+        try:
+            ModelOptions.from_dict(dict(om), where="options")
+        except (ValueError, TypeError) as e:
+            raise v.err(om.line, "options", str(e)) from None
+        plan.options = dict(om)
+    _mapping_overlay(v, plan, top)
     if "tags" in top:
         plan.tags = [str(t) for t in v.seq(top["tags"], top.kline("tags"), "tags")]
     return plan
+
+
+# --- the plan's own DI/DO mapping ---------------------------------------------------------
+_DI_CODES = {f.code: f.symbol for f in DI_FUNCTIONS.values()}
+_DO_CODES = {f.code: f.symbol for f in DO_FUNCTIONS.values()}
+
+
+def mapping_of(name: str, value: int) -> tuple[str, Wire | None] | None:
+    """A plan parameter that maps a physical line (P2.010-P2.017/P2.036/P2.037 -> DI1-DI10,
+    P2.018-P2.022/P2.041 -> DO1-DO6; value 0x01xx a-contact, 0x00xx b-contact, code 0 =
+    no function; L9238-9256, L9323-9339): (line, Wire or None). None for other parameters.
+    Raises ValueError for a code the manual's tables 8.1/8.2 do not list."""
+    if name in DI_PARAMS[:N_PHYSICAL_DI]:
+        line, codes = f"DI{DI_PARAMS.index(name) + 1}", _DI_CODES
+    elif name in DO_PARAMS:
+        line, codes = f"DO{DO_PARAMS.index(name) + 1}", _DO_CODES
+    else:
+        return None
+    code = value & 0xFF
+    if value & ~0x1FF or (code and code not in codes):
+        raise ValueError(f"0x{value:04X} maps {line} to no function of table "
+                         f"{'8.1' if line[1] == 'I' else '8.2'} (0x01xx a-contact, 0x00xx "
+                         "b-contact)")
+    if not code:
+        return line, None
+    return line, Wire(codes[code], line, "a" if value & 0x100 else "b")
+
+
+def _mapping_overlay(v: Checker, plan: Plan, top: LDict) -> None:
+    """Validate the DI/DO mapping parameters among the plan's `params`."""
+    pm = top.get("params")
+    for name, value in plan.params.items():
+        try:
+            mapping_of(name, value)
+        except ValueError as e:
+            line = pm.kline(name) if isinstance(pm, LDict) else top.kline("params")
+            raise v.err(line, join("params", name), str(e)) from None
+
+
+def plan_spec(plan: Plan, spec: DriveSpec) -> DriveSpec:
+    """The drive's wiring as this plan leaves it: the bench wiring with the plan's mapping
+    parameters applied (a line mapped by the plan loses the bench's function; e.g.
+    `P2.037: 0x0127` puts SHOM on DI10, `P2.011: 0x011D` ABSE on DI2 instead of CCLR)."""
+    over = [m for p, x in plan.params.items() if (m := mapping_of(p, x)) is not None]
+    if not over:
+        return spec
+    di = {f: w for f, w in spec.di.items() if w.line not in {ln for ln, _ in over}}
+    do = {f: w for f, w in spec.do.items() if w.line not in {ln for ln, _ in over}}
+    for _line, w in over:
+        if w is not None:
+            (di if w.kind == "DI" else do)[w.function] = w
+    return replace(spec, di=di, do=do)
+
+
+def step_spec(plan: Plan, bench: Bench, step: Step) -> DriveSpec:
+    """Wiring seen by a step: the plan's mapping applies to the plan's default drive."""
+    dname = step.drive or plan.drive or bench.default_drive
+    spec = bench.drives[dname]
+    return plan_spec(plan, spec) if dname == (plan.drive or bench.default_drive) else spec
 
 
 def check_plan(plan: Plan, bench: Bench, spec_ids: set[str] | None = None) -> None:
     """Everything a plan needs from a bench, checked before anything moves."""
     v = Checker(plan.path)
     have = bench.provides()
+    if plan.options and not bench.virtual:
+        raise v.err(plan.key_line("options"), "options",
+                    f"model options are for a virtual bench only; bench {bench.name!r} is real")
     for i, f in enumerate(plan.bench_requires):
         if f not in have:
             raise v.err(plan.key_line("bench_requires"), f"bench_requires[{i}]",
@@ -98,7 +175,7 @@ def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: set[str
         raise v.err(s.line, join(w, "drive"),
                     f"bench {bench.name!r} has no drive {dname!r} (drives: "
                     f"{', '.join(bench.drives)})")
-    d = bench.drives[dname]
+    d = step_spec(plan, bench, s)
     kw = join(w, s.kind)
     if s.kind in VIRTUAL_ONLY and not bench.virtual:
         raise v.err(s.line, kw, f"only on a virtual bench; bench {bench.name!r} is real")
@@ -134,6 +211,22 @@ def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: set[str
                 raise v.err(s.line, join(kw, "state"), f"drive {dname} has no CAN bus")
             if c.kind in ("param", "alarm"):
                 _check_via(v, s.line, join(kw, c.kind), c.via, d, dname)
+    if s.kind in ("abs_read", "abs_origin"):
+        if not d.dio:
+            raise v.err(s.line, kw, f"drive {dname} has no DI/DO lines (dio:)")
+        need = ("ABSE", "ABSC") if s.kind == "abs_origin" else ("ABSE",)
+        for f in need:
+            if f not in d.di:
+                raise v.err(s.line, kw, f"drive {dname} has no DI wired to {f}: wire it in the "
+                            f"bench or map it in the plan's params (e.g. P2.011: 0x011D = ABSE "
+                            f"on DI2); wired: {', '.join(d.di) or 'none'}")
+        on_di4 = [f for f, w in d.di.items() if w.line == "DI4"]
+        if on_di4:
+            f = on_di4[0]
+            raise v.err(s.line, kw, f"DI4 is the handshake's ABSQ; drive {dname} has {f} on it "
+                        "(map it to 0: P2.013: 0, L16504)")
+    if s.kind == "check_timing":
+        _check_timing_args(v, s, kw, d, dname, spec_ids)
     if s.kind == "check_timing" and spec_ids is not None and s.args["spec"] not in spec_ids:
         from hil.plan.runner import BROKEN_SPECS
 
@@ -142,6 +235,38 @@ def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: set[str
                         f"{BROKEN_SPECS[s.args['spec']]}")
         raise v.err(s.line, kw, f"no timing spec {s.args['spec']!r}; known: "
                     f"{', '.join(sorted(spec_ids))}")
+
+
+def _check_timing_args(v: Checker, s: Step, kw: str, d: DriveSpec, dname: str,
+                       specs: Any) -> None:
+    """`bind:` functions must be wired; `constants:` / `bind:` names must be the spec's."""
+    from hil.plan.steps import BIND_LINE_RE
+
+    wired = d.di | d.do
+    for name, x in s.args.get("bind", {}).items():
+        if not BIND_LINE_RE.match(x) and x not in wired:
+            raise v.err(s.line, join(kw, f"bind.{name}"), f"drive {dname} has no line wired "
+                        f"to {x} (wired: {', '.join(wired) or 'none'})")
+    spec = specs.get(s.args["spec"]) if isinstance(specs, dict) else None
+    if spec is None:
+        return
+    known = set(spec.binding()) | set(spec.bind)
+    for name in s.args.get("bind", {}):
+        if name not in known:
+            raise v.err(s.line, join(kw, f"bind.{name}"), f"spec {spec.id!r} binds no "
+                        f"{name!r}; it binds: {', '.join(sorted(spec.bind)) or 'none'} "
+                        "(and the factory functions)")
+    for name in s.args.get("constants", {}):
+        if name not in spec.constants:
+            raise v.err(s.line, join(kw, f"constants.{name}"), f"spec {spec.id!r} has no "
+                        f"constant {name!r}; it has: {', '.join(sorted(spec.constants)) or 'none'}")
+
+
+def bind_line(value: str, d: DriveSpec) -> str:
+    """A `check_timing` bind value as the spec wants it: a line (DI6:b) or a function wired on
+    the drive, replaced by its line (ORGP -> DI9, NL -> DI6:b)."""
+    wired = d.di | d.do
+    return wired[value].binding if value in wired else value
 
 
 def _check_via(v: Checker, line: int, field: str, via: str | None, d: Any, dname: str) -> None:

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from hil.plan.bench import Bench
-from hil.plan.plan import Plan, check_plan
+from hil.plan.plan import Plan, bind_line, check_plan, plan_spec
 from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, DriveIO, Session, open_session
 from hil.plan.steps import Condition, Step
@@ -127,6 +127,9 @@ class StepContext:
         self.session, self.rec, self.plan, self.specs = session, recorder, plan, specs
         self.bench = session.bench
         self.cancel = cancel
+        self.store: dict[str, Any] = {}  # readings kept by `abs_read: {store: name}`
+        self.checked: dict[str, int] = {}  # spec id -> wall ns its last check_timing ended
+        self.started: dict[str, int] = {}  # step name -> wall ns it (last) started
 
     def drive(self, step: Step | None) -> DriveIO:
         name = (step.drive if step else None) or self.plan.drive or self.bench.default_drive
@@ -346,9 +349,18 @@ def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
     spec = ctx.specs[s.args["spec"]]
     ctx.rec.flush()
     source = RecordingSource(ctx.rec.path)
-    binding = d.spec.binding()
+    binding = d.spec.binding() | {k: bind_line(x, d.spec)
+                                  for k, x in s.args.get("bind", {}).items()}
+    constants = (_constants_for(spec, ctx.bench.timing_constants) or {}) | s.args.get(
+        "constants", {})
     verdicts = check(spec, source, params=s.args["params"] or None, binding=binding,
-                     constants=_constants_for(spec, ctx.bench.timing_constants))
+                     constants=constants or None)
+    since = s.args.get("since", "start")
+    if since == "last_check":
+        verdicts = _since(verdicts, ctx.checked.get(spec.id))
+    elif since != "start":
+        verdicts = _since(verdicts, ctx.started.get(since))
+    ctx.checked[spec.id] = time.time_ns()
     counts: dict[str, int] = {}
     out = []
     for v in verdicts:
@@ -357,7 +369,8 @@ def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
         if v.status in ("pass", "fail", "inconclusive"):
             # binding + check_params: what `hil report` needs to redraw the diagram
             ctx.rec.verdict(vd, plan=ctx.plan.name, step=s.index, binding=binding,
-                            check_params=s.args["params"] or {})
+                            check_params=s.args["params"] or {},
+                            check_constants=s.args.get("constants") or {})
         out.append(vd)
     s.args["_verdicts"] = out
     text = ", ".join(f"{n} {k}" for k, n in sorted(counts.items())) or "no occurrence"
@@ -376,12 +389,83 @@ class _Inconclusive(StepFailed):
     pass
 
 
+def _since(verdicts: list, t_ns: int | None) -> list:
+    """Only the occurrences that began after `t_ns` (the previous check of the spec ended):
+    an occurrence begins at the earliest time among its verdicts."""
+    if t_ns is None:
+        return verdicts
+    first: dict[int, int] = {}
+    for v in verdicts:
+        t = v.t_ns if v.t_ns is not None else v.from_ns
+        if t is not None:
+            first[v.occurrence] = min(t, first.get(v.occurrence, t))
+    return [v for v in verdicts if first.get(v.occurrence, t_ns) >= t_ns]
+
+
+def _abs_reader(ctx: StepContext, d: DriveIO) -> Any:
+    """The host-side reader on the drive's DI/DO port; lines from the (plan's) wiring:
+    ABSE/ABSC/ABSW where wired, ABSQ = DI4, ABSR = DO2, ABSD = DO3 (L15143, L15409, L15413)."""
+    from hil.drivers.abs_reader import AbsPositionReader
+
+    if d.dio is None:
+        raise BenchError(f"drive {d.name}: no DI/DO lines for the absolute handshake")
+    w = d.spec.di | d.spec.do
+    kw: dict[str, Any] = {"abse": w["ABSE"].line, "abse_active": w["ABSE"].contact == "a"}
+    if "ABSC" in w:
+        kw |= {"absc": w["ABSC"].line, "absc_active": w["ABSC"].contact == "a"}
+    if "ABSW" in w:
+        kw |= {"absw": w["ABSW"].line, "absw_active": w["ABSW"].contact == "a"}
+    p2009 = d.read_param("P2.009") if d.spec.param_via else 2  # DI filter (L9229)
+    return AbsPositionReader(d.dio, p2009_ms=p2009, **kw)
+
+
+def _x_abs_read(ctx: StepContext, s: Step, d: DriveIO) -> str:
+    """The 80-bit DI/DO handshake (L16460-16521), checksum verified by the reader."""
+    from hil.drivers.abs_reader import AbsReadError
+
+    reader = _abs_reader(ctx, d)
+    reader.retries = s.args["retries"]
+    try:
+        r = reader.read()
+    except AbsReadError as e:
+        raise StepFailed(str(e)) from None
+    got = {"status": r.status, "turns": r.turns, "position": r.position}
+    text = (f"status 0x{r.status:02X}, turns {r.turns}, position {r.position} "
+            f"(attempts {r.attempts})")
+    ctx.rec.log("info", f"absolute read {d.name}: {text}", name="hil.abs_read")
+    want = dict(s.args["expect"])
+    if s.args["same_as"]:
+        want = ctx.store[s.args["same_as"]] | want
+    tol = s.args["tolerance"]
+    bad = [f"{k} {got[k]}, expected {x}" + (f" ± {tol}" if k == "position" and tol else "")
+           for k, x in want.items()
+           if (abs(got[k] - x) > tol if k == "position" else got[k] != x)]
+    if r.violations:
+        text += "; reader timing: " + "; ".join(r.violations[:3])
+    if s.args["store"]:
+        ctx.store[s.args["store"]] = got
+    if bad:
+        same = f" (as {s.args['same_as']})" if s.args["same_as"] else ""
+        raise StepFailed(f"{'; '.join(bad)}{same}: read {text}")
+    return text
+
+
+def _x_abs_origin(ctx: StepContext, s: Step, d: DriveIO) -> str:
+    """Origin by DI/DO: ABSE on, T_S, ABSC held T_Q (default P2.009 + 250 ms), both off
+    (L16436-16450)."""
+    reader = _abs_reader(ctx, d)
+    hold = s.args["hold"]
+    reader.set_origin(None if hold is None else hold / 1e6)
+    return f"ABSC held {(hold / 1e6 if hold else reader.p2009_ms + 250):g} ms"
+
+
 EXECUTORS: dict[str, Callable[[StepContext, Step, DriveIO], str]] = {
     "di": _x_di, "pulse": _x_pulse, "sto": _x_sto, "sto_dropout": _x_sto_dropout,
     "write": _x_write, "read": _x_read, "state": _x_state, "fault_reset": _x_fault_reset,
     "mode": _x_mode, "move": _x_move, "home": _x_home, "wait": _x_wait,
     "wait_until": _x_wait_until, "expect": _x_expect, "power_cycle": _x_power_cycle,
-    "inject": _x_inject, "check_timing": _x_check_timing,
+    "inject": _x_inject, "check_timing": _x_check_timing, "abs_read": _x_abs_read,
+    "abs_origin": _x_abs_origin,
 }
 # Steps whose failure does not end the plan (they only judge what already happened).
 JUDGE_ONLY = ("check_timing",)
@@ -440,7 +524,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
 
     progress = progress or Progress(quiet=True)
     specs = specs if specs is not None else timing_specs()
-    check_plan(plan, bench, set(specs))
+    check_plan(plan, bench, specs)
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = Path(plan.path).stem if plan.path and plan.path != "<string>" else plan.name
     res = PlanResult(plan.name, plan.path, bench.name, recording=str(out_dir / f"{stem}.mcap"))
@@ -456,7 +540,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding
         import json
 
-        dspec = bench.drives[plan.drive or bench.default_drive]
+        dspec = plan_spec(plan, bench.drives[plan.drive or bench.default_drive])
         rec.add_metadata("timing", {"specs": json.dumps(checked),
                                     "binding": json.dumps(dspec.binding()),
                                     "constants": json.dumps(bench.timing_constants)})
@@ -464,6 +548,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     rec.attach("plan.yaml", plan.text.encode(), "application/yaml")
     progress.plan(plan, bench)
     t_start = time.monotonic_ns()
+    tmp = contextlib.ExitStack()
     cancel = threading.Event()
     session: Session | None = None
     ctx: StepContext | None = None
@@ -472,12 +557,15 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     try:
         with _sigterm_as_interrupt():
             try:
-                session = _run_in_thread(lambda: session_factory(bench, rec),  # type: ignore[arg-type, return-value]
+                sbench = _bench_for(plan, bench, tmp)
+                truth = SensorTap(rec) if bench.virtual else rec
+                session = _run_in_thread(lambda: session_factory(sbench, truth),  # type: ignore[arg-type, return-value]
                                          bench.timeouts["ready"] + 5_000_000_000, cancel)
                 ctx = StepContext(session, rec, plan, specs, cancel)  # type: ignore[arg-type]
                 _idle_inputs(ctx)
                 if plan.params:
                     _initial_params(ctx, plan)
+                _apply_plan_wiring(ctx, plan)
                 reason = _steps(ctx, plan, res, progress, allow_inconclusive)
             except KeyboardInterrupt as e:
                 interrupted, reason = e, "interrupted (Ctrl-C / SIGTERM)"
@@ -505,6 +593,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     finally:
         if session is not None:
             session.close()
+        tmp.close()
         res.duration_ns = time.monotonic_ns() - t_start
         rec.add_metadata("hil.result", {"status": res.status, "reason": reason,
                                         "duration_ms": res.duration_ns / 1e6,
@@ -515,6 +604,81 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     if interrupted is not None:
         raise interrupted
     return res
+
+
+class SensorTap:
+    """The recorder as the virtual world sees it, plus the lines the bench mechanics drive.
+
+    The virtual axis drives its own sensors (NL DI6, PL DI7, ORGP DI9: `DEFAULT_SENSORS`);
+    the harness never sets ORGP and sets NL/PL only at rest, so their levels are taken from
+    the ground truth (`di` of each `/drive/<name>/state` sample) and recorded on
+    `/dio/<name>/DI<n>` when they change, stamped with the sample's own time."""
+
+    def __init__(self, rec: Any) -> None:
+        from hil.model.drive import DEFAULT_SENSORS
+
+        self._rec = rec
+        self._lines = sorted(n for n, _kind in DEFAULT_SENSORS.values())
+        self._last: dict[tuple[str, int], bool] = {}
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._rec, name)
+
+    def drive_state(self, drive: str, state: Any, **kw: Any) -> None:
+        self._rec.drive_state(drive, state, **kw)
+        di = state.get("di") if isinstance(state, dict) else None
+        if not isinstance(di, list | tuple):
+            return
+        for n in self._lines:
+            if n > len(di):
+                continue
+            lv = bool(di[n - 1])
+            if self._last.get((drive, n)) != lv:
+                self._last[(drive, n)] = lv
+                self._rec.dio(drive, f"DI{n}", lv, time.time_ns(), kw.get("source_t"))
+
+
+def _bench_for(plan: Plan, bench: Bench, stack: contextlib.ExitStack) -> Bench:
+    """The bench the session opens: the plan's model `options` merged into every virtual
+    drive's (a subprocess bench gets them in a temporary copy of its file: `hil drive
+    --bench` reads the file)."""
+    if not plan.options or not bench.virtual:
+        return bench
+    from dataclasses import replace
+
+    drives = {n: replace(d, options=dict(d.options) | plan.options)
+              for n, d in bench.drives.items()}
+    out = replace(bench, drives=drives)
+    if bench.process == "subprocess":
+        import tempfile
+
+        import yaml
+
+        data = yaml.safe_load(bench.text)
+        for d in data.get("drives", {}).values():
+            d["options"] = dict(d.get("options") or {}) | plan.options
+        tdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="hil-plan-")))
+        path = tdir / Path(bench.path or "bench.yaml").name
+        path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+        out = replace(out, path=str(path), text=path.read_text(encoding="utf-8"))
+    return out
+
+
+# DI functions a machine's sensors drive (the virtual axis drives them from its mechanics):
+# the harness never sets them.
+SENSOR_FUNCTIONS = ("ORGP", "NL", "PL")
+
+
+def _apply_plan_wiring(ctx: StepContext, plan: Plan) -> None:
+    """From here on the default drive's functions are where the plan's params mapped them."""
+    d = ctx.drive(None)
+    before = d.spec
+    d.spec = plan_spec(plan, d.spec)
+    if d.dio is None:
+        return
+    for f, w in d.spec.di.items():  # newly mapped inputs start inactive, as idle() does;
+        if before.di.get(f) != w and f not in SENSOR_FUNCTIONS:  # sensors are the machine's
+            d.set_function(f, False)
 
 
 def _idle_inputs(ctx: StepContext) -> None:
@@ -540,6 +704,8 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
         rec.plan_step(r.label, "start", plan=plan.name, index=s.index, kind=s.kind, line=s.line,
                       drive=d.name)
         t0 = time.monotonic_ns()
+        if s.name:
+            ctx.started[s.name] = time.time_ns()
         timeout = s.timeout_ns or ctx.bench.timeouts["step"]
         try:
             r.message = _run_in_thread(lambda s=s, d=d: EXECUTORS[s.kind](ctx, s, d), timeout,
@@ -620,7 +786,7 @@ def run_plans(plans: list[Plan], bench: Bench, out_dir: Path, *, quiet: bool = F
     """Check every plan against the bench first (nothing moves on a bad file), then run."""
     specs = timing_specs()
     for p in plans:
-        check_plan(p, bench, set(specs))
+        check_plan(p, bench, specs)
     progress = Progress(stream, quiet)
     results = []
     for p in plans:

@@ -109,7 +109,14 @@ def describe(step: Step) -> str:
     if k in ("wait_until", "expect"):
         return f"{k} " + " and ".join(c.describe() for c in a["conditions"])
     if k == "check_timing":
-        return f"check_timing {a['spec']}"
+        extra = ", ".join(f"{x}={y}" for x, y in (a.get("bind") or {}).items())
+        return f"check_timing {a['spec']}" + (f" ({extra})" if extra else "")
+    if k == "abs_read":
+        want = ", ".join(f"{x}={y}" for x, y in a["expect"].items())
+        same = f" same as {a['same_as']}" if a.get("same_as") else ""
+        return f"absolute read (DI/DO){': ' + want if want else ''}{same}"
+    if k == "abs_origin":
+        return "absolute origin (ABSE + ABSC)"
     if k == "inject":
         return "inject " + ", ".join(f"{x}={y}" for x, y in a.items())
     if k == "fault_reset":
@@ -397,16 +404,90 @@ def p_inject(v, obj, line, where):
     return out
 
 
+BIND_LINE_RE = re.compile(r"^(DI\d{1,2}|DO\d)(:[ab])?$|^STO_[AB]$")
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+SINCE = ("start", "last_check")
+
+
 def p_check_timing(v, obj, line, where):
     if isinstance(obj, str):
-        return {"spec": obj, "params": {}}
+        return {"spec": obj, "params": {}, "bind": {}, "constants": {}, "since": "start"}
     m = v.mapping(obj, line, where)
-    v.keys(m, {"spec", "params"}, where, required=("spec",))
+    v.keys(m, {"spec", "params", "bind", "constants", "since"}, where, required=("spec",))
+    since = m.get("since", "start")
+    if not isinstance(since, str) or not since.strip():
+        raise v.err(m.kline("since"), join(where, "since"), f"{since!r}: start (every "
+                    "occurrence in the recording), last_check (only occurrences after the "
+                    "previous check of this spec) or the name of an earlier step")
     params = {}
     if "params" in m:
         pm = v.mapping(m["params"], m.kline("params"), join(where, "params"))
         params = {k: x for k, x in _param_values(v, pm, join(where, "params"), False).items()}
-    return {"spec": v.text(m, "spec", where), "params": params}
+    bind: dict[str, str] = {}
+    if "bind" in m:
+        fw = join(where, "bind")
+        bm = v.mapping(m["bind"], m.kline("bind"), fw)
+        for k, x in bm.items():
+            if not _NAME_RE.match(str(k)):
+                raise v.err(bm.kline(k), join(fw, str(k)), "a placeholder name like REF")
+            if not isinstance(x, str) or not (BIND_LINE_RE.match(x) or x in DI_SYMBOLS
+                                               or x in DO_SYMBOLS):
+                raise v.err(bm.kline(k), join(fw, k), f"{x!r}: a line (DI9, DI6:b, DO4) or a "
+                            "wired DI/DO function (ORGP, NL)")
+            bind[k] = x
+    constants: dict[str, float] = {}
+    if "constants" in m:
+        fw = join(where, "constants")
+        cm = v.mapping(m["constants"], m.kline("constants"), fw)
+        for k, x in cm.items():
+            if isinstance(x, bool) or not isinstance(x, int | float):
+                raise v.err(cm.kline(k), join(fw, str(k)), f"{x!r}: a number (ms, rpm, ...)")
+            constants[str(k)] = x
+    return {"spec": v.text(m, "spec", where), "params": params, "bind": bind,
+            "constants": constants, "since": since}
+
+
+_ABS_FIELDS = ("status", "turns", "position")
+
+
+def _mapping_or_empty(v: Checker, obj: Any, line: int, where: str) -> LDict:
+    if obj is None or obj is True:
+        m = LDict()
+        m.line, m.key_lines = line, {}
+        return m
+    return v.mapping(obj, line, where)
+
+
+def p_abs_read(v, obj, line, where):
+    m = _mapping_or_empty(v, obj, line, where)
+    v.keys(m, {"expect", "tolerance", "store", "same_as", "retries"}, where)
+    out: dict[str, Any] = {"expect": {}, "store": None, "same_as": None,
+                           "tolerance": v.integer(m, "tolerance", where, 0, _INT32[1], 0),
+                           "retries": v.integer(m, "retries", where, 0, 5, 2)}
+    if "expect" in m:
+        fw = join(where, "expect")
+        em = v.mapping(m["expect"], m.kline("expect"), fw)
+        v.keys(em, set(_ABS_FIELDS), fw)
+        for k in em:
+            out["expect"][k] = v.integer(em, k, fw, *_INT32)
+    for k in ("store", "same_as"):
+        if k in m:
+            name = m[k]
+            if not isinstance(name, str) or not _NAME_RE.match(name):
+                raise v.err(m.kline(k), join(where, k), f"{name!r}: a name like before_cycle")
+            out[k] = name
+    return out
+
+
+def p_abs_origin(v, obj, line, where):
+    m = _mapping_or_empty(v, obj, line, where)
+    v.keys(m, {"hold"}, where)
+    out: dict[str, Any] = {"hold": None}
+    if "hold" in m:
+        out["hold"] = v.duration(m, "hold", where)
+        if out["hold"] <= 0:
+            raise v.err(m.kline("hold"), join(where, "hold"), "must be > 0")
+    return out
 
 
 def p_fault_reset(v, obj, line, where):
@@ -433,6 +514,8 @@ PARSERS: dict[str, Parser] = {
     "power_cycle": p_power_cycle,
     "inject": p_inject,
     "check_timing": p_check_timing,
+    "abs_read": p_abs_read,
+    "abs_origin": p_abs_origin,
 }
 VIRTUAL_ONLY = ("power_cycle", "inject")
 MOTION = ("move", "home")
@@ -476,4 +559,24 @@ def parse_steps(v: Checker, obj: Any, line: int) -> list[Step]:
     lst: LList = v.seq(obj, line, "steps")
     if not lst:
         raise v.err(line, "steps", "a plan needs at least one step")
-    return [parse_step(v, item, i, lst.item_lines[i]) for i, item in enumerate(lst)]
+    steps = [parse_step(v, item, i, lst.item_lines[i]) for i, item in enumerate(lst)]
+    stored: set[str] = set()
+    names: set[str] = set()
+    for st in steps:
+        since = st.args.get("since") if st.kind == "check_timing" else None
+        if since is not None and since not in SINCE and since not in names:
+            raise v.err(st.raw[st.kind].kline("since"), join(st.where, "check_timing.since"),
+                        f"{since!r}: start, last_check or the name of an earlier step "
+                        f"(named so far: {', '.join(sorted(names)) or 'none'})")
+        if st.name:
+            names.add(st.name)
+        if st.kind != "abs_read":  # `same_as` names a reading an earlier `abs_read` stored
+            continue
+        same = st.args["same_as"]
+        if same is not None and same not in stored:
+            raise v.err(st.raw[st.kind].kline("same_as"), join(st.where, "abs_read.same_as"),
+                        f"no earlier abs_read stored {same!r} (stored so far: "
+                        f"{', '.join(sorted(stored)) or 'none'})")
+        if st.args["store"]:
+            stored.add(st.args["store"])
+    return steps

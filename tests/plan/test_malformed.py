@@ -43,7 +43,7 @@ def test_malformed_file_gets_its_precise_error(path: Path):
             plan = load_plan(path)
             if bench:
                 check_plan(plan, load_bench(fixture("benches", f"{bench}.yaml")),
-                           set(timing_specs()))
+                           timing_specs())
     e = ei.value
     assert e.file == str(path)
     assert str(e).startswith(f"{path}:{e.line}: {e.field}: "), str(e)
