@@ -30,6 +30,7 @@ class DriveHost:
         self._mono0 = time.monotonic_ns() - drive.now
         self._wall0 = time.time_ns() - drive.now
         self.errors: list[BaseException] = []
+        self._synced = _SyncedLock(self)
 
     # -- time --------------------------------------------------------------------------------
     def model_now(self) -> int:
@@ -50,6 +51,12 @@ class DriveHost:
         with self.lock:
             if fn in self._ticks:
                 self._ticks.remove(fn)
+
+    @property
+    def synced(self) -> _SyncedLock:
+        """A lock for faces: acquiring it also brings the model up to now, so a frame a face
+        applies is stamped with its arrival time, not the last 1 ms tick."""
+        return self._synced
 
     def call(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         """Bring the model up to now, then run `fn` under the lock."""
@@ -105,3 +112,26 @@ class DriveHost:
                 time.sleep(delay / 1e9)
             elif delay < -50 * period:  # fell far behind (suspended?): resynchronise
                 deadline = time.monotonic_ns()
+
+
+class _SyncedLock:
+    """Context manager (and lock-like object) over `DriveHost.lock` that advances the model."""
+
+    def __init__(self, host: DriveHost) -> None:
+        self._host = host
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        ok = self._host.lock.acquire(blocking, timeout)
+        if ok:
+            self._host._advance()
+        return ok
+
+    def release(self) -> None:
+        self._host.lock.release()
+
+    def __enter__(self) -> _SyncedLock:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()

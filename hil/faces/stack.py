@@ -101,7 +101,7 @@ class VirtualDriveStack:
                 self.can_bus,
                 drive,
                 node_id=spec.node_id,
-                lock=host.lock,
+                lock=host.synced,  # frames act at their arrival time, not the last tick
                 own_timer=False,
                 clock=host.model_now,
                 pdo_defaults=spec.tpdo_defaults,
@@ -120,7 +120,7 @@ class VirtualDriveStack:
                 station=spec.station,
                 mode=spec.modbus_mode,  # type: ignore[arg-type]
                 baud=spec.modbus_baud or getattr(self.serial, "baudrate", None),
-                lock=host.lock,
+                lock=host.synced,
                 on_timeout=lambda _t: host.call(drive.raise_alarm, "AL020"),  # P3.004, L10571
             )
             self.modbus_runner = ModbusSlaveRunner(self.modbus, self.serial)

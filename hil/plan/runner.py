@@ -343,11 +343,15 @@ def _constants_for(spec: Any, overrides: dict[str, float]) -> dict[str, float] |
 
 
 def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    from hil.timing.checker import check
+    from hil.timing.checker import check, occurrences_since
     from hil.timing.source import RecordingSource
 
     spec = ctx.specs[s.args["spec"]]
+    sample = getattr(ctx.session.world, "sample_truth", None)
+    if sample is not None:  # the model's state as of now, not as of its last periodic sample
+        sample()
     ctx.rec.flush()
+    until = time.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
     source = RecordingSource(ctx.rec.path)
     binding = d.spec.binding() | {k: bind_line(x, d.spec)
                                   for k, x in s.args.get("bind", {}).items()}
@@ -356,10 +360,12 @@ def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
     verdicts = check(spec, source, params=s.args["params"] or None, binding=binding,
                      constants=constants or None)
     since = s.args.get("since", "start")
+    since_ns = None
     if since == "last_check":
-        verdicts = _since(verdicts, ctx.checked.get(spec.id))
+        since_ns = ctx.checked.get(spec.id)
     elif since != "start":
-        verdicts = _since(verdicts, ctx.started.get(since))
+        since_ns = ctx.started.get(since)
+    verdicts = occurrences_since(verdicts, since_ns)
     ctx.checked[spec.id] = time.time_ns()
     counts: dict[str, int] = {}
     out = []
@@ -370,7 +376,8 @@ def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
             # binding + check_params: what `hil report` needs to redraw the diagram
             ctx.rec.verdict(vd, plan=ctx.plan.name, step=s.index, binding=binding,
                             check_params=s.args["params"] or {},
-                            check_constants=s.args.get("constants") or {})
+                            check_constants=constants or {},
+                            check_since_ns=since_ns, check_until_ns=until)
         out.append(vd)
     s.args["_verdicts"] = out
     text = ", ".join(f"{n} {k}" for k, n in sorted(counts.items())) or "no occurrence"
@@ -387,19 +394,6 @@ def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
 
 class _Inconclusive(StepFailed):
     pass
-
-
-def _since(verdicts: list, t_ns: int | None) -> list:
-    """Only the occurrences that began after `t_ns` (the previous check of the spec ended):
-    an occurrence begins at the earliest time among its verdicts."""
-    if t_ns is None:
-        return verdicts
-    first: dict[int, int] = {}
-    for v in verdicts:
-        t = v.t_ns if v.t_ns is not None else v.from_ns
-        if t is not None:
-            first[v.occurrence] = min(t, first.get(v.occurrence, t))
-    return [v for v in verdicts if first.get(v.occurrence, t_ns) >= t_ns]
 
 
 def _abs_reader(ctx: StepContext, d: DriveIO) -> Any:

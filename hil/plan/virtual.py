@@ -139,7 +139,7 @@ class GroundTruth:
         params = self.drive.params
         values = {}
         table = getattr(params, "table", None)
-        names = [s.name for s in getattr(table, "specs", [])] if table is not None else []
+        names = [s.param for s in table] if table is not None else []
         if not names:
             names = list(getattr(params, "_stored", {}))
         for n in names:
@@ -147,6 +147,11 @@ class GroundTruth:
                 values[n] = params.get(n)
         t = self.drive.now
         self.rec.drive_params(self.name, values, snapshot=True, source_t=self.host.wall_ns(t))
+
+    def sample(self) -> None:
+        """One state sample now (call under the host lock): what a check reads is current."""
+        self.rec.drive_state(self.name, self.drive.snapshot(),
+                             source_t=self.host.wall_ns(self.drive.now))
 
     def _tick(self, now: int) -> None:
         if now >= self._next:
@@ -267,6 +272,11 @@ class VirtualWorld:
     def snapshot(self, drive: str) -> dict:
         vd = self.drives[drive]
         return vd.host.call(vd.drive.snapshot)
+
+    def sample_truth(self) -> None:
+        """Record every drive's ground truth as of now (before a timing check reads it)."""
+        for vd in self.drives.values():
+            vd.host.call(vd.truth.sample)
 
     def close(self) -> None:
         for vd in self.drives.values():

@@ -683,3 +683,16 @@ def summary(verdicts: list[Verdict]) -> dict[str, int]:
     for v in verdicts:
         out[v.status] += 1
     return out
+
+
+def occurrences_since(verdicts: list[Verdict], t_ns: int | None) -> list[Verdict]:
+    """Only the occurrences that began at or after `t_ns` (e.g. since a plan's previous check
+    of the same spec); an occurrence begins at the earliest time among its verdicts."""
+    if t_ns is None:
+        return verdicts
+    first: dict[int, int] = {}
+    for v in verdicts:
+        t = v.t_ns if v.t_ns is not None else v.from_ns
+        if t is not None:
+            first[v.occurrence] = min(t, first.get(v.occurrence, t))
+    return [v for v in verdicts if first.get(v.occurrence, t_ns) >= t_ns]

@@ -34,6 +34,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--time", choices=("publish", "log"), default="publish",
                         help="timestamps to judge on (default: the source's own, publish)")
     parser.add_argument("--json", action="store_true", help="print verdicts as JSON")
+    parser.add_argument("--whole", action="store_true",
+                        help="check each spec once over the whole recording, even for a plan "
+                             "recording (default there: re-check every check_timing step as run)")
     parser.add_argument("--svg", metavar="DIR", help="also write one SVG diagram per spec")
     parser.add_argument("-v", "--verbose", action="store_true",
                         help="also list verdicts that are not applicable (skipped)")
@@ -89,6 +92,35 @@ def exit_code(verdicts: list[Verdict]) -> int:
     return 1 if s["fail"] else 3 if s["inconclusive"] else 0
 
 
+def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: dict,
+            consts: dict, res: dict) -> int:
+    """Re-judge every `check_timing` step of a plan recording on what the run had seen by then,
+    with the step's binding, parameters, constants and `since` (the live verdicts, offline)."""
+    from hil.timing.checker import occurrences_since
+    from hil.timing.source import RecordingSource
+
+    verdicts: list[Verdict] = []
+    cache: dict[int, RecordingSource] = {}
+    for run in runs:
+        try:
+            (spec,) = resolve_specs([run["spec"]])
+        except (SpecError, FileNotFoundError, ValueError) as e:
+            print(f"hil check: step {run['step']}: {e}", file=sys.stderr)
+            return 2
+        until = int(run["until_ns"])
+        src = cache.get(until) or cache.setdefault(
+            until, RecordingSource(args.recording, time=args.time, until_log_ns=until))
+        vs = check(spec, src, params=(run["params"] | params) or None,
+                   binding=dict(run["binding"]) | binding,
+                   constants=(run["constants"] | consts) or None, resolution=res)
+        verdicts.extend(occurrences_since(vs, run["since_ns"]))
+    if args.json:
+        print(json.dumps([v.to_dict() for v in verdicts], indent=2, default=str))
+    else:
+        print(format_table(verdicts, args.verbose))
+    return exit_code(verdicts)
+
+
 def main(args: argparse.Namespace) -> int:
     try:
         binding = _pairs(args.bind, "--bind")
@@ -105,6 +137,7 @@ def main(args: argparse.Namespace) -> int:
         from hil.timing.source import (
             RecordingSource,
             infer_places,
+            recorded_checks,
             recorded_constants,
             recorded_specs,
         )
@@ -117,6 +150,9 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: {args.recording}: cannot read: {e}", file=sys.stderr)
         return 2
     rec_specs, rec_binding = recorded_specs(source.meta)
+    runs = [] if (args.spec or args.whole) else recorded_checks(source)
+    if runs:  # a plan run: re-check each check step as it was made, with no bench
+        return _as_run(args, runs, binding, params, consts, res)
     try:
         specs = resolve_specs(args.spec or rec_specs) if (args.spec or rec_specs) else [
             load_spec(p) for p in shipped_specs()]

@@ -138,7 +138,8 @@ class RecordingSource(MemorySource):
     """
 
     def __init__(self, path: str | Path, topics: Iterable[str] | None = None,
-                 time: str = "publish") -> None:
+                 time: str = "publish", until_log_ns: int | None = None) -> None:
+        """`until_log_ns`: only what the harness had seen by then (re-checking a live check)."""
         from hil.record.reader import Recording  # the record room's reader
 
         if time not in ("publish", "log"):
@@ -148,6 +149,8 @@ class RecordingSource(MemorySource):
             msgs: dict[str, list[tuple[int, dict]]] = {}
             wanted = list(topics) if topics is not None else None
             for topic, log_t, pub_t, data in rec.messages(topics=wanted):
+                if until_log_ns is not None and log_t > until_log_ns:
+                    continue
                 t = pub_t if time == "publish" and pub_t else log_t
                 msgs.setdefault(topic, []).append((int(t), data if isinstance(data, dict) else
                                                    {"value": data}))
@@ -212,6 +215,23 @@ def recorded_specs(meta: Mapping[str, Mapping[str, str]]) -> tuple[list[str], di
     except (ValueError, TypeError):
         pass
     return [str(s) for s in specs], {str(k): str(v) for k, v in binding.items()}
+
+
+def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
+    """The timing checks a plan run made, from its `/timing/verdicts` (one entry per plan
+    step and spec): spec, binding, params, constants, since_ns, until_ns — what a faithful
+    offline re-check needs."""
+    seen: dict[tuple, dict[str, Any]] = {}
+    for _t, v in source.messages(T.TIMING_VERDICTS):
+        if "step" not in v or "spec" not in v or "check_until_ns" not in v:
+            continue
+        key = (v.get("plan"), v["step"], v["spec"])
+        if key not in seen:
+            seen[key] = {"plan": v.get("plan"), "step": v["step"], "spec": v["spec"],
+                         "binding": v.get("binding") or {}, "params": v.get("check_params") or {},
+                         "constants": v.get("check_constants") or {},
+                         "since_ns": v.get("check_since_ns"), "until_ns": v["check_until_ns"]}
+    return list(seen.values())
 
 
 def recorded_constants(meta: Mapping[str, Mapping[str, str]]) -> dict[str, float]:
