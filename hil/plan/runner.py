@@ -702,8 +702,10 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
             ctx.started[s.name] = time.time_ns()
         timeout = s.timeout_ns or ctx.bench.timeouts["step"]
         try:
+            ctx.session.check_lease()  # a bench behind a gateway: only while the lease holds
             r.message = _run_in_thread(lambda s=s, d=d: EXECUTORS[s.kind](ctx, s, d), timeout,
                                        ctx.cancel)
+            ctx.session.check_lease()
             r.status = PASS
         except _Inconclusive as e:
             r.status, r.message = INCONCLUSIVE, str(e)

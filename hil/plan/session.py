@@ -115,9 +115,10 @@ class Session:
 
     def check_lease(self) -> None:
         """Raise BenchError when the gateway lease was lost (the gateway made the bench safe)."""
-        if self.lease is not None and self.lease.lost:
-            raise BenchError(f"lease of {self.lease.prefix} lost: the gateway drove the bench to "
-                             "its safe state; nothing more is sent")
+        if self.lease is not None and self.lease.lost.is_set():
+            why = self.lease.lost_reason or "expired"
+            raise BenchError(f"lease of {self.lease.prefix} lost ({why}): the gateway drove "
+                             "the bench to its safe state; nothing more is sent")
 
     def drive(self, name: str | None) -> DriveIO:
         return self.drives[name or self.bench.default_drive]

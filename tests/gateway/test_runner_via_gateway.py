@@ -80,3 +80,19 @@ def test_gateway_transports_need_a_gateway_section(tmp_path: Path) -> None:
     path.write_text("name: b\ncan:\n  can0: gateway\ndrives:\n  d: {can: can0, node_id: 1}\n")
     with pytest.raises(PlanFileError, match=r"bad.yaml:3: can.can0: `gateway` needs"):
         load_bench(path)
+
+
+def test_a_lost_lease_stops_the_session() -> None:
+    import threading
+    from types import SimpleNamespace
+
+    from hil.plan.session import Session
+
+    lost = threading.Event()
+    s = Session(bench=None, recorder=None)  # type: ignore[arg-type]
+    s.lease = SimpleNamespace(prefix="lab/bench1", lost=lost, lost_reason="")
+    s.check_lease()  # held: nothing happens
+    lost.set()
+    s.lease.lost_reason = "the gateway ended the lease (now: free)"
+    with pytest.raises(BenchError, match=r"lease of lab/bench1 lost \(the gateway ended"):
+        s.check_lease()

@@ -18,11 +18,11 @@ from hil.plan.runner import (
     SensorTap,
     StepFailed,
     _bench_for,
-    _since,
     _x_abs_read,
     timing_specs,
 )
 from hil.plan.steps import describe
+from hil.timing.checker import occurrences_since
 
 HOMING = """
 name: h
@@ -79,8 +79,8 @@ class V:
 
 def test_since_keeps_occurrences_that_began_after():
     vs = [V(0, 100), V(0, 150), V(1, 300), V(1, 250), V(2, None)]
-    assert [v.occurrence for v in _since(vs, 200)] == [1, 1, 2]
-    assert _since(vs, None) == vs
+    assert [v.occurrence for v in occurrences_since(vs, 200)] == [1, 1, 2]
+    assert occurrences_since(vs, None) == vs
 
 
 class Rec:
