@@ -2,7 +2,7 @@
 EMCY) on a python-can bus, in front of a `Drive` (2000h-2FFFh and 6000h-6FFFh objects).
 
 Built on python-can only: canopen.LocalNode lacks NMT gating, PDO behaviour and EMCY/1001h/
-1003h handling (feasibility §3). Choices where the manual is silent: docs/choices/canopen.md.
+1003h handling (feasibility §3). Choices where the manual is silent: docs/manual-choices.md#canopen.
 
 Threading: `start()` runs one receive thread. Every frame is handled while holding `lock`
 (the DriveHost's RLock), and so is every timer step. Timers (heartbeat, event timers,

@@ -12,7 +12,7 @@ stations, loses back-to-back requests and ignores timing: spec/feasibility.md §
 maps those to exception responses and decides no drive behaviour: the comm-timeout alarm
 (AL020) and any comm-error alarm (AL019) are the drive's, reached through `on_timeout` and
 `on_comm_error`. Every ambiguous choice is a field of `ModbusFaceOptions`, documented in
-docs/choices/modbus.md.
+docs/manual-choices.md#modbus.
 
 `ModbusSlaveRunner(slave, line)` pumps a line object (`read(n, timeout)`, `write(data)`)
 in a thread; `FdLine(fd)` adapts a raw pty file descriptor to that interface.
@@ -61,7 +61,7 @@ def _default_exception_codes() -> dict[type, int]:
 
 @dataclass
 class ModbusFaceOptions:
-    """Choices where the manual is silent or ambiguous (docs/choices/modbus.md)."""
+    """Choices where the manual is silent or ambiguous (docs/manual-choices.md#modbus)."""
 
     # Frame-end silence and earliest reply: "t3.5" (Modbus serial spec, 1.75 ms fixed above
     # 19200 baud) or "manual" (10 ms before and after a frame, L15703).

@@ -13,7 +13,7 @@ The encoder knows no other model module. The Drive injects what it needs:
 
 Inputs are DI *functions* (already a/b-contact resolved): `on_abse`, `on_absc`, `on_absq`,
 and the motor position in encoder counts, CCW positive as the encoder counts (L16404).
-Choices (⚠ in the manual) are options of `AbsoluteOptions`; see docs/choices/absolute.md.
+Choices (⚠ in the manual) are options of `AbsoluteOptions`; see docs/manual-choices.md#absolute.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """CiA 402 device state machine of the ASDA-A3 and its 6000h-6FFFh objects.
 
 Sources: a3-comms.md §2.10-2.13 (manual L18202-L19278). Choices where the manual is silent
-are model options (`Cia402Options`) and are listed in docs/choices/cia402-motion.md.
+are model options (`Cia402Options`) and are listed in docs/manual-choices.md#cia402-motion.
 
 Interface to the drive (everything else is internal)::
 
@@ -116,7 +116,7 @@ _OPTION_CODES = {  # model-only option-code objects (absent on the A3, a3-comms 
 
 @dataclass
 class Cia402Options:
-    """Choices where the manual is silent (docs/choices/cia402-motion.md)."""
+    """Choices where the manual is silent (docs/manual-choices.md#cia402-motion)."""
 
     quick_stop_option: int = 2  # 605Ah model: 6085h ramp, then SWITCH ON DISABLED (§3.6 ⚠)
     disable_operation_option: int = 0  # 605Ch model: transition 5 = servo off (L18253)

@@ -7,7 +7,7 @@ L9323-9339): low byte YX = function code (table 8.1 / 8.2), digit Z = contact: 0
 conducts when its function is true (a) or false (b).
 
 Mapping changes need a power cycle (L9256, L9339): the mapping in effect is read at
-construction and at `power_cycle()`. Choices: docs/choices/alarms-dio.md.
+construction and at `power_cycle()`. Choices: docs/manual-choices.md#alarms-dio.
 """
 
 from __future__ import annotations

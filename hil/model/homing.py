@@ -17,7 +17,7 @@
   (`drive.absolute`), gets its origin (L16458).
 
 Method tables: `hil.model.homing_methods`. Choices and deviation knobs (ModelOptions
-.extra["homing"]): `HomingOptions`, docs/choices/homing.md.
+.extra["homing"]): `HomingOptions`, docs/manual-choices.md#homing.
 """
 
 from __future__ import annotations

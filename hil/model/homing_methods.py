@@ -1,7 +1,7 @@
 """Homing methods as data: what each CANopen 6098h method and each PR P5.004 mode looks for.
 
 Pure tables, no motion. `hil.model.homing` runs a `Plan` on the axis. Choices and sources:
-docs/choices/homing.md.
+docs/manual-choices.md#homing.
 
 Every switch is treated as a *region* in which its DI function is active: the home cam ORGP
 is active on [lo, hi], NL on (-inf, nl], PL on [pl, +inf). A plan names one edge of one

@@ -8,7 +8,7 @@ Attributes (§8.1, L6719-6723): ★ read-only, ▲ not writable while Servo On,
 
 Addressing: Modbus address of Pg.n = (g << 8) + 2*n, low word first (L7156, L8492);
 CANopen index = 0x2000 + (g << 8) + n (Pa-bc <=> 2aBCh, L18154-18156).
-Choices on ambiguous points: docs/choices/parameters.md.
+Choices on ambiguous points: docs/manual-choices.md#parameters.
 """
 
 from __future__ import annotations
@@ -363,7 +363,7 @@ class ParameterStore:
 
         A 32-bit parameter written by one half only combines it with its current other half
         (the drive stores the half). For a 16-bit parameter the low word is the value and a
-        high-word write is accepted and ignored. docs/choices/parameters.md.
+        high-word write is accepted and ignored. docs/manual-choices.md#parameters.
         """
         halves: dict[str, dict[int, int]] = {}
         specs: dict[str, ParamSpec] = {}

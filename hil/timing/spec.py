@@ -29,7 +29,7 @@ FACTORY_BINDING: dict[str, str] = {
     "HOME": "DO3",  # P2.020 = 0x0109
     "TPOS": "DO4",  # P2.021 = 0x0105
     "ALRM": "DO5:b",  # P2.022 = 0x0007, b-contact
-    "BRKR": "DO6",  # P2.041 = 0x0108 on the virtual bench (docs/choices/timing.md)
+    "BRKR": "DO6",  # P2.041 = 0x0108 on the virtual bench (docs/manual-choices.md#timing)
 }
 DEFAULT_PLACES: dict[str, str] = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
 LINE_RE = re.compile(r"(DI\d{1,2}|DO\d|STO_A|STO_B|FDBK)(?::([ab]))?")

@@ -30,7 +30,7 @@ SERIAL_PARAMS = {"baud", "parity", "bytesize", "stopbits"}
 ZENOH_MODES = ("peer", "client")
 PARITIES = ("N", "E", "O", "M", "S")
 # Delta ASDA-A3 defaults: P3.001 X=3 -> 38400 bps (L10509-L10544); P3.002=6 -> 8,N,2 RTU
-# (L10546-L10557). See docs/choices/transport.md.
+# (L10546-L10557). See docs/manual-choices.md#transport.
 DEFAULT_BAUD = 38400
 DEFAULT_PARITY = "N"
 DEFAULT_BYTESIZE = 8

@@ -22,7 +22,7 @@ def test_canopen_import_od_reads_it():
     assert od[0x1014].default == 0x8A  # L17704-L17708
     assert od[0x6502].default == 0x6D  # L19259
     assert od[0x6040].default == 0x0004  # L18212
-    assert od[0x6061].access_type == "ro"  # ⚠ resolved, docs/choices/canopen.md
+    assert od[0x6061].access_type == "ro"  # ⚠ resolved, docs/manual-choices.md#canopen
 
 
 def test_parameter_objects():

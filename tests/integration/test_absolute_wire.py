@@ -202,7 +202,7 @@ def test_absolute_position_agrees_over_dio_modbus_and_sdo(bench, tmp_path) -> No
     assert bench.by_modbus() == (0, 0, puu)  # P2.070 bit1 = 0: PUU (L7493-7516)
     assert bench.by_sdo() == (0, 0, puu)
     # 6064h rounds the motor counts, the absolute PUU truncates toward zero (L16408,
-    # docs/choices/absolute.md): they may differ by one PUU.
+    # docs/manual-choices.md#absolute): they may differ by one PUU.
     assert abs(bench.cia.read(0x6064) - puu) <= 1
 
     # A host that answers too late gets ABSW (T_R, L16513); the retry succeeds.
