@@ -49,6 +49,7 @@ from hil.model.events import (
     AlarmChanged,
     DriveEvent,
     FdbkChanged,
+    InputChanged,
     ParamChanged,
     PowerCycled,
 )
@@ -523,7 +524,10 @@ class Drive:
             act = states.get(fn, False)
             if force or self._sensor_state.get(fn) != act:
                 self._sensor_state[fn] = act
-                self.dio.set_input(n, act if kind == "no" else not act, settled=force)
+                level = act if kind == "no" else not act
+                self.dio.set_input(n, level, settled=force)
+                if not force:
+                    self._emit(InputChanged(self.sched.now, n, level))
 
 
 def _abort_for(exc: ParamError, value: int) -> int:

@@ -59,4 +59,24 @@ class PowerCycled:
     battery: bool
 
 
-DriveEvent = DoChanged | FdbkChanged | StateChanged | AlarmChanged | ParamChanged | PowerCycled
+@dataclass(frozen=True, slots=True)
+class InputChanged:
+    """A DI terminal the bench mechanics drive (NL, PL, ORGP sensors) changed level."""
+
+    t: int
+    n: int
+    closed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class HomingPhase:
+    """The homing engine entered a phase ("" idle, search, cross, index, stop, return ...)."""
+
+    t: int
+    phase: str
+
+
+DriveEvent = (
+    DoChanged | FdbkChanged | StateChanged | AlarmChanged | ParamChanged | PowerCycled
+    | InputChanged | HomingPhase
+)

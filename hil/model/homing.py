@@ -26,6 +26,7 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any
 
 from hil.model.errors import ModelError
+from hil.model.events import HomingPhase
 from hil.model.homing_methods import (
     EDGE,
     HERE,
@@ -90,7 +91,7 @@ class Homing:
         self.drive = drive
         self.options = options or HomingOptions.from_dict(drive.options.extra.get("homing"))
         self.route = ""  # "canopen" | "pr" while a run is active
-        self.phase = ""  # "" idle | search | exit | cross | index | torque | stop | return
+        self._phase = ""  # "" idle | search | exit | cross | index | torque | stop | return
         self.plan: Plan | None = None
         self.homed = False  # coordinate established since power-up
         self.last_error = ""
@@ -182,6 +183,16 @@ class Homing:
             self._boot_armed = False
             if (self.drive.params.get("P6.000") >> 28) & 0xF == 1:
                 self.trigger_pr("BOOT")
+
+    @property
+    def phase(self) -> str:
+        return self._phase
+
+    @phase.setter
+    def phase(self, value: str) -> None:
+        if value != self._phase:
+            self._phase = value
+            self.drive._emit(HomingPhase(self.drive.now, value))  # ground truth, exact time
 
     def on_power_up(self) -> None:
         """Power-up: HOME off (L15290), coordinate not homed, BOOT armed again."""
