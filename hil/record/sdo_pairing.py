@@ -117,23 +117,21 @@ class SdoPairing:
                 return [self._error(node, d, t, "upload segment request without a transfer")]
             txn.frames += 1
         elif cs == 4:  # abort by the client
-            code = int.from_bytes(d[4:8], "little") if len(d) >= 8 else None
-            if txn is None:
-                txn = _Txn(
-                    node,
-                    t,
-                    d[1] | d[2] << 8 if len(d) >= 3 else 0,
-                    d[3] if len(d) >= 4 else 0,
-                    "unknown",
-                    "",
-                )
-            else:
-                del self._open[node]
-                txn.frames += 1
-            out.append(_result(txn, "abort", t, abort_code=code, abort_by="client"))
+            out.append(self._abort(node, d, t, txn, "client"))
         else:
             out.append(self._error(node, d, t, f"unknown SDO client command specifier {cs}"))
         return out
+
+    def _abort(self, node: int, d: bytes, t: int, txn: _Txn | None, by: str) -> dict:
+        """An abort frame (cs 4) from the client or the server ends the node's transfer."""
+        code = int.from_bytes(d[4:8], "little") if len(d) >= 8 else None
+        if txn is None:
+            index = d[1] | d[2] << 8 if len(d) >= 3 else 0
+            txn = _Txn(node, t, index, d[3] if len(d) >= 4 else 0, "unknown", "")
+        else:
+            del self._open[node]
+            txn.frames += 1
+        return _result(txn, "abort", t, abort_code=code, abort_by=by)
 
     # -- server (response) side ---------------------------------------------------------------
     def _server(self, node: int, d: bytes, t: int) -> list[dict]:
@@ -142,20 +140,7 @@ class SdoPairing:
             return [self._error(node, d, t, "empty SDO response frame")]
         cs = d[0] >> 5
         if cs == 4:  # abort by the server
-            code = int.from_bytes(d[4:8], "little") if len(d) >= 8 else None
-            if txn is None:
-                txn = _Txn(
-                    node,
-                    t,
-                    d[1] | d[2] << 8 if len(d) >= 3 else 0,
-                    d[3] if len(d) >= 4 else 0,
-                    "unknown",
-                    "",
-                )
-            else:
-                del self._open[node]
-                txn.frames += 1
-            return [_result(txn, "abort", t, abort_code=code, abort_by="server")]
+            return [self._abort(node, d, t, txn, "server")]
         if txn is None:
             return [self._error(node, d, t, f"SDO response (scs {cs}) without a request")]
         txn.frames += 1
