@@ -2,11 +2,7 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
-import subprocess
 import sys
-import threading
 import time
 import uuid
 from collections.abc import Callable
@@ -20,6 +16,7 @@ from hil.faces.stack import DriveSpec, VirtualDriveStack
 from hil.gateway.gateway import Gateway, GatewayConfig
 from hil.plan.bench import load_bench
 from hil.transport import zenoh_net
+from tests.children import ChildProcess, children, hil
 from tests.conftest import free_port
 
 HERE = Path(__file__).parent
@@ -132,103 +129,15 @@ def sdo_read_statusword(bus: can.BusABC, node: int = 1, timeout: float = 2.0) ->
     raise AssertionError(f"no SDO answer from node {node} within {timeout} s")
 
 
-class Child:
-    """A runner child process (tests/gateway/runner_child.py); killed at teardown."""
-
-    def __init__(self, *args: str, timeout_s: float = 20.0):
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen([sys.executable, str(HERE / "runner_child.py"), *args],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, env=env,
-                                     cwd=str(HERE.parent.parent))
-        self.lines: list[str] = []
-        self._ready = threading.Event()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-        if not self._ready.wait(timeout_s):
-            self.stop()
-            raise RuntimeError(f"runner child {args} not ready: {self.lines[-10:]}")
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:  # type: ignore[union-attr]
-            self.lines.append(line.rstrip())
-            if line.startswith(("ready", "refused", "error")):
-                self._ready.set()
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            with contextlib.suppress(OSError):
-                self.proc.stdin.close()  # type: ignore[union-attr]
-            try:
-                self.proc.wait(5)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        self._reader.join(2)
-        with contextlib.suppress(OSError):
-            self.proc.stdout.close()  # type: ignore[union-attr]
-
-
 @pytest.fixture
 def runner_child():
-    children: list[Child] = []
-
-    def start(*args: str) -> Child:
-        c = Child(*args)
-        children.append(c)
-        return c
-
-    yield start
-    for c in children:
-        c.stop()
-
-
-class HilProcess:
-    """`python -m hil.cli ARGS` as a child; ready once it prints a line with `ready`."""
-
-    def __init__(self, args: list[str], timeout_s: float = 30.0) -> None:
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen([sys.executable, "-m", "hil.cli", *args],
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, env=env, cwd=str(HERE.parent.parent))
-        self.lines: list[str] = []
-        self._ready = threading.Event()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-        if not self._ready.wait(timeout_s):
-            self.stop()
-            raise RuntimeError(f"hil {args[0]} never printed ready: {self.lines[-10:]}")
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:  # type: ignore[union-attr]
-            self.lines.append(line.rstrip())
-            if "ready" in line:
-                self._ready.set()
-        self._ready.set()
-
-    def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(2)  # SIGINT
-            try:
-                self.proc.wait(15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        self._reader.join(5)
-        with contextlib.suppress(OSError):
-            self.proc.stdout.close()  # type: ignore[union-attr]
-        return self.proc.returncode
+    """tests/gateway/runner_child.py as a child; stopped by closing its stdin."""
+    yield from children(lambda *args: ChildProcess(
+        [sys.executable, str(HERE / "runner_child.py"), *args], how="stdin", timeout_s=20.0,
+        ready=lambda line: line.startswith(("ready", "refused", "error")), what="runner child"))
 
 
 @pytest.fixture
 def hil_process():
-    procs: list[HilProcess] = []
-
-    def start(*args: str) -> HilProcess:
-        p = HilProcess(list(args))
-        procs.append(p)
-        return p
-
-    yield start
-    for p in reversed(procs):
-        p.stop()
+    """`python -m hil.cli ARGS` as a child, ready once it prints `ready`."""
+    yield from children(hil)

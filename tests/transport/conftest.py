@@ -2,68 +2,23 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import pytest
 
 from hil.transport import zenoh_net
+from tests.children import ChildProcess, children
 
 PEER = Path(__file__).with_name("peer.py")
 
 
-class Child:
-    """A `peer.py` child; stopped by closing its stdin, killed if it lingers."""
-
-    def __init__(self, *args: str, timeout_s: float = 15.0):
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen([sys.executable, str(PEER), *args], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, env=env)
-        self.output: list[str] = []
-        ready = threading.Event()
-
-        def read() -> None:
-            for line in self.proc.stdout:
-                self.output.append(line.rstrip())
-                if line.startswith("ready"):
-                    ready.set()
-
-        self._reader = threading.Thread(target=read, daemon=True)
-        self._reader.start()
-        if not ready.wait(timeout_s):
-            self.stop()
-            raise RuntimeError(f"child {args} not ready: {self.output[-10:]}")
-
-    def stop(self) -> None:
-        try:
-            self.proc.stdin.close()
-        except OSError:
-            pass
-        try:
-            self.proc.wait(5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(5)
-        self._reader.join(2)
-        self.proc.stdout.close()
-
-
 @pytest.fixture
 def spawn():
-    children: list[Child] = []
-
-    def start(*args: str) -> Child:
-        child = Child(*args)
-        children.append(child)
-        return child
-
-    yield start
-    for child in children:
-        child.stop()
+    """A `peer.py` child; stopped by closing its stdin, killed if it lingers."""
+    yield from children(lambda *args: ChildProcess(
+        [sys.executable, str(PEER), *args], how="stdin", timeout_s=15.0,
+        ready=lambda line: line.startswith("ready"), what="peer"))
 
 
 @pytest.fixture(autouse=True)
