@@ -335,15 +335,8 @@ def _x_inject(ctx: StepContext, s: Step, d: DriveIO) -> str:
     return ""
 
 
-def _constants_for(spec: Any, overrides: dict[str, float]) -> dict[str, float] | None:
-    """The bench's constant overrides that this spec defines (others are ignored)."""
-    own = getattr(spec, "constants", {}) or {}
-    picked = {k: v for k, v in overrides.items() if k in own}
-    return picked or None
-
-
 def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    from hil.timing.checker import check, occurrences_since
+    from hil.timing.checker import check, constants_for, occurrences_since
     from hil.timing.source import RecordingSource
 
     spec = ctx.specs[s.args["spec"]]
@@ -355,7 +348,7 @@ def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
     source = RecordingSource(ctx.rec.path)
     binding = d.spec.binding() | {k: bind_line(x, d.spec)
                                   for k, x in s.args.get("bind", {}).items()}
-    constants = (_constants_for(spec, ctx.bench.timing_constants) or {}) | s.args.get(
+    constants = constants_for(spec, ctx.bench.timing_constants) | s.args.get(
         "constants", {})
     verdicts = check(spec, source, params=s.args["params"] or None, binding=binding,
                      constants=constants or None)

@@ -131,6 +131,7 @@ class GroundTruth:
         self.name, self.drive, self.host, self.rec = name, drive, host, recorder
         self.period_ns = int(period_ms * 1_000_000)
         self._next = 0
+        self._last_event_state: dict[str, Any] | None = None
         self._unsub = drive.subscribe(self._on_event)
         host.add_tick(self._tick)
         self.snapshot_params()
@@ -165,9 +166,14 @@ class GroundTruth:
             self.rec.drive_params(self.name, {ev.name: ev.value}, source_t=wall)
         self.rec.drive_event(self.name, {"type": type(ev).__name__, **_fields(ev)},
                              source_t=wall)
-        # a state sample at every event, so transitions are exact rather than 10 ms late
+        # a state sample at every event that changed it, so transitions are exact rather
+        # than a period late (several events at one instant share one sample)
         with contextlib.suppress(Exception):
-            self.rec.drive_state(self.name, self.drive.snapshot(), source_t=wall)
+            snap = self.drive.snapshot()
+            key = {k: v for k, v in snap.items() if k != "t"}
+            if key != self._last_event_state:
+                self._last_event_state = key
+                self.rec.drive_state(self.name, snap, source_t=wall)
 
     def close(self) -> None:
         self.host.remove_tick(self._tick)

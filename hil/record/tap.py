@@ -1,4 +1,5 @@
-"""What a transport calls to have its traffic recorded. The recorder implements `Tap`.
+"""What a transport calls to have its traffic recorded. The recorder implements `Tap`;
+a transport without a tap records nothing (`tap=None`).
 
 Timestamps are integer ns. `t` is when the harness saw the traffic (`time.time_ns()` on
 the wall clock the recorder uses); `source_t` is the source's own timestamp (hardware, model
@@ -28,15 +29,3 @@ class Tap(Protocol):
     def dio(self, name: str, line: str, level: bool, t: int, source_t: int | None) -> None:
         """A DI/DO/STO line level (electrical: True = closed/conducting)."""
 
-
-class NullTap:
-    """A tap that records nothing (the default)."""
-
-    def can(self, bus, frame, direction, t, source_t):
-        pass
-
-    def serial(self, port, data, direction, t, source_t, gaps_us=None):
-        pass
-
-    def dio(self, name, line, level, t, source_t):
-        pass

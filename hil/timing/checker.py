@@ -696,3 +696,9 @@ def occurrences_since(verdicts: list[Verdict], t_ns: int | None) -> list[Verdict
         if t is not None:
             first[v.occurrence] = min(t, first.get(v.occurrence, t))
     return [v for v in verdicts if first.get(v.occurrence, t_ns) >= t_ns]
+
+
+def constants_for(spec: Any, overrides: Mapping[str, float]) -> dict[str, float]:
+    """The overrides (e.g. a bench's `timing.constants`) that `spec` defines; others ignored."""
+    own = getattr(spec, "constants", {}) or {}
+    return {k: v for k, v in overrides.items() if k in own}

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hil.timing.checker import Verdict, check, summary
+from hil.timing.checker import Verdict, check, constants_for, summary
 from hil.timing.spec import Spec, SpecError, load_spec, shipped_specs
 
 
@@ -163,7 +163,7 @@ def main(args: argparse.Namespace) -> int:
     bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
     for spec in specs:
-        own = {k: v for k, v in bench_consts.items() if k in spec.constants}
+        own = constants_for(spec, bench_consts)
         vs = check(spec, source, params=params, binding=bind, constants=(own | consts) or None,
                    resolution=res)
         verdicts.extend(vs)

@@ -54,10 +54,6 @@ def load_yaml(text: str, file: str = "<string>") -> Any:
     return load_yaml_text(text, file, SpecError)
 
 
-def _join(where: str, key: str) -> str:
-    return join(where, key)
-
-
 # --- the spec model --------------------------------------------------------------------
 
 
@@ -186,7 +182,7 @@ class _V:
         for k in d:
             if k not in allowed:
                 hint = ", ".join(sorted(allowed))
-                raise self.err(d.key_lines[k], _join(where, k), f"unknown key (allowed: {hint})")
+                raise self.err(d.key_lines[k], join(where, k), f"unknown key (allowed: {hint})")
         for k in required:
             if k not in d:
                 raise self.err(d.line, where, f"missing field {k!r}")
@@ -194,18 +190,18 @@ class _V:
     def text(self, d: LDict, key: str, where: str) -> str:
         v = d[key]
         if not isinstance(v, str) or not v.strip():
-            raise self.err(d.key_lines[key], _join(where, key), "must be a non-empty string")
+            raise self.err(d.key_lines[key], join(where, key), "must be a non-empty string")
         return v.strip()
 
     def expr(self, d: LDict, key: str, where: str) -> Expr:
         v = d[key]
         line = d.key_lines[key]
         if isinstance(v, bool) or not isinstance(v, str | int | float):
-            raise self.err(line, _join(where, key), f"must be an expression, got {_kind(v)}")
+            raise self.err(line, join(where, key), f"must be an expression, got {_kind(v)}")
         try:
             return Expr(v)
         except ExprError as e:
-            raise self.err(line, _join(where, key), f"bad expression: {e}") from None
+            raise self.err(line, join(where, key), f"bad expression: {e}") from None
 
     def name(self, v: Any, line: int, where: str) -> str:
         if not isinstance(v, str) or not _NAME_RE.fullmatch(v):
@@ -386,7 +382,7 @@ def _ref(v: _V, d: LDict, key: str, where: str, events: dict, signals) -> str:
     """An event reference: a name, or an inline event mapping (registered anonymously)."""
     val = d[key]
     line = d.key_lines[key]
-    w = _join(where, key)
+    w = join(where, key)
     if isinstance(val, LDict):
         name = f"{where or 'spec'}.{key}".replace("[", "_").replace("]", "")
         events[name] = _event(v, name, val, line, w, signals, events)
