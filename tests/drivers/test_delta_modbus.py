@@ -26,17 +26,12 @@ from hil.drivers.delta_modbus import (
 )
 from hil.faces.modbus_slave import FdLine, ModbusSlave, ModbusSlaveRunner
 from hil.model import errors
+from hil.model.params import ParameterStore
 from hil.protocol import modbus as mb
+from hil.transport import serial_line
 
 H = bytes.fromhex
 
-try:
-    from hil.model.params import ParameterStore, ParamTable
-
-    ParamTable.load()
-    HAVE_STORE = True
-except Exception:  # the model room's store is not there (yet)
-    HAVE_STORE = False
 
 
 class WordStore:
@@ -195,7 +190,6 @@ def test_param_address_formula():
         param_address("Q1.000")
 
 
-@pytest.mark.skipif(not HAVE_STORE, reason="hil.model.params.ParameterStore not available")
 def test_param_table_lookup_is_lazy_and_typed():
     drive = DeltaModbus(LoopLine(None), station=1)
     assert drive._table is None
@@ -214,10 +208,7 @@ def pty_drive(tmp_path):
     tty.setraw(slave_fd)
     tty.setraw(master)
     path = os.ttyname(slave_fd)
-    if HAVE_STORE:
-        store = ParameterStore(autosave=False)
-    else:
-        store = WordStore({0x0154: 0, 0x0155: 0, 0x0112: 0, 0x0113: 0, 0x0300: 1})
+    store = ParameterStore(autosave=False)
     face = ModbusSlave(store, station=1, baud=115200)
     runner = ModbusSlaveRunner(face, FdLine(master), poll_s=0.002).start()
     try:
@@ -245,8 +236,7 @@ def test_end_to_end_over_pty(pty_drive):
             drive.read_registers(0x0154, 1, station=9)
         assert drive.read_registers(0x0154, 1) == [100]  # recovers after the silence
         assert drive.last_round_trip_s is not None and drive.last_round_trip_s >= 0.00175
-    if HAVE_STORE:
-        assert store.read("P1.042") == 100 and store.read("P1.009") == -12345
+    assert store.read("P1.042") == 100 and store.read("P1.009") == -12345
     assert face.stats["foreign"] == 1
 
 
@@ -270,13 +260,12 @@ def test_mbpoll_reads_and_writes_over_pty(pty_drive, tmp_path):
     bad = subprocess.run([*base, "-r", str(0x0154), "-c", "11", "-1", str(link)],
                          capture_output=True, text=True, timeout=20)  # fmt: skip
     assert bad.returncode != 0 and "Illegal data value" in bad.stdout + bad.stderr
-    assert (store.read("P1.042") if HAVE_STORE else store.words[0x0154]) == 250
+    assert store.read("P1.042") == 250
     assert face.stats["replies"] == 2 and face.stats["exceptions"] == 1
 
 
 def test_end_to_end_over_transport_ptyline(tmp_path):
     """The face on the transport room's PtyLine (line timing emulated), driver on its link."""
-    serial_line = pytest.importorskip("hil.transport.serial_line")
     link = tmp_path / "ttyA3"
     line = serial_line.open_serial(f"pty:{link}?baud=115200")
     store = WordStore({0x0154: 0, 0x0155: 0})

@@ -5,9 +5,8 @@ from __future__ import annotations
 import pytest
 
 from hil.faces.modbus_slave import ModbusSlave
+from hil.model import params
 from hil.protocol import modbus as mb
-
-params = pytest.importorskip("hil.model.params", reason="hil.model.params not available")
 
 H = bytes.fromhex
 MS = 1_000_000

@@ -172,7 +172,6 @@ def test_missing_decoders_are_skipped(tmp_path, monkeypatch):
 
 
 def test_decoded_canopen_per_frame(tmp_path):
-    pytest.importorskip("hil.protocol.canopen")
     p = tmp_path / "co.mcap"
     with Recorder(p) as rec:
         for i in range(3):

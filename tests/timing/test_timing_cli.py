@@ -5,12 +5,10 @@ from __future__ import annotations
 import json
 
 import pytest
+from mcap.writer import Writer
 
 from hil.timing.cli import configure, main
 from hil.timing.source import RecordingSource
-
-pytest.importorskip("hil.record.reader")
-from mcap.writer import Writer
 
 MS = 1_000_000
 
