@@ -119,7 +119,8 @@ def _inputs(values: list[str]) -> dict[int, bool]:
     for item in values:
         n, _, level = item.partition("=")
         if not n.isdigit() or level not in ("0", "1"):
-            raise SystemExit(f"hil drive: --di {item!r}: expected N=0 or N=1, e.g. 8=1")
+            print(f"hil drive: --di {item!r}: expected N=0 or N=1, e.g. 8=1", file=sys.stderr)
+            raise SystemExit(2)  # a usage error, as argparse exits
         out[int(n)] = level == "1"
     return out
 

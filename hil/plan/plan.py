@@ -299,5 +299,6 @@ def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) ->
             out.append(cand)
             continue
         known = ", ".join(sorted(x.stem for x in plans_dir.glob("*.yaml")))
-        raise PlanFileError(n, 0, "(plan)", f"no such plan file or shipped plan; shipped: {known}")
+        raise PlanFileError(n, 0, "(plan)", f"no such plan file, nor a plan of that name in "
+                            f"{plans_dir} ({known or 'none there'})")
     return out

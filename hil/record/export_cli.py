@@ -1,8 +1,16 @@
-"""`hil export FILE --format candump|asc|blf|csv -o OUT [--bus NAME]`: CAN traffic out."""
+"""`hil export FILE -o OUT [-f candump|asc|blf|csv] [--bus NAME]`: CAN traffic out.
+
+The format comes from OUT's extension, the one python-can's `LogReader` reads it by: `.log`
+candump (`candump -L`), `.asc`, `.blf`, `.csv`. `-f` names it where the extension says nothing
+(`-o traffic.txt -f candump`) and must agree with a known extension. `-o -` writes a text
+format to stdout (default candump); BLF is binary and is refused there.
+Exit 0 written, 2 bad input (usage, unreadable recording, unknown bus, format) or write error.
+"""
 
 from __future__ import annotations
 
 import argparse
+import io
 import sys
 from collections.abc import Iterable
 from pathlib import Path
@@ -14,7 +22,10 @@ from hil.record.canio import can_messages
 from hil.record.reader import Recording, RecordingError
 
 FORMATS = ("candump", "asc", "blf", "csv")
+#: OUT extension -> format (the suffixes python-can's LogReader/Logger use)
+EXTENSIONS = {".log": "candump", ".asc": "asc", ".blf": "blf", ".csv": "csv"}
 CAN_ERR_FLAG = 0x20000000  # linux/can.h: error frames carry it in the id
+STDOUT = "-"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -23,10 +34,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--format",
         "-f",
         choices=FORMATS,
-        default="candump",
-        help="candump log (-L), or a python-can writer format",
+        default=None,
+        help="output format (default: from the -o extension: .log candump, .asc, .blf, .csv; "
+        "candump for -o -)",
     )
-    parser.add_argument("-o", "--output", type=Path, required=True, metavar="OUT")
+    parser.add_argument("-o", "--output", required=True, metavar="OUT",
+                        help="output file, or - for stdout (text formats only)")
     parser.add_argument("--bus", default=None, help="only this bus (default: all)")
     parser.add_argument(
         "--time",
@@ -34,6 +47,35 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default="log",
         help="timestamps from log_time (harness) or publish_time (source)",
     )
+
+
+def output_format(output: str, fmt: str | None) -> str:
+    """The format to write `output` in; ValueError with the reason when it cannot be told or
+    contradicts the file name."""
+    if output == STDOUT:
+        fmt = fmt or "candump"
+        if fmt == "blf":
+            raise ValueError("-o -: BLF is binary and is not written to stdout; give a .blf file")
+        return fmt
+    ext = Path(output).suffix.lower()
+    by_ext = EXTENSIONS.get(ext)
+    known = ", ".join(f"{e} ({f})" for e, f in EXTENSIONS.items())
+    if fmt is None:
+        if by_ext is None:
+            raise ValueError(f"-o {output}: cannot tell the format from {ext or 'no extension'!r}"
+                             f"; use one of {known}, or give -f")
+        return by_ext
+    if by_ext is not None and by_ext != fmt:
+        raise ValueError(f"-o {output} names a {by_ext} file but -f is {fmt}; "
+                         f"python-can would read it as {by_ext} (extensions: {known})")
+    return fmt
+
+
+class _KeepOpen(io.TextIOWrapper):
+    """stdout for a python-can writer: its `stop()` closes the file; this only flushes."""
+
+    def close(self) -> None:
+        self.flush()
 
 
 def candump_line(bus: str, msg: can.Message) -> str:
@@ -65,6 +107,12 @@ def write_candump(items: Iterable[tuple[str, can.Message]], out: TextIO) -> int:
 
 
 def main(args: argparse.Namespace) -> int:
+    output = str(args.output)
+    try:
+        fmt = output_format(output, args.format)
+    except ValueError as exc:
+        print(f"hil export: {exc}", file=sys.stderr)
+        return 2
     try:
         rec = Recording.open(args.file)
         items = list(can_messages(rec, args.bus, time=args.time))
@@ -77,14 +125,20 @@ def main(args: argparse.Namespace) -> int:
             "exporting what is readable",
             file=sys.stderr,
         )
+    to_stdout = output == STDOUT
     try:
-        if args.format == "candump":
-            with open(args.output, "w", encoding="ascii") as f:
-                n = write_candump(items, f)
+        if fmt == "candump":
+            if to_stdout:
+                n = write_candump(items, sys.stdout)
+                sys.stdout.flush()
+            else:
+                with open(output, "w", encoding="ascii") as f:
+                    n = write_candump(items, f)
         else:
-            writer = {"asc": can.ASCWriter, "blf": can.BLFWriter, "csv": can.CSVWriter}[
-                args.format
-            ](args.output)
+            target = (_KeepOpen(sys.stdout.buffer, encoding="utf-8", write_through=True)
+                      if to_stdout else output)
+            writer = {"asc": can.ASCWriter, "blf": can.BLFWriter, "csv": can.CSVWriter}[fmt](
+                target)
             try:
                 for _bus, msg in items:
                     writer.on_message_received(msg)
@@ -92,7 +146,8 @@ def main(args: argparse.Namespace) -> int:
                 writer.stop()
             n = len(items)
     except OSError as exc:
-        print(f"hil export: cannot write {args.output}: {exc}", file=sys.stderr)
+        print(f"hil export: cannot write {output}: {exc}", file=sys.stderr)
         return 2
-    print(f"{n:,} frames -> {args.output} ({args.format})")
+    where = "stdout" if to_stdout else output
+    print(f"{n:,} frames -> {where} ({fmt})", file=sys.stderr if to_stdout else sys.stdout)
     return 0

@@ -331,6 +331,7 @@ class Scan:
     error: str | None  # first broken record, or None
     error_offset: int | None
     size: int
+    corrupt: bool = False  # the broken record was whole but unreadable (not merely cut short)
 
 
 def _parse(cls: Any, body: bytes) -> Any:
@@ -430,8 +431,10 @@ def scan(data: bytes) -> Scan:
                 out.has_footer = True
                 break
         except Exception as exc:  # a broken record ends the readable part
-            out.error = f"record (opcode 0x{op:02x}) at offset {off} unreadable: {exc}"
+            what = "chunk" if op == Opcode.CHUNK else f"record (opcode 0x{op:02x})"
+            out.error = f"{what} at offset {off} unreadable: {exc}"
             out.error_offset = off
+            out.corrupt = True
             break
         off = end
     return out

@@ -97,6 +97,12 @@ class Recording:
         return self._scan.error
 
     @property
+    def corrupt(self) -> bool:
+        """True if a whole record is unreadable (bad CRC, bad compression): the file is damaged
+        mid-way and everything after that record is lost, unlike a killed run's cut tail."""
+        return self._scan.corrupt
+
+    @property
     def size(self) -> int:
         return self._scan.size
 

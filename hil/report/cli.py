@@ -1,4 +1,7 @@
-"""`hil report RECORDING.mcap [-o FILE.html] [--junit FILE.xml]`."""
+"""`hil report RECORDING.mcap [-o FILE.html] [--junit FILE.xml]`.
+
+Exit 0 written, 2 bad input (usage, unreadable recording) or write error.
+"""
 
 from __future__ import annotations
 
@@ -28,7 +31,10 @@ def main(args: argparse.Namespace) -> int:
             print(out)
         if args.junit:
             print(write_junit(args.recording, Path(args.junit)))
-    except RecordingError as e:
+    except RecordingError as e:  # not a readable recording: bad input, like every command
         print(f"hil report: {e}", file=sys.stderr)
-        return 1
+        return 2
+    except OSError as e:
+        print(f"hil report: cannot write: {e}", file=sys.stderr)
+        return 2
     return 0

@@ -685,6 +685,25 @@ def summary(verdicts: list[Verdict]) -> dict[str, int]:
     return out
 
 
+def missing_data(spec: Spec, source: SignalSource, binding: Mapping[str, str] | None = None
+                 ) -> list[str]:
+    """Why each of `spec`'s recorded signals has no samples in `source` ("STO1: no data on
+    /dio/drive1/STO1"); [] when every signal has data. Explains a spec that judged nothing."""
+    ctx = context(spec, source, None, binding)
+    out = []
+    for s in spec.signals.values():
+        if s.kind not in ("topic", "function", "line", "alarm"):
+            continue
+        try:
+            topic, fld, _inv = ctx._where_from(s)
+        except KeyError as e:
+            out.append(f"{s.name}: {e.args[0] if e.args else e}")
+            continue
+        if not samples(source, topic, fld, s.where):
+            out.append(f"{s.name}: no data on {topic}" + (f" field {fld}" if fld else ""))
+    return out
+
+
 def occurrences_since(verdicts: list[Verdict], t_ns: int | None) -> list[Verdict]:
     """Only the occurrences that began at or after `t_ns` (e.g. since a plan's previous check
     of the same spec); an occurrence begins at the earliest time among its verdicts."""

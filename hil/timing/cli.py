@@ -1,8 +1,13 @@
 """`hil check RECORDING.mcap`: re-judge timing specs on a recording, offline and read-only.
 
 Default specs: those the recording's metadata (`timing` record, key `specs`) names, else every
-shipped spec in fixtures/timing/. Exit 0 when every verdict passed (or was not applicable),
-1 when any failed, 3 when none failed but some were inconclusive, 2 on bad input.
+shipped spec in fixtures/timing/.
+
+Exit codes: 0 every judged verdict passed; 1 any failed; 2 bad input (usage, no such file, not
+an MCAP file, not a hil recording, bad spec); 3 none failed but some were inconclusive; 4
+incomplete: nothing was judged at all, a spec named with --spec found no data, or the recording
+is damaged mid-file (a corrupt chunk: everything after it is unreadable). Nothing judged is not
+a pass, so 4 always comes with the reason on stderr.
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hil.timing.checker import Verdict, check, constants_for, summary
+from hil.timing.checker import Verdict, check, constants_for, missing_data, summary
 from hil.timing.spec import Spec, SpecError, load_spec, shipped_specs
 
 
@@ -87,9 +92,52 @@ def format_table(verdicts: list[Verdict], verbose: bool = False) -> str:
     return "\n".join(lines)
 
 
+EXIT_PASS, EXIT_FAIL, EXIT_USAGE, EXIT_INCONCLUSIVE, EXIT_INCOMPLETE = 0, 1, 2, 3, 4
+
+
 def exit_code(verdicts: list[Verdict]) -> int:
     s = summary(verdicts)
-    return 1 if s["fail"] else 3 if s["inconclusive"] else 0
+    return EXIT_FAIL if s["fail"] else EXIT_INCONCLUSIVE if s["inconclusive"] else EXIT_PASS
+
+
+def _judged(verdicts: list[Verdict]) -> bool:
+    return any(v.status != "skipped" for v in verdicts)
+
+
+def _why_nothing(spec: Spec, verdicts: list[Verdict], source: Any, binding: dict) -> str:
+    """One line: why `spec` judged nothing (its signals without data, else why not applicable)."""
+    missing = missing_data(spec, source, binding)
+    if missing:
+        return f"spec {spec.id}: found no data for signal " + "; ".join(missing)
+    whys = sorted({v.message for v in verdicts if v.spec == spec.id}) or ["no constraint"]
+    return f"spec {spec.id}: nothing to judge: " + "; ".join(whys)
+
+
+def not_hil(source: Any) -> str | None:
+    """Why a readable MCAP is not a hil recording, or None when it is one (it has the
+    recorder's `hil.run` metadata or `hil.*` schema channels)."""
+    if "hil.run" in source.meta or any(s.startswith("hil.") for s in source.schemas):
+        return None
+    found = ", ".join(source.topics()[:5]) or "none"
+    return ("not a hil recording: no hil.run metadata and no hil.* channels "
+            f"(channels: {found})")
+
+
+def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> int:
+    """The exit code, printing on stderr why a result is incomplete (exit 4)."""
+    if source.corrupt:
+        incomplete = [f"{source.path}: damaged: {source.error}; nothing after it was read",
+                      *incomplete]
+    if not _judged(verdicts):
+        incomplete = [*incomplete, "nothing was judged"]
+    code = exit_code(verdicts)
+    if incomplete and code != EXIT_FAIL:
+        for line in incomplete:
+            print(f"hil check: incomplete: {line}", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    for line in incomplete:
+        print(f"hil check: {line}", file=sys.stderr)
+    return code
 
 
 def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: dict,
@@ -118,7 +166,7 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
         print(json.dumps([v.to_dict() for v in verdicts], indent=2, default=str))
     else:
         print(format_table(verdicts, args.verbose))
-    return exit_code(verdicts)
+    return final_code(verdicts, next(iter(cache.values())), [])
 
 
 def main(args: argparse.Namespace) -> int:
@@ -147,8 +195,15 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: cannot read recordings ({e})", file=sys.stderr)
         return 2
     except Exception as e:
-        print(f"hil check: {args.recording}: cannot read: {e}", file=sys.stderr)
-        return 2
+        from hil.record.reader import RecordingError
+
+        why = str(e) if isinstance(e, RecordingError) else f"{args.recording}: cannot read: {e}"
+        print(f"hil check: {why}", file=sys.stderr)
+        return EXIT_USAGE
+    why = not_hil(source)
+    if why and not source.corrupt:
+        print(f"hil check: {args.recording}: {why}", file=sys.stderr)
+        return EXIT_USAGE
     rec_specs, rec_binding = recorded_specs(source.meta)
     runs = [] if (args.spec or args.whole) else recorded_checks(source)
     if runs:  # a plan run: re-check each check step as it was made, with no bench
@@ -162,11 +217,14 @@ def main(args: argparse.Namespace) -> int:
     bind = infer_places(source.topics()) | rec_binding | binding
     bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
+    incomplete: list[str] = []
     for spec in specs:
         own = constants_for(spec, bench_consts)
         vs = check(spec, source, params=params, binding=bind, constants=(own | consts) or None,
                    resolution=res)
         verdicts.extend(vs)
+        if args.spec and not _judged(vs):  # a spec the user asked for must judge something
+            incomplete.append(_why_nothing(spec, vs, source, bind))
         if args.svg:
             from hil.timing.render import svg
 
@@ -178,4 +236,6 @@ def main(args: argparse.Namespace) -> int:
         print(json.dumps([v.to_dict() for v in verdicts], indent=2, default=str))
     else:
         print(format_table(verdicts, args.verbose))
-    return exit_code(verdicts)
+    if not _judged(verdicts) and not args.spec:
+        incomplete = [_why_nothing(sp, verdicts, source, bind) for sp in specs]
+    return final_code(verdicts, source, incomplete)

@@ -156,6 +156,11 @@ class RecordingSource(MemorySource):
                                                    {"value": data}))
             self.meta = _metadata(rec)
             res = _resolutions(rec, self.meta)
+            #: the first broken record (None if the file is whole) and whether it is damage
+            #: mid-file (`corrupt`) rather than a killed run's cut tail
+            self.error: str | None = rec.error
+            self.corrupt: bool = rec.corrupt
+            self.schemas: set[str] = {c.schema for c in rec.channels()}
         finally:
             close = getattr(rec, "close", None)
             if close:

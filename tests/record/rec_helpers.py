@@ -7,6 +7,8 @@ from importlib.metadata import entry_points
 
 import can
 
+from hil.record.recorder import Recorder
+
 EP_TEXT = """[can.io.message_writer]
 .mcap = hil.record.canio:McapCanWriter
 
@@ -60,3 +62,24 @@ def schema_check(schema: dict, obj: dict) -> list[str]:
 
 def load_schema(data: bytes) -> dict:
     return json.loads(data)
+
+
+T0 = 1_700_000_000_123_456_000
+
+
+def make(path):
+    """A small recording: five CAN frames on two buses (std, ext, RTR, FD, empty) + DI1."""
+    with Recorder(path) as rec:
+        rec.can("can0", frame(0x123, "DEADBEEF"), "rx", T0, None)
+        rec.can("can0", frame(0x1ABCDEF0, "01", ext=True), "tx", T0 + 1_000_000, None)
+        rec.can("can1", frame(0x701, b"", is_remote_frame=True), "tx", T0 + 2_000_000, None)
+        rec.can(
+            "can0",
+            frame(0x181, "0011", is_fd=True, bitrate_switch=True),
+            "rx",
+            T0 + 3_000_000,
+            None,
+        )
+        rec.can("can0", frame(0x181, b""), "rx", T0 + 500_000_000, None)
+        rec.dio("io", "DI1", True, T0, None)
+    return path

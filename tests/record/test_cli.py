@@ -7,32 +7,12 @@ import subprocess
 import sys
 
 import can
-from rec_helpers import frame
+from rec_helpers import make
 
 from hil.cli import main as hil
 from hil.record.canio import McapCanReader, McapCanWriter
 from hil.record.export_cli import candump_line
 from hil.record.reader import Recording
-from hil.record.recorder import Recorder
-
-T0 = 1_700_000_000_123_456_000
-
-
-def make(path):
-    with Recorder(path) as rec:
-        rec.can("can0", frame(0x123, "DEADBEEF"), "rx", T0, None)
-        rec.can("can0", frame(0x1ABCDEF0, "01", ext=True), "tx", T0 + 1_000_000, None)
-        rec.can("can1", frame(0x701, b"", is_remote_frame=True), "tx", T0 + 2_000_000, None)
-        rec.can(
-            "can0",
-            frame(0x181, "0011", is_fd=True, bitrate_switch=True),
-            "rx",
-            T0 + 3_000_000,
-            None,
-        )
-        rec.can("can0", frame(0x181, b""), "rx", T0 + 500_000_000, None)
-        rec.dio("io", "DI1", True, T0, None)
-    return path
 
 
 def test_inspect_prints_summary(tmp_path, capsys):

@@ -1,0 +1,115 @@
+"""`hil check` never passes what it did not judge (issue 12): a damaged recording, a spec that
+found no data, or a file that is not a hil recording each get their own exit code and a reason.
+
+Exit codes: 0 pass, 1 fail, 2 bad input, 3 inconclusive, 4 incomplete (nothing judged).
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import pytest
+from mcap.writer import Writer
+
+from hil.cli import main as hil
+from hil.plan.bench import load_bench
+from hil.plan.plan import find_plans, load_plan
+from hil.plan.runner import run_plan
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    """A real plan recording from the virtual bench (servo on/off with the brake)."""
+    out = tmp_path_factory.mktemp("rec")
+    result = run_plan(load_plan(find_plans(["servo_on_off_brake"])[0]), load_bench(None), out)
+    assert result.passed
+    return Path(result.recording)
+
+
+def chunk_offsets(data: bytes) -> list[int]:
+    """File offsets of the MCAP chunk records (opcode 0x06), in file order."""
+    off, out = 8, []
+    while off + 9 <= len(data):
+        op, ln = struct.unpack_from("<BQ", data, off)
+        if op == 0x06:
+            out.append(off)
+        if op == 0x02:  # footer
+            break
+        off += 9 + ln
+    return out
+
+
+def corrupt(src: Path, dst: Path, which: int) -> int:
+    """Copy `src` to `dst` with ten bytes of chunk number `which` inverted; its offset."""
+    data = bytearray(src.read_bytes())
+    off = chunk_offsets(bytes(data))[which]
+    for i in range(off + 80, off + 90):  # inside the compressed records, past the header
+        data[i] ^= 0xFF
+    dst.write_bytes(bytes(data))
+    return off
+
+
+def test_intact_recording_passes(recording, capsys):
+    assert hil(["check", str(recording)]) == 0
+
+
+def test_corrupt_first_chunk_judges_nothing_and_says_where(recording, tmp_path, capsys):
+    bad = tmp_path / "bad.mcap"
+    off = corrupt(recording, bad, 0)
+    assert hil(["check", str(bad)]) == 4
+    err = capsys.readouterr().err
+    assert f"chunk at offset {off} unreadable" in err
+    assert "nothing was judged" in err
+
+
+def test_corrupt_middle_chunk_is_incomplete_not_pass(recording, tmp_path, capsys):
+    """Verdicts before the damage passed, but what followed it was never read."""
+    assert len(chunk_offsets(recording.read_bytes())) > 2
+    bad = tmp_path / "bad.mcap"
+    off = corrupt(recording, bad, 1)
+    assert hil(["check", str(bad)]) == 4
+    assert f"damaged: chunk at offset {off}" in capsys.readouterr().err
+
+
+def test_spec_without_data_is_not_a_pass(recording, capsys):
+    """The brake recording has no STO event: `--spec sto` judges nothing."""
+    assert hil(["check", str(recording), "--spec", "sto"]) == 4
+    err = capsys.readouterr().err
+    assert "incomplete: spec sto: nothing to judge" in err
+
+
+def test_spec_whose_signals_have_no_data_names_them(tmp_path, capsys):
+    """A hil recording with only a CAN bus: the brake spec finds no DI/DO data at all."""
+    import can
+
+    from hil.record.recorder import Recorder
+
+    p = tmp_path / "can_only.mcap"
+    with Recorder(p) as rec:
+        rec.can("can0", can.Message(arbitration_id=0x181, data=b"\0"), "rx", 1_000_000, None)
+    assert hil(["check", str(p), "--spec", "servo_on_brake", "--bind", "dio=drive1"]) == 4
+    err = capsys.readouterr().err
+    assert "spec servo_on_brake: found no data for signal SON: no data on /dio/drive1/DI1" in err
+
+
+def test_not_a_hil_recording(tmp_path, capsys):
+    p = tmp_path / "other.mcap"
+    with open(p, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("geometry.Pose", "jsonschema", b"{}")
+        cid = w.register_channel("/pose", "json", sid)
+        w.add_message(cid, log_time=1, publish_time=1, data=b"{}")
+        w.finish()
+    assert hil(["check", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert "not a hil recording: no hil.run metadata and no hil.* channels" in err
+    assert "/pose" in err
+
+
+def test_not_an_mcap_file(tmp_path, capsys):
+    p = tmp_path / "notes.mcap"
+    p.write_text("hello")
+    assert hil(["check", str(p)]) == 2
+    assert f"{p}: not an MCAP file" in capsys.readouterr().err
