@@ -372,7 +372,12 @@ class Drive:
     def _update_servo(self) -> None:
         if not self.powered:
             return
-        blocked = self.alarms.servo_off_required or not (self.sto.a and self.sto.b)
+        sto_lost = not (self.sto.a and self.sto.b)
+        if sto_lost and self.servo_on and self.options.sto_servo_off == "acknowledged":
+            # the hardware has cut the current (L2474); the firmware enters Servo Off only
+            # when it acknowledges the loss with AL500 / AL501 / AL502 (L2478, L2482)
+            sto_lost = False
+        blocked = self.alarms.servo_off_required or sto_lost
         want = self._requested() and not blocked
         if want and not self.servo_on:
             self._servo_on()
