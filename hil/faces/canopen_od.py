@@ -12,6 +12,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from hil.model.canopen_init import CANOPEN_INIT_VALUES
 from hil.model.errors import (
     ABORT_NO_OBJECT,
     ABORT_NO_SUBINDEX,
@@ -194,7 +195,9 @@ def load_parameter_objects(path: Path = PARAMETERS_CSV) -> list[Entry]:
                     type="INTEGER32" if wide else "INTEGER16",
                     access="ro" if ro else "rw",
                     pdo=True,
-                    default=_num(row, "default"),
+                    # a CANopen drive (P3.012.Z = 0 by default) reads the init table's
+                    # values after power-up: 212Ch (P1.044) = 1 (L10737-10745, L18184)
+                    default=CANOPEN_INIT_VALUES.get(row["param"], _num(row, "default")),
                     min=_num(row, "min"),
                     max=_num(row, "max"),
                     unit=row.get("unit", "") or "",

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from hil.model.errors import UnknownFunction
+from hil.model.errors import InertFunction, UnknownFunction
 from hil.model.events import DoChanged
 from hil.model.params import ParameterStore
 from hil.model.timebase import MS, Scheduler, Timer
@@ -86,6 +86,46 @@ DI_FUNCTIONS: dict[int, Function] = _table(
         (0x47, "PFQS", "rising", "L15253"),
     ]
 )
+# Table 8.1 functions the virtual drive does not model (issue 13 item 6). Mapping one of them
+# by a P2.010-P2.017 / P2.036-P2.040 write, or in a bench, is refused: a mapped function that
+# silently does nothing would make a test pass for the wrong reason. Factory defaults that
+# carry one (P2.011 = 0x0104 CCLR) stay as they are: they are never active unless driven.
+INERT_DI_FUNCTIONS: dict[str, str] = {
+    "GAINUP": "gain switching (P2.027 = 1, gain x change ratio) is not modelled; "
+    "the axis has fixed gains (L15085)",
+    "CCLR": "the pulse command (PT) and its accumulated pulse error (P2.050) are not "
+    "modelled (L15088)",
+    "ZCLAMP": "speed mode S (zero-speed clamp below P1.038) is not modelled (L15091)",
+    "TRQLM": "the torque limit from P1.012-P1.014 selected by TCM0/TCM1 is not modelled "
+    "(L15101); use 60E0h/60E1h",
+    "SPDLM": "the speed limit from P1.009-P1.011 selected by SPD0/SPD1 in torque mode T is "
+    "not modelled (L15121); use P1.055 / 6080h",
+    "JOGU": "jog at P4.005 is not modelled (L15209)",
+    "JOGD": "jog at P4.005 is not modelled (L15212)",
+    "PFQS": "the PFQS quick stop (AL35F, P5.003 ramp, AL3CF + Servo Off) is not modelled "
+    "(L15253)",
+}
+
+
+def inert_mapping(param: str, value: int) -> str | None:
+    """Why mapping `value` on DI parameter `param` is refused, or None (not a DI mapping or
+    a modelled function)."""
+    if param not in DI_PARAMS:
+        return None
+    fn = DI_FUNCTIONS.get(value & 0xFF)
+    if fn is None or fn.symbol not in INERT_DI_FUNCTIONS:
+        return None
+    return f"DI function {fn.symbol} (0x{fn.code:02X}): {INERT_DI_FUNCTIONS[fn.symbol]}"
+
+
+def check_di_mapping_write(param: str, value: int) -> None:
+    """Validator of a DI mapping write: unknown codes and inert functions are refused."""
+    decode_mapping("DI", value, param)
+    why = inert_mapping(param, value)
+    if why:
+        raise InertFunction(param, why)
+
+
 # Functions that only exist through the absolute handshake overlay (L15145).
 OVERLAY_DI_SYMBOLS = ("ABSQ",)
 
@@ -199,7 +239,7 @@ class DigitalIO:
         self._overlay_do: dict[int, str] = {}
         self._held: dict[str, bool] = {}
         for p in DI_PARAMS:
-            params.on_validate(p, lambda n, v: decode_mapping("DI", v, n))
+            params.on_validate(p, check_di_mapping_write)
         for p in DO_PARAMS:
             params.on_validate(p, lambda n, v: decode_mapping("DO", v, n))
         params.on_write("P3.006", lambda *_: self._update_di())

@@ -27,6 +27,7 @@ from typing import Any
 from hil.model.absolute import AbsoluteEncoder, AbsoluteOptions
 from hil.model.alarms import AlarmManager, AlarmOptions
 from hil.model.brake import Brake
+from hil.model.canopen_init import HOME_OFFSET_INIT, load_canopen_init
 from hil.model.cia402 import Cia402, Cia402Options
 from hil.model.dio import DigitalIO
 from hil.model.errors import (
@@ -262,6 +263,11 @@ class Drive:
         if self.servo_on:
             self.alarms.raise_alarm("AL401")
         self.alarms.reset("nmt")
+        if load_canopen_init(self.params):  # "或是進行通訊重置後" (L10731)
+            self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
+            self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
+            self._mirror_params()
+            self.cia402.write(0x607C, 0, HOME_OFFSET_INIT)
 
     def power_cycle(self, *, battery: bool = True, off_for: int = 0) -> None:
         """Switch the drive off (for `off_for` ns) and on again."""
@@ -324,6 +330,7 @@ class Drive:
         """After power on: SRDY, outputs, and the CiA 402 automatic transitions 0/1."""
         for hook in self._boot_hooks:
             hook()
+        canopen_init = load_canopen_init(self.params)  # P3.012.Z = 0 (L10731-10745)
         self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
         self._set_do("SRDY", not self.alarms.alrm)
@@ -334,6 +341,8 @@ class Drive:
         self._refresh_speed_outputs()
         self.cia402.power_on()
         self._mirror_params()  # after power_on(), which resets 6093h to 1/1
+        if canopen_init:
+            self.cia402.write(0x607C, 0, HOME_OFFSET_INIT)  # home offset (L10744)
         self.cia402.set_voltage(True)
         self._on_alarm(None)
 
@@ -372,7 +381,12 @@ class Drive:
     def _update_servo(self) -> None:
         if not self.powered:
             return
-        blocked = self.alarms.servo_off_required or not (self.sto.a and self.sto.b)
+        sto_lost = not (self.sto.a and self.sto.b)
+        if sto_lost and self.servo_on and self.options.sto_servo_off == "acknowledged":
+            # the hardware has cut the current (L2474); the firmware enters Servo Off only
+            # when it acknowledges the loss with AL500 / AL501 / AL502 (L2478, L2482)
+            sto_lost = False
+        blocked = self.alarms.servo_off_required or sto_lost
         want = self._requested() and not blocked
         if want and not self.servo_on:
             self._servo_on()

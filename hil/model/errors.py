@@ -25,6 +25,13 @@ class OutOfRange(ParamError):
     rule = "out of range"
 
 
+class InertFunction(OutOfRange):
+    """A DI function of table 8.1 the virtual drive does not model: mapping it is refused
+    (SDO abort 0609 0030, Modbus exception 03) instead of silently doing nothing."""
+
+    rule = "DI function not modelled"
+
+
 class ReadOnly(ParamError):
     rule = "read-only"
 

@@ -31,6 +31,8 @@ FDBK_STO_ACTIVE: dict[tuple[bool, bool], bool] = {
     (False, False): True,
 }
 
+STO_SERVO_OFF = ("acknowledged", "at_loss")
+
 
 @dataclass
 class ModelOptions:
@@ -48,6 +50,11 @@ class ModelOptions:
     sto_one_lost_ms: float = 1000.0  # one lost 1 s -> AL501 / AL502 (L2482, L2487)
     # Torque returns when both channels are back before any alarm (gap in §3.10.4, L2482).
     sto_resume_after_dropout: bool = True
+    # When the firmware enters Servo Off on an STO loss (L2474-2482): "acknowledged" = only
+    # when it acknowledges the loss (both lost 10 ms -> AL500, one lost 1 s -> AL501/AL502);
+    # a shorter glitch cuts torque in hardware but DO.SON, BRKR and the CiA 402 state stay.
+    # "at_loss" = servo off at the first lost channel (the model before issue 13).
+    sto_servo_off: str = "acknowledged"
     fdbk_table: dict[tuple[bool, bool], bool] = field(
         default_factory=lambda: dict(FDBK_AS_PRINTED)
     )
@@ -89,4 +96,6 @@ class ModelOptions:
             data["fdbk_table"] = dict(tables[data["fdbk_table"]])
         if data.get("negative_p1043", "brake_first") not in ("brake_first", "as_zero"):
             raise ValueError(f"{where}.negative_p1043: 'brake_first' or 'as_zero'")
+        if data.get("sto_servo_off", "acknowledged") not in STO_SERVO_OFF:
+            raise ValueError(f"{where}.sto_servo_off: one of {', '.join(STO_SERVO_OFF)}")
         return cls(**data)

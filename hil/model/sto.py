@@ -7,6 +7,9 @@
 * One channel lost (or A and B out of step) for 1 s: servo off + AL501 (A lost) or AL502
   (B lost) (L2482, L2487, L20203, L20209); cleared only by a power cycle (L20205, L20211).
 * Restored signals never clear an alarm by themselves (L2493).
+* Before the 10 ms / 1 s acknowledgement the firmware is still Servo On (DO.SON, BRKR and the
+  CiA 402 state stay): only the hardware has cut the torque (`ModelOptions.sto_servo_off`,
+  applied in drive.py).
 
 The printed state table (L2454-2468) maps the alarms the other way round; the notes and
 chapter 13 agree with the mapping above (see docs/manual-choices.md). When both channels

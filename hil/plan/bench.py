@@ -11,7 +11,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hil.model.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS, N_PHYSICAL_DI
+from hil.model.dio import (
+    DI_PARAMS,
+    DI_SYMBOLS,
+    DO_PARAMS,
+    DO_SYMBOLS,
+    INERT_DI_FUNCTIONS,
+    N_PHYSICAL_DI,
+    inert_mapping,
+)
 from hil.plan.yamlio import (
     MS,
     Checker,
@@ -491,6 +499,9 @@ def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str) -> None:
         if func not in table:
             raise v.err(m.kline(key), fw, f"unknown {kind} function {func!r} (manual table "
                         f"8.{1 if kind == 'DI' else 2}); known: {', '.join(sorted(table))}")
+        if kind == "DI" and func in INERT_DI_FUNCTIONS:  # issue 13 item 6
+            raise v.err(m.kline(key), fw, f"DI function {func} is not modelled by the "
+                        f"virtual drive: {INERT_DI_FUNCTIONS[func]}")
         limit = N_PHYSICAL_DI if kind == "DI" else N_DO
         if not 1 <= n <= limit:
             raise v.err(m.kline(key), fw, f"{kind}{n}: the A3 has {kind}1..{kind}{limit}")
@@ -513,6 +524,8 @@ def _params(v: Checker, obj: Any, line: int, where: str) -> dict[str, int]:
         if isinstance(val, bool) or not isinstance(val, int):
             raise v.err(m.kline(k), join(where, k),
                         f"must be an integer (raw communication units), got {val!r}")
+        if why := inert_mapping(k, val):  # issue 13 item 6
+            raise v.err(m.kline(k), join(where, k), f"0x{val:04X} maps {why}")
         out[k] = val
     return out
 

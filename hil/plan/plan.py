@@ -11,7 +11,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from hil.model.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS, N_PHYSICAL_DI
+from hil.model.dio import (
+    DI_FUNCTIONS,
+    DI_PARAMS,
+    DO_FUNCTIONS,
+    DO_PARAMS,
+    N_PHYSICAL_DI,
+    inert_mapping,
+)
 from hil.plan.bench import Bench, DriveSpec, Wire
 from hil.plan.steps import MOTION, VIRTUAL_ONLY, Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
@@ -107,6 +114,8 @@ def mapping_of(name: str, value: int) -> tuple[str, Wire | None] | None:
         raise ValueError(f"0x{value:04X} maps {line} to no function of table "
                          f"{'8.1' if line[1] == 'I' else '8.2'} (0x01xx a-contact, 0x00xx "
                          "b-contact)")
+    if why := inert_mapping(name, value):  # issue 13 item 6: not modelled, so refused
+        raise ValueError(f"0x{value:04X} maps {why}")
     if not code:
         return line, None
     return line, Wire(codes[code], line, "a" if value & 0x100 else "b")

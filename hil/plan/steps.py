@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from hil.model.dio import DI_SYMBOLS, DO_SYMBOLS
+from hil.model.dio import DI_SYMBOLS, DO_SYMBOLS, inert_mapping
 from hil.plan.yamlio import Checker, LDict, LList, join, level, parse_duration
 
 STATES = ("SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED",
@@ -243,6 +243,11 @@ def p_write(v, obj, line, where):
                         f"(got {', '.join(out['values'])})")
         check_expect_error(v, m.kline("expect_error"), fw, code, via)
         out["expect_error"] = code
+    else:
+        for k, val in out["values"].items():
+            if why := inert_mapping(k, val):  # issue 13 item 6: the drive refuses it
+                raise v.err(m.kline(k), join(where, k), f"0x{val:04X} maps {why}; a write "
+                            "that expects the refusal needs expect_error (0x06090030 / 3)")
     return out
 
 

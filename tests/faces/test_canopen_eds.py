@@ -34,3 +34,13 @@ def test_parameter_objects():
     if (0x2300, 0) in od:  # a3_parameters.csv present
         assert od.get(0x2300, 0).type == "INTEGER16" and od.get(0x2300, 0).pdo
         assert od.get(0x212C, 0).type == "INTEGER32"
+
+
+def test_eds_defaults_of_the_canopen_init_table():
+    """212Ch "預設值 1" (L18175-18184) is the P3.012.Z = 0 init value (L10737-10745)."""
+    od = canopen.import_od(str(EDS_PATH), node_id=10)
+    assert od[0x212C].default == 1 and od[0x212D].default == 1  # P1.044 / P1.045
+    assert od[0x2120].default == 0x0010  # P1.032
+    assert od[0x2126].default == 100  # P1.038
+    assert od[0x2223].default == 50331648  # P2.035
+    assert od[0x2109].default == 1000  # P1.009 is not in the table: its own default

@@ -109,6 +109,29 @@ def sto_one(tap: ModelTap) -> None:
     tap.advance(1100 * MS)
 
 
+def sto_glitch_then_loss(tap: ModelTap) -> None:
+    """Glitches shorter than the firmware's acknowledgement, then a real loss (L2474-2482)."""
+    for cw in (0x06, 0x07, 0x0F):  # servo on through CiA 402: OPERATION ENABLED
+        tap.write_object(0x6040, 0, cw)
+        tap.advance(20 * MS)
+    tap.advance(200 * MS)
+    tap.set_sto("A", False)
+    tap.set_sto("B", False)
+    tap.advance(5 * MS)  # 5 ms glitch on both channels: < 10 ms
+    tap.set_sto("A", True)
+    tap.set_sto("B", True)
+    tap.advance(50 * MS)
+    tap.set_sto("B", False)
+    tap.advance(500 * MS)  # one channel for 0.5 s: < 1 s
+    tap.set_sto("B", True)
+    tap.advance(50 * MS)
+    tap.set_sto("A", False)
+    tap.set_sto("B", False)
+    tap.advance(30 * MS)  # a loss: AL500 and Servo Off at 10 ms
+    tap.set_sto("A", True)
+    tap.set_sto("B", True)
+
+
 def arst_pulse_after_emgs(tap: ModelTap) -> None:
     tap.set_sto("A", False)
     tap.set_sto("B", False)
@@ -145,6 +168,9 @@ FAITHFUL = [
     ("servo_off_brake", servo_off_moving, {"P1.043": 500, "P1.032": 0x0010}, {}),
     ("sto", sto_both, {}, {}),
     ("sto", sto_one, {}, {}),
+    ("sto", sto_glitch_then_loss, {}, {}),
+    ("sto_glitch", sto_glitch_then_loss, {}, {}),
+    ("sto_glitch", sto_both, {}, {}),
     ("sto_reset", sto_one, {}, {}),
     ("sto_reset", sto_both, {}, {}),
     ("alarm_reset", arst_pulse_after_emgs, {}, {"alarm": "AL500"}),
@@ -181,6 +207,13 @@ DEVIATIONS = [
     ),
     ("sto", sto_both, {"dev_sto_both_lost_ms": 15}, {}, "AL500 when both channels lost for 10 ms"),
     ("sto", sto_one, {"dev_sto_one_lost_ms": 500}, {}, "no AL501 before STO_A lost alone for 1 s"),
+    (
+        "sto_glitch",
+        sto_glitch_then_loss,
+        {"sto_servo_off": "at_loss"},
+        {},
+        "no servo off while both channels are lost for less than 10 ms",
+    ),
     ("sto_reset", sto_one, {"dev_al501_cleared_by_arst": True}, {}, "AL501 survives ARST"),
     (
         "alarm_reset",

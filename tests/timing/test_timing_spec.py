@@ -7,8 +7,8 @@ import pytest
 from hil.timing.expr import Expr, ExprError
 from hil.timing.spec import SpecError, load_spec, loads_spec, shipped_specs
 
-EXPECTED = {"servo_on_brake", "servo_off_brake", "sto", "sto_reset", "alarm_reset", "emgs",
-            "cia402_transitions"}
+EXPECTED = {"servo_on_brake", "servo_off_brake", "sto", "sto_reset", "sto_glitch", "alarm_reset",
+            "emgs", "cia402_transitions"}
 
 
 def test_every_shipped_spec_loads_and_cites_the_manual():

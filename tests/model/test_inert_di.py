@@ -1,0 +1,65 @@
+"""DI functions of table 8.1 the virtual drive does not model are refused when mapped.
+
+Issue 13 item 6: a mapped function that silently does nothing is refused with a clear error
+naming the function and why: by the P2.010-P2.017 / P2.036-P2.040 write (SDO abort
+0609 0030, Modbus exception 03) and by `hil run --check` (tests/plan/test_loading.py).
+Functions and lines: GAINUP L15085, CCLR L15088, ZCLAMP L15091, TRQLM L15101, SPDLM L15121,
+JOGU L15209, JOGD L15212, PFQS L15253.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.faces.modbus_slave import ModbusSlave
+from hil.model.dio import DI_PARAMS, INERT_DI_FUNCTIONS, inert_mapping
+from hil.model.drive import Drive
+from hil.model.errors import InertFunction, ObjectError
+from hil.protocol import modbus as mb
+
+CODES = {"GAINUP": 0x03, "CCLR": 0x04, "ZCLAMP": 0x05, "TRQLM": 0x09, "SPDLM": 0x10,
+         "JOGU": 0x37, "JOGD": 0x38, "PFQS": 0x47}  # table 8.1 set values (L15075-15255)
+
+
+def test_the_refused_set_is_the_issue_list() -> None:
+    assert set(INERT_DI_FUNCTIONS) == set(CODES)
+
+
+@pytest.mark.parametrize("symbol", sorted(CODES))
+def test_mapping_write_is_refused_naming_the_function(symbol: str) -> None:
+    drive = Drive(inputs={8: True})
+    before = drive.params.read("P2.014")
+    with pytest.raises(InertFunction, match=rf"P2\.014: DI function {symbol} \(0x"):
+        drive.params.write("P2.014", 0x0100 | CODES[symbol])
+    assert drive.params.read("P2.014") == before  # nothing lost, nothing changed
+
+
+@pytest.mark.parametrize("param", DI_PARAMS)
+def test_every_di_mapping_parameter_refuses(param: str) -> None:
+    assert inert_mapping(param, 0x0137)  # JOGU
+    assert inert_mapping(param, 0x0101) is None  # SON is modelled
+    assert inert_mapping("P2.018", 0x0103) is None  # DO3 ZSPD: a DO, not GAINUP
+
+
+def test_sdo_write_aborts_0609_0030() -> None:
+    drive = Drive(inputs={8: True})
+    with pytest.raises(ObjectError) as info:
+        drive.write_object(0x220E, 0, 0x0109)  # P2.014 (DI5) = TRQLM (L18156: 2aBCh)
+    assert info.value.abort_code == 0x06090030
+    assert "TRQLM" in str(info.value)
+
+
+def test_modbus_write_answers_exception_03() -> None:
+    drive = Drive(inputs={8: True})
+    out: list[bytes] = []
+    slave = ModbusSlave(drive.params, send=out.append, station=1)
+    address = drive.params.spec("P2.014").modbus_address  # 021CH
+    slave.feed(mb.rtu_encode(1, mb.write_single_request(address, 0x0147)), 0)  # PFQS
+    slave.tick(100_000_000)
+    assert out == [mb.rtu_encode(1, mb.exception_response(0x06, mb.ILLEGAL_DATA_VALUE))]
+
+
+def test_factory_default_cclr_stays_loadable() -> None:
+    """P2.011 factory value 0x0104 (CCLR, L1860-1880) is not a write: the drive boots."""
+    drive = Drive(inputs={8: True})
+    assert drive.dio.di_function(2) == "CCLR"

@@ -1,0 +1,113 @@
+"""When the firmware enters Servo Off on an STO loss (issue 13 item 4).
+
+L2474: either channel lost -> the hardware cuts the motor current within 20 ms.
+L2478: both lost for 10 ms -> the firmware acknowledges: Servo Off + AL500.
+L2482: one lost for 1 s -> the firmware acknowledges: Servo Off + AL501 / AL502.
+Default `ModelOptions.sto_servo_off = "acknowledged"`: a shorter glitch only cuts torque;
+DO.SON, BRKR and the CiA 402 state stay. "at_loss" is the old reading (servo off at once).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.model.drive import Drive
+from hil.model.events import DoChanged
+from hil.model.options import ModelOptions
+from hil.model.timebase import MS
+
+# BRKR on DO6 (released 50 ms after servo on), DO.SON on DO2
+BENCH = {"P2.041": 0x0108, "P2.019": 0x0102, "P1.042": 50}
+
+
+def make(**opts) -> tuple[Drive, list]:
+    drive = Drive(options=ModelOptions(**opts), inputs={8: True}, params=BENCH)
+    events: list = []
+    drive.subscribe(events.append)
+    return drive, events
+
+
+def enabled(drive: Drive) -> None:
+    """Servo on through CiA 402 (6040h 6 -> 7 -> F), brake released."""
+    for cw in (0x06, 0x07, 0x0F):
+        drive.write_object(0x6040, 0, cw)
+        drive.advance(10 * MS)
+    drive.advance(100 * MS)
+    assert drive.servo_on and drive.brake.brkr
+    assert drive.cia402.state == "OPERATION ENABLED"
+
+
+def do_edges(events: list, t0: int) -> list[tuple[str, bool]]:
+    return [(e.function, e.level) for e in events if isinstance(e, DoChanged) and e.t >= t0]
+
+
+@pytest.mark.parametrize(("channels", "glitch_ms"), [("AB", 9), ("A", 999), ("B", 999)])
+def test_glitch_shorter_than_acknowledgement_keeps_servo_on(channels: str, glitch_ms: int):
+    """L2474 vs L2478/L2482: torque cut by hardware, DO.SON / BRKR / 402 state unchanged."""
+    drive, events = make()
+    enabled(drive)
+    t0 = drive.now
+    for ch in channels:
+        drive.set_sto(ch, False)
+    drive.advance(2 * MS)  # past sto_torque_cut_ms (1 ms, "within 20 ms", L2474)
+    assert not drive.axis.power  # current cut in hardware
+    assert drive.servo_on and drive.do(6)  # firmware: still Servo On, brake released
+    drive.advance((glitch_ms - 2) * MS)
+    assert drive.cia402.state == "OPERATION ENABLED"
+    for ch in channels:
+        drive.set_sto(ch, True)
+    drive.advance(10 * MS)
+    assert do_edges(events, t0) == []  # neither SON nor BRKR moved
+    assert drive.alarms.active == ()
+    assert drive.servo_on and drive.axis.power  # torque back (sto_resume_after_dropout)
+
+
+@pytest.mark.parametrize(
+    ("channels", "ack_ms", "code"), [("AB", 10, "AL500"), ("A", 1000, "AL501")]
+)
+def test_loss_enters_servo_off_when_acknowledged(channels: str, ack_ms: int, code: str):
+    """L2478/L2482: Servo Off (DO.SON off, BRKR timing, FAULT) at the acknowledgement."""
+    drive, events = make()
+    enabled(drive)
+    t0 = drive.now
+    for ch in channels:
+        drive.set_sto(ch, False)
+    drive.advance((ack_ms - 1) * MS)
+    assert drive.servo_on and do_edges(events, t0) == []
+    drive.advance(1 * MS)
+    assert not drive.servo_on and code in drive.alarms.active
+    son = [e.t for e in events if isinstance(e, DoChanged) and e.function == "SON"]
+    son_off = [t for t in son if t >= t0]
+    assert son_off == [t0 + ack_ms * MS]
+    assert drive.cia402.state == "FAULT"
+    drive.advance(10 * MS)
+    assert not drive.brake.brkr  # at standstill BRKR engages at once (L1362)
+
+
+def test_at_loss_option_turns_servo_off_on_a_glitch():
+    """The other reading (sto_servo_off = "at_loss"): a 5 ms glitch drops DO.SON and BRKR."""
+    drive, events = make(sto_servo_off="at_loss")
+    enabled(drive)
+    t0 = drive.now
+    drive.set_sto("A", False)
+    drive.advance(5 * MS)
+    drive.set_sto("A", True)
+    assert ("SON", False) in do_edges(events, t0)
+    assert ("BRKR", False) in do_edges(events, t0)
+
+
+def test_servo_on_refused_while_a_channel_is_lost():
+    """Ready (準備完成) needs both channels (L2454-2468): no servo on during a glitch."""
+    drive, _ = make()
+    drive.set_sto("B", False)
+    drive.set_di(1, True)
+    drive.advance(5 * MS)
+    assert not drive.servo_on
+    drive.set_sto("B", True)
+    drive.advance(1 * MS)
+    assert drive.servo_on
+
+
+def test_bad_option_value_is_refused():
+    with pytest.raises(ValueError, match="sto_servo_off"):
+        ModelOptions.from_dict({"sto_servo_off": "never"})
