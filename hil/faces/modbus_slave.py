@@ -265,19 +265,26 @@ class ModbusSlave:
 
     def _rtu_try_complete(self, t: int) -> None:
         """Complete a request as soon as its length (by function) and CRC say so; with
-        `resync`, also one that ends here after leading garbage or a glued-on frame."""
+        `resync`, also one that ends here after leading garbage or a glued-on frame (the
+        longest such frame wins, as in a scan from the first byte)."""
         buf = self._buf
         n = len(buf)
-        first = max(0, n - mb.MAX_RTU_ADU) if self.options.resync else 0
-        for k in range(first, n - 7 if self.options.resync else min(1, n - 7)):
-            fn = buf[k + 1]
-            if fn in (mb.READ_HOLDING, mb.WRITE_SINGLE):
-                want = 8
-            elif fn == mb.WRITE_MULTIPLE:
-                want = 9 + buf[k + 6]
-            else:
-                continue
-            if want == n - k and _crc_ok(bytes(buf[k:])):
+        if n < 8:
+            return
+        if not self.options.resync:
+            candidates = [0] if _request_length(buf, 0) == n else []
+        else:
+            first = max(0, n - mb.MAX_RTU_ADU)
+            candidates = [] if buf[n - 7] not in (mb.READ_HOLDING, mb.WRITE_SINGLE) else [n - 8]
+            # 10h at k: 9 + byte count (buf[k + 6]) bytes end here; found at C speed
+            at = buf.find(mb.WRITE_MULTIPLE, first + 1, n - 6)
+            while at >= 0:
+                if 9 + buf[at + 5] == n - at + 1:
+                    candidates.append(at - 1)
+                at = buf.find(mb.WRITE_MULTIPLE, at + 1, n - 6)
+            candidates.sort()
+        for k in candidates:
+            if _crc_ok(bytes(buf[k:])):
                 frame = bytes(buf[k:])
                 if k:
                     self._note(f"skipped {k} bytes before a frame: {buf[:k].hex(' ')}")
@@ -503,6 +510,16 @@ class ModbusSlave:
     def _note(self, reason: str) -> None:
         self.errors.append(reason)
         del self.errors[:-20]
+
+
+def _request_length(buf: bytearray, k: int) -> int | None:
+    """Length of the 03h / 06h / 10h request starting at `buf[k]` (None: other function)."""
+    fn = buf[k + 1]
+    if fn in (mb.READ_HOLDING, mb.WRITE_SINGLE):
+        return 8
+    if fn == mb.WRITE_MULTIPLE:
+        return 9 + buf[k + 6]
+    return None
 
 
 def _crc_ok(adu: bytes) -> bool:
