@@ -555,6 +555,8 @@ class ModbusSlaveRunner:
 
     The line needs `read(n, timeout) -> bytes` and `write(data)` (hil.transport's
     SerialLine, or `FdLine`). Use as a context manager or call `start()` / `stop()`.
+    An exception in a step (a failing line, a face bug) is kept in `error`, counted in
+    `slave.last_resort` (logged once) and the thread keeps serving.
     """
 
     def __init__(
