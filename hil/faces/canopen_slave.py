@@ -23,6 +23,7 @@ from typing import Any
 import can
 
 from hil.faces.canopen_od import Entry, ObjectDictionary
+from hil.faces.last_resort import LastResort
 from hil.model import errors as E
 from hil.model.errors import ObjectError
 from hil.model.events import AlarmChanged, PowerCycled
@@ -110,6 +111,9 @@ class CanopenSlave:
         self.bitrate = 0
         self.state = "INITIALISING"
         self.stats = {"rx": 0, "tx": 0, "sdo_aborts": 0, "pdo_errors": 0, "tx_errors": 0}
+        # anything no CiA 301 rule answers (a model bug, a failing callback): counted, logged
+        # once per kind; SDO requests still get the general abort 0800 0000
+        self.last_resort = LastResort(log, "CANopen")
         self._values: dict[tuple[int, int], Any] = {}
         self._pdo: dict[int, _PdoRun] = {}
         self._transfer: _Transfer | None = None
@@ -155,17 +159,20 @@ class CanopenSlave:
         while not self._stop.is_set():
             try:
                 msg = self.bus.recv(timeout=0.001 if self.own_timer else 0.05)
-            except Exception:  # a closed bus ends the thread
+            except Exception as exc:  # a closed bus ends the thread
                 if self._stop.is_set():
                     return
-                log.exception("CAN receive failed")
+                self.last_resort("CAN receive", exc)
                 time.sleep(0.01)
                 continue
-            with self.lock:
-                if msg is not None:
-                    self.handle_frame(msg)
-                if self.own_timer:
-                    self.tick(self.clock())
+            try:
+                with self.lock:
+                    if msg is not None:
+                        self.handle_frame(msg)
+                    if self.own_timer:
+                        self.tick(self.clock())
+            except Exception as exc:  # last resort: the thread keeps serving the bus
+                self.last_resort("receive loop", exc)
 
     # ------------------------------------------------------------------ sending
     def _send(self, can_id: int, data: bytes = b"", remote: bool = False) -> None:
@@ -236,7 +243,7 @@ class CanopenSlave:
         elif cs in (P.NMT_RESET_NODE, P.NMT_RESET_COMMUNICATION):
             kind = "reset node" if cs == P.NMT_RESET_NODE else "reset communication"
             if self.on_nmt_reset is not None:
-                self.on_nmt_reset(kind)  # drive decides AL401 (servo on) and alarm clearing
+                self._callback("on_nmt_reset", self.on_nmt_reset, kind)  # AL401, alarm clearing
             self._reset(kind)
 
     def _restart_heartbeat(self, now: int) -> None:
@@ -246,7 +253,7 @@ class CanopenSlave:
     def _comm_error(self, alarm: str) -> None:
         """Heartbeat consumer / life guarding timeout: AL180 and 1029h (L17806-L17838)."""
         if self.on_alarm is not None:
-            self.on_alarm(alarm)
+            self._callback("on_alarm", self.on_alarm, alarm)
         behaviour = self._values.get((0x1029, 1), 0)
         if behaviour == 0 and self.state == "OPERATIONAL":
             self._set_state("PRE-OPERATIONAL")
@@ -258,8 +265,15 @@ class CanopenSlave:
         """Dispatch one received frame (call with `lock` held). Never raises."""
         try:
             self._handle(msg)
-        except Exception:  # malformed traffic must never stop the slave
-            log.exception("frame 0x%X %s not handled", msg.arbitration_id, bytes(msg.data).hex())
+        except Exception as exc:  # malformed traffic must never stop the slave
+            self.last_resort(f"frame 0x{msg.arbitration_id:03X}", exc)
+
+    def _callback(self, name: str, fn: Callable[..., Any], *args: Any) -> None:
+        """Call an owner's callback; a failing one must not stop the protocol action."""
+        try:
+            fn(*args)
+        except Exception as exc:
+            self.last_resort(name, exc)
 
     def _handle(self, msg: can.Message) -> None:
         if msg.is_extended_id or msg.is_error_frame or self.state == "INITIALISING":
@@ -322,8 +336,8 @@ class CanopenSlave:
         SDO timeout. Call with `lock` held (the host does) about every millisecond."""
         try:
             self._tick(now)
-        except Exception:
-            log.exception("CANopen tick failed")
+        except Exception as exc:
+            self.last_resort("tick", exc)
 
     def _tick(self, now: int) -> None:
         if self.state == "INITIALISING":
@@ -376,8 +390,12 @@ class CanopenSlave:
         for index, sub, length in self._mapping(0x1A00 + n):
             try:
                 value = self._read_mapped(index, sub)
-            except ObjectError:
+            except E.ModelError:
                 self.stats["pdo_errors"] += 1
+                return None
+            except Exception as exc:
+                self.stats["pdo_errors"] += 1
+                self.last_resort("TPDO", exc)
                 return None
             acc |= (value & ((1 << length) - 1)) << bits
             bits += length
@@ -451,8 +469,11 @@ class CanopenSlave:
                 raw -= 1 << length
             try:
                 self.drive.write_object(index, sub, raw)
-            except ObjectError:
+            except E.ModelError:  # refused: an RPDO has no answer (CiA 301)
                 self.stats["pdo_errors"] += 1
+            except Exception as exc:
+                self.stats["pdo_errors"] += 1
+                self.last_resort("RPDO", exc)
 
     # ------------------------------------------------------------------ EMCY
     def _error_register(self) -> int:
@@ -468,8 +489,8 @@ class CanopenSlave:
                 self._emcy(ev)
             elif isinstance(ev, PowerCycled):
                 self._reset("power cycle")
-        except Exception:
-            log.exception("drive event %r not handled", ev)
+        except Exception as exc:
+            self.last_resort(f"drive event {type(ev).__name__}", exc)
 
     def _emcy(self, ev: AlarmChanged) -> None:
         """EMCY (L17061-L17069): code, 1001h, Delta alarm code in bytes 3-4 (little-endian)."""
@@ -508,7 +529,25 @@ class CanopenSlave:
         self.stats["sdo_aborts"] += 1
         self._sdo_send(P.sdo_abort(index, sub, code))
 
+    def _abort_code(self, exc: Exception, download: bool) -> int:
+        """The CiA 301 abort for an exception raised while serving an SDO request."""
+        if isinstance(exc, ObjectError):
+            return exc.abort_code
+        if isinstance(exc, E.ModelError):  # a refusal that names no abort code itself
+            return E.ABORT_VALUE_RANGE if download else E.ABORT_GENERAL
+        self.last_resort("SDO", exc)  # a bug: still answered, with the general abort
+        return E.ABORT_GENERAL
+
     def _on_sdo(self, data: bytes, now: int) -> None:
+        """Serve one SDO request: every request but an abort gets an answer."""
+        try:
+            self._serve_sdo(data, now)
+        except Exception as exc:  # last resort: no SDO goes unanswered
+            self._transfer = None
+            padded = data.ljust(4, b"\0")
+            self._sdo_abort(padded[1] | padded[2] << 8, padded[3], self._abort_code(exc, True))
+
+    def _serve_sdo(self, data: bytes, now: int) -> None:
         if len(data) != 8:  # CiA 301: SDO frames are 8 bytes
             padded = data.ljust(4, b"\0")
             self._transfer = None
@@ -530,9 +569,10 @@ class CanopenSlave:
                 self._initiate_download(index, sub, data, now)
             else:  # block transfers (5, 6) and 7: the A3 does expedited only (L16942)
                 raise ObjectError(index, sub, E.ABORT_COMMAND, "command specifier not supported")
-        except ObjectError as exc:
+        except Exception as exc:  # every refusal becomes an abort (CiA 301 §7.2.4.3.17)
             self._transfer = None
-            self._sdo_abort(index, sub, exc.abort_code)
+            code = self._abort_code(exc, cs == P.CCS_INITIATE_DOWNLOAD)
+            self._sdo_abort(index, sub, code)
 
     def _initiate_upload(self, index: int, sub: int, now: int) -> None:
         e = self.od.get(index, sub)
@@ -595,8 +635,8 @@ class CanopenSlave:
             if t.size is not None and len(t.data) != t.size:
                 raise ObjectError(e.index, e.sub, E.ABORT_LENGTH, "size indicated != size sent")
             self._write_bytes(e, bytes(t.data))
-        except ObjectError as exc:
-            self._sdo_abort(e.index, e.sub, exc.abort_code)
+        except Exception as exc:
+            self._sdo_abort(e.index, e.sub, self._abort_code(exc, True))
             return
         self._sdo_send(bytes([0x20 | toggle << 4]) + bytes(7))
 

@@ -89,6 +89,15 @@ class DriveHost:
         if now > self.drive.now:
             self.drive.advance_to(now)
 
+    def _note_error(self, where: str, exc: Exception) -> None:
+        """Log the first error of each type with its traceback, count the rest."""
+        if not any(type(e) is type(exc) for e in self.errors):
+            log.error("drive host: %s failed (further %s are counted only)", where,
+                      type(exc).__name__, exc_info=exc)
+        self.errors.append(exc)
+        if len(self.errors) > 100:
+            del self.errors[:50]
+
     def _run(self) -> None:
         period = int(self.period_s * 1e9)
         deadline = time.monotonic_ns()
@@ -101,12 +110,7 @@ class DriveHost:
                     for fn in list(self._ticks):
                         fn(now)
                 except Exception as exc:  # a face bug must not stop the drive clock
-                    if not any(type(e) is type(exc) for e in self.errors):
-                        log.exception("drive host: tick failed (further %s are counted only)",
-                                      type(exc).__name__)
-                    self.errors.append(exc)
-                    if len(self.errors) > 100:
-                        del self.errors[:50]
+                    self._note_error("tick", exc)
             delay = deadline - time.monotonic_ns()
             if delay > 0:
                 time.sleep(delay / 1e9)
@@ -123,7 +127,10 @@ class _SyncedLock:
     def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
         ok = self._host.lock.acquire(blocking, timeout)
         if ok:
-            self._host._advance()
+            try:
+                self._host._advance()
+            except Exception as exc:  # the lock stays held for the caller's `with` body:
+                self._host._note_error("advance", exc)  # raising here would leak it
         return ok
 
     def release(self) -> None:

@@ -21,6 +21,7 @@ in a thread; `FdLine(fd)` adapts a raw pty file descriptor to that interface.
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import select
 import threading
@@ -29,8 +30,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
+from hil.faces.last_resort import LastResort
 from hil.model import errors
 from hil.protocol import modbus as mb
+
+log = logging.getLogger(__name__)
 
 # Parameter addresses the face itself reads (address = (group << 8) + 2 n, L6697).
 P3_000 = 0x0300  # station, low byte YX (L10495-L10507); ● power cycle (L7014)
@@ -55,6 +59,7 @@ def _default_exception_codes() -> dict[type, int]:
         errors.ReadOnly: mb.ILLEGAL_DATA_ADDRESS,
         errors.ServoOnLocked: mb.SERVER_DEVICE_FAILURE,
         errors.ProtectedParameter: mb.SERVER_DEVICE_FAILURE,
+        errors.UnknownFunction: mb.ILLEGAL_DATA_VALUE,  # e.g. P2.010 = 0x0007 (table 8.1)
         errors.ModelError: mb.SERVER_DEVICE_FAILURE,
     }
 
@@ -80,6 +85,7 @@ class ModbusFaceOptions:
     # P3.007 unit, ns: 0.5 ms (L10612) vs 1 ms (summary table L7020).
     p3007_unit_ns: int = 500_000
     # Exception code per refusal (the manual documents none); most specific class wins.
+    # An exception that is no ModelError is a model bug: 04h, and `last_resort` counts it.
     exception_codes: dict[type, int] = field(default_factory=_default_exception_codes)
     max_read_words: int = mb.MAX_READ_WORDS  # L15634
     max_write_words: int = mb.MAX_WRITE_WORDS  # L15781
@@ -140,6 +146,9 @@ class ModbusSlave:
              "dropped", "timeouts"), 0,
         )  # fmt: skip
         self.errors: list[str] = []  # last few reasons a frame was dropped (for debugging)
+        # anything no protocol rule answers (a model bug, a failing callback): counted, logged
+        # once per kind, and the face keeps serving (hil.faces.last_resort)
+        self.last_resort = LastResort(log, "Modbus")
         self._buf = bytearray()
         self._last_t: int | None = None
         self._broken = False
@@ -233,12 +242,17 @@ class ModbusSlave:
         if times_ns:
             self.tick(times_ns[-1])
 
+    @property
+    def _in_burst(self) -> bool:
+        """Bytes (or a dropped, overlong burst) wait for the silence that ends them."""
+        return bool(self._buf) or self._broken
+
     def _rtu_byte(self, byte: int, t: int, char: int) -> None:
-        if self._buf and self._last_t is not None:
+        if self._in_burst and self._last_t is not None:
             gap = t - char - self._last_t
-            if gap >= self.silence_ns:
+            if gap >= self.silence_ns:  # every frame after t3.5 of silence is judged afresh
                 self._end_rtu_frame()
-            elif self.options.enforce_t15 and gap > self.t15_t35_ns[0]:
+            elif self.options.enforce_t15 and self._buf and gap > self.t15_t35_ns[0]:
                 self._broken = True
         self._last_t = t
         self._buf.append(byte)
@@ -251,19 +265,26 @@ class ModbusSlave:
 
     def _rtu_try_complete(self, t: int) -> None:
         """Complete a request as soon as its length (by function) and CRC say so; with
-        `resync`, also one that ends here after leading garbage or a glued-on frame."""
+        `resync`, also one that ends here after leading garbage or a glued-on frame (the
+        longest such frame wins, as in a scan from the first byte)."""
         buf = self._buf
         n = len(buf)
-        first = max(0, n - mb.MAX_RTU_ADU) if self.options.resync else 0
-        for k in range(first, n - 7 if self.options.resync else min(1, n - 7)):
-            fn = buf[k + 1]
-            if fn in (mb.READ_HOLDING, mb.WRITE_SINGLE):
-                want = 8
-            elif fn == mb.WRITE_MULTIPLE:
-                want = 9 + buf[k + 6]
-            else:
-                continue
-            if want == n - k and _crc_ok(bytes(buf[k:])):
+        if n < 8:
+            return
+        if not self.options.resync:
+            candidates = [0] if _request_length(buf, 0) == n else []
+        else:
+            first = max(0, n - mb.MAX_RTU_ADU)
+            candidates = [] if buf[n - 7] not in (mb.READ_HOLDING, mb.WRITE_SINGLE) else [n - 8]
+            # 10h at k: 9 + byte count (buf[k + 6]) bytes end here; found at C speed
+            at = buf.find(mb.WRITE_MULTIPLE, first + 1, n - 6)
+            while at >= 0:
+                if 9 + buf[at + 5] == n - at + 1:
+                    candidates.append(at - 1)
+                at = buf.find(mb.WRITE_MULTIPLE, at + 1, n - 6)
+            candidates.sort()
+        for k in candidates:
+            if _crc_ok(bytes(buf[k:])):
                 frame = bytes(buf[k:])
                 if k:
                     self._note(f"skipped {k} bytes before a frame: {buf[:k].hex(' ')}")
@@ -278,7 +299,8 @@ class ModbusSlave:
         self._buf.clear()
         broken, self._broken = self._broken, False
         if broken:
-            self._drop(f"RTU burst of {len(buf)} bytes broken (gap > t1.5 or overlong)")
+            if buf:  # (an overlong burst cut at a multiple of 257 bytes leaves nothing here)
+                self._drop(f"RTU burst of {len(buf)} bytes broken (gap > t1.5 or overlong)")
             return
         if _crc_ok(buf):  # e.g. an unknown function: only the silence ends it
             self._dispatch(buf, t)
@@ -309,6 +331,12 @@ class ModbusSlave:
     # ------------------------------------------------------------------ processing
 
     def _dispatch(self, adu: bytes, t_end: int) -> None:
+        try:
+            self._dispatch_frame(adu, t_end)
+        except Exception as exc:  # last resort: the bytes of this chunk keep being read
+            self.last_resort("frame", exc)
+
+    def _dispatch_frame(self, adu: bytes, t_end: int) -> None:
         try:
             station, pdu = mb.decode_adu(adu, self.line.mode)
         except mb.FrameError as exc:
@@ -366,6 +394,8 @@ class ModbusSlave:
         except mb.PduError as exc:
             return self._exception(fn, exc.code, str(exc), broadcast)
         except Exception as exc:  # a store refusal, or a bug: answer, never crash the face
+            if not isinstance(exc, errors.ModelError):
+                self.last_resort("request", exc)  # not a refusal: a model bug
             code = self._code_for(exc)
             return self._exception(fn, code, f"{type(exc).__name__}: {exc}", broadcast)
         if broadcast:
@@ -383,7 +413,7 @@ class ModbusSlave:
         self.stats["exceptions"] += 1
         self._note(message)
         if self.on_comm_error is not None:
-            self.on_comm_error(code, message)
+            self._callback("on_comm_error", self.on_comm_error, code, message)
         return None if broadcast else mb.exception_response(fn, code)
 
     def _after_write(self, address: int, count: int) -> None:
@@ -402,7 +432,7 @@ class ModbusSlave:
             self._buf.clear()
             self._in_ascii = False
             if self.on_line_settings is not None:
-                self.on_line_settings(self.line)
+                self._callback("on_line_settings", self.on_line_settings, self.line)
 
     # ------------------------------------------------------------------ time
 
@@ -412,7 +442,7 @@ class ModbusSlave:
         self._now = max(self._now, t_ns)
         if (
             self.line.mode == "rtu"
-            and self._buf
+            and self._in_burst
             and self._last_t is not None
             and t_ns - self._last_t >= self.silence_ns
         ):
@@ -422,7 +452,7 @@ class ModbusSlave:
             _, adu = self._outbox.pop(0)
             sent.append(adu)
             if self.send is not None:
-                self.send(adu)
+                self._callback("send", self.send, adu)
         if sent and not self._outbox:
             self._apply_line()
         self._check_timeout(t_ns)
@@ -433,7 +463,7 @@ class ModbusSlave:
         times = []
         if self._outbox:
             times.append(self._outbox[0][0])
-        if self.line.mode == "rtu" and self._buf and self._last_t is not None:
+        if self.line.mode == "rtu" and self._in_burst and self._last_t is not None:
             times.append(self._last_t + self.silence_ns)
         if self._timeout_enabled and not self._timeout_fired:
             limit = self._param(P3_004) or 0
@@ -461,9 +491,16 @@ class ModbusSlave:
             self._timeout_fired = True
             self.stats["timeouts"] += 1
             if self.on_timeout is not None:
-                self.on_timeout(t)
+                self._callback("on_timeout", self.on_timeout, t)
 
     # ------------------------------------------------------------------ misc
+
+    def _callback(self, name: str, fn: Callable[..., Any], *args: Any) -> None:
+        """Call an owner's callback; a failing one is the owner's bug, not the line's."""
+        try:
+            fn(*args)
+        except Exception as exc:
+            self.last_resort(name, exc)
 
     def _drop(self, reason: str) -> None:
         self.stats["dropped"] += 1
@@ -473,6 +510,16 @@ class ModbusSlave:
     def _note(self, reason: str) -> None:
         self.errors.append(reason)
         del self.errors[:-20]
+
+
+def _request_length(buf: bytearray, k: int) -> int | None:
+    """Length of the 03h / 06h / 10h request starting at `buf[k]` (None: other function)."""
+    fn = buf[k + 1]
+    if fn in (mb.READ_HOLDING, mb.WRITE_SINGLE):
+        return 8
+    if fn == mb.WRITE_MULTIPLE:
+        return 9 + buf[k + 6]
+    return None
 
 
 def _crc_ok(adu: bytes) -> bool:
@@ -508,6 +555,8 @@ class ModbusSlaveRunner:
 
     The line needs `read(n, timeout) -> bytes` and `write(data)` (hil.transport's
     SerialLine, or `FdLine`). Use as a context manager or call `start()` / `stop()`.
+    An exception in a step (a failing line, a face bug) is kept in `error`, counted in
+    `slave.last_resort` (logged once) and the thread keeps serving.
     """
 
     def __init__(
@@ -544,31 +593,41 @@ class ModbusSlaveRunner:
         self.stop()
 
     def _run(self) -> None:
-        slave = self.slave
         timed = hasattr(self.line, "read_timed")  # hil.transport.serial_line.SerialLine
-        try:
-            while not self._stop.is_set():
-                now = self.clock()
-                deadline = slave.next_deadline()
-                wait = self.poll_s
-                if deadline is not None:
-                    wait = min(wait, max(0.0, (deadline - now) / 1e9))
-                # one byte with the wait, then whatever else is there (lines whose read(n)
-                # waits for all n bytes would otherwise hold a request back)
-                if timed:
-                    frame = self.line.read_timed(1, wait)
-                    if frame is not None and frame.data:
-                        more = self.line.read_timed(511, 0)
-                        data, times = frame.data, tuple(frame.times_ns)
-                        if more is not None:
-                            data, times = data + more.data, times + tuple(more.times_ns)
-                        slave.feed_timed(data, times)
-                        continue
-                else:
-                    data = self.line.read(1, wait)
-                    if data:
-                        slave.feed(data + self.line.read(511, 0), self.clock())
-                        continue
-                slave.tick(self.clock())
-        except BaseException as exc:  # surfaced to the owner; the thread ends
-            self.error = exc
+        while not self._stop.is_set():
+            try:
+                self._step(timed)
+            except Exception as exc:  # last resort: log once, keep serving the line
+                if self._stop.is_set():
+                    return
+                self.error = exc  # surfaced to the owner
+                self.slave.last_resort("runner", exc)
+                self._stop.wait(self.poll_s)  # e.g. a line that fails every read
+            except BaseException as exc:  # KeyboardInterrupt / SystemExit: the thread ends
+                self.error = exc
+                return
+
+    def _step(self, timed: bool) -> None:
+        slave = self.slave
+        now = self.clock()
+        deadline = slave.next_deadline()
+        wait = self.poll_s
+        if deadline is not None:
+            wait = min(wait, max(0.0, (deadline - now) / 1e9))
+        # one byte with the wait, then whatever else is there (lines whose read(n)
+        # waits for all n bytes would otherwise hold a request back)
+        if timed:
+            frame = self.line.read_timed(1, wait)
+            if frame is not None and frame.data:
+                more = self.line.read_timed(511, 0)
+                data, times = frame.data, tuple(frame.times_ns)
+                if more is not None:
+                    data, times = data + more.data, times + tuple(more.times_ns)
+                slave.feed_timed(data, times)
+                return
+        else:
+            data = self.line.read(1, wait)
+            if data:
+                slave.feed(data + self.line.read(511, 0), self.clock())
+                return
+        slave.tick(self.clock())

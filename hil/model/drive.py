@@ -38,12 +38,14 @@ from hil.model.errors import (
     ABORT_VALUE_HIGH,
     ABORT_VALUE_LOW,
     ABORT_VALUE_RANGE,
+    ModelError,
     ObjectError,
     OutOfRange,
     ParamError,
     ProtectedParameter,
     ReadOnly,
     ServoOnLocked,
+    UnknownFunction,
     UnknownParameter,
 )
 from hil.model.events import (
@@ -243,11 +245,18 @@ class Drive:
             name = self._param_of(index, sub)
             try:
                 self.params.write(name, value)
-            except ParamError as exc:
+            except ObjectError:
+                raise
+            except ModelError as exc:  # ParamError, UnknownFunction (P2.010 = 0x0007) ...
                 raise ObjectError(index, sub, _abort_for(exc, value), str(exc)) from exc
             return
         if 0x6000 <= index <= 0x6FFF:
-            self.cia402.write(index, sub, value)
+            try:
+                self.cia402.write(index, sub, value)
+            except ObjectError:
+                raise
+            except ModelError as exc:  # a refusal from a hook behind the object
+                raise ObjectError(index, sub, _abort_for(exc, value), str(exc)) from exc
             self._update_servo()
             return
         raise ObjectError(index, sub, ABORT_NO_OBJECT, "object does not exist in the drive")
@@ -544,8 +553,12 @@ class Drive:
                     self._emit(InputChanged(self.sched.now, n, level))
 
 
-def _abort_for(exc: ParamError, value: int) -> int:
-    """SDO abort code for a refused parameter write (CiA 301 codes; a3-comms §2.13.2 ⚠)."""
+def _abort_for(exc: ModelError, value: int) -> int:
+    """SDO abort code for a refused write (CiA 301 codes; a3-comms §2.13.2 ⚠). Every
+    refusal gets one: an undefined DI/DO function code (table 8.1 / 8.2) is a value
+    outside the range (0609 0030), as is any other refusal that names no finer rule."""
+    if isinstance(exc, UnknownFunction) or not isinstance(exc, ParamError):
+        return ABORT_VALUE_RANGE
     if isinstance(exc, ReadOnly):
         return ABORT_READ_ONLY
     if isinstance(exc, OutOfRange):
