@@ -41,7 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any
 
-from hil.model.errors import ModelError, ParamError, ReadOnly
+from hil.model.errors import ModelError, OutOfRange, ParamError, ReadOnly
 from hil.model.motion import counts_to_puu, puu_per_s_to_rpm, puu_to_counts
 from hil.model.pr import (
     ARRAY_SIZE,
@@ -588,7 +588,7 @@ def attach_pr(drive: Drive, options: PrOptions | None = None) -> PrEngine:
 
     def check_p5007(_name: str, value: int) -> None:
         if 100 <= value <= 999:
-            raise PrError(f"P5.007 = {value}: 100~999 may not be written (L11176)")
+            raise OutOfRange("P5.007", f"{value}: 100~999 may not be written (L11176)")
 
     def on_p5007(_n: str, _old: int, new: int) -> None:
         if 1 <= new <= 99:
