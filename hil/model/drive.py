@@ -184,6 +184,9 @@ class Drive:
         from hil.model.homing import attach_homing  # homing refers back to Drive
 
         self.homing = attach_homing(self)
+        from hil.model.pr_engine import attach_pr  # PR#1-#99 (chapter 7, docs/pr.md)
+
+        self.pr = attach_pr(self)
         self._boot()
 
     # ------------------------------------------------------------------ public API

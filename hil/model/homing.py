@@ -22,6 +22,7 @@ Method tables: `hil.model.homing_methods`. Choices and deviation knobs (ModelOpt
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any
 
@@ -109,6 +110,9 @@ class Homing:
         self._pending: Timer | None = None
         self._early: Timer | None = None
         self._boot_armed = True
+        # PR engine hooks (pr_engine.attach_pr): a PR#0 run starts / finished (PATH, L12607)
+        self.on_pr_start: Callable[[], None] | None = None
+        self.on_pr_done: Callable[[], None] | None = None
 
     # ---------------------------------------------------------------- routes / triggers
     def start_canopen(self) -> None:
@@ -161,6 +165,8 @@ class Homing:
         p = d.params.get
         if self.route:
             self._end()  # a new trigger replaces the running homing (PR executor)
+        if self.on_pr_start is not None:
+            self.on_pr_start()
         try:
             plan = pr_plan(p("P5.004"), self.options.pr_z_speed)
         except ModelError as exc:  # a P5.004 that bypassed the write check
@@ -394,8 +400,11 @@ class Homing:
             self.after_step()
 
     def _complete(self) -> None:
+        route = self.route
         self._report()
         self._end()
+        if route == "pr" and self.on_pr_done is not None:
+            self.on_pr_done()  # P6.000 PATH (L12607-12631)
 
     def _report(self) -> None:
         self._early = None

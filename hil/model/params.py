@@ -352,9 +352,12 @@ class ParameterStore:
         if count < 0:
             raise ValueError(f"negative word count {count}")
         words: list[int] = []
+        values: dict[str, int] = {}  # one read per parameter: read hooks may count (P5.012)
         for addr in range(address, address + count):
             spec = self.table.by_modbus_address(addr)
-            low, high = spec.to_words(self.read(spec.param))
+            if spec.param not in values:
+                values[spec.param] = self.read(spec.param)
+            low, high = spec.to_words(values[spec.param])
             words.append(high if addr & 1 else low)
         return words
 

@@ -22,6 +22,7 @@ from typing import Any, TextIO
 
 from hil.plan.bench import Bench
 from hil.plan.plan import Plan, bind_line, check_plan, plan_spec
+from hil.plan.pr_steps import EXECUTORS as PR_EXECUTORS
 from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, DriveIO, Session, open_session
 from hil.plan.steps import Condition, Step
@@ -454,6 +455,7 @@ EXECUTORS: dict[str, Callable[[StepContext, Step, DriveIO], str]] = {
     "inject": _x_inject, "check_timing": _x_check_timing, "abs_read": _x_abs_read,
     "abs_origin": _x_abs_origin,
 }
+EXECUTORS.update(PR_EXECUTORS)  # pr_table, pr_trigger, pr_wait (hil/plan/pr_steps.py)
 # Steps whose failure does not end the plan (they only judge what already happened).
 JUDGE_ONLY = ("check_timing",)
 

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hil.model.dio import DI_SYMBOLS, DO_SYMBOLS, inert_mapping
+from hil.plan.pr_steps import PARSERS as PR_PARSERS
+from hil.plan.pr_steps import describe as pr_describe
 from hil.plan.yamlio import Checker, LDict, LList, join, level, parse_duration
 
 STATES = ("SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED",
@@ -121,6 +123,8 @@ def describe(step: Step) -> str:
         return "inject " + ", ".join(f"{x}={y}" for x, y in a.items())
     if k == "fault_reset":
         return "fault reset (6040h bit 7)"
+    if k.startswith("pr_"):
+        return pr_describe(k, a)
     return k
 
 
@@ -522,6 +526,7 @@ PARSERS: dict[str, Parser] = {
     "abs_read": p_abs_read,
     "abs_origin": p_abs_origin,
 }
+PARSERS.update(PR_PARSERS)  # pr_table, pr_trigger, pr_wait (hil/plan/pr_steps.py)
 VIRTUAL_ONLY = ("power_cycle", "inject")
 MOTION = ("move", "home")
 

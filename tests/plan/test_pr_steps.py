@@ -1,0 +1,44 @@
+"""PR plan steps and the DeltaPr driver (docs/pr.md)."""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.drivers.delta_pr import DeltaPr, PrTableError
+from hil.model.drive import Drive
+from hil.model.timebase import MS
+from hil.plan.steps import parse_steps
+from hil.plan.yamlio import Checker, PlanFileError, load_yaml_text
+
+TEXT = """steps:
+  - pr_table:
+      1: {type: single, data: 1000}
+      2: {type: jump, data: 120}
+"""
+
+
+def test_check_rejects_a_table_the_drive_refuses() -> None:
+    """A jump to PR#120 raises AL249 on the drive (L20099): refused at load, with the line."""
+    doc = load_yaml_text(TEXT, "p.yaml")
+    with pytest.raises(PlanFileError) as e:
+        parse_steps(Checker("p.yaml"), doc["steps"], 1)
+    assert ":4:" in str(e.value) and "AL249" in str(e.value)
+
+
+def test_driver_writes_reads_back_triggers_and_waits() -> None:
+    """DeltaPr over the drive's parameters: table, P5.007 trigger, n+20000 read-back (L11185)."""
+    d = Drive(inputs={8: True}, params={"P2.010": 0x0101}, sensors={})
+    d.set_di(1, True)
+    d.advance(400 * MS)
+    class Access:  # the model's parameters, as a bus would reach them
+        read_param = staticmethod(d.params.read)
+        write_param = staticmethod(d.params.write)
+
+    pr = DeltaPr(Access(), sleep=lambda s: d.advance(int(s * 1e9)), clock=lambda: d.now / 1e9)
+    pr.write_table({4: {"type": "single", "data": 30000, "spd": 4}})
+    assert pr.read_path(4).data == 30000
+    pr.trigger(4)
+    assert pr.wait(4, "in_position", timeout_s=2) > 0
+    assert pr.status() == (4, "in_position")
+    with pytest.raises(PrTableError, match="L4451"):
+        pr.write_table({1: {"type": "speed", "data": 70000}})
