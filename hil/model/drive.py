@@ -92,7 +92,7 @@ class Drive:
         self._subs: list[Callable[[DriveEvent], None]] = []
         self._step_ns = max(1, ms(options.motion_step_ms))
         self.servo_on = False
-        self.powered = True
+        self.powered = False  # True from the end of `_boot()`: no servo on before power-up
 
         self.params = ParameterStore(
             retained_path=self.state_path / "params.json" if self.state_path else None
@@ -266,6 +266,7 @@ class Drive:
     def power_cycle(self, *, battery: bool = True, off_for: int = 0) -> None:
         """Switch the drive off (for `off_for` ns) and on again."""
         self._servo_off("normal", None, immediate=True)
+        self.powered = False
         self.advance(off_for)
         self.params.power_cycle()
         self.dio.power_cycle()
@@ -324,6 +325,10 @@ class Drive:
         """After power on: SRDY, outputs, and the CiA 402 automatic transitions 0/1."""
         for hook in self._boot_hooks:
             hook()
+        # Level-triggered DI functions act from power-up (EMGS/NL/PL -> AL013-AL015,
+        # L2829-2831, L15184-15191), before anything may switch the servo on.
+        self.dio.apply_levels()
+        self.powered = True
         self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
         self._set_do("SRDY", not self.alarms.alrm)
@@ -453,6 +458,7 @@ class Drive:
         cur = al.current
         self.cia402.error_code = al.table.spec(cur).emcy if cur else 0  # 603Fh
         self.cia402.set_fault(fault)
+        self.cia402.set_servo_blocked(al.servo_off_required and not fault)  # AL013 (L18326)
         self.cia402.set_warning(al.warn)
         self._update_servo()
 
