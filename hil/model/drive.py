@@ -150,6 +150,7 @@ class Drive:
             self.sched,
             self.params,
             set_cause=self.alarms.set_cause,
+            clear_alarm=self.alarms.clear,
             set_output=self.dio.set_do_function,
             set_overlay=lambda on: self.dio.overlay() if on else self.dio.clear_overlay(),
             read_absq=lambda: self.dio.function_active("ABSQ"),
