@@ -26,7 +26,7 @@ from typing import Any
 
 from hil.model.absolute import AbsoluteEncoder, AbsoluteOptions
 from hil.model.alarms import AlarmManager, AlarmOptions
-from hil.model.brake import Brake
+from hil.model.brake import Brake, HoldingBrake
 from hil.model.cia402 import Cia402, Cia402Options
 from hil.model.dio import DigitalIO
 from hil.model.errors import (
@@ -47,6 +47,7 @@ from hil.model.errors import (
 )
 from hil.model.events import (
     AlarmChanged,
+    DoChanged,
     DriveEvent,
     FdbkChanged,
     InputChanged,
@@ -90,6 +91,7 @@ class Drive:
         if self.state_path:
             self.state_path.mkdir(parents=True, exist_ok=True)
         self._subs: list[Callable[[DriveEvent], None]] = []
+        self.brake_line: int | None = None  # DO line of the brake coil, resolved at power-up
         self._step_ns = max(1, ms(options.motion_step_ms))
         self.servo_on = False
         self.powered = False  # True from the end of `_boot()`: no servo on before power-up
@@ -110,15 +112,19 @@ class Drive:
         self.alarms = AlarmManager(
             None, self.sched, self.params, self._on_alarm, AlarmOptions(override)
         )
-        self.dio = DigitalIO(self.params, self.sched, self._emit, name=name)
+        self.dio = DigitalIO(self.params, self.sched, self._on_dio_event, name=name)
         self.axis = Axis(self.mech)
         self.brake = Brake(
             self.sched,
             self.params.get,
             lambda: self.axis.velocity_rpm,
             lambda v: self._set_do("BRKR", v),
-            self._on_clamp,
             options,
+        )
+        # The bench's mechanical brake hangs on one DO line (`Mechanics.brake_do`).
+        self.holding_brake = HoldingBrake(
+            self.sched,
+            self._on_clamp,
             release_ms=self.mech.brake_release_ms,
             engage_ms=self.mech.brake_engage_ms,
         )
@@ -268,6 +274,7 @@ class Drive:
         """Switch the drive off (for `off_for` ns) and on again."""
         self._servo_off("normal", None, immediate=True)
         self.powered = False
+        self.holding_brake.coil(False)  # no control power: no DO conducts, the brake engages
         self.advance(off_for)
         self.params.power_cycle()
         self.dio.power_cycle()
@@ -304,7 +311,7 @@ class Drive:
             "torque_pct": round(ax.torque / 10.0, 2),
             "following_error_counts": round(ax.following_error),
             "brkr": self.brake.brkr,
-            "brake_released": not self.brake.clamped,
+            "brake_released": not self.holding_brake.clamped,
             "sto_a": self.sto.a,
             "sto_b": self.sto.b,
             "alarms": list(self.alarms.active),
@@ -338,10 +345,25 @@ class Drive:
         self._set_do("SON", False)
         self._set_do("BRKR", False)
         self._refresh_speed_outputs()
+        self._wire_brake()
         self.cia402.power_on()
         self._mirror_params()  # after power_on(), which resets 6093h to 1/1
         self.cia402.set_voltage(True)
         self._on_alarm(None)
+
+    def _wire_brake(self) -> None:
+        """Power-up: which DO line the brake coil hangs on, and its level now."""
+        bdo = self.mech.brake_do
+        if bdo == "auto":
+            lines = [n for n in range(1, 7) if self.dio.do_function(n) == "BRKR"]
+            bdo = lines[0] if lines else None  # BRKR mapped to no DO: no brake (L15286)
+        self.brake_line = bdo
+        self.holding_brake.power_up(None if bdo is None else self.dio.do_level(bdo))
+
+    def _on_dio_event(self, event: DriveEvent) -> None:
+        if isinstance(event, DoChanged) and event.n == self.brake_line:
+            self.holding_brake.coil(event.level)  # the bench's wiring, not the function
+        self._emit(event)
 
     def _mirror_params(self) -> None:
         """Parameters the CiA 402 objects mirror: gear 6093h, max speed, limit ramps."""
