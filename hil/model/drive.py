@@ -141,7 +141,7 @@ class Drive:
             emit=self._emit,
             options=Cia402Options(**options.extra.get("cia402", {})),
             fault_reset=self._fault_reset,
-            on_servo_request=lambda _on, _cause: self._update_servo(),
+            on_servo_request=lambda _on, _cause: self._update_servo(source="cia402"),
             on_write=self._on_object_written,
         )
         self._step_hooks: list[Callable[[], None]] = []  # after each motion substep
@@ -397,7 +397,8 @@ class Drive:
             or self.params.get("P2.030") == 1  # forced software servo on (L9496)
         )
 
-    def _update_servo(self) -> None:
+    def _update_servo(self, source: str = "") -> None:
+        """Switch the servo to what is requested; `source` "cia402": the state machine asked."""
         if not self.powered:
             return
         blocked = self.alarms.servo_off_required or not (self.sto.a and self.sto.b)
@@ -410,7 +411,14 @@ class Drive:
                 cause = "emgs" if "AL013" in self.alarms.active else "alarm"
                 self._servo_off(cause, code)
             else:
-                self._servo_off("normal", None)
+                self._servo_off("normal", None, by_state_machine=source == "cia402")
+
+    def _stop_mode(self, by_state_machine: bool) -> int:
+        """P1.032.Y code of this servo off's stop: 605Bh for a CiA 402 servo off (L18342-
+        18358), P1.032.Y for SON off, alarms and EMGS (L8321); `shutdown_option_scope`."""
+        if by_state_machine and self.options.shutdown_option_scope == "state_machine":
+            return self.cia402.shutdown_stop_mode
+        return (self.params.get("P1.032") >> 4) & 0xF
 
     def _servo_on(self) -> None:
         self.servo_on = True
@@ -425,10 +433,13 @@ class Drive:
         for hook in self._servo_on_hooks:
             hook()
 
-    def _servo_off(self, cause: str, alarm: str | None, immediate: bool = False) -> None:
+    def _servo_off(
+        self, cause: str, alarm: str | None, immediate: bool = False, by_state_machine: bool = False
+    ) -> None:
         if not self.servo_on:
             return
         self.servo_on = False
+        self.axis.stop_mode = self._stop_mode(by_state_machine)
         self.axis.set_power(False)  # torque off first: every event below sees it off
         hold = 0 if immediate else self.brake.servo_off(cause, alarm)
         if hold:  # negative P1.043: brake clamps first, torque held |P1.043| (options.py)
