@@ -335,7 +335,8 @@ class Drive:
             hook()
         # Level-triggered DI functions act from power-up (EMGS/NL/PL -> AL013-AL015,
         # L2829-2831, L15184-15191), before anything may switch the servo on.
-        self.dio.apply_levels()
+        if not self.options.dev_di_levels_ignored_at_power_up:
+            self.dio.apply_levels()
         self.powered = True
         self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF

@@ -73,6 +73,7 @@ class ModelOptions:
     dev_al501_cleared_by_arst: bool = False  # AL501/AL502 wrongly cleared by ARST
     dev_arst_on_falling_edge: bool = False  # alarm reset on the wrong edge
     dev_emgs_ignores_negative_rule: bool = False  # negative P1.043 honoured on EMGS stops
+    dev_di_levels_ignored_at_power_up: bool = False  # EMGS/NL/PL open at power-up unseen
     extra: dict[str, Any] = field(default_factory=dict)  # options of other rooms (homing, abs)
 
     @classmethod
