@@ -274,6 +274,7 @@ class AbsoluteEncoder:
         options: AbsoluteOptions | None = None,
         memory: EncoderMemory | None = None,
         hook_params: bool = True,
+        clear_alarm: Callable[[str], None] | None = None,
     ) -> None:
         self.scheduler = scheduler
         self.on_origin: Callable[[], None] | None = None  # ABSC / P2.071 origin set
@@ -281,6 +282,7 @@ class AbsoluteEncoder:
         self.options = options or AbsoluteOptions()
         self.mem = memory or EncoderMemory()
         self._set_cause = set_cause
+        self._clear_alarm = clear_alarm  # ends a "special" alarm whose procedure is done
         self._set_output = set_output
         self._set_overlay = set_overlay
         self._clear_position_error = clear_position_error
@@ -472,6 +474,9 @@ class AbsoluteEncoder:
         m.turn_overflow = m.puu_overflow = False  # AL062 / AL289 cleared (L16404, L16417)
         m.al07c = m.al07d = False
         self._evaluate()
+        if self._clear_alarm is not None:
+            # AL060's clearing procedure is rebuilding the origin (L19767, L16397).
+            self._clear_alarm("AL060")
 
     # -- parameters -------------------------------------------------------------------------
 

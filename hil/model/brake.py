@@ -8,8 +8,10 @@ BRKR On = brake coil energised = shaft free; BRKR Off = brake holds (§2.9, L135
   rest engages at once.
 * A servo off caused by an alarm (except AL022) or by EMGS treats a negative P1.043 as 0
   (L8516). What a negative P1.043 means otherwise is undefined: `ModelOptions.negative_p1043`.
-* The mechanical brake follows BRKR after the motor's release/engage times (Appendix A,
-  L20485-20494: at most 70 ms; bench data, `Mechanics.brake_release_ms/brake_engage_ms`).
+* The mechanical brake (`HoldingBrake`) is bench hardware: its coil hangs on one DO line
+  (`Mechanics.brake_do`) and follows that line's level after the motor's release/engage
+  times (Appendix A, L20485-20494: at most 70 ms; `Mechanics.brake_release_ms/engage_ms`).
+  BRKR mapped to no DO (P2.041 = 0 ...) controls nothing (L15286, L9603).
 """
 
 from __future__ import annotations
@@ -20,8 +22,53 @@ from hil.model.options import ModelOptions
 from hil.model.timebase import Scheduler, Timer, ms
 
 
+class HoldingBrake:
+    """The motor's spring-applied brake: coil energised = shaft free, after a delay."""
+
+    def __init__(
+        self,
+        sched: Scheduler,
+        on_clamp: Callable[[bool], None],
+        release_ms: float = 20.0,
+        engage_ms: float = 50.0,
+    ) -> None:
+        self._sched = sched
+        self._on_clamp = on_clamp
+        self.release_ms = release_ms
+        self.engage_ms = engage_ms
+        self.energised = False
+        self.clamped = True  # mechanical state: the shaft is held
+        self._mech: Timer | None = None
+
+    def coil(self, energised: bool) -> None:
+        """The coil's supply changed (the DO line it hangs on)."""
+        energised = bool(energised)
+        if energised == self.energised:
+            return
+        self.energised = energised
+        if self._mech:
+            self._mech.cancel()
+        delay = self.release_ms if energised else self.engage_ms
+        self._mech = self._sched.after(ms(delay), lambda: self._mechanical(not energised))
+
+    def power_up(self, energised: bool | None) -> None:
+        """Settle at power-up: `energised` = coil level now; None = no coil wired, no brake."""
+        if self._mech:
+            self._mech.cancel()
+            self._mech = None
+        self.energised = bool(energised)
+        self.clamped = energised is not None and not energised
+        self._on_clamp(self.clamped)
+
+    def _mechanical(self, clamped: bool) -> None:
+        self._mech = None
+        if clamped != self.clamped:
+            self.clamped = clamped
+            self._on_clamp(clamped)
+
+
 class Brake:
-    """BRKR logic plus the mechanical brake it drives."""
+    """BRKR logic (the DO function); the mechanics is the bench's `HoldingBrake`."""
 
     def __init__(
         self,
@@ -29,23 +76,15 @@ class Brake:
         param: Callable[[str], int],
         speed_rpm: Callable[[], float],
         on_brkr: Callable[[bool], None],
-        on_clamp: Callable[[bool], None],
         options: ModelOptions,
-        release_ms: float = 20.0,
-        engage_ms: float = 50.0,
     ) -> None:
         self._sched = sched
         self._param = param
         self._speed = speed_rpm
         self._on_brkr = on_brkr
-        self._on_clamp = on_clamp
         self._opt = options
-        self.release_ms = release_ms
-        self.engage_ms = engage_ms
         self.brkr = False  # DO function state: True = release the brake
-        self.clamped = True  # mechanical state: the shaft is held
         self._pending: Timer | None = None  # BRKR change waiting for its delay
-        self._mech: Timer | None = None
         self._watch_speed = False  # servo off, waiting for |v| < P1.038
 
     # -- events from the drive -------------------------------------------------------------
@@ -90,13 +129,9 @@ class Brake:
             self._set(False)
 
     def reset(self) -> None:
-        """Power cycle: brake holds, BRKR off."""
+        """Power cycle: BRKR off."""
         self._cancel()
-        if self._mech:
-            self._mech.cancel()
         self.brkr = False
-        self.clamped = True
-        self._on_clamp(True)
 
     # -- internals -------------------------------------------------------------------------
     def _below_zspd(self) -> bool:
@@ -115,13 +150,3 @@ class Brake:
             return
         self.brkr = release
         self._on_brkr(release)
-        if self._mech:
-            self._mech.cancel()
-        delay = self.release_ms if release else self.engage_ms
-        self._mech = self._sched.after(ms(delay), lambda: self._mechanical(not release))
-
-    def _mechanical(self, clamped: bool) -> None:
-        self._mech = None
-        if clamped != self.clamped:
-            self.clamped = clamped
-            self._on_clamp(clamped)

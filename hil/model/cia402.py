@@ -114,6 +114,9 @@ _OPTION_CODES = {  # model-only option-code objects (absent on the A3, a3-comms 
 }
 
 
+_BLOCKED_STATES = ("switch_on_disabled", "switched_on", "operation_enabled")
+
+
 @dataclass
 class Cia402Options:
     """Choices where the manual is silent (docs/manual-choices.md#cia402-motion)."""
@@ -129,6 +132,11 @@ class Cia402Options:
     pp_relative_base: str = "target"  # bit 6 relative to: "target" | "demand" | "actual"
     remote_bit: bool = True  # statusword bit 9 (no description, L18312)
     homing_stop_on_bit4_fall: bool = True  # HM bit 4 1->0 interrupts homing [std]
+    # State while a servo-off warning (EMGS AL013: WARN class, servo OFF, L19338) blocks the
+    # servo: OPERATION ENABLED means servo on (L18326), so the machine leaves it and refuses
+    # transition 4 while blocked. "switch_on_disabled" | "switched_on" | "operation_enabled"
+    # (the old model: state kept, servo off anyway).
+    servo_blocked_state: str = "switch_on_disabled"
 
     def __post_init__(self) -> None:
         for index, name in (
@@ -148,6 +156,10 @@ class Cia402Options:
             raise ValueError("Cia402Options.pp_relative_base: 'target', 'demand' or 'actual'")
         if self.limit_decel_ms <= 0:
             raise ValueError("Cia402Options.limit_decel_ms: must be > 0 ms")
+        if self.servo_blocked_state not in _BLOCKED_STATES:
+            raise ValueError(
+                f"Cia402Options.servo_blocked_state: one of {', '.join(_BLOCKED_STATES)}"
+            )
 
 
 @dataclass(frozen=True)
@@ -263,6 +275,7 @@ class Cia402:
         self.servo_enable_requested = False
         self.error_code = 0
         self._fault = False
+        self._blocked = False  # a servo-off warning (AL013) holds the servo off
         self._warning = False
         self._voltage = True
         self._nl = self._pl = False
@@ -325,6 +338,20 @@ class Cia402:
             self._set_state(FAULT)  # 14
         else:
             self.axis.ramp_stop(self._stop_decel(opt))
+
+    def set_servo_blocked(self, active: bool) -> None:
+        """A servo-off event that is no fault (EMGS, AL013 WARN/servo OFF, L19338) is present.
+
+        OPERATION ENABLED is "servo on" (L18326): while blocked the machine leaves it (to
+        `servo_blocked_state`) and refuses transition 4 (enable operation).
+        """
+        self._blocked = bool(active)
+        target = self.options.servo_blocked_state
+        if not self._blocked or target == "operation_enabled":
+            return
+        if self.state in (OPERATION_ENABLED, QUICK_STOP_ACTIVE) or self._off_after_stop:
+            self._off_after_stop = False
+            self._disable(SWITCH_ON_DISABLED if target == "switch_on_disabled" else SWITCHED_ON)
 
     def set_warning(self, active: bool) -> None:
         self._warning = bool(active)
@@ -635,7 +662,9 @@ class Cia402:
 
     # ---- transitions' actions ------------------------------------------------------------
     def _enable(self) -> None:
-        """Transition 4: servo on and run the mode (L18252)."""
+        """Transition 4: servo on and run the mode (L18252); refused while blocked."""
+        if self._blocked and self.options.servo_blocked_state != "operation_enabled":
+            return
         self._off_after_stop = False
         self._set_servo(True, "state")
         self._set_state(OPERATION_ENABLED)

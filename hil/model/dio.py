@@ -341,6 +341,17 @@ class DigitalIO:
         self._subs.setdefault(symbol, []).append(fn)
         return lambda: self._subs[symbol].remove(fn)
 
+    def apply_levels(self) -> None:
+        """Power-up: tell the handlers of every active level-triggered function (table 8.1
+        "準位") its state once, as if it had just become active. Level functions act for as
+        long as they are on, including from power-up (EMGS/NL/PL at power-up show AL013-
+        AL015, L2829-2831); edge-triggered functions (ARST, ABSC, ...) saw no edge."""
+        for sym, active in list(self._di_state.items()):
+            code = DI_SYMBOLS.get(sym)
+            if active and code is not None and DI_FUNCTIONS[code].trigger == "level":
+                for fn in list(self._subs.get(sym, ())):
+                    fn(True)
+
     def _accept(self, i: int, closed: bool) -> None:
         self._pending[i] = None
         if self._accepted[i] != closed:

@@ -26,7 +26,7 @@ from typing import Any
 
 from hil.model.absolute import AbsoluteEncoder, AbsoluteOptions
 from hil.model.alarms import AlarmManager, AlarmOptions
-from hil.model.brake import Brake
+from hil.model.brake import Brake, HoldingBrake
 from hil.model.canopen_init import HOME_OFFSET_INIT, load_canopen_init
 from hil.model.cia402 import Cia402, Cia402Options
 from hil.model.dio import DigitalIO
@@ -50,6 +50,7 @@ from hil.model.errors import (
 )
 from hil.model.events import (
     AlarmChanged,
+    DoChanged,
     DriveEvent,
     FdbkChanged,
     InputChanged,
@@ -93,9 +94,10 @@ class Drive:
         if self.state_path:
             self.state_path.mkdir(parents=True, exist_ok=True)
         self._subs: list[Callable[[DriveEvent], None]] = []
+        self.brake_line: int | None = None  # DO line of the brake coil, resolved at power-up
         self._step_ns = max(1, ms(options.motion_step_ms))
         self.servo_on = False
-        self.powered = True
+        self.powered = False  # True from the end of `_boot()`: no servo on before power-up
 
         self.params = ParameterStore(
             retained_path=self.state_path / "params.json" if self.state_path else None
@@ -113,15 +115,19 @@ class Drive:
         self.alarms = AlarmManager(
             None, self.sched, self.params, self._on_alarm, AlarmOptions(override)
         )
-        self.dio = DigitalIO(self.params, self.sched, self._emit, name=name)
+        self.dio = DigitalIO(self.params, self.sched, self._on_dio_event, name=name)
         self.axis = Axis(self.mech)
         self.brake = Brake(
             self.sched,
             self.params.get,
             lambda: self.axis.velocity_rpm,
             lambda v: self._set_do("BRKR", v),
-            self._on_clamp,
             options,
+        )
+        # The bench's mechanical brake hangs on one DO line (`Mechanics.brake_do`).
+        self.holding_brake = HoldingBrake(
+            self.sched,
+            self._on_clamp,
             release_ms=self.mech.brake_release_ms,
             engage_ms=self.mech.brake_engage_ms,
         )
@@ -138,7 +144,7 @@ class Drive:
             emit=self._emit,
             options=Cia402Options(**options.extra.get("cia402", {})),
             fault_reset=self._fault_reset,
-            on_servo_request=lambda _on, _cause: self._update_servo(),
+            on_servo_request=lambda _on, _cause: self._update_servo(source="cia402"),
             on_write=self._on_object_written,
         )
         self._step_hooks: list[Callable[[], None]] = []  # after each motion substep
@@ -153,6 +159,7 @@ class Drive:
             self.sched,
             self.params,
             set_cause=self.alarms.set_cause,
+            clear_alarm=self.alarms.clear,
             set_output=self.dio.set_do_function,
             set_overlay=lambda on: self.dio.overlay() if on else self.dio.clear_overlay(),
             read_absq=lambda: self.dio.function_active("ABSQ"),
@@ -284,6 +291,8 @@ class Drive:
     def power_cycle(self, *, battery: bool = True, off_for: int = 0) -> None:
         """Switch the drive off (for `off_for` ns) and on again."""
         self._servo_off("normal", None, immediate=True)
+        self.powered = False
+        self.holding_brake.coil(False)  # no control power: no DO conducts, the brake engages
         self.advance(off_for)
         self.params.power_cycle()
         self.dio.power_cycle()
@@ -320,7 +329,7 @@ class Drive:
             "torque_pct": round(ax.torque / 10.0, 2),
             "following_error_counts": round(ax.following_error),
             "brkr": self.brake.brkr,
-            "brake_released": not self.brake.clamped,
+            "brake_released": not self.holding_brake.clamped,
             "sto_a": self.sto.a,
             "sto_b": self.sto.b,
             "alarms": list(self.alarms.active),
@@ -343,6 +352,11 @@ class Drive:
         for hook in self._boot_hooks:
             hook()
         canopen_init = load_canopen_init(self.params)  # P3.012.Z = 0 (L10731-10745)
+        # Level-triggered DI functions act from power-up (EMGS/NL/PL -> AL013-AL015,
+        # L2829-2831, L15184-15191), before anything may switch the servo on.
+        if not self.options.dev_di_levels_ignored_at_power_up:
+            self.dio.apply_levels()
+        self.powered = True
         self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
         self._set_do("SRDY", not self.alarms.alrm)
@@ -351,12 +365,27 @@ class Drive:
         self._set_do("SON", False)
         self._set_do("BRKR", False)
         self._refresh_speed_outputs()
+        self._wire_brake()
         self.cia402.power_on()
         self._mirror_params()  # after power_on(), which resets 6093h to 1/1
         if canopen_init:
             self.cia402.write(0x607C, 0, HOME_OFFSET_INIT)  # home offset (L10744)
         self.cia402.set_voltage(True)
         self._on_alarm(None)
+
+    def _wire_brake(self) -> None:
+        """Power-up: which DO line the brake coil hangs on, and its level now."""
+        bdo = self.mech.brake_do
+        if bdo == "auto":
+            lines = [n for n in range(1, 7) if self.dio.do_function(n) == "BRKR"]
+            bdo = lines[0] if lines else None  # BRKR mapped to no DO: no brake (L15286)
+        self.brake_line = bdo
+        self.holding_brake.power_up(None if bdo is None else self.dio.do_level(bdo))
+
+    def _on_dio_event(self, event: DriveEvent) -> None:
+        if isinstance(event, DoChanged) and event.n == self.brake_line:
+            self.holding_brake.coil(event.level)  # the bench's wiring, not the function
+        self._emit(event)
 
     def _mirror_params(self) -> None:
         """Parameters the CiA 402 objects mirror: gear 6093h, max speed, limit ramps."""
@@ -390,7 +419,8 @@ class Drive:
             or self.params.get("P2.030") == 1  # forced software servo on (L9496)
         )
 
-    def _update_servo(self) -> None:
+    def _update_servo(self, source: str = "") -> None:
+        """Switch the servo to what is requested; `source` "cia402": the state machine asked."""
         if not self.powered:
             return
         sto_lost = not (self.sto.a and self.sto.b)
@@ -408,7 +438,14 @@ class Drive:
                 cause = "emgs" if "AL013" in self.alarms.active else "alarm"
                 self._servo_off(cause, code)
             else:
-                self._servo_off("normal", None)
+                self._servo_off("normal", None, by_state_machine=source == "cia402")
+
+    def _stop_mode(self, by_state_machine: bool) -> int:
+        """P1.032.Y code of this servo off's stop: 605Bh for a CiA 402 servo off (L18342-
+        18358), P1.032.Y for SON off, alarms and EMGS (L8321); `shutdown_option_scope`."""
+        if by_state_machine and self.options.shutdown_option_scope == "state_machine":
+            return self.cia402.shutdown_stop_mode
+        return (self.params.get("P1.032") >> 4) & 0xF
 
     def _servo_on(self) -> None:
         self.servo_on = True
@@ -423,10 +460,13 @@ class Drive:
         for hook in self._servo_on_hooks:
             hook()
 
-    def _servo_off(self, cause: str, alarm: str | None, immediate: bool = False) -> None:
+    def _servo_off(
+        self, cause: str, alarm: str | None, immediate: bool = False, by_state_machine: bool = False
+    ) -> None:
         if not self.servo_on:
             return
         self.servo_on = False
+        self.axis.stop_mode = self._stop_mode(by_state_machine)
         self.axis.set_power(False)  # torque off first: every event below sees it off
         hold = 0 if immediate else self.brake.servo_off(cause, alarm)
         if hold:  # negative P1.043: brake clamps first, torque held |P1.043| (options.py)
@@ -479,6 +519,7 @@ class Drive:
         cur = al.current
         self.cia402.error_code = al.table.spec(cur).emcy if cur else 0  # 603Fh
         self.cia402.set_fault(fault)
+        self.cia402.set_servo_blocked(al.servo_off_required and not fault)  # AL013 (L18326)
         self.cia402.set_warning(al.warn)
         self._update_servo()
 

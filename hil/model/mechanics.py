@@ -61,6 +61,10 @@ class Mechanics:
     brake_release_ms: float = 20.0  # coil energised -> shaft free
     brake_engage_ms: float = 50.0  # coil off -> shaft clamped
     brake_holding_torque: float = 1.3  # N·m (ECM-A3L 0602/0604, L20485-20494)
+    # Bench wiring of the brake coil's relay: DO line 1-6 it hangs on; "auto" = the DO that
+    # BRKR is mapped to at power-up (bench wired per the drive's configuration); None = no
+    # brake wired (the shaft is never held). An unmapped BRKR controls nothing (L15286).
+    brake_do: int | str | None = "auto"
 
     def __post_init__(self) -> None:
         if self.counts_per_rev <= 0:
@@ -78,6 +82,9 @@ class Mechanics:
         neg, pos = self.hard_stop_neg_rev, self.hard_stop_pos_rev
         if neg is not None and pos is not None and neg >= pos:
             raise ValueError("Mechanics: hard_stop_neg_rev must be below hard_stop_pos_rev")
+        bdo = self.brake_do
+        if not (bdo is None or bdo == "auto" or (type(bdo) is int and 1 <= bdo <= 6)):
+            raise ValueError(f"Mechanics.brake_do: 1-6, 'auto' or null, got {bdo!r}")
         if self.friction_torque < 0 or self.dynamic_brake_torque < 0:
             raise ValueError("Mechanics: friction_torque and dynamic_brake_torque must be >= 0")
 

@@ -64,6 +64,10 @@ class ModelOptions:
     son_sources: tuple[str, ...] = ("DI", "CANOPEN")
     # SON held through an alarm reset re-enables the servo (SON is level-triggered, L15079).
     son_level_reenables: bool = True
+    # Stop at a servo off: 605Bh (0 free run, 1 dynamic brake, L18342-18358) decides when the
+    # CiA 402 state machine switched the servo off; P1.032.Y ("Servo Off 或 Alarm (含 EMGS)",
+    # L8321) for SON off, alarms and EMGS. "never": P1.032.Y always, 605Bh has no effect.
+    shutdown_option_scope: str = "state_machine"
     # --- timing of the model's outputs ---
     motion_step_ms: float = 1.0  # integration substep while anything moves
     state_publish_ms: float = 10.0  # ground-truth snapshots when recorded
@@ -76,6 +80,7 @@ class ModelOptions:
     dev_al501_cleared_by_arst: bool = False  # AL501/AL502 wrongly cleared by ARST
     dev_arst_on_falling_edge: bool = False  # alarm reset on the wrong edge
     dev_emgs_ignores_negative_rule: bool = False  # negative P1.043 honoured on EMGS stops
+    dev_di_levels_ignored_at_power_up: bool = False  # EMGS/NL/PL open at power-up unseen
     extra: dict[str, Any] = field(default_factory=dict)  # options of other rooms (homing, abs)
 
     @classmethod
@@ -94,6 +99,8 @@ class ModelOptions:
             if data["fdbk_table"] not in tables:
                 raise ValueError(f"{where}.fdbk_table: one of {', '.join(tables)}")
             data["fdbk_table"] = dict(tables[data["fdbk_table"]])
+        if data.get("shutdown_option_scope", "never") not in ("state_machine", "never"):
+            raise ValueError(f"{where}.shutdown_option_scope: 'state_machine' or 'never'")
         if data.get("negative_p1043", "brake_first") not in ("brake_first", "as_zero"):
             raise ValueError(f"{where}.negative_p1043: 'brake_first' or 'as_zero'")
         if data.get("sto_servo_off", "acknowledged") not in STO_SERVO_OFF:

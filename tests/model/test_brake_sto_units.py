@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from hil.model.brake import Brake
+from hil.model.brake import Brake, HoldingBrake
 from hil.model.options import FDBK_AS_PRINTED, ModelOptions
 from hil.model.sto import Sto
 from hil.model.timebase import MS, Scheduler
@@ -17,14 +17,20 @@ class Rig:
         self.speed = 0.0
         self.brkr_edges: list[tuple[int, bool]] = []
         self.clamp_edges: list[tuple[int, bool]] = []
+        # the brake coil wired straight to BRKR's DO line
+        clamp = self.clamp_edges
+        self.holding = HoldingBrake(self.sched, lambda v: clamp.append((self.sched.now, v)))
         self.brake = Brake(
             self.sched,
             self.params.__getitem__,
             lambda: self.speed,
-            lambda v: self.brkr_edges.append((self.sched.now, v)),
-            lambda v: self.clamp_edges.append((self.sched.now, v)),
+            self._brkr,
             options or ModelOptions(),
         )
+
+    def _brkr(self, v: bool) -> None:
+        self.brkr_edges.append((self.sched.now, v))
+        self.holding.coil(v)
 
     def run_until(self, t: int, step: int = MS) -> None:
         while self.sched.now < t:

@@ -1,0 +1,42 @@
+"""emgs_power_up.yaml: a drive powered up with EMGS open (DI8 b-contact, L2829-2831).
+
+The faithful model passes; `dev_di_levels_ignored_at_power_up` (the old model: level DI
+functions applied only on a change) fails the spec.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hil.model.drive import Drive
+from hil.model.options import ModelOptions
+from hil.model.timebase import MS
+from hil.record.model_tap import ModelTap
+from hil.record.recorder import Recorder
+
+from .test_specs_on_model import BENCH, assert_all_pass, verdicts
+
+
+def run_power_up(tmp_path: Path, options: ModelOptions | None = None) -> Path:
+    path = tmp_path / "run.mcap"
+    drive = Drive(options=options, params=BENCH)  # DI8 open: EMGS active from power-up
+    with Recorder(path) as rec:
+        tap = ModelTap(drive, rec)
+        tap.advance(20 * MS)
+        tap.set_di(1, True)  # SON closes under EMGS
+        tap.advance(200 * MS)
+        tap.set_di(8, True)  # EMGS released
+        tap.advance(100 * MS)
+        tap.close()
+    return path
+
+
+def test_faithful_drive_passes(tmp_path) -> None:
+    assert_all_pass(verdicts(run_power_up(tmp_path), "emgs_power_up"))
+
+
+def test_drive_ignoring_power_up_levels_fails(tmp_path) -> None:
+    path = run_power_up(tmp_path, ModelOptions(dev_di_levels_ignored_at_power_up=True))
+    failed = {v.constraint for v in verdicts(path, "emgs_power_up") if v.status == "fail"}
+    assert "SON does not switch the servo on under EMGS" in failed
+    assert "AL013 present while EMGS is active from power-up" in failed
