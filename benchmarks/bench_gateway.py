@@ -24,13 +24,13 @@ import can
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hil.faces.stack import DriveSpec, VirtualDriveStack
 from hil.gateway.client import acquire
 from hil.gateway.gateway import Gateway, GatewayConfig
 from hil.plan.bench import loads_bench
 from hil.protocol.modbus import read_request, rtu_encode
 from hil.transport.can_bus import open_can
 from hil.transport.serial_line import open_serial
+from hil.virtual.stack import DriveSpec, VirtualDriveStack
 
 SDO_UPLOAD_6041 = bytes([0x40, 0x41, 0x60, 0x00, 0, 0, 0, 0])
 BAUD = 115200

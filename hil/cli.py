@@ -13,7 +13,7 @@ import sys
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("hil.plan.cli", "run plans on a bench (default: every shipped plan, virtual bench)"),
-    "drive": ("hil.faces.cli", "run one virtual ASDA-A3 as its own process on given transports"),
+    "drive": ("hil.virtual.cli", "run one virtual ASDA-A3 as its own process on given transports"),
     "check": ("hil.timing.cli", "re-check timing specs on a recording, offline"),
     "report": ("hil.report.cli", "render an HTML report from a recording"),
     "inspect": ("hil.record.cli", "summarise (and repair) an MCAP recording"),

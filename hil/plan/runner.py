@@ -26,6 +26,7 @@ from hil.plan.pr_steps import EXECUTORS as PR_EXECUTORS
 from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, DriveIO, Session, open_session
 from hil.plan.steps import Condition, Step
+from hil.virtual.truth import SensorTap, bench_with_options
 
 PASS, FAIL, ERROR, SKIPPED, ABORTED, INCONCLUSIVE = (
     "pass", "fail", "error", "skipped", "aborted", "inconclusive")
@@ -546,7 +547,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     try:
         with _sigterm_as_interrupt():
             try:
-                sbench = _bench_for(plan, bench, tmp)
+                sbench = bench_with_options(bench, plan.options, tmp)
                 truth = SensorTap(rec) if bench.virtual else rec
                 session = _run_in_thread(lambda: session_factory(sbench, truth),  # type: ignore[arg-type, return-value]
                                          bench.timeouts["ready"] + 5_000_000_000, cancel)
@@ -593,64 +594,6 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     if interrupted is not None:
         raise interrupted
     return res
-
-
-class SensorTap:
-    """The recorder as the virtual world sees it, plus the lines the bench mechanics drive.
-
-    The virtual axis drives its own sensors (NL DI6, PL DI7, ORGP DI9: `DEFAULT_SENSORS`);
-    the harness never sets ORGP and sets NL/PL only at rest, so their levels are taken from
-    the ground truth (`di` of each `/drive/<name>/state` sample) and recorded on
-    `/dio/<name>/DI<n>` when they change, stamped with the sample's own time."""
-
-    def __init__(self, rec: Any) -> None:
-        from hil.model.drive import DEFAULT_SENSORS
-
-        self._rec = rec
-        self._lines = sorted(n for n, _kind in DEFAULT_SENSORS.values())
-        self._last: dict[tuple[str, int], bool] = {}
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._rec, name)
-
-    def drive_state(self, drive: str, state: Any, **kw: Any) -> None:
-        self._rec.drive_state(drive, state, **kw)
-        di = state.get("di") if isinstance(state, dict) else None
-        if not isinstance(di, list | tuple):
-            return
-        for n in self._lines:
-            if n > len(di):
-                continue
-            lv = bool(di[n - 1])
-            if self._last.get((drive, n)) != lv:
-                self._last[(drive, n)] = lv
-                self._rec.dio(drive, f"DI{n}", lv, time.time_ns(), kw.get("source_t"))
-
-
-def _bench_for(plan: Plan, bench: Bench, stack: contextlib.ExitStack) -> Bench:
-    """The bench the session opens: the plan's model `options` merged into every virtual
-    drive's (a subprocess bench gets them in a temporary copy of its file: `hil drive
-    --bench` reads the file)."""
-    if not plan.options or not bench.virtual:
-        return bench
-    from dataclasses import replace
-
-    drives = {n: replace(d, options=dict(d.options) | plan.options)
-              for n, d in bench.drives.items()}
-    out = replace(bench, drives=drives)
-    if bench.process == "subprocess":
-        import tempfile
-
-        import yaml
-
-        data = yaml.safe_load(bench.text)
-        for d in data.get("drives", {}).values():
-            d["options"] = dict(d.get("options") or {}) | plan.options
-        tdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="hil-plan-")))
-        path = tdir / Path(bench.path or "bench.yaml").name
-        path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-        out = replace(out, path=str(path), text=path.read_text(encoding="utf-8"))
-    return out
 
 
 # DI functions a machine's sensors drive (the virtual axis drives them from its mechanics):

@@ -157,7 +157,7 @@ def open_session(bench: Bench, recorder: Any, *, world_factory: Callable | None 
     urls: dict[str, str] = {}
     if bench.virtual:
         if world_factory is None:
-            from hil.plan.virtual import SubprocessWorld, VirtualWorld
+            from hil.virtual.world import SubprocessWorld, VirtualWorld
 
             world_factory = VirtualWorld if bench.process == "inproc" else SubprocessWorld
         world = world_factory(bench, recorder)

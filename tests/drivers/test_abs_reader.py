@@ -9,11 +9,11 @@ from hil.drivers.abs_reader import (
     AbsPositionReader,
     AbsReadError,
     AbsTimingError,
-    ModelLines,
     checksum,
 )
 from hil.model.absolute import COUNTS_PER_REV, AbsoluteEncoder, AbsoluteOptions, build_frame
 from hil.model.timebase import MS, Scheduler, ms
+from hil.virtual.model_lines import ModelLines
 
 REV = COUNTS_PER_REV
 

@@ -14,11 +14,11 @@ import can
 import pytest
 
 from hil.faces.canopen_slave import CanopenSlave
-from hil.faces.host import DriveHost
 from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
 from hil.model import errors as E
 from hil.model.drive import Drive
 from hil.protocol import modbus as mb
+from hil.virtual.host import DriveHost
 
 MS = 1_000_000
 S = 1_000_000_000

@@ -31,9 +31,9 @@ import tty
 from modbus_fuzz import STATION, check_replies, units
 
 from hil.faces.modbus_slave import ModbusSlave
-from hil.faces.stack import DriveSpec, VirtualDriveStack
 from hil.model.drive import Drive
 from hil.protocol import modbus as mb
+from hil.virtual.stack import DriveSpec, VirtualDriveStack
 
 MS = 1_000_000
 S = 1_000_000_000

@@ -12,10 +12,10 @@ from pathlib import Path
 import can
 import pytest
 
-from hil.faces.stack import DriveSpec, VirtualDriveStack
 from hil.gateway.gateway import Gateway, GatewayConfig
 from hil.plan.bench import load_bench
 from hil.transport import zenoh_net
+from hil.virtual.stack import DriveSpec, VirtualDriveStack
 from tests.children import ChildProcess, children, hil
 from tests.conftest import free_port
 

@@ -9,7 +9,6 @@ import can
 import pytest
 import zenoh
 
-from hil.faces.stack import VirtualDriveStack
 from hil.gateway.client import LeaseRefused, acquire, status
 from hil.record.reader import Recording
 from hil.record.recorder import Recorder
@@ -17,6 +16,7 @@ from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
 from hil.transport.zenoh_can import pack
 from hil.transport.zenoh_net import close_session, make_config, open_session, wait_connected
+from hil.virtual.stack import VirtualDriveStack
 from tests.gateway.conftest import sdo_read_statusword
 
 

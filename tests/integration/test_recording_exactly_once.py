@@ -11,12 +11,12 @@ import canopen
 import pytest
 
 from hil.drivers.delta_modbus import DeltaModbus
-from hil.faces.stack import DriveSpec, VirtualDriveStack
 from hil.record import topics
 from hil.record.reader import Recording
 from hil.record.recorder import Recorder
 from hil.transport.can_bus import open_can
 from hil.transport.serial_line import open_serial
+from hil.virtual.stack import DriveSpec, VirtualDriveStack
 
 pytestmark = pytest.mark.integration
 EDS = str(Path(__file__).parents[2] / "fixtures" / "drive" / "a3.eds")

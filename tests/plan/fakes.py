@@ -7,8 +7,8 @@ import threading
 from typing import Any
 
 from hil.plan.session import DriveIO, Session
-from hil.plan.virtual import resolve_auto
 from hil.transport.dio import open_dio
+from hil.virtual.world import resolve_auto
 
 
 class FakeParams:

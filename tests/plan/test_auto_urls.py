@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from hil.paths import fixture
 from hil.plan.bench import load_bench
-from hil.plan.virtual import harness_side, resolve_auto
 from hil.transport.urls import parse_url
+from hil.virtual.world import harness_side, resolve_auto
 
 
 def test_zenoh_auto_gets_a_unique_key_and_a_free_loopback_port(tmp_path):

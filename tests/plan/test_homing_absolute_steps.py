@@ -15,14 +15,13 @@ from hil.paths import fixture
 from hil.plan.bench import load_bench
 from hil.plan.plan import bind_line, check_plan, loads_plan, mapping_of, plan_spec
 from hil.plan.runner import (
-    SensorTap,
     StepFailed,
-    _bench_for,
     _x_abs_read,
     timing_specs,
 )
 from hil.plan.steps import describe
 from hil.timing.checker import occurrences_since
+from hil.virtual.truth import SensorTap, bench_with_options
 
 HOMING = """
 name: h
@@ -117,9 +116,10 @@ def test_plan_options_reach_the_virtual_drives(tmp_path: Path):
 
     plan = loads_plan(HOMING)
     with contextlib.ExitStack() as stack:
-        b = _bench_for(plan, load_bench(), stack)
+        b = bench_with_options(load_bench(), plan.options, stack)
         assert b.drives["drive1"].options["state_publish_ms"] == 1
-        z = _bench_for(plan, load_bench(fixture("benches", "virtual-zenoh.yaml")), stack)
+        zenoh = load_bench(fixture("benches", "virtual-zenoh.yaml"))
+        z = bench_with_options(zenoh, plan.options, stack)
         # `hil drive --bench` reads the file: the copy carries the options
         data = yaml.safe_load(Path(z.path).read_text())
         assert data["drives"]["drive1"]["options"]["state_publish_ms"] == 1

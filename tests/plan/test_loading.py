@@ -22,7 +22,7 @@ def test_durations():
 
 
 def test_virtual_bench_wiring_sets_mapping_parameters():
-    from hil.plan.virtual import initial_params
+    from hil.virtual.world import initial_params
 
     b = load_bench()
     d = b.drives["drive1"]

@@ -21,11 +21,11 @@ from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
 from hil.model.timebase import MS
 from hil.paths import fixture
-from hil.record.model_tap import ModelTap
 from hil.record.recorder import Recorder
 from hil.timing.checker import check
 from hil.timing.source import RecordingSource
 from hil.timing.spec import load_spec
+from hil.virtual.model_tap import ModelTap
 
 NL, PL, LO, HI, Z0 = -4.0, 4.0, -0.5, 0.5, 0.25
 STARTS = {"neg": -2.0, "on": 0.0, "pos": 2.0, "on_NL": -4.2, "on_PL": 4.2}

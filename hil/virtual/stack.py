@@ -16,12 +16,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hil.faces.canopen_slave import CanopenSlave
 from hil.faces.dio_face import DioFace
-from hil.faces.host import DriveHost
+from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
 from hil.model.drive import Drive
 from hil.model.events import PowerCycled
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
+from hil.transport.can_bus import open_can
+from hil.transport.dio import open_dio
+from hil.transport.serial_line import open_serial
+from hil.virtual.host import DriveHost
 
 
 @dataclass
@@ -85,15 +90,12 @@ class VirtualDriveStack:
     def _start(self) -> None:
         spec, drive, host = self.spec, self.drive, self.host
         if spec.dio:
-            from hil.transport.dio import open_dio
 
             self.dio_port = open_dio(spec.dio, role="drive", name=f"{spec.name}-dio")
             self._closers.append(self.dio_port.close)
             self.dio_face = DioFace(self.dio_port, host)
             self._closers.append(self.dio_face.close)
         if spec.can:
-            from hil.faces.canopen_slave import CanopenSlave
-            from hil.transport.can_bus import open_can
 
             self.can_bus = open_can(spec.can, name=f"{spec.name}-can")
             self._closers.append(self.can_bus.shutdown)
@@ -110,8 +112,6 @@ class VirtualDriveStack:
             self._closers.append(self.canopen.close)
             host.add_tick(self.canopen.tick)
         if spec.rs485:
-            from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
-            from hil.transport.serial_line import open_serial
 
             self.serial = open_serial(spec.rs485, name=f"{spec.name}-rs485")
             self._closers.append(self.serial.close)

@@ -13,7 +13,14 @@ import sys
 import threading
 from pathlib import Path
 
-from hil.faces.stack import DriveSpec, VirtualDriveStack
+import yaml
+
+from hil.model.mechanics import Mechanics
+from hil.model.options import ModelOptions
+from hil.plan.bench import load_bench
+from hil.plan.yamlio import PlanFileError
+from hil.virtual.stack import DriveSpec, VirtualDriveStack
+from hil.virtual.world import StdioControl, idle_inputs, initial_params
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -68,12 +75,8 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _load_mapping(path: Path) -> dict:
     text = path.read_text(encoding="utf-8")
-    if path.suffix in (".yaml", ".yml"):
-        import yaml
-
-        data = yaml.safe_load(text) or {}
-    else:
-        data = json.loads(text)
+    yamlish = path.suffix in (".yaml", ".yml")
+    data = (yaml.safe_load(text) or {}) if yamlish else json.loads(text)
     if not isinstance(data, dict):
         raise SystemExit(f"hil drive: {path}: expected a mapping of parameter names to values")
     return {str(k): int(v, 0) if isinstance(v, str) else int(v) for k, v in data.items()}
@@ -82,11 +85,6 @@ def _load_mapping(path: Path) -> dict:
 def _from_bench(spec: DriveSpec, args: argparse.Namespace) -> str:
     """Fill `spec` from a bench drive: mechanics, options, the wiring's mapping parameters
     plus its params (command-line --params win), idle DI levels (b-contacts closed)."""
-    from hil.model.mechanics import Mechanics
-    from hil.model.options import ModelOptions
-    from hil.plan.bench import load_bench
-    from hil.plan.virtual import idle_inputs, initial_params
-    from hil.plan.yamlio import PlanFileError
 
     if not args.bench:
         return "--drive needs --bench FILE"
@@ -156,7 +154,6 @@ def main(args: argparse.Namespace) -> int:
     control = None
     try:
         if args.control == "stdio":
-            from hil.plan.virtual import StdioControl
 
             control = StdioControl(stack, stop)
         print(f"hil drive: ready: {stack.describe()}", flush=True)

@@ -18,6 +18,7 @@ import contextlib
 import itertools
 import json
 import os
+import socket
 import subprocess
 import sys
 import tempfile
@@ -27,7 +28,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from hil.model.mechanics import Mechanics
+from hil.model.options import ModelOptions
 from hil.plan.bench import Bench, DriveSpec
+from hil.virtual.stack import DriveSpec as StackSpec
+from hil.virtual.stack import VirtualDriveStack
 
 _seq = itertools.count()
 DriveFactory = Callable[..., Any]  # Drive(**kwargs) stand-in (tests)
@@ -39,7 +44,6 @@ def _auto_name(kind: str) -> str:
 
 def free_loopback_port() -> int:
     """A TCP port free on 127.0.0.1 right now (the OS picks it)."""
-    import socket
 
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -187,14 +191,10 @@ def _fields(ev: Any) -> dict:
 
 
 class VirtualDrive:
-    """One in-process virtual drive with its faces (`hil.faces.stack`) and ground truth."""
+    """One in-process virtual drive with its faces (`hil.virtual.stack`) and ground truth."""
 
     def __init__(self, spec: DriveSpec, urls: dict[str, str], recorder: Any,
                  factory: DriveFactory | None, bench: Bench) -> None:
-        from hil.faces.stack import DriveSpec as StackSpec
-        from hil.faces.stack import VirtualDriveStack
-        from hil.model.mechanics import Mechanics
-        from hil.model.options import ModelOptions
 
         self.spec = spec
         options = ModelOptions.from_dict(dict(spec.options), where=f"drives.{spec.name}.options")
