@@ -10,6 +10,7 @@ is polled over SDO, so the same code works on a real A3 that ships with no PDO m
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -95,6 +96,10 @@ class Cia402Timeout(Cia402Error):
         )
 
 
+class Cia402Cancelled(Cia402Error):
+    """A wait was given up because its owner cancelled it (`Cia402Driver.cancel`)."""
+
+
 class Cia402Fault(Cia402Error):
     """The drive entered FAULT while something else was expected."""
 
@@ -146,6 +151,11 @@ class Cia402Driver:
         network.add_node(self.node)
         self.node.sdo.RESPONSE_TIMEOUT = self.timeouts["sdo"]
         self._controlword = 0
+        # One SDO transaction at a time: a step thread polling 6041h and the safe-state
+        # routine share this client (canopen's SdoClient pairs replies by arrival order).
+        self.lock = threading.RLock()
+        # Set by the owner (the plan runner) to end waits early; None: never cancelled.
+        self.cancel: threading.Event | None = None
 
     # ------------------------------------------------------------------ objects
     def _step(self, name: str, **fields: Any) -> None:
@@ -156,13 +166,14 @@ class Cia402Driver:
     def read(self, index: int, sub: int = 0) -> int:
         """SDO upload decoded with the EDS type (raises SdoError)."""
         try:
-            if index in self.node.object_dictionary:
+            with self.lock:
+                if index not in self.node.object_dictionary:
+                    return int.from_bytes(self.node.sdo.upload(index, sub), "little")
                 return (
                     self.node.sdo[index][sub].raw
                     if self._is_compound(index)
                     else (self.node.sdo[index].raw)
                 )
-            return int.from_bytes(self.node.sdo.upload(index, sub), "little")
         except (SdoAbortedError, SdoCommunicationError) as exc:
             raise SdoError(self.node_id, index, sub, "upload", exc) from None
 
@@ -170,10 +181,11 @@ class Cia402Driver:
         """SDO download encoded with the EDS type (raises SdoError)."""
         self._step("sdo_write", index=index, sub=sub, value=value)
         try:
-            if self._is_compound(index):
-                self.node.sdo[index][sub].raw = value
-            else:
-                self.node.sdo[index].raw = value
+            with self.lock:
+                if self._is_compound(index):
+                    self.node.sdo[index][sub].raw = value
+                else:
+                    self.node.sdo[index].raw = value
         except (SdoAbortedError, SdoCommunicationError) as exc:
             raise SdoError(self.node_id, index, sub, "download", exc) from None
 
@@ -217,7 +229,14 @@ class Cia402Driver:
                 )
             if elapsed > timeout:
                 raise Cia402Timeout(self.node_id, what, timeout_name, timeout, sw, elapsed)
+            self._pause()
+
+    def _pause(self) -> None:
+        """One poll interval; raises Cia402Cancelled once `cancel` is set."""
+        if self.cancel is None:
             time.sleep(self.timeouts["poll"])
+        elif self.cancel.wait(self.timeouts["poll"]):
+            raise Cia402Cancelled(f"node {self.node_id}: wait cancelled")
 
     def wait_state(self, name: str, timeout: float | None = None) -> int:
         """Wait until the statusword decodes to `name`; returns the statusword."""
@@ -308,7 +327,7 @@ class Cia402Driver:
                     f"{timeout:.3f} s (timeouts['mode']), saw {shown} "
                     f"({MODE_NAMES.get(shown, '?')}) after {elapsed:.3f} s"
                 )
-            time.sleep(self.timeouts["poll"])
+            self._pause()
 
     def move_to(
         self,

@@ -11,6 +11,7 @@ then, and always at the end, the bench is driven to its safe state and that is r
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -125,10 +126,14 @@ class StepContext:
     """What a step executor needs: session, recorder, plan, bench, specs, cancel flag."""
 
     def __init__(self, session: Session, recorder: Any, plan: Plan, specs: dict[str, Any],
-                 cancel: threading.Event) -> None:
+                 cancel: threading.Event, steps: _StepThread | None = None) -> None:
         self.session, self.rec, self.plan, self.specs = session, recorder, plan, specs
         self.bench = session.bench
         self.cancel = cancel
+        self.steps = steps or _StepThread()
+        for d in session.drives.values():  # driver waits end when the step is cancelled
+            if getattr(d, "_cia", None) is not None:
+                d._cia.cancel = cancel
         self.store: dict[str, Any] = {}  # readings kept by `abs_read: {store: name}`
         self.checked: dict[str, int] = {}  # spec id -> wall ns its last check_timing ended
         self.started: dict[str, int] = {}  # step name -> wall ns it (last) started
@@ -464,45 +469,88 @@ JUDGE_ONLY = ("check_timing",)
 # --- the runner ---------------------------------------------------------------------------
 
 
-def _run_in_thread(fn: Callable[[], str], timeout_ns: int, cancel: threading.Event) -> str:
-    box: dict[str, Any] = {}
+class _StepThread:
+    """Runs one step executor in a thread the runner can give up on, and join later."""
 
-    def target() -> None:
+    def __init__(self) -> None:
+        self.thread: threading.Thread | None = None
+
+    def run(self, fn: Callable[[], Any], timeout_ns: int, cancel: threading.Event) -> Any:
+        """`fn()` or, at `timeout_ns`, TimeoutError at once (the step is cancelled and left
+        to `join`). A KeyboardInterrupt cancels the step and joins it before propagating."""
+        box: dict[str, Any] = {}
+
+        def target() -> None:
+            try:
+                box["value"] = fn()
+            except BaseException as e:
+                box["error"] = e
+
+        t = self.thread = threading.Thread(target=target, name="hil-step", daemon=True)
+        t0 = time.monotonic_ns()
+        t.start()
         try:
-            box["value"] = fn()
-        except BaseException as e:
-            box["error"] = e
-
-    t = threading.Thread(target=target, name="hil-step", daemon=True)
-    t.start()
-    end = time.monotonic_ns() + timeout_ns
-    while t.is_alive():
-        t.join(0.02)
-        if t.is_alive() and time.monotonic_ns() > end:
+            t.join(timeout_ns / 1e9)
+        except BaseException:
             cancel.set()
-            t.join(1.0)
+            self.join()
+            raise
+        if t.is_alive():
+            cancel.set()
+            t.join(0.05)  # a step that honours `cancel` ends now; the others are joined later
             raise TimeoutError(f"step timeout {timeout_ns / 1e9:g} s (bench timeouts.step or "
-                               "the step's timeout)")
-    if "error" in box:
-        raise box["error"]
-    return box.get("value", "")
+                               f"the step's timeout), ended after "
+                               f"{(time.monotonic_ns() - t0) / 1e9:.3f} s")
+        if "error" in box:
+            raise box["error"]
+        return box.get("value", "")
+
+    def join(self, timeout_s: float = 5.0) -> bool:
+        """Wait for the last step to end (bounded); True if no step thread is left running."""
+        t = self.thread
+        if t is not None:
+            end = time.monotonic() + timeout_s
+            while t.is_alive() and time.monotonic() < end:
+                t.join(0.05)  # short joins: a signal handler still runs in between
+        return t is None or not t.is_alive()
 
 
-@contextlib.contextmanager
-def _sigterm_as_interrupt():
-    """SIGTERM -> KeyboardInterrupt in the main thread, so the safe state runs."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+class _Interrupts:
+    """SIGINT / SIGTERM while a plan runs (main thread only).
 
-    def handler(signum, frame):
-        raise KeyboardInterrupt(f"signal {signum}")
+    The first signal raises KeyboardInterrupt: the plan stops and the bench goes safe. From
+    then on, and at any time while `shield` is set (the safe state, closing the recording),
+    a signal only prints a notice: the safe-state sequence and the recording's close always
+    run to their end. A signal that arrives while shielded is remembered (`requested`)."""
 
-    old = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
+    NOTICE = (b"hil: making the bench safe and closing the recording; further Ctrl-C is "
+              b"ignored until that is done\n")
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.shield = False
+        self._old: dict[int, Any] = {}
+
+    @property
+    def requested(self) -> bool:
+        return self.count > 0
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        self.count += 1
+        if self.count == 1 and not self.shield:
+            raise KeyboardInterrupt(f"signal {signum}")
+        with contextlib.suppress(OSError):
+            os.write(2, self.NOTICE)
+
+    def __enter__(self) -> _Interrupts:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
 
 
 def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] | None = None,
@@ -540,24 +588,26 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     t_start = time.monotonic_ns()
     tmp = contextlib.ExitStack()
     cancel = threading.Event()
+    steps = _StepThread()
     session: Session | None = None
     ctx: StepContext | None = None
     interrupted: BaseException | None = None
     reason = "end of plan"
-    try:
-        with _sigterm_as_interrupt():
+    with _Interrupts() as intr:
+        try:
             try:
                 sbench = bench_with_options(bench, plan.options, tmp)
                 truth = SensorTap(rec) if bench.virtual else rec
-                session = _run_in_thread(lambda: session_factory(sbench, truth),  # type: ignore[arg-type, return-value]
-                                         bench.timeouts["ready"] + 5_000_000_000, cancel)
-                ctx = StepContext(session, rec, plan, specs, cancel)  # type: ignore[arg-type]
+                session = steps.run(lambda: session_factory(sbench, truth),
+                                    bench.timeouts["ready"] + 5_000_000_000, cancel)
+                ctx = StepContext(session, rec, plan, specs, cancel, steps)  # type: ignore[arg-type]
                 _idle_inputs(ctx)
                 if plan.params:
                     _initial_params(ctx, plan)
                 _apply_plan_wiring(ctx, plan)
                 reason = _steps(ctx, plan, res, progress, allow_inconclusive)
             except KeyboardInterrupt as e:
+                intr.shield = True
                 interrupted, reason = e, "interrupted (Ctrl-C / SIGTERM)"
                 res.status = ABORTED
                 for r in res.steps:
@@ -571,29 +621,44 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
                 rec.log("error", f"plan {plan.name}: {res.error}", name="hil.runner")
                 progress.note(f"ERROR {res.error}")
             finally:
+                intr.shield = True
                 cancel.set()
+                if not steps.join():
+                    rec.log("warning", "a step did not end within 5 s of its cancel; going "
+                            "safe anyway (one SDO transaction at a time)", name="hil.runner")
                 if session is not None:
-                    res.safe = go_safe(session, reason, rec)
-                    if not res.safe.ok:
-                        progress.note("SAFE STATE NOT CONFIRMED: " + "; ".join(
-                            f"{a['drive']}: {a['action']}: {a['detail']}"
-                            for a in res.safe.actions if not a["ok"]))
-                    elif reason != "end of plan":
-                        progress.note(f"bench driven to its safe state ({reason})")
-    finally:
-        if session is not None:
-            session.close()
-        tmp.close()
-        res.duration_ns = time.monotonic_ns() - t_start
-        rec.add_metadata("hil.result", {"status": res.status, "reason": reason,
-                                        "duration_ms": res.duration_ns / 1e6,
-                                        "safe_state_ok": res.safe.ok if res.safe else ""})
-        rec.close()
-        if reports:
-            write_reports(res, out_dir, stem)
+                    _go_safe(session, reason, rec, res, progress)
+        finally:
+            intr.shield = True
+            if session is not None:
+                session.close()
+            tmp.close()
+            res.duration_ns = time.monotonic_ns() - t_start
+            rec.add_metadata("hil.result", {"status": res.status, "reason": reason,
+                                            "duration_ms": res.duration_ns / 1e6,
+                                            "safe_state_ok": res.safe.ok if res.safe else ""})
+            rec.close()
+            if reports:
+                write_reports(res, out_dir, stem)
+    if interrupted is None and intr.requested:
+        interrupted = KeyboardInterrupt("signal while the bench was made safe")
     if interrupted is not None:
         raise interrupted
     return res
+
+
+def _go_safe(session: Session, reason: str, rec: Any, res: PlanResult,
+             progress: Progress) -> None:
+    for d in session.drives.values():
+        if getattr(d, "_cia", None) is not None:
+            d._cia.cancel = None  # the plan's cancel must not cut the safe state's own waits
+    res.safe = go_safe(session, reason, rec)
+    if not res.safe.ok:
+        progress.note("SAFE STATE NOT CONFIRMED: " + "; ".join(
+            f"{a['drive']}: {a['action']}: {a['detail']}"
+            for a in res.safe.actions if not a["ok"]))
+    elif reason != "end of plan":
+        progress.note(f"bench driven to its safe state ({reason})")
 
 
 # DI functions a machine's sensors drive (the virtual axis drives them from its mechanics):
@@ -641,9 +706,11 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
         timeout = s.timeout_ns or ctx.bench.timeouts["step"]
         try:
             ctx.session.check_lease()  # a bench behind a gateway: only while the lease holds
-            r.message = _run_in_thread(lambda s=s, d=d: EXECUTORS[s.kind](ctx, s, d), timeout,
-                                       ctx.cancel)
+            ctx.session.check_alive()  # a virtual bench: only while its drive processes live
+            r.message = ctx.steps.run(lambda s=s, d=d: EXECUTORS[s.kind](ctx, s, d), timeout,
+                                      ctx.cancel)
             ctx.session.check_lease()
+            ctx.session.check_alive()
             r.status = PASS
         except _Inconclusive as e:
             r.status, r.message = INCONCLUSIVE, str(e)

@@ -17,6 +17,14 @@ from typing import Any
 CONTROLWORD = {"disable_voltage": 0x00, "quick_stop": 0x02, "shutdown": 0x06}
 
 
+class DriveGone(Exception):
+    """The drive (a virtual drive's process) is gone: no action on it can be confirmed."""
+
+
+def _raise(e: Exception) -> None:
+    raise e
+
+
 @dataclass
 class SafeReport:
     reason: str
@@ -37,6 +45,8 @@ def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:
             detail = fn()
             ok = detail is not False
             msg = detail if isinstance(detail, str) else ""
+        except DriveGone as e:
+            ok, msg = False, str(e)
         except Exception as e:
             ok, msg = False, f"{type(e).__name__}: {e}"
         rep.actions.append({"drive": drive, "action": action, "ok": ok, "detail": msg, **extra})
@@ -48,7 +58,13 @@ def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:
                          f"safe state: {drive}: {action} {'done' if ok else 'FAILED'}"
                          f"{': ' + msg if msg else ''} ({reason})", name="hil.safety")
 
+    dead_drives = getattr(session, "dead_drives", None)
+    dead = dead_drives() if callable(dead_drives) else {}
+    for name, why in dead.items():  # nothing can be sent to it: say so, claim nothing
+        act(name, "drive process alive", lambda why=why: _raise(DriveGone(why)))
     for name, d in session.drives.items():
+        if name in dead:
+            continue
         spec = d.spec
         cw = CONTROLWORD.get(safe.controlword)
         if cw is not None and spec.can and d._cia is not None:
@@ -65,7 +81,7 @@ def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:
                     lambda d=d, line=line, lv=lv: d.set_line(line, lv))
     if safe.wait_brake:
         for name, d in session.drives.items():
-            if "BRKR" not in d.spec.do or d.dio is None:
+            if "BRKR" not in d.spec.do or d.dio is None or name in dead:
                 continue
 
             def brake(d: Any = d) -> Any:

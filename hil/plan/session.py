@@ -120,6 +120,17 @@ class Session:
             raise BenchError(f"lease of {self.lease.prefix} lost ({why}): the gateway drove "
                              "the bench to its safe state; nothing more is sent")
 
+    def dead_drives(self) -> dict[str, str]:
+        """Virtual drives whose process has died (name -> message); empty on a real bench."""
+        dead = getattr(self.world, "dead", None)
+        return dead() if callable(dead) else {}
+
+    def check_alive(self) -> None:
+        """Raise BenchError when a virtual drive's process has died."""
+        dead = self.dead_drives()
+        if dead:
+            raise BenchError("; ".join(dead.values()))
+
     def drive(self, name: str | None) -> DriveIO:
         return self.drives[name or self.bench.default_drive]
 

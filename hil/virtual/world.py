@@ -493,6 +493,16 @@ class SubprocessWorld:
             raise RuntimeError(f"virtual drive {drive}: {op}: {reply.get('error')}")
         return reply.get("result")
 
+    def dead(self) -> dict[str, str]:
+        """Drive processes that have exited: name -> what happened (empty while all live)."""
+        out = {}
+        for name, p in self.procs.items():
+            code = p.poll()
+            if code is not None:
+                how = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
+                out[name] = f"virtual drive process {name!r} (hil drive, pid {p.pid}) died: {how}"
+        return out
+
     def harness_urls(self) -> dict[str, str]:
         return {k: harness_side(u) for k, u in self.urls.items()}
 

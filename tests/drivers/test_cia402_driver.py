@@ -111,3 +111,49 @@ def test_sdo_error_names_abort(rig):
         drv.read(0x3000, 0)
     with pytest.raises(ValueError, match="unknown names"):
         Cia402Driver(None, 1, timeouts={"nope": 1})
+
+
+def test_two_threads_share_one_sdo_client(rig):
+    """A step thread polling 6041h while the safe-state routine writes 6040h (issue 12): with
+    one SDO client, every transaction must still pair with its own reply (no 0x4B mix-ups)."""
+    import threading
+
+    _, drv = rig
+    errors: list[BaseException] = []
+    stop = threading.Event()
+
+    def poll() -> None:
+        try:
+            while not stop.is_set():
+                drv.statusword  # noqa: B018
+        except BaseException as e:
+            errors.append(e)
+
+    t = threading.Thread(target=poll)
+    t.start()
+    try:
+        for _ in range(200):
+            drv.write(0x6040, 0, 0x06)
+            drv.write(0x6040, 0, 0x00)
+    except BaseException as e:
+        errors.append(e)
+    finally:
+        stop.set()
+        t.join(5)
+    assert not errors, errors[:3]
+
+
+def test_cancel_ends_a_wait_at_once(rig):
+    """The runner's cancel event ends a driver wait within one poll, not at its timeout."""
+    import threading
+    import time
+
+    from hil.drivers.cia402 import Cia402Cancelled
+
+    _, drv = rig
+    drv.cancel = threading.Event()
+    threading.Timer(0.05, drv.cancel.set).start()
+    t0 = time.monotonic()
+    with pytest.raises(Cia402Cancelled):
+        drv.wait_state("OPERATION ENABLED", timeout=5.0)
+    assert time.monotonic() - t0 < 1.0
