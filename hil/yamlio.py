@@ -4,10 +4,18 @@
 where they were written (`LDict.line`, `LDict.kline(key)`, `LList.item_lines`), so a
 validator can say `file:line: field: problem`. YAML syntax errors, duplicate keys and keys
 that are not names raise `error` (a `FileError` subclass) with the same shape.
+
+Hostile files are refused before they cost anything (limits, each with its own message and
+line; raise them with the environment variables of the same name):
+`HIL_YAML_MAX_BYTES` (1 MiB), `HIL_YAML_MAX_DEPTH` (64 nested collections),
+`HIL_YAML_MAX_ALIASES` (100 `*alias` uses) and `HIL_YAML_MAX_NODES` (100 000 values after
+aliases are expanded: an alias bomb stops here). Non-UTF-8 bytes and NUL bytes are refused
+with the line they are on.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -53,9 +61,50 @@ def _key_text(key: Any, knode: yaml.Node) -> str:
     return str(key)
 
 
+def limit(name: str, default: int) -> int:
+    """A size limit: the environment variable `name` if set to an integer, else `default`."""
+    try:
+        return int(os.environ.get(name, default))
+    except ValueError:
+        return default
+
+
+def _prescan(text: str, file: str, error: type[FileError]) -> None:
+    """Depth and alias limits on the event stream (PyYAML's parser does not recurse)."""
+    max_depth = limit("HIL_YAML_MAX_DEPTH", 64)
+    max_aliases = limit("HIL_YAML_MAX_ALIASES", 100)
+    depth = aliases = 0
+    for ev in yaml.parse(text, Loader=yaml.SafeLoader):
+        if isinstance(ev, yaml.MappingStartEvent | yaml.SequenceStartEvent):
+            depth += 1
+            if depth > max_depth:
+                raise error(file, ev.start_mark.line + 1, "(yaml)",
+                            f"nested deeper than {max_depth} levels (HIL_YAML_MAX_DEPTH)")
+        elif isinstance(ev, yaml.MappingEndEvent | yaml.SequenceEndEvent):
+            depth -= 1
+        elif isinstance(ev, yaml.AliasEvent):
+            aliases += 1
+            if aliases > max_aliases:
+                raise error(file, ev.start_mark.line + 1, "(yaml)",
+                            f"more than {max_aliases} aliases (HIL_YAML_MAX_ALIASES)")
+
+
+class _Budget:
+    """Values left to build: aliases re-use nodes, so an alias bomb would expand forever."""
+
+    def __init__(self) -> None:
+        self.max = limit("HIL_YAML_MAX_NODES", 100_000)
+        self.left = self.max
+
+
 def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
-           error: type[FileError]) -> Any:
+           error: type[FileError], budget: _Budget | None = None) -> Any:
     line = node.start_mark.line + 1
+    budget = budget or _Budget()
+    budget.left -= 1
+    if budget.left < 0:
+        raise error(file, line, where or "(top)", f"more than {budget.max} values once aliases "
+                    "are expanded (an alias bomb?; HIL_YAML_MAX_NODES)")
     if isinstance(node, yaml.MappingNode):
         out = LDict()
         out.line, out.key_lines = line, {}
@@ -68,20 +117,35 @@ def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
             if key in out:
                 raise error(file, kline, join(where, key), "duplicate key")
             out.key_lines[key] = kline
-            out[key] = _build(vnode, loader, file, join(where, key), error)
+            out[key] = _build(vnode, loader, file, join(where, key), error, budget)
         return out
     if isinstance(node, yaml.SequenceNode):
         lst = LList()
         lst.line, lst.item_lines = line, []
         for i, item in enumerate(node.value):
             lst.item_lines.append(item.start_mark.line + 1)
-            lst.append(_build(item, loader, file, join(where, i), error))
+            lst.append(_build(item, loader, file, join(where, i), error, budget))
         return lst
     return loader.construct_object(node, deep=True)
 
 
 def load_yaml_text(text: str, file: str, error: type[FileError] = FileError) -> Any:
     """Parse YAML keeping line numbers; problems raise `error(file, line, field, problem)`."""
+    max_bytes = limit("HIL_YAML_MAX_BYTES", 1 << 20)
+    if len(text) > max_bytes:
+        raise error(file, 1, "(file)", f"{len(text)} characters, more than {max_bytes} "
+                    "(HIL_YAML_MAX_BYTES)")
+    if "\0" in text:
+        raise error(file, text.count("\n", 0, text.index("\0")) + 1, "(file)",
+                    "NUL byte: not a text file")
+    try:
+        _prescan(text, file, error)
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        raise error(file, (mark.line + 1) if mark else 1, "(yaml)", str(e.problem or e)) from None
+    except yaml.YAMLError as e:  # reader errors: characters YAML does not allow
+        pos = getattr(e, "position", 0) or 0
+        raise error(file, text.count("\n", 0, pos) + 1, "(yaml)", str(e)) from None
     loader = yaml.SafeLoader(text)
     try:
         node = loader.get_single_node()
@@ -99,8 +163,18 @@ def load_yaml_text(text: str, file: str, error: type[FileError] = FileError) -> 
 def load_yaml_file(path: str | Path, error: type[FileError] = FileError) -> Any:
     """`load_yaml_text` of a file; an unreadable file is an `error` at line 0."""
     p = Path(path)
+    max_bytes = limit("HIL_YAML_MAX_BYTES", 1 << 20)
     try:
-        text = p.read_text(encoding="utf-8")
+        size = p.stat().st_size
+        if size > max_bytes:
+            raise error(str(p), 1, "(file)", f"{size} bytes, more than {max_bytes} "
+                        "(HIL_YAML_MAX_BYTES)")
+        data = p.read_bytes()
     except OSError as e:
         raise error(str(p), 0, "(file)", f"cannot read: {e.strerror or e}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise error(str(p), data.count(b"\n", 0, e.start) + 1, "(file)",
+                    f"not UTF-8 text: byte 0x{data[e.start]:02X} at offset {e.start}") from None
     return load_yaml_text(text, str(p), error)
