@@ -22,7 +22,7 @@ from hil.record.recorder import Recorder
 README = Path(__file__).resolve().parents[1] / "README.md"
 #: documented but too slow or intrusive to run here, with where they are exercised
 NOT_RUN_HERE = {
-    ("run", 130): "Ctrl-C during a run: the runner's signal tests",
+    ("run", 130): "Ctrl-C during a run: tests/integration/test_interrupts.py",
     ("gateway", 0): "tests/gateway/test_cli.py stops a gateway with exit 0",
     ("gateway", 1): "needs a zenoh endpoint that fails to open",
 }

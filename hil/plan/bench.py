@@ -20,6 +20,7 @@ from hil.model.dio import (
     N_PHYSICAL_DI,
     inert_mapping,
 )
+from hil.plan.param_rules import check_param
 from hil.plan.yamlio import (
     MS,
     Checker,
@@ -526,6 +527,7 @@ def _params(v: Checker, obj: Any, line: int, where: str) -> dict[str, int]:
                         f"must be an integer (raw communication units), got {val!r}")
         if why := inert_mapping(k, val):  # issue 13 item 6
             raise v.err(m.kline(k), join(where, k), f"0x{val:04X} maps {why}")
+        check_param(v, m.kline(k), join(where, k), k, val, write=True)
         out[k] = val
     return out
 

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hil.model.dio import DI_SYMBOLS, DO_SYMBOLS, inert_mapping
+from hil.model.homing_methods import CANOPEN_METHODS
+from hil.plan.param_rules import check_param
 from hil.plan.pr_steps import PARSERS as PR_PARSERS
 from hil.plan.pr_steps import describe as pr_describe
 from hil.plan.yamlio import Checker, LDict, LList, join, level, parse_duration
@@ -191,14 +193,16 @@ def _via(v: Checker, m: LDict, where: str) -> str | None:
     return via
 
 
-def _param_values(v: Checker, m: LDict, where: str, allow_none: bool) -> dict[str, int | None]:
+def _param_values(v: Checker, m: LDict, where: str, allow_none: bool,
+                  write: bool = False) -> dict[str, int | None]:
     out: dict[str, int | None] = {}
     for k, val in m.items():
-        if k == "via":
+        if k in ("via", "expect_error"):
             continue
         if not _PARAM_RE.match(k):
             raise v.err(m.kline(k), join(where, k), "a parameter name like P1.042 (or via)")
         if val is None and allow_none:
+            check_param(v, m.kline(k), join(where, k), k, None, write=write)
             out[k] = None
             continue
         if isinstance(val, bool) or not isinstance(val, int):
@@ -206,6 +210,8 @@ def _param_values(v: Checker, m: LDict, where: str, allow_none: bool) -> dict[st
                         f"must be an integer (raw communication units), got {val!r}")
         if not _INT32[0] <= val <= 0xFFFFFFFF:
             raise v.err(m.kline(k), join(where, k), f"{val} does not fit 32 bits")
+        if not (write and "expect_error" in m):  # a write that expects the refusal is fine
+            check_param(v, m.kline(k), join(where, k), k, val, write=write)
         out[k] = val
     if not out:
         raise v.err(m.line, where, "name at least one parameter, e.g. P1.042: 150")
@@ -235,7 +241,10 @@ def p_write(v, obj, line, where):
     fields = {k: x for k, x in m.items() if k != "expect_error"}
     fm = LDict(fields)
     fm.line, fm.key_lines = m.line, m.key_lines
-    out = {"values": _param_values(v, fm, where, False), "via": via, "expect_error": None}
+    if "expect_error" in m:
+        fm["expect_error"] = m["expect_error"]  # seen by _param_values: no range rule
+    out = {"values": _param_values(v, fm, where, False, write=True), "via": via,
+           "expect_error": None}
     if "expect_error" in m:
         fw = join(where, "expect_error")
         code = m["expect_error"]
@@ -259,6 +268,7 @@ def p_read(v, obj, line, where):
     if isinstance(obj, str):
         if not _PARAM_RE.match(obj):
             raise v.err(line, where, f"{obj!r}: a parameter name like P1.042")
+        check_param(v, line, where, obj, None, write=False)
         return {"values": {obj: None}, "via": None}
     m = v.mapping(obj, line, where)
     return {"values": _param_values(v, m, where, True), "via": _via(v, m, where)}
@@ -310,6 +320,10 @@ def p_home(v, obj, line, where):
     out = {"method": v.integer(m, "method", where, -128, 127),  # 6098h (L18838)
            "accel": v.integer(m, "accel", where, 1, _INT32[1], 100),
            "offset": v.integer(m, "offset", where, *_INT32, 0), "speeds": (100, 20)}
+    if out["method"] not in CANOPEN_METHODS:  # 6098h range 0..35, 15/16/31/32 reserved
+        raise v.err(m.kline("method"), join(where, "method"),
+                    f"homing method {out['method']}: the A3 supports 1-14, 17-30 and 33-35 "
+                    "(6098h, L18856-18869)")
     if "speeds" in m:
         s = m["speeds"]
         if (not isinstance(s, list) or len(s) != 2

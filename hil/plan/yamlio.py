@@ -40,6 +40,9 @@ _DUR_RE = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ns|us|µs|ms|s|min)\s*$")
 _UNITS = {"ns": 1, "us": 1_000, "µs": 1_000, "ms": MS, "s": S, "min": 60 * S}
 
 
+MAX_DURATION_NS = 24 * 3600 * 1_000_000_000  # an absurd duration is a typo, not a test
+
+
 def parse_duration(value: Any) -> int:
     """`150ms`, `1.5s`, `20 us`, `2min` -> integer ns. Raises ValueError with the rule."""
     if isinstance(value, bool) or not isinstance(value, str):
@@ -53,7 +56,11 @@ def parse_duration(value: Any) -> int:
             f"duration {value!r}: a number and a unit, e.g. 150ms, 1.5s (units: "
             f"{', '.join(_UNITS)})"
         )
-    return round(float(m.group(1)) * _UNITS[m.group(2)])
+    ns = round(float(m.group(1)) * _UNITS[m.group(2)])
+    if ns > MAX_DURATION_NS:
+        raise ValueError(f"duration {value!r} is longer than {MAX_DURATION_NS // S // 3600} h, "
+                         "the longest anything in a plan or bench may take")
+    return ns
 
 
 def format_duration(ns: int) -> str:

@@ -134,6 +134,11 @@ class TransportUrl:
             raise self.error("zenoh needs at least one listen= or connect= endpoint")
         if mode == "client" and not connect:
             raise self.error("mode=client needs a connect= endpoint (a router)")
+        for ep in (*listen, *connect):  # loopback only (network rules), a real port
+            try:
+                check_endpoint(ep)
+            except ZenohConfigError as e:
+                raise self.error(str(e)) from None
         return ZenohEndpoints(mode=mode, listen=listen, connect=connect)
 
     def serial(self) -> SerialSettings:
@@ -187,6 +192,27 @@ def _parse_query(url: str, query: str) -> dict[str, str]:
             raise TransportUrlError(url, f"query part {part!r} is not name=value")
         params[name] = f"{params[name]},{value}" if name in params else value
     return params
+
+
+_LOOPBACK = re.compile(r"^(?:tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):(\d{1,5}|auto)$")
+_ANY_TCP = re.compile(r"^(tcp|tls|quic)/(.+):(\d{1,5})$")
+
+
+class ZenohConfigError(ValueError):
+    """A zenoh endpoint or mode that the project's network rules refuse."""
+
+
+def check_endpoint(endpoint: str, *, allow_remote: bool = False) -> str:
+    """Return `endpoint` if it is tcp/ or tls/ on 127.0.0.1, [::1] or localhost with a port
+    (0-65535, or `auto`: a free port chosen at run time); else raise ZenohConfigError."""
+    m = _LOOPBACK.match(endpoint)
+    if m and (m.group(2) == "auto" or int(m.group(2)) < 65536):
+        return endpoint
+    if allow_remote and _ANY_TCP.match(endpoint):
+        return endpoint
+    rule = ("must be tcp/127.0.0.1:<port>, tcp/[::1]:<port> or tcp/localhost:<port>"
+            + ("" if allow_remote else " (pass allow_remote=True for other hosts)"))
+    raise ZenohConfigError(f"zenoh endpoint {endpoint!r}: {rule}")
 
 
 def check_zenoh_key(url: str, key: str) -> None:

@@ -26,7 +26,6 @@ import contextlib
 import json
 import logging
 import os
-import re
 import subprocess
 import sys
 import threading
@@ -36,31 +35,11 @@ from dataclasses import dataclass
 
 import zenoh
 
-from hil.transport.urls import ZenohEndpoints
+from hil.transport.urls import ZenohConfigError, ZenohEndpoints, check_endpoint
 
 log = logging.getLogger(__name__)
 
 MODES = ("peer", "client", "router")
-_LOOPBACK = re.compile(r"^(?:tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):(\d{1,5})$")
-_ANY_TCP = re.compile(r"^(tcp|tls|quic)/(.+):(\d{1,5})$")
-
-
-class ZenohConfigError(ValueError):
-    """A zenoh endpoint or mode that the project's network rules refuse."""
-
-
-def check_endpoint(endpoint: str, *, allow_remote: bool = False) -> str:
-    """Return `endpoint` if it is tcp/ or tls/ on 127.0.0.1, [::1] or localhost with a port."""
-    m = _LOOPBACK.match(endpoint)
-    if m and int(m.group(2)) < 65536:
-        return endpoint
-    if allow_remote and _ANY_TCP.match(endpoint):
-        return endpoint
-    rule = ("must be tcp/127.0.0.1:<port>, tcp/[::1]:<port> or tcp/localhost:<port>"
-            + ("" if allow_remote else " (pass allow_remote=True for other hosts)"))
-    raise ZenohConfigError(f"zenoh endpoint {endpoint!r}: {rule}")
-
-
 def make_config(
     mode: str,
     *,

@@ -11,9 +11,8 @@ import json
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
-
-import yaml
 
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
@@ -21,6 +20,7 @@ from hil.plan.bench import load_bench
 from hil.plan.yamlio import PlanFileError
 from hil.virtual.stack import DriveSpec, VirtualDriveStack
 from hil.virtual.world import StdioControl, idle_inputs, initial_params
+from hil.yamlio import load_yaml_file
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -34,8 +34,10 @@ def configure(p: argparse.ArgumentParser) -> None:
         "--rs485", metavar="URL", help="RS-485 transport, e.g. pty:/tmp/ttyA3?baud=115200"
     )
     p.add_argument("--dio", metavar="URL", help="DI/DO transport, e.g. zenoh:lab/b1/dio?listen=...")
-    p.add_argument("--node-id", type=int, help="CANopen node id (P3.000; default: parameter)")
-    p.add_argument("--station", type=int, help="Modbus station (P3.000; default: parameter)")
+    p.add_argument("--node-id", type=_ranged("node id", 1, 127),
+                   help="CANopen node id 1-127 (P3.000; default: parameter)")
+    p.add_argument("--station", type=_ranged("station", 1, 247),
+                   help="Modbus station 1-247 (P3.000; default: parameter)")
     p.add_argument(
         "--params",
         type=Path,
@@ -73,13 +75,47 @@ def configure(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _load_mapping(path: Path) -> dict:
-    text = path.read_text(encoding="utf-8")
-    yamlish = path.suffix in (".yaml", ".yml")
-    data = (yaml.safe_load(text) or {}) if yamlish else json.loads(text)
+def _ranged(what: str, lo: int, hi: int) -> Callable[[str], int]:
+    """argparse type: an integer in lo..hi (P3.000 range, L10469), else a usage error."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 0)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {what}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{what} {value} outside {lo}..{hi}")
+        return value
+
+    return parse
+
+
+def _load_mapping(path: Path) -> dict[str, int]:
+    """`--params FILE`: parameter name -> value, YAML (line-numbered errors) or JSON."""
+    if path.suffix in (".yaml", ".yml"):
+        data = load_yaml_file(path, PlanFileError)
+        where = lambda k: f"{path}:{data.kline(k)}: {k}"  # noqa: E731
+    else:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as e:
+            raise ParamsFileError(f"{path}: cannot read: {e.strerror or e}") from None
+        except ValueError as e:
+            raise ParamsFileError(f"{path}: not JSON: {e}") from None
+        where = lambda k: f"{path}: {k}"  # noqa: E731
     if not isinstance(data, dict):
-        raise SystemExit(f"hil drive: {path}: expected a mapping of parameter names to values")
-    return {str(k): int(v, 0) if isinstance(v, str) else int(v) for k, v in data.items()}
+        raise ParamsFileError(f"{path}: expected a mapping of parameter names to values")
+    out = {}
+    for k, v in data.items():
+        try:
+            out[str(k)] = int(v, 0) if isinstance(v, str) else int(v)
+        except (TypeError, ValueError):
+            raise ParamsFileError(f"{where(k)}: {v!r} is not an integer") from None
+    return out
+
+
+class ParamsFileError(ValueError):
+    """A `--params` file that cannot be used; the message names the file (and line)."""
 
 
 def _from_bench(spec: DriveSpec, args: argparse.Namespace) -> str:
@@ -127,6 +163,11 @@ def main(args: argparse.Namespace) -> int:
     if not (args.can or args.rs485 or args.dio):
         print("hil drive: give at least one of --can, --rs485, --dio", file=sys.stderr)
         return 2
+    try:
+        params = _load_mapping(args.params) if args.params else {}
+    except (ParamsFileError, PlanFileError) as e:
+        print(f"hil drive: --params {e}", file=sys.stderr)
+        return 2
     spec = DriveSpec(
         name=args.name,
         can=args.can,
@@ -134,10 +175,11 @@ def main(args: argparse.Namespace) -> int:
         dio=args.dio,
         node_id=args.node_id,
         station=args.station,
-        params=_load_mapping(args.params) if args.params else {},
+        params={},
         inputs=_inputs(args.di) or {8: True},
         state_path=args.state,
     )
+    spec.params = params
     if args.bench or args.drive:
         err = _from_bench(spec, args)
         if err:

@@ -1,0 +1,39 @@
+"""What a drive would refuse of a parameter in a plan or bench file, judged before anything
+moves (`hil run --check`) from the same chapter 8 table the virtual drive uses."""
+
+from __future__ import annotations
+
+from functools import cache
+
+from hil.model.dio import DI_PARAMS, DO_PARAMS
+from hil.model.errors import ParamError
+from hil.model.params import ParamTable
+from hil.plan.yamlio import Checker, PlanFileError
+
+
+@cache
+def _table() -> ParamTable:
+    return ParamTable.load()
+
+
+def check_param(v: Checker, line: int, field: str, name: str, value: int | None, *,
+                write: bool) -> None:
+    """Raise `file:line: field: problem` for an unknown parameter, a written value outside its
+    range (refused with Modbus exception 03 / SDO abort 0609 0031/0032) or a write to a
+    read-only one. Read values are not range-checked: some read back other numbers than may
+    be written (P5.007 shows n+10000 / n+20000, L11185)."""
+    try:
+        spec = _table().spec(name)
+    except ParamError as e:
+        raise v.err(line, field, f"unknown parameter: {e}") from None
+    if write and spec.read_only:
+        raise v.err(line, field, f"{spec.param} is read-only (★, L6719): the drive refuses "
+                    "the write")
+    if spec.param in DI_PARAMS or spec.param in DO_PARAMS:
+        return  # DI/DO mappings: the mapping check names the function (hil/plan/plan.py)
+    if write and value is not None and not spec.min <= value <= spec.max:
+        raise v.err(line, field, f"{value} outside {spec.param}'s range {spec.min}..{spec.max} "
+                    "(chapter 8): the drive refuses the write")
+
+
+__all__ = ["PlanFileError", "check_param"]

@@ -1,0 +1,59 @@
+"""The command line under bad input, as a stranger types it (issue 12, "Input files"):
+`hil drive --params` and `--node-id`, and output piped into `head`."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+HIL = str(Path(sys.executable).with_name("hil"))
+
+
+def _drive(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([HIL, "drive", "--can", "virtual:cli-inputs", *args],
+                          capture_output=True, text=True, timeout=30)
+
+
+@pytest.mark.parametrize("content, name, needle", [
+    (None, "missing.yaml", "missing.yaml:0: (file): cannot read"),
+    ("P1.042: [1, 2\n", "broken.yaml", "broken.yaml:2: (yaml)"),
+    ("P1.042: fast\n", "word.yaml", "word.yaml:1: P1.042: 'fast' is not an integer"),
+    ("- P1.042\n", "list.yaml", "expected a mapping"),
+    ("{nope", "bad.json", "bad.json: not JSON"),
+])
+def test_drive_params_file_errors_name_the_file(tmp_path, content, name, needle):
+    path = tmp_path / name
+    if content is not None:
+        path.write_text(content)
+    r = _drive("--params", str(path))
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert needle in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("value", ["0", "128", "999", "-1", "x"])
+def test_node_id_outside_1_127_is_a_usage_error(value):
+    r = _drive("--node-id", value)
+    assert r.returncode == 2 and "--node-id" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("argv", [["inspect", "{mcap}"], ["run", "--check"]])
+def test_output_into_head_stops_quietly(tmp_path, argv):
+    """`hil inspect x.mcap | head -1` and `hil run --check | head -1`: no BrokenPipeError."""
+    from hil.record.recorder import Recorder
+
+    mcap = tmp_path / "x.mcap"
+    with Recorder(mcap) as rec:
+        for i in range(200):
+            rec.log("info", f"line {i}", name="test")
+    cmd = [HIL, *(a.format(mcap=mcap) for a in argv)]
+    # the reader is gone before the command writes its first line (as `head` is, soon)
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout is not None
+    p.stdout.close()
+    _, err = p.communicate(timeout=60)
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
+    assert p.returncode == 141, (p.returncode, err)
