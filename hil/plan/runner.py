@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from hil.plan.bench import Bench
+from hil.plan.fault_steps import x_fault, x_nmt, x_produce, x_sdo
 from hil.plan.plan import Plan, bind_line, check_plan, plan_spec
 from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, DriveIO, Session, open_session
@@ -453,6 +454,7 @@ EXECUTORS: dict[str, Callable[[StepContext, Step, DriveIO], str]] = {
     "wait_until": _x_wait_until, "expect": _x_expect, "power_cycle": _x_power_cycle,
     "inject": _x_inject, "check_timing": _x_check_timing, "abs_read": _x_abs_read,
     "abs_origin": _x_abs_origin,
+    "fault": x_fault, "produce": x_produce, "sdo": x_sdo, "nmt": x_nmt,  # docs/faults.md
 }
 # Steps whose failure does not end the plan (they only judge what already happened).
 JUDGE_ONLY = ("check_timing",)

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hil.model.dio import DI_SYMBOLS, DO_SYMBOLS, inert_mapping
+from hil.plan.fault_steps import describe as describe_comm
+from hil.plan.fault_steps import p_fault, p_nmt, p_produce, p_sdo
 from hil.plan.yamlio import Checker, LDict, LList, join, level, parse_duration
 
 STATES = ("SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED",
@@ -117,6 +119,8 @@ def describe(step: Step) -> str:
         return f"absolute read (DI/DO){': ' + want if want else ''}{same}"
     if k == "abs_origin":
         return "absolute origin (ABSE + ABSC)"
+    if k in ("fault", "produce", "sdo", "nmt"):
+        return describe_comm(k, a)
     if k == "inject":
         return "inject " + ", ".join(f"{x}={y}" for x, y in a.items())
     if k == "fault_reset":
@@ -521,6 +525,10 @@ PARSERS: dict[str, Parser] = {
     "check_timing": p_check_timing,
     "abs_read": p_abs_read,
     "abs_origin": p_abs_origin,
+    "fault": p_fault,
+    "produce": p_produce,
+    "sdo": p_sdo,
+    "nmt": p_nmt,
 }
 VIRTUAL_ONLY = ("power_cycle", "inject")
 MOTION = ("move", "home")

@@ -80,6 +80,12 @@ class CanMatch:
                 return True
         return False
 
+    def target(self) -> str:
+        """One string naming what is matched ("heartbeat", "0x205", "any"), for timing specs."""
+        parts = [*self.functions, *(f"0x{c:03X}" for c in sorted(self.cob_ids)),
+                 *(f"0x{a:03X}-0x{b:03X}" for a, b in self.ranges)]
+        return ",".join(parts) or "any"
+
     def describe(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
         if self.cob_ids:
@@ -173,6 +179,7 @@ class _Faults:
         detail = dict(f.params)
         if f.match is not None:
             detail["match"] = f.match.describe()
+            detail["target"] = f.match.target()
         if f.rate < 1.0:
             detail["rate"] = f.rate
         try:
