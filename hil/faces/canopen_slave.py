@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,6 +28,7 @@ from hil.faces.last_resort import LastResort
 from hil.model import errors as E
 from hil.model.errors import ObjectError
 from hil.model.events import AlarmChanged, PowerCycled
+from hil.model.options import ModelOptions
 from hil.protocol import canopen as P
 
 log = logging.getLogger(__name__)
@@ -36,6 +38,21 @@ MS = 1_000_000
 
 # P3.001 digit Z -> bit rate (L10529-L10533; Z=3 is 800 kbit/s there, 750 kbit/s in L16844).
 BITRATES = {0: 125_000, 1: 250_000, 2: 500_000, 3: 750_000, 4: 1_000_000}
+
+IP_MODE = 7  # 6060h/6061h interpolated position (L17211)
+ERROR_PASSIVE = 128  # AL185: "Rx/Tx error counter > 128" (L20029)
+
+
+def sent_ns(msg: can.Message) -> int:
+    """When the frame was sent (wall ns): the zenoh sender stamp, python-can's timestamp
+    (the virtual bus stamps at send), else now."""
+    t = getattr(msg, "sender_time_ns", None)
+    if t:
+        return int(t)
+    if msg.timestamp:
+        return int(msg.timestamp * 1e9)
+    return time.time_ns()
+
 
 # Harness default PDOs (option pdo_defaults="harness"); the manual ships none (L17980-L18024).
 HARNESS_PDOS: dict[tuple[int, int], int] = {
@@ -122,6 +139,15 @@ class CanopenSlave:
         self._life_deadline: int | None = None
         self._guard_toggle = 0
         self._history_cleared: tuple | None = None
+        # communication monitoring (issue 16, docs/faults.md)
+        self._sdo_prev_sent: int | None = None  # sender time of the last SDO request
+        self._sdo_answered = 0  # wall ns when the last SDO answer left
+        self._pdo_prev: dict[int, tuple[int, int]] = {}  # RPDO COB-ID -> (sent, processed)
+        self.rx_error_counter = 0  # receive error counter (AL185, L20029)
+        self._bus_error_raised = False
+        self._sync_prev_sent: int | None = None
+        self._sync_deadline: int | None = None
+        self._sync_intervals: deque[int] = deque()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._unsubscribe: Callable[[], None] | None = None
@@ -212,6 +238,9 @@ class CanopenSlave:
         self._hb_consumer_deadline = None
         self._life_deadline = None
         self._guard_toggle = 0
+        self._sync_reset()
+        self._sdo_prev_sent = None
+        self._pdo_prev = {}
         self._send(P.HEARTBEAT + self.node_id, bytes([P.STATE_BOOTUP]))  # boot-up
         self._set_state("PRE-OPERATIONAL")
         self._restart_heartbeat(self.clock())
@@ -221,6 +250,11 @@ class CanopenSlave:
             return int(self.drive.read_object(index, 0))
         except Exception:  # fake drives may not carry P3.xxx
             return default
+
+    def _opt(self, name: str) -> Any:
+        """A communication choice or deviation of the drive's ModelOptions."""
+        opts = getattr(self.drive, "options", None)
+        return getattr(opts if isinstance(opts, ModelOptions) else _DEFAULTS, name)
 
     def _set_state(self, state: str) -> None:
         if state == "OPERATIONAL" and self.state != "OPERATIONAL":
@@ -260,6 +294,81 @@ class CanopenSlave:
         elif behaviour == 2:
             self._set_state("STOPPED")
 
+    # ------------------------------------------------------------------ monitoring
+    def _comm_alarm(self, alarm: str) -> None:
+        """A communication alarm the drive raises without changing the NMT state."""
+        if self.on_alarm is not None:
+            self._callback("on_alarm", self.on_alarm, alarm)
+
+    def _check_sdo_flood(self, sent: int) -> None:
+        """AL111: a second SDO request within 1 ms, sent before the answer to the previous
+        one left, overflows the one-deep SDO Rx buffer (L19933-19937)."""
+        prev, self._sdo_prev_sent = self._sdo_prev_sent, sent
+        window = self._opt("sdo_flood_window_us") * US
+        if prev is None or self._opt("dev_ignore_sdo_flood"):
+            return
+        if sent - prev < window and sent < self._sdo_answered:
+            self._comm_alarm("AL111")
+
+    def _check_pdo_overflow(self, cob: int, sent: int) -> None:
+        """AL112: two PDOs with the same COB-ID within 1 ms (L19941-19945), the second sent
+        before the drive had processed the first (a one-deep receive buffer)."""
+        prev = self._pdo_prev.get(cob)
+        window = self._opt("pdo_overflow_window_us") * US
+        if prev is None or self._opt("dev_ignore_pdo_overflow"):
+            return
+        if 0 <= sent - prev[0] < window and sent < prev[1]:
+            self._comm_alarm("AL112")
+
+    def _on_error_frame(self) -> None:
+        """AL185: an error frame raises the receive error counter; above 128 (L20029)."""
+        weight = self._opt("can_error_frame_weight")
+        self.rx_error_counter = min(255, self.rx_error_counter + weight)
+        limit = self._opt("dev_bus_error_limit") or ERROR_PASSIVE
+        if self.rx_error_counter > limit and not self._bus_error_raised:
+            self._bus_error_raised = True
+            self._comm_alarm("AL185")
+
+    def _ip_sync_monitored(self) -> bool:
+        """SYNC is monitored in IP mode (6061h = 7) with 1006h > 0 (L17211-17232)."""
+        if self._values.get((0x1006, 0), 0) <= 0:
+            return False
+        try:
+            return int(self.drive.read_object(0x6061, 0)) == IP_MODE
+        except Exception:  # fake drives without 6061h
+            return False
+
+    def _sync_reset(self) -> None:
+        self._sync_prev_sent = None
+        self._sync_deadline = None
+        self._sync_intervals = deque()
+
+    def _monitor_sync(self, sent: int, now: int) -> None:
+        """AL3E2 early SYNC, AL301 cycle != 1006h, and arm the AL3E3 timeout (a3-comms §2.6;
+        thresholds: ModelOptions sync_*)."""
+        if not self._ip_sync_monitored():
+            self._sync_reset()
+            return
+        period = self._values[(0x1006, 0)] * US
+        prev, self._sync_prev_sent = self._sync_prev_sent, sent
+        late = round(self._opt("dev_sync_timeout_extra_ms") * MS)
+        self._sync_deadline = now + round(self._opt("sync_timeout_cycles") * period) + late
+        if prev is None:
+            return
+        dt = sent - prev
+        if dt < self._opt("sync_early_ratio") * period:
+            self._comm_alarm("AL3E2")  # SYNC too early (L20159-20163)
+            return
+        window = max(1, int(self._opt("sync_fail_window")))
+        self._sync_intervals.append(dt)
+        while len(self._sync_intervals) > window:
+            self._sync_intervals.popleft()
+        if len(self._sync_intervals) == window:
+            mean = sum(self._sync_intervals) / window
+            if abs(mean - period) > self._opt("sync_fail_tolerance") * period:
+                self._comm_alarm("AL301")  # synchronisation failure (L20123-20127)
+                self._sync_intervals.clear()
+
     # ------------------------------------------------------------------ frames
     def handle_frame(self, msg: can.Message) -> None:
         """Dispatch one received frame (call with `lock` held). Never raises."""
@@ -276,7 +385,14 @@ class CanopenSlave:
             self.last_resort(name, exc)
 
     def _handle(self, msg: can.Message) -> None:
-        if msg.is_extended_id or msg.is_error_frame or self.state == "INITIALISING":
+        if msg.is_error_frame:
+            self._on_error_frame()
+            return
+        if self.rx_error_counter:
+            self.rx_error_counter -= 1  # a valid frame (ISO 11898-1 fault confinement)
+            if not self.rx_error_counter:
+                self._bus_error_raised = False
+        if msg.is_extended_id or self.state == "INITIALISING":
             return
         self.stats["rx"] += 1
         cid = msg.arbitration_id
@@ -295,10 +411,13 @@ class CanopenSlave:
             return  # STOPPED: NMT and error control only (L17089-L17095)
         if cid == self._values.get((0x1200, 1), P.SDO_RX + nid) & 0x7FF:
             if not msg.is_remote_frame:
+                self._check_sdo_flood(sent_ns(msg))
                 self._on_sdo(data, now)
+                self._sdo_answered = time.time_ns()
             return
         if cid == self._values.get((0x1005, 0), 0x80) & 0x7FF:
             if self.state == "OPERATIONAL":
+                self._monitor_sync(sent_ns(msg), now)
                 self._on_sync(now)
             return
         if self._on_heartbeat_in(cid, data, now, msg.is_remote_frame):
@@ -308,7 +427,10 @@ class CanopenSlave:
         for n in range(4):
             cob = self._values[(0x1400 + n, 1)]
             if not cob & 0x80000000 and cid == cob & 0x7FF and not msg.is_remote_frame:
+                sent = sent_ns(msg)
+                self._check_pdo_overflow(cid, sent)
                 self._on_rpdo(n, data)
+                self._pdo_prev[cid] = (sent, time.time_ns())
             tcob = self._values[(0x1800 + n, 1)]
             if msg.is_remote_frame and not tcob & 0xC0000000 and cid == tcob & 0x7FF:
                 self._send_tpdo(n, now, force=True)
@@ -318,7 +440,8 @@ class CanopenSlave:
         self._send(P.HEARTBEAT + self.node_id, bytes([self._guard_toggle << 7 | state]))
         self._guard_toggle ^= 1
         guard, factor = self._values.get((0x100C, 0), 0), self._values.get((0x100D, 0), 0)
-        self._life_deadline = now + guard * factor * MS if guard and factor else None
+        late = round(self._opt("dev_heartbeat_extra_ms") * MS)  # deviation knob
+        self._life_deadline = now + guard * factor * MS + late if guard and factor else None
 
     def _on_heartbeat_in(self, cid: int, data: bytes, now: int, remote: bool) -> bool:
         if remote or not (0x701 <= cid <= 0x77F):
@@ -327,7 +450,8 @@ class CanopenSlave:
         node, t_ms = (watch >> 16) & 0x7F, watch & 0xFFFF
         if node and t_ms and cid == P.HEARTBEAT + node and data:
             # A boot-up restarts monitoring; it starts with the first heartbeat (CiA 301).
-            self._hb_consumer_deadline = None if data[0] == 0 else now + t_ms * MS
+            late = round(self._opt("dev_heartbeat_extra_ms") * MS)  # deviation knob
+            self._hb_consumer_deadline = None if data[0] == 0 else now + t_ms * MS + late
         return True
 
     # ------------------------------------------------------------------ timers
@@ -361,6 +485,10 @@ class CanopenSlave:
             self._sdo_abort(e.index, e.sub, E.ABORT_TIMEOUT)
         if self.state != "OPERATIONAL":
             return
+        if self._sync_deadline is not None and now > self._sync_deadline:
+            self._sync_deadline = None  # re-armed by the next SYNC
+            if self._ip_sync_monitored():
+                self._comm_alarm("AL3E3")  # SYNC timeout in IP mode (L20165-20169)
         for n in range(4):
             if self._tpdo_active(n) and self._values[(0x1800 + n, 2)] >= 254:
                 self._event_tpdo(n, now)
@@ -706,6 +834,8 @@ class CanopenSlave:
             self._hb_consumer_deadline = None
         elif index in (0x100C, 0x100D):
             self._life_deadline = None
+        elif index == 0x1006:
+            self._sync_reset()
 
     def _write_pdo_comm(self, index: int, sub: int, value: int) -> None:
         rx = index < 0x1800
@@ -758,3 +888,4 @@ class CanopenSlave:
 
 
 P_SIGNED = {"INTEGER8", "INTEGER16", "INTEGER32"}
+_DEFAULTS = ModelOptions()

@@ -273,6 +273,19 @@ class Drive:
 
     def raise_alarm(self, code: str) -> None:
         """An alarm a face detected (AL020 RS-485 timeout, AL180 heartbeat, ...)."""
+        extra = self.options.dev_comm_timeout_extra_ms
+        if code == "AL020" and extra > 0:  # deviation: AL020 late by `extra` ms
+            self.sched.after(round(extra * 1e6), lambda: self._raise_face_alarm(code))
+            return
+        self._raise_face_alarm(code)
+
+    def modbus_comm_error(self, exception_code: int) -> None:
+        """The Modbus face answered an exception: AL019 when the code is an "incorrect
+        communication address / value" (L19592-19596, option modbus_al019_exceptions)."""
+        if exception_code in self.options.modbus_al019_exceptions:
+            self._raise_face_alarm("AL019")
+
+    def _raise_face_alarm(self, code: str) -> None:
         self.alarms.raise_alarm(code)
         if code == "AL020" and self.params.get("P3.003") == 1 and self.servo_on:
             self.axis.ramp_stop(self._p5003_decel(5))  # P3.003 = 1: P5.003.B ramp (L10559)

@@ -71,6 +71,30 @@ class ModelOptions:
     # --- timing of the model's outputs ---
     motion_step_ms: float = 1.0  # integration substep while anything moves
     state_publish_ms: float = 10.0  # ground-truth snapshots when recorded
+    # --- communication faults (issue 16, docs/faults.md) ---
+    # AL111: "more than one SDO received within 1 ms" overflows the SDO Rx buffer
+    # (L19933-19937). Counted only for a request the master sent before the drive answered
+    # the previous one: a master that waits for each answer never overflows a one-deep buffer.
+    sdo_flood_window_us: int = 1000
+    # AL112: "more than one PDO with the same COB-ID within 1 ms" (L19941-19945), by the
+    # frames' sender timestamps; counted only for a PDO sent before the drive had processed
+    # the previous one with that COB-ID (same one-deep buffer reading as AL111).
+    pdo_overflow_window_us: int = 1000
+    # SYNC monitoring in IP mode (6061h = 7, 1006h > 0, NMT OPERATIONAL); the manual gives no
+    # numbers (a3-comms §2.6, gap §8): AL3E2 when a SYNC interval is shorter than
+    # sync_early_ratio x 1006h (L20159-20163); AL3E3 when no SYNC for sync_timeout_cycles x
+    # 1006h (L20165-20169); AL301 when the mean of the last sync_fail_window intervals is off
+    # 1006h by more than sync_fail_tolerance (L20123-20127).
+    sync_early_ratio: float = 0.5
+    sync_timeout_cycles: float = 3.0
+    sync_fail_window: int = 8
+    sync_fail_tolerance: float = 0.1
+    # AL185 "Rx/Tx error counter > 128" (L20027-20031): an error frame adds this to the
+    # receive error counter, a valid frame subtracts 1 (ISO 11898-1 fault confinement).
+    can_error_frame_weight: int = 8
+    # AL019 "communication address / value incorrect" (L19592-19596): the Modbus exception
+    # codes that raise it (02 illegal address, 03 illegal value). () = never.
+    modbus_al019_exceptions: tuple[int, ...] = (2, 3)
     # --- deviations (deliberately wrong drive) ---
     dev_brake_on_delay_ms: float = 0.0  # added to P1.042 (e.g. 5: BRKR 5 ms late)
     dev_brake_off_delay_ms: float = 0.0  # added to the P1.043 rule
@@ -81,6 +105,12 @@ class ModelOptions:
     dev_arst_on_falling_edge: bool = False  # alarm reset on the wrong edge
     dev_emgs_ignores_negative_rule: bool = False  # negative P1.043 honoured on EMGS stops
     dev_di_levels_ignored_at_power_up: bool = False  # EMGS/NL/PL open at power-up unseen
+    dev_heartbeat_extra_ms: float = 0.0  # AL180 raised this much after the consumer time
+    dev_sync_timeout_extra_ms: float = 0.0  # AL3E3 raised this much late
+    dev_ignore_sdo_flood: bool = False  # no AL111
+    dev_ignore_pdo_overflow: bool = False  # no AL112
+    dev_bus_error_limit: int | None = None  # AL185 above this counter instead of 128
+    dev_comm_timeout_extra_ms: float = 0.0  # AL020 raised this much after P3.004
     extra: dict[str, Any] = field(default_factory=dict)  # options of other rooms (homing, abs)
 
     @classmethod

@@ -63,7 +63,7 @@ _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
 
 _TOP = {"name", "description", "virtual", "process", "can", "rs485", "drives", "timeouts",
         "timing", "gateway",
-        "safe_state", "motion_allowed", "features"}
+        "safe_state", "motion_allowed", "features", "faults_allowed"}
 _DRIVE = {"node_id", "station", "profile", "can", "rs485", "dio", "dio_map", "wiring", "sto",
           "params", "param_via", "mechanics", "options", "modbus_mode"}
 _VIRTUAL_ONLY = ("mechanics", "options")
@@ -157,6 +157,8 @@ class Bench:
     timeouts: dict[str, int] = field(default_factory=lambda: dict(DEFAULT_TIMEOUTS))
     safe_state: SafeState = field(default_factory=SafeState)
     motion_allowed: bool = True
+    # `fault:` steps (docs/faults.md); default: true on a virtual bench, false on a real one
+    faults_allowed: bool = False
     features: set[str] = field(default_factory=set)
     # Timing-spec constants this bench overrides (e.g. a transport's input latency widens
     # `fw_tol`): the same as `hil check --const NAME=VALUE`, in ms.
@@ -281,6 +283,7 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
         description=str(top.get("description") or ""), process=process, can=can, rs485=rs485,
         timeouts=timeouts, safe_state=safe,
         motion_allowed=v.boolean(top, "motion_allowed", "", True), features=features,
+        faults_allowed=v.boolean(top, "faults_allowed", "", virtual),
         timing_constants=_timing(v, top), gateway=gateway,
     )
 

@@ -188,6 +188,9 @@ def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: set[str
     kw = join(w, s.kind)
     if s.kind in VIRTUAL_ONLY and not bench.virtual:
         raise v.err(s.line, kw, f"only on a virtual bench; bench {bench.name!r} is real")
+    if s.kind == "fault" and not bench.faults_allowed:
+        raise v.err(s.line, kw, f"fault injection is not allowed on bench {bench.name!r} "
+                                "(faults_allowed: false; docs/faults.md)")
     if s.kind in MOTION and not bench.motion_allowed:
         raise v.err(s.line, kw, f"motion is not allowed on bench {bench.name!r} "
                                 "(motion_allowed: false)")

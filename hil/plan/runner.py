@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from hil.plan.bench import Bench
+from hil.plan.fault_steps import x_fault, x_nmt, x_produce, x_sdo
 from hil.plan.plan import Plan, bind_line, check_plan, plan_spec
 from hil.plan.pr_steps import EXECUTORS as PR_EXECUTORS
 from hil.plan.safety import SafeReport, go_safe
@@ -460,6 +461,7 @@ EXECUTORS: dict[str, Callable[[StepContext, Step, DriveIO], str]] = {
     "wait_until": _x_wait_until, "expect": _x_expect, "power_cycle": _x_power_cycle,
     "inject": _x_inject, "check_timing": _x_check_timing, "abs_read": _x_abs_read,
     "abs_origin": _x_abs_origin,
+    "fault": x_fault, "produce": x_produce, "sdo": x_sdo, "nmt": x_nmt,  # docs/faults.md
 }
 EXECUTORS.update(PR_EXECUTORS)  # pr_table, pr_trigger, pr_wait (hil/plan/pr_steps.py)
 # Steps whose failure does not end the plan (they only judge what already happened).

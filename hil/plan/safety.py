@@ -37,6 +37,8 @@ def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:
     """Drive every drive of `session` to `session.bench.safe_state`; never raises."""
     bench = session.bench
     safe = bench.safe_state
+    if hasattr(session, "stop_faults"):
+        session.stop_faults()  # injected faults end before the safe state needs the wire
     rep = SafeReport(reason)
     t0 = time.monotonic_ns()
 

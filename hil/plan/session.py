@@ -112,6 +112,18 @@ class Session:
         self.drives: dict[str, DriveIO] = {}
         self._closers: list[Callable[[], None]] = []
         self.lease: Any = None  # hil.gateway.client.Lease when the bench is behind a gateway
+        # fault layers (bench faults_allowed) and CANopen networks, by bus / line / drive name
+        self.nets: dict[str, Any] = {}
+        self.fault_can: dict[str, Any] = {}
+        self.fault_serial: dict[str, Any] = {}
+        self.fault_dio: dict[str, Any] = {}
+
+    def stop_faults(self) -> None:
+        """End every injected fault now (before a safe-state action needs the wire)."""
+        for layer in (*self.fault_can.values(), *self.fault_serial.values(),
+                      *self.fault_dio.values()):
+            with contextlib.suppress(Exception):
+                layer.stop_all()
 
     def check_lease(self) -> None:
         """Raise BenchError when the gateway lease was lost (the gateway made the bench safe)."""
@@ -228,9 +240,11 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
     from hil.drivers.delta_modbus import DeltaModbus
     from hil.transport.can_bus import open_can
     from hil.transport.dio import open_dio
+    from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial
     from hil.transport.serial_line import open_serial
 
     bench, rec = s.bench, s.recorder
+    faults = bench.faults_allowed  # a passive layer until a `fault:` step (docs/faults.md)
     nets: dict[str, Any] = {}
     for bname in bench.can:
         url = urls[f"can:{bname}"]
@@ -238,9 +252,11 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
             bus = open_can(url, tap=rec, name=bname)
         except Exception as e:
             raise BenchError(f"CAN bus {bname} ({url}): {e}") from e
+        if faults:
+            bus = s.fault_can[bname] = FaultyCanBus(bus, bname, sink=rec)
         net = canopen.Network(bus)
         net.notifier = can.Notifier(bus, net.listeners, 0.05)
-        nets[bname] = net
+        nets[bname] = s.nets[bname] = net
         s._closers.append(bus.shutdown)
         s._closers.append(net.notifier.stop)
     lines: dict[str, Any] = {}
@@ -251,6 +267,8 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
         except Exception as e:
             raise BenchError(f"RS-485 line {lname} ({url}): {e}") from e
         s._closers.append(lines[lname].close)
+        if faults:
+            lines[lname] = s.fault_serial[lname] = FaultySerial(lines[lname], lname, sink=rec)
     t = bench.timeouts
     for name, spec in bench.drives.items():
         dio = cia = mb = None
@@ -262,6 +280,8 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
             except Exception as e:
                 raise BenchError(f"DI/DO of drive {name} ({url}): {e}") from e
             s._closers.append(dio.close)
+            if faults:
+                dio = s.fault_dio[name] = FaultyDio(dio, name, sink=rec)
         if spec.can:
             cia = Cia402Driver(nets[spec.can], spec.node_id or 1,
                                timeouts={k: t[k] / 1e9 for k in CIA402_TIMEOUTS})

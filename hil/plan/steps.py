@@ -13,6 +13,8 @@ from typing import Any
 
 from hil.model.dio import DI_SYMBOLS, DO_SYMBOLS, inert_mapping
 from hil.model.homing_methods import CANOPEN_METHODS
+from hil.plan.fault_steps import describe as describe_comm
+from hil.plan.fault_steps import p_fault, p_nmt, p_produce, p_sdo
 from hil.plan.param_rules import check_param
 from hil.plan.pr_steps import PARSERS as PR_PARSERS
 from hil.plan.pr_steps import describe as pr_describe
@@ -121,6 +123,8 @@ def describe(step: Step) -> str:
         return f"absolute read (DI/DO){': ' + want if want else ''}{same}"
     if k == "abs_origin":
         return "absolute origin (ABSE + ABSC)"
+    if k in ("fault", "produce", "sdo", "nmt"):
+        return describe_comm(k, a)
     if k == "inject":
         return "inject " + ", ".join(f"{x}={y}" for x, y in a.items())
     if k == "fault_reset":
@@ -539,6 +543,10 @@ PARSERS: dict[str, Parser] = {
     "check_timing": p_check_timing,
     "abs_read": p_abs_read,
     "abs_origin": p_abs_origin,
+    "fault": p_fault,
+    "produce": p_produce,
+    "sdo": p_sdo,
+    "nmt": p_nmt,
 }
 PARSERS.update(PR_PARSERS)  # pr_table, pr_trigger, pr_wait (hil/plan/pr_steps.py)
 VIRTUAL_ONLY = ("power_cycle", "inject")

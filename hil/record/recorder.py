@@ -339,6 +339,13 @@ class Recorder:
         payload = {"action": action, "reason": reason, "source": source, **extra}
         self._put(topics.SAFETY, "hil.SafetyAction", "harness", dumps(payload), t, None)
 
+    def fault(self, fault: str, transport: str, active: bool, fault_id: int, *,
+              t: int | None = None, **detail: Any) -> None:
+        """An injected fault starts (active) or ends, on the /faults channel."""
+        payload = {"fault": fault, "transport": transport, "active": bool(active),
+                   "id": int(fault_id), "detail": _plain(detail)}
+        self._put(topics.FAULTS, "hil.Fault", "harness", dumps(payload), t, None)
+
     # -- virtual-bench ground truth ---------------------------------------------------------------
     def drive_state(
         self,

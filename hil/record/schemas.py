@@ -159,6 +159,17 @@ SCHEMAS: dict[str, dict] = {
         },
         ["action", "reason"],
     ),
+    "hil.Fault": _obj(
+        "hil.Fault",
+        {
+            "fault": {"type": "string", "description": "drop, delay, corrupt, sdo_flood, ..."},
+            "transport": {"type": "string", "description": "can:<bus>, rs485:<port>, dio:<drive>"},
+            "active": {"type": "boolean", "description": "true at the start, false at the end"},
+            "id": {"type": "integer", "description": "pairs a start with its end"},
+            "detail": {"type": "object"},
+        },
+        ["fault", "transport", "active", "id"],
+    ),
     "hil.Json": _obj("hil.Json", {}, []),
     # https://docs.foxglove.dev/docs/visualization/message-schemas/log
     "foxglove.Log": _obj(
@@ -206,6 +217,7 @@ def schema_for_topic(topic: str) -> str:
         topics.PLAN_STEPS: "hil.PlanStep",
         topics.TIMING_VERDICTS: "hil.TimingVerdict",
         topics.SAFETY: "hil.SafetyAction",
+        topics.FAULTS: "hil.Fault",
     }
     if topic in fixed:
         return fixed[topic]

@@ -57,4 +57,5 @@ def drive_params(drive: str) -> str:
 PLAN_STEPS = "/plan/steps"  # step start/end with status and message
 LOG = "/log"  # harness log lines in the foxglove.Log shape
 TIMING_VERDICTS = "/timing/verdicts"  # one message per judged constraint
+FAULTS = "/faults"  # injected faults: start/end, kind, transport, match (docs/faults.md)
 SAFETY = "/safety"  # safe-state actions taken by the runner or gateway

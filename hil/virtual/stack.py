@@ -122,6 +122,8 @@ class VirtualDriveStack:
                 baud=spec.modbus_baud or getattr(self.serial, "baudrate", None),
                 lock=host.synced,
                 on_timeout=lambda _t: host.call(drive.raise_alarm, "AL020"),  # P3.004, L10571
+                # AL019 on an incorrect address / value (L19592-19596); the drive decides
+                on_comm_error=lambda code, _m: host.call(drive.modbus_comm_error, code),
             )
             self.modbus_runner = ModbusSlaveRunner(self.modbus, self.serial)
             self.modbus_runner.start()

@@ -1,0 +1,303 @@
+"""Plan steps for communication faults (issue 16, docs/faults.md):
+
+    - produce: {heartbeat: 50ms, node: 127}   # harness traffic the drive monitors;
+    - produce: {sync: 10ms}                   #   `off` stops it
+    - produce: {guard: 20ms}                  #   (node guarding RTR to 700h + node)
+    - sdo: {"1016:1": 0x007F0064, "1006": 10000}   # communication objects, SDO download
+    - fault: {can: drop, match: {function: sync}, for: 200ms}   # drop|delay|corrupt|duplicate
+    - fault: {can: sdo_flood, count: 3}        # SDO requests back to back (AL111)
+    - fault: {can: duplicate_pdo, cob_id: 0x205, data: "060000"}   # (AL112)
+    - fault: {can: bus_error, count: 17}       # error frames (AL185)
+    - fault: {rs485: silence, for: 2s}         # crc|partial|split|late|noise|silence
+    - fault: {dio: stuck, line: DI5, level: false, for: 1s}   # bounce|stuck
+    - fault: off                               # end every fault now
+    - nmt: start                               # NMT command to the drive's node
+
+Faults touch only what the harness sends; every start and end is on the /faults channel.
+`fault:` needs `faults_allowed: true` in the bench file (default on virtual benches only):
+`hil run --check` refuses it otherwise.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from hil.plan.yamlio import Checker, join, parse_duration
+from hil.transport.faults import CAN_ACTIONS, CAN_FUNCTIONS, DIO_FAULTS, SERIAL_FAULTS
+
+CAN_BURSTS = ("sdo_flood", "duplicate_pdo", "bus_error")
+_OBJ_RE = re.compile(r"^(?:0x)?([0-9A-Fa-f]{4})h?(?::(\d{1,3}))?$")
+_LINE_RE = re.compile(r"^(DI\d{1,2}|STO_[AB])$")
+
+
+def _int(v: Checker, obj: Any, line: int, where: str, lo: int, hi: int) -> int:
+    if isinstance(obj, bool) or not isinstance(obj, int) or not lo <= obj <= hi:
+        raise v.err(line, where, f"{obj!r}: an integer {lo}..{hi}")
+    return obj
+
+
+def _ids(v: Checker, obj: Any, line: int, where: str) -> list[int]:
+    items = obj if isinstance(obj, list) else [obj]
+    return [_int(v, x, line, where, 0, 0x7FF) for x in items]
+
+
+def _match(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    m = v.mapping(obj, line, where)
+    v.keys(m, {"cob_id", "range", "function"}, where)
+    out: dict[str, Any] = {"cob_ids": [], "ranges": [], "functions": []}
+    if "cob_id" in m:
+        out["cob_ids"] = _ids(v, m["cob_id"], m.kline("cob_id"), join(where, "cob_id"))
+    if "range" in m:
+        r = m["range"]
+        w = join(where, "range")
+        if not isinstance(r, list) or len(r) != 2:
+            raise v.err(m.kline("range"), w, "two COB-IDs [first, last]")
+        lo, hi = (_int(v, x, m.kline("range"), w, 0, 0x7FF) for x in r)
+        if lo > hi:
+            raise v.err(m.kline("range"), w, f"first 0x{lo:X} > last 0x{hi:X}")
+        out["ranges"] = [(lo, hi)]
+    if "function" in m:
+        fs = m["function"] if isinstance(m["function"], list) else [m["function"]]
+        for f in fs:
+            if f not in CAN_FUNCTIONS:
+                raise v.err(m.kline("function"), join(where, "function"),
+                            f"{f!r}: one of {', '.join(CAN_FUNCTIONS)}")
+        out["functions"] = list(fs)
+    return out
+
+
+def _rate(v: Checker, m: Any, where: str) -> float:
+    if "rate" not in m:
+        return 1.0
+    r = m["rate"]
+    if isinstance(r, bool) or not isinstance(r, int | float) or not 0 < r <= 1:
+        raise v.err(m.kline("rate"), join(where, "rate"), f"{r!r}: a fraction in (0, 1]")
+    return float(r)
+
+
+def p_fault(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    if obj in ("off", False):
+        return {"transport": "off"}
+    m = v.mapping(obj, line, where)
+    kinds = [k for k in ("can", "rs485", "dio") if k in m]
+    if len(kinds) != 1:
+        raise v.err(line, where, "one of can: (drop, delay, corrupt, duplicate, sdo_flood, "
+                    "duplicate_pdo, bus_error), rs485: (...) or dio: (...); or `fault: off`")
+    t = kinds[0]
+    kind = m[t]
+    out: dict[str, Any] = {"transport": t, "kind": kind, "duration": None, "rate": 1.0}
+    if "for" in m:
+        out["duration"] = v.duration(m, "for", where)
+        if out["duration"] <= 0:
+            raise v.err(m.kline("for"), join(where, "for"), "must be > 0")
+    if t == "can" and kind in CAN_ACTIONS:
+        v.keys(m, {"can", "match", "for", "rate", "delay", "bus"}, where)
+        out["match"] = (_match(v, m["match"], m.kline("match"), join(where, "match"))
+                        if "match" in m else {"cob_ids": [], "ranges": [], "functions": []})
+        out["rate"] = _rate(v, m, where)
+        out["delay"] = v.duration(m, "delay", where, 10_000_000 if kind == "delay" else 0)
+    elif t == "can" and kind in CAN_BURSTS:
+        v.keys(m, {"can", "count", "cob_id", "data", "bus"}, where)
+        out["count"] = (_int(v, m["count"], m.kline("count"), join(where, "count"), 1, 1000)
+                        if "count" in m else {"sdo_flood": 3, "duplicate_pdo": 2,
+                                              "bus_error": 17}[kind])
+        if kind == "duplicate_pdo":
+            if "cob_id" not in m:
+                raise v.err(line, join(where, "cob_id"), "missing: the RPDO's COB-ID")
+            out["cob_id"] = _ids(v, m["cob_id"], m.kline("cob_id"), join(where, "cob_id"))[0]
+            data = str(m.get("data", ""))
+            try:
+                out["data"] = bytes.fromhex(data)
+            except ValueError:
+                raise v.err(m.kline("data"), join(where, "data"), f"{data!r}: hex bytes") from None
+    elif t == "rs485" and kind in SERIAL_FAULTS:
+        v.keys(m, {"rs485", "for", "rate", "delay", "gap", "bytes", "line"}, where)
+        out["rate"] = _rate(v, m, where)
+        out["params"] = {"delay_ms": v.duration(m, "delay", where, 20_000_000) / 1e6,
+                         "gap_ms": v.duration(m, "gap", where, 5_000_000) / 1e6,
+                         "bytes": _int(v, m.get("bytes", 3), m.kline("bytes") if "bytes" in m
+                                       else line, join(where, "bytes"), 1, 256)}
+    elif t == "dio" and kind in DIO_FAULTS:
+        v.keys(m, {"dio", "line", "for", "level", "bounces", "period"}, where)
+        ln = m.get("line")
+        if not isinstance(ln, str) or not _LINE_RE.match(ln):
+            raise v.err(m.kline("line") if "line" in m else line, join(where, "line"),
+                        f"{ln!r}: a harness-driven line like DI5 or STO_A")
+        out["line"] = ln
+        out["params"] = {"level": v.boolean(m, "level", where, False),
+                         "bounces": _int(v, m.get("bounces", 3), line, join(where, "bounces"),
+                                         1, 100),
+                         "period_ms": v.duration(m, "period", where, 1_000_000) / 1e6}
+    else:
+        known = {"can": CAN_ACTIONS + CAN_BURSTS, "rs485": SERIAL_FAULTS, "dio": DIO_FAULTS}[t]
+        raise v.err(m.kline(t), join(where, t), f"{kind!r}: one of {', '.join(known)}")
+    if "bus" in m:
+        out["bus"] = v.text(m, "bus", where)
+    return out
+
+
+def p_produce(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    m = v.mapping(obj, line, where)
+    v.keys(m, {"heartbeat", "sync", "guard", "node"}, where)
+    out: dict[str, Any] = {"node": _int(v, m.get("node", 0x7F), line, join(where, "node"),
+                                        1, 127)}
+    for k in ("heartbeat", "sync", "guard"):
+        if k not in m:
+            continue
+        if m[k] in ("off", False):
+            out[k] = 0
+            continue
+        try:
+            out[k] = parse_duration(m[k])
+        except ValueError as e:
+            raise v.err(m.kline(k), join(where, k), str(e)) from None
+        if out[k] <= 0:
+            raise v.err(m.kline(k), join(where, k), "a period > 0 or off")
+    if not any(k in out for k in ("heartbeat", "sync", "guard")):
+        raise v.err(line, where, "heartbeat: PERIOD, sync: PERIOD and/or guard: PERIOD (or off)")
+    return out
+
+
+def p_sdo(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    m = v.mapping(obj, line, where)
+    values: list[tuple[int, int, int]] = []
+    for k, x in m.items():
+        mt = _OBJ_RE.match(str(k))
+        if not mt:
+            raise v.err(m.kline(k), join(where, str(k)), "an object like \"1016:1\" or 1006")
+        values.append((int(mt.group(1), 16), int(mt.group(2) or 0),
+                       _int(v, x, m.kline(k), join(where, str(k)), -(2**31), 2**32 - 1)))
+    if not values:
+        raise v.err(line, where, "one or more objects: {\"1016:1\": 0x007F0064}")
+    return {"values": values}
+
+
+NMT_COMMANDS = {"start": 0x01, "stop": 0x02, "pre-operational": 0x80, "reset_node": 0x81,
+                "reset_communication": 0x82}
+
+
+def p_nmt(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    if obj not in NMT_COMMANDS:
+        raise v.err(line, where, f"{obj!r}: one of {', '.join(NMT_COMMANDS)}")
+    return {"command": obj}
+
+
+def describe(kind: str, a: dict[str, Any]) -> str:
+    if kind == "nmt":
+        return f"nmt {a['command']}"
+    if kind == "sdo":
+        return "sdo " + ", ".join(f"{i:04X}h:{s}={x}" for i, s, x in a["values"])
+    if kind == "produce":
+        parts = [f"{k} {'off' if not a[k] else f'{a[k] / 1e6:g}ms'}"
+                 for k in ("heartbeat", "sync", "guard") if k in a]
+        return "produce " + ", ".join(parts)
+    if a["transport"] == "off":
+        return "fault off"
+    dur = f" for {a['duration'] / 1e6:g}ms" if a.get("duration") else ""
+    return f"fault {a['transport']} {a['kind']}{dur}"
+
+
+# --- executors (registered in hil.plan.runner.EXECUTORS) -------------------------------------
+
+def _bus_name(ctx: Any, s: Any, d: Any) -> str:
+    name = s.args.get("bus") or d.spec.can
+    if not name:
+        raise RuntimeError(f"drive {d.name} has no CAN bus on this bench")
+    return name
+
+
+def _node(d: Any) -> int:
+    return d.spec.node_id or 1
+
+
+def x_fault(ctx: Any, s: Any, d: Any) -> str:
+    import can
+
+    from hil.transport.faults import CanMatch, error_frames
+
+    a = s.args
+    sess = ctx.session
+    if a["transport"] == "off":
+        sess.stop_faults()
+        return "every fault ended"
+    kind, dur = a["kind"], a["duration"]
+    if a["transport"] == "can":
+        bus = sess.fault_can.get(_bus_name(ctx, s, d))
+        if bus is None:
+            raise RuntimeError("no fault layer on this CAN bus (faults_allowed: false)")
+        if kind in CAN_ACTIONS:
+            mt = a["match"]
+            match = CanMatch(frozenset(mt["cob_ids"]), tuple(mt["ranges"]),
+                             tuple(mt["functions"]))
+            bus.inject(kind, match=match, duration_ns=dur, rate=a["rate"], delay_ns=a["delay"])
+            return f"{kind} {match.describe() or 'every frame'} on can:{bus.name}"
+        node = _node(d)
+        if kind == "sdo_flood":  # 1000h uploads back to back: well within 1 ms
+            req = bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])
+            frames = [can.Message(arbitration_id=0x600 + node, data=req, is_extended_id=False)
+                      for _ in range(a["count"])]
+        elif kind == "duplicate_pdo":
+            frames = [can.Message(arbitration_id=a["cob_id"], data=a["data"],
+                                  is_extended_id=False) for _ in range(a["count"])]
+        else:
+            frames = error_frames(a["count"])
+        n = bus.burst(kind, frames)
+        return f"{kind}: {n} frames back to back on can:{bus.name}"
+    if a["transport"] == "rs485":
+        line = sess.fault_serial.get(d.spec.rs485 or "")
+        if line is None:
+            raise RuntimeError("no fault layer on this RS-485 line")
+        line.inject(kind, duration_ns=dur, rate=a["rate"], **a["params"])
+        return f"{kind} on rs485:{d.spec.rs485}"
+    port = sess.fault_dio.get(d.name)
+    if port is None:
+        raise RuntimeError(f"no fault layer on the DI/DO of drive {d.name}")
+    port.inject(kind, a["line"], duration_ns=dur, **a["params"])
+    return f"{kind} on {a['line']} of {d.name}"
+
+
+def x_produce(ctx: Any, s: Any, d: Any) -> str:
+    import can
+
+    a = s.args
+    net = ctx.session.nets.get(_bus_name(ctx, s, d))
+    if net is None:
+        raise RuntimeError(f"drive {d.name}: no CANopen network")
+    tasks = ctx.store.setdefault("_produce", {})
+    out = []
+    for k in ("heartbeat", "sync", "guard"):
+        if k not in a:
+            continue
+        old = tasks.pop(k, None)
+        if old is not None:
+            old.stop()
+        period = a[k]
+        if not period:
+            out.append(f"{k} off")
+            continue
+        if k == "heartbeat":
+            msg = can.Message(arbitration_id=0x700 + a["node"], data=b"\x05",
+                              is_extended_id=False)  # OPERATIONAL master
+        elif k == "sync":
+            msg = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
+        else:
+            msg = can.Message(arbitration_id=0x700 + _node(d), is_remote_frame=True,
+                              is_extended_id=False)
+        tasks[k] = net.bus.send_periodic(msg, period / 1e9)
+        out.append(f"{k} every {period / 1e6:g}ms")
+    return ", ".join(out)
+
+
+def x_sdo(ctx: Any, s: Any, d: Any) -> str:
+    for index, sub, value in s.args["values"]:
+        d.cia.write(index, sub, value)
+    return f"{len(s.args['values'])} object(s) written"
+
+
+def x_nmt(ctx: Any, s: Any, d: Any) -> str:
+    net = ctx.session.nets.get(_bus_name(ctx, s, d))
+    if net is None:
+        raise RuntimeError(f"drive {d.name}: no CANopen network")
+    net.send_message(0x000, bytes([NMT_COMMANDS[s.args["command"]], _node(d)]))
+    return f"NMT {s.args['command']} to node {_node(d)}"

@@ -1,0 +1,415 @@
+"""Fault injection on the harness's own side of a transport (issue 16, docs/faults.md).
+
+Wrappers that stop, delay, garble or multiply what the *harness sends*; what the drive
+sends is passed through untouched (on a real bench only our side may be touched):
+
+* `FaultyCanBus`  - a `can.BusABC` around the harness's bus: drop / delay / corrupt /
+  duplicate frames matched by COB-ID, range or CANopen function, for a duration, at a rate;
+  plus `burst()` for floods, duplicate PDOs and error frames.
+* `FaultySerial`  - around a `SerialLine`: CRC errors, partial / split / late requests,
+  line noise, master silence.
+* `FaultyDio`     - around a `DioPort`: contact bounce, a stuck input.
+
+Every fault start and end goes to the recorder's /faults channel (`Recorder.fault`), so a
+reviewer sees cause and effect on one timeline. With nothing injected each wrapper is a
+plain pass-through (benchmarks/bench_faults.py measures the cost).
+"""
+
+from __future__ import annotations
+
+import itertools
+import random
+import threading
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import can
+
+CAN_ACTIONS = ("drop", "delay", "corrupt", "duplicate")
+# CANopen functions by COB-ID range (CiA 301 pre-defined connection set, a3-comms §2.3)
+CAN_FUNCTIONS: dict[str, tuple[int, int]] = {
+    "nmt": (0x000, 0x000),
+    "sync": (0x080, 0x080),
+    "emcy": (0x081, 0x0FF),
+    "pdo": (0x180, 0x57F),
+    "tpdo": (0x180, 0x1FF),  # and 0x280.., 0x380.., 0x480.. (see `_FUNCTION_SETS`)
+    "rpdo": (0x200, 0x27F),
+    "sdo": (0x580, 0x67F),
+    "sdo_rx": (0x600, 0x67F),
+    "heartbeat": (0x700, 0x77F),
+}
+_FUNCTION_SETS: dict[str, tuple[tuple[int, int], ...]] = {
+    "tpdo": ((0x180, 0x1FF), (0x280, 0x2FF), (0x380, 0x3FF), (0x480, 0x4FF)),
+    "rpdo": ((0x200, 0x27F), (0x300, 0x37F), (0x400, 0x47F), (0x500, 0x57F)),
+}
+SERIAL_FAULTS = ("crc", "partial", "split", "late", "noise", "silence")
+DIO_FAULTS = ("bounce", "stuck")
+_ids = itertools.count(1)
+
+
+class FaultSink(Protocol):
+    def fault(self, fault: str, transport: str, active: bool, fault_id: int, *,
+              t: int | None = None, **detail: Any) -> None: ...
+
+
+@dataclass(frozen=True)
+class CanMatch:
+    """Which frames a CAN fault touches; empty = every frame the harness sends."""
+
+    cob_ids: frozenset[int] = frozenset()
+    ranges: tuple[tuple[int, int], ...] = ()
+    functions: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        for f in self.functions:
+            if f not in CAN_FUNCTIONS:
+                raise ValueError(f"unknown CANopen function {f!r}; known: "
+                                 f"{', '.join(CAN_FUNCTIONS)}")
+
+    def __call__(self, msg: can.Message) -> bool:
+        if not (self.cob_ids or self.ranges or self.functions):
+            return True
+        cid = msg.arbitration_id
+        if cid in self.cob_ids or any(lo <= cid <= hi for lo, hi in self.ranges):
+            return True
+        for f in self.functions:
+            spans = _FUNCTION_SETS.get(f, (CAN_FUNCTIONS[f],))
+            if any(lo <= cid <= hi for lo, hi in spans):
+                return True
+        return False
+
+    def target(self) -> str:
+        """One string naming what is matched ("heartbeat", "0x205", "any"), for timing specs."""
+        parts = [*self.functions, *(f"0x{c:03X}" for c in sorted(self.cob_ids)),
+                 *(f"0x{a:03X}-0x{b:03X}" for a, b in self.ranges)]
+        return ",".join(parts) or "any"
+
+    def describe(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.cob_ids:
+            out["cob_id"] = [f"0x{c:03X}" for c in sorted(self.cob_ids)]
+        if self.ranges:
+            out["range"] = [f"0x{a:03X}-0x{b:03X}" for a, b in self.ranges]
+        if self.functions:
+            out["function"] = list(self.functions)
+        return out
+
+
+@dataclass
+class Fault:
+    """One injected fault: `kind` on `transport`, active until `end_ns` (monotonic)."""
+
+    kind: str
+    transport: str
+    end_ns: int | None = None
+    rate: float = 1.0
+    params: dict[str, Any] = field(default_factory=dict)
+    match: CanMatch | None = None
+    id: int = field(default_factory=lambda: next(_ids))
+
+    def hits(self, rng: random.Random) -> bool:
+        return self.rate >= 1.0 or rng.random() < self.rate
+
+
+class _Faults:
+    """Active faults of one transport, their recording and their expiry."""
+
+    def __init__(self, transport: str, sink: FaultSink | None, seed: int | None) -> None:
+        self.transport = transport
+        self.sink = sink
+        self.rng = random.Random(seed)
+        self.active: list[Fault] = []
+        self._lock = threading.Lock()
+        self._timers: dict[int, threading.Timer] = {}
+
+    def start(self, fault: Fault, duration_ns: int | None) -> Fault:
+        if duration_ns is not None:
+            fault.end_ns = time.monotonic_ns() + duration_ns
+        self._record(fault, True)
+        with self._lock:
+            self.active = [*self.active, fault]  # copy on write: senders read without a lock
+        if duration_ns is not None:
+            timer = threading.Timer(duration_ns / 1e9, self.stop, (fault,))
+            timer.daemon = True
+            self._timers[fault.id] = timer
+            timer.start()
+        return fault
+
+    def stop(self, fault: Fault) -> None:
+        with self._lock:
+            if fault not in self.active:
+                return
+            self.active = [f for f in self.active if f is not fault]
+            timer = self._timers.pop(fault.id, None)
+        if timer is not None and timer is not threading.current_thread():
+            timer.cancel()
+        self._record(fault, False)
+
+    def stop_all(self) -> None:
+        for f in list(self.active):
+            self.stop(f)
+
+    def instant(self, kind: str, **detail: Any) -> None:
+        """A fault that is one action (a burst): start and end recorded around it."""
+        f = Fault(kind, self.transport, params=detail)
+        self._record(f, True)
+        self._pending_instant = f
+
+    def instant_end(self) -> None:
+        f = getattr(self, "_pending_instant", None)
+        if f is not None:
+            self._record(f, False)
+            self._pending_instant = None
+
+    def current(self) -> list[Fault]:
+        now = time.monotonic_ns()
+        out = []
+        for f in self.active:
+            if f.end_ns is not None and now >= f.end_ns:
+                self.stop(f)
+            else:
+                out.append(f)
+        return out
+
+    def _record(self, f: Fault, active: bool) -> None:
+        if self.sink is None:
+            return
+        detail = dict(f.params)
+        if f.match is not None:
+            detail["match"] = f.match.describe()
+            detail["target"] = f.match.target()
+        if f.rate < 1.0:
+            detail["rate"] = f.rate
+        try:
+            self.sink.fault(f.kind, self.transport, active, f.id, **detail)
+        except Exception:  # a recording problem must not change what is injected
+            pass
+
+
+class FaultyCanBus(can.BusABC):
+    """The harness's CAN bus with a fault layer; received frames pass untouched."""
+
+    def __init__(self, bus: can.BusABC, name: str, *, sink: FaultSink | None = None,
+                 seed: int | None = None) -> None:
+        self.bus = bus
+        self.name = name
+        self.faults = _Faults(f"can:{name}", sink, seed)
+        self.channel_info = f"{bus.channel_info} (fault layer)"
+        self._can_protocol = bus.protocol
+        super().__init__(channel=getattr(bus, "channel", name))
+
+    # -- injection ---------------------------------------------------------------------
+    def inject(self, action: str, *, match: CanMatch | None = None,
+               duration_ns: int | None = None, rate: float = 1.0,
+               delay_ns: int = 0) -> Fault:
+        """Start `action` (drop | delay | corrupt | duplicate) on matching frames we send."""
+        if action not in CAN_ACTIONS:
+            raise ValueError(f"CAN fault {action!r}: one of {', '.join(CAN_ACTIONS)}")
+        if not 0.0 < rate <= 1.0:
+            raise ValueError(f"rate {rate}: a fraction in (0, 1]")
+        params = {"delay_ms": delay_ns / 1e6} if action == "delay" else {}
+        f = Fault(action, self.faults.transport, rate=rate, params=params,
+                  match=match or CanMatch())
+        return self.faults.start(f, duration_ns)
+
+    def burst(self, kind: str, frames: Iterable[can.Message], **detail: Any) -> int:
+        """Send `frames` back to back (an SDO flood, a duplicate PDO, error frames);
+        recorded as one fault `kind` from the first frame to the last. Returns the count."""
+        frames = list(frames)
+        self.faults.instant(kind, frames=len(frames), **detail)
+        try:
+            for m in frames:
+                self.bus.send(m)
+        finally:
+            self.faults.instant_end()
+        return len(frames)
+
+    def stop_all(self) -> None:
+        self.faults.stop_all()
+
+    # -- BusABC ------------------------------------------------------------------------
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if not self.faults.active:  # passive: one attribute test
+            self.bus.send(msg, timeout)
+            return
+        self._send_faulty(msg, timeout)
+
+    def _send_faulty(self, msg: can.Message, timeout: float | None) -> None:
+        copies = [msg]
+        rng = self.faults.rng
+        delay = 0
+        for f in self.faults.current():
+            if f.match is None or not f.match(msg) or not f.hits(rng):
+                continue
+            if f.kind == "drop":
+                return
+            if f.kind == "corrupt":
+                copies = [_corrupt(m, rng) for m in copies]
+            elif f.kind == "duplicate":
+                copies = copies + copies
+            elif f.kind == "delay":
+                delay = max(delay, int(f.params.get("delay_ms", 0) * 1e6))
+        if delay:
+            t = threading.Timer(delay / 1e9, self._send_all, (copies, timeout))
+            t.daemon = True
+            t.start()
+            return
+        self._send_all(copies, timeout)
+
+    def _send_all(self, copies: list[can.Message], timeout: float | None) -> None:
+        for m in copies:
+            try:
+                self.bus.send(m, timeout)
+            except Exception:
+                if len(copies) == 1:
+                    raise
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        return self.bus.recv(timeout)  # the drive's output: never touched
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        return self.bus.recv(timeout), True
+
+    def set_filters(self, filters: Any = None) -> None:
+        self.bus.set_filters(filters)
+
+    @property
+    def state(self) -> can.BusState:
+        return self.bus.state
+
+    def flush_tx_buffer(self) -> None:
+        self.bus.flush_tx_buffer()
+
+    def fileno(self) -> int:
+        return self.bus.fileno()
+
+    def shutdown(self) -> None:
+        if self._is_shutdown:
+            return
+        self.faults.stop_all()
+        super().shutdown()
+        self.bus.shutdown()
+
+
+def _corrupt(msg: can.Message, rng: random.Random) -> can.Message:
+    """A garbled frame. With data: one bit flipped (a payload error the CRC cannot see, as
+    from a faulty master). Without data: an error frame (what a garbled frame becomes on a
+    real bus when the receivers see a CRC error)."""
+    if not msg.data:
+        return can.Message(is_error_frame=True, arbitration_id=0, is_extended_id=False)
+    data = bytearray(msg.data)
+    i = rng.randrange(len(data))
+    data[i] ^= 1 << rng.randrange(8)
+    return can.Message(arbitration_id=msg.arbitration_id, data=bytes(data),
+                       is_extended_id=msg.is_extended_id, is_remote_frame=msg.is_remote_frame)
+
+
+def error_frames(n: int) -> list[can.Message]:
+    """`n` error frames (AL185 burst on a virtual bus)."""
+    return [can.Message(is_error_frame=True, arbitration_id=0, is_extended_id=False)
+            for _ in range(n)]
+
+
+class FaultySerial:
+    """The harness's RS-485 line with a fault layer on what it writes; reads untouched.
+
+    crc: the CRC/LRC bytes garbled; partial: only the first half sent; split: the frame
+    sent in two halves `gap_ms` apart (RTU: longer than t3.5 splits it in two frames);
+    late: each request held back `delay_ms`; noise: `noise_bytes` random bytes ahead of
+    each request; silence: nothing sent at all (master silence, AL020 after P3.004).
+    """
+
+    def __init__(self, line: Any, name: str, *, sink: FaultSink | None = None,
+                 seed: int | None = None) -> None:
+        self.line = line
+        self.faults = _Faults(f"rs485:{name}", sink, seed)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.line, name)
+
+    def inject(self, kind: str, *, duration_ns: int | None = None, rate: float = 1.0,
+               **params: Any) -> Fault:
+        if kind not in SERIAL_FAULTS:
+            raise ValueError(f"RS-485 fault {kind!r}: one of {', '.join(SERIAL_FAULTS)}")
+        return self.faults.start(Fault(kind, self.faults.transport, rate=rate, params=params),
+                                 duration_ns)
+
+    def stop_all(self) -> None:
+        self.faults.stop_all()
+
+    def write(self, data: bytes, **kw: Any) -> Any:
+        if not self.faults.active:
+            return self.line.write(data, **kw)
+        rng = self.faults.rng
+        data = bytes(data)
+        for f in self.faults.current():
+            if not f.hits(rng):
+                continue
+            if f.kind == "silence":
+                return None
+            if f.kind == "crc":
+                data = data[:-1] + bytes([data[-1] ^ 0xFF])
+            elif f.kind == "partial":
+                data = data[: max(1, len(data) // 2)]
+            elif f.kind == "noise":
+                n = int(f.params.get("bytes", 3))
+                self.line.write(bytes(rng.randrange(256) for _ in range(n)))
+                time.sleep(float(f.params.get("gap_ms", 5)) / 1e3)
+            elif f.kind == "late":
+                time.sleep(float(f.params.get("delay_ms", 20)) / 1e3)
+            elif f.kind == "split":
+                half = max(1, len(data) // 2)
+                self.line.write(data[:half], **kw)
+                time.sleep(float(f.params.get("gap_ms", 5)) / 1e3)
+                return self.line.write(data[half:])
+        return self.line.write(data, **kw)
+
+
+class FaultyDio:
+    """The harness's DI/DO port with a fault layer on the DI lines it drives.
+
+    bounce: each level change becomes `bounces` toggles `period_ms` apart before it
+    settles; stuck: the line holds `level` whatever the harness sets.
+    """
+
+    def __init__(self, port: Any, name: str, *, sink: FaultSink | None = None,
+                 seed: int | None = None) -> None:
+        self.port = port
+        self.faults = _Faults(f"dio:{name}", sink, seed)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.port, name)
+
+    def inject(self, kind: str, line: str, *, duration_ns: int | None = None,
+               **params: Any) -> Fault:
+        if kind not in DIO_FAULTS:
+            raise ValueError(f"DI/DO fault {kind!r}: one of {', '.join(DIO_FAULTS)}")
+        f = Fault(kind, self.faults.transport, params={"line": line, **params})
+        self.faults.start(f, duration_ns)
+        if kind == "stuck":
+            self.port.set(line, bool(params.get("level", False)))
+        return f
+
+    def stop_all(self) -> None:
+        self.faults.stop_all()
+
+    def set(self, line: str, level: bool, *args: Any, **kw: Any) -> None:
+        if not self.faults.active:
+            self.port.set(line, level, *args, **kw)
+            return
+        for f in self.faults.current():
+            if f.params.get("line") != line:
+                continue
+            if f.kind == "stuck":
+                return
+            if f.kind == "bounce":
+                period = float(f.params.get("period_ms", 1)) / 1e3
+                for _ in range(int(f.params.get("bounces", 3))):
+                    self.port.set(line, level)
+                    time.sleep(period)
+                    self.port.set(line, not level)
+                    time.sleep(period)
+        self.port.set(line, level, *args, **kw)
+

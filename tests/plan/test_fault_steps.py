@@ -1,0 +1,47 @@
+"""`fault:` steps and the `faults_allowed` bench key (issue 16, docs/faults.md)."""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.paths import fixture
+from hil.plan.bench import load_bench
+from hil.plan.plan import check_plan, load_plan
+from hil.plan.yamlio import PlanFileError
+
+PLAN = "plans/fault_heartbeat.yaml"
+
+
+def test_fault_step_refused_on_real_bench_by_default():
+    bench = load_bench(fixture("benches", "example-asda-a3-socketcan.yaml"))
+    assert bench.faults_allowed is False
+    with pytest.raises(PlanFileError, match="faults_allowed: false"):
+        check_plan(load_plan(PLAN), bench)
+
+
+def test_fault_step_allowed_on_virtual_bench():
+    bench = load_bench(fixture("benches", "virtual.yaml"))
+    assert bench.faults_allowed is True
+    check_plan(load_plan(PLAN), bench)
+
+
+def test_real_bench_may_allow_faults(tmp_path):
+    text = fixture("benches", "example-asda-a3-socketcan.yaml").read_text()
+    p = tmp_path / "b.yaml"
+    p.write_text(text + "\nfaults_allowed: true\n")
+    check_plan(load_plan(PLAN), load_bench(p))
+
+
+@pytest.mark.parametrize(("step", "problem"), [
+    ("{can: explode}", "one of drop"),
+    ("{can: drop, match: {function: foo}}", "one of nmt"),
+    ("{can: drop, rate: 2}", "fraction"),
+    ("{can: duplicate_pdo}", "cob_id"),
+    ("{dio: stuck, line: DO3}", "harness-driven line"),
+])
+def test_malformed_fault_step(tmp_path, step, problem):
+    p = tmp_path / "p.yaml"
+    p.write_text(f"name: p\nsteps:\n  - fault: {step}\n")
+    with pytest.raises(PlanFileError, match=problem) as e:
+        load_plan(p)
+    assert "p.yaml:3" in str(e.value)

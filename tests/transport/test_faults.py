@@ -1,0 +1,157 @@
+"""The harness-side fault layer (issue 16): what it does to frames we send, what it leaves
+alone (everything received), and the /faults start/end records."""
+
+from __future__ import annotations
+
+import time
+import uuid
+
+import can
+import pytest
+
+from hil.transport.faults import CanMatch, FaultyCanBus, FaultySerial, error_frames
+
+MS = 1_000_000
+
+
+class Sink:
+    def __init__(self) -> None:
+        self.records: list[tuple] = []
+
+    def fault(self, fault, transport, active, fault_id, *, t=None, **detail):
+        self.records.append((fault, transport, active, fault_id, detail))
+
+
+@pytest.fixture
+def pair():
+    ch = f"flt-{uuid.uuid4().hex}"
+    inner = can.Bus(interface="virtual", channel=ch, ignore_config=True)
+    peer = can.Bus(interface="virtual", channel=ch, ignore_config=True)
+    sink = Sink()
+    bus = FaultyCanBus(inner, "can0", sink=sink, seed=1)
+    yield bus, peer, sink
+    bus.shutdown()
+    peer.shutdown()
+
+
+def frame(cid: int, data: bytes = b"\x01\x02") -> can.Message:
+    return can.Message(arbitration_id=cid, data=data, is_extended_id=False)
+
+
+def drain(peer: can.BusABC) -> list[can.Message]:
+    out = []
+    while (m := peer.recv(0.02)) is not None:
+        out.append(m)
+    return out
+
+
+def test_passive_layer_passes_everything_both_ways(pair):
+    bus, peer, sink = pair
+    bus.send(frame(0x601))
+    peer.send(frame(0x585))
+    assert [m.arbitration_id for m in drain(peer)] == [0x601]
+    assert bus.recv(0.1).arbitration_id == 0x585
+    assert sink.records == []
+
+
+def test_drop_by_function_only_matching_frames_and_recorded(pair):
+    bus, peer, sink = pair
+    f = bus.inject("drop", match=CanMatch(functions=("sync",)))
+    bus.send(frame(0x80, b""))
+    bus.send(frame(0x77F, b"\x05"))
+    assert [m.arbitration_id for m in drain(peer)] == [0x77F]
+    bus.faults.stop(f)
+    bus.send(frame(0x80, b""))
+    assert [m.arbitration_id for m in drain(peer)] == [0x80]
+    assert [(r[0], r[1], r[2]) for r in sink.records] == [("drop", "can:can0", True),
+                                                          ("drop", "can:can0", False)]
+    assert sink.records[0][4]["match"] == {"function": ["sync"]}
+
+
+def test_received_frames_are_never_touched(pair):
+    bus, peer, _ = pair
+    bus.inject("drop")  # everything we send
+    peer.send(frame(0x185))
+    assert bus.recv(0.1).arbitration_id == 0x185
+
+
+def test_duration_ends_the_fault_and_records_the_end(pair):
+    bus, peer, sink = pair
+    bus.inject("drop", match=CanMatch(cob_ids=frozenset({0x601})), duration_ns=30 * MS)
+    bus.send(frame(0x601))
+    time.sleep(0.1)
+    bus.send(frame(0x601))
+    assert len(drain(peer)) == 1
+    assert [r[2] for r in sink.records] == [True, False]
+
+
+def test_duplicate_corrupt_and_delay(pair):
+    bus, peer, _ = pair
+    f = bus.inject("duplicate", match=CanMatch(ranges=((0x200, 0x27F),)))
+    bus.send(frame(0x205))
+    assert [m.arbitration_id for m in drain(peer)] == [0x205, 0x205]
+    bus.faults.stop(f)
+    f = bus.inject("corrupt")
+    bus.send(frame(0x205, b"\x00\x00"))
+    bus.send(frame(0x80, b""))  # no data: becomes an error frame
+    got = drain(peer)
+    assert bin(int.from_bytes(got[0].data, "little")).count("1") == 1  # one bit flipped
+    assert got[1].is_error_frame
+    bus.faults.stop(f)
+    bus.inject("delay", delay_ns=50 * MS)
+    t0 = time.monotonic()
+    bus.send(frame(0x205))
+    m = peer.recv(1.0)
+    assert m is not None and time.monotonic() - t0 >= 0.045
+
+
+def test_rate_affects_a_fraction(pair):
+    bus, peer, _ = pair
+    bus.inject("drop", rate=0.5)
+    for _ in range(200):
+        bus.send(frame(0x205))
+    n = len(drain(peer))
+    assert 60 < n < 140
+
+
+def test_burst_is_one_recorded_fault(pair):
+    bus, peer, sink = pair
+    assert bus.burst("bus_error", error_frames(17)) == 17
+    got = drain(peer)
+    assert len(got) == 17 and all(m.is_error_frame for m in got)
+    assert [(r[0], r[2]) for r in sink.records] == [("bus_error", True), ("bus_error", False)]
+
+
+def test_bad_fault_is_refused(pair):
+    bus, _, _ = pair
+    with pytest.raises(ValueError, match="drop, delay"):
+        bus.inject("explode")
+    with pytest.raises(ValueError, match="unknown CANopen function"):
+        CanMatch(functions=("foo",))
+
+
+class Line:
+    def __init__(self) -> None:
+        self.writes: list[bytes] = []
+
+    def write(self, data: bytes, **kw) -> None:
+        self.writes.append(bytes(data))
+
+
+def test_serial_faults():
+    line = Line()
+    s = FaultySerial(line, "rs0", sink=Sink(), seed=1)
+    req = bytes.fromhex("7F0300000002CED5")
+    s.write(req)
+    f = s.inject("crc")
+    s.write(req)
+    s.faults.stop(f)
+    f = s.inject("silence")
+    s.write(req)
+    s.faults.stop(f)
+    f = s.inject("split", gap_ms=1)
+    s.write(req)
+    s.faults.stop(f)
+    f = s.inject("partial")
+    s.write(req)
+    assert line.writes == [req, req[:-1] + bytes([req[-1] ^ 0xFF]), req[:4], req[4:], req[:4]]
