@@ -41,6 +41,7 @@ class RunData:
     params: dict[str, dict[str, Any]] = field(default_factory=dict)  # drive -> values
     truth: dict[str, list[tuple[int, dict]]] = field(default_factory=dict)  # drive -> states
     bus: list[tuple[int, str, dict]] = field(default_factory=list)  # (t, topic, msg)
+    bus_source_t: list[int] = field(default_factory=list)  # publish time of each bus entry
     truncated: bool = False
     t0: int = 0  # the plan start (first plan step event), else the first message: time zero
 
@@ -119,8 +120,11 @@ def load_run(path: str | Path) -> RunData:
             data.params.setdefault(d, {}).update(msg.get("values") or {})
         elif _is_bus(topic) and not topic.startswith("/can/"):
             data.bus.append((lt, topic, msg))
+            data.bus_source_t.append(pt or lt)
     data.t0 = t_plan or t_first or 0
-    data.bus.sort(key=lambda b: b[0])
+    order = sorted(range(len(data.bus)), key=lambda i: data.bus[i][0])
+    data.bus = [data.bus[i] for i in order]
+    data.bus_source_t = [data.bus_source_t[i] for i in order]
     data.steps = [steps[k] for k in sorted(steps)]
     if not data.status:
         bad = [s for s in data.steps if s.status not in ("pass", "skipped")]
@@ -184,7 +188,8 @@ def bus_around(run: RunData, v: dict, before: int = 12, after: int = 12,
     """The bus messages (CANopen, Modbus, DI/DO) around a judged constraint: every message
     between its reference and observed instants (+- `margin_ns`), and at least `before` /
     `after` messages either side. (t, topic, text, inside) with `inside` True for messages
-    within the judged interval itself."""
+    within the judged interval itself, on the checker's clock (the source's publish time,
+    which for model-driven lines precedes the harness's log time)."""
     span = verdict_times(v)
     if span is None or not run.bus:
         return []
@@ -192,4 +197,6 @@ def bus_around(run: RunData, v: dict, before: int = 12, after: int = 12,
     times = [t for t, _topic, _msg in run.bus]
     i = min(bisect_left(times, lo - margin_ns), max(0, bisect_left(times, lo) - before))
     j = max(bisect_right(times, hi + margin_ns), bisect_right(times, hi) + after)
-    return [(t, topic, _brief(msg), lo <= t <= hi) for t, topic, msg in run.bus[i:j][:limit]]
+    src = run.bus_source_t or times
+    return [(t, topic, _brief(msg), lo <= src[k] <= hi)
+            for k, (t, topic, msg) in enumerate(run.bus[i:j][:limit], start=i)]
