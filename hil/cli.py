@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "drive": ("hil.virtual.cli", "run one virtual ASDA-A3 as its own process on given transports"),
     "check": ("hil.timing.cli", "re-check timing specs on a recording, offline"),
     "report": ("hil.report.cli", "render an HTML report from a recording"),
+    "diff": ("hil.report.diff_cli", "compare two recordings of a plan, step by step"),
     "inspect": ("hil.record.cli", "summarise (and repair) an MCAP recording"),
     "export": ("hil.record.export_cli", "export a recording's CAN traffic (candump, python-can)"),
     "gateway": ("hil.gateway.cli", "export a bench's buses over zenoh"),

@@ -81,6 +81,8 @@ def cases(w: dict[str, Path]) -> dict[tuple[str, int], object]:
         ("check", 4): lambda: hil(["check", can_rec, "--spec", "servo_on_brake"]),
         ("report", 0): lambda: hil(["report", rec, "-o", str(d / "r.html")]),
         ("report", 2): lambda: hil(["report", notes]),
+        ("diff", 0): lambda: hil(["diff", rec, rec, "-o", str(d / "diff.html")]),
+        ("diff", 2): lambda: hil(["diff", rec, notes, "-o", str(d / "diff2.html")]),
         ("inspect", 0): lambda: hil(["inspect", rec]),
         ("inspect", 2): lambda: hil(["inspect", notes]),
         ("export", 0): lambda: hil(["export", can_rec, "-o", str(d / "x.blf")]),

@@ -50,6 +50,7 @@ from hil.model.errors import (
 )
 from hil.model.events import (
     AlarmChanged,
+    BrakeChanged,
     DoChanged,
     DriveEvent,
     FdbkChanged,
@@ -503,7 +504,10 @@ class Drive:
         self.axis.set_power(self.servo_on and not cut)
 
     def _on_clamp(self, clamped: bool) -> None:
+        # Brake calls this on every mechanical change: subscribers (the ground truth) see
+        # the instant exactly, not at the next periodic state sample
         self.axis.brake_clamped = clamped
+        self._emit(BrakeChanged(self.sched.now, clamped))
 
     def _fault_reset(self) -> bool:
         """CiA 402 fault reset (6040h bit 7 edge, L18231): True if no servo-off alarm stays."""

@@ -24,6 +24,15 @@ class FdbkChanged:
 
 
 @dataclass(frozen=True, slots=True)
+class BrakeChanged:
+    """The motor's mechanical brake clamped or freed the shaft (`brake_release_ms` /
+    `brake_engage_ms` after BRKR changed, §2.9 L1351-1382)."""
+
+    t: int
+    clamped: bool
+
+
+@dataclass(frozen=True, slots=True)
 class StateChanged:
     """The CiA 402 state changed (names as in CiA 402, e.g. "OPERATION ENABLED")."""
 
@@ -78,5 +87,5 @@ class HomingPhase:
 
 DriveEvent = (
     DoChanged | FdbkChanged | StateChanged | AlarmChanged | ParamChanged | PowerCycled
-    | InputChanged | HomingPhase
+    | InputChanged | HomingPhase | BrakeChanged
 )

@@ -63,4 +63,7 @@ def main(args: argparse.Namespace) -> int:
         return 2
     write_junit([r.recording for r in results], out / "junit.xml")
     print(summary_table(results))
+    from hil.report.index import write_index
+
+    print(f"index: {write_index([r.recording for r in results], out / 'index.html')}")
     return 0 if all(r.passed for r in results) else 1

@@ -1,4 +1,4 @@
-"""`hil report RECORDING.mcap [-o FILE.html] [--junit FILE.xml]`.
+"""`hil report RECORDING.mcap [-o FILE.html] [--junit FILE.xml] [--index FILE.html]`.
 
 Exit 0 written, 2 bad input (usage, unreadable recording) or write error.
 """
@@ -15,6 +15,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", help="HTML file (one recording only; default: "
                         "beside the recording, .html)")
     parser.add_argument("--junit", help="also write JUnit XML of all recordings to this file")
+    parser.add_argument("--index", metavar="FILE", help="also write an index page listing "
+                        "every recording (status, verdicts, duration, links)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -31,6 +33,10 @@ def main(args: argparse.Namespace) -> int:
             print(out)
         if args.junit:
             print(write_junit(args.recording, Path(args.junit)))
+        if args.index:
+            from hil.report.index import write_index
+
+            print(write_index(args.recording, args.index))
     except RecordingError as e:  # not a readable recording: bad input, like every command
         print(f"hil report: {e}", file=sys.stderr)
         return 2

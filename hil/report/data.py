@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,8 +41,30 @@ class RunData:
     params: dict[str, dict[str, Any]] = field(default_factory=dict)  # drive -> values
     truth: dict[str, list[tuple[int, dict]]] = field(default_factory=dict)  # drive -> states
     bus: list[tuple[int, str, dict]] = field(default_factory=list)  # (t, topic, msg)
+    bus_source_t: list[int] = field(default_factory=list)  # publish time of each bus entry
     truncated: bool = False
-    t0: int = 0
+    t0: int = 0  # the plan start (first plan step event), else the first message: time zero
+
+    def step(self, index: object) -> StepData | None:
+        """The step with this index (a verdict's `step`), None if unknown."""
+        return next((s for s in self.steps if s.index == index), None)
+
+    def info(self) -> dict[str, str]:
+        """Where and what ran: run date (UTC), hil version, host, bench, git revision."""
+        return run_info(self.metadata, self.bench)
+
+
+def run_info(meta: dict[str, dict[str, str]], bench: str = "") -> dict[str, str]:
+    """The run's identity from a recording's metadata (`hil.run`, `hil.versions`)."""
+    import datetime
+
+    run, ver = meta.get("hil.run", {}), meta.get("hil.versions", {})
+    date = "?"
+    if str(run.get("started_ns", "")).isdigit():
+        date = datetime.datetime.fromtimestamp(int(run["started_ns"]) / 1e9, datetime.UTC
+                                               ).strftime("%Y-%m-%d %H:%M:%S UTC")
+    return {"date": date, "hil": ver.get("hil", "?"), "host": run.get("host", "?"),
+            "bench": bench or run.get("bench", "?"), "git": ver.get("git_revision", "?")}
 
 
 def _is_bus(topic: str) -> bool:
@@ -66,9 +89,11 @@ def load_run(path: str | Path) -> RunData:
             data.attachments[a.name] = f"<{len(a.data)} bytes>"
     steps: dict[int, StepData] = {}
     t_first: int | None = None
+    t_plan: int | None = None
     for topic, lt, pt, msg in rec.messages():
         t_first = lt if t_first is None else min(t_first, lt)
         if topic == T.PLAN_STEPS:
+            t_plan = lt if t_plan is None else min(t_plan, lt)
             idx = int(msg.get("index") if msg.get("index") is not None else -1)
             sd = steps.setdefault(idx, StepData(idx, str(msg.get("step", ""))))
             sd.kind = msg.get("kind", sd.kind) or sd.kind
@@ -95,7 +120,11 @@ def load_run(path: str | Path) -> RunData:
             data.params.setdefault(d, {}).update(msg.get("values") or {})
         elif _is_bus(topic) and not topic.startswith("/can/"):
             data.bus.append((lt, topic, msg))
-    data.t0 = t_first or 0
+            data.bus_source_t.append(pt or lt)
+    data.t0 = t_plan or t_first or 0
+    order = sorted(range(len(data.bus)), key=lambda i: data.bus[i][0])
+    data.bus = [data.bus[i] for i in order]
+    data.bus_source_t = [data.bus_source_t[i] for i in order]
     data.steps = [steps[k] for k in sorted(steps)]
     if not data.status:
         bad = [s for s in data.steps if s.status not in ("pass", "skipped")]
@@ -146,3 +175,28 @@ def bus_log(run: RunData, step: StepData, limit: int = 200) -> list[tuple[int, s
             if len(out) >= limit:
                 break
     return out
+
+
+def verdict_times(v: dict) -> tuple[int, int] | None:
+    """(first, last) instant a verdict looked at: its reference and observed edges."""
+    ts = [int(v[k]) for k in ("from_ns", "to_ns", "t_ns") if isinstance(v.get(k), int)]
+    return (min(ts), max(ts)) if ts else None
+
+
+def bus_around(run: RunData, v: dict, before: int = 12, after: int = 12,
+               margin_ns: int = 20_000_000, limit: int = 300) -> list[tuple[int, str, str, bool]]:
+    """The bus messages (CANopen, Modbus, DI/DO) around a judged constraint: every message
+    between its reference and observed instants (+- `margin_ns`), and at least `before` /
+    `after` messages either side. (t, topic, text, inside) with `inside` True for messages
+    within the judged interval itself, on the checker's clock (the source's publish time,
+    which for model-driven lines precedes the harness's log time)."""
+    span = verdict_times(v)
+    if span is None or not run.bus:
+        return []
+    lo, hi = span
+    times = [t for t, _topic, _msg in run.bus]
+    i = min(bisect_left(times, lo - margin_ns), max(0, bisect_left(times, lo) - before))
+    j = max(bisect_right(times, hi + margin_ns), bisect_right(times, hi) + after)
+    src = run.bus_source_t or times
+    return [(t, topic, _brief(msg), lo <= src[k] <= hi)
+            for k, (t, topic, msg) in enumerate(run.bus[i:j][:limit], start=i)]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-from hil.report.data import RunData, bus_log, load_run
+from hil.report.data import RunData, bus_around, bus_log, load_run
 
 CSS = """
 body{font:14px/1.4 system-ui,sans-serif;margin:1.5em;color:#222;max-width:1200px}
@@ -26,7 +26,8 @@ pre{background:#f7f7f7;padding:8px;overflow:auto;font-size:12px}
 .b-pass{background:#176f2c}.b-fail,.b-error,.b-aborted{background:#b00020}
 .b-inconclusive{background:#a06000}.b-unknown{background:#777}
 svg{background:#fff;border:1px solid #ddd}
-.diagram{overflow-x:auto}figure{margin:0.8em 0}figcaption{font-weight:600;margin:0.3em 0}
+.diagram{overflow-x:auto}.runinfo td{border:none;padding:1px 12px 1px 0}
+pre b{background:#fde2e4}figure{margin:0.8em 0}figcaption{font-weight:600;margin:0.3em 0}
 """
 E = html.escape
 
@@ -127,7 +128,7 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
             chosen = [v for v in verdicts if v.occurrence == occ]
             try:
                 pic = svg(spec, source, chosen, params=params, binding=binding,
-                          occurrence=None, width=1100)
+                          occurrence=None, width=1100, t0=run.t0)
             except Exception as e:
                 pic = f"<p>Diagram not drawn: {E(type(e).__name__)}: {E(str(e))}</p>"
             out.append((f"{label}, occurrence {occ + 1}", pic))
@@ -157,8 +158,9 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
     t0 = min(p[0][0] for _, p in series)
     t1 = max(p[-1][0] for _, p in series)
     span = max(t1 - t0, 1)
+    zero = run.t0 or t0  # axis labels: ms from the plan start
     W, PH, pad = 900, 110, 50
-    out = [f'<svg width="{W}" height="{PH * len(series) + 20}" xmlns="http://www.w3.org/2000/svg">']
+    out = [f'<svg width="{W}" height="{PH * len(series) + 34}" xmlns="http://www.w3.org/2000/svg">']
     for i, (label, pts) in enumerate(series):
         y0 = i * PH + 10
         lo = min(v for _, v in pts)
@@ -174,10 +176,28 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
                    'fill="none" stroke="#ddd"/>'
                    f'<polyline points="{coords}" fill="none" stroke="#1f5fbf" '
                    'stroke-width="1.2"/>')
-    out.append(f'<text x="{pad}" y="{PH * len(series) + 14}" font-size="10">0 s</text>'
-               f'<text x="{W - 60}" y="{PH * len(series) + 14}" font-size="10">'
-               f'{span / 1e9:.2f} s</text></svg>')
+    for i in range(6):
+        t = t0 + span * i / 5
+        out.append(f'<text x="{pad + (W - pad - 10) * i / 5:.1f}" y="{PH * len(series) + 14}" '
+                   f'font-size="10" text-anchor="middle">{(t - zero) / 1e6:.0f}</text>')
+    out.append(f'<text x="{W - 10}" y="{PH * len(series) + 28}" font-size="10" '
+               'text-anchor="end">ms from the plan start</text></svg>')
     return "".join(out)
+
+
+def run_info_table(info: dict[str, str]) -> str:
+    """Run date, hil version, host, bench and git revision as a small table."""
+    return ("<table class='runinfo' style='width:auto'><tr>" + "".join(
+        f"<td><small>{E(k)}</small><br><b>{E(info.get(k, '?'))}</b></td>"
+        for k in ("date", "hil", "host", "bench", "git")) + "</tr></table>")
+
+
+def _step_name(run: RunData, index: object) -> str:
+    """`3: wait_until DO BRKR on` for a verdict's step index."""
+    st = run.step(index)
+    if st is None:
+        return "–" if index is None else E(str(index))
+    return f"<a href='#step-{st.index + 1}'>{st.index + 1}</a>: {E(st.label)}"
 
 
 def render_html(run: RunData) -> str:
@@ -186,24 +206,28 @@ def render_html(run: RunData) -> str:
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
         f"<title>hil report: {E(run.plan)}</title><style>{CSS}</style></head><body>",
         f"<h1>{E(run.plan)} <span class='badge b-{E(st)}'>{E(st.upper())}</span></h1>",
-        f"<p>Bench <b>{E(run.bench)}</b> · recording <code>{E(run.path)}</code>"
-        + (" · <b>recording truncated (killed run)</b>" if run.truncated else "") + "</p>",
+        run_info_table(run.info()),
+        f"<p>Recording <code>{E(run.path)}</code>"
+        + (" · <b>recording truncated (killed run)</b>" if run.truncated else "")
+        + " · times are ms from the plan start</p>",
         "<h2>Steps</h2><table><tr><th>#</th><th>step</th><th>line</th><th>status</th>"
-        "<th>time</th><th>message</th></tr>",
+        "<th>start</th><th>time</th><th>message</th></tr>",
     ]
     for s in run.steps:
         n = s.index + 1 if s.index >= 0 else "-"
-        h.append(f"<tr><td>{n}</td><td>{E(s.label)}</td><td>{s.line or ''}</td>"
-                 f"<td>{_status(s.status)}</td><td>{s.duration_ns / 1e6:.1f} ms</td>"
-                 f"<td>{E(s.message)}</td></tr>")
+        start = f"{(s.t_start - run.t0) / 1e6:.1f} ms" if s.t_start is not None else ""
+        h.append(f"<tr id='step-{n}'><td>{n}</td><td>{E(s.label)}</td><td>{s.line or ''}</td>"
+                 f"<td>{_status(s.status)}</td><td>{start}</td>"
+                 f"<td>{s.duration_ns / 1e6:.1f} ms</td><td>{E(s.message)}</td></tr>")
     h.append("</table>")
     h.append("<h2>Timing verdicts: expected vs observed</h2>")
     if run.verdicts:
-        h.append("<table><tr><th>spec</th><th>constraint</th><th>status</th><th>measured</th>"
-                 "<th>window</th><th>diagram</th><th>message</th></tr>")
+        h.append("<table><tr><th>step</th><th>spec</th><th>constraint</th><th>status</th>"
+                 "<th>measured</th><th>window</th><th>diagram</th><th>message</th></tr>")
         for v in run.verdicts:
             win = v.get("window_expr") or v.get("window_ms")
-            h.append(f"<tr><td>{E(str(v.get('spec', '')))}</td>"
+            h.append(f"<tr><td>{_step_name(run, v.get('step'))}</td>"
+                     f"<td>{E(str(v.get('spec', '')))}</td>"
                      f"<td>{E(str(v.get('constraint', '')))}<br><small>"
                      f"{E(str(v.get('source', '')))}</small></td>"
                      f"<td>{_status(str(v.get('status', '')))}</td>"
@@ -234,7 +258,26 @@ def render_html(run: RunData) -> str:
         h.append("</table>")
     else:
         h.append("<p>No safe-state actions recorded.</p>")
-    failing = [s for s in run.steps if s.status not in ("pass", "skipped")]
+    bad = [v for v in run.verdicts if v.get("status") in ("fail", "inconclusive")]
+    if bad:
+        h.append("<h2>Bus log around failing checks</h2>"
+                 "<p>Frames between the reference and the observed instant of each failing "
+                 "constraint (highlighted), with the frames just before and after.</p>")
+        for v in bad:
+            rows = bus_around(run, v)
+            h.append(f"<h3>{_step_name(run, v.get('step'))}: {E(str(v.get('spec', '')))}: "
+                     f"{E(str(v.get('constraint', '')))} {_status(str(v.get('status')))}</h3>")
+            if not rows:
+                h.append("<p>No bus traffic recorded around this check.</p>")
+                continue
+            h.append("<pre>" + "\n".join(
+                (f"<b>{line}</b>" if inside else line)
+                for t, topic, text, inside in rows
+                for line in [f"{(t - run.t0) / 1e6:10.3f} ms  {E(topic):<28} {E(text)}"])
+                + "</pre>")
+    shown = {v.get("step") for v in bad}  # checks have their frames above
+    failing = [s for s in run.steps if s.status not in ("pass", "skipped")
+               and s.index not in shown]
     if failing:
         h.append("<h2>Bus log of failing steps</h2>")
         for s in failing:

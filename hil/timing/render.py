@@ -126,10 +126,14 @@ def wavejson(spec: Spec, source: SignalSource, verdicts: list[Verdict],
 def svg(spec: Spec, source: SignalSource, verdicts: list[Verdict],
         params: Mapping[str, Any] | None = None, binding: Mapping[str, str] | None = None,
         t_range: tuple[int, int] | None = None, occurrence: int | None = 0,
-        width: int = 960) -> str:
-    """A self-contained SVG timing diagram (observed steps + expected window bands)."""
+        width: int = 960, t0: int | None = None) -> str:
+    """A self-contained SVG timing diagram (observed steps + expected window bands).
+
+    The time axis reads in ms from `t0` (a report passes the plan start), else from the
+    start of the drawn range."""
     ctx = context(spec, source, params, binding)
     lo, hi = t_range or _range(verdicts, ctx, occurrence)
+    origin = lo if t0 is None else t0
     names = _lanes(ctx)
     left, right, top, lane_h = 150, 20, 40, 34
     plot_w = width - left - right
@@ -153,9 +157,10 @@ def svg(spec: Spec, source: SignalSource, verdicts: list[Verdict],
         out.append(f'<line x1="{x(t):.1f}" y1="{top}" x2="{x(t):.1f}" y2="{axis_y}" '
                    'stroke="#eee"/>')
         out.append(f'<text x="{x(t):.1f}" y="{axis_y + 14}" text-anchor="middle">'
-                   f'{(t - lo) / MS:.1f}</text>')
-    out.append(f'<text x="{left + plot_w}" y="{axis_y + 26}" text-anchor="end">ms from '
-               f't = {lo / MS:.3f} ms</text>')
+                   f'{(t - origin) / MS:.1f}</text>')
+    foot = ("ms from the plan start" if t0 is not None
+            else f"ms from t = {lo / MS:.3f} ms")
+    out.append(f'<text x="{left + plot_w}" y="{axis_y + 26}" text-anchor="end">{foot}</text>')
     row = {n: i for i, n in enumerate(names)}
     # expected windows as bands
     shown = [v for v in verdicts if occurrence is None or v.occurrence == occurrence]

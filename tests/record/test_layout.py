@@ -1,13 +1,22 @@
-"""The Foxglove layout fixture references panels and topics that exist."""
+"""The Foxglove layout points at what recordings really hold: every panel path resolves in a
+real recording of the virtual bench (topic recorded, field present in its messages), and the
+DI/DO panel shows the bench's wired lines under their function names."""
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
-from hil.record import topics
+import pytest
+
+from hil.plan.bench import load_bench
+from hil.plan.plan import find_plans, load_plan
+from hil.plan.runner import run_plans
+from hil.record.reader import Recording
 
 LAYOUT = Path(__file__).resolve().parents[2] / "fixtures" / "foxglove" / "hil-drive-layout.json"
+PANELS = {"Plot", "StateTransitions", "RawMessages", "RosOut", "Table"}
 
 
 def _leaves(node):
@@ -18,44 +27,80 @@ def _leaves(node):
         yield from _leaves(node["second"])
 
 
-def test_layout_is_consistent_with_topic_names():
+def _paths(doc: dict) -> list[tuple[str, str]]:
+    """(panel id, message path or topic) of every panel."""
+    out = []
+    for panel_id, cfg in doc["configById"].items():
+        out += [(panel_id, p["value"]) for p in cfg.get("paths", [])]
+        out += [(panel_id, cfg[k]) for k in ("topicPath", "topicToRender") if k in cfg]
+    return out
+
+
+def resolve(path: str, rec: Recording) -> str | None:
+    """Why `path` (Foxglove message path `/topic.a.b`) does not resolve in `rec`, or None.
+
+    Topics contain slashes and no dots, so the topic is everything before the first dot."""
+    topic, _, field = path.partition(".")
+    if topic not in rec.topics():
+        return f"{path}: topic {topic} not in the recording"
+    if not field:
+        return None
+    for _t, _lt, _pt, msg in rec.messages(topic):
+        cur = msg
+        for part in field.split("."):
+            if not isinstance(cur, dict) or part not in cur:
+                break
+            cur = cur[part]
+        else:
+            return None
+    return f"{path}: no message of {topic} has field {field}"
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Recording:
+    out = tmp_path_factory.mktemp("layout")
+    [r] = run_plans([load_plan(p) for p in find_plans(["servo_on_off_brake"])], load_bench(),
+                    out, stream=io.StringIO(), allow_inconclusive=True)
+    return Recording.open(r.recording)
+
+
+def test_layout_tree_and_panels():
     doc = json.loads(LAYOUT.read_text())
     assert set(_leaves(doc["layout"])) == set(doc["configById"])
-    known = {
-        topics.drive_state("drive1"),
-        topics.can_raw("can0"),
-        topics.canopen_sdo("can0"),
-        topics.LOG,
-        topics.TIMING_VERDICTS,
-    }
-    known |= {
-        topics.dio("drive1", line)
-        for line in [
-            "DI1",
-            "DI2",
-            "DI3",
-            "DI4",
-            "DO1",
-            "DO2",
-            "DO3",
-            "DO4",
-            "STO_A",
-            "STO_B",
-            "FDBK",
-        ]
-    }
-    used = set()
-    for panel_id, cfg in doc["configById"].items():
-        for p in cfg.get("paths", []):
-            used.add(p["value"].split(".")[0])
-        for key in ("topicPath", "topicToRender"):
-            if key in cfg:
-                used.add(cfg[key])
-        assert panel_id.split("!")[0] in {
-            "Plot",
-            "StateTransitions",
-            "RawMessages",
-            "RosOut",
-            "Table",
-        }
-    assert used <= known, used - known
+    assert {pid.split("!")[0] for pid in doc["configById"]} <= PANELS
+
+
+@pytest.mark.integration
+def test_every_layout_path_resolves_in_a_real_recording(recording: Recording):
+    doc = json.loads(LAYOUT.read_text())
+    paths = _paths(doc)
+    assert len(paths) > 20
+    problems = [why for _pid, p in paths if (why := resolve(p, recording))]
+    assert not problems, "\n".join(problems)
+    # the motion plots: the fields the recorder writes (hil.record.schemas DriveState)
+    plotted = {p for pid, p in paths if pid.startswith("Plot!")}
+    assert plotted == {f"/drive/drive1/state.{f}"
+                       for f in ("position_puu", "speed_rpm", "torque_pct")}
+    brake = {p for pid, p in paths if pid == "StateTransitions!brake"}
+    assert "/drive/drive1/state.brkr" in brake
+
+
+def test_resolve_rejects_a_stale_path(recording: Recording):
+    """The check can fail: the layout's old field names are not in a recording."""
+    assert resolve("/drive/drive1/state.position", recording)
+    assert resolve("/dio/drive1/DO9.level", recording)
+    assert resolve("/drive/drive1/state.brkr", recording) is None
+
+
+def test_dio_panel_shows_the_bench_wiring():
+    """Every wired DI/DO of the virtual bench (fixtures/benches/virtual.yaml) is in the DI/DO
+    panel under its line and function, and nothing else is (plus STO_A/B and FDBK)."""
+    bench = load_bench()
+    spec = bench.drives["drive1"]
+    wired = {w.line: f for f, w in (spec.di | spec.do).items()}
+    doc = json.loads(LAYOUT.read_text())
+    shown = {p["value"].split("/")[3].split(".")[0]: p["label"]
+             for p in doc["configById"]["StateTransitions!dio"]["paths"]}
+    assert set(shown) == set(wired) | {"STO_A", "STO_B", "FDBK"}
+    for line, func in wired.items():
+        assert shown[line] == f"{line} {func}"

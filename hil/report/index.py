@@ -1,0 +1,116 @@
+"""One `index.html` per run: every plan with its status, verdict counts, duration and links to
+its report, recording and JUnit file (in the spirit of Robot Framework's log.html).
+
+Read from the recordings alone, like every report: `write_index(recordings, out)`. Links are
+relative to the index, so the directory can be archived or served as it is.
+"""
+
+from __future__ import annotations
+
+import html
+import os
+from collections import Counter
+from pathlib import Path
+
+from hil.report.data import load_run
+from hil.report.html import CSS, run_info_table
+
+E = html.escape
+INDEX_CSS = """
+.bar{height:10px;border-radius:5px;background:#b00020;margin:0.5em 0 1em}
+.bar>div{height:10px;border-radius:5px;background:#176f2c}
+td.num{text-align:right;font-variant-numeric:tabular-nums}
+"""
+
+
+def _row(rec: Path, out_dir: Path) -> dict:
+    """What the index shows of one recording (a row that says so if it is unreadable)."""
+    from hil.record.reader import RecordingError
+
+    row: dict = {"recording": rec, "plan": rec.stem, "status": "unreadable", "info": {},
+                 "steps": (0, 0), "verdicts": Counter(), "duration_ms": None, "reason": ""}
+    try:
+        run = load_run(rec)
+    except (RecordingError, OSError) as e:
+        row["reason"] = str(e)
+        return row
+    res = run.metadata.get("hil.result", {})
+    row.update(plan=run.plan, status=run.status or "unknown", info=run.info(),
+               steps=(sum(s.status == "pass" for s in run.steps if s.index >= 0),
+                      sum(s.index >= 0 for s in run.steps)),
+               verdicts=Counter(str(v.get("status")) for v in run.verdicts),
+               reason=res.get("reason", "") if run.status != "pass" else "",
+               description=run.metadata.get("hil.plan", {}).get("description", ""))
+    try:
+        row["duration_ms"] = float(res["duration_ms"])
+    except (KeyError, ValueError):
+        ends = [s.t_end for s in run.steps if s.t_end is not None]
+        row["duration_ms"] = (max(ends) - run.t0) / 1e6 if ends else None
+    return row
+
+
+def _link(target: Path, out_dir: Path, text: str) -> str:
+    if not target.exists():
+        return ""
+    href = Path(os.path.relpath(target.resolve(), out_dir.resolve())).as_posix()
+    return f"<a href='{E(href)}'>{E(text)}</a>"
+
+
+def _merged_info(rows: list[dict]) -> dict[str, str]:
+    """The run's identity; a field that differs between plans lists every value."""
+    out = {}
+    for k in ("date", "hil", "host", "bench", "git"):
+        vals = sorted({r["info"].get(k, "?") for r in rows if r["info"]})
+        if k == "date" and vals:
+            vals = [vals[0]]  # the run started with its first plan
+        out[k] = ", ".join(vals) or "?"
+    return out
+
+
+def render_index(recordings: list[str | Path], out: str | Path) -> str:
+    out_dir = Path(out).parent
+    rows = [_row(Path(r), out_dir) for r in recordings]
+    passed = sum(r["status"] == "pass" for r in rows)
+    total_ms = sum(r["duration_ms"] or 0 for r in rows)
+    st = "pass" if rows and passed == len(rows) else "fail"
+    h = ["<!DOCTYPE html><html><head><meta charset='utf-8'>",
+         f"<title>hil run: {passed}/{len(rows)} plans passed</title>"
+         f"<style>{CSS}{INDEX_CSS}</style></head><body>",
+         f"<h1>hil run <span class='badge b-{st}'>{passed}/{len(rows)} PASSED</span></h1>",
+         run_info_table(_merged_info(rows)),
+         f"<div class='bar' title='{passed} of {len(rows)} plans passed'><div style='width:"
+         f"{100 * passed / max(len(rows), 1):.1f}%'></div></div>",
+         "<table id='plans'><tr><th>plan</th><th>status</th><th>steps passed</th>"
+         "<th>verdicts pass / fail / inconclusive</th><th>duration</th><th>files</th></tr>"]
+    for r in rows:
+        rec = r["recording"]
+        vc = r["verdicts"]
+        dur = f"{r['duration_ms'] / 1000:.2f} s" if r["duration_ms"] is not None else "–"
+        links = " · ".join(x for x in (
+            _link(rec.with_suffix(".html"), out_dir, "report"),
+            _link(rec, out_dir, "recording"),
+            _link(rec.with_suffix(".junit.xml"), out_dir, "junit")) if x)
+        title = _link(rec.with_suffix(".html"), out_dir, r["plan"]) or E(r["plan"])
+        note = f"<br><small>{E(r.get('description') or '')}</small>"
+        if r["reason"]:
+            note += f"<br><small class='fail'>{E(r['reason'])}</small>"
+        h.append(f"<tr class='plan'><td>{title}{note}</td>"
+                 f"<td class='{E(r['status'])}'>{E(r['status'].upper())}</td>"
+                 f"<td class='num'>{r['steps'][0]}/{r['steps'][1]}</td>"
+                 f"<td class='num'>{vc['pass']} / {vc['fail']} / {vc['inconclusive']}</td>"
+                 f"<td class='num'>{dur}</td><td>{links}</td></tr>")
+    h.append(f"<tr><th>total</th><th>{passed}/{len(rows)}</th><th></th><th>"
+             f"{sum(r['verdicts']['pass'] for r in rows)} / "
+             f"{sum(r['verdicts']['fail'] for r in rows)} / "
+             f"{sum(r['verdicts']['inconclusive'] for r in rows)}</th>"
+             f"<th>{total_ms / 1000:.2f} s</th><th>"
+             + _link(out_dir / "junit.xml", out_dir, "junit.xml (all plans)") + "</th></tr>")
+    h.append("</table></body></html>\n")
+    return "\n".join(h)
+
+
+def write_index(recordings: list[str | Path], out: str | Path) -> Path:
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(render_index(recordings, out), encoding="utf-8")
+    return out
