@@ -23,6 +23,7 @@ def _drive(*args: str) -> subprocess.CompletedProcess:
     ("P1.042: fast\n", "word.yaml", "word.yaml:1: P1.042: 'fast' is not an integer"),
     ("- P1.042\n", "list.yaml", "expected a mapping"),
     ("{nope", "bad.json", "bad.json: not JSON"),
+    ("P1.042: -5\n", "range.yaml", "P1.042"),
 ])
 def test_drive_params_file_errors_name_the_file(tmp_path, content, name, needle):
     path = tmp_path / name

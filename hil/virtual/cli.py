@@ -14,6 +14,7 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
+from hil.model.errors import ModelError
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
 from hil.plan.bench import load_bench
@@ -190,6 +191,9 @@ def main(args: argparse.Namespace) -> int:
         signal.signal(sig, lambda *_: stop.set())
     try:
         stack = VirtualDriveStack(spec).start()
+    except ModelError as exc:  # a --params / bench value the drive refuses: bad input
+        print(f"hil drive: {exc}", file=sys.stderr)
+        return 2
     except Exception as exc:  # transport errors name the URL
         print(f"hil drive: {exc}", file=sys.stderr)
         return 1
