@@ -424,8 +424,12 @@ class SubprocessWorld:
                             "--station", str(spec.station)]
                 if spec.dio:
                     cmd += ["--dio", self.urls[f"dio:{name}"]]
+                # Its own session: a terminal's Ctrl-C reaches the runner only, which drives
+                # the bench safe through this process before stopping it; if the runner dies,
+                # EOF on the control channel stops it.
                 p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, bufsize=1)
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1,
+                                     start_new_session=True)
                 self.procs[name] = p
                 self._wait_ready(name, p, ready)
         except BaseException:
