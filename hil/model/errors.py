@@ -2,23 +2,10 @@
 
 from __future__ import annotations
 
+# The refusals the A3 tables themselves express live with the tables (hil/profile/errors.py).
+from hil.profile.errors import ModelError, ParamError, UnknownFunction, UnknownParameter
 
-class ModelError(Exception):
-    """Base class: a request the virtual drive refuses, with the rule that refuses it."""
-
-
-class ParamError(ModelError):
-    """A parameter access refused like the drive refuses it (names the parameter and rule)."""
-
-    rule = "invalid"
-
-    def __init__(self, param: str, message: str) -> None:
-        super().__init__(f"{param}: {message}")
-        self.param = param
-
-
-class UnknownParameter(ParamError):
-    rule = "unknown parameter"
+__all__ = ["ModelError", "ParamError", "UnknownFunction", "UnknownParameter"]
 
 
 class OutOfRange(ParamError):
@@ -42,16 +29,6 @@ class ServoOnLocked(ParamError):
 
 class ProtectedParameter(ParamError):
     rule = "protected (needs a key, e.g. P2.008 = 271)"
-
-
-class UnknownFunction(ModelError):
-    """A DI/DO function code that table 8.1 / 8.2 does not define."""
-
-    def __init__(self, kind: str, code: int, where: str = "") -> None:
-        at = f" in {where}" if where else ""
-        super().__init__(f"unknown {kind} function code 0x{code:02X}{at}")
-        self.kind = kind
-        self.code = code
 
 
 class ObjectError(ModelError):

@@ -11,10 +11,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from hil.model.dio import DI_SYMBOLS, DO_SYMBOLS, inert_mapping
+from hil.model.dio import inert_mapping
 from hil.plan.pr_steps import PARSERS as PR_PARSERS
 from hil.plan.pr_steps import describe as pr_describe
 from hil.plan.yamlio import Checker, LDict, LList, join, level, parse_duration
+from hil.profile.dio import DI_SYMBOLS, DO_SYMBOLS
 
 STATES = ("SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED",
           "QUICK STOP ACTIVE", "FAULT")
