@@ -293,7 +293,7 @@ class CanopenSlave:
         if self.state == "STOPPED":
             self._on_heartbeat_in(cid, data, now, msg.is_remote_frame)
             return  # STOPPED: NMT and error control only (L17089-L17095)
-        if cid == self._values.get((0x1200, 1), P.SDO_RX + nid) & 0x7FF:
+        if cid == self._values.get((0x1200, 1), P.SDO_REQUEST + nid) & 0x7FF:
             if not msg.is_remote_frame:
                 self._on_sdo(data, now)
             return
@@ -523,7 +523,7 @@ class CanopenSlave:
 
     # ------------------------------------------------------------------ SDO
     def _sdo_send(self, data: bytes) -> None:
-        self._send(self._values.get((0x1200, 2), P.SDO_TX + self.node_id) & 0x7FF, data)
+        self._send(self._values.get((0x1200, 2), P.SDO_RESPONSE + self.node_id) & 0x7FF, data)
 
     def _sdo_abort(self, index: int, sub: int, code: int) -> None:
         self.stats["sdo_aborts"] += 1

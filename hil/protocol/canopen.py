@@ -14,8 +14,12 @@ SYNC = 0x080
 EMCY = 0x080
 TPDO_BASE = (0x180, 0x280, 0x380, 0x480)
 RPDO_BASE = (0x200, 0x300, 0x400, 0x500)
-SDO_TX = 0x580  # server -> client
-SDO_RX = 0x600  # client -> server
+# SDO COB-ID bases, named from the client's side: the client sends its REQUEST on 0x600+node,
+# the server answers with its RESPONSE on 0x580+node. (CiA 301 and canopen call these from
+# the server's side: "SDO rx" = 0x600, "SDO tx" = 0x580; recorded `kind`s keep that:
+# "sdo_rx" = request, "sdo_tx" = response.)
+SDO_REQUEST = 0x600  # client -> server
+SDO_RESPONSE = 0x580  # server -> client
 HEARTBEAT = 0x700
 
 # NMT command specifiers (CiA 301; the manual's figure is missing, a3-comms §2.4).
@@ -138,9 +142,9 @@ def classify(can_id: int) -> tuple[str, int | None]:
     for i, base in enumerate(RPDO_BASE):
         if fc == base:
             return f"rpdo{i + 1}", node
-    if fc == SDO_TX:
+    if fc == SDO_RESPONSE:
         return "sdo_tx", node
-    if fc == SDO_RX:
+    if fc == SDO_REQUEST:
         return "sdo_rx", node
     if fc == HEARTBEAT:
         return "heartbeat", node
