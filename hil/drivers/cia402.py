@@ -19,7 +19,7 @@ import canopen
 from canopen.profiles.p402 import State402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from hil.faces.eds import EDS_PATH
+from hil.profile.od import EDS_PATH
 from hil.protocol.canopen import abort_text
 from hil.protocol.cia402 import (
     CW_DISABLE_VOLTAGE,

@@ -22,11 +22,11 @@ from typing import Any
 
 import can
 
-from hil.faces.canopen_od import Entry, ObjectDictionary
 from hil.faces.last_resort import LastResort
 from hil.model import errors as E
 from hil.model.errors import ObjectError
 from hil.model.events import AlarmChanged, PowerCycled
+from hil.profile.od import Entry, ObjectDictionary
 from hil.protocol import canopen as P
 
 log = logging.getLogger(__name__)

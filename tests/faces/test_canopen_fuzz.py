@@ -25,9 +25,9 @@ import time
 import can
 import pytest
 
-from hil.faces.canopen_od import Entry, ObjectDictionary
 from hil.faces.canopen_slave import CanopenSlave
 from hil.model.drive import Drive
+from hil.profile.od import Entry, ObjectDictionary
 from hil.protocol import canopen as P
 
 NODE = 5
