@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "faces"))
 from fake_drive import FakeDrive
 
 from hil.faces.canopen_slave import CanopenSlave
-from hil.faces.eds import EDS_PATH
+from hil.profile.od import EDS_PATH
 
 canopen.Network.NOTIFIER_CYCLE = 0.05
 NODE = 5

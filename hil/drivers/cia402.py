@@ -17,10 +17,21 @@ from pathlib import Path
 from typing import Any
 
 import canopen
+from canopen.profiles.p402 import State402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from hil.faces.eds import EDS_PATH
+from hil.profile.od import EDS_PATH
 from hil.protocol.canopen import abort_text
+from hil.protocol.cia402 import (
+    CW_DISABLE_VOLTAGE,
+    CW_ENABLE_OPERATION,
+    CW_FAULT_RESET,
+    CW_QUICK_STOP,
+    CW_SHUTDOWN,
+    CW_SWITCH_ON,
+    MODE_NAMES,
+    MODES,
+)
 
 DEFAULT_TIMEOUTS: dict[str, float] = {
     "sdo": 0.5,  # one SDO round trip (canopen's client timeout)
@@ -33,26 +44,8 @@ DEFAULT_TIMEOUTS: dict[str, float] = {
     "poll": 0.002,  # statusword poll period (not a timeout)
 }
 
-MODES = {"PP": 1, "PV": 3, "PT": 4, "HM": 6, "IP": 7}  # 6060h (L18375-L18381)
-MODE_NAMES = {v: k for k, v in MODES.items()}
-
-# (mask, value) per state (L18321-L18331).
-STATES: dict[str, tuple[int, int]] = {
-    "NOT READY TO SWITCH ON": (0x4F, 0x00),
-    "SWITCH ON DISABLED": (0x4F, 0x40),
-    "READY TO SWITCH ON": (0x6F, 0x21),
-    "SWITCHED ON": (0x6F, 0x23),
-    "OPERATION ENABLED": (0x6F, 0x27),
-    "QUICK STOP ACTIVE": (0x6F, 0x07),
-    "FAULT REACTION ACTIVE": (0x4F, 0x0F),
-    "FAULT": (0x4F, 0x08),
-}
-CW_SHUTDOWN = 0x06
-CW_SWITCH_ON = 0x07
-CW_ENABLE_OPERATION = 0x0F
-CW_DISABLE_VOLTAGE = 0x00
-CW_QUICK_STOP = 0x02
-CW_FAULT_RESET = 0x80
+# (mask, value) per state: canopen's table, the same as the manual's (L18321-L18331).
+STATES: dict[str, tuple[int, int]] = State402.SW_MASK
 SW_TARGET_REACHED = 1 << 10
 SW_BIT12 = 1 << 12  # PP set-point acknowledge / HM homing attained (L18335-L18338)
 SW_BIT13 = 1 << 13  # PP following error / HM homing error

@@ -11,9 +11,9 @@ client polls with a >= 1 ms sleep (feasibility §4: p50 2.4 ms on a pty), gives 
 the inter-frame silence the A3 asks for (10 ms, L15703) and hides the raw frames the
 recorder wants.
 
-Parameter size and signedness come from `hil.model.params.ParamTable`
-(fixtures/drive/a3_parameters.csv), loaded on first use. 32-bit values go low word first
-(L7156; example 3, L15781: P1.009 = 3000 as 0BB8h, 0000h).
+Parameter size and signedness come from `hil.profile.params.ParamTable`
+(fixtures/drive/a3_parameters.csv), loaded on first use; a name not in it is an error.
+32-bit values go low word first (L7156; example 3, L15781: P1.009 = 3000 as 0BB8h, 0000h).
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from hil.profile.errors import UnknownParameter
+from hil.profile.params import ParamTable
 from hil.protocol import modbus as mb
 
 _NAME_RE = re.compile(r"^\s*P([0-7M])[.\-](\d{1,3})\s*$", re.IGNORECASE)
@@ -61,6 +63,10 @@ class ModbusTimeoutError(ModbusError, TimeoutError):
         )
         self.sent = sent
         self.received = received
+
+
+class UnknownParameterError(ModbusError):
+    """A parameter name the A3 table does not list (its width and sign are unknown)."""
 
 
 class ModbusReplyError(ModbusError):
@@ -295,20 +301,18 @@ class DeltaModbus:
     # ------------------------------------------------------------------ parameters
 
     def param(self, name: str) -> ParamInfo:
-        """Address, size and signedness of a parameter (ParamTable when available)."""
+        """Address, size and signedness of a parameter (`param_info`, else the A3 table)."""
         if self._param_info is not None:
             return self._param_info(name)
         if self._table is None:
-            try:
-                from hil.model.params import ParamTable
-
-                self._table = ParamTable.load()
-            except Exception:  # table not available: address formula, 16-bit unsigned
-                self._table = False
-        if self._table:
+            self._table = ParamTable.load()  # no fallback: a wrong width would corrupt values
+        try:
             spec = self._table.spec(name)
-            return ParamInfo(spec.param, spec.modbus_address, spec.size, spec.signed)
-        return ParamInfo(name, param_address(name))
+        except UnknownParameter as exc:
+            raise UnknownParameterError(
+                f"{exc} (fixtures/drive/a3_parameters.csv); pass param_info= for others"
+            ) from exc
+        return ParamInfo(spec.param, spec.modbus_address, spec.size, spec.signed)
 
     def read_param(self, name: str) -> int:
         """Read a parameter by name: 32-bit ones as two words, low word first (L7156)."""

@@ -23,12 +23,12 @@ from typing import Any
 
 import can
 
-from hil.faces.canopen_od import Entry, ObjectDictionary
 from hil.faces.last_resort import LastResort
 from hil.model import errors as E
 from hil.model.errors import ObjectError
 from hil.model.events import AlarmChanged, PowerCycled
 from hil.model.options import ModelOptions
+from hil.profile.od import Entry, ObjectDictionary
 from hil.protocol import canopen as P
 
 log = logging.getLogger(__name__)
@@ -409,7 +409,7 @@ class CanopenSlave:
         if self.state == "STOPPED":
             self._on_heartbeat_in(cid, data, now, msg.is_remote_frame)
             return  # STOPPED: NMT and error control only (L17089-L17095)
-        if cid == self._values.get((0x1200, 1), P.SDO_RX + nid) & 0x7FF:
+        if cid == self._values.get((0x1200, 1), P.SDO_REQUEST + nid) & 0x7FF:
             if not msg.is_remote_frame:
                 self._check_sdo_flood(sent_ns(msg))
                 self._on_sdo(data, now)
@@ -651,7 +651,7 @@ class CanopenSlave:
 
     # ------------------------------------------------------------------ SDO
     def _sdo_send(self, data: bytes) -> None:
-        self._send(self._values.get((0x1200, 2), P.SDO_TX + self.node_id) & 0x7FF, data)
+        self._send(self._values.get((0x1200, 2), P.SDO_RESPONSE + self.node_id) & 0x7FF, data)
 
     def _sdo_abort(self, index: int, sub: int, code: int) -> None:
         self.stats["sdo_aborts"] += 1

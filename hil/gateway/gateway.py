@@ -37,6 +37,8 @@ from hil.gateway import keys
 from hil.gateway.health import BusHealth
 from hil.gateway.lease import NS, LeaseInfo, LeaseTable, iso
 from hil.gateway.tls import TlsFiles, acl_section, check_exposure
+from hil.protocol.canopen import SDO_REQUEST, SDO_RESPONSE
+from hil.protocol.cia402 import CONTROLWORD
 from hil.transport.can_bus import TappedBus, open_can
 from hil.transport.dio import DioPort, is_input, open_dio
 from hil.transport.serial_line import SerialLine, open_serial, pack_chunk, unpack_chunk
@@ -48,9 +50,6 @@ from hil.transport.zenoh_net import close_session, make_config, open_session, wa
 
 log = logging.getLogger(__name__)
 
-# CiA 402 controlword commands (a3-comms.md, manual L18272-18281).
-CONTROLWORD = {"disable_voltage": 0x0000, "quick_stop": 0x0002, "shutdown": 0x0006}
-SDO_RX, SDO_TX = 0x600, 0x580
 TOKEN_LEN = 16
 _T = struct.Struct("<q")
 LEASE_TOPIC = "/gateway/lease"
@@ -794,7 +793,7 @@ class Gateway:
 def sdo_write_controlword(node: int, value: int) -> can.Message:
     """Expedited SDO download of 2 bytes to 6040h:00 (CiA 301 ccs=1, n=2, e=1, s=1)."""
     data = bytes([0x2B, 0x40, 0x60, 0x00, value & 0xFF, value >> 8, 0, 0])
-    return can.Message(arbitration_id=SDO_RX + node, data=data, is_extended_id=False)
+    return can.Message(arbitration_id=SDO_REQUEST + node, data=data, is_extended_id=False)
 
 
 def default_safe_state(gw: Gateway, reason: str) -> list[dict]:
@@ -813,7 +812,7 @@ def default_safe_state(gw: Gateway, reason: str) -> list[dict]:
             def write(export: CanExport = export, node: int = node, cw: int = cw) -> str | bool:
                 ans = export.request(
                     sdo_write_controlword(node, cw),
-                    lambda m, node=node: m.arbitration_id == SDO_TX + node
+                    lambda m, node=node: m.arbitration_id == SDO_RESPONSE + node
                     and bytes(m.data[1:4]) == b"\x40\x60\x00",
                     min(timeout_s, 1.0))
                 if ans is None:
@@ -860,7 +859,6 @@ def default_safe_state(gw: Gateway, reason: str) -> list[dict]:
 
 
 __all__ = [
-    "CONTROLWORD",
     "Gateway",
     "GatewayConfig",
     "default_safe_state",

@@ -65,6 +65,7 @@ from hil.model.errors import (
 from hil.model.events import StateChanged
 from hil.model.motion import Axis, counts_to_puu, puu_per_s_to_rpm, puu_to_counts
 from hil.model.timebase import MS, S
+from hil.protocol.cia402 import MODES
 
 # ---- states (names as canopen.BaseNode402 uses them) ------------------------------------
 NOT_READY = "NOT READY TO SWITCH ON"
@@ -89,7 +90,7 @@ _STATE_BITS = {
 }
 
 # ---- modes (6060h, L18375-18381; 6502h = 0x6D, L19250-19278) ----------------------------
-PP, PV, PT, HM, IP = 1, 3, 4, 6, 7
+PP, PV, PT, HM, IP = (MODES[m] for m in ("PP", "PV", "PT", "HM", "IP"))  # hil.protocol.cia402
 SUPPORTED_MODES = frozenset({0, PP, PV, PT, HM, IP})  # 0 = no mode (the default value)
 SUPPORTED_DRIVE_MODES = 0x6D
 

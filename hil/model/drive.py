@@ -64,8 +64,7 @@ from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
 from hil.model.sto import Sto
 from hil.model.timebase import Scheduler, ms
-
-MODE_NAMES = {0: "", 1: "PP", 3: "PV", 4: "PT", 6: "HM", 7: "IP"}
+from hil.protocol.cia402 import MODE_NAMES
 
 # Physical wiring of the virtual bench's sensors: function -> (DI number, contact type).
 # Limit switches are normally closed (open at the limit), the home sensor normally open.

@@ -2,23 +2,37 @@
 
 from __future__ import annotations
 
+# The refusals the A3 tables themselves express live with the tables (hil/profile/errors.py).
+from hil.profile.errors import (
+    ModelError,
+    ObjectError,
+    ParamError,
+    UnknownFunction,
+    UnknownParameter,
+)
+from hil.protocol.canopen import (  # noqa: F401  (re-exported for the model and faces)
+    ABORT_COMMAND,
+    ABORT_DATA_STATE,
+    ABORT_DATA_STORE,
+    ABORT_GENERAL,
+    ABORT_LENGTH,
+    ABORT_LENGTH_HIGH,
+    ABORT_LENGTH_LOW,
+    ABORT_NO_OBJECT,
+    ABORT_NO_SUBINDEX,
+    ABORT_NOT_MAPPABLE,
+    ABORT_PDO_LENGTH,
+    ABORT_READ_ONLY,
+    ABORT_TIMEOUT,
+    ABORT_TOGGLE,
+    ABORT_UNSUPPORTED_ACCESS,
+    ABORT_VALUE_HIGH,
+    ABORT_VALUE_LOW,
+    ABORT_VALUE_RANGE,
+    ABORT_WRITE_ONLY,
+)
 
-class ModelError(Exception):
-    """Base class: a request the virtual drive refuses, with the rule that refuses it."""
-
-
-class ParamError(ModelError):
-    """A parameter access refused like the drive refuses it (names the parameter and rule)."""
-
-    rule = "invalid"
-
-    def __init__(self, param: str, message: str) -> None:
-        super().__init__(f"{param}: {message}")
-        self.param = param
-
-
-class UnknownParameter(ParamError):
-    rule = "unknown parameter"
+__all__ = ["ModelError", "ObjectError", "ParamError", "UnknownFunction", "UnknownParameter"]
 
 
 class OutOfRange(ParamError):
@@ -42,45 +56,3 @@ class ServoOnLocked(ParamError):
 
 class ProtectedParameter(ParamError):
     rule = "protected (needs a key, e.g. P2.008 = 271)"
-
-
-class UnknownFunction(ModelError):
-    """A DI/DO function code that table 8.1 / 8.2 does not define."""
-
-    def __init__(self, kind: str, code: int, where: str = "") -> None:
-        at = f" in {where}" if where else ""
-        super().__init__(f"unknown {kind} function code 0x{code:02X}{at}")
-        self.kind = kind
-        self.code = code
-
-
-class ObjectError(ModelError):
-    """A CANopen object access refused; carries the CiA 301 SDO abort code."""
-
-    def __init__(self, index: int, sub: int, abort_code: int, message: str) -> None:
-        super().__init__(f"{index:04X}h sub {sub}: {message} (abort 0x{abort_code:08X})")
-        self.index = index
-        self.sub = sub
-        self.abort_code = abort_code
-
-
-# CiA 301 SDO abort codes used by the model and the CANopen face.
-ABORT_TOGGLE = 0x05030000
-ABORT_TIMEOUT = 0x05040000
-ABORT_COMMAND = 0x05040001
-ABORT_UNSUPPORTED_ACCESS = 0x06010000
-ABORT_WRITE_ONLY = 0x06010001
-ABORT_READ_ONLY = 0x06010002
-ABORT_NO_OBJECT = 0x06020000
-ABORT_NOT_MAPPABLE = 0x06040041
-ABORT_PDO_LENGTH = 0x06040042
-ABORT_LENGTH = 0x06070010
-ABORT_LENGTH_HIGH = 0x06070012
-ABORT_LENGTH_LOW = 0x06070013
-ABORT_NO_SUBINDEX = 0x06090011
-ABORT_VALUE_RANGE = 0x06090030
-ABORT_VALUE_HIGH = 0x06090031
-ABORT_VALUE_LOW = 0x06090032
-ABORT_GENERAL = 0x08000000
-ABORT_DATA_STORE = 0x08000020
-ABORT_DATA_STATE = 0x08000022

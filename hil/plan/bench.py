@@ -12,10 +12,6 @@ from pathlib import Path
 from typing import Any
 
 from hil.model.dio import (
-    DI_PARAMS,
-    DI_SYMBOLS,
-    DO_PARAMS,
-    DO_SYMBOLS,
     INERT_DI_FUNCTIONS,
     N_PHYSICAL_DI,
     inert_mapping,
@@ -32,6 +28,7 @@ from hil.plan.yamlio import (
     load_yaml_file,
     load_yaml_text,
 )
+from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS
 
 # Named timeouts (ns) and their defaults; a bench overrides any of them. The CiA 402 ones
 # are handed to hil.drivers.cia402.Cia402Driver (same names).

@@ -11,17 +11,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from hil.model.dio import (
-    DI_FUNCTIONS,
-    DI_PARAMS,
-    DO_FUNCTIONS,
-    DO_PARAMS,
-    N_PHYSICAL_DI,
-    inert_mapping,
-)
+from hil.model.dio import N_PHYSICAL_DI, inert_mapping
 from hil.plan.bench import Bench, DriveSpec, Wire
 from hil.plan.steps import MOTION, VIRTUAL_ONLY, Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
+from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS
 
 _TOP = {"name", "description", "bench_requires", "drive", "params", "options", "steps", "tags"}
 FEATURES = ("virtual", "real", "motion", "can", "sdo", "rs485", "modbus", "dio")

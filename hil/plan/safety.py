@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-CONTROLWORD = {"disable_voltage": 0x00, "quick_stop": 0x02, "shutdown": 0x06}
+from hil.protocol.cia402 import CONTROLWORD
 
 
 class DriveGone(Exception):

@@ -98,7 +98,7 @@ def refusal_code(exc: BaseException) -> int | None:
 
 def _od_index(name: str) -> int:
     """Parameter Px.yyy -> object 2xyyh (L16860: 2000h + group << 8 + index)."""
-    from hil.model.params import parse_name
+    from hil.profile.params import parse_name
 
     group, index = parse_name(name)
     return 0x2000 + (group << 8) + index

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from hil.model.dio import DI_SYMBOLS, DO_SYMBOLS, inert_mapping
+from hil.model.dio import inert_mapping
 from hil.model.homing_methods import CANOPEN_METHODS
 from hil.plan.fault_steps import describe as describe_comm
 from hil.plan.fault_steps import p_fault, p_nmt, p_produce, p_sdo
@@ -19,12 +19,14 @@ from hil.plan.param_rules import check_param
 from hil.plan.pr_steps import PARSERS as PR_PARSERS
 from hil.plan.pr_steps import describe as pr_describe
 from hil.plan.yamlio import Checker, LDict, LList, join, level, parse_duration
+from hil.profile.dio import DI_SYMBOLS, DO_SYMBOLS
+from hil.protocol.cia402 import MODES as CIA402_MODES
 
 STATES = ("SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED",
           "QUICK STOP ACTIVE", "FAULT")
 # states a `state:` step can command (FAULT is reached, never commanded)
 COMMANDABLE = STATES[:-1]
-MODES = ("PP", "PV", "PT", "HM")
+MODES = tuple(m for m in CIA402_MODES if m != "IP")  # a `mode:` step offers no IP
 VIAS = ("modbus", "sdo")
 STO = ("A", "B")
 COMMON = {"name", "drive", "note", "timeout", "imposed"}

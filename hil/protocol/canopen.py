@@ -14,8 +14,12 @@ SYNC = 0x080
 EMCY = 0x080
 TPDO_BASE = (0x180, 0x280, 0x380, 0x480)
 RPDO_BASE = (0x200, 0x300, 0x400, 0x500)
-SDO_TX = 0x580  # server -> client
-SDO_RX = 0x600  # client -> server
+# SDO COB-ID bases, named from the client's side: the client sends its REQUEST on 0x600+node,
+# the server answers with its RESPONSE on 0x580+node. (CiA 301 and canopen call these from
+# the server's side: "SDO rx" = 0x600, "SDO tx" = 0x580; recorded `kind`s keep that:
+# "sdo_rx" = request, "sdo_tx" = response.)
+SDO_REQUEST = 0x600  # client -> server
+SDO_RESPONSE = 0x580  # server -> client
 HEARTBEAT = 0x700
 
 # NMT command specifiers (CiA 301; the manual's figure is missing, a3-comms §2.4).
@@ -79,6 +83,27 @@ SCS_NAMES = {
 }
 
 # CiA 301 table 22 abort texts (the manual's list, L17024-L17042, is a subset).
+# CiA 301 SDO abort codes (the model, the OD and the CANopen face raise them).
+ABORT_TOGGLE = 0x05030000
+ABORT_TIMEOUT = 0x05040000
+ABORT_COMMAND = 0x05040001
+ABORT_UNSUPPORTED_ACCESS = 0x06010000
+ABORT_WRITE_ONLY = 0x06010001
+ABORT_READ_ONLY = 0x06010002
+ABORT_NO_OBJECT = 0x06020000
+ABORT_NOT_MAPPABLE = 0x06040041
+ABORT_PDO_LENGTH = 0x06040042
+ABORT_LENGTH = 0x06070010
+ABORT_LENGTH_HIGH = 0x06070012
+ABORT_LENGTH_LOW = 0x06070013
+ABORT_NO_SUBINDEX = 0x06090011
+ABORT_VALUE_RANGE = 0x06090030
+ABORT_VALUE_HIGH = 0x06090031
+ABORT_VALUE_LOW = 0x06090032
+ABORT_GENERAL = 0x08000000
+ABORT_DATA_STORE = 0x08000020
+ABORT_DATA_STATE = 0x08000022
+
 ABORT_TEXTS = {
     0x05030000: "Toggle bit not alternated",
     0x05040000: "SDO protocol timed out",
@@ -138,9 +163,9 @@ def classify(can_id: int) -> tuple[str, int | None]:
     for i, base in enumerate(RPDO_BASE):
         if fc == base:
             return f"rpdo{i + 1}", node
-    if fc == SDO_TX:
+    if fc == SDO_RESPONSE:
         return "sdo_tx", node
-    if fc == SDO_RX:
+    if fc == SDO_REQUEST:
         return "sdo_rx", node
     if fc == HEARTBEAT:
         return "heartbeat", node

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-TX_BASE = 0x600  # client -> server (CiA 301 default SDO COB-IDs)
-RX_BASE = 0x580  # server -> client
+from hil.protocol.canopen import SDO_REQUEST, SDO_RESPONSE
 
 
 @dataclass
@@ -61,13 +60,16 @@ class SdoPairing:
 
     @staticmethod
     def is_sdo(can_id: int) -> bool:
-        return RX_BASE < can_id <= RX_BASE + 127 or TX_BASE < can_id <= TX_BASE + 127
+        return (
+            SDO_RESPONSE < can_id <= SDO_RESPONSE + 127
+            or SDO_REQUEST < can_id <= SDO_REQUEST + 127
+        )
 
     def feed(self, can_id: int, data: bytes, t: int) -> list[dict]:
-        if TX_BASE < can_id <= TX_BASE + 127:
-            return self._client(can_id - TX_BASE, bytes(data), t)
-        if RX_BASE < can_id <= RX_BASE + 127:
-            return self._server(can_id - RX_BASE, bytes(data), t)
+        if SDO_REQUEST < can_id <= SDO_REQUEST + 127:
+            return self._client(can_id - SDO_REQUEST, bytes(data), t)
+        if SDO_RESPONSE < can_id <= SDO_RESPONSE + 127:
+            return self._server(can_id - SDO_RESPONSE, bytes(data), t)
         return []
 
     def pending(self) -> list[dict]:

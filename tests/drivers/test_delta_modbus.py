@@ -22,6 +22,7 @@ from hil.drivers.delta_modbus import (
     ModbusReplyError,
     ModbusTimeoutError,
     ParamInfo,
+    UnknownParameterError,
     param_address,
 )
 from hil.faces.modbus_slave import FdLine, ModbusSlave, ModbusSlaveRunner
@@ -196,6 +197,29 @@ def test_param_table_lookup_is_lazy_and_typed():
     info = drive.param("P1.009")
     assert (info.address, info.size, info.signed) == (0x0112, 32, True)
     assert drive.param("p1-42").address == 0x0154
+
+
+def test_unknown_parameter_fails_loudly():
+    """A name outside the chapter 8 table is an error, never a guessed 16-bit access."""
+    drive = DeltaModbus(LoopLine(None), station=1)
+    with pytest.raises(UnknownParameterError, match=r"P1\.255"):
+        drive.param("P1.255")
+    with pytest.raises(UnknownParameterError, match="not a parameter name"):
+        drive.param("PM.004")
+
+
+def test_unreadable_parameter_table_is_not_a_16_bit_fallback(monkeypatch):
+    """The old driver fell back to 16-bit unsigned when the table could not be loaded, so
+    P1.009 (32-bit, L7931-7934) would have been written as one word."""
+    from hil.profile.params import ParamTable
+
+    def broken(cls, path=None):
+        raise OSError("a3_parameters.csv: no such file")
+
+    monkeypatch.setattr(ParamTable, "load", classmethod(broken))
+    drive = DeltaModbus(LoopLine(None), station=1)
+    with pytest.raises(OSError, match="a3_parameters"):
+        drive.param("P1.009")
 
 
 # ---------------------------------------------------------------- over a real pty

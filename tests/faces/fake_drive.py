@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from hil.faces.canopen_od import ObjectDictionary
 from hil.model.errors import ABORT_NO_OBJECT, ABORT_READ_ONLY, ObjectError
 from hil.model.events import AlarmChanged, PowerCycled, StateChanged
+from hil.profile.od import ObjectDictionary
 
 SW = {
     "NOT READY TO SWITCH ON": 0x0000,

@@ -1,17 +1,35 @@
-"""The checked-in EDS equals a fresh generation, and canopen can load it."""
+"""The checked-in EDS equals a fresh canopen `export_od` of hil.profile.od, and loads back."""
 
 from __future__ import annotations
 
 import canopen
 
-from hil.faces.canopen_od import ObjectDictionary, parameter_index
-from hil.faces.eds import EDS_PATH, generate
+from hil.profile.od import EDS_PATH, TYPE_CODES, ObjectDictionary, generate_eds, parameter_index
 
 
 def test_checked_in_eds_is_fresh():
-    assert EDS_PATH.read_text(encoding="utf-8") == generate(), (
-        "fixtures/drive/a3.eds is stale: run `python -m hil.faces.eds`"
+    assert EDS_PATH.read_text(encoding="utf-8") == generate_eds(), (
+        "fixtures/drive/a3.eds is stale: run `python -m hil.profile.od`"
     )
+
+
+def test_eds_lists_every_object_with_its_default():
+    """Every entry of the A3 dictionary comes back from the EDS with its type, access, PDO
+    flag and default (COB-IDs relative to the node, L17877-L17885)."""
+    od = canopen.import_od(str(EDS_PATH), node_id=10)
+    entries = ObjectDictionary.a3().entries
+    seen = set()
+    for index in od:
+        obj = od[index]
+        subs = [obj] if isinstance(obj, canopen.objectdictionary.ODVariable) else obj.values()
+        seen |= {(v.index, v.subindex) for v in subs}
+    assert seen == set(entries)
+    for (index, sub), e in entries.items():
+        var = od[index] if e.object == "VAR" else od[index][sub]
+        assert (var.data_type, var.access_type, var.pdo_mappable) == (
+            TYPE_CODES[e.type], e.access, e.pdo), (index, sub)
+        assert var.default == e.default_for(10), (index, sub)
+    assert od[0x2509].default == -2147483648  # P5.009: a negative default survives
 
 
 def test_canopen_import_od_reads_it():

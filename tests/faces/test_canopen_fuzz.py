@@ -25,13 +25,13 @@ import time
 import can
 import pytest
 
-from hil.faces.canopen_od import Entry, ObjectDictionary
 from hil.faces.canopen_slave import CanopenSlave
 from hil.model.drive import Drive
+from hil.profile.od import Entry, ObjectDictionary
 from hil.protocol import canopen as P
 
 NODE = 5
-SDO_RX, SDO_TX = 0x600 + NODE, 0x580 + NODE
+SDO_REQ, SDO_RSP = 0x600 + NODE, 0x580 + NODE
 MS = 1_000_000
 
 
@@ -57,7 +57,7 @@ class Rig:
             msg = self.master.recv(timeout=left)
             if msg is None:
                 break
-            if msg.arbitration_id == SDO_TX and not msg.is_extended_id:
+            if msg.arbitration_id == SDO_RSP and not msg.is_extended_id:
                 return bytes(msg.data)
             self.other.append(msg.arbitration_id)
         return None
@@ -123,7 +123,7 @@ def test_sdo_download_fuzz_over_every_writable_object(rig, caplog):
             frames.append(bytes([0x22]) + struct.pack("<HB", e.index, e.sub)
                           + rng.randbytes(4))  # expedited, size not indicated
             for frame in frames:
-                rig.send(SDO_RX, frame)
+                rig.send(SDO_REQ, frame)
                 owed += 1
                 got = rig.answer()
                 if got is None or got[0] not in (0x60, 0x80) or not _pairs(frame, got):
@@ -173,7 +173,7 @@ def test_canopen_fuzz_20k_frames(rig, caplog):
             r = rng.random()
             if r < 0.45:
                 data = _sdo(rng, od)
-                rig.send(SDO_RX, data)
+                rig.send(SDO_REQ, data)
                 counts["frames"] += 1
                 owed = state != "STOPPED" and (len(data) != 8 or data[0] >> 5 != P.CCS_ABORT)
                 if owed:
@@ -212,7 +212,7 @@ def test_canopen_fuzz_20k_frames(rig, caplog):
                     rig.send(P.HEARTBEAT + rng.randrange(1, 128), bytes([rng.choice([0, 5, 127])]))
                 counts["frames"] += 1
             else:  # anything: random COB-ID (some 605h), extended IDs, RTRs
-                cid = rng.choice([rng.randrange(0x800), SDO_RX, 0x080, 0x000])
+                cid = rng.choice([rng.randrange(0x800), SDO_REQ, 0x080, 0x000])
                 extended = rng.random() < 0.2
                 remote = rng.random() < 0.1
                 data = b"" if remote else rng.randbytes(rng.randrange(9))
@@ -220,7 +220,7 @@ def test_canopen_fuzz_20k_frames(rig, caplog):
                     cid |= rng.randrange(1 << 29) & ~0x7FF
                 rig.send(cid, data, remote=remote, extended=extended)
                 counts["frames"] += 1
-                if cid == SDO_RX and not extended and not remote and state != "STOPPED" and (
+                if cid == SDO_REQ and not extended and not remote and state != "STOPPED" and (
                     len(data) != 8 or data[0] >> 5 != P.CCS_ABORT
                 ):
                     counts["owed"] += 1
@@ -239,7 +239,7 @@ def test_canopen_fuzz_20k_frames(rig, caplog):
         # the face still serves after all that: reset communication, read 1000h
         rig.send(P.NMT, bytes([P.NMT_RESET_COMMUNICATION, NODE]))
         upload = bytes([0x40, 0x00, 0x10, 0x00]) + bytes(4)
-        rig.send(SDO_RX, upload)
+        rig.send(SDO_REQ, upload)
         last = rig.answer(5.0)
     assert problems == [], f"{len(problems)} unanswered, first: {problems[:5]}; {counts}"
     assert counts["answered"] == counts["owed"] > 5000, counts

@@ -11,8 +11,8 @@ import canopen
 import pytest
 from fake_drive import Bench
 
-from hil.faces.canopen_od import Entry, ObjectDictionary
 from hil.model import errors as E
+from hil.profile.od import Entry, ObjectDictionary
 
 NODE = 5
 canopen.Network.NOTIFIER_CYCLE = 0.05  # feasibility §3: 1.0 s adds a second per teardown
@@ -276,7 +276,7 @@ def test_fuzz_random_frames_never_crash(bench):
 
 def test_basenode402_reaches_operation_enabled(bench):
     """canopen's own CiA 402 master (a third party) drives the slave to OPERATION ENABLED."""
-    from hil.faces.eds import EDS_PATH
+    from hil.profile.od import EDS_PATH
 
     net = bench.network()
     node = canopen.BaseNode402(NODE, str(EDS_PATH))

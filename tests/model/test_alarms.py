@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from hil.model.alarms import AlarmManager, AlarmOptions, AlarmTable, UnknownAlarm
+from hil.model.alarms import AlarmManager, AlarmOptions
 from hil.model.events import AlarmChanged
-from hil.model.params import ParameterStore, ParamTable
+from hil.model.params import ParameterStore
 from hil.model.timebase import Scheduler
+from hil.profile.alarms import AlarmTable, UnknownAlarm
+from hil.profile.params import ParamTable
 
 
 @pytest.fixture(scope="module")

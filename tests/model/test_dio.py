@@ -7,8 +7,9 @@ import pytest
 from hil.model.dio import DigitalIO
 from hil.model.errors import UnknownFunction
 from hil.model.events import DoChanged
-from hil.model.params import ParameterStore, ParamTable
+from hil.model.params import ParameterStore
 from hil.model.timebase import MS, Scheduler
+from hil.profile.params import ParamTable
 
 
 @pytest.fixture(scope="module")

@@ -12,9 +12,10 @@ from __future__ import annotations
 import pytest
 
 from hil.faces.modbus_slave import ModbusSlave
-from hil.model.dio import DI_PARAMS, INERT_DI_FUNCTIONS, inert_mapping
+from hil.model.dio import INERT_DI_FUNCTIONS, inert_mapping
 from hil.model.drive import Drive
 from hil.model.errors import InertFunction, ObjectError
+from hil.profile.dio import DI_PARAMS
 from hil.protocol import modbus as mb
 
 CODES = {"GAINUP": 0x03, "CCLR": 0x04, "ZCLAMP": 0x05, "TRQLM": 0x09, "SPDLM": 0x10,

@@ -11,7 +11,8 @@ from hil.model.errors import (
     ServoOnLocked,
     UnknownParameter,
 )
-from hil.model.params import ParameterStore, ParamTable, parse_name
+from hil.model.params import ParameterStore
+from hil.profile.params import ParamTable, parse_name
 
 _NAMES = (
     "P0.001 P0.002 P0.046 P0.049 P0.050 P0.051 P0.052 P1.001 P1.032 P1.034 P1.035 P1.038 P1.039 "
