@@ -2,7 +2,8 @@
 EMCY) on a python-can bus, in front of a `Drive` (2000h-2FFFh and 6000h-6FFFh objects).
 
 Built on python-can only: canopen.LocalNode lacks NMT gating, PDO behaviour and EMCY/1001h/
-1003h handling (feasibility §3). Choices where the manual is silent: docs/manual-choices.md#canopen.
+1003h handling (docs/dev/feasibility.md §3). Choices where the manual is silent:
+docs/manual-choices.md#canopen.
 
 Threading: `start()` runs one receive thread. Every frame is handled while holding `lock`
 (the DriveHost's RLock), and so is every timer step. Timers (heartbeat, event timers,
@@ -344,7 +345,7 @@ class CanopenSlave:
         self._sync_intervals = deque()
 
     def _monitor_sync(self, sent: int, now: int) -> None:
-        """AL3E2 early SYNC, AL301 cycle != 1006h, and arm the AL3E3 timeout (a3-comms §2.6;
+        """AL3E2 early SYNC, AL301 cycle != 1006h, and arm the AL3E3 timeout (docs/faults.md;
         thresholds: ModelOptions sync_*)."""
         if not self._ip_sync_monitored():
             self._sync_reset()

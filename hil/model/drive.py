@@ -614,9 +614,10 @@ class Drive:
 
 
 def _abort_for(exc: ModelError, value: int) -> int:
-    """SDO abort code for a refused write (CiA 301 codes; a3-comms §2.13.2 ⚠). Every
-    refusal gets one: an undefined DI/DO function code (table 8.1 / 8.2) is a value
-    outside the range (0609 0030), as is any other refusal that names no finer rule."""
+    """SDO abort code for a refused write (CiA 301 codes, L17024-17042; the manual names few:
+    docs/manual-choices.md). Every refusal gets one: an undefined DI/DO function code (table 8.1 /
+    8.2) is a value outside the range (0609 0030), as is any other refusal that names no finer
+    rule."""
     if isinstance(exc, UnknownFunction) or not isinstance(exc, ParamError):
         return ABORT_VALUE_RANGE
     if isinstance(exc, ReadOnly):

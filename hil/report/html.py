@@ -201,6 +201,8 @@ def _step_name(run: RunData, index: object) -> str:
 
 
 def render_html(run: RunData) -> str:
+    """One plan's report: steps, timing verdicts and diagrams, motion, safe state, bus logs
+    around failures, parameters, the plan and bench files and the log."""
     st = run.status or "unknown"
     h: list[str] = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
@@ -210,9 +212,17 @@ def render_html(run: RunData) -> str:
         f"<p>Recording <code>{E(run.path)}</code>"
         + (" · <b>recording truncated (killed run)</b>" if run.truncated else "")
         + " · times are ms from the plan start</p>",
-        "<h2>Steps</h2><table><tr><th>#</th><th>step</th><th>line</th><th>status</th>"
-        "<th>start</th><th>time</th><th>message</th></tr>",
     ]
+    for section in (_steps_html, _verdicts_html, _motion_html, _safety_html, _bus_html,
+                    _files_html):
+        h += section(run)
+    h.append("</body></html>\n")
+    return "\n".join(h)
+
+
+def _steps_html(run: RunData) -> list[str]:
+    h = ["<h2>Steps</h2><table><tr><th>#</th><th>step</th><th>line</th><th>status</th>"
+         "<th>start</th><th>time</th><th>message</th></tr>"]
     for s in run.steps:
         n = s.index + 1 if s.index >= 0 else "-"
         start = f"{(s.t_start - run.t0) / 1e6:.1f} ms" if s.t_start is not None else ""
@@ -220,78 +230,98 @@ def render_html(run: RunData) -> str:
                  f"<td>{_status(s.status)}</td><td>{start}</td>"
                  f"<td>{s.duration_ns / 1e6:.1f} ms</td><td>{E(s.message)}</td></tr>")
     h.append("</table>")
-    h.append("<h2>Timing verdicts: expected vs observed</h2>")
-    if run.verdicts:
-        h.append("<table><tr><th>step</th><th>spec</th><th>constraint</th><th>status</th>"
-                 "<th>measured</th><th>window</th><th>diagram</th><th>message</th></tr>")
-        for v in run.verdicts:
-            win = v.get("window_expr") or v.get("window_ms")
-            h.append(f"<tr><td>{_step_name(run, v.get('step'))}</td>"
-                     f"<td>{E(str(v.get('spec', '')))}</td>"
-                     f"<td>{E(str(v.get('constraint', '')))}<br><small>"
-                     f"{E(str(v.get('source', '')))}</small></td>"
-                     f"<td>{_status(str(v.get('status', '')))}</td>"
-                     f"<td>{_ms(v.get('measured_ms'))}</td><td>{E(str(win))}</td>"
-                     f"<td>{_window_svg(v)}</td><td>{E(str(v.get('message', '')))}</td></tr>")
-        h.append("</table>")
-        h.append("<h2>Timing diagrams: observed signals and expected windows</h2>")
-        for title, pic in timing_diagrams(run):
-            h.append(f"<figure><figcaption>{E(title)}</figcaption>"
-                     f"<div class='diagram'>{pic}</div></figure>")
-    else:
-        h.append("<p>No timing verdicts in this run.</p>")
-    h.append("<h2>Motion (virtual-bench ground truth)</h2>")
-    if run.truth:
-        for d, samples in run.truth.items():
-            h.append(f"<h3>{E(d)}</h3>{_plot(run, d, samples)}")
-    else:
-        h.append("<p>No ground truth in this recording (real bench).</p>")
-    h.append("<h2>Safe state</h2>")
-    if run.safety:
-        h.append("<table><tr><th>drive</th><th>action</th><th>ok</th><th>reason</th>"
-                 "<th>detail</th></tr>")
-        for a in run.safety:
-            h.append(f"<tr><td>{E(str(a.get('drive', '')))}</td><td>{E(str(a.get('action')))}"
-                     f"</td><td>{_status('pass' if a.get('ok') else 'fail')}</td>"
-                     f"<td>{E(str(a.get('reason', '')))}</td>"
-                     f"<td>{E(str(a.get('detail', '')))}</td></tr>")
-        h.append("</table>")
-    else:
-        h.append("<p>No safe-state actions recorded.</p>")
+    return h
+
+
+def _verdicts_html(run: RunData) -> list[str]:
+    h = ["<h2>Timing verdicts: expected vs observed</h2>"]
+    if not run.verdicts:
+        return [*h, "<p>No timing verdicts in this run.</p>"]
+    h.append("<table><tr><th>step</th><th>spec</th><th>constraint</th><th>status</th>"
+             "<th>measured</th><th>window</th><th>diagram</th><th>message</th></tr>")
+    for v in run.verdicts:
+        win = v.get("window_expr") or v.get("window_ms")
+        h.append(f"<tr><td>{_step_name(run, v.get('step'))}</td>"
+                 f"<td>{E(str(v.get('spec', '')))}</td>"
+                 f"<td>{E(str(v.get('constraint', '')))}<br><small>"
+                 f"{E(str(v.get('source', '')))}</small></td>"
+                 f"<td>{_status(str(v.get('status', '')))}</td>"
+                 f"<td>{_ms(v.get('measured_ms'))}</td><td>{E(str(win))}</td>"
+                 f"<td>{_window_svg(v)}</td><td>{E(str(v.get('message', '')))}</td></tr>")
+    h.append("</table>")
+    h.append("<h2>Timing diagrams: observed signals and expected windows</h2>")
+    for title, pic in timing_diagrams(run):
+        h.append(f"<figure><figcaption>{E(title)}</figcaption>"
+                 f"<div class='diagram'>{pic}</div></figure>")
+    return h
+
+
+def _motion_html(run: RunData) -> list[str]:
+    h = ["<h2>Motion (virtual-bench ground truth)</h2>"]
+    if not run.truth:
+        return [*h, "<p>No ground truth in this recording (real bench).</p>"]
+    for d, samples in run.truth.items():
+        h.append(f"<h3>{E(d)}</h3>{_plot(run, d, samples)}")
+    return h
+
+
+def _safety_html(run: RunData) -> list[str]:
+    h = ["<h2>Safe state</h2>"]
+    if not run.safety:
+        return [*h, "<p>No safe-state actions recorded.</p>"]
+    h.append("<table><tr><th>drive</th><th>action</th><th>ok</th><th>reason</th>"
+             "<th>detail</th></tr>")
+    for a in run.safety:
+        h.append(f"<tr><td>{E(str(a.get('drive', '')))}</td><td>{E(str(a.get('action')))}"
+                 f"</td><td>{_status('pass' if a.get('ok') else 'fail')}</td>"
+                 f"<td>{E(str(a.get('reason', '')))}</td>"
+                 f"<td>{E(str(a.get('detail', '')))}</td></tr>")
+    h.append("</table>")
+    return h
+
+
+def _bus_html(run: RunData) -> list[str]:
+    """The frames around each failing check, then the bus log of other failing steps."""
+    h: list[str] = []
     bad = [v for v in run.verdicts if v.get("status") in ("fail", "inconclusive")]
     if bad:
         h.append("<h2>Bus log around failing checks</h2>"
                  "<p>Frames between the reference and the observed instant of each failing "
                  "constraint (highlighted), with the frames just before and after.</p>")
-        for v in bad:
-            rows = bus_around(run, v)
-            h.append(f"<h3>{_step_name(run, v.get('step'))}: {E(str(v.get('spec', '')))}: "
-                     f"{E(str(v.get('constraint', '')))} {_status(str(v.get('status')))}</h3>")
-            if not rows:
-                h.append("<p>No bus traffic recorded around this check.</p>")
-                continue
-            h.append("<pre>" + "\n".join(
-                (f"<b>{line}</b>" if inside else line)
-                for t, topic, text, inside in rows
-                for line in [f"{(t - run.t0) / 1e6:10.3f} ms  {E(topic):<28} {E(text)}"])
-                + "</pre>")
+    for v in bad:
+        rows = bus_around(run, v)
+        h.append(f"<h3>{_step_name(run, v.get('step'))}: {E(str(v.get('spec', '')))}: "
+                 f"{E(str(v.get('constraint', '')))} {_status(str(v.get('status')))}</h3>")
+        if not rows:
+            h.append("<p>No bus traffic recorded around this check.</p>")
+            continue
+        h.append("<pre>" + "\n".join(
+            (f"<b>{line}</b>" if inside else line)
+            for t, topic, text, inside in rows
+            for line in [f"{(t - run.t0) / 1e6:10.3f} ms  {E(topic):<28} {E(text)}"])
+            + "</pre>")
     shown = {v.get("step") for v in bad}  # checks have their frames above
     failing = [s for s in run.steps if s.status not in ("pass", "skipped")
                and s.index not in shown]
     if failing:
         h.append("<h2>Bus log of failing steps</h2>")
-        for s in failing:
-            rows = bus_log(run, s)
-            h.append(f"<h3>step {s.index + 1}: {E(s.label)}</h3>")
-            if not rows:
-                h.append("<p>No bus traffic during this step.</p>")
-                continue
-            h.append("<pre>" + "\n".join(
-                f"{(t - run.t0) / 1e6:10.3f} ms  {E(topic):<28} {E(text)}"
-                for t, topic, text in rows) + "</pre>")
-    h.append("<h2>Parameters</h2>")
+    for s in failing:
+        rows = bus_log(run, s)
+        h.append(f"<h3>step {s.index + 1}: {E(s.label)}</h3>")
+        if not rows:
+            h.append("<p>No bus traffic during this step.</p>")
+            continue
+        h.append("<pre>" + "\n".join(
+            f"{(t - run.t0) / 1e6:10.3f} ms  {E(topic):<28} {E(text)}"
+            for t, topic, text in rows) + "</pre>")
+    return h
+
+
+def _files_html(run: RunData) -> list[str]:
+    """Parameters, the plan and bench files as run, and the tail of the log."""
+    h = ["<h2>Parameters</h2>"]
     for d, values in run.params.items():
-        shown = {k: v for k, v in sorted(values.items())}
+        shown = dict(sorted(values.items()))
         h.append(f"<details><summary>{E(d)}: {len(shown)} parameters</summary><pre>"
                  + E("\n".join(f"{k} = {v}" for k, v in shown.items())) + "</pre></details>")
     for name in ("bench.yaml", "plan.yaml"):
@@ -301,8 +331,7 @@ def render_html(run: RunData) -> str:
         h.append("<h2>Log</h2><pre>" + "\n".join(
             f"{(lg['_t'] - run.t0) / 1e6:10.3f} ms  {E(str(lg.get('name', '')))}: "
             f"{E(str(lg.get('message', '')))}" for lg in run.logs[-300:]) + "</pre>")
-    h.append("</body></html>\n")
-    return "\n".join(h)
+    return h
 
 
 def write_html(recording: str | Path, out: str | Path | None = None) -> Path:
