@@ -47,6 +47,7 @@ from hil.gateway.exports import (
 from hil.gateway.lease import NS, LeaseInfo, LeaseTable, iso
 from hil.gateway.safe_state import default_safe_state, sdo_write_controlword
 from hil.gateway.tls import TlsFiles, acl_section, check_exposure
+from hil.record.recorder import Recorder
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
 from hil.transport.serial_line import open_serial
@@ -108,8 +109,6 @@ class Gateway:
         self.lease = LeaseTable(config.lease_timeout_s)
         self._own_recorder = recorder is None and config.record is not None
         if self._own_recorder:
-            from hil.record.recorder import Recorder
-
             recorder = Recorder(config.record, metadata={"gateway": self.prefix,
                                                          "bench_file": bench.path})
         self.recorder = recorder

@@ -10,7 +10,7 @@ import can
 
 from hil.gateway.exports import DioExport
 from hil.gateway.lease import NS
-from hil.protocol import canopen as P
+from hil.protocol import canopen
 from hil.safety import run_safe_state
 
 if TYPE_CHECKING:
@@ -19,8 +19,8 @@ if TYPE_CHECKING:
 
 def sdo_write_controlword(node: int, value: int) -> can.Message:
     """Expedited SDO download of 2 bytes to 6040h:00 (CiA 301, L16960-L16964)."""
-    data = P.sdo_expedited_download(0x6040, 0, (value & 0xFFFF).to_bytes(2, "little"))
-    return can.Message(arbitration_id=P.SDO_REQUEST + node, data=data, is_extended_id=False)
+    data = canopen.sdo_expedited_download(0x6040, 0, (value & 0xFFFF).to_bytes(2, "little"))
+    return can.Message(arbitration_id=canopen.SDO_REQUEST + node, data=data, is_extended_id=False)
 
 
 class _GatewayDrive:
@@ -41,7 +41,7 @@ class _GatewayDrive:
         timeout_s = self.gw.bench.safe_state.timeout_ns / NS
         ans = export.request(
             sdo_write_controlword(node, cw),
-            lambda m: m.arbitration_id == P.SDO_RESPONSE + node
+            lambda m: m.arbitration_id == canopen.SDO_RESPONSE + node
             and bytes(m.data[1:4]) == b"\x40\x60\x00",
             min(timeout_s, 1.0))
         if ans is None:

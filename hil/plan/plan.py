@@ -7,12 +7,14 @@ bench (drives, wiring, virtual-only steps, motion, parameter access, timing spec
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 from hil.model.dio import N_PHYSICAL_DI, inert_mapping
-from hil.plan.bench import Bench, DriveSpec, Wire
+from hil.model.options import ModelOptions
+from hil.paths import plans_dir as _pd
+from hil.plan.bench import Bench, DriveSpec, Wire, _params
 from hil.plan.kinds import CheckContext
 from hil.plan.kinds.timing import bind_line
 from hil.plan.steps import Step, parse_steps
@@ -55,8 +57,6 @@ def loads_plan(text: str, file: str = "<string>") -> Plan:
 
 
 def parse_plan(data: Any, file: str, text: str = "") -> Plan:
-    from hil.plan.bench import _params
-
     v = Checker(file)
     top: LDict = v.mapping(data, 1, "(top)")
     v.keys(top, _TOP, "", required=("name", "steps"))
@@ -75,10 +75,6 @@ def parse_plan(data: Any, file: str, text: str = "") -> Plan:
     if "params" in top:
         plan.params = _params(v, top["params"], top.kline("params"), "params")
     if "options" in top:
-        from dataclasses import fields
-
-        from hil.model.options import ModelOptions
-
         om = v.mapping(top["options"], top.kline("options"), "options")
         v.keys(om, {f.name for f in fields(ModelOptions)}, "options")
         try:
@@ -197,8 +193,6 @@ def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) ->
     """Plan files by path or by name (`servo_on_brake` -> plans/servo_on_brake.yaml);
     no names: every plan in the plans directory, sorted."""
     if plans_dir is None:
-        from hil.paths import plans_dir as _pd
-
         plans_dir = _pd()
     if not names:
         return sorted(p for p in plans_dir.glob("*.yaml"))

@@ -24,6 +24,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable, Mapping
 from functools import cache
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import IO, Any
 
@@ -91,7 +92,6 @@ def dumps(obj: Any) -> bytes:
 @cache
 def versions() -> dict[str, str]:
     """Versions of the stack and the git revision of the hil checkout (if any)."""
-    from importlib.metadata import PackageNotFoundError, version
 
     out = {"python": platform.python_version(), "platform": platform.platform()}
     for key, dist in (

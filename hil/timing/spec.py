@@ -12,6 +12,7 @@ from dataclasses import field as _f
 from pathlib import Path
 from typing import Any
 
+from hil.paths import fixture
 from hil.timing.expr import Expr, ExprError, is_param
 from hil.yamlio import FileError, LDict, LList, join, load_yaml_text
 
@@ -556,6 +557,5 @@ def loads_spec(text: str, file: str = "<string>") -> Spec:
 
 def shipped_specs() -> list[Path]:
     """The spec files shipped in fixtures/timing/."""
-    from hil.paths import fixture
 
     return sorted(fixture("timing").glob("*.yaml"))

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any
 
 from hil.drivers.abs_reader import AbsPositionReader, AbsReadError
 from hil.plan.context import Outcome, StepFailed
-from hil.plan.kinds import fields as F
+from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.session import BenchError
 from hil.plan.yamlio import Checker, join
@@ -39,7 +39,7 @@ class _Handshake(StepKind):
 
     def check(self, cc: CheckContext) -> None:
         d, dname = cc.drive, cc.dname
-        F.check_dio(cc)
+        fields.check_dio(cc)
         for f in self.need:
             if f not in d.di:
                 raise cc.err(f"drive {dname} has no DI wired to {f}: wire it in the bench or "
@@ -59,21 +59,21 @@ class AbsRead(_Handshake):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        m = F.mapping_or_empty(v, obj, line, where)
+        m = fields.mapping_or_empty(v, obj, line, where)
         v.keys(m, {"expect", "tolerance", "store", "same_as", "retries"}, where)
         out: dict[str, Any] = {"expect": {}, "store": None, "same_as": None,
-                               "tolerance": v.integer(m, "tolerance", where, 0, F.INT32[1], 0),
+                               "tolerance": v.integer(m, "tolerance", where, 0, fields.INT32[1], 0),
                                "retries": v.integer(m, "retries", where, 0, 5, 2)}
         if "expect" in m:
             fw = join(where, "expect")
             em = v.mapping(m["expect"], m.kline("expect"), fw)
             v.keys(em, set(_ABS_FIELDS), fw)
             for k in em:
-                out["expect"][k] = v.integer(em, k, fw, *F.INT32)
+                out["expect"][k] = v.integer(em, k, fw, *fields.INT32)
         for k in ("store", "same_as"):
             if k in m:
                 name = m[k]
-                if not isinstance(name, str) or not F.NAME_RE.match(name):
+                if not isinstance(name, str) or not fields.NAME_RE.match(name):
                     raise v.err(m.kline(k), join(where, k),
                                 f"{name!r}: a name like before_cycle")
                 out[k] = name
@@ -123,7 +123,7 @@ class AbsOrigin(_Handshake):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        m = F.mapping_or_empty(v, obj, line, where)
+        m = fields.mapping_or_empty(v, obj, line, where)
         v.keys(m, {"hold"}, where)
         out: dict[str, Any] = {"hold": None}
         if "hold" in m:

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any
 
 from hil.model.homing_methods import CANOPEN_METHODS
 from hil.plan.context import Outcome
-from hil.plan.kinds import fields as F
+from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.yamlio import Checker, join
 
@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
 class _Cia402(StepKind):
     def check(self, cc: CheckContext) -> None:
-        F.check_can(cc)
+        fields.check_can(cc)
 
 
 class State(_Cia402):
@@ -28,8 +28,8 @@ class State(_Cia402):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        if not isinstance(obj, str) or obj.strip().upper() not in F.COMMANDABLE:
-            raise v.err(line, where, f"{obj!r}: one of {', '.join(F.COMMANDABLE)}")
+        if not isinstance(obj, str) or obj.strip().upper() not in fields.COMMANDABLE:
+            raise v.err(line, where, f"{obj!r}: one of {', '.join(fields.COMMANDABLE)}")
         return {"state": obj.strip().upper()}
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
@@ -79,8 +79,8 @@ class Mode(_Cia402):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        if not isinstance(obj, str) or obj.strip().upper() not in F.MODES:
-            raise v.err(line, where, f"{obj!r}: one of {', '.join(F.MODES)}")
+        if not isinstance(obj, str) or obj.strip().upper() not in fields.MODES:
+            raise v.err(line, where, f"{obj!r}: one of {', '.join(fields.MODES)}")
         return {"mode": obj.strip().upper()}
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
@@ -112,7 +112,7 @@ class Move(_Cia402):
             raise v.err(m.kline("mode"), join(where, "mode"), f"{m.get('mode')!r}: PP, PV or PT")
         v.keys(m, _MOVE_KEYS[mode], where)
         out: dict[str, Any] = {"mode": mode}
-        i32 = F.INT32
+        i32 = fields.INT32
         if mode == "PP":
             out["target"] = v.integer(m, "target", where, *i32)
             out["velocity"] = v.integer(m, "velocity", where, 1, i32[1])
@@ -152,7 +152,7 @@ class Home(_Cia402):
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
         v.keys(m, {"method", "speeds", "accel", "offset"}, where, required=("method",))
-        i32 = F.INT32
+        i32 = fields.INT32
         out = {"method": v.integer(m, "method", where, -128, 127),  # 6098h (L18838)
                "accel": v.integer(m, "accel", where, 1, i32[1], 100),
                "offset": v.integer(m, "offset", where, *i32, 0), "speeds": (100, 20)}

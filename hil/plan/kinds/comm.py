@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from hil.plan import fault_steps as FS
+from hil.plan import fault_steps
 from hil.plan.context import Outcome
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.yamlio import Checker
@@ -30,15 +30,15 @@ class _Comm(StepKind):
         return Outcome(type(self)._run(ctx, step, d))
 
     def describe(self) -> str:
-        return FS.describe(self.name, self.args)
+        return fault_steps.describe(self.name, self.args)
 
 
 class Fault(_Comm):
     """`fault: {can: drop, match: {...}, for: 2s}` and the RS-485 / DI/DO faults."""
 
     name = "fault"
-    _parse = staticmethod(FS.p_fault)
-    _run = staticmethod(FS.x_fault)
+    _parse = staticmethod(fault_steps.p_fault)
+    _run = staticmethod(fault_steps.x_fault)
 
     def check(self, cc: CheckContext) -> None:
         if not cc.bench.faults_allowed:
@@ -50,24 +50,24 @@ class Produce(_Comm):
     """`produce: {heartbeat: 100ms, sync: off}`: the master's periodic frames."""
 
     name = "produce"
-    _parse = staticmethod(FS.p_produce)
-    _run = staticmethod(FS.x_produce)
+    _parse = staticmethod(fault_steps.p_produce)
+    _run = staticmethod(fault_steps.x_produce)
 
 
 class Sdo(_Comm):
     """`sdo: {1016h:1: 0x000A0064}`: raw object writes."""
 
     name = "sdo"
-    _parse = staticmethod(FS.p_sdo)
-    _run = staticmethod(FS.x_sdo)
+    _parse = staticmethod(fault_steps.p_sdo)
+    _run = staticmethod(fault_steps.x_sdo)
 
 
 class Nmt(_Comm):
     """`nmt: stop`: an NMT command to the drive's node."""
 
     name = "nmt"
-    _parse = staticmethod(FS.p_nmt)
-    _run = staticmethod(FS.x_nmt)
+    _parse = staticmethod(fault_steps.p_nmt)
+    _run = staticmethod(fault_steps.x_nmt)
 
 
 KINDS = (Fault, Produce, Sdo, Nmt)

@@ -7,7 +7,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from hil.plan.context import Outcome
-from hil.plan.kinds import fields as F
+from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.yamlio import Checker
 from hil.profile.dio import DI_SYMBOLS
@@ -40,7 +40,7 @@ class Di(StepKind):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return {"levels": F.levels(v, obj, line, where, DI_SYMBOLS, "DI function")}
+        return {"levels": fields.levels(v, obj, line, where, DI_SYMBOLS, "DI function")}
 
     def check(self, cc: CheckContext) -> None:
         _check_wired(cc, self.args["levels"])
@@ -61,7 +61,7 @@ class Pulse(StepKind):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return {"widths": F.widths(v, obj, line, where, DI_SYMBOLS, "DI function")}
+        return {"widths": fields.widths(v, obj, line, where, DI_SYMBOLS, "DI function")}
 
     def check(self, cc: CheckContext) -> None:
         _check_wired(cc, self.args["widths"])
@@ -92,10 +92,10 @@ class Sto(StepKind):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return {"levels": F.levels(v, obj, line, where, F.STO, "STO channel")}
+        return {"levels": fields.levels(v, obj, line, where, fields.STO, "STO channel")}
 
     def check(self, cc: CheckContext) -> None:
-        F.check_dio(cc)
+        fields.check_dio(cc)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         for ch, lv in self.args["levels"].items():
@@ -113,10 +113,10 @@ class StoDropout(StepKind):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return {"widths": F.widths(v, obj, line, where, F.STO, "STO channel")}
+        return {"widths": fields.widths(v, obj, line, where, fields.STO, "STO channel")}
 
     def check(self, cc: CheckContext) -> None:
-        F.check_dio(cc)
+        fields.check_dio(cc)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         widths = sorted(self.args["widths"].items(), key=lambda x: x[1])

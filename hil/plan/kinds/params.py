@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any
 
 from hil.model.dio import inert_mapping
 from hil.plan.context import Outcome, StepFailed
-from hil.plan.kinds import fields as F
+from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.param_rules import check_param
 from hil.plan.session import refusal_code
@@ -26,13 +26,13 @@ class Write(StepKind):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
-        via = F.parse_via(v, m, where)
-        fields = {k: x for k, x in m.items() if k != "expect_error"}
-        fm = LDict(fields)
+        via = fields.parse_via(v, m, where)
+        plain = {k: x for k, x in m.items() if k != "expect_error"}
+        fm = LDict(plain)
         fm.line, fm.key_lines = m.line, m.key_lines
         if "expect_error" in m:
             fm["expect_error"] = m["expect_error"]  # seen by param_values: no range rule
-        out = {"values": F.param_values(v, fm, where, False, write=True), "via": via,
+        out = {"values": fields.param_values(v, fm, where, False, write=True), "via": via,
                "expect_error": None}
         if "expect_error" in m:
             fw = join(where, "expect_error")
@@ -44,7 +44,7 @@ class Write(StepKind):
             if len(out["values"]) != 1:
                 raise v.err(m.kline("expect_error"), fw, "one parameter per refused write "
                             f"(got {', '.join(out['values'])})")
-            F.check_expect_error(v, m.kline("expect_error"), fw, code, via)
+            fields.check_expect_error(v, m.kline("expect_error"), fw, code, via)
             out["expect_error"] = code
         else:
             for k, val in out["values"].items():
@@ -54,12 +54,12 @@ class Write(StepKind):
         return out
 
     def check(self, cc: CheckContext) -> None:
-        F.check_via(cc, "", self.args["via"])
+        fields.check_via(cc, "", self.args["via"])
         if self.args.get("expect_error") is not None:
             via = self.args["via"] or cc.drive.param_via
             raw = cc.step.raw.get(self.name)
             line = raw.kline("expect_error") if hasattr(raw, "kline") else cc.step.line
-            F.check_expect_error(cc.v, line, join(cc.field, "expect_error"),
+            fields.check_expect_error(cc.v, line, join(cc.field, "expect_error"),
                                  self.args["expect_error"], via)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
@@ -105,15 +105,16 @@ class Read(StepKind):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         if isinstance(obj, str):
-            if not F.PARAM_RE.match(obj):
+            if not fields.PARAM_RE.match(obj):
                 raise v.err(line, where, f"{obj!r}: a parameter name like P1.042")
             check_param(v, line, where, obj, None, write=False)
             return {"values": {obj: None}, "via": None}
         m = v.mapping(obj, line, where)
-        return {"values": F.param_values(v, m, where, True), "via": F.parse_via(v, m, where)}
+        return {"values": fields.param_values(v, m, where, True),
+                "via": fields.parse_via(v, m, where)}
 
     def check(self, cc: CheckContext) -> None:
-        F.check_via(cc, "", self.args["via"])
+        fields.check_via(cc, "", self.args["via"])
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         got, bad = [], []

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from hil.plan import pr_steps as PS
+from hil.plan import pr_steps
 from hil.plan.context import Outcome
 from hil.plan.kinds.base import StepKind
 from hil.plan.yamlio import Checker
@@ -21,13 +21,13 @@ if TYPE_CHECKING:
 class _Pr(StepKind):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return PS.PARSERS[cls.name](v, obj, line, where)
+        return pr_steps.PARSERS[cls.name](v, obj, line, where)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        return Outcome(PS.EXECUTORS[self.name](ctx, step, d))
+        return Outcome(pr_steps.EXECUTORS[self.name](ctx, step, d))
 
     def describe(self) -> str:
-        return PS.describe(self.name, self.args)
+        return pr_steps.describe(self.name, self.args)
 
 
 class PrTable(_Pr):

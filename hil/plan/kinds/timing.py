@@ -7,7 +7,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from hil.plan.context import Inconclusive, Outcome, StepFailed
-from hil.plan.kinds import fields as F
+from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.yamlio import Checker, join
 from hil.profile.dio import DI_SYMBOLS, DO_SYMBOLS
@@ -51,13 +51,13 @@ class CheckTiming(StepKind):
         params = {}
         if "params" in m:
             pm = v.mapping(m["params"], m.kline("params"), join(where, "params"))
-            params = dict(F.param_values(v, pm, join(where, "params"), False))
+            params = dict(fields.param_values(v, pm, join(where, "params"), False))
         bind: dict[str, str] = {}
         if "bind" in m:
             fw = join(where, "bind")
             bm = v.mapping(m["bind"], m.kline("bind"), fw)
             for k, x in bm.items():
-                if not F.NAME_RE.match(str(k)):
+                if not fields.NAME_RE.match(str(k)):
                     raise v.err(bm.kline(k), join(fw, str(k)), "a placeholder name like REF")
                 if not isinstance(x, str) or not (BIND_LINE_RE.match(x) or x in DI_SYMBOLS
                                                    or x in DO_SYMBOLS):

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import fields
+import dataclasses
 from typing import TYPE_CHECKING, Any
 
 from hil.model.options import ModelOptions
 from hil.plan.context import Outcome
-from hil.plan.kinds import fields as F
+from hil.plan.kinds import fields
 from hil.plan.kinds.base import StepKind
 from hil.plan.yamlio import Checker, join
 
@@ -54,11 +54,11 @@ class Inject(StepKind):
         out: dict[str, Any] = {}
         if "options" in m:
             om = v.mapping(m["options"], m.kline("options"), join(where, "options"))
-            v.keys(om, {f.name for f in fields(ModelOptions)}, join(where, "options"))
+            v.keys(om, {f.name for f in dataclasses.fields(ModelOptions)}, join(where, "options"))
             out["options"] = dict(om)
         if "alarm" in m:
             a = m["alarm"]
-            if not isinstance(a, str) or not F.ALARM_RE.match(a.upper()):
+            if not isinstance(a, str) or not fields.ALARM_RE.match(a.upper()):
                 raise v.err(m.kline("alarm"), join(where, "alarm"),
                             f"{a!r}: an alarm code like AL009")
             out["alarm"] = a.upper()

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 from hil.drivers.cia402 import decode_state
 from hil.plan.context import Outcome, StepFailed
-from hil.plan.kinds import fields as F
+from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.kinds.fields import Condition
 from hil.plan.yamlio import Checker, parse_duration
@@ -73,7 +73,7 @@ class _Conditions(StepKind):
             if c.kind == "state" and not d.can:
                 raise cc.err(f"drive {dname} has no CAN bus", "state")
             if c.kind in ("param", "alarm"):
-                F.check_via(cc, c.kind, c.via)
+                fields.check_via(cc, c.kind, c.via)
 
     def describe(self) -> str:
         return f"{self.name} " + " and ".join(c.describe() for c in self.args["conditions"])
@@ -87,8 +87,8 @@ class WaitUntil(_Conditions):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
-        v.keys(m, F.COND_KEYS | {"timeout"}, where)
-        out = {"conditions": F.conditions(v, m, where), "timeout": None}
+        v.keys(m, fields.COND_KEYS | {"timeout"}, where)
+        out = {"conditions": fields.conditions(v, m, where), "timeout": None}
         if "timeout" in m:
             out["timeout"] = v.duration(m, "timeout", where)
         return out
@@ -118,8 +118,8 @@ class Expect(_Conditions):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
-        v.keys(m, F.COND_KEYS, where)
-        return {"conditions": F.conditions(v, m, where)}
+        v.keys(m, fields.COND_KEYS, where)
+        return {"conditions": fields.conditions(v, m, where)}
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         seen = [(c, *evaluate(d, c)) for c in self.args["conditions"]]
