@@ -130,6 +130,9 @@ class DigitalIO:
         self._overlay_di: dict[int, str] = {}
         self._overlay_do: dict[int, str] = {}
         self._held: dict[str, bool] = {}
+        self._reserved_di: set[int] = set()  # DI7 while CAPTURE runs (capture.py, L5150)
+        self._forced_do: dict[int, bool] = {}  # DO4 while COMPARE runs (compare.py, L5188)
+        self._raw_subs: list[Callable[[int, bool], None]] = []
         for p in DI_PARAMS:
             params.on_validate(p, check_di_mapping_write)
         for p in DO_PARAMS:
@@ -178,6 +181,9 @@ class DigitalIO:
         """
         i = self._physical_index(n)
         closed = bool(closed)
+        if closed != self._raw[i]:
+            for fn in list(self._raw_subs):  # high-speed inputs see the terminal, unfiltered
+                fn(n, closed)
         if settled:
             if self._pending[i] is not None:
                 self._pending[i].cancel()
@@ -265,7 +271,7 @@ class DigitalIO:
                     held = DI_FUNCTIONS[code].symbol
                     state[held] = state.get(held, False) or self._held.get(held, False)
                 continue
-            if not code:
+            if not code or n in self._reserved_di:
                 continue
             sym = DI_FUNCTIONS[code].symbol
             active = self.contact(n) == a_contact
@@ -316,7 +322,9 @@ class DigitalIO:
     def _update_do(self) -> None:
         for i, (code, a_contact) in enumerate(self._do_map):
             n = i + 1
-            if n in self._overlay_do:
+            if n in self._forced_do:
+                sym, level = "", self._forced_do[n]
+            elif n in self._overlay_do:
                 sym = self._overlay_do[n]
                 level = self._do_state.get(sym, False)  # overlay outputs act as a-contacts
             elif code:
@@ -333,6 +341,29 @@ class DigitalIO:
     def _update_p0046(self) -> None:
         word = sum(1 << bit for sym, bit in P0046_BITS.items() if self._do_state.get(sym))
         self.params.set_internal("P0.046", word)
+
+    # -- high-speed lines: CAPTURE on DI7, COMPARE on DO4 (A3 §7.2.2-7.2.3) -----------------
+
+    def on_raw(self, fn: Callable[[int, bool], None]) -> None:
+        """fn(n, closed) on every terminal change of a physical DI, before the P2.009 filter."""
+        self._raw_subs.append(fn)
+
+    def reserve_di(self, n: int, on: bool) -> None:
+        """While on, DI n feeds no mapped function (CAPTURE forces DI7, L5150)."""
+        if on == (n in self._reserved_di):
+            return
+        (self._reserved_di.add if on else self._reserved_di.discard)(n)
+        self._update_di()
+
+    def force_do(self, n: int, level: bool | None) -> None:
+        """Drive DO n to `level` regardless of its mapping; None gives it back (COMPARE forces
+        DO4, L5188)."""
+        if level is None:
+            if self._forced_do.pop(n, None) is None:
+                return
+        else:
+            self._forced_do[n] = bool(level)
+        self._update_do()
 
     # -- absolute handshake overlay (L15137, L16503-16521) ----------------------------------
 

@@ -28,7 +28,9 @@ from hil.model.absolute import AbsoluteEncoder, AbsoluteOptions
 from hil.model.alarms import AlarmManager, AlarmOptions
 from hil.model.brake import Brake, HoldingBrake
 from hil.model.canopen_init import HOME_OFFSET_INIT, load_canopen_init
+from hil.model.capture import attach_capture
 from hil.model.cia402 import Cia402, Cia402Options
+from hil.model.compare import attach_compare
 from hil.model.dio import DigitalIO
 from hil.model.errors import (
     ABORT_DATA_STATE,
@@ -111,6 +113,8 @@ class Drive:
         self._update_sensors(force=True)
         self.homing = attach_homing(self)  # homing methods (docs/homing.md)
         self.pr = attach_pr(self)  # PR#1-#99 (chapter 7, docs/pr.md)
+        self.capture = attach_capture(self)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
+        self.compare = attach_compare(self)  # COMPARE on DO4 (§7.2.3, docs/capture.md)
         self._boot()
 
     # ------------------------------------------------------------------ construction
@@ -236,7 +240,10 @@ class Drive:
 
     def set_di(self, n: int, closed: bool) -> None:
         """Physical DI n (1..10): True = contact closed (24 V)."""
+        changed = self.dio.input_level(n) != bool(closed)
         self.dio.set_input(n, closed)
+        if changed:  # the terminal edge, for the ground truth (a latch is judged against it)
+            self._emit(InputChanged(self.sched.now, n, bool(closed)))
 
     def set_sto(self, channel: str, on: bool) -> None:
         """STO channel "A"/"B" (or "STO_A"/"STO_B"): True = 24 V present."""

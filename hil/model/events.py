@@ -70,7 +70,7 @@ class PowerCycled:
 
 @dataclass(frozen=True, slots=True)
 class InputChanged:
-    """A DI terminal the bench mechanics drive (NL, PL, ORGP sensors) changed level."""
+    """A DI terminal changed level (the bench's sensors, or `Drive.set_di`)."""
 
     t: int
     n: int
@@ -85,7 +85,33 @@ class HomingPhase:
     phase: str
 
 
+@dataclass(frozen=True, slots=True)
+class CaptureLatched:
+    """CAPTURE stored `value` (capture-source pulses) at data array `address` (capture.py)."""
+
+    t: int
+    address: int
+    value: int
+
+
+@dataclass(frozen=True, slots=True)
+class CompareFired:
+    """COMPARE matched point `index` (CMP_DATA `target`) and drove DO4 (compare.py)."""
+
+    t: int
+    index: int
+    target: int
+
+
+@dataclass(frozen=True, slots=True)
+class ZPulse:
+    """Ground truth: the motor passed its Z mark at `position_puu` (virtual mechanics)."""
+
+    t: int
+    position_puu: float
+
+
 DriveEvent = (
     DoChanged | FdbkChanged | StateChanged | AlarmChanged | ParamChanged | PowerCycled
-    | InputChanged | HomingPhase | BrakeChanged
+    | InputChanged | HomingPhase | BrakeChanged | CaptureLatched | CompareFired | ZPulse
 )
