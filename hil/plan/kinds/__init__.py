@@ -14,7 +14,18 @@ from __future__ import annotations
 
 from importlib.metadata import entry_points
 
-from hil.plan.kinds import absolute, cia402, comm, io, params, pr, timing, virtual, waits
+from hil.plan.kinds import (
+    absolute,
+    capture,
+    cia402,
+    comm,
+    io,
+    params,
+    pr,
+    timing,
+    virtual,
+    waits,
+)
 from hil.plan.kinds.base import CheckContext, StepKind
 
 __all__ = ["BUILTIN", "CheckContext", "StepKind", "kinds"]
@@ -23,7 +34,7 @@ ENTRY_POINT_GROUP = "hil.steps"
 
 BUILTIN: dict[str, type[StepKind]] = {
     k.name: k
-    for module in (io, params, cia402, waits, virtual, timing, absolute, comm, pr)
+    for module in (io, params, cia402, waits, virtual, timing, absolute, comm, pr, capture)
     for k in module.KINDS
 }
 

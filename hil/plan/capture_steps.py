@@ -1,0 +1,287 @@
+"""Plan steps of CAPTURE / COMPARE: `capture_arm`, `compare_table`, `latch` (docs/capture.md).
+
+    - capture_arm: {start: 100, count: 3, source: CN2, trigger: no, min_interval: 2ms,
+                    reset: 0, cyclic: false, run_pr50: false, start_compare: false, mask: 0}
+    - compare_table: {start: 50, positions: [20000, 30000], width: 10ms, source: capture,
+                      polarity: no, cyclic: false, zero_after: false, run_pr45: false,
+                      start_capture: false, shift: 0}
+    - mark: {width: 2ms}          # the sensor sees a mark: DI7 leaves its level for 2 ms
+    - latch: {tolerance: 20, window: {min: 0, max: 50000}, width: {min: 100, max: 5000},
+              edges: every}
+
+`capture_arm` writes P5.036, P5.038, P5.076, P1.019, P1.020 and P5.039 (L11471-11542, L8122,
+L8149); `compare_table` writes the data array through P5.011/P5.012 (L5104-5114), P5.056,
+P5.058, P1.023 and P5.059 (L11692-11781). `latch` reads the captured values back and judges
+them against the recording's ground truth (hil/timing/latch.py).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from hil.plan.context import Inconclusive, StepFailed
+from hil.plan.yamlio import Checker, join
+from hil.record import topics
+from hil.timing.latch import Reference, edges_from, judge
+from hil.timing.source import RecordingSource
+
+SOURCES = {"off": 0, "CN5": 1, "CN1": 2, "CN2": 3}  # P5.039.Y (L11524-11528)
+CMP_SOURCES = {"capture": 0, "CN5": 1, "CN1": 2, "CN2": 3}  # P5.059.Y (L11751-11756)
+POLARITY = {"no": 0, "nc": 1}  # P5.039.Z / P5.059.Z (L11530, L11758)
+ARRAY = 800  # L5097
+STORE = "capture_armed:"
+
+
+def _polarity(v: Checker, m: Any, key: str, where: str) -> int:
+    x = m.get(key, "no")
+    if x not in POLARITY:
+        raise v.err(m.kline(key), join(where, key), f"{x!r}: no (normally open) or nc")
+    return POLARITY[x]
+
+
+def _choice(v: Checker, m: Any, key: str, where: str, table: dict[str, int], default: str
+            ) -> int:
+    x = m.get(key, default)
+    if x not in table:
+        raise v.err(m.kline(key), join(where, key), f"{x!r}: one of {', '.join(table)}")
+    return table[x]
+
+
+def _ms(v: Checker, m: Any, key: str, where: str, default: int, hi: int) -> int:
+    ns = v.duration(m, key, where, default * 1_000_000)
+    if ns % 1_000_000 or not 0 <= ns // 1_000_000 <= hi:
+        raise v.err(m.kline(key), join(where, key), f"whole ms 0..{hi} (the drive counts ms)")
+    return ns // 1_000_000
+
+
+def p_capture_arm(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    m = v.mapping(obj, line, where)
+    v.keys(m, {"start", "count", "source", "trigger", "min_interval", "reset", "cyclic",
+               "run_pr50", "start_compare", "mask", "via"}, where)
+    start = v.integer(m, "start", where, 0, ARRAY - 1, 0)
+    count = v.integer(m, "count", where, 1, ARRAY, 1)
+    if start + count > ARRAY:
+        raise v.err(m.kline("count"), join(where, "count"), f"start {start} + count {count} "
+                    "exceeds the 800-entry data array (L11494)")
+    out = {"start": start, "count": count,
+           "source": _choice(v, m, "source", where, SOURCES, "CN2"),
+           "nc": _polarity(v, m, "trigger", where),
+           "min_interval": _ms(v, m, "min_interval", where, 0, 15),
+           "reset": m.get("reset"), "cyclic": v.boolean(m, "cyclic", where, False),
+           "run_pr50": v.boolean(m, "run_pr50", where, False),
+           "start_compare": v.boolean(m, "start_compare", where, False),
+           "mask": v.integer(m, "mask", where, 0, 100_000_000, 0), "via": m.get("via")}
+    if out["source"] == 0:
+        raise v.err(m.kline("source"), join(where, "source"), "off: CAPTURE would not act")
+    if out["reset"] is not None and (isinstance(out["reset"], bool)
+                                     or not isinstance(out["reset"], int)):
+        raise v.err(m.kline("reset"), join(where, "reset"), "an integer (P5.076)")
+    return out
+
+
+def p_compare_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    m = v.mapping(obj, line, where)
+    v.keys(m, {"start", "positions", "width", "source", "polarity", "cyclic", "zero_after",
+               "run_pr45", "start_capture", "shift", "via"}, where, required=("positions",))
+    start = v.integer(m, "start", where, 0, ARRAY - 1, 50)
+    pos = v.seq(m["positions"], m.kline("positions"), join(where, "positions"))
+    for i, x in enumerate(pos):
+        if isinstance(x, bool) or not isinstance(x, int) or not -2**31 <= x < 2**31:
+            raise v.err(m.kline("positions"), join(where, f"positions[{i}]"),
+                        f"{x!r}: a 32-bit integer position")
+    if not pos or start + len(pos) > ARRAY:
+        raise v.err(m.kline("positions"), join(where, "positions"),
+                    f"1..{ARRAY - start} positions from start {start} (L11717)")
+    return {"start": start, "positions": list(pos),
+            "width": _ms(v, m, "width", where, 100, 0xFFF),
+            "source": _choice(v, m, "source", where, CMP_SOURCES, "capture"),
+            "nc": _polarity(v, m, "polarity", where),
+            "cyclic": v.boolean(m, "cyclic", where, False),
+            "zero_after": v.boolean(m, "zero_after", where, False),
+            "run_pr45": v.boolean(m, "run_pr45", where, False),
+            "start_capture": v.boolean(m, "start_capture", where, False),
+            "shift": v.integer(m, "shift", where, -10_000_000, 100_000_000, 0),
+            "via": m.get("via")}
+
+
+def _range(v: Checker, m: Any, key: str, where: str) -> tuple[float, float] | None:
+    if key not in m:
+        return None
+    r = v.mapping(m[key], m.kline(key), join(where, key))
+    v.keys(r, {"min", "max"}, join(where, key))
+    lo, hi = r.get("min", float("-inf")), r.get("max", float("inf"))
+    for k, x in (("min", lo), ("max", hi)):
+        if isinstance(x, bool) or not isinstance(x, int | float):
+            raise v.err(r.kline(k), join(where, key, k), f"{x!r}: a number (counts)")
+    if lo > hi:
+        raise v.err(r.line, join(where, key), f"min {lo} > max {hi}")
+    return float(lo), float(hi)
+
+
+def p_latch(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    m = v.mapping(obj, line, where)
+    v.keys(m, {"tolerance", "window", "width", "edges", "trigger", "start", "count",
+               "reference", "via"}, where, required=("tolerance",))
+    tol = m["tolerance"]
+    if isinstance(tol, bool) or not isinstance(tol, int | float) or tol < 0:
+        raise v.err(m.kline("tolerance"), join(where, "tolerance"),
+                    f"{tol!r}: counts (capture-source pulses) >= 0")
+    edges = m.get("edges", "every")
+    if edges not in ("first", "every"):
+        raise v.err(m.kline("edges"), join(where, "edges"), f"{edges!r}: first or every")
+    trig = m.get("trigger", "DI7")
+    if trig not in ("DI7", "Z"):
+        raise v.err(m.kline("trigger"), join(where, "trigger"), f"{trig!r}: DI7 or Z")
+    ref = None
+    if "reference" in m:
+        r = v.mapping(m["reference"], m.kline("reference"), join(where, "reference"))
+        v.keys(r, {"topic", "field"}, join(where, "reference"), required=("topic", "field"))
+        ref = (v.text(r, "topic", where), v.text(r, "field", where))
+    return {"tolerance": float(tol), "window": _range(v, m, "window", where),
+            "width": _range(v, m, "width", where), "every": edges == "every",
+            "trigger": trig, "start": m.get("start"), "count": m.get("count"),
+            "reference": ref, "via": m.get("via")}
+
+
+def p_mark(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    m = v.mapping(obj, line, where)
+    v.keys(m, {"width", "line"}, where)
+    ln = m.get("line", "DI7")
+    if not isinstance(ln, str) or not ln.startswith("DI") or not ln[2:].isdigit() \
+            or not 1 <= int(ln[2:]) <= 10:
+        raise v.err(m.kline("line"), join(where, "line"), f"{ln!r}: a DI line DI1..DI10")
+    return {"width": v.duration(m, "width", where, 2_000_000), "line": ln}
+
+
+# ------------------------------------------------------------------------- executors
+def x_mark(ctx: Any, s: Any, d: Any) -> str:
+    """The sensor sees a mark: the line leaves its level for `width`, then returns."""
+    ln = s.args["line"]
+    idle = d.line(ln)
+    d.set_line(ln, not idle)
+    ctx.sleep(s.args["width"])
+    d.set_line(ln, idle)
+    return f"{ln} {'opened' if idle else 'closed'} for {s.args['width'] / 1e6:g} ms"
+
+
+
+def x_capture_arm(ctx: Any, s: Any, d: Any) -> str:
+    a, via = s.args, s.args["via"]
+    old = d.read_param("P5.039", via)
+    d.write_param("P5.039", old & ~1, via)  # stop first: P5.036/P5.038 need it (L11476)
+    d.write_param("P5.036", a["start"], via)
+    d.write_param("P5.038", a["count"], via)
+    if a["reset"] is not None:
+        d.write_param("P5.076", a["reset"], via)
+    p1019 = d.read_param("P1.019", via)
+    d.write_param("P1.019", (p1019 & ~1) | int(a["cyclic"]), via)
+    d.write_param("P1.020", a["mask"], via)
+    x = 1 | (2 if a["reset"] is not None else 0) | (4 if a["start_compare"] else 0) \
+        | (8 if a["run_pr50"] else 0)
+    value = a["min_interval"] << 12 | a["nc"] << 8 | a["source"] << 4 | x
+    ctx.store[STORE + d.name] = {"t": time.time_ns(), "start": a["start"],
+                                 "count": a["count"], "nc": a["nc"]}
+    d.write_param("P5.039", value, via)
+    return f"P5.039 = 0x{value:04X}: {a['count']} point(s) into Array[{a['start']}]"
+
+
+def x_compare_table(ctx: Any, s: Any, d: Any) -> str:
+    a, via = s.args, s.args["via"]
+    old = d.read_param("P5.059", via)
+    d.write_param("P5.059", old & ~1, via)
+    d.write_param("P5.011", a["start"], via)  # window #1 advances on every write (L5111)
+    for x in a["positions"]:
+        d.write_param("P5.012", x, via)
+    d.write_param("P5.011", a["start"], via)
+    back = [d.read_param("P5.012", via) for _ in a["positions"]]
+    if back != a["positions"]:
+        raise StepFailed(f"data array read back {back}, wrote {a['positions']}")
+    d.write_param("P5.056", a["start"], via)
+    d.write_param("P5.058", len(a["positions"]), via)
+    d.write_param("P1.023", a["shift"], via)
+    x = 1 | (2 if a["cyclic"] else 0) | (4 if a["start_capture"] else 0) \
+        | (8 if a["zero_after"] else 0)
+    value = a["width"] << 16 | int(a["run_pr45"]) << 12 | a["nc"] << 8 | a["source"] << 4 | x
+    d.write_param("P5.059", value, via)
+    return f"P5.059 = 0x{value:08X}: {len(a['positions'])} point(s) from Array[{a['start']}]"
+
+
+def read_array(d: Any, start: int, count: int, via: str | None) -> list[int]:
+    d.write_param("P5.011", start, via)
+    return [_s32(d.read_param("P5.012", via)) for _ in range(count)]
+
+
+def _s32(x: int) -> int:
+    return x - (1 << 32) if x >= 1 << 31 else x
+
+
+def x_latch(ctx: Any, s: Any, d: Any) -> tuple[str, list[dict]]:
+    a = s.args
+    armed = ctx.store.get(STORE + d.name, {})
+    start = a["start"] if a["start"] is not None else armed.get("start", 0)
+    count = a["count"] if a["count"] is not None else armed.get("count", 1)
+    captured = read_array(d, start, count, a["via"])
+    remaining = d.read_param("P5.038", a["via"])
+    sample = getattr(ctx.session.world, "sample_truth", None)
+    if sample is not None:
+        sample()
+    ctx.rec.flush()
+    src = RecordingSource(ctx.rec.path)
+    edges = edges_from(src, d.name, z=a["trigger"] == "Z", since_ns=armed.get("t"))
+    topic, field = a["reference"] or (topics.drive_state(d.name), "position_puu")
+    ref = Reference.from_source(src, topic, field)
+    # P5.038 counts down while armed: only the points already stored are the drive's
+    done = count - remaining if remaining < count else count
+    results = judge(edges, ref, captured[:done] if done else captured,
+                    trigger_level=not armed.get("nc", 0) or a["trigger"] == "Z",
+                    tolerance=a["tolerance"], window=a["window"], width=a["width"],
+                    every=a["every"])
+    out = []
+    for r in results:
+        if r.status not in ("pass", "fail", "inconclusive"):
+            continue
+        msg = (f"edge {r.index}: true {r.true_counts:.1f}, captured {r.captured}, error "
+               + ("-" if r.error_counts is None else f"{r.error_counts:+.1f}")
+               + f" ± {r.uncertainty_counts:.1f} counts (tolerance ±{a['tolerance']:g})"
+               + (f": {r.reason}" if r.reason else ""))
+        vd = {"spec": "latch", "constraint": f"latch edge {r.index}", "status": r.status,
+              "message": msg, "t_ns": r.t_ns, "latch": r.to_dict(),
+              "tolerance_counts": a["tolerance"]}
+        ctx.rec.verdict(vd, plan=ctx.plan.name, step=s.index)
+        out.append(vd)
+    judged = [r for r in results if r.status in ("pass", "fail", "inconclusive")]
+    if not judged:
+        raise StepFailed(f"latch: no accepted sensor edge to judge ({len(edges)} edge(s) "
+                         f"seen, {sum(r.status == 'rejected' for r in results)} rejected)")
+    errs = ", ".join(f"{r.error_counts:+.1f}±{r.uncertainty_counts:.1f}"
+                     if r.error_counts is not None else "none" for r in judged)
+    rejected = sum(r.status == "rejected" for r in results)
+    text = f"{len(judged)} edge(s) judged, errors [{errs}] counts" + \
+        (f", {rejected} rejected" if rejected else "")
+    bad = [v["message"] for v in out if v["status"] == "fail"]
+    if bad:
+        raise StepFailed(f"{text}; " + "; ".join(bad[:3]), out)
+    if any(v["status"] == "inconclusive" for v in out):
+        raise Inconclusive(text, out)
+    return text, out
+
+
+def describe(kind: str, a: dict[str, Any]) -> str:
+    if kind == "capture_arm":
+        return f"capture_arm {a['count']} -> Array[{a['start']}]"
+    if kind == "mark":
+        return f"mark {a['line']} {a['width'] / 1e6:g} ms"
+    if kind == "compare_table":
+        return f"compare_table {len(a['positions'])} point(s), {a['width']} ms"
+    opts = [f"±{a['tolerance']:g}"]
+    if a["window"]:
+        opts.append(f"window {a['window'][0]:g}..{a['window'][1]:g}")
+    if a["width"]:
+        opts.append(f"width {a['width'][0]:g}..{a['width'][1]:g}")
+    opts.append("every edge" if a["every"] else "first edge")
+    return f"latch {a['trigger']} (" + ", ".join(opts) + ")"
+
+
+PARSERS = {"capture_arm": p_capture_arm, "compare_table": p_compare_table, "latch": p_latch,
+           "mark": p_mark}
