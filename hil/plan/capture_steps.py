@@ -1,9 +1,9 @@
 """Plan steps of CAPTURE / COMPARE: `capture_arm`, `compare_table`, `latch` (docs/capture.md).
 
-    - capture_arm: {start: 100, count: 3, source: CN2, trigger: no, min_interval: 2ms,
+    - capture_arm: {start: 100, count: 3, source: CN2, trigger: closing, min_interval: 2ms,
                     reset: 0, cyclic: false, run_pr50: false, start_compare: false, mask: 0}
     - compare_table: {start: 50, positions: [20000, 30000], width: 10ms, source: capture,
-                      polarity: no, cyclic: false, zero_after: false, run_pr45: false,
+                      pulse: closed, cyclic: false, zero_after: false, run_pr45: false,
                       start_capture: false, shift: 0}
     - mark: {width: 2ms}          # the sensor sees a mark: DI7 leaves its level for 2 ms
     - latch: {tolerance: 20, window: {min: 0, max: 50000}, width: {min: 100, max: 5000},
@@ -26,18 +26,15 @@ from hil.record import topics
 from hil.timing.latch import Reference, edges_from, judge
 from hil.timing.source import RecordingSource
 
-SOURCES = {"off": 0, "CN5": 1, "CN1": 2, "CN2": 3}  # P5.039.Y (L11524-11528)
+SOURCES = {"CN5": 1, "CN1": 2, "CN2": 3}  # P5.039.Y (L11524-11528; 0 = off)
 CMP_SOURCES = {"capture": 0, "CN5": 1, "CN1": 2, "CN2": 3}  # P5.059.Y (L11751-11756)
-POLARITY = {"no": 0, "nc": 1}  # P5.039.Z / P5.059.Z (L11530, L11758)
+# P5.039.Z / P5.059.Z 0 NO / 1 NC (L11530, L11758), named by what they do (YAML reads
+# a bare `no` as false): CAPTURE latches on the contact `closing` (NO) or `opening` (NC);
+# the COMPARE pulse makes DO4 `closed` (NO) or `open` (NC).
+TRIGGER = {"closing": 0, "opening": 1}
+PULSE = {"closed": 0, "open": 1}
 ARRAY = 800  # L5097
 STORE = "capture_armed:"
-
-
-def _polarity(v: Checker, m: Any, key: str, where: str) -> int:
-    x = m.get(key, "no")
-    if x not in POLARITY:
-        raise v.err(m.kline(key), join(where, key), f"{x!r}: no (normally open) or nc")
-    return POLARITY[x]
 
 
 def _choice(v: Checker, m: Any, key: str, where: str, table: dict[str, int], default: str
@@ -66,14 +63,12 @@ def p_capture_arm(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]
                     "exceeds the 800-entry data array (L11494)")
     out = {"start": start, "count": count,
            "source": _choice(v, m, "source", where, SOURCES, "CN2"),
-           "nc": _polarity(v, m, "trigger", where),
+           "nc": _choice(v, m, "trigger", where, TRIGGER, "closing"),
            "min_interval": _ms(v, m, "min_interval", where, 0, 15),
            "reset": m.get("reset"), "cyclic": v.boolean(m, "cyclic", where, False),
            "run_pr50": v.boolean(m, "run_pr50", where, False),
            "start_compare": v.boolean(m, "start_compare", where, False),
            "mask": v.integer(m, "mask", where, 0, 100_000_000, 0), "via": m.get("via")}
-    if out["source"] == 0:
-        raise v.err(m.kline("source"), join(where, "source"), "off: CAPTURE would not act")
     if out["reset"] is not None and (isinstance(out["reset"], bool)
                                      or not isinstance(out["reset"], int)):
         raise v.err(m.kline("reset"), join(where, "reset"), "an integer (P5.076)")
@@ -82,7 +77,7 @@ def p_capture_arm(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]
 
 def p_compare_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     m = v.mapping(obj, line, where)
-    v.keys(m, {"start", "positions", "width", "source", "polarity", "cyclic", "zero_after",
+    v.keys(m, {"start", "positions", "width", "source", "pulse", "cyclic", "zero_after",
                "run_pr45", "start_capture", "shift", "via"}, where, required=("positions",))
     start = v.integer(m, "start", where, 0, ARRAY - 1, 50)
     pos = v.seq(m["positions"], m.kline("positions"), join(where, "positions"))
@@ -96,7 +91,7 @@ def p_compare_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, An
     return {"start": start, "positions": list(pos),
             "width": _ms(v, m, "width", where, 100, 0xFFF),
             "source": _choice(v, m, "source", where, CMP_SOURCES, "capture"),
-            "nc": _polarity(v, m, "polarity", where),
+            "nc": _choice(v, m, "pulse", where, PULSE, "closed"),
             "cyclic": v.boolean(m, "cyclic", where, False),
             "zero_after": v.boolean(m, "zero_after", where, False),
             "run_pr45": v.boolean(m, "run_pr45", where, False),

@@ -1,0 +1,96 @@
+"""CAPTURE / COMPARE plan steps and the `latch` assertion (docs/capture.md)."""
+
+from __future__ import annotations
+
+import io
+import math
+
+import pytest
+
+from hil.plan.bench import load_bench
+from hil.plan.plan import find_plans, load_plan, loads_plan
+from hil.plan.runner import run_plans
+from hil.plan.steps import parse_steps
+from hil.plan.yamlio import Checker, PlanFileError, load_yaml_text
+from hil.timing.latch import Edge, Reference, judge
+
+# a reference moving 1000 counts per ms, sampled every 1 ms (t in ns)
+REF = Reference([(k * 1_000_000, 1000.0 * k) for k in range(100)])
+
+
+def pulses(*spans: tuple[float, float]) -> list[Edge]:
+    """Closing at a, opening at b (ms) for each span."""
+    out = []
+    for a, b in spans:
+        out += [Edge(round(a * 1e6), True), Edge(round(b * 1e6), False)]
+    return out
+
+
+def test_error_and_uncertainty_from_the_sampling() -> None:
+    """An edge between samples: interpolated truth, uncertainty = the distance to the
+    farther of the two samples plus half a count; on a sample: half a count."""
+    [r] = judge(pulses((10.25, 12)), REF, [10260], tolerance=20)
+    assert r.true_counts == pytest.approx(10250) and r.error_counts == pytest.approx(10)
+    assert r.uncertainty_counts == pytest.approx(750.5)
+    assert r.status == "inconclusive"  # 10 ± 750.5 straddles ±20
+    [r] = judge(pulses((10, 12)), REF, [10005], tolerance=20)
+    assert (r.status, r.uncertainty_counts) == ("pass", 0.5)
+    [r] = judge(pulses((10, 12)), REF, [10100], tolerance=20)
+    assert r.status == "fail" and "beyond" in r.reason
+
+
+def test_window_width_and_first_edge() -> None:
+    """B&R LATCH semantics (003:454-489): window on the true position, width between the
+    edges in counts, `first` judges only the first accepted edge."""
+    edges = pulses((5, 6), (20, 20.1), (30, 35), (40, 42))
+    caps = [5000, 20000, 30000, 40999]
+    rs = judge(edges, REF, caps, tolerance=5, window=(10000, 50000), width=(500, 3000))
+    assert [r.status for r in rs] == ["rejected", "rejected", "rejected", "fail"]
+    assert "window" in rs[0].reason and "width 100" in rs[1].reason
+    assert "width 5000" in rs[2].reason
+    rs = judge(edges, REF, caps, tolerance=5, every=False)
+    assert [r.status for r in rs] == ["pass", "skipped", "skipped", "skipped"]
+    rs = judge(edges, REF, caps, tolerance=5, trigger_level=False)  # NC: the opening edges
+    assert [round(r.true_counts) for r in rs] == [6000, 20100, 35000, 42000]
+
+
+def test_missing_capture_and_missing_reference() -> None:
+    rs = judge(pulses((10, 11), (500, 501)), REF, [10000], tolerance=5)
+    assert rs[0].status == "pass" and rs[1].status == "inconclusive"
+    assert math.isnan(rs[1].true_counts)
+    [r] = judge(pulses((10, 11)), REF, [], tolerance=5)
+    assert r.status == "fail" and "no value" in r.reason
+
+
+@pytest.mark.parametrize(("text", "line", "what"), [
+    ("  - capture_arm: {start: 790, count: 20}\n", 2, "exceeds the 800-entry"),
+    ("  - capture_arm: {source: off}\n", 2, "one of CN5, CN1, CN2"),
+    ("  - capture_arm: {trigger: no}\n", 2, "one of closing, opening"),
+    ("  - capture_arm: {min_interval: 20ms}\n", 2, "0..15"),
+    ("  - compare_table: {positions: [1, x]}\n", 2, "positions[1]"),
+    ("  - compare_table:\n      positions: [1]\n      width: 1.5ms\n", 4, "whole ms"),
+    ("  - latch: {tolerance: 5, edges: last}\n", 2, "first or every"),
+    ("  - latch: {tolerance: 5, window: {min: 9, max: 1}}\n", 2, "min 9 > max 1"),
+    ("  - latch: {window: {min: 1}}\n", 2, "tolerance"),
+    ("  - mark: {line: DO4}\n", 2, "a DI line"),
+])
+def test_malformed_steps_name_file_line_field(text: str, line: int, what: str) -> None:
+    doc = load_yaml_text("steps:\n" + text, "p.yaml")
+    with pytest.raises(PlanFileError) as e:
+        parse_steps(Checker("p.yaml"), doc["steps"], 1)
+    assert f"p.yaml:{line}:" in str(e.value) and what in str(e.value)
+
+
+@pytest.mark.integration
+def test_latch_fails_on_a_late_capture(tmp_path) -> None:
+    """The shipped plan with the deviation `dev_capture_delay_us: 100` (50 counts late at
+    500 000 PUU/s): the latch step fails and names the error."""
+    [path] = find_plans(["capture_di7_pv"])
+    text = path.read_text().replace(
+        "steps:\n", "options:\n  extra: {capture: {dev_capture_delay_us: 100}}\nsteps:\n", 1)
+    plan = loads_plan(text, str(tmp_path / "late.yaml"))
+    [r] = run_plans([plan], load_bench(), tmp_path, stream=io.StringIO())
+    latch = next(s for s in r.steps if s.label.startswith("latch"))
+    assert latch.status == "fail" and "beyond ±10" in latch.message, latch.message
+    [r] = run_plans([load_plan(path)], load_bench(), tmp_path, stream=io.StringIO())
+    assert r.passed
