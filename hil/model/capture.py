@@ -4,7 +4,8 @@
 (choices: docs/manual-choices.md#capture, `CaptureOptions` under `ModelOptions.extra["capture"]`):
 
 * DI7 triggers, in hardware, in 5 µs (L5150): the terminal edge before the P2.009 filter; the
-  value latched is the capture axis position `delay_us` after the edge. While CAPTURE is on,
+  capture acts `delay_us` after the edge (value = the capture axis position then; CAP_OK
+  then). While CAPTURE is on,
   DI7 feeds no mapped function (L5150). P5.039.Z: 0 NO latches on the contact closing, 1 NC
   on its opening (L11530). `trigger: Z` loops the motor's Z pulse into the capture input
   instead (a bench wiring choice; seed 004 CAPTURE bit 4).
@@ -185,9 +186,12 @@ class Capture:
             return
         nc = (self.drive.params.get("P5.039") >> 8) & 0xF
         if closed == (nc == 0):  # NO: latch on closing; NC: on opening (L11530)
-            delay = (self.options.delay_us + self.options.dev_capture_delay_us) * 1e-6
-            self.latch(self.position() + self.source_velocity() * delay,
-                       self.drive.now + round(delay * 1e9))
+            delay = round((self.options.delay_us + self.options.dev_capture_delay_us) * 1e3)
+            if delay <= 0:
+                self.latch(self.position(), self.drive.now)
+            else:  # the hardware latches `delay` later: the position then, CAP_OK then
+                self.drive.sched.after(delay, lambda: self.running and self.latch(
+                    self.position(), self.drive.now))
 
     def on_step(self) -> None:
         """`trigger: Z`: the Z pulses the last motion step passed (exact positions)."""

@@ -59,13 +59,18 @@ def test_di7_capture_latches_position_5us_after_the_edge() -> None:
     d.advance(3 * MS)
     v = d.axis.velocity * 100000 / 16777216  # PUU/s
     want = fb_puu(d) + v * 5e-6
+    t_edge = d.now
     d.set_di(7, True)
+    assert d.pr.array[100] == 0  # not yet: the latch acts 5 µs after the edge
+    d.advance(10_000)
     assert d.pr.array[100] == round(want)
+    assert d.capture.values[0][0] == t_edge + 5000
     assert d.params.read("P5.038") == 1 and d.params.read("P5.039") & 1
     d.advance(7 * MS)
     d.set_di(7, False)
     d.advance(3 * MS)
     d.set_di(7, True)
+    d.advance(MS)
     assert d.pr.array[101] != 0 and d.pr.array[101] > d.pr.array[100]
     assert d.dio.do_function_state("CAP_OK")
     assert not d.params.read("P5.039") & 1  # bit0 cleared at the last point
@@ -187,6 +192,7 @@ def test_capture_delay_knob() -> None:
     want = fb_puu(d)
     d.set_di(7, False)
     d.set_di(7, True)
+    d.advance(2 * MS)
     assert d.pr.array[0] - want > 400  # 1 ms at 500 000 PUU/s
 
 

@@ -1,0 +1,93 @@
+"""The CAPTURE / COMPARE timing specs pass on the faithful drive, at several speeds and in both
+directions, and fail on each deviation knob (A3 §7.2.2-7.2.3: 5 µs L5150, L5188; pulse width
+P5.059.CBA L11770)."""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.model.options import ModelOptions
+from hil.model.timebase import MS
+from hil.paths import fixture
+from hil.timing.checker import check
+from hil.timing.source import RecordingSource
+from hil.timing.spec import load_spec
+from tests.timing.test_specs_on_model import assert_all_pass, assert_fails, run
+
+PARAMS = {"P2.020": 0x0116, "P2.021": 0x0000}  # DO3 CAP_OK (L15323); DO4 free for COMPARE
+
+
+def options(**dev) -> ModelOptions:
+    return ModelOptions(state_publish_ms=1, extra={"capture": dev})
+
+
+def pv(tap, rpm: float) -> None:
+    tap.write_object(0x6060, 0, 3)
+    for cw in (6, 7, 15):
+        tap.write_object(0x6040, 0, cw)
+    tap.write_object(0x60FF, 0, round(rpm * 10))
+    tap.advance(500 * MS)
+
+
+def capture_scenario(tap) -> None:
+    pv(tap, 300)
+    p = tap.drive.params
+    for _ in range(3):
+        p.write("P5.038", 1)
+        p.write("P5.039", 0x0131)  # CN2, NC, start (L11500-11531)
+        tap.advance(7 * MS + 123_000)
+        tap.set_di(7, False)  # the mark: DI7 opens
+        tap.advance(3 * MS)
+        tap.set_di(7, True)
+        tap.advance(10 * MS)
+
+
+def compare_scenario(rpm: float, width: int = 10):
+    def scenario(tap) -> None:
+        pv(tap, rpm)
+        d = tap.drive
+        d.params.write("P5.039", 0x0030)  # capture axis = CN2 (Fb_PUU), stopped
+        v = d.compare.velocity()  # PUU/s
+        target = round(d.compare.position() + v * 0.05)  # 50 ms ahead
+        d.pr.array[50] = target
+        d.params.write("P5.056", 50)
+        d.params.write("P5.058", 1)
+        d.params.write("P5.059", width << 16 | 0x0001)  # capture axis, NO, start
+        tap.advance(50 * MS + (width + 100) * MS)
+        scenario.target = target
+    return scenario
+
+
+def verdicts(path, spec_id: str, **constants) -> list:
+    spec = load_spec(fixture("timing", f"{spec_id}.yaml"))
+    return check(spec, RecordingSource(path), constants=constants or None)
+
+
+def test_capture_latency_faithful(tmp_path) -> None:
+    path = run(tmp_path, capture_scenario, options(), **PARAMS)
+    vs = verdicts(path, "capture_latency")
+    assert len([v for v in vs if v.status == "pass"]) == 3
+    assert_all_pass(vs)
+
+
+def test_capture_latency_fails_late(tmp_path) -> None:
+    path = run(tmp_path, capture_scenario, options(dev_capture_delay_us=50), **PARAMS)
+    assert_fails(verdicts(path, "capture_latency"), "CAP_OK rises 5 µs after the DI7 edge")
+
+
+@pytest.mark.parametrize("rpm", [60, 300, 1000, -60, -300, -1000])
+def test_compare_output_faithful(tmp_path, rpm) -> None:
+    sc = compare_scenario(rpm)
+    path = run(tmp_path, sc, options(), **PARAMS)
+    assert_all_pass(verdicts(path, "compare_output", target=sc.target, width=10))
+
+
+@pytest.mark.parametrize(("knob", "constraint", "rpm"), [
+    ({"dev_compare_late": 5000}, "DO4 fires at the table position", 1000),
+    ({"dev_compare_late": 5000}, "DO4 fires at the table position", -60),
+    ({"dev_compare_width_extra_ms": 2}, "DO4 pulse lasts P5.059.CBA ms", 300),
+], ids=["late-up", "late-down", "width"])
+def test_compare_output_fails_on_knobs(tmp_path, knob, constraint, rpm) -> None:
+    sc = compare_scenario(rpm)
+    path = run(tmp_path, sc, options(**knob), **PARAMS)
+    assert_fails(verdicts(path, "compare_output", target=sc.target, width=10), constraint)
