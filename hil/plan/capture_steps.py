@@ -4,7 +4,7 @@
                     reset: 0, cyclic: false, run_pr50: false, start_compare: false, mask: 0}
     - compare_table: {start: 50, positions: [20000, 30000], width: 10ms, source: capture,
                       pulse: closed, cyclic: false, zero_after: false, run_pr45: false,
-                      start_capture: false, shift: 0}
+                      start_capture: false, shift: 0, axis: 0}   # axis: P5.057 (CN5/CN1)
     - mark: {width: 2ms}          # the sensor sees a mark: DI7 leaves its level for 2 ms
     - latch: {tolerance: 20, window: {min: 0, max: 50000}, width: {min: 100, max: 5000},
               edges: every}
@@ -78,7 +78,8 @@ def p_capture_arm(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]
 def p_compare_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     m = v.mapping(obj, line, where)
     v.keys(m, {"start", "positions", "width", "source", "pulse", "cyclic", "zero_after",
-               "run_pr45", "start_capture", "shift", "via"}, where, required=("positions",))
+               "run_pr45", "start_capture", "shift", "axis", "via"}, where,
+           required=("positions",))
     start = v.integer(m, "start", where, 0, ARRAY - 1, 50)
     pos = v.seq(m["positions"], m.kline("positions"), join(where, "positions"))
     for i, x in enumerate(pos):
@@ -97,7 +98,18 @@ def p_compare_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, An
             "run_pr45": v.boolean(m, "run_pr45", where, False),
             "start_capture": v.boolean(m, "start_capture", where, False),
             "shift": v.integer(m, "shift", where, -10_000_000, 100_000_000, 0),
-            "via": m.get("via")}
+            "axis": _axis(v, m, where), "via": m.get("via")}
+
+
+def _axis(v: Checker, m: Any, where: str) -> int | None:
+    """`axis:` P5.057 before the start (CN5 / CN1 only, L11703-11712)."""
+    if "axis" not in m:
+        return None
+    x = v.integer(m, "axis", where, -2**31, 2**31 - 1)
+    if m.get("source", "capture") not in ("CN5", "CN1"):
+        raise v.err(m.kline("axis"), join(where, "axis"), "P5.057 is writable only with "
+                    "source CN5 or CN1 (L11708-11712)")
+    return x
 
 
 def _range(v: Checker, m: Any, key: str, where: str) -> tuple[float, float] | None:
@@ -195,6 +207,9 @@ def x_compare_table(ctx: Any, s: Any, d: Any) -> str:
     d.write_param("P5.056", a["start"], via)
     d.write_param("P5.058", len(a["positions"]), via)
     d.write_param("P1.023", a["shift"], via)
+    if a["axis"] is not None:
+        d.write_param("P5.059", (old & ~0xF1) | a["source"] << 4, via)  # Y first, stopped
+        d.write_param("P5.057", a["axis"], via)
     x = 1 | (2 if a["cyclic"] else 0) | (4 if a["start_capture"] else 0) \
         | (8 if a["zero_after"] else 0)
     value = a["width"] << 16 | int(a["run_pr45"]) << 12 | a["nc"] << 8 | a["source"] << 4 | x

@@ -94,3 +94,24 @@ def test_latch_fails_on_a_late_capture(tmp_path) -> None:
     assert latch.status == "fail" and "beyond ±10" in latch.message, latch.message
     [r] = run_plans([load_plan(path)], load_bench(), tmp_path, stream=io.StringIO())
     assert r.passed
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("name", ["capture_di7_pv", "capture_z", "compare_table",
+                                  "capture_pr50"])
+def test_capture_plans_pass(tmp_path, name) -> None:
+    [r] = run_plans([load_plan(p) for p in find_plans([name])], load_bench(), tmp_path,
+                    stream=io.StringIO())
+    assert r.passed, [(s.label, s.status, s.message) for s in r.steps if s.status != "pass"]
+
+
+@pytest.mark.integration
+def test_compare_table_plan_fails_on_a_long_pulse(tmp_path) -> None:
+    """compare_pulse judges each of the 10 pulses: 2 ms too long fails the check."""
+    [path] = find_plans(["compare_table"])
+    text = path.read_text().replace(
+        "steps:\n", "options:\n  extra: {capture: {dev_compare_width_extra_ms: 2}}\nsteps:\n", 1)
+    [r] = run_plans([loads_plan(text, str(tmp_path / "long.yaml"))], load_bench(), tmp_path,
+                    stream=io.StringIO())
+    step = next(s for s in r.steps if s.label.startswith("check_timing"))
+    assert step.status == "fail" and "10 fail" in step.message, step.message

@@ -91,3 +91,26 @@ def test_compare_output_fails_on_knobs(tmp_path, knob, constraint, rpm) -> None:
     sc = compare_scenario(rpm)
     path = run(tmp_path, sc, options(**knob), **PARAMS)
     assert_fails(verdicts(path, "compare_output", target=sc.target, width=10), constraint)
+
+
+def table_scenario(tap) -> None:
+    pv(tap, 300)
+    d = tap.drive
+    d.params.write("P5.039", 0x0030)
+    here = round(d.compare.position())
+    for i in range(3):
+        d.pr.array[50 + i] = here + (i + 1) * 10000  # every 20 ms at 500 000 PUU/s
+    d.params.write("P5.058", 3)
+    d.params.write("P5.059", 5 << 16 | 0x0001)  # 5 ms pulses
+    tap.advance(150 * MS)
+
+
+@pytest.mark.parametrize(("knob", "ok"), [({}, True), ({"dev_compare_width_extra_ms": 2}, False)])
+def test_compare_pulse_every_point(tmp_path, knob, ok) -> None:
+    path = run(tmp_path, table_scenario, options(**knob), **PARAMS)
+    vs = verdicts(path, "compare_pulse", width=5)
+    assert len([v for v in vs if v.status != "skipped"]) == 3
+    if ok:
+        assert_all_pass(vs)
+    else:
+        assert_fails(vs, "each DO4 pulse lasts P5.059.CBA ms")
