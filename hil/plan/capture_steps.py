@@ -257,7 +257,8 @@ def x_latch(ctx: Any, s: Any, d: Any) -> tuple[str, list[dict]]:
                + (f": {r.reason}" if r.reason else ""))
         vd = {"spec": "latch", "constraint": f"latch edge {r.index}", "status": r.status,
               "message": msg, "t_ns": r.t_ns, "latch": r.to_dict(),
-              "tolerance_counts": a["tolerance"]}
+              "tolerance_counts": a["tolerance"],
+              "source": "L5150 (5 µs); 003:454-505 (window, width, edges)"}
         ctx.rec.verdict(vd, plan=ctx.plan.name, step=s.index)
         out.append(vd)
     judged = [r for r in results if r.status in ("pass", "fail", "inconclusive")]

@@ -14,6 +14,7 @@ from dataclasses import fields
 from pathlib import Path
 
 from hil.report.data import RunData, bus_around, bus_log, load_run
+from hil.report.latch_html import LATCH_SPEC, latch_html
 from hil.timing.checker import Verdict
 from hil.timing.render import svg
 from hil.timing.source import RecordingSource
@@ -96,6 +97,8 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
 
     groups: dict[tuple[str, object], list[dict]] = {}
     for v in run.verdicts:
+        if v.get("spec") == LATCH_SPEC:
+            continue  # no diagram: the latch section shows its figures
         groups.setdefault((str(v.get("spec", "")), v.get("step")), []).append(v)
     if not groups:
         return []
@@ -212,8 +215,8 @@ def render_html(run: RunData) -> str:
         + (" · <b>recording truncated (killed run)</b>" if run.truncated else "")
         + " · times are ms from the plan start</p>",
     ]
-    for section in (_steps_html, _verdicts_html, _motion_html, _safety_html, _bus_html,
-                    _files_html):
+    for section in (_steps_html, _verdicts_html, latch_html, _motion_html, _safety_html,
+                    _bus_html, _files_html):
         h += section(run)
     h.append("</body></html>\n")
     return "\n".join(h)

@@ -12,6 +12,7 @@ from hil.plan.plan import find_plans, load_plan, loads_plan
 from hil.plan.runner import run_plans
 from hil.plan.steps import parse_steps
 from hil.plan.yamlio import Checker, PlanFileError, load_yaml_text
+from hil.report.html import write_html
 from hil.timing.latch import Edge, Reference, judge
 
 # a reference moving 1000 counts per ms, sampled every 1 ms (t in ns)
@@ -103,6 +104,13 @@ def test_capture_plans_pass(tmp_path, name) -> None:
     [r] = run_plans([load_plan(p) for p in find_plans([name])], load_bench(), tmp_path,
                     stream=io.StringIO())
     assert r.passed, [(s.label, s.status, s.message) for s in r.steps if s.status != "pass"]
+    if name.startswith("capture"):  # the error figures in the HTML report
+        page = write_html(r.recording, tmp_path / "r.html").read_text()
+        section = page.split("Capture / latch: captured position vs ground truth")[1]
+        rows = section.split("</table>")[0].count("<tr>") - 1
+        assert rows == (1 if name == "capture_pr50" else 3)
+        assert "error [counts]" in section and "± uncertainty" in section
+        assert "No timing spec latch" not in page
 
 
 @pytest.mark.integration
