@@ -74,6 +74,8 @@ def parse_plan(data: Any, file: str, text: str = "") -> Plan:
         plan.drive = v.text(top, "drive", "")
     if "params" in top:
         plan.params = _params(v, top["params"], top.kline("params"), "params")
+        pm = top["params"]
+        plan._lines |= {f"params.{k}": pm.kline(k) for k in plan.params if hasattr(pm, "kline")}
     if "options" in top:
         om = v.mapping(top["options"], top.kline("options"), "options")
         v.keys(om, {f.name for f in fields(ModelOptions)}, "options")
@@ -109,8 +111,6 @@ def mapping_of(name: str, value: int) -> tuple[str, Wire | None] | None:
         raise ValueError(f"0x{value:04X} maps {line} to no function of table "
                          f"{'8.1' if line[1] == 'I' else '8.2'} (0x01xx a-contact, 0x00xx "
                          "b-contact)")
-    if why := inert_mapping(name, value):  # issue 13 item 6: not modelled, so refused
-        raise ValueError(f"0x{value:04X} maps {why}")
     if not code:
         return line, None
     return line, Wire(codes[code], line, "a" if value & 0x100 else "b")
@@ -168,6 +168,12 @@ def check_plan(plan: Plan, bench: Bench, spec_ids: set[str] | None = None) -> No
     if plan.params and not any(d.param_via for d in bench.drives.values()):
         raise v.err(plan.key_line("params"), "params",
                     f"bench {bench.name!r} has no parameter access (rs485 or can)")
+    if bench.virtual:  # the virtual drive refuses a DI function it does not model (issue 13)
+        for name, value in plan.params.items():
+            if why := inert_mapping(name, value):
+                raise v.err(plan._lines.get(f"params.{name}", plan.key_line("params")),
+                            join("params", name),
+                            f"0x{value:04X} maps {why} (bench {bench.name!r} is virtual)")
     for s in plan.steps:
         _check_step(v, s, plan, bench, spec_ids)
 
