@@ -23,7 +23,7 @@ def _inert() -> tuple[str, int]:
 
 
 def _plans() -> tuple[str, str]:
-    func, value = _inert()
+    _, value = _inert()
     in_params = f"name: p\nparams:\n  P2.013: 0x{value:04X}\nsteps:\n  - wait: 1ms\n"
     in_write = f"name: p\nsteps:\n  - write: {{P2.013: 0x{value:04X}}}\n"
     return in_params, in_write
@@ -32,7 +32,8 @@ def _plans() -> tuple[str, str]:
 @pytest.mark.parametrize("which", [0, 1], ids=["plan params", "write step"])
 def test_virtual_bench_refuses_an_inert_function_with_its_line(which):
     plan = loads_plan(_plans()[which], file="p.yaml")
-    with pytest.raises(PlanFileError, match=r"p\.yaml:(3|4): .*P2\.013: 0x01.. maps DI function \w+"):
+    want = r"p\.yaml:(3|4): .*P2\.013: 0x01.. maps DI function \w+"
+    with pytest.raises(PlanFileError, match=want):
         check_plan(plan, load_bench(), timing_specs())
 
 
