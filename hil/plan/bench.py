@@ -11,13 +11,6 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from hil.model.dio import (
-    INERT_DI_FUNCTIONS,
-    N_PHYSICAL_DI,
-    inert_mapping,
-)
-from hil.model.mechanics import Mechanics
-from hil.model.options import ModelOptions
 from hil.paths import fixture
 from hil.plan.param_rules import check_param
 from hil.plan.yamlio import (
@@ -31,8 +24,9 @@ from hil.plan.yamlio import (
     load_yaml_file,
     load_yaml_text,
 )
-from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS
+from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS, N_DO, N_PHYSICAL_DI
 from hil.transport.urls import TransportUrlError, parse_url
+from hil.virtual.checks import INERT_DI_FUNCTIONS, Mechanics, ModelOptions, inert_mapping
 
 # Named timeouts (ns) and their defaults; a bench overrides any of them. The CiA 402 ones
 # are handed to hil.drivers.cia402.Cia402Driver (same names).
@@ -57,7 +51,6 @@ PROCESSES = ("inproc", "subprocess")
 PROFILES = ("asda-a3",)
 PARAM_VIAS = ("modbus", "sdo")
 STO_CHANNELS = {"A": "STO_A", "B": "STO_B"}
-N_DO = len(DO_PARAMS)
 _LINE_RE = re.compile(r"^(DI|DO)(\d{1,2})(?::([ab]))?$")
 _PARAM_RE = re.compile(r"^P[0-7]\.\d{3}$")
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")

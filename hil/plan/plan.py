@@ -11,15 +11,14 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from hil.model.dio import N_PHYSICAL_DI, inert_mapping
-from hil.model.options import ModelOptions
 from hil.paths import plans_dir as _pd
 from hil.plan.bench import Bench, DriveSpec, Wire, _params
 from hil.plan.kinds import CheckContext
 from hil.plan.kinds.timing import bind_line
 from hil.plan.steps import Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
-from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS
+from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS, N_PHYSICAL_DI
+from hil.virtual.checks import ModelOptions, inert_mapping
 
 __all__ = ["Plan", "bind_line", "check_plan", "find_plans", "load_plan", "loads_plan", "mapping_of",
            "plan_spec", "step_spec"]

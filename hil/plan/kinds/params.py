@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from hil.model.dio import inert_mapping
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.param_rules import check_param
 from hil.plan.session import refusal_code
 from hil.plan.yamlio import Checker, LDict, join
+from hil.virtual.checks import inert_mapping
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
