@@ -29,8 +29,8 @@ from hil.model.capture import CaptureOptions
 from hil.model.errors import OutOfRange, ReadOnly
 from hil.model.events import CompareFired
 from hil.model.motion import counts_to_puu
-from hil.model.pr import ARRAY_SIZE
 from hil.model.timebase import MS, Timer
+from hil.profile.pr import ARRAY_SIZE
 
 if TYPE_CHECKING:
     from hil.model.drive import Drive
