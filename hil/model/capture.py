@@ -14,7 +14,8 @@
   (`cn5_per_puu` pulses per motor PUU); 2 CN1 = pulse command (not on the virtual bench:
   it stands still); 0 = CAPTURE inactive.
 * P5.039.X bit0 starts (P5.038 > 0, DO.CAP_OK off); each capture stores Array[P5.036 + i] and
-  decrements P5.038; at 0 CAP_OK on and bit0 clears (L5155). Only 0 may be written while
+  decrements P5.038; at 0 CAP_OK on and bit0 clears (L5155); P5.038 stays 0 until written
+  (bit0 = 1 with P5.038 = 0 is refused: the count "must be > 0", L5153). Only 0 may be written while
   bit0 = 1 (L5155). bit1: the first point resets the capture axis to P5.076 (first cycle only,
   L5176); bit2: the first point starts COMPARE unless it runs (L5157); bit3: PR#50 after the
   last point (L5158, every cycle L5176). P1.019.X bit0 cyclic: the count reloads and the data
@@ -132,6 +133,9 @@ class Capture:
     # ------------------------------------------------------------------ parameters
     def validate_p5039(self, _name: str, value: int) -> None:
         old = self.drive.params.stored("P5.039")
+        if value & 1 and not self.running and self.drive.params.stored("P5.038") <= 0:
+            raise OutOfRange("P5.039", "P5.038 is 0: write the capture count first (it must "
+                             "be > 0 for CAPTURE to act, L5153)")
         if self.running and value & 1:
             raise OutOfRange("P5.039", "CAPTURE runs (bit0 = 1): only 0 may be written to "
                              "stop it (L5155)")
@@ -252,8 +256,7 @@ class Capture:
             self.index = 0
             p.set_internal("P5.038", self.count_set)
         else:
-            p.set_internal("P5.038", self.count_set)  # stopped: the count to capture next
-            self.stop()
+            self.stop()  # P5.038 stays 0: "為零時抓取結束" (L5155)
 
 
 def attach_capture(drive: Drive, options: CaptureOptions | None = None) -> Capture:

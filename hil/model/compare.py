@@ -12,7 +12,8 @@
   the manual says "相同", equal; a hardware comparator sees the crossing); DO4 pulses for
   P5.059.CBA ms `compare_delay_us` after the match ("5 μs", L5188); P5.059.Z: 0 NO (pulse =
   DO4 on) / 1 NC (pulse = DO4 off). While COMPARE is on, DO4 shows only the compare pulse
-  (L5188). Each match decrements P5.058; at 0 COMPARE ends and bit0 clears (L11740).
+  (L5188). Each match decrements P5.058; at 0 COMPARE ends, bit0 clears and P5.058 stays 0
+  until written (L11740, L11722).
   bit1 cyclic: P5.058 reloads (L11742); bit2: start CAPTURE after the last point unless it
   runs (L11744); bit3: P5.057 = 0 after the last point (L11746); U bit0: PR#45 after the last
   point (L11762). P1.019.Z bit0: P1.024 is used once, then zeroed (L8131, L8240).
@@ -98,6 +99,9 @@ class Compare:
         if self.running and value & 1:
             raise OutOfRange("P5.059", "COMPARE runs (bit0 = 1): only 0 may be written to "
                              "stop it (L11740)")
+        if value & 1 and not self.running and p.stored("P5.058") <= 0:
+            raise OutOfRange("P5.059", "P5.058 is 0: write the compare count first (it must "
+                             "be > 0 for COMPARE to act, L5190)")
         if value & 1 and p.stored("P5.056") + p.stored("P5.058") > ARRAY_SIZE:
             raise OutOfRange("P5.059", "P5.056 + P5.058 exceeds the 800-entry data array "
                              "(L11717)")
@@ -223,8 +227,7 @@ class Compare:
             self.index = 0
             p.set_internal("P5.058", self.count_set)
         else:
-            p.set_internal("P5.058", self.count_set)
-            self.stop()
+            self.stop()  # P5.058 stays 0 (L11722)
 
     def _width_ns(self) -> int:
         cba = (self.drive.params.get("P5.059") >> 16) & 0xFFF  # CBA [ms] (L11770)

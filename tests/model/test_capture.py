@@ -237,7 +237,7 @@ def test_compare_pulses_at_the_table_positions(rpm: float) -> None:
         assert abs(t - want) < 2000, (t, want)  # exact instant, not the 1 ms step grid
     assert all(f - r == 10 * MS for r, f in zip(rises, falls, strict=True))
     assert not d.params.read("P5.059") & 1  # bit0 cleared after the last point
-    assert d.params.read("P5.058") == 3
+    assert d.params.read("P5.058") == 0  # "直到數目為 0" (L11722)
 
 
 def test_compare_shift_autozero_and_last_point_actions() -> None:
@@ -276,3 +276,32 @@ def test_compare_knobs() -> None:
     pv(d, -60.0)
     arm_compare(d, [round(d.compare.position()) - 1000])
     assert not do4_edges(d, 100)
+
+
+def test_count_ends_at_zero_and_must_be_rewritten() -> None:
+    """P5.038 counts down to 0, where CAPTURE ends (L5155); it must be > 0 for CAPTURE to act
+    (L5153): bit0 = 1 with P5.038 = 0 is refused, a new count re-arms."""
+    d = make()
+    arm(d, count=1)
+    d.set_di(7, False)
+    d.set_di(7, True)
+    d.advance(MS)
+    assert d.params.read("P5.038") == 0 and not d.params.read("P5.039") & 1
+    with pytest.raises(ParamError, match=r"P5\.038 is 0"):
+        d.params.write("P5.039", 0x0031)
+    arm(d, count=1)
+    assert d.capture.running
+
+
+def test_set_di_edge_is_ground_truth() -> None:
+    """Every terminal edge set through `Drive.set_di` is an `InputChanged` event at its
+    instant (the virtual world records a state sample there: the latch's ground truth)."""
+    d = make()
+    seen: list = []
+    d.subscribe(lambda e: type(e).__name__ == "InputChanged" and seen.append((e.t, e.n,
+                                                                               e.closed)))
+    d.advance(1_234_567)
+    d.set_di(7, False)
+    d.set_di(7, False)  # no edge
+    d.set_di(3, True)
+    assert seen == [(1_234_567, 7, False), (1_234_567, 3, True)]
