@@ -168,7 +168,8 @@ class Capture:
         """bit0 = 1: arm (L5155); `reload`: started by COMPARE with the previous count."""
         d = self.drive
         if reload:
-            d.params.set_internal("P5.038", self.count_set)
+            if d.params.stored("P5.038") <= 0:  # ended at 0: the previous count
+                d.params.set_internal("P5.038", self.count_set)
             d.params.set_internal("P5.039", d.params.stored("P5.039") | 1)
         self.count_set = max(1, d.params.stored("P5.038"))
         self.running = self.source != 0  # Y = 0: "抓取功能不作用" (L11525)

@@ -129,7 +129,8 @@ class Compare:
     def start(self, reload: bool = False) -> None:
         d = self.drive
         if reload:  # started by CAPTURE bit2 with the previous count (L5157)
-            d.params.set_internal("P5.058", self.count_set)
+            if d.params.stored("P5.058") <= 0:  # ended at 0: the previous count
+                d.params.set_internal("P5.058", self.count_set)
             d.params.set_internal("P5.059", d.params.stored("P5.059") | 1)
         self.count_set = max(1, d.params.stored("P5.058"))
         self.index = 0

@@ -305,3 +305,33 @@ def test_set_di_edge_is_ground_truth() -> None:
     d.set_di(7, False)  # no edge
     d.set_di(3, True)
     assert seen == [(1_234_567, 7, False), (1_234_567, 3, True)]
+
+
+def test_compare_cyclic_pr45_and_capture_chain() -> None:
+    """P5.059 bit1 cyclic reload (L11742), bit2 starts CAPTURE after the last point with its
+    previous count (L11744), U bit0 PR#45 (L11762); P5.039 bit2 starts COMPARE at the first
+    capture (L5157)."""
+    d = make_cmp()
+    d.params.write("P5.039", 0x0030)
+    d.params.write("P5.038", 2)
+    pv(d, 60.0)  # 100 000 PUU/s
+    here = round(d.compare.position())
+    d.pr.array[50] = here + 1000
+    d.pr.array[51] = here + 2000
+    d.params.write("P5.056", 50)
+    d.params.write("P5.058", 2)
+    d.params.write("P5.059", 0x00011007)  # 1 ms, PR#45, start capture, cyclic, start
+    d.advance(25 * MS)
+    assert len(d.compare.fired) == 2
+    assert d.capture.running and d.params.read("P5.038") == 2  # started by COMPARE
+    assert d.compare.running and d.params.read("P5.058") == 2  # cyclic: reloaded
+    assert any("trigger:COMPARE:45" in w for _t, w in d.pr.trace)
+    d.params.write("P5.059", 0x00011006)  # stop COMPARE (0 in bit0)
+    d.params.write("P5.039", 0x0030)
+    d.params.write("P5.058", 1)
+    d.params.write("P5.039", 0x0035)  # capture with bit2: its first point starts COMPARE
+    assert not d.compare.running
+    d.set_di(7, False)
+    d.set_di(7, True)
+    d.advance(MS)
+    assert d.compare.running and d.params.read("P5.058") == 1

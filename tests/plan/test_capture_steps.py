@@ -123,3 +123,21 @@ def test_compare_table_plan_fails_on_a_long_pulse(tmp_path) -> None:
                     stream=io.StringIO())
     step = next(s for s in r.steps if s.label.startswith("check_timing"))
     assert step.status == "fail" and "10 fail" in step.message, step.message
+
+
+def test_real_bench_sources() -> None:
+    """Without model events the edges come from the harness's DI7 line, and a named
+    reference channel gives the true position (a real bench's reference encoder)."""
+    from hil.timing.latch import edges_from
+    from hil.timing.source import MemorySource
+
+    src = MemorySource({
+        "/dio/drive1/DI7": [(0, {"level": True}), (5_000_000, {"level": False}),
+                            (8_000_000, {"level": True})],
+        "/enc/ref": [(k * 1_000_000, {"counts": 10.0 * k}) for k in range(20)],
+    })
+    edges = edges_from(src, "drive1")
+    assert [(e.t, e.level) for e in edges] == [(5_000_000, False), (8_000_000, True)]
+    ref = Reference.from_source(src, "/enc/ref", "counts")
+    [r] = judge(edges, ref, [52], trigger_level=False, tolerance=3)
+    assert (r.true_counts, r.error_counts, r.status) == (50.0, 2.0, "pass")
