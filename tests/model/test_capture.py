@@ -335,3 +335,27 @@ def test_compare_cyclic_pr45_and_capture_chain() -> None:
     d.set_di(7, True)
     d.advance(MS)
     assert d.compare.running and d.params.read("P5.058") == 1
+
+
+def test_capture_starts_pr50_cap_move() -> None:
+    """P5.039 bit3: PR#50 after the last point (L5158); a CAP position command goes to the
+    last capture + data (L4471): the axis stops 30000 PUU after the mark."""
+    d = make(**{"P1.001": 0x0001, "P2.016": 0})  # PR mode; DI7 no function of its own
+    d.set_di(1, True)
+    d.advance(10 * MS)
+    for pair, (kind, data, kw) in ((("P6.002", "P6.003"), ("speed", 1000, {})),
+                                   (("P7.000", "P7.001"), ("single", 30000,
+                                                           {"cmd": "CAP", "spd": 4}))):
+        definition, word = encode(kind, data, **kw)
+        d.params.write(pair[0], definition)
+        d.params.write(pair[1], word)
+    d.params.write("P5.007", 1)
+    d.advance(400 * MS)
+    arm(d, count=1, ctrl=0x0139)  # CN2, NC, bit3
+    d.set_di(7, False)
+    d.advance(3 * MS)
+    d.set_di(7, True)
+    d.advance(2000 * MS)
+    cap = d.capture.values[0][2]
+    assert round(fb_puu(d)) == cap + 30000
+    assert d.params.read("P5.007") == 20050  # PR#50 done (n + 20000, L11185)
