@@ -111,8 +111,10 @@ def test_modbus_fuzz_over_a_real_pty(tmp_path, caplog):
                 wire = len(unit.data) * char_s
                 if unit.replies:  # the answers come after t3.5: the line is idle again
                     sent = _read_replies(fd, len(unit.replies), wire + 2.0)
-                else:  # its characters, then t3.5 (1.75 ms) with room for a late pty reader
-                    time.sleep(wire + 0.006)
+                else:  # its characters, then t3.5 (1.75 ms) with room for a late pty reader:
+                    # a reader descheduled for longer (a busy machine) reads this unit and the
+                    # next one as one burst, with no silence between them to end a frame
+                    time.sleep(wire + 0.015)
                     sent = _read_replies(fd, 1, 0.0) if unit.silent else []
                 owed += len(unit.replies)
                 answered += len(sent) if unit.replies else 0
