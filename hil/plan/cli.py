@@ -1,20 +1,53 @@
-"""`hil run [PLAN ...] [--bench FILE] [--out DIR] [--quiet]`."""
+"""`hil run [PLAN ...] [--bench FILE] [--out DIR]`, with selection (`-k`, `-m`, globs,
+`--list`), progress (`-q`, `-v`, `--log-level`) and `HIL_BENCH`."""
 
 from __future__ import annotations
 
 import argparse
+import logging
+import os
 import sys
 from pathlib import Path
+
+from hil.plan.bench import load_bench
+from hil.plan.events import Listener
+from hil.plan.listeners import StepLines
+from hil.plan.plan import Plan, check_plan, find_plans, load_plan
+from hil.plan.plansdir import choose_plans_dir
+from hil.plan.progress import RunProgress
+from hil.plan.runner import run_plans, summary_table, timing_specs
+from hil.plan.select import ExprError, select
+from hil.plan.yamlio import PlanFileError
+from hil.report.index import write_index
+from hil.report.junit import write_junit
+
+BENCH_ENV = "HIL_BENCH"  # like labgrid's LG_ENV: the bench file when --bench is not given
+LOG_LEVELS = ("debug", "info", "warning", "error", "critical")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("plans", nargs="*", metavar="PLAN",
-                        help="plan files or plan names (default: all in the plans directory)")
+                        help="plan files, plan names or globs like 'pr_*' (default: all in "
+                        "the plans directory)")
     parser.add_argument("--bench", metavar="FILE",
-                        help="bench file (default: the built-in virtual bench)")
+                        help=f"bench file (default: ${BENCH_ENV} if set, else the built-in "
+                        "virtual bench)")
     parser.add_argument("--out", metavar="DIR", default="reports",
                         help="where recordings and reports go (default: reports/)")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no per-step progress")
+    parser.add_argument("-k", metavar="EXPR", dest="keyword",
+                        help="only plans whose name, file or tags contain the words of EXPR "
+                        "(and, or, not, parentheses), e.g. -k 'brake and not sto'")
+    parser.add_argument("-m", metavar="EXPR", dest="marker",
+                        help="only plans whose tags match EXPR, e.g. -m brake, -m 'pr or homing'")
+    parser.add_argument("--list", action="store_true",
+                        help="list the selected plans (name, steps, tags, file); run nothing")
+    parser.add_argument("-q", "--quiet", action="store_true",
+                        help="no progress; only the summary table and errors")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="one line per step (-vv: also info logs)")
+    parser.add_argument("--log-level", choices=LOG_LEVELS, metavar="LEVEL",
+                        help=f"log messages of this level and above to stderr "
+                        f"({', '.join(LOG_LEVELS)}; default: warning)")
     parser.add_argument("--allow-inconclusive", action="store_true",
                         help="count inconclusive timing verdicts as passed")
     parser.add_argument("--check", action="store_true",
@@ -25,45 +58,76 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "installed plans)")
 
 
-def main(args: argparse.Namespace) -> int:
-    from hil.plan.bench import load_bench
-    from hil.plan.plan import check_plan, find_plans, load_plan
-    from hil.plan.plansdir import choose_plans_dir
-    from hil.plan.runner import run_plans, summary_table, timing_specs
-    from hil.plan.yamlio import PlanFileError
-    from hil.report.junit import write_junit
+def _logging(args: argparse.Namespace) -> None:
+    level = args.log_level or ("info" if args.verbose >= 2 else
+                               "error" if args.quiet else "warning")
+    logging.basicConfig(level=level.upper(), stream=sys.stderr,
+                        format="%(levelname)s %(name)s: %(message)s")
 
+
+def _bench_path(args: argparse.Namespace) -> str | None:
+    return args.bench or os.environ.get(BENCH_ENV) or None
+
+
+def _listing(plans: list[Plan]) -> str:
+    rows = [(p.name, str(len(p.steps)), ", ".join(p.tags), p.path) for p in plans]
+    widths = [max(len(r[i]) for r in rows) for i in range(3)]
+    return "\n".join(f"{r[0]:<{widths[0]}}  {r[1]:>{widths[1]}} steps  "
+                     f"{r[2]:<{widths[2]}}  {r[3]}".rstrip() for r in rows)
+
+
+def _listeners(args: argparse.Namespace, plans: list[Plan]) -> list[Listener]:
+    if args.quiet:
+        return []
+    if args.verbose:
+        return [StepLines()]
+    return [RunProgress(sum(len(p.steps) for p in plans), len(plans))]
+
+
+def main(args: argparse.Namespace) -> int:
+    _logging(args)
     try:
         plans_dir, why = choose_plans_dir(args.plans_dir)
     except ValueError as e:
         print(f"hil run: {e}", file=sys.stderr)
         return 2
-    print(f"plans: {plans_dir} ({why})", file=sys.stderr)
+    bench_path = _bench_path(args)
+    if not args.quiet:
+        print(f"plans: {plans_dir} ({why})", file=sys.stderr)
+        if bench_path and not args.bench:
+            print(f"bench: {bench_path} (from ${BENCH_ENV})", file=sys.stderr)
     try:
-        bench = load_bench(args.bench)
-        plans = [load_plan(p) for p in find_plans(args.plans, plans_dir)]
-        if not plans:
-            print("hil run: no plans found", file=sys.stderr)
-            return 2
-        if args.check:
-            ids = set(timing_specs())
-            for p in plans:
-                check_plan(p, bench, ids)
-                print(f"{p.path}: ok ({len(p.steps)} steps)")
-            return 0
+        bench = load_bench(bench_path)
+        plans = select([load_plan(p) for p in find_plans(args.plans, plans_dir)],
+                       args.keyword, args.marker)
     except PlanFileError as e:
         print(f"hil run: {e}", file=sys.stderr)
         return 2
-    out = Path(args.out)
+    except ExprError as e:
+        print(f"hil run: -k/-m: {e}", file=sys.stderr)
+        return 2
+    if not plans:
+        print("hil run: no plans found" + (" (none selected by -k/-m)"
+                                            if args.keyword or args.marker else ""),
+              file=sys.stderr)
+        return 2 if not (args.keyword or args.marker) else 5
+    if args.list:
+        print(_listing(plans))
+        return 0
     try:
-        results = run_plans(plans, bench, out, quiet=args.quiet,
-                            allow_inconclusive=args.allow_inconclusive)
+        if args.check:
+            specs = timing_specs()
+            for p in plans:
+                check_plan(p, bench, specs)
+                print(f"{p.path}: ok ({len(p.steps)} steps)")
+            return 0
+        out = Path(args.out)
+        results = run_plans(plans, bench, out, allow_inconclusive=args.allow_inconclusive,
+                            listeners=_listeners(args, plans))
     except PlanFileError as e:
         print(f"hil run: {e}", file=sys.stderr)
         return 2
     write_junit([r.recording for r in results], out / "junit.xml")
     print(summary_table(results))
-    from hil.report.index import write_index
-
     print(f"index: {write_index([r.recording for r in results], out / 'index.html')}")
     return 0 if all(r.passed for r in results) else 1

@@ -15,6 +15,7 @@ from hil.paths import plans_dir as _pd
 from hil.plan.bench import Bench, DriveSpec, Wire, _params
 from hil.plan.kinds import CheckContext
 from hil.plan.kinds.timing import bind_line
+from hil.plan.select import is_glob
 from hil.plan.steps import Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
 from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS, N_PHYSICAL_DI
@@ -195,17 +196,26 @@ def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: Any) ->
 
 
 def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) -> list[Path]:
-    """Plan files by path or by name (`servo_on_brake` -> plans/servo_on_brake.yaml);
-    no names: every plan in the plans directory, sorted."""
+    """Plan files by path, by name (`servo_on_brake` -> plans/servo_on_brake.yaml) or by glob
+    (`pr_*`); no names: every plan in the plans directory, sorted."""
     if plans_dir is None:
         plans_dir = _pd()
     if not names:
         return sorted(p for p in plans_dir.glob("*.yaml"))
-    out = []
+    out: list[Path] = []
     for n in names:
         p = Path(n)
         if p.suffix in (".yaml", ".yml") and p.exists():
             out.append(p)
+            continue
+        if is_glob(n):  # `pr_*` or `plans/fault_*.yaml`: every plan it matches, sorted
+            pattern = n if n.endswith((".yaml", ".yml")) else f"{n}.yaml"
+            found = sorted(Path().glob(pattern)) if "/" in n else sorted(
+                plans_dir.glob(pattern))
+            if not found:
+                raise PlanFileError(n, 0, "(plan)", f"no plan matches {n!r} in "
+                                    f"{plans_dir if '/' not in n else Path.cwd()}")
+            out += [f for f in found if f not in out]
             continue
         cand = plans_dir / f"{n}.yaml"
         if cand.exists():

@@ -11,12 +11,12 @@ then, and always at the end, the bench is driven to its safe state and that is r
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
-import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -29,9 +29,20 @@ from hil.plan.context import (
     StepFailed,
     StepThread,
 )
+from hil.plan.events import (
+    Listener,
+    Note,
+    Notifier,
+    PlanEnded,
+    PlanStarted,
+    StepEnded,
+    StepStarted,
+)
+from hil.plan.listeners import Reports, StepLines, StepRecords
 from hil.plan.plan import Plan, check_plan, plan_spec
 from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, Session, open_session
+from hil.record.recorder import Recorder
 from hil.timing.registry import SpecRegistry, load_specs
 from hil.virtual.truth import SensorTap, bench_with_options
 
@@ -79,31 +90,6 @@ def timing_specs(extra_dirs: list[Path] | None = None) -> SpecRegistry:
     return load_specs(extra_dirs)
 
 
-class Progress:
-    """One line per step with status and duration (stderr); silent when quiet."""
-
-    def __init__(self, stream: TextIO | None = None, quiet: bool = False) -> None:
-        self.stream = stream or sys.stderr
-        self.quiet = quiet
-
-    def plan(self, plan: Plan, bench: Bench) -> None:
-        self._w(f"== {plan.name} ({len(plan.steps)} steps) on bench {bench.name}")
-
-    def step(self, n: int, total: int, r: StepResult) -> None:
-        label = r.label if len(r.label) <= 52 else r.label[:49] + "..."
-        msg = f"  [{n:>2}/{total}] {label:<52} {r.status.upper():<12} {r.duration_ns / 1e6:8.1f} ms"
-        if r.status not in (PASS, SKIPPED) and r.message:
-            msg += f"\n         {r.message}"
-        self._w(msg)
-
-    def note(self, text: str) -> None:
-        self._w(f"  {text}")
-
-    def _w(self, text: str) -> None:
-        if not self.quiet:
-            print(text, file=self.stream, flush=True)
-
-
 # --- the runner ---------------------------------------------------------------------------
 
 
@@ -145,38 +131,20 @@ class _Interrupts:
             signal.signal(sig, old)
 
 
-def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] | None = None,
-             progress: Progress | None = None,
+def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any] | None = None,
+             listeners: list[Listener] | None = None,
              session_factory: Callable[[Bench, Any], Session] = open_session,
-             allow_inconclusive: bool = False, reports: bool = True) -> PlanResult:
-    """Run one (already checked) plan; raises KeyboardInterrupt after leaving the bench safe."""
-    from hil.record.recorder import Recorder
-
-    progress = progress or Progress(quiet=True)
+             allow_inconclusive: bool = False, reports: bool = True, index: int = 1,
+             total: int = 1) -> PlanResult:
+    """Run one plan (checked here against the bench first); raises KeyboardInterrupt after
+    leaving the bench safe. Listeners hear plan and step events; the recording's step records
+    and, with `reports`, the JUnit and HTML reports are listeners too."""
     specs = specs if specs is not None else timing_specs()
     check_plan(plan, bench, specs)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    stem = Path(plan.path).stem if plan.path and plan.path != "<string>" else plan.name
-    res = PlanResult(plan.name, plan.path, bench.name, recording=str(out_dir / f"{stem}.mcap"))
-    res.steps = [StepResult(s.index, s.label, s.kind, s.line) for s in plan.steps]
-    rec = Recorder(res.recording, metadata={"plan": plan.name, "plan_file": plan.path,
-                                            "bench": bench.name, "bench_file": bench.path})
-    rec.add_metadata("hil.plan", {"name": plan.name, "file": plan.path,
-                                  "description": plan.description, "steps": len(plan.steps)})
-    rec.add_metadata("hil.bench", {"name": bench.name, "file": bench.path,
-                                   "virtual": bench.virtual, "drives": list(bench.drives),
-                                   "motion_allowed": bench.motion_allowed})
-    checked = sorted({s.args["spec"] for s in plan.steps if s.kind == "check_timing"})
-    if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding
-        import json
-
-        dspec = plan_spec(plan, bench.drives[plan.drive or bench.default_drive])
-        rec.add_metadata("timing", {"specs": json.dumps(checked),
-                                    "binding": json.dumps(dspec.binding()),
-                                    "constants": json.dumps(bench.timing_constants)})
-    rec.attach("bench.yaml", bench.text.encode(), "application/yaml")
-    rec.attach("plan.yaml", plan.text.encode(), "application/yaml")
-    progress.plan(plan, bench)
+    res, rec, stem = _open_recording(plan, bench, out_dir)
+    events = Notifier([StepRecords(), *(listeners or [])]
+                      + ([Reports(out_dir, stem)] if reports else []))
+    events.emit(PlanStarted(plan, bench, index, total, rec))
     t_start = time.monotonic_ns()
     tmp = contextlib.ExitStack()
     cancel = threading.Event()
@@ -197,7 +165,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
                 if plan.params:
                     _initial_params(ctx, plan)
                 _apply_plan_wiring(ctx, plan)
-                reason = _steps(ctx, plan, res, progress, allow_inconclusive)
+                reason = _steps(ctx, plan, res, events, allow_inconclusive)
             except KeyboardInterrupt as e:
                 intr.shield = True
                 interrupted, reason = e, "interrupted (Ctrl-C / SIGTERM)"
@@ -206,12 +174,12 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
                     if r.status == SKIPPED and not r.message:
                         r.message = "not run: interrupted"
                 if ctx is not None:
-                    _record_skipped(ctx, plan, res)
+                    _record_skipped(ctx, plan, res, events)
             except Exception as e:
                 res.status, res.error = ERROR, f"{type(e).__name__}: {e}"
                 reason = f"error: {res.error}"
                 rec.log("error", f"plan {plan.name}: {res.error}", name="hil.runner")
-                progress.note(f"ERROR {res.error}")
+                events.emit(Note(plan, f"ERROR {res.error}"))
             finally:
                 intr.shield = True
                 cancel.set()
@@ -219,7 +187,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
                     rec.log("warning", "a step did not end within 5 s of its cancel; going "
                             "safe anyway (one SDO transaction at a time)", name="hil.runner")
                 if session is not None:
-                    _go_safe(session, reason, rec, res, progress)
+                    _go_safe(session, reason, rec, res, events, plan)
         finally:
             intr.shield = True
             if session is not None:
@@ -230,8 +198,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
                                             "duration_ms": res.duration_ns / 1e6,
                                             "safe_state_ok": res.safe.ok if res.safe else ""})
             rec.close()
-            if reports:
-                write_reports(res, out_dir, stem)
+            events.emit(PlanEnded(plan, res, index, total))
     if interrupted is None and intr.requested:
         interrupted = KeyboardInterrupt("signal while the bench was made safe")
     if interrupted is not None:
@@ -239,18 +206,44 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     return res
 
 
-def _go_safe(session: Session, reason: str, rec: Any, res: PlanResult,
-             progress: Progress) -> None:
+def _open_recording(plan: Plan, bench: Bench, out_dir: Path) -> tuple[PlanResult, Recorder, str]:
+    """The plan's result skeleton and its recording, with the plan, bench and timing
+    metadata `hil check` and `hil report` read back."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stem = Path(plan.path).stem if plan.path and plan.path != "<string>" else plan.name
+    res = PlanResult(plan.name, plan.path, bench.name, recording=str(out_dir / f"{stem}.mcap"))
+    res.steps = [StepResult(s.index, s.label, s.kind, s.line) for s in plan.steps]
+    rec = Recorder(res.recording, metadata={"plan": plan.name, "plan_file": plan.path,
+                                            "bench": bench.name, "bench_file": bench.path})
+    rec.add_metadata("hil.plan", {"name": plan.name, "file": plan.path,
+                                  "description": plan.description, "steps": len(plan.steps),
+                                  "tags": json.dumps(plan.tags)})
+    rec.add_metadata("hil.bench", {"name": bench.name, "file": bench.path,
+                                   "virtual": bench.virtual, "drives": list(bench.drives),
+                                   "motion_allowed": bench.motion_allowed})
+    checked = sorted({s.args["spec"] for s in plan.steps if s.kind == "check_timing"})
+    if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding
+        dspec = plan_spec(plan, bench.drives[plan.drive or bench.default_drive])
+        rec.add_metadata("timing", {"specs": json.dumps(checked),
+                                    "binding": json.dumps(dspec.binding()),
+                                    "constants": json.dumps(bench.timing_constants)})
+    rec.attach("bench.yaml", bench.text.encode(), "application/yaml")
+    rec.attach("plan.yaml", plan.text.encode(), "application/yaml")
+    return res, rec, stem
+
+
+def _go_safe(session: Session, reason: str, rec: Any, res: PlanResult, events: Notifier,
+             plan: Plan) -> None:
     for d in session.drives.values():
         if getattr(d, "_cia", None) is not None:
             d._cia.cancel = None  # the plan's cancel must not cut the safe state's own waits
     res.safe = go_safe(session, reason, rec)
     if not res.safe.ok:
-        progress.note("SAFE STATE NOT CONFIRMED: " + "; ".join(
+        events.emit(Note(plan, "SAFE STATE NOT CONFIRMED: " + "; ".join(
             f"{a['drive']}: {a['action']}: {a['detail']}"
-            for a in res.safe.actions if not a["ok"]))
+            for a in res.safe.actions if not a["ok"])))
     elif reason != "end of plan":
-        progress.note(f"bench driven to its safe state ({reason})")
+        events.emit(Note(plan, f"bench driven to its safe state ({reason})"))
 
 
 # DI functions a machine's sensors drive (the virtual axis drives them from its mechanics):
@@ -285,13 +278,12 @@ def _initial_params(ctx: StepContext, plan: Plan) -> None:
                       message=", ".join(f"{p}={v}" for p, v in plan.params.items()))
 
 
-def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
+def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
            allow_inconclusive: bool) -> str:
-    rec, total = ctx.rec, len(plan.steps)
+    rec = ctx.rec
     for s, r in zip(plan.steps, res.steps, strict=True):
         d = ctx.drive(s)
-        rec.plan_step(r.label, "start", plan=plan.name, index=s.index, kind=s.kind, line=s.line,
-                      drive=d.name)
+        events.emit(StepStarted(plan, s, r, d.name, rec))
         t0 = time.monotonic_ns()
         if s.name:
             ctx.started[s.name] = time.time_ns()
@@ -316,10 +308,7 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
         except Exception as e:
             r.status, r.message = ERROR, f"{type(e).__name__}: {e}"
         r.duration_ns = time.monotonic_ns() - t0
-        rec.plan_step(r.label, "end", plan=plan.name, index=s.index, kind=s.kind, line=s.line,
-                      drive=d.name, status=r.status, message=r.message,
-                      duration_ns=r.duration_ns, file=s.file)
-        progress.step(s.index + 1, total, r)
+        events.emit(StepEnded(plan, s, r, d.name, rec))
         ok = r.status == PASS or (r.status == INCONCLUSIVE and allow_inconclusive)
         if not ok:
             if res.status == PASS:
@@ -329,30 +318,15 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
                         name="hil.runner", file=s.file, line=s.line)
                 for later in res.steps[s.index + 1:]:
                     later.message = f"not run: step {s.index + 1} {r.status}"
-                _record_skipped(ctx, plan, res)
+                _record_skipped(ctx, plan, res, events)
                 return f"step {s.index + 1} ({r.label}) {r.status}: {r.message}"
     return "end of plan"
 
 
-def _record_skipped(ctx: StepContext, plan: Plan, res: PlanResult) -> None:
+def _record_skipped(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier) -> None:
     for s, r in zip(plan.steps, res.steps, strict=True):
         if r.status == SKIPPED:
-            ctx.rec.plan_step(r.label, "end", plan=plan.name, index=s.index, kind=s.kind,
-                              line=s.line, status=SKIPPED, message=r.message, file=s.file)
-
-
-def write_reports(res: PlanResult, out_dir: Path, stem: str) -> None:
-    from hil.report.html import write_html
-    from hil.report.junit import write_junit
-
-    try:
-        res.junit = str(write_junit([res.recording], out_dir / f"{stem}.junit.xml"))
-    except Exception as e:
-        res.error = res.error or f"JUnit report failed: {e}"
-    try:
-        res.html = str(write_html(res.recording, out_dir / f"{stem}.html"))
-    except Exception as e:
-        res.error = res.error or f"HTML report failed: {e}"
+            events.emit(StepEnded(plan, s, r, ctx.drive(s).name, ctx.rec))
 
 
 def summary_table(results: list[PlanResult]) -> str:
@@ -374,16 +348,16 @@ def summary_table(results: list[PlanResult]) -> str:
 
 def run_plans(plans: list[Plan], bench: Bench, out_dir: Path, *, quiet: bool = False,
               stream: TextIO | None = None, allow_inconclusive: bool = False,
-              session_factory: Callable[[Bench, Any], Session] = open_session
-              ) -> list[PlanResult]:
-    """Check every plan against the bench first (nothing moves on a bad file), then run."""
+              session_factory: Callable[[Bench, Any], Session] = open_session,
+              listeners: list[Listener] | None = None) -> list[PlanResult]:
+    """Check every plan against the bench first (nothing moves on a bad file), then run them
+    one after the other. Default listeners: a line per step on `stream` (none if `quiet`)."""
     specs = timing_specs()
     for p in plans:
         check_plan(p, bench, specs)
-    progress = Progress(stream, quiet)
-    results = []
-    for p in plans:
-        results.append(run_plan(p, bench, out_dir, specs=specs, progress=progress,
-                                session_factory=session_factory,
-                                allow_inconclusive=allow_inconclusive))
-    return results
+    if listeners is None:
+        listeners = [] if quiet else [StepLines(stream)]
+    return [run_plan(p, bench, out_dir, specs=specs, listeners=listeners,
+                     session_factory=session_factory, allow_inconclusive=allow_inconclusive,
+                     index=i, total=len(plans))
+            for i, p in enumerate(plans, 1)]

@@ -1,0 +1,81 @@
+"""The runner's standard listeners: step records in the recording, reports, step lines.
+
+`StepRecords` writes each step's start and end on the recording's `/plan/steps` topic (the
+runner adds it to every run); `Reports` writes `<plan>.junit.xml` and `<plan>.html` once the
+recording is closed; `StepLines` prints one line per step (`hil run -v`, and the library
+default of `run_plans`). The live progress display is `hil/plan/progress.py`.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TextIO
+
+from hil.plan.events import Listener, Note, PlanEnded, PlanStarted, StepEnded, StepStarted
+from hil.report.html import write_html
+from hil.report.junit import write_junit
+
+PASS, SKIPPED = "pass", "skipped"
+
+
+class StepRecords(Listener):
+    """Step start/end records on the recording (read by reports, `hil check`, `hil diff`)."""
+
+    def step_started(self, e: StepStarted) -> None:
+        s = e.step
+        e.recorder.plan_step(e.result.label, "start", plan=e.plan.name, index=s.index,
+                             kind=s.kind, line=s.line, drive=e.drive)
+
+    def step_ended(self, e: StepEnded) -> None:
+        s, r = e.step, e.result
+        e.recorder.plan_step(r.label, "end", plan=e.plan.name, index=s.index, kind=s.kind,
+                             line=s.line, drive=e.drive, status=r.status, message=r.message,
+                             duration_ns=r.duration_ns, file=s.file)
+
+
+class Reports(Listener):
+    """JUnit XML and HTML for one plan, written when its recording is complete."""
+
+    def __init__(self, out_dir: Path, stem: str) -> None:
+        self.out_dir, self.stem = out_dir, stem
+
+    def plan_ended(self, e: PlanEnded) -> None:
+        res = e.result
+        try:
+            res.junit = str(write_junit([res.recording], self.out_dir / f"{self.stem}.junit.xml"))
+        except Exception as exc:
+            res.error = res.error or f"JUnit report failed: {exc}"
+        try:
+            res.html = str(write_html(res.recording, self.out_dir / f"{self.stem}.html"))
+        except Exception as exc:
+            res.error = res.error or f"HTML report failed: {exc}"
+
+
+class StepLines(Listener):
+    """One line per step with status and duration; messages of steps that did not pass."""
+
+    def __init__(self, stream: TextIO | None = None) -> None:
+        self.stream = stream
+
+    def _w(self, text: str) -> None:
+        print(text, file=self.stream or sys.stderr, flush=True)
+
+    def plan_started(self, e: PlanStarted) -> None:
+        of = f"[{e.index}/{e.total}] " if e.total > 1 else ""
+        self._w(f"== {of}{e.plan.name} ({len(e.plan.steps)} steps) on bench {e.bench.name}")
+
+    def step_ended(self, e: StepEnded) -> None:
+        r = e.result
+        if r.status == SKIPPED:
+            return
+        total = len(e.plan.steps)
+        label = r.label if len(r.label) <= 52 else r.label[:49] + "..."
+        msg = (f"  [{r.index + 1:>2}/{total}] {label:<52} {r.status.upper():<12} "
+               f"{r.duration_ns / 1e6:8.1f} ms")
+        if r.status != PASS and r.message:
+            msg += f"\n         {r.message}"
+        self._w(msg)
+
+    def note(self, e: Note) -> None:
+        self._w(f"  {e.text}")
