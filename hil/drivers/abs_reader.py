@@ -1,8 +1,8 @@
 """Host side of the ASDA-A3 absolute-position DI/DO handshake (§10.3.5.1, L16460-16521).
 
-The reader works on *electrical levels* of named lines (DESIGN.md: `1` = input contact closed /
-output transistor conducting). With the drive's default a-contact mapping of ABSE (0x1D) and
-ABSW (0x0D), and the fixed ABSQ = DI4, ABSR = DO2, ABSD = DO3, "function on" = level True.
+The reader works on *electrical levels* of named lines (docs/transports.md: `1` = input contact
+closed / output transistor conducting). With the drive's default a-contact mapping of ABSE (0x1D)
+and ABSW (0x0D), and the fixed ABSQ = DI4, ABSR = DO2, ABSD = DO3, "function on" = level True.
 For a b-contact mapping pass the `*_active` level arguments.
 
 Frame (L16464-16486): status(15-0) | turns or 0(31-16) | position(63-32) | checksum(79-64).

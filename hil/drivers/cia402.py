@@ -3,8 +3,8 @@
 Every wait has a named timeout (bench file `timeouts`, defaults in DEFAULT_TIMEOUTS) and every
 failure raises a `Cia402Error` subclass saying what was expected and what was seen (state,
 statusword hex, elapsed time). Unlike canopen's BaseNode402 it never swallows a timeout
-(feasibility §3.5) and does not depend on a cyclic statusword TPDO (§3.3): the statusword
-is polled over SDO, so the same code works on a real A3 that ships with no PDO mapping
+(docs/dev/feasibility.md §3.5) and does not depend on a cyclic statusword TPDO (§3.3): the
+statusword is polled over SDO, so the same code works on a real A3 that ships with no PDO mapping
 (L17980-L18024). Controlword sequences follow L17135-L17376.
 """
 

@@ -7,8 +7,8 @@
 The same code drives a real RS-485 adapter and the virtual drive's pty: it needs only a
 pyserial-like object (`write`, `read`, optional `reset_input_buffer`, `timeout`) or a line
 with `read(n, timeout)`. It uses `hil.protocol.modbus`, not pymodbus: pymodbus's serial
-client polls with a >= 1 ms sleep (feasibility §4: p50 2.4 ms on a pty), gives no control of
-the inter-frame silence the A3 asks for (10 ms, L15703) and hides the raw frames the
+client polls with a >= 1 ms sleep (docs/dev/feasibility.md §4: p50 2.4 ms on a pty), gives no
+control of the inter-frame silence the A3 asks for (10 ms, L15703) and hides the raw frames the
 recorder wants.
 
 Parameter size and signedness come from `hil.profile.params.ParamTable`

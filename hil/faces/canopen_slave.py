@@ -2,7 +2,8 @@
 EMCY) on a python-can bus, in front of a `Drive` (2000h-2FFFh and 6000h-6FFFh objects).
 
 Built on python-can only: canopen.LocalNode lacks NMT gating, PDO behaviour and EMCY/1001h/
-1003h handling (feasibility §3). Choices where the manual is silent: docs/manual-choices.md#canopen.
+1003h handling (docs/dev/feasibility.md §3). Choices where the manual is silent:
+docs/manual-choices.md#canopen.
 
 Threading: `start()` runs one receive thread. Every frame is handled while holding `lock`
 (the DriveHost's RLock), and so is every timer step. Timers (heartbeat, event timers,
@@ -24,12 +25,12 @@ from typing import Any
 import can
 
 from hil.faces.last_resort import LastResort
-from hil.model import errors as E
+from hil.model import errors
 from hil.model.errors import ObjectError
 from hil.model.events import AlarmChanged, PowerCycled
 from hil.model.options import ModelOptions
 from hil.profile.od import Entry, ObjectDictionary
-from hil.protocol import canopen as P
+from hil.protocol import canopen as cop
 
 log = logging.getLogger(__name__)
 
@@ -241,7 +242,7 @@ class CanopenSlave:
         self._sync_reset()
         self._sdo_prev_sent = None
         self._pdo_prev = {}
-        self._send(P.HEARTBEAT + self.node_id, bytes([P.STATE_BOOTUP]))  # boot-up
+        self._send(cop.HEARTBEAT + self.node_id, bytes([cop.STATE_BOOTUP]))  # boot-up
         self._set_state("PRE-OPERATIONAL")
         self._restart_heartbeat(self.clock())
 
@@ -268,14 +269,14 @@ class CanopenSlave:
         if len(data) != 2 or data[1] not in (0, self.node_id):
             return
         cs = data[0]
-        if cs == P.NMT_START:
+        if cs == cop.NMT_START:
             self._set_state("OPERATIONAL")
-        elif cs == P.NMT_STOP:
+        elif cs == cop.NMT_STOP:
             self._set_state("STOPPED")
-        elif cs == P.NMT_PRE_OPERATIONAL:
+        elif cs == cop.NMT_PRE_OPERATIONAL:
             self._set_state("PRE-OPERATIONAL")
-        elif cs in (P.NMT_RESET_NODE, P.NMT_RESET_COMMUNICATION):
-            kind = "reset node" if cs == P.NMT_RESET_NODE else "reset communication"
+        elif cs in (cop.NMT_RESET_NODE, cop.NMT_RESET_COMMUNICATION):
+            kind = "reset node" if cs == cop.NMT_RESET_NODE else "reset communication"
             if self.on_nmt_reset is not None:
                 self._callback("on_nmt_reset", self.on_nmt_reset, kind)  # AL401, alarm clearing
             self._reset(kind)
@@ -344,7 +345,7 @@ class CanopenSlave:
         self._sync_intervals = deque()
 
     def _monitor_sync(self, sent: int, now: int) -> None:
-        """AL3E2 early SYNC, AL301 cycle != 1006h, and arm the AL3E3 timeout (a3-comms §2.6;
+        """AL3E2 early SYNC, AL301 cycle != 1006h, and arm the AL3E3 timeout (docs/faults.md;
         thresholds: ModelOptions sync_*)."""
         if not self._ip_sync_monitored():
             self._sync_reset()
@@ -399,17 +400,17 @@ class CanopenSlave:
         data = bytes(msg.data)
         nid = self.node_id
         now = self.clock()
-        if cid == P.NMT:
+        if cid == cop.NMT:
             self._on_nmt(data)
             return
-        if cid == P.HEARTBEAT + nid:
+        if cid == cop.HEARTBEAT + nid:
             if msg.is_remote_frame:
                 self._on_guard(now)
             return
         if self.state == "STOPPED":
             self._on_heartbeat_in(cid, data, now, msg.is_remote_frame)
             return  # STOPPED: NMT and error control only (L17089-L17095)
-        if cid == self._values.get((0x1200, 1), P.SDO_REQUEST + nid) & 0x7FF:
+        if cid == self._values.get((0x1200, 1), cop.SDO_REQUEST + nid) & 0x7FF:
             if not msg.is_remote_frame:
                 self._check_sdo_flood(sent_ns(msg))
                 self._on_sdo(data, now)
@@ -437,7 +438,7 @@ class CanopenSlave:
 
     def _on_guard(self, now: int) -> None:
         state = {"STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}.get(self.state, 0)
-        self._send(P.HEARTBEAT + self.node_id, bytes([self._guard_toggle << 7 | state]))
+        self._send(cop.HEARTBEAT + self.node_id, bytes([self._guard_toggle << 7 | state]))
         self._guard_toggle ^= 1
         guard, factor = self._values.get((0x100C, 0), 0), self._values.get((0x100D, 0), 0)
         late = round(self._opt("dev_heartbeat_extra_ms") * MS)  # deviation knob
@@ -448,7 +449,7 @@ class CanopenSlave:
             return False
         watch = self._values.get((0x1016, 1), 0)
         node, t_ms = (watch >> 16) & 0x7F, watch & 0xFFFF
-        if node and t_ms and cid == P.HEARTBEAT + node and data:
+        if node and t_ms and cid == cop.HEARTBEAT + node and data:
             # A boot-up restarts monitoring; it starts with the first heartbeat (CiA 301).
             late = round(self._opt("dev_heartbeat_extra_ms") * MS)  # deviation knob
             self._hb_consumer_deadline = None if data[0] == 0 else now + t_ms * MS + late
@@ -468,7 +469,7 @@ class CanopenSlave:
             return
         if self._hb_next is not None and now >= self._hb_next:
             state = {"STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}[self.state]
-            self._send(P.HEARTBEAT + self.node_id, bytes([state]))
+            self._send(cop.HEARTBEAT + self.node_id, bytes([state]))
             period = self._values.get((0x1017, 0), 0) * MS
             self._hb_next = self._hb_next + period if period else None
             if self._hb_next is not None and self._hb_next <= now:
@@ -482,7 +483,7 @@ class CanopenSlave:
         if self._transfer is not None and now - self._transfer.started > self.sdo_timeout_ns:
             e = self._transfer.entry
             self._transfer = None
-            self._sdo_abort(e.index, e.sub, E.ABORT_TIMEOUT)
+            self._sdo_abort(e.index, e.sub, errors.ABORT_TIMEOUT)
         if self.state != "OPERATIONAL":
             return
         if self._sync_deadline is not None and now > self._sync_deadline:
@@ -518,7 +519,7 @@ class CanopenSlave:
         for index, sub, length in self._mapping(0x1A00 + n):
             try:
                 value = self._read_mapped(index, sub)
-            except E.ModelError:
+            except errors.ModelError:
                 self.stats["pdo_errors"] += 1
                 return None
             except Exception as exc:
@@ -597,7 +598,7 @@ class CanopenSlave:
                 raw -= 1 << length
             try:
                 self.drive.write_object(index, sub, raw)
-            except E.ModelError:  # refused: an RPDO has no answer (CiA 301)
+            except errors.ModelError:  # refused: an RPDO has no answer (CiA 301)
                 self.stats["pdo_errors"] += 1
             except Exception as exc:
                 self.stats["pdo_errors"] += 1
@@ -651,20 +652,20 @@ class CanopenSlave:
 
     # ------------------------------------------------------------------ SDO
     def _sdo_send(self, data: bytes) -> None:
-        self._send(self._values.get((0x1200, 2), P.SDO_RESPONSE + self.node_id) & 0x7FF, data)
+        self._send(self._values.get((0x1200, 2), cop.SDO_RESPONSE + self.node_id) & 0x7FF, data)
 
     def _sdo_abort(self, index: int, sub: int, code: int) -> None:
         self.stats["sdo_aborts"] += 1
-        self._sdo_send(P.sdo_abort(index, sub, code))
+        self._sdo_send(cop.sdo_abort(index, sub, code))
 
     def _abort_code(self, exc: Exception, download: bool) -> int:
         """The CiA 301 abort for an exception raised while serving an SDO request."""
         if isinstance(exc, ObjectError):
             return exc.abort_code
-        if isinstance(exc, E.ModelError):  # a refusal that names no abort code itself
-            return E.ABORT_VALUE_RANGE if download else E.ABORT_GENERAL
+        if isinstance(exc, errors.ModelError):  # a refusal that names no abort code itself
+            return errors.ABORT_VALUE_RANGE if download else errors.ABORT_GENERAL
         self.last_resort("SDO", exc)  # a bug: still answered, with the general abort
-        return E.ABORT_GENERAL
+        return errors.ABORT_GENERAL
 
     def _on_sdo(self, data: bytes, now: int) -> None:
         """Serve one SDO request: every request but an abort gets an answer."""
@@ -679,36 +680,38 @@ class CanopenSlave:
         if len(data) != 8:  # CiA 301: SDO frames are 8 bytes
             padded = data.ljust(4, b"\0")
             self._transfer = None
-            self._sdo_abort(padded[1] | padded[2] << 8, padded[3], E.ABORT_COMMAND)
+            self._sdo_abort(padded[1] | padded[2] << 8, padded[3], errors.ABORT_COMMAND)
             return
         cs = data[0] >> 5
         index, sub = data[1] | data[2] << 8, data[3]
-        if cs == P.CCS_ABORT:
+        if cs == cop.CCS_ABORT:
             self._transfer = None
             return
-        if cs in (P.CCS_DOWNLOAD_SEGMENT, P.CCS_UPLOAD_SEGMENT):
+        if cs in (cop.CCS_DOWNLOAD_SEGMENT, cop.CCS_UPLOAD_SEGMENT):
             self._on_segment(cs, data, now)
             return
         self._transfer = None
         try:
-            if cs == P.CCS_INITIATE_UPLOAD:
+            if cs == cop.CCS_INITIATE_UPLOAD:
                 self._initiate_upload(index, sub, now)
-            elif cs == P.CCS_INITIATE_DOWNLOAD:
+            elif cs == cop.CCS_INITIATE_DOWNLOAD:
                 self._initiate_download(index, sub, data, now)
             else:  # block transfers (5, 6) and 7: the A3 does expedited only (L16942)
-                raise ObjectError(index, sub, E.ABORT_COMMAND, "command specifier not supported")
+                raise ObjectError(
+                    index, sub, errors.ABORT_COMMAND, "command specifier not supported"
+                )
         except Exception as exc:  # every refusal becomes an abort (CiA 301 §7.2.4.3.17)
             self._transfer = None
-            code = self._abort_code(exc, cs == P.CCS_INITIATE_DOWNLOAD)
+            code = self._abort_code(exc, cs == cop.CCS_INITIATE_DOWNLOAD)
             self._sdo_abort(index, sub, code)
 
     def _initiate_upload(self, index: int, sub: int, now: int) -> None:
         e = self.od.get(index, sub)
         if not e.readable:
-            raise ObjectError(index, sub, E.ABORT_WRITE_ONLY, "write-only object")
+            raise ObjectError(index, sub, errors.ABORT_WRITE_ONLY, "write-only object")
         raw = self._read_bytes(e)
         if len(raw) <= 4 and raw:
-            self._sdo_send(P.sdo_expedited_upload_response(index, sub, raw))
+            self._sdo_send(cop.sdo_expedited_upload_response(index, sub, raw))
             return
         self._transfer = _Transfer(upload=True, entry=e, data=bytearray(raw), started=now)
         size = len(raw).to_bytes(4, "little")
@@ -717,31 +720,31 @@ class CanopenSlave:
     def _initiate_download(self, index: int, sub: int, data: bytes, now: int) -> None:
         e = self.od.get(index, sub)
         if not e.writable:
-            raise ObjectError(index, sub, E.ABORT_READ_ONLY, "read-only object")
+            raise ObjectError(index, sub, errors.ABORT_READ_ONLY, "read-only object")
         expedited, sized = bool(data[0] & 2), bool(data[0] & 1)
         if expedited:
             n = 4 - ((data[0] >> 2) & 3) if sized else (e.size or 4)
             self._write_bytes(e, data[4 : 4 + n])
-            self._sdo_send(P.sdo_download_response(index, sub))
+            self._sdo_send(cop.sdo_download_response(index, sub))
             return
         size = int.from_bytes(data[4:8], "little") if sized else None
         if size is not None and e.size is not None and size != e.size:
-            code = E.ABORT_LENGTH_HIGH if size > e.size else E.ABORT_LENGTH_LOW
+            code = errors.ABORT_LENGTH_HIGH if size > e.size else errors.ABORT_LENGTH_LOW
             raise ObjectError(index, sub, code, f"{size} bytes for a {e.size}-byte object")
         self._transfer = _Transfer(upload=False, entry=e, size=size, started=now)
-        self._sdo_send(P.sdo_download_response(index, sub))
+        self._sdo_send(cop.sdo_download_response(index, sub))
 
     def _on_segment(self, cs: int, data: bytes, now: int) -> None:
         t = self._transfer
         toggle = (data[0] >> 4) & 1
-        if t is None or t.upload != (cs == P.CCS_UPLOAD_SEGMENT):
+        if t is None or t.upload != (cs == cop.CCS_UPLOAD_SEGMENT):
             self._transfer = None
-            self._sdo_abort(0, 0, E.ABORT_COMMAND)
+            self._sdo_abort(0, 0, errors.ABORT_COMMAND)
             return
         e = t.entry
         if toggle != t.toggle:
             self._transfer = None
-            self._sdo_abort(e.index, e.sub, E.ABORT_TOGGLE)
+            self._sdo_abort(e.index, e.sub, errors.ABORT_TOGGLE)
             return
         t.started = now
         t.toggle ^= 1
@@ -761,7 +764,9 @@ class CanopenSlave:
         self._transfer = None
         try:
             if t.size is not None and len(t.data) != t.size:
-                raise ObjectError(e.index, e.sub, E.ABORT_LENGTH, "size indicated != size sent")
+                raise ObjectError(
+                    e.index, e.sub, errors.ABORT_LENGTH, "size indicated != size sent"
+                )
             self._write_bytes(e, bytes(t.data))
         except Exception as exc:
             self._sdo_abort(e.index, e.sub, self._abort_code(exc, True))
@@ -797,15 +802,15 @@ class CanopenSlave:
             self._values[(index, sub)] = bytes(raw)
             return
         if len(raw) != e.size:
-            code = E.ABORT_LENGTH_HIGH if len(raw) > e.size else E.ABORT_LENGTH_LOW
+            code = errors.ABORT_LENGTH_HIGH if len(raw) > e.size else errors.ABORT_LENGTH_LOW
             raise ObjectError(index, sub, code, f"{len(raw)} bytes for a {e.size}-byte object")
         value = e.decode(raw)
         if value < 0 and e.min is not None and e.min >= 0:
             value += 1 << (8 * e.size)  # hex parameters are carried unsigned
         if e.max is not None and value > e.max:
-            raise ObjectError(index, sub, E.ABORT_VALUE_HIGH, f"{value} > max {e.max}")
+            raise ObjectError(index, sub, errors.ABORT_VALUE_HIGH, f"{value} > max {e.max}")
         if e.min is not None and value < e.min:
-            raise ObjectError(index, sub, E.ABORT_VALUE_LOW, f"{value} < min {e.min}")
+            raise ObjectError(index, sub, errors.ABORT_VALUE_LOW, f"{value} < min {e.min}")
         if 0x2000 <= index <= 0x2FFF or 0x6000 <= index <= 0x6FFF:
             self.drive.write_object(index, sub, value)
             return
@@ -815,7 +820,7 @@ class CanopenSlave:
         index, sub = e.index, e.sub
         if index == 0x1003:
             if value != 0:
-                raise ObjectError(index, sub, E.ABORT_VALUE_RANGE, "only 0 clears 1003h")
+                raise ObjectError(index, sub, errors.ABORT_VALUE_RANGE, "only 0 clears 1003h")
             clear = getattr(getattr(self.drive, "alarms", None), "clear_error_history", None)
             if callable(clear):
                 clear()
@@ -843,33 +848,39 @@ class CanopenSlave:
         valid = not old & 0x80000000
         if sub == 1:
             if value & 0x20000000 or value & 0x1FFFF800:
-                raise ObjectError(index, sub, E.ABORT_VALUE_RANGE, "29-bit COB-IDs unsupported")
+                raise ObjectError(
+                    index, sub, errors.ABORT_VALUE_RANGE, "29-bit COB-IDs unsupported"
+                )
             if valid and not value & 0x80000000 and (value & 0x7FF) != (old & 0x7FF):
                 raise ObjectError(
-                    index, sub, E.ABORT_VALUE_RANGE, "COB-ID change while the PDO is valid"
+                    index, sub, errors.ABORT_VALUE_RANGE, "COB-ID change while the PDO is valid"
                 )
             n = index & 3
             self._pdo[n if rx else 4 + n] = _PdoRun()
         elif sub == 2:
             if 241 <= value <= 251 or (rx and value in (252, 253)):
-                raise ObjectError(index, sub, E.ABORT_VALUE_RANGE, f"transmission type {value}")
+                raise ObjectError(
+                    index, sub, errors.ABORT_VALUE_RANGE, f"transmission type {value}"
+                )
         elif sub == 3 and valid and not rx:
-            raise ObjectError(index, sub, E.ABORT_DATA_STATE, "inhibit time while PDO valid")
+            raise ObjectError(index, sub, errors.ABORT_DATA_STATE, "inhibit time while PDO valid")
 
     def _write_pdo_map(self, index: int, sub: int, value: int) -> None:
         rx = index < 0x1A00
         comm = (0x1400 if rx else 0x1800) + (index & 3)
         if not self._values[(comm, 1)] & 0x80000000:
-            raise ObjectError(index, sub, E.ABORT_DATA_STATE, "mapping change while PDO valid")
+            raise ObjectError(index, sub, errors.ABORT_DATA_STATE, "mapping change while PDO valid")
         if sub == 0:
             total = 0
             for s in range(1, value + 1):
                 total += self._check_map_entry(index, s, self._values[(index, s)], rx)
             if total > 64:
-                raise ObjectError(index, sub, E.ABORT_PDO_LENGTH, f"{total} bits > 64 (L18024)")
+                raise ObjectError(
+                    index, sub, errors.ABORT_PDO_LENGTH, f"{total} bits > 64 (L18024)"
+                )
             return
         if self._values[(index, 0)] != 0:
-            raise ObjectError(index, sub, E.ABORT_DATA_STATE, "mapping change while sub0 != 0")
+            raise ObjectError(index, sub, errors.ABORT_DATA_STATE, "mapping change while sub0 != 0")
         if value:
             self._check_map_entry(index, sub, value, rx)
 
@@ -878,11 +889,12 @@ class CanopenSlave:
         try:
             target = self.od.get(t_index, t_sub)
         except ObjectError as exc:
-            raise ObjectError(index, sub, E.ABORT_NO_OBJECT, f"maps {exc}") from None
+            raise ObjectError(index, sub, errors.ABORT_NO_OBJECT, f"maps {exc}") from None
         ok = target.pdo and target.bits == bits and (target.writable if rx else target.readable)
         if not ok:
             raise ObjectError(
-                index, sub, E.ABORT_NOT_MAPPABLE, f"{t_index:04X}h sub {t_sub} cannot be mapped"
+                index, sub, errors.ABORT_NOT_MAPPABLE,
+                f"{t_index:04X}h sub {t_sub} cannot be mapped"
             )
         return bits
 

@@ -2,7 +2,7 @@
 
 Inputs seen on the port (`DI<n>`, `STO_A`, `STO_B`, electrical levels) go to the model;
 the model's DO and FDBK changes are published on the port. a/b-contact logic stays inside
-the drive, as on hardware (DESIGN.md, DI/DO over zenoh).
+the drive, as on hardware (docs/transports.md, DI/DO over zenoh).
 """
 
 from __future__ import annotations

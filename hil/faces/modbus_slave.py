@@ -1,7 +1,7 @@
 """The virtual ASDA-A3's Modbus RTU/ASCII face (manual ch. 9, L15525-L16049; P3 group).
 
 Byte-level, clock-injected and independent of pymodbus's server (which answers unknown
-stations, loses back-to-back requests and ignores timing: spec/feasibility.md §4).
+stations, loses back-to-back requests and ignores timing: docs/dev/feasibility.md §4).
 
     slave = ModbusSlave(store, station=1, send=line.write)
     slave.feed(chunk, t_ns)   # bytes as they arrive; t_ns = arrival of the chunk's last byte

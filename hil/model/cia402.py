@@ -1,7 +1,7 @@
 """CiA 402 device state machine of the ASDA-A3 and its 6000h-6FFFh objects.
 
-Sources: a3-comms.md §2.10-2.13 (manual L18202-L19278). Choices where the manual is silent
-are model options (`Cia402Options`) and are listed in docs/manual-choices.md#cia402-motion.
+Sources: manual L18202-L19278 (CiA 402 objects and state machine). Choices where the manual is
+silent are model options (`Cia402Options`) and are listed in docs/manual-choices.md#cia402-motion.
 
 Interface to the drive (everything else is internal)::
 
@@ -107,7 +107,7 @@ _TYPES = {
     "I32": (-0x80000000, 0x7FFFFFFF),
 }
 
-_OPTION_CODES = {  # model-only option-code objects (absent on the A3, a3-comms §2.13.3)
+_OPTION_CODES = {  # model-only option-code objects (absent from the A3 object list, L18202-L19278)
     0x605A: frozenset(range(9)),  # quick stop option code
     0x605C: frozenset({0, 1}),  # disable operation option code
     0x605D: frozenset({1, 2, 3, 4}),  # halt option code
@@ -174,7 +174,8 @@ class _Obj:
 
 
 def _objects(max_speed_rpm: int) -> dict[tuple[int, int], _Obj]:
-    """6xxx objects of a3-comms.md §2.13.3 (stored ones get defaults; RO ones are computed)."""
+    """6xxx objects of the A3 object list (L18202-L19278); stored ones get defaults, RO ones
+    are computed."""
     o = _Obj
     return {
         (0x603F, 0): o("Error code", "U16", False, 0),

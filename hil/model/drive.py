@@ -58,10 +58,12 @@ from hil.model.events import (
     ParamChanged,
     PowerCycled,
 )
+from hil.model.homing import attach_homing
 from hil.model.mechanics import Mechanics
 from hil.model.motion import Axis, counts_to_puu, puu_to_counts
 from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
+from hil.model.pr_engine import attach_pr
 from hil.model.sto import Sto
 from hil.model.timebase import Scheduler, ms
 from hil.protocol.cia402 import MODE_NAMES
@@ -99,6 +101,21 @@ class Drive:
         self.servo_on = False
         self.powered = False  # True from the end of `_boot()`: no servo on before power-up
 
+        self.sensors = dict(DEFAULT_SENSORS if sensors is None else sensors)
+        self._make_params(params)
+        self._make_parts(options)
+        self._make_absolute(options)
+        self._wire_functions()
+        for n, closed in (inputs or {}).items():
+            self.dio.set_input(n, closed, settled=True)  # present before power-up
+        self._update_sensors(force=True)
+        self.homing = attach_homing(self)  # homing methods (docs/homing.md)
+        self.pr = attach_pr(self)  # PR#1-#99 (chapter 7, docs/pr.md)
+        self._boot()
+
+    # ------------------------------------------------------------------ construction
+    def _make_params(self, params: dict[str, int] | None) -> None:
+        """The parameter store, with a bench's configured values (chapter 8)."""
         self.params = ParameterStore(
             retained_path=self.state_path / "params.json" if self.state_path else None
         )
@@ -109,13 +126,15 @@ class Drive:
         if params:
             self.params.power_cycle()  # bench-given values act like configured drives
 
+    def _make_parts(self, options: ModelOptions) -> None:
+        """Alarms, DI/DO, axis, brake (BRKR) and holding brake, STO, CiA 402."""
         override = {}
         if options.dev_al501_cleared_by_arst:
             override = {"AL501": "reset", "AL502": "reset"}
         self.alarms = AlarmManager(
             None, self.sched, self.params, self._on_alarm, AlarmOptions(override)
         )
-        self.dio = DigitalIO(self.params, self.sched, self._on_dio_event, name=name)
+        self.dio = DigitalIO(self.params, self.sched, self._on_dio_event, name=self.name)
         self.axis = Axis(self.mech)
         self.brake = Brake(
             self.sched,
@@ -152,9 +171,11 @@ class Drive:
         self._boot_hooks: list[Callable[[], None]] = []  # at power-up, before outputs settle
         self._hold_timer = None
         self._dout_cache: dict[str, bool] = {}
-        self.sensors = dict(DEFAULT_SENSORS if sensors is None else sensors)
         self._sensor_state: dict[str, bool] = {}
 
+    def _make_absolute(self, options: ModelOptions) -> None:
+        """The absolute encoder and its DI/DO handshake (section 10.3), restored from the
+        drive's state directory."""
         self.absolute = AbsoluteEncoder(
             self.sched,
             self.params,
@@ -177,6 +198,8 @@ class Drive:
         for fn in ("ABSE", "ABSC", "ABSQ"):
             self.dio.on_function(fn, getattr(self.absolute, f"on_{fn.lower()}"))
 
+    def _wire_functions(self) -> None:
+        """What the DI functions do (table 8.1) and the parameters that act at once."""
         self.dio.on_function("SON", lambda _a: self._update_servo())
         self.dio.on_function("EMGS", lambda a: self.alarms.set_cause("AL013", a))
         self.dio.on_function("NL", lambda a: self._on_limit("NL", a))
@@ -184,17 +207,6 @@ class Drive:
         self.dio.on_function("ORGP", self.cia402.set_home_switch)
         self.dio.on_function("ARST", self._on_arst)
         self.params.on_write("P2.030", lambda *_: self._update_servo())
-
-        for n, closed in (inputs or {}).items():
-            self.dio.set_input(n, closed, settled=True)  # present before power-up
-        self._update_sensors(force=True)
-        from hil.model.homing import attach_homing  # homing refers back to Drive
-
-        self.homing = attach_homing(self)
-        from hil.model.pr_engine import attach_pr  # PR#1-#99 (chapter 7, docs/pr.md)
-
-        self.pr = attach_pr(self)
-        self._boot()
 
     # ------------------------------------------------------------------ public API
     @property
@@ -614,9 +626,10 @@ class Drive:
 
 
 def _abort_for(exc: ModelError, value: int) -> int:
-    """SDO abort code for a refused write (CiA 301 codes; a3-comms §2.13.2 ⚠). Every
-    refusal gets one: an undefined DI/DO function code (table 8.1 / 8.2) is a value
-    outside the range (0609 0030), as is any other refusal that names no finer rule."""
+    """SDO abort code for a refused write (CiA 301 codes, L17024-17042; the manual names few:
+    docs/manual-choices.md). Every refusal gets one: an undefined DI/DO function code (table 8.1 /
+    8.2) is a value outside the range (0609 0030), as is any other refusal that names no finer
+    rule."""
     if isinstance(exc, UnknownFunction) or not isinstance(exc, ParamError):
         return ABORT_VALUE_RANGE
     if isinstance(exc, ReadOnly):

@@ -1,4 +1,4 @@
-"""Homing that moves the axis: CANopen (6098h, a3-comms §3) and PR mode (P5.004, a3-timing §7).
+"""Homing that moves the axis: CANopen (6098h, L18838-18869) and PR mode (P5.004, manual chapter 7).
 
 `attach_homing(drive)` wires a `Homing` into a `Drive` through its public pieces only:
 

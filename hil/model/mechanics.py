@@ -56,7 +56,7 @@ class Mechanics:
     home_lo_rev: float = -0.5  # ORGP actuated for home_lo_rev <= pos <= home_hi_rev
     home_hi_rev: float = 0.5
     index_angle: float = 0.0  # Z pulse angle as a fraction of a revolution, 0 <= a < 1
-    # Brake mechanics (bench data; Appendix A gives <= 70 ms max for both, a3-timing §1.3,
+    # Brake mechanics (bench data; Appendix A gives <= 70 ms max for both,
     # L20493-20494, L20777-20778; which column is which is ambiguous, keep them swappable).
     brake_release_ms: float = 20.0  # coil energised -> shaft free
     brake_engage_ms: float = 50.0  # coil off -> shaft clamped

@@ -351,131 +351,149 @@ class Axis:
 
     # ---- the integrator ------------------------------------------------------------
     def step(self, dt_ns: int) -> None:
-        """Advance the axis by `dt_ns` (<= 1 ms for accuracy)."""
+        """Advance the axis by `dt_ns` (<= 1 ms for accuracy): the profile generator gives the
+        demand, the torque or velocity loop the new speed (or the axis coasts when power is
+        off), then the brake, the hard stops and settling."""
         if dt_ns <= 0:
             return
         dt = dt_ns * 1e-9
         v = self.velocity
         p = self.position
         self.last_position = p
-        k = self._k
-        ext = self._ext
-        fr = self._fric
         if self.power:
-            mode = self._mode
-            pd = self.demand
-            vd = self.demand_velocity
-            done = True
-            if mode == _POS:
-                tgt = self._target
-                r = tgt - pd
-                if r != 0.0 or vd != 0.0:
-                    dec = self._dec
-                    vdes = math.sqrt(2.0 * dec * abs(r))
-                    if vdes > self._vmax:
-                        vdes = self._vmax
-                    if r < 0.0:
-                        vdes = -vdes
-                    vd = _approach(vd, vdes, self._acc, dec, dt)
-                    ds = vd * dt
-                    if ds * r > 0.0 and abs(ds) >= abs(r) and abs(vd) <= abs(vdes) + dec * dt:
-                        pd = tgt
-                        vd = 0.0
-                    else:
-                        pd += ds
-                        done = False
-            elif mode in (_VEL, _STOP):
-                vd = _approach(vd, self._vtarget, self._acc, self._dec, dt)
-                pd += vd * dt
-                if mode == _STOP and vd == 0.0:
-                    self._mode = mode = _HOLD
-                else:
-                    done = False
-            elif mode == _INTERP:
-                rem = self._ip_rem
-                if rem > 0:
-                    use = dt_ns if dt_ns < rem else rem
-                    self._ip_rem = rem = rem - use
-                    if rem <= 0:
-                        pd = self._ip_target
-                    else:
-                        pd += self._ip_rate * use * 1e-9
-                        done = False
-                    vd = self._ip_rate
-                else:
-                    vd = 0.0
-
+            mode, pd, vd, done = self._profile(dt_ns, dt)
             if mode == _TORQUE:
-                tq = self._tq_dem
-                tt = self._tq_target
-                if tq != tt:
-                    d = self._tq_rate * dt
-                    if tt > tq:
-                        tq = tt if tq + d >= tt else tq + d
-                    else:
-                        tq = tt if tq - d <= tt else tq - d
-                    self._tq_dem = tq
-                    done = False
-                if tq > self._tmax:
-                    tq = self._tmax
-                elif tq < self._tmin:
-                    tq = self._tmin
-                net = tq - ext
-                if v == 0.0:
-                    if -fr <= net <= fr:
-                        net = 0.0
-                    else:
-                        net -= fr if net > 0.0 else -fr
-                else:
-                    net -= fr if v > 0.0 else -fr
-                nv = v + net * k * dt
-                if v != 0.0 and nv * v < 0.0 and (tq - ext) * v <= 0.0:
-                    nv = 0.0
-                lim = self.max_speed_rpm * self.cpr / 60.0
-                if nv > lim or nv < -lim:  # speed-limited torque mode (P1.055)
-                    nv = lim if nv > 0.0 else -lim
-                    tq = (nv - v) / (k * dt) + ext + (fr if nv > 0.0 else -fr)
-                self.torque_nm = tq
+                nv, ramp_done = self._torque_loop(v, dt)
+                done = done and ramp_done
                 vd = nv
             else:
-                vcmd = vd if mode == _VEL else self.feedforward * vd + self.kpp * (pd - p)
-                if dt_ns != self._alpha_dt:
-                    self._alpha_dt = dt_ns
-                    self._alpha = 1.0 - math.exp(-dt / self._tau_v)
-                nv = v + (vcmd - v) * self._alpha
-                f = fr if nv > 0.0 else (-fr if nv < 0.0 else 0.0)
-                tq = (nv - v) / (k * dt) + ext + f
-                if tq > self._tmax:
-                    tq = self._tmax
-                    nv = v + (tq - ext - f) * k * dt
-                elif tq < self._tmin:
-                    tq = self._tmin
-                    nv = v + (tq - ext - f) * k * dt
-                self.torque_nm = tq
+                nv = self._velocity_loop(v, p, pd, vd, mode, dt_ns, dt)
         else:
-            # power off: coast or dynamic brake (implicit, always stable)
-            sm = self.stop_mode
-            c = 0.0
-            if sm == 0 or (sm == 2 and abs(v) * 60.0 / self.cpr >= self.zero_speed_rpm):
-                c = self._db * k * dt
-            if v == 0.0:
-                if -fr <= ext <= fr:
-                    nv = 0.0
-                else:
-                    net = -ext + (fr if ext > 0.0 else -fr)
-                    nv = net * k * dt / (1.0 + c)
-            else:
-                nv = (v + (-ext - (fr if v > 0.0 else -fr)) * k * dt) / (1.0 + c)
-                if nv * v < 0.0:
-                    nv = 0.0
-            mode = _HOLD
-            done = True
-            vd = 0.0
-            pd = p
-
+            nv = self._coast(v, dt)
+            mode, done, vd, pd = _HOLD, True, 0.0, p
         if self.brake_clamped:
             nv = 0.0
-        p += nv * dt
+        p, nv = self._hard_stops(p + nv * dt, nv)
+        self._settle(p, nv, pd, vd, mode, done)
+
+    def _profile(self, dt_ns: int, dt: float) -> tuple[int, float, float, bool]:
+        """(mode, position demand, velocity demand, profile done) after `dt`."""
+        mode = self._mode
+        pd = self.demand
+        vd = self.demand_velocity
+        done = True
+        if mode == _POS:
+            tgt = self._target
+            r = tgt - pd
+            if r != 0.0 or vd != 0.0:
+                dec = self._dec
+                vdes = math.sqrt(2.0 * dec * abs(r))
+                if vdes > self._vmax:
+                    vdes = self._vmax
+                if r < 0.0:
+                    vdes = -vdes
+                vd = _approach(vd, vdes, self._acc, dec, dt)
+                ds = vd * dt
+                if ds * r > 0.0 and abs(ds) >= abs(r) and abs(vd) <= abs(vdes) + dec * dt:
+                    pd = tgt
+                    vd = 0.0
+                else:
+                    pd += ds
+                    done = False
+        elif mode in (_VEL, _STOP):
+            vd = _approach(vd, self._vtarget, self._acc, self._dec, dt)
+            pd += vd * dt
+            if mode == _STOP and vd == 0.0:
+                self._mode = mode = _HOLD
+            else:
+                done = False
+        elif mode == _INTERP:
+            rem = self._ip_rem
+            if rem > 0:
+                use = dt_ns if dt_ns < rem else rem
+                self._ip_rem = rem = rem - use
+                if rem <= 0:
+                    pd = self._ip_target
+                else:
+                    pd += self._ip_rate * use * 1e-9
+                    done = False
+                vd = self._ip_rate
+            else:
+                vd = 0.0
+        return mode, pd, vd, done
+
+    def _torque_loop(self, v: float, dt: float) -> tuple[float, bool]:
+        """Torque mode: ramp the torque demand, limit it, integrate the speed (P1.055 speed
+        limit). Returns (new speed, ramp done)."""
+        k, ext, fr = self._k, self._ext, self._fric
+        done = True
+        tq = self._tq_dem
+        tt = self._tq_target
+        if tq != tt:
+            d = self._tq_rate * dt
+            tq = min(tt, tq + d) if tt > tq else max(tt, tq - d)
+            self._tq_dem = tq
+            done = False
+        if tq > self._tmax:
+            tq = self._tmax
+        elif tq < self._tmin:
+            tq = self._tmin
+        net = tq - ext
+        if v == 0.0:
+            if -fr <= net <= fr:
+                net = 0.0
+            else:
+                net -= fr if net > 0.0 else -fr
+        else:
+            net -= fr if v > 0.0 else -fr
+        nv = v + net * k * dt
+        if v != 0.0 and nv * v < 0.0 and (tq - ext) * v <= 0.0:
+            nv = 0.0
+        lim = self.max_speed_rpm * self.cpr / 60.0
+        if nv > lim or nv < -lim:  # speed-limited torque mode (P1.055)
+            nv = lim if nv > 0.0 else -lim
+            tq = (nv - v) / (k * dt) + ext + (fr if nv > 0.0 else -fr)
+        self.torque_nm = tq
+        return nv, done
+
+    def _velocity_loop(self, v: float, p: float, pd: float, vd: float, mode: int, dt_ns: int,
+                       dt: float) -> float:
+        """Speed (mode _VEL) or position loop with feed-forward; first-order velocity response,
+        torque limited. Returns the new speed."""
+        k, ext, fr = self._k, self._ext, self._fric
+        vcmd = vd if mode == _VEL else self.feedforward * vd + self.kpp * (pd - p)
+        if dt_ns != self._alpha_dt:
+            self._alpha_dt = dt_ns
+            self._alpha = 1.0 - math.exp(-dt / self._tau_v)
+        nv = v + (vcmd - v) * self._alpha
+        f = fr if nv > 0.0 else (-fr if nv < 0.0 else 0.0)
+        tq = (nv - v) / (k * dt) + ext + f
+        if tq > self._tmax:
+            tq = self._tmax
+            nv = v + (tq - ext - f) * k * dt
+        elif tq < self._tmin:
+            tq = self._tmin
+            nv = v + (tq - ext - f) * k * dt
+        self.torque_nm = tq
+        return nv
+
+    def _coast(self, v: float, dt: float) -> float:
+        """Power off: coast or dynamic brake (implicit, always stable). Returns the new speed."""
+        k, ext, fr = self._k, self._ext, self._fric
+        sm = self.stop_mode
+        c = 0.0
+        if sm == 0 or (sm == 2 and abs(v) * 60.0 / self.cpr >= self.zero_speed_rpm):
+            c = self._db * k * dt
+        if v == 0.0:
+            if -fr <= ext <= fr:
+                return 0.0
+            net = -ext + (fr if ext > 0.0 else -fr)
+            return net * k * dt / (1.0 + c)
+        nv = (v + (-ext - (fr if v > 0.0 else -fr)) * k * dt) / (1.0 + c)
+        return 0.0 if nv * v < 0.0 else nv
+
+    def _hard_stops(self, p: float, nv: float) -> tuple[float, float]:
+        """The mechanical end stops hold the axis (position, speed)."""
         hs = self._hs_neg
         if hs is not None and p < hs:
             p = hs
@@ -486,7 +504,11 @@ class Axis:
             p = hs
             if nv > 0.0:
                 nv = 0.0
+        return p, nv
 
+    def _settle(self, p: float, nv: float, pd: float, vd: float, mode: int,
+                done: bool) -> None:
+        """Snap to the demand once within the settle band, and store the new state."""
         if not self.power:
             pd = p
             moving = nv != 0.0

@@ -81,7 +81,7 @@ class ModelOptions:
     # the previous one with that COB-ID (same one-deep buffer reading as AL111).
     pdo_overflow_window_us: int = 1000
     # SYNC monitoring in IP mode (6061h = 7, 1006h > 0, NMT OPERATIONAL); the manual gives no
-    # numbers (a3-comms §2.6, gap §8): AL3E2 when a SYNC interval is shorter than
+    # numbers (docs/manual-choices.md, SYNC supervision): AL3E2 when a SYNC interval is shorter than
     # sync_early_ratio x 1006h (L20159-20163); AL3E3 when no SYNC for sync_timeout_cycles x
     # 1006h (L20165-20169); AL301 when the mean of the last sync_fail_window intervals is off
     # 1006h by more than sync_fail_tolerance (L20123-20127).

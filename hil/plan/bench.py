@@ -7,7 +7,7 @@ Format: docs/benches.md. `load_bench(path)` returns a validated `Bench` or raise
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +16,9 @@ from hil.model.dio import (
     N_PHYSICAL_DI,
     inert_mapping,
 )
+from hil.model.mechanics import Mechanics
+from hil.model.options import ModelOptions
+from hil.paths import fixture
 from hil.plan.param_rules import check_param
 from hil.plan.yamlio import (
     MS,
@@ -29,6 +32,7 @@ from hil.plan.yamlio import (
     load_yaml_text,
 )
 from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS
+from hil.transport.urls import TransportUrlError, parse_url
 
 # Named timeouts (ns) and their defaults; a bench overrides any of them. The CiA 402 ones
 # are handed to hil.drivers.cia402.Cia402Driver (same names).
@@ -199,8 +203,6 @@ GATEWAY = "gateway"
 
 
 def builtin_bench_path() -> Path:
-    from hil.paths import fixture
-
     return fixture("benches", "virtual.yaml")
 
 
@@ -325,8 +327,6 @@ def _timing(v: Checker, top: LDict) -> dict[str, float]:
 
 
 def _urls(v: Checker, top: LDict, key: str, kind: str, gateway: bool = False) -> dict[str, str]:
-    from hil.transport.urls import TransportUrlError, parse_url
-
     if key not in top:
         return {}
     m = v.mapping(top[key], top.kline(key), key)
@@ -364,8 +364,6 @@ def _timeouts(v: Checker, top: LDict) -> dict[str, int]:
 
 def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict,
            rs485: dict, process: str) -> DriveSpec:
-    from hil.transport.urls import TransportUrlError, parse_url
-
     v.keys(d, _DRIVE, where)
     for k in _VIRTUAL_ONLY:
         if k in d and not virtual:
@@ -375,6 +373,27 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
     if spec.profile not in PROFILES:
         raise v.err(d.kline("profile"), join(where, "profile"),
                     f"{spec.profile!r}: known profiles: {', '.join(PROFILES)}")
+    _drive_buses(v, spec, d, where, can, rs485)
+    if process == "subprocess" and virtual:
+        for kind, urls, bname in (("can", can, spec.can), ("rs485", rs485, spec.rs485)):
+            if bname and urls[bname].startswith("virtual:"):
+                raise v.err(d.kline(kind), join(where, kind),
+                            "a virtual: bus is in-process only; process: subprocess needs "
+                            "zenoh: or socketcan:")
+    _drive_dio(v, spec, d, where, subprocess_virtual=process == "subprocess" and virtual)
+    if not (spec.can or spec.rs485 or spec.dio):
+        raise v.err(d.line, where, "a drive needs at least one of can, rs485, dio")
+    _drive_lines(v, spec, d, where)
+    if "params" in d:
+        spec.params = _params(v, d["params"], d.kline("params"), join(where, "params"))
+    _drive_param_via(v, spec, d, where)
+    _drive_model(v, spec, d, where)
+    return spec
+
+
+def _drive_buses(v: Checker, spec: DriveSpec, d: LDict, where: str, can: dict,
+                 rs485: dict) -> None:
+    """`can:` + `node_id:`, `rs485:` + `station:` + `modbus_mode:`."""
     if "can" in d:
         spec.can = v.text(d, "can", where)
         if spec.can not in can:
@@ -395,12 +414,11 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
             raise v.err(d.kline("modbus_mode"), join(where, "modbus_mode"), "rtu or ascii")
     elif "station" in d:
         raise v.err(d.kline("station"), join(where, "station"), "needs `rs485:` (a line)")
-    if process == "subprocess" and virtual:
-        for kind, urls, bname in (("can", can, spec.can), ("rs485", rs485, spec.rs485)):
-            if bname and urls[bname].startswith("virtual:"):
-                raise v.err(d.kline(kind), join(where, kind),
-                            "a virtual: bus is in-process only; process: subprocess needs "
-                            "zenoh: or socketcan:")
+
+
+def _drive_dio(v: Checker, spec: DriveSpec, d: LDict, where: str,
+               subprocess_virtual: bool) -> None:
+    """`dio:` (a URL or the gateway's) and `dio_map:` (modbus-tcp only)."""
     if "dio" in d and d["dio"] == GATEWAY:
         spec.dio = GATEWAY  # from the gateway's lease (checked by parse_bench)
     elif "dio" in d:
@@ -409,7 +427,7 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
             u = parse_url(spec.dio, "dio")
         except (TransportUrlError, ValueError) as e:
             raise v.err(d.kline("dio"), join(where, "dio"), str(e)) from None
-        if process == "subprocess" and virtual and u.scheme == "virtual":
+        if subprocess_virtual and u.scheme == "virtual":
             raise v.err(d.kline("dio"), join(where, "dio"),
                         "a virtual: DI/DO set is in-process only; use zenoh: with subprocess")
         if "dio_map" in d:
@@ -418,8 +436,10 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
                 raise v.err(d.kline("dio_map"), join(where, "dio_map"), "only for modbus-tcp:")
     elif "dio_map" in d:
         raise v.err(d.kline("dio_map"), join(where, "dio_map"), "needs `dio:`")
-    if not (spec.can or spec.rs485 or spec.dio):
-        raise v.err(d.line, where, "a drive needs at least one of can, rs485, dio")
+
+
+def _drive_lines(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
+    """`wiring:` (DI/DO functions on lines) and `sto:` (channels on lines)."""
     if "wiring" in d:
         if not spec.dio:
             raise v.err(d.kline("wiring"), join(where, "wiring"), "needs `dio:` (the lines)")
@@ -433,8 +453,10 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
             if line not in ("STO_A", "STO_B"):
                 raise v.err(m.kline(ch), join(where, f"sto.{ch}"), "STO_A or STO_B")
             spec.sto[ch] = line
-    if "params" in d:
-        spec.params = _params(v, d["params"], d.kline("params"), join(where, "params"))
+
+
+def _drive_param_via(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
+    """`param_via:` modbus (default with rs485) or sdo, and the bus it needs."""
     default_via = "modbus" if spec.rs485 else "sdo"
     spec.param_via = v.text(d, "param_via", where, default_via)
     if spec.param_via not in PARAM_VIAS:
@@ -445,9 +467,12 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
             raise v.err(d.kline("param_via"), join(where, "param_via"),
                         f"{spec.param_via} needs {needs}")
         spec.param_via = ""
-    if "mechanics" in d:
-        from hil.model.mechanics import Mechanics
 
+
+def _drive_model(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
+    """A virtual drive's `mechanics:` and model `options:`, validated by the model's own
+    classes."""
+    if "mechanics" in d:
         m = v.mapping(d["mechanics"], d.kline("mechanics"), join(where, "mechanics"))
         _known(v, m, Mechanics, join(where, "mechanics"))
         try:
@@ -456,8 +481,6 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
             raise v.err(m.line, join(where, "mechanics"), str(e)) from None
         spec.mechanics = dict(m)
     if "options" in d:
-        from hil.model.options import ModelOptions
-
         m = v.mapping(d["options"], d.kline("options"), join(where, "options"))
         _known(v, m, ModelOptions, join(where, "options"))
         try:
@@ -465,7 +488,6 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
         except (ValueError, TypeError) as e:
             raise v.err(m.line, join(where, "options"), str(e)) from None
         spec.options = _plain(m)
-    return spec
 
 
 def _plain(obj: Any) -> Any:
@@ -477,8 +499,6 @@ def _plain(obj: Any) -> Any:
 
 
 def _known(v: Checker, m: LDict, cls: type, where: str) -> None:
-    from dataclasses import fields
-
     known = {f.name for f in fields(cls)}
     v.keys(m, known, where)
 

@@ -23,8 +23,17 @@ from __future__ import annotations
 import re
 from typing import Any
 
+import can
+
 from hil.plan.yamlio import Checker, join, parse_duration
-from hil.transport.faults import CAN_ACTIONS, CAN_FUNCTIONS, DIO_FAULTS, SERIAL_FAULTS
+from hil.transport.faults import (
+    CAN_ACTIONS,
+    CAN_FUNCTIONS,
+    DIO_FAULTS,
+    SERIAL_FAULTS,
+    CanMatch,
+    error_frames,
+)
 
 CAN_BURSTS = ("sdo_flood", "duplicate_pdo", "bus_error")
 _OBJ_RE = re.compile(r"^(?:0x)?([0-9A-Fa-f]{4})h?(?::(\d{1,3}))?$")
@@ -198,7 +207,7 @@ def describe(kind: str, a: dict[str, Any]) -> str:
     return f"fault {a['transport']} {a['kind']}{dur}"
 
 
-# --- executors (registered in hil.plan.runner.EXECUTORS) -------------------------------------
+# --- executors (the step kinds in hil/plan/kinds/comm.py) -------------------------------------
 
 def _bus_name(ctx: Any, s: Any, d: Any) -> str:
     name = s.args.get("bus") or d.spec.can
@@ -212,10 +221,6 @@ def _node(d: Any) -> int:
 
 
 def x_fault(ctx: Any, s: Any, d: Any) -> str:
-    import can
-
-    from hil.transport.faults import CanMatch, error_frames
-
     a = s.args
     sess = ctx.session
     if a["transport"] == "off":
@@ -258,8 +263,6 @@ def x_fault(ctx: Any, s: Any, d: Any) -> str:
 
 
 def x_produce(ctx: Any, s: Any, d: Any) -> str:
-    import can
-
     a = s.args
     net = ctx.session.nets.get(_bus_name(ctx, s, d))
     if net is None:

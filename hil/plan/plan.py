@@ -7,15 +7,22 @@ bench (drives, wiring, virtual-only steps, motion, parameter access, timing spec
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 from hil.model.dio import N_PHYSICAL_DI, inert_mapping
-from hil.plan.bench import Bench, DriveSpec, Wire
-from hil.plan.steps import MOTION, VIRTUAL_ONLY, Step, parse_steps
+from hil.model.options import ModelOptions
+from hil.paths import plans_dir as _pd
+from hil.plan.bench import Bench, DriveSpec, Wire, _params
+from hil.plan.kinds import CheckContext
+from hil.plan.kinds.timing import bind_line
+from hil.plan.steps import Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
 from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS
+
+__all__ = ["Plan", "bind_line", "check_plan", "find_plans", "load_plan", "loads_plan", "mapping_of",
+           "plan_spec", "step_spec"]
 
 _TOP = {"name", "description", "bench_requires", "drive", "params", "options", "steps", "tags"}
 FEATURES = ("virtual", "real", "motion", "can", "sdo", "rs485", "modbus", "dio")
@@ -50,8 +57,6 @@ def loads_plan(text: str, file: str = "<string>") -> Plan:
 
 
 def parse_plan(data: Any, file: str, text: str = "") -> Plan:
-    from hil.plan.bench import _params
-
     v = Checker(file)
     top: LDict = v.mapping(data, 1, "(top)")
     v.keys(top, _TOP, "", required=("name", "steps"))
@@ -70,10 +75,6 @@ def parse_plan(data: Any, file: str, text: str = "") -> Plan:
     if "params" in top:
         plan.params = _params(v, top["params"], top.kline("params"), "params")
     if "options" in top:
-        from dataclasses import fields
-
-        from hil.model.options import ModelOptions
-
         om = v.mapping(top["options"], top.kline("options"), "options")
         v.keys(om, {f.name for f in fields(ModelOptions)}, "options")
         try:
@@ -171,126 +172,27 @@ def check_plan(plan: Plan, bench: Bench, spec_ids: set[str] | None = None) -> No
         _check_step(v, s, plan, bench, spec_ids)
 
 
-def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: set[str] | None):
-    w = s.where
+def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: Any) -> None:
+    """The bench's policy (drive, virtual only, motion), then the kind's own check."""
     dname = s.drive or plan.drive or bench.default_drive
     if dname not in bench.drives:
-        raise v.err(s.line, join(w, "drive"),
+        raise v.err(s.line, join(s.where, "drive"),
                     f"bench {bench.name!r} has no drive {dname!r} (drives: "
                     f"{', '.join(bench.drives)})")
-    d = step_spec(plan, bench, s)
-    kw = join(w, s.kind)
-    if s.kind in VIRTUAL_ONLY and not bench.virtual:
-        raise v.err(s.line, kw, f"only on a virtual bench; bench {bench.name!r} is real")
-    if s.kind == "fault" and not bench.faults_allowed:
-        raise v.err(s.line, kw, f"fault injection is not allowed on bench {bench.name!r} "
-                                "(faults_allowed: false; docs/faults.md)")
-    if s.kind in MOTION and not bench.motion_allowed:
-        raise v.err(s.line, kw, f"motion is not allowed on bench {bench.name!r} "
-                                "(motion_allowed: false)")
-    if s.kind in ("di", "pulse"):
-        names = s.args.get("levels") or s.args.get("widths")
-        for f in names:
-            if f not in d.di:
-                raise v.err(s.line, join(kw, f), f"drive {dname} has no DI wired to {f} "
-                            f"(wired: {', '.join(d.di) or 'none'})")
-    if s.kind in ("sto", "sto_dropout") and not d.dio:
-        raise v.err(s.line, kw, f"drive {dname} has no DI/DO lines (dio:)")
-    if s.kind in ("state", "mode", "move", "home", "fault_reset") and not d.can:
-        raise v.err(s.line, kw, f"drive {dname} has no CAN bus: CiA 402 needs `can:`")
-    if s.kind in ("write", "read"):
-        _check_via(v, s.line, kw, s.args["via"], d, dname)
-    if s.kind == "write" and s.args.get("expect_error") is not None:
-        from hil.plan.steps import check_expect_error
-
-        via = s.args["via"] or d.param_via
-        line = s.raw[s.kind].kline("expect_error") if hasattr(s.raw[s.kind], "kline") else s.line
-        check_expect_error(v, line, join(kw, "expect_error"), s.args["expect_error"], via)
-    if s.kind in ("wait_until", "expect"):
-        for c in s.args["conditions"]:
-            if c.kind == "do" and c.key not in d.do:
-                raise v.err(s.line, join(kw, f"do.{c.key}"), f"drive {dname} has no DO wired "
-                            f"to {c.key} (wired: {', '.join(d.do) or 'none'})")
-            if c.kind == "fdbk" and not d.dio:
-                raise v.err(s.line, join(kw, "fdbk"), f"drive {dname} has no DI/DO lines")
-            if c.kind == "state" and not d.can:
-                raise v.err(s.line, join(kw, "state"), f"drive {dname} has no CAN bus")
-            if c.kind in ("param", "alarm"):
-                _check_via(v, s.line, join(kw, c.kind), c.via, d, dname)
-    if s.kind in ("abs_read", "abs_origin"):
-        if not d.dio:
-            raise v.err(s.line, kw, f"drive {dname} has no DI/DO lines (dio:)")
-        need = ("ABSE", "ABSC") if s.kind == "abs_origin" else ("ABSE",)
-        for f in need:
-            if f not in d.di:
-                raise v.err(s.line, kw, f"drive {dname} has no DI wired to {f}: wire it in the "
-                            f"bench or map it in the plan's params (e.g. P2.011: 0x011D = ABSE "
-                            f"on DI2); wired: {', '.join(d.di) or 'none'}")
-        on_di4 = [f for f, w in d.di.items() if w.line == "DI4"]
-        if on_di4:
-            f = on_di4[0]
-            raise v.err(s.line, kw, f"DI4 is the handshake's ABSQ; drive {dname} has {f} on it "
-                        "(map it to 0: P2.013: 0, L16504)")
-    if s.kind == "check_timing":
-        _check_timing_args(v, s, kw, d, dname, spec_ids)
-    if s.kind == "check_timing" and spec_ids is not None and s.args["spec"] not in spec_ids:
-        from hil.plan.runner import BROKEN_SPECS
-
-        if s.args["spec"] in BROKEN_SPECS:
-            raise v.err(s.line, kw, f"timing spec {s.args['spec']!r} does not load: "
-                        f"{BROKEN_SPECS[s.args['spec']]}")
-        raise v.err(s.line, kw, f"no timing spec {s.args['spec']!r}; known: "
-                    f"{', '.join(sorted(spec_ids))}")
-
-
-def _check_timing_args(v: Checker, s: Step, kw: str, d: DriveSpec, dname: str,
-                       specs: Any) -> None:
-    """`bind:` functions must be wired; `constants:` / `bind:` names must be the spec's."""
-    from hil.plan.steps import BIND_LINE_RE
-
-    wired = d.di | d.do
-    for name, x in s.args.get("bind", {}).items():
-        if not BIND_LINE_RE.match(x) and x not in wired:
-            raise v.err(s.line, join(kw, f"bind.{name}"), f"drive {dname} has no line wired "
-                        f"to {x} (wired: {', '.join(wired) or 'none'})")
-    spec = specs.get(s.args["spec"]) if isinstance(specs, dict) else None
-    if spec is None:
-        return
-    known = set(spec.binding()) | set(spec.bind)
-    for name in s.args.get("bind", {}):
-        if name not in known:
-            raise v.err(s.line, join(kw, f"bind.{name}"), f"spec {spec.id!r} binds no "
-                        f"{name!r}; it binds: {', '.join(sorted(spec.bind)) or 'none'} "
-                        "(and the factory functions)")
-    for name in s.args.get("constants", {}):
-        if name not in spec.constants:
-            raise v.err(s.line, join(kw, f"constants.{name}"), f"spec {spec.id!r} has no "
-                        f"constant {name!r}; it has: {', '.join(sorted(spec.constants)) or 'none'}")
-
-
-def bind_line(value: str, d: DriveSpec) -> str:
-    """A `check_timing` bind value as the spec wants it: a line (DI6:b) or a function wired on
-    the drive, replaced by its line (ORGP -> DI9, NL -> DI6:b)."""
-    wired = d.di | d.do
-    return wired[value].binding if value in wired else value
-
-
-def _check_via(v: Checker, line: int, field: str, via: str | None, d: Any, dname: str) -> None:
-    via = via or d.param_via
-    if not via:
-        raise v.err(line, field, f"drive {dname} has no parameter access (rs485 or can)")
-    if via == "modbus" and not d.rs485:
-        raise v.err(line, field, f"drive {dname} has no RS-485 line for via: modbus")
-    if via == "sdo" and not d.can:
-        raise v.err(line, field, f"drive {dname} has no CAN bus for via: sdo")
+    cc = CheckContext(v, s, plan, bench, step_spec(plan, bench, s), dname, spec_ids)
+    action = s.action
+    assert action is not None, "steps come from parse_steps"
+    if action.virtual_only and not bench.virtual:
+        raise cc.err(f"only on a virtual bench; bench {bench.name!r} is real")
+    if action.motion and not bench.motion_allowed:
+        raise cc.err(f"motion is not allowed on bench {bench.name!r} (motion_allowed: false)")
+    action.check(cc)
 
 
 def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) -> list[Path]:
     """Plan files by path or by name (`servo_on_brake` -> plans/servo_on_brake.yaml);
     no names: every plan in the plans directory, sorted."""
     if plans_dir is None:
-        from hil.paths import plans_dir as _pd
-
         plans_dir = _pd()
     if not names:
         return sorted(p for p in plans_dir.glob("*.yaml"))

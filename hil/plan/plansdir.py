@@ -11,6 +11,8 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+from hil.paths import plans_dir
+
 
 def checkout_root(start: Path | None = None) -> Path | None:
     """The hil checkout containing `start` (default: the current directory), or None."""
@@ -38,6 +40,5 @@ def choose_plans_dir(given: str | None = None, start: Path | None = None) -> tup
     root = checkout_root(start)
     if root is not None:
         return root / "plans", f"checkout {root}"
-    from hil.paths import plans_dir
 
     return plans_dir(), "installed"

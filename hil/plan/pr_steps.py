@@ -18,6 +18,7 @@ import time
 from typing import Any
 
 from hil.drivers.delta_pr import STATES, DeltaPr, PrTableError, table_words
+from hil.plan.context import StepFailed
 from hil.plan.yamlio import Checker, LDict, join
 
 PATH_KEYS = {"type", "data", "ins", "auto", "ovlp", "cmd", "unit_pps", "acc", "dec", "spd",
@@ -96,8 +97,6 @@ def x_pr_table(ctx: Any, s: Any, d: Any) -> str:
     try:
         words = pr.write_table(s.args["table"])
     except PrTableError as exc:
-        from hil.plan.runner import StepFailed
-
         raise StepFailed(str(exc)) from None
     if not ctx.bench.virtual:
         ctx.rec.drive_params(d.name, words)
@@ -113,8 +112,6 @@ def x_pr_trigger(ctx: Any, s: Any, d: Any) -> str:
         if f in d.spec.di:
             d.set_function(f, bool(n >> i & 1))
         elif n >> i & 1:
-            from hil.plan.runner import StepFailed
-
             raise StepFailed(f"PR#{n} needs {f}, which the bench does not wire")
     ctx.sleep(s.args["width"])
     d.set_function("CTRG", True)
@@ -124,8 +121,6 @@ def x_pr_trigger(ctx: Any, s: Any, d: Any) -> str:
 
 
 def x_pr_wait(ctx: Any, s: Any, d: Any) -> str:
-    from hil.plan.runner import StepFailed
-
     pr = DeltaPr(_Access(d, s.args["via"]), sleep=lambda t: ctx.sleep(int(t * 1e9)))
     t0 = time.monotonic()
     try:

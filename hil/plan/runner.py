@@ -22,24 +22,23 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from hil.plan.bench import Bench
-from hil.plan.fault_steps import x_fault, x_nmt, x_produce, x_sdo
-from hil.plan.plan import Plan, bind_line, check_plan, plan_spec
-from hil.plan.pr_steps import EXECUTORS as PR_EXECUTORS
+from hil.plan.context import (
+    Cancelled,
+    Inconclusive,
+    StepContext,
+    StepFailed,
+    StepThread,
+)
+from hil.plan.plan import Plan, check_plan, plan_spec
 from hil.plan.safety import SafeReport, go_safe
-from hil.plan.session import BenchError, DriveIO, Session, open_session
-from hil.plan.steps import Condition, Step
+from hil.plan.session import BenchError, Session, open_session
 from hil.virtual.truth import SensorTap, bench_with_options
+
+__all__ = ["Cancelled", "PlanResult", "StepContext", "StepFailed", "StepResult", "run_plan",
+           "run_plans", "summary_table", "timing_specs"]
 
 PASS, FAIL, ERROR, SKIPPED, ABORTED, INCONCLUSIVE = (
     "pass", "fail", "error", "skipped", "aborted", "inconclusive")
-
-
-class StepFailed(Exception):
-    """A step's expectation was not met (not a harness error)."""
-
-
-class Cancelled(Exception):
-    pass
 
 
 @dataclass
@@ -123,398 +122,7 @@ class Progress:
             print(text, file=self.stream, flush=True)
 
 
-class StepContext:
-    """What a step executor needs: session, recorder, plan, bench, specs, cancel flag."""
-
-    def __init__(self, session: Session, recorder: Any, plan: Plan, specs: dict[str, Any],
-                 cancel: threading.Event, steps: _StepThread | None = None) -> None:
-        self.session, self.rec, self.plan, self.specs = session, recorder, plan, specs
-        self.bench = session.bench
-        self.cancel = cancel
-        self.steps = steps or _StepThread()
-        for d in session.drives.values():  # driver waits end when the step is cancelled
-            if getattr(d, "_cia", None) is not None:
-                d._cia.cancel = cancel
-        self.store: dict[str, Any] = {}  # readings kept by `abs_read: {store: name}`
-        self.checked: dict[str, int] = {}  # spec id -> wall ns its last check_timing ended
-        self.started: dict[str, int] = {}  # step name -> wall ns it (last) started
-
-    def drive(self, step: Step | None) -> DriveIO:
-        name = (step.drive if step else None) or self.plan.drive or self.bench.default_drive
-        return self.session.drive(name)
-
-    def sleep(self, ns: int) -> None:
-        if self.cancel.wait(ns / 1e9):
-            raise Cancelled()
-
-
-# --- step executors -----------------------------------------------------------------------
-
-
-def _x_di(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    for f, lv in s.args["levels"].items():
-        d.set_function(f, lv)
-    return ""
-
-
-def _x_pulse(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    widths = sorted(s.args["widths"].items(), key=lambda x: x[1])
-    t0 = time.monotonic_ns()
-    for f, _w in widths:
-        d.set_function(f, True)
-    for f, w in widths:
-        left = t0 + w - time.monotonic_ns()
-        if left > 0:
-            ctx.sleep(left)
-        d.set_function(f, False)
-    return ""
-
-
-def _x_sto(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    for ch, lv in s.args["levels"].items():
-        d.set_line(d.spec.sto[ch], lv)
-    return ""
-
-
-def _x_sto_dropout(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    widths = sorted(s.args["widths"].items(), key=lambda x: x[1])
-    t0 = time.monotonic_ns()
-    for ch, _w in widths:
-        d.set_line(d.spec.sto[ch], False)
-    for ch, w in widths:
-        left = t0 + w - time.monotonic_ns()
-        if left > 0:
-            ctx.sleep(left)
-        d.set_line(d.spec.sto[ch], True)
-    return ""
-
-
-def _x_write(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    want = s.args.get("expect_error")
-    if want is not None:
-        return _refused_write(s, d, want)
-    for p, val in s.args["values"].items():
-        d.write_param(p, val, s.args["via"])
-        if not ctx.bench.virtual:  # a real drive has no ground truth: record what it took
-            ctx.rec.drive_params(d.name, {p: val})
-    return ""
-
-
-def _refused_write(s: Step, d: DriveIO, want: int) -> str:
-    """A write the drive must refuse with `want` (Modbus exception / SDO abort code)."""
-    from hil.plan.session import refusal_code
-
-    [(p, val)] = s.args["values"].items()
-    via = s.args["via"] or d.spec.param_via
-    what = "exception" if via == "modbus" else "abort"
-    try:
-        d.write_param(p, val, via)
-    except Exception as e:
-        got = refusal_code(e)
-        if got is None:
-            raise
-        if got != want:
-            raise StepFailed(f"{p} = {val} via {via}: refused with {what} 0x{got:X}, expected "
-                             f"0x{want:X} ({e})") from None
-        return f"{p} = {val} refused as expected: {e}"
-    raise StepFailed(f"{p} = {val} via {via} was accepted; expected a refusal with {what} "
-                     f"0x{want:X}")
-
-
-def _x_read(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    got, bad = [], []
-    for p, want in s.args["values"].items():
-        val = d.read_param(p, s.args["via"])
-        got.append(f"{p} = {val}")
-        if want is not None and val != want:
-            bad.append(f"{p} = {val}, expected {want}")
-    if bad:
-        raise StepFailed("; ".join(bad))
-    return ", ".join(got)
-
-
-def _x_state(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    cia, want = d.cia, s.args["state"]
-    if want == "OPERATION ENABLED":
-        cia.enable_operation()
-    elif want == "SWITCH ON DISABLED":
-        cia.disable_voltage()
-    elif want == "READY TO SWITCH ON":
-        cia.shutdown()
-    elif want == "QUICK STOP ACTIVE":
-        cia.quick_stop()
-    elif want == "SWITCHED ON":
-        if cia.state not in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"):
-            cia.shutdown()
-        cia.write(0x6040, 0, 0x07)  # switch on (L18300-18319)
-        cia.wait_state("SWITCHED ON")
-    return ""
-
-
-def _x_fault_reset(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    d.cia.fault_reset()
-    return ""
-
-
-def _x_mode(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    d.cia.set_mode(s.args["mode"])
-    return ""
-
-
-def _x_move(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    a = s.args
-    if a["mode"] == "PP":
-        d.cia.move_to(a["target"], a["velocity"], a["accel"], a["decel"], relative=a["relative"],
-                      wait=a["wait"])
-    elif a["mode"] == "PV":
-        d.cia.jog(a["velocity"])
-    else:
-        d.cia.torque(a["torque"])
-    return ""
-
-
-def _x_home(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    a = s.args
-    timeout = (s.timeout_ns or ctx.bench.timeouts["homing"]) / 1e9
-    sw = d.cia.home(a["method"], speeds=a["speeds"], accel=a["accel"], offset=a["offset"],
-                    timeout=timeout)
-    return f"statusword 0x{sw:04X}"
-
-
-def _x_wait(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    ctx.sleep(s.args["duration"])
-    return ""
-
-
-def evaluate(ctx: StepContext, d: DriveIO, c: Condition) -> tuple[bool, str]:
-    """(met, what was observed) for one condition."""
-    if c.kind == "do":
-        v = d.do_active(c.key)
-        return v == c.value, f"{c.key} {'on' if v else 'off'}"
-    if c.kind == "fdbk":
-        v = d.line("FDBK")
-        return v == c.value, f"FDBK {'closed' if v else 'open'}"
-    if c.kind == "state":
-        from hil.drivers.cia402 import decode_state
-
-        sw = d.cia.statusword
-        st = decode_state(sw)
-        return st == c.value, f"{st} (statusword 0x{sw:04X})"
-    if c.kind == "param":
-        v = d.read_param(c.key, c.via)
-        return v == c.value, f"{c.key} = {v}"
-    a = d.alarm(c.via)
-    return a == c.value, f"alarm {a or 'none'}"
-
-
-def _x_wait_until(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    conds = s.args["conditions"]
-    timeout = s.args["timeout"] or ctx.bench.timeouts["wait_until"]
-    polls_bus = any(c.kind in ("param", "alarm", "state") for c in conds)
-    poll = 10_000_000 if polls_bus else 1_000_000
-    t0 = time.monotonic_ns()
-    while True:
-        seen = [evaluate(ctx, d, c) for c in conds]
-        if all(ok for ok, _ in seen):
-            return f"met after {(time.monotonic_ns() - t0) / 1e6:.1f} ms"
-        if time.monotonic_ns() - t0 >= timeout:
-            want = " and ".join(c.describe() for c in conds)
-            saw = ", ".join(obs for _, obs in seen)
-            raise StepFailed(f"timeout {timeout / 1e6:g} ms waiting for {want}; saw {saw}")
-        ctx.sleep(poll)
-
-
-def _x_expect(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    seen = [(c, *evaluate(ctx, d, c)) for c in s.args["conditions"]]
-    bad = [f"expected {c.describe()}, saw {obs}" for c, ok, obs in seen if not ok]
-    if bad:
-        raise StepFailed("; ".join(bad))
-    return ", ".join(obs for _, _, obs in seen)
-
-
-def _x_power_cycle(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    ctx.session.world.power_cycle(d.name, battery=s.args["battery"], off_ns=s.args.get("off", 0))
-    return ""
-
-
-def _x_inject(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    ctx.session.world.inject(d.name, options=s.args.get("options"), alarm=s.args.get("alarm"))
-    ctx.rec.log("warning", f"injected into {d.name}: {s.args}", name="hil.inject")
-    return ""
-
-
-def _x_check_timing(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    from hil.timing.checker import check, constants_for, occurrences_since
-    from hil.timing.source import RecordingSource
-
-    spec = ctx.specs[s.args["spec"]]
-    sample = getattr(ctx.session.world, "sample_truth", None)
-    if sample is not None:  # the model's state as of now, not as of its last periodic sample
-        sample()
-    ctx.rec.flush()
-    until = time.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
-    source = RecordingSource(ctx.rec.path)
-    binding = d.spec.binding() | {k: bind_line(x, d.spec)
-                                  for k, x in s.args.get("bind", {}).items()}
-    constants = constants_for(spec, ctx.bench.timing_constants) | s.args.get(
-        "constants", {})
-    verdicts = check(spec, source, params=s.args["params"] or None, binding=binding,
-                     constants=constants or None)
-    since = s.args.get("since", "start")
-    since_ns = None
-    if since == "last_check":
-        since_ns = ctx.checked.get(spec.id)
-    elif since != "start":
-        since_ns = ctx.started.get(since)
-    verdicts = occurrences_since(verdicts, since_ns)
-    ctx.checked[spec.id] = time.time_ns()
-    counts: dict[str, int] = {}
-    out = []
-    for v in verdicts:
-        vd = v.to_dict()
-        counts[v.status] = counts.get(v.status, 0) + 1
-        if v.status in ("pass", "fail", "inconclusive"):
-            # binding + check_params: what `hil report` needs to redraw the diagram
-            ctx.rec.verdict(vd, plan=ctx.plan.name, step=s.index, binding=binding,
-                            check_params=s.args["params"] or {},
-                            check_constants=constants or {},
-                            check_since_ns=since_ns, check_until_ns=until)
-        out.append(vd)
-    s.args["_verdicts"] = out
-    text = ", ".join(f"{n} {k}" for k, n in sorted(counts.items())) or "no occurrence"
-    if not verdicts:
-        raise StepFailed(f"spec {spec.id}: nothing to judge (no occurrence in the recording)")
-    if counts.get("fail"):
-        bad = [f"{v.constraint}: {v.message}" for v in verdicts if v.status == "fail"]
-        raise StepFailed(f"{text}; " + "; ".join(bad[:3]))
-    if counts.get("inconclusive"):
-        bad = [f"{v.constraint}: {v.message}" for v in verdicts if v.status == "inconclusive"]
-        raise _Inconclusive(f"{text}; " + "; ".join(bad[:3]))
-    return text
-
-
-class _Inconclusive(StepFailed):
-    pass
-
-
-def _abs_reader(ctx: StepContext, d: DriveIO) -> Any:
-    """The host-side reader on the drive's DI/DO port; lines from the (plan's) wiring:
-    ABSE/ABSC/ABSW where wired, ABSQ = DI4, ABSR = DO2, ABSD = DO3 (L15143, L15409, L15413)."""
-    from hil.drivers.abs_reader import AbsPositionReader
-
-    if d.dio is None:
-        raise BenchError(f"drive {d.name}: no DI/DO lines for the absolute handshake")
-    w = d.spec.di | d.spec.do
-    kw: dict[str, Any] = {"abse": w["ABSE"].line, "abse_active": w["ABSE"].contact == "a"}
-    if "ABSC" in w:
-        kw |= {"absc": w["ABSC"].line, "absc_active": w["ABSC"].contact == "a"}
-    if "ABSW" in w:
-        kw |= {"absw": w["ABSW"].line, "absw_active": w["ABSW"].contact == "a"}
-    p2009 = d.read_param("P2.009") if d.spec.param_via else 2  # DI filter (L9229)
-    return AbsPositionReader(d.dio, p2009_ms=p2009, **kw)
-
-
-def _x_abs_read(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    """The 80-bit DI/DO handshake (L16460-16521), checksum verified by the reader."""
-    from hil.drivers.abs_reader import AbsReadError
-
-    reader = _abs_reader(ctx, d)
-    reader.retries = s.args["retries"]
-    try:
-        r = reader.read()
-    except AbsReadError as e:
-        raise StepFailed(str(e)) from None
-    got = {"status": r.status, "turns": r.turns, "position": r.position}
-    text = (f"status 0x{r.status:02X}, turns {r.turns}, position {r.position} "
-            f"(attempts {r.attempts})")
-    ctx.rec.log("info", f"absolute read {d.name}: {text}", name="hil.abs_read")
-    want = dict(s.args["expect"])
-    if s.args["same_as"]:
-        want = ctx.store[s.args["same_as"]] | want
-    tol = s.args["tolerance"]
-    bad = [f"{k} {got[k]}, expected {x}" + (f" ± {tol}" if k == "position" and tol else "")
-           for k, x in want.items()
-           if (abs(got[k] - x) > tol if k == "position" else got[k] != x)]
-    if r.violations:
-        text += "; reader timing: " + "; ".join(r.violations[:3])
-    if s.args["store"]:
-        ctx.store[s.args["store"]] = got
-    if bad:
-        same = f" (as {s.args['same_as']})" if s.args["same_as"] else ""
-        raise StepFailed(f"{'; '.join(bad)}{same}: read {text}")
-    return text
-
-
-def _x_abs_origin(ctx: StepContext, s: Step, d: DriveIO) -> str:
-    """Origin by DI/DO: ABSE on, T_S, ABSC held T_Q (default P2.009 + 250 ms), both off
-    (L16436-16450)."""
-    reader = _abs_reader(ctx, d)
-    hold = s.args["hold"]
-    reader.set_origin(None if hold is None else hold / 1e6)
-    return f"ABSC held {(hold / 1e6 if hold else reader.p2009_ms + 250):g} ms"
-
-
-EXECUTORS: dict[str, Callable[[StepContext, Step, DriveIO], str]] = {
-    "di": _x_di, "pulse": _x_pulse, "sto": _x_sto, "sto_dropout": _x_sto_dropout,
-    "write": _x_write, "read": _x_read, "state": _x_state, "fault_reset": _x_fault_reset,
-    "mode": _x_mode, "move": _x_move, "home": _x_home, "wait": _x_wait,
-    "wait_until": _x_wait_until, "expect": _x_expect, "power_cycle": _x_power_cycle,
-    "inject": _x_inject, "check_timing": _x_check_timing, "abs_read": _x_abs_read,
-    "abs_origin": _x_abs_origin,
-    "fault": x_fault, "produce": x_produce, "sdo": x_sdo, "nmt": x_nmt,  # docs/faults.md
-}
-EXECUTORS.update(PR_EXECUTORS)  # pr_table, pr_trigger, pr_wait (hil/plan/pr_steps.py)
-# Steps whose failure does not end the plan (they only judge what already happened).
-JUDGE_ONLY = ("check_timing",)
-
-
 # --- the runner ---------------------------------------------------------------------------
-
-
-class _StepThread:
-    """Runs one step executor in a thread the runner can give up on, and join later."""
-
-    def __init__(self) -> None:
-        self.thread: threading.Thread | None = None
-
-    def run(self, fn: Callable[[], Any], timeout_ns: int, cancel: threading.Event) -> Any:
-        """`fn()` or, at `timeout_ns`, TimeoutError at once (the step is cancelled and left
-        to `join`). A KeyboardInterrupt cancels the step and joins it before propagating."""
-        box: dict[str, Any] = {}
-
-        def target() -> None:
-            try:
-                box["value"] = fn()
-            except BaseException as e:
-                box["error"] = e
-
-        t = self.thread = threading.Thread(target=target, name="hil-step", daemon=True)
-        t0 = time.monotonic_ns()
-        t.start()
-        try:
-            t.join(timeout_ns / 1e9)
-        except BaseException:
-            cancel.set()
-            self.join()
-            raise
-        if t.is_alive():
-            cancel.set()
-            t.join(0.05)  # a step that honours `cancel` ends now; the others are joined later
-            raise TimeoutError(f"step timeout {timeout_ns / 1e9:g} s (bench timeouts.step or "
-                               f"the step's timeout), ended after "
-                               f"{(time.monotonic_ns() - t0) / 1e9:.3f} s")
-        if "error" in box:
-            raise box["error"]
-        return box.get("value", "")
-
-    def join(self, timeout_s: float = 5.0) -> bool:
-        """Wait for the last step to end (bounded); True if no step thread is left running."""
-        t = self.thread
-        if t is not None:
-            end = time.monotonic() + timeout_s
-            while t.is_alive() and time.monotonic() < end:
-                t.join(0.05)  # short joins: a signal handler still runs in between
-        return t is None or not t.is_alive()
 
 
 class _Interrupts:
@@ -590,7 +198,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: dict[str, Any] |
     t_start = time.monotonic_ns()
     tmp = contextlib.ExitStack()
     cancel = threading.Event()
-    steps = _StepThread()
+    steps = StepThread()
     session: Session | None = None
     ctx: StepContext | None = None
     interrupted: BaseException | None = None
@@ -709,15 +317,16 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
         try:
             ctx.session.check_lease()  # a bench behind a gateway: only while the lease holds
             ctx.session.check_alive()  # a virtual bench: only while its drive processes live
-            r.message = ctx.steps.run(lambda s=s, d=d: EXECUTORS[s.kind](ctx, s, d), timeout,
-                                      ctx.cancel)
+            outcome = ctx.steps.run(lambda s=s, d=d: s.action.run(ctx, s, d), timeout,
+                                    ctx.cancel)
+            r.message, r.verdicts = outcome.text, outcome.verdicts
             ctx.session.check_lease()
             ctx.session.check_alive()
             r.status = PASS
-        except _Inconclusive as e:
-            r.status, r.message = INCONCLUSIVE, str(e)
+        except Inconclusive as e:
+            r.status, r.message, r.verdicts = INCONCLUSIVE, str(e), e.verdicts
         except StepFailed as e:
-            r.status, r.message = FAIL, str(e)
+            r.status, r.message, r.verdicts = FAIL, str(e), e.verdicts
         except (TimeoutError, Cancelled) as e:
             r.status, r.message = ERROR, str(e) or "cancelled"
         except BenchError as e:
@@ -725,7 +334,6 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
         except Exception as e:
             r.status, r.message = ERROR, f"{type(e).__name__}: {e}"
         r.duration_ns = time.monotonic_ns() - t0
-        r.verdicts = s.args.pop("_verdicts", [])
         rec.plan_step(r.label, "end", plan=plan.name, index=s.index, kind=s.kind, line=s.line,
                       drive=d.name, status=r.status, message=r.message,
                       duration_ns=r.duration_ns, file=s.file)
@@ -734,7 +342,7 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, progress: Progress,
         if not ok:
             if res.status == PASS:
                 res.status = FAIL if r.status in (FAIL, INCONCLUSIVE) else ERROR
-            if s.kind not in JUDGE_ONLY:
+            if not s.action.judge_only:
                 rec.log("error", f"step {s.index + 1} ({r.label}) {r.status}: {r.message}",
                         name="hil.runner", file=s.file, line=s.line)
                 for later in res.steps[s.index + 1:]:

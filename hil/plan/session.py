@@ -13,7 +13,18 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import can
+import canopen
+
+from hil.drivers.cia402 import Cia402Driver, SdoError
+from hil.drivers.delta_modbus import DeltaModbus, ModbusExceptionError
+from hil.gateway.client import LeaseRefused, acquire
 from hil.plan.bench import CIA402_TIMEOUTS, Bench, DriveSpec
+from hil.profile.params import parse_name
+from hil.transport.can_bus import open_can
+from hil.transport.dio import open_dio
+from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial
+from hil.transport.serial_line import open_serial
 
 
 class BenchError(RuntimeError):
@@ -86,8 +97,6 @@ class DriveIO:
 def refusal_code(exc: BaseException) -> int | None:
     """The drive's own refusal in an error: Modbus exception code (ModbusExceptionError.code)
     or SDO abort code (SdoError.abort_code); None for anything else (timeouts, local errors)."""
-    from hil.drivers.cia402 import SdoError
-    from hil.drivers.delta_modbus import ModbusExceptionError
 
     if isinstance(exc, ModbusExceptionError):
         return int(exc.code)
@@ -98,7 +107,6 @@ def refusal_code(exc: BaseException) -> int | None:
 
 def _od_index(name: str) -> int:
     """Parameter Px.yyy -> object 2xyyh (L16860: 2000h + group << 8 + index)."""
-    from hil.profile.params import parse_name
 
     group, index = parse_name(name)
     return 0x2000 + (group << 8) + index
@@ -202,7 +210,6 @@ def open_session(bench: Bench, recorder: Any, *, world_factory: Callable | None 
 
 def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
     """Take the bench's lease from its gateway; `gateway` transports become zenoh URLs."""
-    from hil.gateway.client import LeaseRefused, acquire
 
     gw = s.bench.gateway
     assert gw is not None
@@ -233,16 +240,6 @@ def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
 
 
 def _open_harness(s: Session, urls: dict[str, str]) -> None:
-    import can
-    import canopen
-
-    from hil.drivers.cia402 import Cia402Driver
-    from hil.drivers.delta_modbus import DeltaModbus
-    from hil.transport.can_bus import open_can
-    from hil.transport.dio import open_dio
-    from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial
-    from hil.transport.serial_line import open_serial
-
     bench, rec = s.bench, s.recorder
     faults = bench.faults_allowed  # a passive layer until a `fault:` step (docs/faults.md)
     nets: dict[str, Any] = {}

@@ -11,6 +11,7 @@ import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from hil.paths import fixture
 from hil.profile.errors import ModelError
 
 CLEAR_RULES = ("reset", "power_cycle", "auto", "nmt_or_reset", "service", "special")
@@ -67,8 +68,6 @@ class AlarmTable:
     @classmethod
     def load(cls, path: str | os.PathLike[str] | None = None) -> AlarmTable:
         if path is None:
-            from hil.paths import fixture
-
             path = fixture("drive", "a3_alarms.csv")
         with open(path, newline="", encoding="utf-8") as f:
             return cls([AlarmSpec.from_row(r) for r in csv.DictReader(f)])

@@ -19,6 +19,7 @@ import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
+from hil.paths import fixture
 from hil.profile.errors import UnknownParameter
 
 _NAME_RE = re.compile(r"^\s*P([0-7])[.\-](\d{1,3})\s*$", re.IGNORECASE)
@@ -156,8 +157,6 @@ class ParamTable:
     def load(cls, path: str | os.PathLike[str] | None = None) -> ParamTable:
         """Load the CSV (default: fixtures/drive/a3_parameters.csv)."""
         if path is None:
-            from hil.paths import fixture
-
             path = fixture("drive", "a3_parameters.csv")
         with open(path, newline="", encoding="utf-8") as f:
             return cls(ParamSpec.from_row(row) for row in csv.DictReader(f))

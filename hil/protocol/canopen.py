@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import struct
 
-# Function codes (COB-ID bits 10..7) -- a3-comms §2.3, L16873-L16899.
+# Function codes (COB-ID bits 10..7) -- L16873-L16899.
 NMT = 0x000
 SYNC = 0x080
 EMCY = 0x080
@@ -22,7 +22,7 @@ SDO_REQUEST = 0x600  # client -> server
 SDO_RESPONSE = 0x580  # server -> client
 HEARTBEAT = 0x700
 
-# NMT command specifiers (CiA 301; the manual's figure is missing, a3-comms §2.4).
+# NMT command specifiers (CiA 301; the manual's NMT figure is missing).
 NMT_START = 0x01
 NMT_STOP = 0x02
 NMT_PRE_OPERATIONAL = 0x80

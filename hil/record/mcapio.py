@@ -1,9 +1,9 @@
 """A lean MCAP writer and a tolerant record scanner (MCAP spec, as `mcap` 1.6.0 writes it).
 
 Why not `mcap.writer.Writer` on the hot path: its `add_message` builds a dataclass and a
-`BytesIO` record per message (~4.5 µs, feasibility §5), which eats most of the budget of a
-saturated CAN bus plus its decoded twin. Here a message is one `struct.pack` and two list
-appends; everything that is not per message (schema, channel, chunk, indexes, summary,
+`BytesIO` record per message (~4.5 µs, docs/dev/feasibility.md §5), which eats most of the
+budget of a saturated CAN bus plus its decoded twin. Here a message is one `struct.pack` and
+two list appends; everything that is not per message (schema, channel, chunk, indexes, summary,
 footer) reuses `mcap.records`, so the bytes are those of the official writer.
 
 Crash safety: `flush()` closes the open chunk early and writes it, so every message added

@@ -1,6 +1,7 @@
 """The recorder: every bus crossing and harness event into one MCAP file.
 
-Callers (transports, faces, runner) only append a tuple to a bounded queue; one writer
+Callers (transports, faces, runner) only append a named item (hil/record/queue_items.py)
+to a bounded queue; one writer
 thread encodes, decodes (CANopen, Modbus), pairs transactions and writes. The writer closes
 the open chunk at least every `flush_interval` s, so a `kill -9` loses at most that tail.
 A full queue never blocks the caller: the item is dropped and counted (`Recorder.drops`,
@@ -23,12 +24,21 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable, Mapping
 from functools import cache
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import IO, Any
 
 from hil.record import topics
 from hil.record.mcapio import McapWriter
 from hil.record.modbus_pairing import AduAssembler, ModbusPairing, guess_mode
+from hil.record.queue_items import (
+    AttachItem,
+    BarrierItem,
+    BytesItem,
+    CanItem,
+    MetadataItem,
+    SerialItem,
+)
 from hil.record.schemas import SCHEMA_BYTES, schema_for_topic
 from hil.record.sdo_pairing import SdoPairing
 
@@ -82,7 +92,6 @@ def dumps(obj: Any) -> bytes:
 @cache
 def versions() -> dict[str, str]:
     """Versions of the stack and the git revision of the hil checkout (if any)."""
-    from importlib.metadata import PackageNotFoundError, version
 
     out = {"python": platform.python_version(), "platform": platform.platform()}
     for key, dist in (
@@ -195,9 +204,11 @@ class Recorder:
         self._describe_adu: Callable | None = None
         self._decoders: dict[str, str] = {}
         self._decoders_loaded = False
-        self._h_can = self._do_can
-        self._h_serial = self._do_serial
-        self._h_bytes = self._do_bytes
+        self._handlers: dict[type, Callable[[Any], None]] = {
+            CanItem: self._do_can, SerialItem: self._do_serial, BytesItem: self._do_bytes,
+            AttachItem: self._do_attach, MetadataItem: self._do_metadata,
+            BarrierItem: self._do_barrier,
+        }
         start = {
             "started_ns": str(time.time_ns()),
             "pid": str(os.getpid()),
@@ -218,7 +229,7 @@ class Recorder:
     ) -> None:
         """A python-can `Message` seen on `bus` ("rx"/"tx" as seen by the harness)."""
         if self._open and len(self._q) < self._max_queue:
-            self._q.append((self._h_can, bus, frame, direction, t, source_t))
+            self._q.append(CanItem(bus, frame, direction, t, source_t))
         else:
             self._drop()
 
@@ -233,17 +244,8 @@ class Recorder:
     ) -> None:
         """One RS-485 frame (an ADU, as delimited by the line silence) on `port`."""
         if self._open and len(self._q) < self._max_queue:
-            self._q.append(
-                (
-                    self._h_serial,
-                    port,
-                    bytes(data),
-                    direction,
-                    t,
-                    source_t,
-                    None if gaps_us is None else list(gaps_us),
-                )
-            )
+            self._q.append(SerialItem(port, bytes(data), direction, t, source_t,
+                                      None if gaps_us is None else list(gaps_us)))
         else:
             self._drop()
 
@@ -421,18 +423,18 @@ class Recorder:
     ) -> None:
         """A file attachment (bench file, plan, EDS ...)."""
         t = time.time_ns() if t is None else t
-        self._control((self._do_attach, name, bytes(data), media_type, t))
+        self._control(AttachItem(name, bytes(data), media_type, t))
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         """A metadata record; non-string values are stored as JSON text."""
-        self._control((self._do_metadata, name, _str_map(data)))
+        self._control(MetadataItem(name, _str_map(data)))
 
     def flush(self, timeout: float = 10.0) -> bool:
         """Wait until everything queued so far is written and flushed to the OS."""
         if not self._thread.is_alive():
             return False
         done = threading.Event()
-        self._control((self._do_barrier, done))
+        self._control(BarrierItem(done))
         return done.wait(timeout)
 
     @property
@@ -496,11 +498,11 @@ class Recorder:
         if t is None:
             t = time.time_ns()
         if self._open and len(self._q) < self._max_queue:
-            self._q.append((self._h_bytes, topic, schema, source, data, t, source_t))
+            self._q.append(BytesItem(topic, schema, source, data, t, source_t))
         else:
             self._drop()
 
-    def _control(self, item: tuple) -> None:
+    def _control(self, item: AttachItem | MetadataItem | BarrierItem) -> None:
         if self._open:
             self._q.append(item)  # control items are never dropped for space
         else:
@@ -525,6 +527,7 @@ class Recorder:
     def _run(self) -> None:
         q = self._q
         pop = q.popleft
+        handlers = self._handlers
         interval = self.flush_interval
         next_flush = time.monotonic() + interval
         dirty = False
@@ -534,7 +537,7 @@ class Recorder:
                 while n < 4096:
                     item = pop()
                     try:
-                        item[0](item)
+                        handlers[type(item)](item)
                     except Exception as exc:
                         self._error(exc)
                     n += 1
@@ -585,8 +588,8 @@ class Recorder:
         )
         self._describe_adu, self._decoders["modbus"] = _load("hil.protocol.modbus", "describe_adu")
 
-    def _do_bytes(self, item: tuple) -> None:
-        _, topic, schema, source, data, t, st = item
+    def _do_bytes(self, item: BytesItem) -> None:
+        topic, schema, source, data, t, st = item
         cid = self._channels.get(topic)
         if cid is None:
             cid = self._channel(topic, schema, source or ("harness" if st is None else "adapter"))
@@ -604,8 +607,8 @@ class Recorder:
         ch = self._can_ch[bus] = (raw, dec, sdo, SdoPairing(), {})
         return ch
 
-    def _do_can(self, item: tuple) -> None:
-        _, bus, frame, direction, t, st = item
+    def _do_can(self, item: CanItem) -> None:
+        bus, frame, direction, t, st = item
         ch = self._can_ch.get(bus)
         if ch is None:
             ch = self._can_channels(bus, st)
@@ -676,8 +679,8 @@ class Recorder:
             )
         return enc if enc[:1] == b"{" else dumps({"value": enc.decode()})
 
-    def _do_serial(self, item: tuple) -> None:
-        _, port, data, direction, t, st, gaps = item
+    def _do_serial(self, item: SerialItem) -> None:
+        port, data, direction, t, st, gaps = item
         ch = self._serial_ch.get(port)
         if ch is None:
             if not self._decoders_loaded:
@@ -728,17 +731,15 @@ class Recorder:
                 msg.setdefault("error", why)
         self._w.add_message(mb_cid, t, pt, dumps(msg))
 
-    def _do_attach(self, item: tuple) -> None:
-        _, name, data, media_type, t = item
-        self._w.add_attachment(name, media_type, data, t)
+    def _do_attach(self, item: AttachItem) -> None:
+        self._w.add_attachment(item.name, item.media_type, item.data, item.t)
 
-    def _do_metadata(self, item: tuple) -> None:
-        _, name, data = item
-        self._w.add_metadata(name, data)
+    def _do_metadata(self, item: MetadataItem) -> None:
+        self._w.add_metadata(item.name, item.data)
 
-    def _do_barrier(self, item: tuple) -> None:
+    def _do_barrier(self, item: BarrierItem) -> None:
         self._w.flush()
-        item[1].set()
+        item.done.set()
 
 
 def _now() -> int:

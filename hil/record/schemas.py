@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from hil.record import topics
+
 _T = {"type": "integer", "description": "ns"}
 _DIR = {"type": "string", "enum": ["rx", "tx"], "description": "as seen by the harness"}
 
@@ -210,7 +212,6 @@ SCHEMA_BYTES: dict[str, bytes] = {k: json.dumps(v).encode() for k, v in SCHEMAS.
 
 def schema_for_topic(topic: str) -> str:
     """The schema name a topic gets when written through the generic `write()`."""
-    from hil.record import topics
 
     fixed = {
         topics.LOG: "foxglove.Log",

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import datetime
 import json
 from bisect import bisect_left, bisect_right
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hil.record import topics as T
+from hil.record import topics
+from hil.record.reader import Recording
 
 
 @dataclass
@@ -56,7 +58,6 @@ class RunData:
 
 def run_info(meta: dict[str, dict[str, str]], bench: str = "") -> dict[str, str]:
     """The run's identity from a recording's metadata (`hil.run`, `hil.versions`)."""
-    import datetime
 
     run, ver = meta.get("hil.run", {}), meta.get("hil.versions", {})
     date = "?"
@@ -73,8 +74,6 @@ def _is_bus(topic: str) -> bool:
 
 
 def load_run(path: str | Path) -> RunData:
-    from hil.record.reader import Recording
-
     rec = Recording.open(path)
     meta = rec.metadata()
     run_meta = meta.get("hil.run", {})
@@ -92,7 +91,7 @@ def load_run(path: str | Path) -> RunData:
     t_plan: int | None = None
     for topic, lt, pt, msg in rec.messages():
         t_first = lt if t_first is None else min(t_first, lt)
-        if topic == T.PLAN_STEPS:
+        if topic == topics.PLAN_STEPS:
             t_plan = lt if t_plan is None else min(t_plan, lt)
             idx = int(msg.get("index") if msg.get("index") is not None else -1)
             sd = steps.setdefault(idx, StepData(idx, str(msg.get("step", ""))))
@@ -107,11 +106,11 @@ def load_run(path: str | Path) -> RunData:
                 sd.status = msg.get("status") or sd.status
                 sd.message = msg.get("message") or ""
                 sd.duration_ns = int(msg.get("duration_ns") or 0)
-        elif topic == T.TIMING_VERDICTS:
+        elif topic == topics.TIMING_VERDICTS:
             data.verdicts.append({**msg, "_t": lt})
-        elif topic == T.SAFETY:
+        elif topic == topics.SAFETY:
             data.safety.append({**msg, "_t": lt})
-        elif topic == T.LOG:
+        elif topic == topics.LOG:
             data.logs.append({**msg, "_t": lt})
         elif topic.startswith("/drive/") and topic.endswith("/state"):
             data.truth.setdefault(topic.split("/")[2], []).append((pt or lt, msg))

@@ -26,7 +26,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hil.record import topics as T
+import yaml
+
+from hil.record import topics
+from hil.record.reader import Recording
+from hil.report.html import CSS
 
 MS = 1_000_000
 TRUTH_EDGES = ("servo_on", "brkr", "brake_released", "torque_enabled", "sto_a", "sto_b")
@@ -52,8 +56,6 @@ class Side:
 
 
 def _bench_drive(text: str) -> dict:
-    import yaml
-
     try:
         data = yaml.safe_load(text) or {}
         return next(iter((data.get("drives") or {}).values()), {}) or {}
@@ -62,8 +64,6 @@ def _bench_drive(text: str) -> dict:
 
 
 def load_side(path: str | Path) -> Side:
-    from hil.record.reader import Recording
-
     rec = Recording.open(path)
     meta = rec.metadata()
     run = meta.get("hil.run", {})
@@ -88,12 +88,12 @@ def load_side(path: str | Path) -> Side:
     states: dict[str, list[str]] = {}
     for topic, lt, pt, msg in rec.messages():
         t = pt or lt
-        if topic == T.PLAN_STEPS:
+        if topic == topics.PLAN_STEPS:
             idx = msg.get("index")
             if msg.get("event") == "start" and isinstance(idx, int):
                 side.starts.setdefault(idx, lt)
                 side.labels[idx] = str(msg.get("step", ""))
-        elif topic == T.TIMING_VERDICTS:
+        elif topic == topics.TIMING_VERDICTS:
             key = (msg.get("spec"), msg.get("constraint"), msg.get("occurrence"))
             side.verdicts[key] = msg
         elif topic.startswith("/dio/") and "level" in msg:
@@ -326,21 +326,19 @@ def diff(a_path: str | Path, b_path: str | Path) -> dict:
 
 
 # --- HTML -----------------------------------------------------------------------------------
-E = html.escape
+esc = html.escape
 
 
 def _n(x: Any) -> str:
-    return "–" if x is None else (f"{x:.3f}" if isinstance(x, float) else E(str(x)))
+    return "–" if x is None else (f"{x:.3f}" if isinstance(x, float) else esc(str(x)))
 
 
 def render_html(d: dict) -> str:
-    from hil.report.html import CSS
-
     h = ["<!DOCTYPE html><html><head><meta charset='utf-8'>",
-         f"<title>hil diff: {E(d['a']['plan'])}</title><style>{CSS}</style></head><body>",
-         f"<h1>hil diff: {E(d['a']['plan'])}</h1>",
-         f"<p>A <code>{E(d['a']['path'])}</code> (bench {E(d['a']['bench'])}) · "
-         f"B <code>{E(d['b']['path'])}</code> (bench {E(d['b']['bench'])}) · times in ms from "
+         f"<title>hil diff: {esc(d['a']['plan'])}</title><style>{CSS}</style></head><body>",
+         f"<h1>hil diff: {esc(d['a']['plan'])}</h1>",
+         f"<p>A <code>{esc(d['a']['path'])}</code> (bench {esc(d['a']['bench'])}) · "
+         f"B <code>{esc(d['b']['path'])}</code> (bench {esc(d['b']['bench'])}) · times in ms from "
          "A's plan start, B mapped onto A step by step</p>"]
     if not d["same_plan"] or not d["same_steps"]:
         h.append("<p class='fail'>The recordings are not of the same plan (steps differ): "
@@ -350,10 +348,10 @@ def render_html(d: dict) -> str:
         h.append("<table id='explanations'><tr><th>signature</th><th>A ms</th><th>B ms</th>"
                  "<th>delta ms</th><th>options</th><th>estimate</th></tr>")
         for e in d["explanations"]:
-            h.append(f"<tr><td>{E(e['what'])}</td><td>{_n(e['a_ms'])}</td><td>{_n(e['b_ms'])}"
-                     f"</td><td>{_n(e['delta_ms'])}</td><td>{E(', '.join(e['options']))}</td>"
-                     f"<td>{E(e['option'])} ≈ <b>{_n(e['estimate'])}</b> ms<br><small>"
-                     f"{E(e['basis'])}</small></td></tr>")
+            h.append(f"<tr><td>{esc(e['what'])}</td><td>{_n(e['a_ms'])}</td><td>{_n(e['b_ms'])}"
+                     f"</td><td>{_n(e['delta_ms'])}</td><td>{esc(', '.join(e['options']))}</td>"
+                     f"<td>{esc(e['option'])} ≈ <b>{_n(e['estimate'])}</b> ms<br><small>"
+                     f"{esc(e['basis'])}</small></td></tr>")
         h.append("</table>")
     else:
         h.append("<p>No signature differs.</p>")
@@ -361,11 +359,11 @@ def render_html(d: dict) -> str:
              "<th>constraint</th><th>A</th><th>B</th><th>delta ms</th></tr>")
     for v in d["verdicts"]:
         step = v["step"] + 1 if isinstance(v["step"], int) else "–"
-        h.append(f"<tr><td>{step}</td><td>{E(str(v['spec']))}</td>"
-                 f"<td>{E(str(v['constraint']))}</td>"
-                 f"<td class='{E(str(v['a_status']))}'>{_n(v['a_ms'])} {E(str(v['a_status']))}"
-                 f"</td><td class='{E(str(v['b_status']))}'>{_n(v['b_ms'])} "
-                 f"{E(str(v['b_status']))}</td><td>{_n(v['delta_ms'])}</td></tr>")
+        h.append(f"<tr><td>{step}</td><td>{esc(str(v['spec']))}</td>"
+                 f"<td>{esc(str(v['constraint']))}</td>"
+                 f"<td class='{esc(str(v['a_status']))}'>{_n(v['a_ms'])} {esc(str(v['a_status']))}"
+                 f"</td><td class='{esc(str(v['b_status']))}'>{_n(v['b_ms'])} "
+                 f"{esc(str(v['b_status']))}</td><td>{_n(v['delta_ms'])}</td></tr>")
     h.append("</table><h2>Edges per signal</h2><table><tr><th>signal</th><th>edge</th>"
              "<th>step</th><th>A ms</th><th>B ms</th><th>delta ms</th></tr>")
     labels = {s["index"]: s["label"] for s in d["steps"]}
@@ -375,21 +373,21 @@ def render_html(d: dict) -> str:
                 MIN_DELTA_MS else ""
             step = f"{r['step'] + 1}: {labels.get(r['step'], '')}" if r["step"] is not None \
                 else "–"
-            h.append(f"<tr{cls}><td>{E(s['signal'])}</td><td>→ {E(str(r['value']))} "
-                     f"#{r['n']}</td><td>{E(step)}</td><td>{_n(r['a_ms'])}</td>"
+            h.append(f"<tr{cls}><td>{esc(s['signal'])}</td><td>→ {esc(str(r['value']))} "
+                     f"#{r['n']}</td><td>{esc(step)}</td><td>{_n(r['a_ms'])}</td>"
                      f"<td>{_n(r['b_ms'])}</td><td>{_n(r['delta_ms'])}</td></tr>")
     h.append("</table><h2>State sequences</h2>")
     if d["states"]:
         for s in d["states"]:
-            h.append(f"<h3>{E(s['sequence'])}</h3><pre>"
-                     + E("\n".join(s["differences"])) + "</pre>")
+            h.append(f"<h3>{esc(s['sequence'])}</h3><pre>"
+                     + esc("\n".join(s["differences"])) + "</pre>")
     else:
         h.append("<p>Identical.</p>")
     for title, key in (("Parameters that differ", "params"), ("Bench options that differ",
                                                               "options")):
         if d[key]:
             h.append(f"<h2>{title}</h2><table><tr><th></th><th>A</th><th>B</th></tr>"
-                     + "".join(f"<tr><td>{E(k)}</td><td>{_n(v[0])}</td><td>{_n(v[1])}</td></tr>"
+                     + "".join(f"<tr><td>{esc(k)}</td><td>{_n(v[0])}</td><td>{_n(v[1])}</td></tr>"
                                for k, v in d[key].items()) + "</table>")
     h.append("</body></html>\n")
     return "\n".join(h)

@@ -10,9 +10,13 @@ the safe-state actions, the bus log of each failing step, parameters, bench and 
 from __future__ import annotations
 
 import html
+from dataclasses import fields
 from pathlib import Path
 
 from hil.report.data import RunData, bus_around, bus_log, load_run
+from hil.timing.checker import Verdict
+from hil.timing.render import svg
+from hil.timing.source import RecordingSource
 
 CSS = """
 body{font:14px/1.4 system-ui,sans-serif;margin:1.5em;color:#222;max-width:1200px}
@@ -29,11 +33,11 @@ svg{background:#fff;border:1px solid #ddd}
 .diagram{overflow-x:auto}.runinfo td{border:none;padding:1px 12px 1px 0}
 pre b{background:#fde2e4}figure{margin:0.8em 0}figcaption{font-weight:600;margin:0.3em 0}
 """
-E = html.escape
+esc = html.escape
 
 
 def _status(s: str) -> str:
-    return f'<span class="{E(s)}">{E(s.upper())}</span>'
+    return f'<span class="{esc(s)}">{esc(s.upper())}</span>'
 
 
 def _ms(value: object) -> str:
@@ -89,11 +93,6 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
     """(title, svg) per checked spec and occurrence: the observed signals with the expected
     windows drawn on them (`hil.timing.render.svg`), from the recording alone. A spec that
     cannot be redrawn (unknown id, unreadable recording) gives a note instead of a diagram."""
-    from dataclasses import fields
-
-    from hil.timing.checker import Verdict
-    from hil.timing.render import svg
-    from hil.timing.source import RecordingSource
 
     groups: dict[tuple[str, object], list[dict]] = {}
     for v in run.verdicts:
@@ -105,13 +104,13 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
         specs = _spec_by_id()
         source = RecordingSource(run.path)
     except Exception as e:  # a truncated or foreign recording: the table still stands
-        return [("timing diagrams", f"<p>Diagrams not drawn: {E(str(e))}</p>")]
+        return [("timing diagrams", f"<p>Diagrams not drawn: {esc(str(e))}</p>")]
     names = {f.name for f in fields(Verdict)}
     for (sid, step), vds in groups.items():
         spec = specs.get(sid)
         label = f"{sid}" + (f" (step {int(step) + 1})" if isinstance(step, int) else "")
         if spec is None:
-            out.append((label, f"<p>No timing spec {E(sid)} here: diagram not drawn.</p>"))
+            out.append((label, f"<p>No timing spec {esc(sid)} here: diagram not drawn.</p>"))
             continue
         verdicts = []
         for vd in vds:
@@ -130,7 +129,7 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
                 pic = svg(spec, source, chosen, params=params, binding=binding,
                           occurrence=None, width=1100, t0=run.t0)
             except Exception as e:
-                pic = f"<p>Diagram not drawn: {E(type(e).__name__)}: {E(str(e))}</p>"
+                pic = f"<p>Diagram not drawn: {esc(type(e).__name__)}: {esc(str(e))}</p>"
             out.append((f"{label}, occurrence {occ + 1}", pic))
         if len(occs) > MAX_DIAGRAMS:
             out.append((f"{label}: {len(occs) - MAX_DIAGRAMS} more occurrences",
@@ -169,7 +168,7 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
         coords = " ".join(
             f"{pad + (W - pad - 10) * (t - t0) / span:.1f},"
             f"{y0 + PH - 20 - (PH - 30) * (v - lo) / rng:.1f}" for t, v in pts)
-        out.append(f'<text x="4" y="{y0 + 12}" font-size="11">{E(label)}</text>'
+        out.append(f'<text x="4" y="{y0 + 12}" font-size="11">{esc(label)}</text>'
                    f'<text x="4" y="{y0 + 26}" font-size="9">{hi:.4g}</text>'
                    f'<text x="4" y="{y0 + PH - 20}" font-size="9">{lo:.4g}</text>'
                    f'<rect x="{pad}" y="{y0}" width="{W - pad - 10}" height="{PH - 20}" '
@@ -188,7 +187,7 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
 def run_info_table(info: dict[str, str]) -> str:
     """Run date, hil version, host, bench and git revision as a small table."""
     return ("<table class='runinfo' style='width:auto'><tr>" + "".join(
-        f"<td><small>{E(k)}</small><br><b>{E(info.get(k, '?'))}</b></td>"
+        f"<td><small>{esc(k)}</small><br><b>{esc(info.get(k, '?'))}</b></td>"
         for k in ("date", "hil", "host", "bench", "git")) + "</tr></table>")
 
 
@@ -196,113 +195,142 @@ def _step_name(run: RunData, index: object) -> str:
     """`3: wait_until DO BRKR on` for a verdict's step index."""
     st = run.step(index)
     if st is None:
-        return "–" if index is None else E(str(index))
-    return f"<a href='#step-{st.index + 1}'>{st.index + 1}</a>: {E(st.label)}"
+        return "–" if index is None else esc(str(index))
+    return f"<a href='#step-{st.index + 1}'>{st.index + 1}</a>: {esc(st.label)}"
 
 
 def render_html(run: RunData) -> str:
+    """One plan's report: steps, timing verdicts and diagrams, motion, safe state, bus logs
+    around failures, parameters, the plan and bench files and the log."""
     st = run.status or "unknown"
     h: list[str] = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
-        f"<title>hil report: {E(run.plan)}</title><style>{CSS}</style></head><body>",
-        f"<h1>{E(run.plan)} <span class='badge b-{E(st)}'>{E(st.upper())}</span></h1>",
+        f"<title>hil report: {esc(run.plan)}</title><style>{CSS}</style></head><body>",
+        f"<h1>{esc(run.plan)} <span class='badge b-{esc(st)}'>{esc(st.upper())}</span></h1>",
         run_info_table(run.info()),
-        f"<p>Recording <code>{E(run.path)}</code>"
+        f"<p>Recording <code>{esc(run.path)}</code>"
         + (" · <b>recording truncated (killed run)</b>" if run.truncated else "")
         + " · times are ms from the plan start</p>",
-        "<h2>Steps</h2><table><tr><th>#</th><th>step</th><th>line</th><th>status</th>"
-        "<th>start</th><th>time</th><th>message</th></tr>",
     ]
+    for section in (_steps_html, _verdicts_html, _motion_html, _safety_html, _bus_html,
+                    _files_html):
+        h += section(run)
+    h.append("</body></html>\n")
+    return "\n".join(h)
+
+
+def _steps_html(run: RunData) -> list[str]:
+    h = ["<h2>Steps</h2><table><tr><th>#</th><th>step</th><th>line</th><th>status</th>"
+         "<th>start</th><th>time</th><th>message</th></tr>"]
     for s in run.steps:
         n = s.index + 1 if s.index >= 0 else "-"
         start = f"{(s.t_start - run.t0) / 1e6:.1f} ms" if s.t_start is not None else ""
-        h.append(f"<tr id='step-{n}'><td>{n}</td><td>{E(s.label)}</td><td>{s.line or ''}</td>"
+        h.append(f"<tr id='step-{n}'><td>{n}</td><td>{esc(s.label)}</td><td>{s.line or ''}</td>"
                  f"<td>{_status(s.status)}</td><td>{start}</td>"
-                 f"<td>{s.duration_ns / 1e6:.1f} ms</td><td>{E(s.message)}</td></tr>")
+                 f"<td>{s.duration_ns / 1e6:.1f} ms</td><td>{esc(s.message)}</td></tr>")
     h.append("</table>")
-    h.append("<h2>Timing verdicts: expected vs observed</h2>")
-    if run.verdicts:
-        h.append("<table><tr><th>step</th><th>spec</th><th>constraint</th><th>status</th>"
-                 "<th>measured</th><th>window</th><th>diagram</th><th>message</th></tr>")
-        for v in run.verdicts:
-            win = v.get("window_expr") or v.get("window_ms")
-            h.append(f"<tr><td>{_step_name(run, v.get('step'))}</td>"
-                     f"<td>{E(str(v.get('spec', '')))}</td>"
-                     f"<td>{E(str(v.get('constraint', '')))}<br><small>"
-                     f"{E(str(v.get('source', '')))}</small></td>"
-                     f"<td>{_status(str(v.get('status', '')))}</td>"
-                     f"<td>{_ms(v.get('measured_ms'))}</td><td>{E(str(win))}</td>"
-                     f"<td>{_window_svg(v)}</td><td>{E(str(v.get('message', '')))}</td></tr>")
-        h.append("</table>")
-        h.append("<h2>Timing diagrams: observed signals and expected windows</h2>")
-        for title, pic in timing_diagrams(run):
-            h.append(f"<figure><figcaption>{E(title)}</figcaption>"
-                     f"<div class='diagram'>{pic}</div></figure>")
-    else:
-        h.append("<p>No timing verdicts in this run.</p>")
-    h.append("<h2>Motion (virtual-bench ground truth)</h2>")
-    if run.truth:
-        for d, samples in run.truth.items():
-            h.append(f"<h3>{E(d)}</h3>{_plot(run, d, samples)}")
-    else:
-        h.append("<p>No ground truth in this recording (real bench).</p>")
-    h.append("<h2>Safe state</h2>")
-    if run.safety:
-        h.append("<table><tr><th>drive</th><th>action</th><th>ok</th><th>reason</th>"
-                 "<th>detail</th></tr>")
-        for a in run.safety:
-            h.append(f"<tr><td>{E(str(a.get('drive', '')))}</td><td>{E(str(a.get('action')))}"
-                     f"</td><td>{_status('pass' if a.get('ok') else 'fail')}</td>"
-                     f"<td>{E(str(a.get('reason', '')))}</td>"
-                     f"<td>{E(str(a.get('detail', '')))}</td></tr>")
-        h.append("</table>")
-    else:
-        h.append("<p>No safe-state actions recorded.</p>")
+    return h
+
+
+def _verdicts_html(run: RunData) -> list[str]:
+    h = ["<h2>Timing verdicts: expected vs observed</h2>"]
+    if not run.verdicts:
+        return [*h, "<p>No timing verdicts in this run.</p>"]
+    h.append("<table><tr><th>step</th><th>spec</th><th>constraint</th><th>status</th>"
+             "<th>measured</th><th>window</th><th>diagram</th><th>message</th></tr>")
+    for v in run.verdicts:
+        win = v.get("window_expr") or v.get("window_ms")
+        h.append(f"<tr><td>{_step_name(run, v.get('step'))}</td>"
+                 f"<td>{esc(str(v.get('spec', '')))}</td>"
+                 f"<td>{esc(str(v.get('constraint', '')))}<br><small>"
+                 f"{esc(str(v.get('source', '')))}</small></td>"
+                 f"<td>{_status(str(v.get('status', '')))}</td>"
+                 f"<td>{_ms(v.get('measured_ms'))}</td><td>{esc(str(win))}</td>"
+                 f"<td>{_window_svg(v)}</td><td>{esc(str(v.get('message', '')))}</td></tr>")
+    h.append("</table>")
+    h.append("<h2>Timing diagrams: observed signals and expected windows</h2>")
+    for title, pic in timing_diagrams(run):
+        h.append(f"<figure><figcaption>{esc(title)}</figcaption>"
+                 f"<div class='diagram'>{pic}</div></figure>")
+    return h
+
+
+def _motion_html(run: RunData) -> list[str]:
+    h = ["<h2>Motion (virtual-bench ground truth)</h2>"]
+    if not run.truth:
+        return [*h, "<p>No ground truth in this recording (real bench).</p>"]
+    for d, samples in run.truth.items():
+        h.append(f"<h3>{esc(d)}</h3>{_plot(run, d, samples)}")
+    return h
+
+
+def _safety_html(run: RunData) -> list[str]:
+    h = ["<h2>Safe state</h2>"]
+    if not run.safety:
+        return [*h, "<p>No safe-state actions recorded.</p>"]
+    h.append("<table><tr><th>drive</th><th>action</th><th>ok</th><th>reason</th>"
+             "<th>detail</th></tr>")
+    for a in run.safety:
+        h.append(f"<tr><td>{esc(str(a.get('drive', '')))}</td><td>{esc(str(a.get('action')))}"
+                 f"</td><td>{_status('pass' if a.get('ok') else 'fail')}</td>"
+                 f"<td>{esc(str(a.get('reason', '')))}</td>"
+                 f"<td>{esc(str(a.get('detail', '')))}</td></tr>")
+    h.append("</table>")
+    return h
+
+
+def _bus_html(run: RunData) -> list[str]:
+    """The frames around each failing check, then the bus log of other failing steps."""
+    h: list[str] = []
     bad = [v for v in run.verdicts if v.get("status") in ("fail", "inconclusive")]
     if bad:
         h.append("<h2>Bus log around failing checks</h2>"
                  "<p>Frames between the reference and the observed instant of each failing "
                  "constraint (highlighted), with the frames just before and after.</p>")
-        for v in bad:
-            rows = bus_around(run, v)
-            h.append(f"<h3>{_step_name(run, v.get('step'))}: {E(str(v.get('spec', '')))}: "
-                     f"{E(str(v.get('constraint', '')))} {_status(str(v.get('status')))}</h3>")
-            if not rows:
-                h.append("<p>No bus traffic recorded around this check.</p>")
-                continue
-            h.append("<pre>" + "\n".join(
-                (f"<b>{line}</b>" if inside else line)
-                for t, topic, text, inside in rows
-                for line in [f"{(t - run.t0) / 1e6:10.3f} ms  {E(topic):<28} {E(text)}"])
-                + "</pre>")
+    for v in bad:
+        rows = bus_around(run, v)
+        h.append(f"<h3>{_step_name(run, v.get('step'))}: {esc(str(v.get('spec', '')))}: "
+                 f"{esc(str(v.get('constraint', '')))} {_status(str(v.get('status')))}</h3>")
+        if not rows:
+            h.append("<p>No bus traffic recorded around this check.</p>")
+            continue
+        h.append("<pre>" + "\n".join(
+            (f"<b>{line}</b>" if inside else line)
+            for t, topic, text, inside in rows
+            for line in [f"{(t - run.t0) / 1e6:10.3f} ms  {esc(topic):<28} {esc(text)}"])
+            + "</pre>")
     shown = {v.get("step") for v in bad}  # checks have their frames above
     failing = [s for s in run.steps if s.status not in ("pass", "skipped")
                and s.index not in shown]
     if failing:
         h.append("<h2>Bus log of failing steps</h2>")
-        for s in failing:
-            rows = bus_log(run, s)
-            h.append(f"<h3>step {s.index + 1}: {E(s.label)}</h3>")
-            if not rows:
-                h.append("<p>No bus traffic during this step.</p>")
-                continue
-            h.append("<pre>" + "\n".join(
-                f"{(t - run.t0) / 1e6:10.3f} ms  {E(topic):<28} {E(text)}"
-                for t, topic, text in rows) + "</pre>")
-    h.append("<h2>Parameters</h2>")
+    for s in failing:
+        rows = bus_log(run, s)
+        h.append(f"<h3>step {s.index + 1}: {esc(s.label)}</h3>")
+        if not rows:
+            h.append("<p>No bus traffic during this step.</p>")
+            continue
+        h.append("<pre>" + "\n".join(
+            f"{(t - run.t0) / 1e6:10.3f} ms  {esc(topic):<28} {esc(text)}"
+            for t, topic, text in rows) + "</pre>")
+    return h
+
+
+def _files_html(run: RunData) -> list[str]:
+    """Parameters, the plan and bench files as run, and the tail of the log."""
+    h = ["<h2>Parameters</h2>"]
     for d, values in run.params.items():
-        shown = {k: v for k, v in sorted(values.items())}
-        h.append(f"<details><summary>{E(d)}: {len(shown)} parameters</summary><pre>"
-                 + E("\n".join(f"{k} = {v}" for k, v in shown.items())) + "</pre></details>")
+        shown = dict(sorted(values.items()))
+        h.append(f"<details><summary>{esc(d)}: {len(shown)} parameters</summary><pre>"
+                 + esc("\n".join(f"{k} = {v}" for k, v in shown.items())) + "</pre></details>")
     for name in ("bench.yaml", "plan.yaml"):
         if name in run.attachments:
-            h.append(f"<h2>{E(name)}</h2><pre>{E(run.attachments[name])}</pre>")
+            h.append(f"<h2>{esc(name)}</h2><pre>{esc(run.attachments[name])}</pre>")
     if run.logs:
         h.append("<h2>Log</h2><pre>" + "\n".join(
-            f"{(lg['_t'] - run.t0) / 1e6:10.3f} ms  {E(str(lg.get('name', '')))}: "
-            f"{E(str(lg.get('message', '')))}" for lg in run.logs[-300:]) + "</pre>")
-    h.append("</body></html>\n")
-    return "\n".join(h)
+            f"{(lg['_t'] - run.t0) / 1e6:10.3f} ms  {esc(str(lg.get('name', '')))}: "
+            f"{esc(str(lg.get('message', '')))}" for lg in run.logs[-300:]) + "</pre>")
+    return h
 
 
 def write_html(recording: str | Path, out: str | Path | None = None) -> Path:

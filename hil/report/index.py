@@ -12,10 +12,11 @@ import os
 from collections import Counter
 from pathlib import Path
 
+from hil.record.reader import RecordingError
 from hil.report.data import load_run
 from hil.report.html import CSS, run_info_table
 
-E = html.escape
+esc = html.escape
 INDEX_CSS = """
 .bar{height:10px;border-radius:5px;background:#b00020;margin:0.5em 0 1em}
 .bar>div{height:10px;border-radius:5px;background:#176f2c}
@@ -25,7 +26,6 @@ td.num{text-align:right;font-variant-numeric:tabular-nums}
 
 def _row(rec: Path, out_dir: Path) -> dict:
     """What the index shows of one recording (a row that says so if it is unreadable)."""
-    from hil.record.reader import RecordingError
 
     row: dict = {"recording": rec, "plan": rec.stem, "status": "unreadable", "info": {},
                  "steps": (0, 0), "verdicts": Counter(), "duration_ms": None, "reason": ""}
@@ -53,7 +53,7 @@ def _link(target: Path, out_dir: Path, text: str) -> str:
     if not target.exists():
         return ""
     href = Path(os.path.relpath(target.resolve(), out_dir.resolve())).as_posix()
-    return f"<a href='{E(href)}'>{E(text)}</a>"
+    return f"<a href='{esc(href)}'>{esc(text)}</a>"
 
 
 def _merged_info(rows: list[dict]) -> dict[str, str]:
@@ -90,12 +90,12 @@ def render_index(recordings: list[str | Path], out: str | Path) -> str:
             _link(rec.with_suffix(".html"), out_dir, "report"),
             _link(rec, out_dir, "recording"),
             _link(rec.with_suffix(".junit.xml"), out_dir, "junit")) if x)
-        title = _link(rec.with_suffix(".html"), out_dir, r["plan"]) or E(r["plan"])
-        note = f"<br><small>{E(r.get('description') or '')}</small>"
+        title = _link(rec.with_suffix(".html"), out_dir, r["plan"]) or esc(r["plan"])
+        note = f"<br><small>{esc(r.get('description') or '')}</small>"
         if r["reason"]:
-            note += f"<br><small class='fail'>{E(r['reason'])}</small>"
+            note += f"<br><small class='fail'>{esc(r['reason'])}</small>"
         h.append(f"<tr class='plan'><td>{title}{note}</td>"
-                 f"<td class='{E(r['status'])}'>{E(r['status'].upper())}</td>"
+                 f"<td class='{esc(r['status'])}'>{esc(r['status'].upper())}</td>"
                  f"<td class='num'>{r['steps'][0]}/{r['steps'][1]}</td>"
                  f"<td class='num'>{vc['pass']} / {vc['fail']} / {vc['inconclusive']}</td>"
                  f"<td class='num'>{dur}</td><td>{links}</td></tr>")

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from hil.record import topics as T
+from hil.record import topics
 from hil.timing.expr import ExprError, is_param
 from hil.timing.source import ParamTimeline, SignalSource, samples
 from hil.timing.spec import ConstraintDef, EventDef, SignalDef, Spec, WindowDef
@@ -218,9 +218,9 @@ class Context:
             if not line:
                 raise KeyError(f"function {s.function} is not bound to a line")
             ln, _, contact = line.partition(":")
-            return T.dio(self.binding["dio"], ln), "level", contact == "b"
+            return topics.dio(self.binding["dio"], ln), "level", contact == "b"
         if s.kind == "line":
-            return T.dio(self.binding["dio"], s.io_line or ""), "level", False
+            return topics.dio(self.binding["dio"], s.io_line or ""), "level", False
         return self.fmt(s.topic or ""), s.field or "", False
 
     def _transform(self, s: SignalDef, pts: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
@@ -450,7 +450,7 @@ def context(spec: Spec, source: SignalSource,
     if isinstance(params, ParamTimeline):
         timeline = params
     else:
-        topic = T.drive_params(bind.get("drive", "drive1"))
+        topic = topics.drive_params(bind.get("drive", "drive1"))
         timeline = ParamTimeline.from_source(source, topic, params)
     return Context(spec, source, timeline, bind, constants, resolution)
 

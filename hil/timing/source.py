@@ -14,7 +14,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
-from hil.record import topics as T
+from hil.record import topics
+from hil.record.reader import Recording
 
 _MISSING = object()
 
@@ -89,7 +90,7 @@ class MemorySource:
             for t, v in lst:
                 msgs.setdefault(topic, []).append((int(t), _nest(field, v)))
         if params is not None:
-            topic = params_topic or T.drive_params("drive1")
+            topic = params_topic or topics.drive_params("drive1")
             msgs.setdefault(topic, []).insert(0, (0, dict(params)))
         return cls(msgs, resolutions)
 
@@ -140,7 +141,6 @@ class RecordingSource(MemorySource):
     def __init__(self, path: str | Path, topics: Iterable[str] | None = None,
                  time: str = "publish", until_log_ns: int | None = None) -> None:
         """`until_log_ns`: only what the harness had seen by then (re-checking a live check)."""
-        from hil.record.reader import Recording  # the record room's reader
 
         if time not in ("publish", "log"):
             raise ValueError(f"time must be 'publish' or 'log', not {time!r}")
@@ -227,7 +227,7 @@ def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
     step and spec): spec, binding, params, constants, since_ns, until_ns — what a faithful
     offline re-check needs."""
     seen: dict[tuple, dict[str, Any]] = {}
-    for _t, v in source.messages(T.TIMING_VERDICTS):
+    for _t, v in source.messages(topics.TIMING_VERDICTS):
         if "step" not in v or "spec" not in v or "check_until_ns" not in v:
             continue
         key = (v.get("plan"), v["step"], v["spec"])

@@ -12,10 +12,11 @@ from dataclasses import field as _f
 from pathlib import Path
 from typing import Any
 
+from hil.paths import fixture
 from hil.timing.expr import Expr, ExprError, is_param
 from hil.yamlio import FileError, LDict, LList, join, load_yaml_text
 
-# Factory DI/DO assignment (a3-timing §0.1, L1860-1907, L9251-9336): function -> "LINE[:b]".
+# Factory DI/DO assignment (L1860-1907, L9251-9336): function -> "LINE[:b]".
 # BRKR has no factory DO: the virtual bench maps it to DO6 with P2.041 = 0x0108 (a-contact).
 FACTORY_BINDING: dict[str, str] = {
     "SON": "DI1",  # P2.010 = 0x0101 (L1860)
@@ -556,6 +557,5 @@ def loads_spec(text: str, file: str = "<string>") -> Spec:
 
 def shipped_specs() -> list[Path]:
     """The spec files shipped in fixtures/timing/."""
-    from hil.paths import fixture
 
     return sorted(fixture("timing").glob("*.yaml"))

@@ -1,7 +1,7 @@
 """DI/DO/STO lines: `open_dio(url, role=...)` -> `DioPort`.
 
-Lines carry *electrical* levels (DESIGN.md): inputs `DI<n>`, `STO_A`, `STO_B` (True = contact
-closed / 24 V present), outputs `DO<n>`, `FDBK` (True = transistor conducting / closed).
+Lines carry *electrical* levels (docs/transports.md): inputs `DI<n>`, `STO_A`, `STO_B` (True =
+contact closed / 24 V present), outputs `DO<n>`, `FDBK` (True = transistor conducting / closed).
 Two roles share the classes:
 
 - role="harness": `set()` inputs, `subscribe()` / `wait_for()` outputs;
@@ -234,7 +234,7 @@ class VirtualDio(DioPort):
 
 
 class ZenohDio(DioPort):
-    """DI/DO over zenoh, DESIGN.md layout `<key>/<line>` = b"1" / b"0"."""
+    """DI/DO over zenoh, layout `<key>/<line>` (docs/transports.md) = b"1" / b"0"."""
 
     def __init__(self, url: str, u: TransportUrl, role: Role, *, tap: Tap | None, name: str,
                  connect_timeout: float = 5.0, query_timeout: float = 1.0,

@@ -28,7 +28,7 @@ from typing import Any, Protocol
 import can
 
 CAN_ACTIONS = ("drop", "delay", "corrupt", "duplicate")
-# CANopen functions by COB-ID range (CiA 301 pre-defined connection set, a3-comms §2.3)
+# CANopen functions by COB-ID range (CiA 301 pre-defined connection set, L16873-L16899)
 CAN_FUNCTIONS: dict[str, tuple[int, int]] = {
     "nmt": (0x000, 0x000),
     "sync": (0x080, 0x080),

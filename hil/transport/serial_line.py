@@ -53,7 +53,7 @@ NS = 1_000_000_000
 
 def t35_s(settings: SerialSettings) -> float:
     """Modbus RTU t3.5: 3.5 character times, fixed 1.75 ms above 19200 bps (Modbus over
-    Serial Line V1.02 §2.5.1.1). The A3 manual asks for >10 ms (a3-comms §1.2, L15703)."""
+    Serial Line V1.02 §2.5.1.1). The A3 manual asks for >10 ms (L15703)."""
     return 0.00175 if settings.baud > 19200 else 3.5 * settings.char_time_s
 
 

@@ -1,4 +1,4 @@
-"""Transport URLs (DESIGN.md "Transports are named by URL-like strings").
+"""Transport URLs (docs/transports.md).
 
     CAN     socketcan:can0   virtual:bus0   zenoh:<key>?connect=tcp/127.0.0.1:7447&mode=client
             <python-can interface>:<channel>?bitrate=500000        (passed through to can.Bus)

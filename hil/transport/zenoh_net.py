@@ -4,7 +4,7 @@
   endpoints, multicast and gossip scouting off, scouting/delay 0). Endpoints must be
   loopback TCP unless `allow_remote=True`.
 - `open_session` / `close_session` / `close_all`: a registry that closes every session
-  before interpreter shutdown joins zenoh's callback threads (feasibility §2.4 gotcha 1:
+  before interpreter shutdown joins zenoh's callback threads (docs/dev/feasibility.md §2.4 gotcha 1:
   `atexit` is too late, so `threading._register_atexit` is used).
 - `wait_connected`: a peer's `zenoh.open` returns before its connect link is up; frames put
   before then are lost. Wait for a transport (and optionally a matching subscriber).

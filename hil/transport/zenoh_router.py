@@ -2,7 +2,7 @@
 
 Prints `ready <endpoint>` once listening; stops on SIGINT/SIGTERM, and with
 `--exit-on-stdin-eof` also when its stdin closes (its parent died). Buses attached to it
-use mode=client (feasibility §2.4 gotcha 3).
+use mode=client (docs/dev/feasibility.md §2.4 gotcha 3).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 `DriveHost` owns the lock every face holds while it touches the drive, and a ticker thread
 that advances the model clock to the monotonic clock every `period_s` (1 ms by default,
-absolute deadlines: feasibility §7) and then calls each face's `tick(now_ns)`.
+absolute deadlines: docs/dev/feasibility.md §7) and then calls each face's `tick(now_ns)`.
 Model time starts at 0 when the host starts; `wall_ns(t)` maps it to epoch ns for records.
 """
 

@@ -19,7 +19,8 @@ from hil.model.timebase import MS
 from hil.record import topics
 
 EPOCH_NS = 1_700_000_000_000_000_000  # a fixed, plausible wall time for model t = 0
-SDO_ROUND_TRIP_NS = 200_000  # 0.2 ms, like an expedited SDO on a virtual bus (feasibility §3)
+# 0.2 ms, like an expedited SDO on a virtual bus (docs/dev/feasibility.md §3)
+SDO_ROUND_TRIP_NS = 200_000
 
 
 class ModelTap:

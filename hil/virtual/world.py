@@ -396,7 +396,7 @@ class SubprocessWorld:
 
     Each process gets `--bench FILE --drive NAME --control stdio` plus its transports
     (`--can URL --node-id N --rs485 URL --station N --dio URL`, `auto` targets resolved
-    here) and prints a line containing `ready` (DESIGN.md). Through the control channel the
+    here) and prints a line containing `ready` (docs/benches.md). Through the control channel the
     runner power-cycles, injects and snapshots the drive, and records the ground truth the
     process streams (same topics as in process)."""
 

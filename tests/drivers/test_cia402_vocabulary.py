@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from hil import safety
 from hil.drivers import cia402 as driver
 from hil.gateway import gateway
 from hil.model import cia402 as model_cia402
 from hil.model import drive
-from hil.plan import safety, steps
+from hil.plan.kinds import fields as steps
 from hil.protocol import canopen as P
 from hil.protocol import cia402 as P402
 from hil.record import sdo_pairing
@@ -30,7 +31,7 @@ def test_statusword_masks_are_the_manuals():
 def test_controlword_and_modes_have_one_home():
     """Controlword commands L18272-L18281, 6060h modes L18375-L18381."""
     assert P402.CONTROLWORD["shutdown"] == 0x06 and P402.CONTROLWORD["quick_stop"] == 0x02
-    assert safety.CONTROLWORD is P402.CONTROLWORD and gateway.CONTROLWORD is P402.CONTROLWORD
+    assert safety.CONTROLWORD is P402.CONTROLWORD  # the one safe-state routine (hil/safety.py)
     assert driver.MODES is P402.MODES and drive.MODE_NAMES is P402.MODE_NAMES
     assert (model_cia402.PP, model_cia402.HM, model_cia402.IP) == (1, 6, 7)
     assert set(steps.MODES) < set(P402.MODES)

@@ -13,12 +13,10 @@ import yaml
 
 from hil.paths import fixture
 from hil.plan.bench import load_bench
+from hil.plan.context import StepFailed
+from hil.plan.kinds import absolute
 from hil.plan.plan import bind_line, check_plan, loads_plan, mapping_of, plan_spec
-from hil.plan.runner import (
-    StepFailed,
-    _x_abs_read,
-    timing_specs,
-)
+from hil.plan.runner import timing_specs
 from hil.plan.steps import describe
 from hil.timing.checker import occurrences_since
 from hil.virtual.truth import SensorTap, bench_with_options
@@ -132,7 +130,6 @@ def _abs_step(text: str):
 
 
 def test_abs_read_compares_with_expect_and_stored_readings(monkeypatch):
-    import hil.plan.runner as runner
 
     readings = iter([(0, 0, 250000), (0, 0, 250001), (0, 0, 250003)])
 
@@ -144,17 +141,17 @@ def test_abs_read_compares_with_expect_and_stored_readings(monkeypatch):
             return SimpleNamespace(status=st, turns=tu, position=pos, attempts=1,
                                    violations=())
 
-    monkeypatch.setattr(runner, "_abs_reader", lambda ctx, d: Reader())
+    monkeypatch.setattr(absolute, "abs_reader", lambda d: Reader())
     ctx = SimpleNamespace(store={}, rec=SimpleNamespace(log=lambda *a, **k: None))
     d = SimpleNamespace(name="drive1")
     steps = _abs_step("  - abs_read: {expect: {status: 0, position: 250000}, store: a}\n"
                       "  - abs_read: {same_as: a, tolerance: 1}\n"
                       "  - abs_read: {same_as: a, tolerance: 1}\n")
-    assert "position 250000" in _x_abs_read(ctx, steps[0], d)
+    assert "position 250000" in steps[0].action.run(ctx, steps[0], d).text
     assert ctx.store["a"] == {"status": 0, "turns": 0, "position": 250000}
-    _x_abs_read(ctx, steps[1], d)  # within one PUU
+    assert "position 250001" in steps[1].action.run(ctx, steps[1], d).text  # within one PUU
     with pytest.raises(StepFailed, match=r"position 250003, expected 250000 ± 1 \(as a\)"):
-        _x_abs_read(ctx, steps[2], d)
+        steps[2].action.run(ctx, steps[2], d)
 
 
 def test_abs_steps_need_abse_and_absc_wired():

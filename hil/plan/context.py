@@ -1,0 +1,113 @@
+"""What a running step sees (`StepContext`) and what it returns (`Outcome`) or raises.
+
+Shared by the runner (hil/plan/runner.py) and the step kinds (hil/plan/kinds/), so that
+neither imports the other's internals.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from hil.plan.plan import Plan
+    from hil.plan.session import DriveIO, Session
+    from hil.plan.steps import Step
+
+
+class StepFailed(Exception):
+    """A step's expectation was not met (not a harness error); may carry timing verdicts."""
+
+    def __init__(self, message: str, verdicts: list[dict] | None = None) -> None:
+        super().__init__(message)
+        self.verdicts = verdicts or []
+
+
+class Inconclusive(StepFailed):
+    """The observation cannot decide pass or fail (e.g. a gap in the recording)."""
+
+
+class Cancelled(Exception):
+    """The step was cancelled (step timeout, Ctrl-C) while it waited."""
+
+
+@dataclass
+class Outcome:
+    """What a step kind's `run` returns: a one-line result and any timing verdicts."""
+
+    text: str = ""
+    verdicts: list[dict] = field(default_factory=list)
+
+
+class StepThread:
+    """Runs one step in a thread the runner can give up on, and join later."""
+
+    def __init__(self) -> None:
+        self.thread: threading.Thread | None = None
+
+    def run(self, fn: Callable[[], Any], timeout_ns: int, cancel: threading.Event) -> Any:
+        """`fn()` or, at `timeout_ns`, TimeoutError at once (the step is cancelled and left
+        to `join`). A KeyboardInterrupt cancels the step and joins it before propagating."""
+        box: dict[str, Any] = {}
+
+        def target() -> None:
+            try:
+                box["value"] = fn()
+            except BaseException as e:
+                box["error"] = e
+
+        t = self.thread = threading.Thread(target=target, name="hil-step", daemon=True)
+        t0 = time.monotonic_ns()
+        t.start()
+        try:
+            t.join(timeout_ns / 1e9)
+        except BaseException:
+            cancel.set()
+            self.join()
+            raise
+        if t.is_alive():
+            cancel.set()
+            t.join(0.05)  # a step that honours `cancel` ends now; the others are joined later
+            raise TimeoutError(f"step timeout {timeout_ns / 1e9:g} s (bench timeouts.step or "
+                               f"the step's timeout), ended after "
+                               f"{(time.monotonic_ns() - t0) / 1e9:.3f} s")
+        if "error" in box:
+            raise box["error"]
+        return box.get("value", "")
+
+    def join(self, timeout_s: float = 5.0) -> bool:
+        """Wait for the last step to end (bounded); True if no step thread is left running."""
+        t = self.thread
+        if t is not None:
+            end = time.monotonic() + timeout_s
+            while t.is_alive() and time.monotonic() < end:
+                t.join(0.05)  # short joins: a signal handler still runs in between
+        return t is None or not t.is_alive()
+
+
+class StepContext:
+    """What a step kind needs: session, recorder, plan, bench, specs, cancel flag."""
+
+    def __init__(self, session: Session, recorder: Any, plan: Plan, specs: dict[str, Any],
+                 cancel: threading.Event, steps: StepThread | None = None) -> None:
+        self.session, self.rec, self.plan, self.specs = session, recorder, plan, specs
+        self.bench = session.bench
+        self.cancel = cancel
+        self.steps = steps or StepThread()
+        for d in session.drives.values():  # driver waits end when the step is cancelled
+            if getattr(d, "_cia", None) is not None:
+                d._cia.cancel = cancel
+        self.store: dict[str, Any] = {}  # readings kept by `abs_read: {store: name}`
+        self.checked: dict[str, int] = {}  # spec id -> wall ns its last check_timing ended
+        self.started: dict[str, int] = {}  # step name -> wall ns it (last) started
+
+    def drive(self, step: Step | None) -> DriveIO:
+        name = (step.drive if step else None) or self.plan.drive or self.bench.default_drive
+        return self.session.drive(name)
+
+    def sleep(self, ns: int) -> None:
+        if self.cancel.wait(ns / 1e9):
+            raise Cancelled()

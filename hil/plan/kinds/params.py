@@ -1,0 +1,134 @@
+"""Parameter access: `write` (optionally expecting the drive's refusal) and `read`."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from hil.model.dio import inert_mapping
+from hil.plan.context import Outcome, StepFailed
+from hil.plan.kinds import fields
+from hil.plan.kinds.base import CheckContext, StepKind
+from hil.plan.param_rules import check_param
+from hil.plan.session import refusal_code
+from hil.plan.yamlio import Checker, LDict, join
+
+if TYPE_CHECKING:
+    from hil.plan.context import StepContext
+    from hil.plan.session import DriveIO
+    from hil.plan.steps import Step
+
+
+class Write(StepKind):
+    """`write: {P1.042: 150, via: sdo}`; with `expect_error:` the write must be refused."""
+
+    name = "write"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        via = fields.parse_via(v, m, where)
+        plain = {k: x for k, x in m.items() if k != "expect_error"}
+        fm = LDict(plain)
+        fm.line, fm.key_lines = m.line, m.key_lines
+        if "expect_error" in m:
+            fm["expect_error"] = m["expect_error"]  # seen by param_values: no range rule
+        out = {"values": fields.param_values(v, fm, where, False, write=True), "via": via,
+               "expect_error": None}
+        if "expect_error" in m:
+            fw = join(where, "expect_error")
+            code = m["expect_error"]
+            if isinstance(code, bool) or not isinstance(code, int) or code <= 0:
+                raise v.err(m.kline("expect_error"), fw, f"{code!r}: the refusal code, a "
+                            "Modbus exception code (e.g. 3) or an SDO abort code (e.g. "
+                            "0x06090031)")
+            if len(out["values"]) != 1:
+                raise v.err(m.kline("expect_error"), fw, "one parameter per refused write "
+                            f"(got {', '.join(out['values'])})")
+            fields.check_expect_error(v, m.kline("expect_error"), fw, code, via)
+            out["expect_error"] = code
+        else:
+            for k, val in out["values"].items():
+                if why := inert_mapping(k, val):  # issue 13 item 6: the drive refuses it
+                    raise v.err(m.kline(k), join(where, k), f"0x{val:04X} maps {why}; a write "
+                                "that expects the refusal needs expect_error (0x06090030 / 3)")
+        return out
+
+    def check(self, cc: CheckContext) -> None:
+        fields.check_via(cc, "", self.args["via"])
+        if self.args.get("expect_error") is not None:
+            via = self.args["via"] or cc.drive.param_via
+            raw = cc.step.raw.get(self.name)
+            line = raw.kline("expect_error") if hasattr(raw, "kline") else cc.step.line
+            fields.check_expect_error(cc.v, line, join(cc.field, "expect_error"),
+                                 self.args["expect_error"], via)
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        want = self.args.get("expect_error")
+        if want is not None:
+            return Outcome(self._refused(d, want))
+        for p, val in self.args["values"].items():
+            d.write_param(p, val, self.args["via"])
+            if not ctx.bench.virtual:  # a real drive has no ground truth: record what it took
+                ctx.rec.drive_params(d.name, {p: val})
+        return Outcome()
+
+    def _refused(self, d: DriveIO, want: int) -> str:
+        """A write the drive must refuse with `want` (Modbus exception / SDO abort code)."""
+        [(p, val)] = self.args["values"].items()
+        via = self.args["via"] or d.spec.param_via
+        what = "exception" if via == "modbus" else "abort"
+        try:
+            d.write_param(p, val, via)
+        except Exception as e:
+            got = refusal_code(e)
+            if got is None:
+                raise
+            if got != want:
+                raise StepFailed(f"{p} = {val} via {via}: refused with {what} 0x{got:X}, "
+                                 f"expected 0x{want:X} ({e})") from None
+            return f"{p} = {val} refused as expected: {e}"
+        raise StepFailed(f"{p} = {val} via {via} was accepted; expected a refusal with {what} "
+                         f"0x{want:X}")
+
+    def describe(self) -> str:
+        a = self.args
+        vals = ", ".join(f"{p}={v}" for p, v in a["values"].items())
+        refused = f" refused 0x{a['expect_error']:X}" if a.get("expect_error") else ""
+        return f"write {vals} via {a['via'] or '-'}{refused}"
+
+
+class Read(StepKind):
+    """`read: P0.001` or `read: {P1.042: 150}` (a value to expect, or null to only record)."""
+
+    name = "read"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        if isinstance(obj, str):
+            if not fields.PARAM_RE.match(obj):
+                raise v.err(line, where, f"{obj!r}: a parameter name like P1.042")
+            check_param(v, line, where, obj, None, write=False)
+            return {"values": {obj: None}, "via": None}
+        m = v.mapping(obj, line, where)
+        return {"values": fields.param_values(v, m, where, True),
+                "via": fields.parse_via(v, m, where)}
+
+    def check(self, cc: CheckContext) -> None:
+        fields.check_via(cc, "", self.args["via"])
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        got, bad = [], []
+        for p, want in self.args["values"].items():
+            val = d.read_param(p, self.args["via"])
+            got.append(f"{p} = {val}")
+            if want is not None and val != want:
+                bad.append(f"{p} = {val}, expected {want}")
+        if bad:
+            raise StepFailed("; ".join(bad))
+        return Outcome(", ".join(got))
+
+    def describe(self) -> str:
+        return f"read {', '.join(self.args['values'])} via {self.args['via'] or '-'}"
+
+
+KINDS = (Write, Read)

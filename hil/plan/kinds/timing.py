@@ -1,0 +1,163 @@
+"""`check_timing`: judge a timing spec (fixtures/timing) on the recording as it stands."""
+
+from __future__ import annotations
+
+import re
+import time
+from typing import TYPE_CHECKING, Any
+
+from hil.plan.context import Inconclusive, Outcome, StepFailed
+from hil.plan.kinds import fields
+from hil.plan.kinds.base import CheckContext, StepKind
+from hil.plan.yamlio import Checker, join
+from hil.profile.dio import DI_SYMBOLS, DO_SYMBOLS
+from hil.timing.checker import check, constants_for, occurrences_since
+from hil.timing.source import RecordingSource
+
+if TYPE_CHECKING:
+    from hil.plan.bench import DriveSpec
+    from hil.plan.context import StepContext
+    from hil.plan.session import DriveIO
+    from hil.plan.steps import Step
+
+BIND_LINE_RE = re.compile(r"^(DI\d{1,2}|DO\d)(:[ab])?$|^STO_[AB]$")
+SINCE = ("start", "last_check")
+
+
+def bind_line(value: str, d: DriveSpec) -> str:
+    """A `check_timing` bind value as the spec wants it: a line (DI6:b) or a function wired on
+    the drive, replaced by its line (ORGP -> DI9, NL -> DI6:b)."""
+    wired = d.di | d.do
+    return wired[value].binding if value in wired else value
+
+
+class CheckTiming(StepKind):
+    """`check_timing: {spec: brake_servo_off, bind: {...}, constants: {...}, since: ...}`."""
+
+    name = "check_timing"
+    judge_only = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        if isinstance(obj, str):
+            return {"spec": obj, "params": {}, "bind": {}, "constants": {}, "since": "start"}
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"spec", "params", "bind", "constants", "since"}, where, required=("spec",))
+        since = m.get("since", "start")
+        if not isinstance(since, str) or not since.strip():
+            raise v.err(m.kline("since"), join(where, "since"), f"{since!r}: start (every "
+                        "occurrence in the recording), last_check (only occurrences after the "
+                        "previous check of this spec) or the name of an earlier step")
+        params = {}
+        if "params" in m:
+            pm = v.mapping(m["params"], m.kline("params"), join(where, "params"))
+            params = dict(fields.param_values(v, pm, join(where, "params"), False))
+        bind: dict[str, str] = {}
+        if "bind" in m:
+            fw = join(where, "bind")
+            bm = v.mapping(m["bind"], m.kline("bind"), fw)
+            for k, x in bm.items():
+                if not fields.NAME_RE.match(str(k)):
+                    raise v.err(bm.kline(k), join(fw, str(k)), "a placeholder name like REF")
+                if not isinstance(x, str) or not (BIND_LINE_RE.match(x) or x in DI_SYMBOLS
+                                                   or x in DO_SYMBOLS):
+                    raise v.err(bm.kline(k), join(fw, k), f"{x!r}: a line (DI9, DI6:b, DO4) "
+                                "or a wired DI/DO function (ORGP, NL)")
+                bind[k] = x
+        constants: dict[str, float] = {}
+        if "constants" in m:
+            fw = join(where, "constants")
+            cm = v.mapping(m["constants"], m.kline("constants"), fw)
+            for k, x in cm.items():
+                if isinstance(x, bool) or not isinstance(x, int | float):
+                    raise v.err(cm.kline(k), join(fw, str(k)),
+                                f"{x!r}: a number (ms, rpm, ...)")
+                constants[str(k)] = x
+        return {"spec": v.text(m, "spec", where), "params": params, "bind": bind,
+                "constants": constants, "since": since}
+
+    def check(self, cc: CheckContext) -> None:
+        """`bind:` functions must be wired; `constants:` / `bind:` names must be the spec's;
+        the spec must exist and load."""
+        a, d = self.args, cc.drive
+        wired = d.di | d.do
+        for name, x in a.get("bind", {}).items():
+            if not BIND_LINE_RE.match(x) and x not in wired:
+                raise cc.err(f"drive {cc.dname} has no line wired to {x} (wired: "
+                             f"{', '.join(wired) or 'none'})", f"bind.{name}")
+        specs = cc.specs
+        spec = specs.get(a["spec"]) if isinstance(specs, dict) else None
+        if spec is not None:
+            known = set(spec.binding()) | set(spec.bind)
+            for name in a.get("bind", {}):
+                if name not in known:
+                    raise cc.err(f"spec {spec.id!r} binds no {name!r}; it binds: "
+                                 f"{', '.join(sorted(spec.bind)) or 'none'} (and the factory "
+                                 "functions)", f"bind.{name}")
+            for name in a.get("constants", {}):
+                if name not in spec.constants:
+                    raise cc.err(f"spec {spec.id!r} has no constant {name!r}; it has: "
+                                 f"{', '.join(sorted(spec.constants)) or 'none'}",
+                                 f"constants.{name}")
+        if specs is not None and a["spec"] not in specs:
+            from hil.plan.runner import BROKEN_SPECS
+
+            if a["spec"] in BROKEN_SPECS:
+                raise cc.err(f"timing spec {a['spec']!r} does not load: "
+                             f"{BROKEN_SPECS[a['spec']]}")
+            raise cc.err(f"no timing spec {a['spec']!r}; known: {', '.join(sorted(specs))}")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        spec = ctx.specs[a["spec"]]
+        sample = getattr(ctx.session.world, "sample_truth", None)
+        if sample is not None:  # the model's state as of now, not as of its last sample
+            sample()
+        ctx.rec.flush()
+        until = time.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
+        source = RecordingSource(ctx.rec.path)
+        binding = d.spec.binding() | {k: bind_line(x, d.spec)
+                                      for k, x in a.get("bind", {}).items()}
+        constants = constants_for(spec, ctx.bench.timing_constants) | a.get("constants", {})
+        verdicts = check(spec, source, params=a["params"] or None, binding=binding,
+                         constants=constants or None)
+        since = a.get("since", "start")
+        since_ns = None
+        if since == "last_check":
+            since_ns = ctx.checked.get(spec.id)
+        elif since != "start":
+            since_ns = ctx.started.get(since)
+        verdicts = occurrences_since(verdicts, since_ns)
+        ctx.checked[spec.id] = time.time_ns()
+        counts: dict[str, int] = {}
+        out = []
+        for v in verdicts:
+            vd = v.to_dict()
+            counts[v.status] = counts.get(v.status, 0) + 1
+            if v.status in ("pass", "fail", "inconclusive"):
+                # binding + check_params: what `hil report` needs to redraw the diagram
+                ctx.rec.verdict(vd, plan=ctx.plan.name, step=step.index, binding=binding,
+                                check_params=a["params"] or {},
+                                check_constants=constants or {},
+                                check_since_ns=since_ns, check_until_ns=until)
+            out.append(vd)
+        text = ", ".join(f"{n} {k}" for k, n in sorted(counts.items())) or "no occurrence"
+        if not verdicts:
+            raise StepFailed(f"spec {spec.id}: nothing to judge (no occurrence in the "
+                             "recording)")
+        if counts.get("fail"):
+            bad = [f"{v.constraint}: {v.message}" for v in verdicts if v.status == "fail"]
+            raise StepFailed(f"{text}; " + "; ".join(bad[:3]), out)
+        if counts.get("inconclusive"):
+            bad = [f"{v.constraint}: {v.message}" for v in verdicts
+                   if v.status == "inconclusive"]
+            raise Inconclusive(f"{text}; " + "; ".join(bad[:3]), out)
+        return Outcome(text, out)
+
+    def describe(self) -> str:
+        a = self.args
+        extra = ", ".join(f"{x}={y}" for x, y in (a.get("bind") or {}).items())
+        return f"check_timing {a['spec']}" + (f" ({extra})" if extra else "")
+
+
+KINDS = (CheckTiming,)

@@ -1,0 +1,79 @@
+"""The virtual bench's own knobs: `power_cycle` and `inject` (model options, alarms)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any
+
+from hil.model.options import ModelOptions
+from hil.plan.context import Outcome
+from hil.plan.kinds import fields
+from hil.plan.kinds.base import StepKind
+from hil.plan.yamlio import Checker, join
+
+if TYPE_CHECKING:
+    from hil.plan.context import StepContext
+    from hil.plan.session import DriveIO
+    from hil.plan.steps import Step
+
+
+class PowerCycle(StepKind):
+    """`power_cycle: {battery: true, off: 100ms}`."""
+
+    name = "power_cycle"
+    virtual_only = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        if obj is None or obj is True:
+            return {"battery": True}
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"battery", "off"}, where)
+        return {"battery": v.boolean(m, "battery", where, True),
+                "off": v.duration(m, "off", where, 0)}
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        ctx.session.world.power_cycle(d.name, battery=self.args["battery"],
+                                      off_ns=self.args.get("off", 0))
+        return Outcome()
+
+    def describe(self) -> str:
+        return "power_cycle"
+
+
+class Inject(StepKind):
+    """`inject: {options: {...}, alarm: AL009}`: change model options or raise an alarm."""
+
+    name = "inject"
+    virtual_only = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"options", "alarm"}, where)
+        out: dict[str, Any] = {}
+        if "options" in m:
+            om = v.mapping(m["options"], m.kline("options"), join(where, "options"))
+            v.keys(om, {f.name for f in dataclasses.fields(ModelOptions)}, join(where, "options"))
+            out["options"] = dict(om)
+        if "alarm" in m:
+            a = m["alarm"]
+            if not isinstance(a, str) or not fields.ALARM_RE.match(a.upper()):
+                raise v.err(m.kline("alarm"), join(where, "alarm"),
+                            f"{a!r}: an alarm code like AL009")
+            out["alarm"] = a.upper()
+        if not out:
+            raise v.err(line, where, "inject options: {...} and/or alarm: ALnnn")
+        return out
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        ctx.session.world.inject(d.name, options=self.args.get("options"),
+                                 alarm=self.args.get("alarm"))
+        ctx.rec.log("warning", f"injected into {d.name}: {self.args}", name="hil.inject")
+        return Outcome()
+
+    def describe(self) -> str:
+        return "inject " + ", ".join(f"{x}={y}" for x, y in self.args.items())
+
+
+KINDS = (PowerCycle, Inject)

@@ -1,0 +1,133 @@
+"""Time and conditions: `wait`, `wait_until` (poll until met or timeout), `expect` (now)."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+from hil.drivers.cia402 import decode_state
+from hil.plan.context import Outcome, StepFailed
+from hil.plan.kinds import fields
+from hil.plan.kinds.base import CheckContext, StepKind
+from hil.plan.kinds.fields import Condition
+from hil.plan.yamlio import Checker, parse_duration
+
+if TYPE_CHECKING:
+    from hil.plan.context import StepContext
+    from hil.plan.session import DriveIO
+    from hil.plan.steps import Step
+
+
+def evaluate(d: DriveIO, c: Condition) -> tuple[bool, str]:
+    """(met, what was observed) for one condition."""
+    if c.kind == "do":
+        v = d.do_active(c.key)
+        return v == c.value, f"{c.key} {'on' if v else 'off'}"
+    if c.kind == "fdbk":
+        v = d.line("FDBK")
+        return v == c.value, f"FDBK {'closed' if v else 'open'}"
+    if c.kind == "state":
+        sw = d.cia.statusword
+        st = decode_state(sw)
+        return st == c.value, f"{st} (statusword 0x{sw:04X})"
+    if c.kind == "param":
+        v = d.read_param(c.key, c.via)
+        return v == c.value, f"{c.key} = {v}"
+    a = d.alarm(c.via)
+    return a == c.value, f"alarm {a or 'none'}"
+
+
+class Wait(StepKind):
+    """`wait: 200ms`."""
+
+    name = "wait"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        try:
+            d = parse_duration(obj)
+        except ValueError as e:
+            raise v.err(line, where, str(e)) from None
+        return {"duration": d}
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        ctx.sleep(self.args["duration"])
+        return Outcome()
+
+    def describe(self) -> str:
+        return f"wait {self.args['duration'] / 1e6:g}ms"
+
+    def imposed_ns(self) -> int:
+        return self.args["duration"]
+
+
+class _Conditions(StepKind):
+    def check(self, cc: CheckContext) -> None:
+        d, dname = cc.drive, cc.dname
+        for c in self.args["conditions"]:
+            if c.kind == "do" and c.key not in d.do:
+                raise cc.err(f"drive {dname} has no DO wired to {c.key} (wired: "
+                             f"{', '.join(d.do) or 'none'})", f"do.{c.key}")
+            if c.kind == "fdbk" and not d.dio:
+                raise cc.err(f"drive {dname} has no DI/DO lines", "fdbk")
+            if c.kind == "state" and not d.can:
+                raise cc.err(f"drive {dname} has no CAN bus", "state")
+            if c.kind in ("param", "alarm"):
+                fields.check_via(cc, c.kind, c.via)
+
+    def describe(self) -> str:
+        return f"{self.name} " + " and ".join(c.describe() for c in self.args["conditions"])
+
+
+class WaitUntil(_Conditions):
+    """`wait_until: {do: {BRKR: off}, timeout: 1s}`: poll until every condition holds."""
+
+    name = "wait_until"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, fields.COND_KEYS | {"timeout"}, where)
+        out = {"conditions": fields.conditions(v, m, where), "timeout": None}
+        if "timeout" in m:
+            out["timeout"] = v.duration(m, "timeout", where)
+        return out
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        conds = self.args["conditions"]
+        timeout = self.args["timeout"] or ctx.bench.timeouts["wait_until"]
+        polls_bus = any(c.kind in ("param", "alarm", "state") for c in conds)
+        poll = 10_000_000 if polls_bus else 1_000_000
+        t0 = time.monotonic_ns()
+        while True:
+            seen = [evaluate(d, c) for c in conds]
+            if all(ok for ok, _ in seen):
+                return Outcome(f"met after {(time.monotonic_ns() - t0) / 1e6:.1f} ms")
+            if time.monotonic_ns() - t0 >= timeout:
+                want = " and ".join(c.describe() for c in conds)
+                saw = ", ".join(obs for _, obs in seen)
+                raise StepFailed(f"timeout {timeout / 1e6:g} ms waiting for {want}; saw {saw}")
+            ctx.sleep(poll)
+
+
+class Expect(_Conditions):
+    """`expect: {alarm: AL013}`: every condition holds now."""
+
+    name = "expect"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, fields.COND_KEYS, where)
+        return {"conditions": fields.conditions(v, m, where)}
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        seen = [(c, *evaluate(d, c)) for c in self.args["conditions"]]
+        bad = [f"expected {c.describe()}, saw {obs}" for c, ok, obs in seen if not ok]
+        if bad:
+            raise StepFailed("; ".join(bad))
+        return Outcome(", ".join(obs for _, _, obs in seen))
+
+
+KINDS = (Wait, WaitUntil, Expect)
+

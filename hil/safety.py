@@ -1,0 +1,131 @@
+"""The one safe-state routine: the runner's (hil/plan/safety.py) and the gateway's.
+
+Called on any failure, timeout, Ctrl-C/SIGTERM, lost lease and at the end of every plan (like
+a plug tearDown: always). Every action is attempted even if an earlier one failed, and each
+is reported to `record` (the SAFETY topic and the log). The order follows the manual's
+servo-off path: disable voltage (controlword 0x00, L17135-17376) and SON off, optionally cut
+STO, then wait for BRKR off, i.e. the brake engaged (§2.9, L1351-1382). Python is never the
+last line of defence: hardware interlocks are.
+
+Who drives the lines differs (the runner's session, the gateway's exports); each supplies one
+`SafeDrive` per drive, and this module decides what is done, in which order, and what counts
+as done.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from hil.protocol.cia402 import CONTROLWORD
+
+__all__ = ["DriveGone", "SafeDrive", "SafeReport", "SafeStateSpec", "run_safe_state"]
+
+
+class DriveGone(Exception):
+    """The drive (a virtual drive's process) is gone: no action on it can be confirmed."""
+
+
+class SafeStateSpec(Protocol):
+    """A bench file's `safe_state:` (hil.plan.bench.SafeState)."""
+
+    controlword: str
+    di: dict[str, bool]
+    sto: dict[str, bool]
+    wait_brake: bool
+    timeout_ns: int
+
+
+class SafeDrive(Protocol):
+    """One drive as the safe state reaches it. A method returns a detail string (done), False
+    (not confirmed) or raises; `None` from a `has_*` / `wired` query means "skip"."""
+
+    name: str
+
+    def gone(self) -> str | None:
+        """Why nothing can be sent to this drive (its process died), or None."""
+
+    def has_controlword(self) -> bool: ...
+
+    def write_controlword(self, cw: int) -> str | bool | None: ...
+
+    def di_wired(self, function: str) -> bool: ...
+
+    def set_di(self, function: str, active: bool) -> Any: ...
+
+    def has_sto(self) -> bool: ...
+
+    def set_sto(self, channel: str, on: bool) -> Any: ...
+
+    def has_brkr(self) -> bool: ...
+
+    def brake_engaged(self, timeout_ns: int) -> str | bool: ...
+
+
+@dataclass
+class SafeReport:
+    reason: str
+    ok: bool = True
+    actions: list[dict[str, Any]] = field(default_factory=list)
+    duration_ns: int = 0
+
+
+#: record(drive, action, ok, detail, extra) -> None
+Record = Callable[[str, str, bool, str, dict[str, Any]], None]
+
+
+def _raise(e: Exception) -> None:
+    raise e
+
+
+def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
+                   record: Record | None = None) -> SafeReport:
+    """Drive every drive to `safe`; never raises. Returns what was done and whether it held."""
+    rep = SafeReport(reason)
+    t0 = time.monotonic_ns()
+
+    def act(drive: str, action: str, fn: Callable[[], Any], **extra: Any) -> None:
+        try:
+            detail = fn()
+            ok = detail is not False
+            msg = detail if isinstance(detail, str) else ""
+        except DriveGone as e:
+            ok, msg = False, str(e)
+        except Exception as e:
+            ok, msg = False, f"{type(e).__name__}: {e}"
+        rep.actions.append({"drive": drive, "action": action, "ok": ok, "detail": msg, **extra})
+        if not ok:
+            rep.ok = False
+        if record is not None:
+            record(drive, action, ok, msg, extra)
+
+    live = []
+    for d in drives:  # a dead drive: say so, claim nothing
+        why = d.gone()
+        if why is not None:
+            act(d.name, "drive process alive", lambda why=why: _raise(DriveGone(why)))
+        else:
+            live.append(d)
+    cw = CONTROLWORD.get(safe.controlword)
+    for d in live:
+        if cw is not None and d.has_controlword():
+            act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",
+                lambda d=d, cw=cw: d.write_controlword(cw))
+        for func, active in safe.di.items():
+            if d.di_wired(func):
+                act(d.name, f"DI {func} {'on' if active else 'off'}",
+                    lambda d=d, f=func, a=active: d.set_di(f, a))
+        if d.has_sto():
+            for ch, on in safe.sto.items():
+                act(d.name, f"STO {ch} {'on' if on else 'off'}",
+                    lambda d=d, ch=ch, on=on: d.set_sto(ch, on))
+    if safe.wait_brake:
+        for d in live:
+            if d.has_brkr():
+                act(d.name, "wait BRKR off (brake engaged)",
+                    lambda d=d: d.brake_engaged(safe.timeout_ns),
+                    timeout_ms=safe.timeout_ns / 1e6)
+    rep.duration_ns = time.monotonic_ns() - t0
+    return rep

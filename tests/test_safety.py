@@ -1,0 +1,116 @@
+"""The one safe-state routine (hil/safety.py), used by the runner and the gateway (issue 17
+item 5): order of actions, every action attempted, dead drives claimed nothing."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+import hil.gateway.safe_state as gateway_mod
+import hil.plan.safety as plan_safety
+from hil.plan.bench import SafeState
+from hil.safety import run_safe_state
+
+
+class FakeDrive:
+    def __init__(self, name: str, *, gone: str | None = None, fail_cw: bool = False,
+                 brake: bool = True) -> None:
+        self.name, self._gone, self.fail_cw, self.brake = name, gone, fail_cw, brake
+        self.log: list[str] = []
+
+    def gone(self) -> str | None:
+        return self._gone
+
+    def has_controlword(self) -> bool:
+        return True
+
+    def write_controlword(self, cw: int) -> Any:
+        self.log.append(f"cw {cw:#x}")
+        if self.fail_cw:
+            raise TimeoutError("no SDO answer")
+        return "acknowledged"
+
+    def di_wired(self, function: str) -> bool:
+        return function == "SON"
+
+    def set_di(self, function: str, active: bool) -> None:
+        self.log.append(f"{function} {active}")
+
+    def has_sto(self) -> bool:
+        return True
+
+    def set_sto(self, channel: str, on: bool) -> None:
+        self.log.append(f"STO {channel} {on}")
+
+    def has_brkr(self) -> bool:
+        return True
+
+    def brake_engaged(self, timeout_ns: int) -> str | bool:
+        self.log.append(f"brake {timeout_ns}")
+        return "BRKR off: brake engaged" if self.brake else False
+
+
+SAFE = SafeState(controlword="disable_voltage", di={"SON": False, "EMGS": True},
+                 sto={"A": False}, wait_brake=True, timeout_ns=500_000_000)
+
+
+def test_servo_off_path_order_disable_voltage_son_sto_then_brake():
+    """Disable voltage = controlword 0x00 (L18272-18281), SON off, STO, then BRKR off (§2.9)."""
+    d = FakeDrive("a")
+    seen: list[tuple] = []
+    rep = run_safe_state([d], SAFE, "end", lambda *a: seen.append(a))
+    assert d.log == ["cw 0x0", "SON False", "STO A False", "brake 500000000"]
+    assert rep.ok and [a["action"] for a in rep.actions] == [
+        "controlword disable_voltage (0x00)", "DI SON off", "STO A off",
+        "wait BRKR off (brake engaged)"]
+    assert len(seen) == 4 and seen[-1][3] == "BRKR off: brake engaged"
+
+
+def test_a_failed_action_does_not_stop_the_others_and_is_not_confirmed():
+    d = FakeDrive("a", fail_cw=True, brake=False)
+    rep = run_safe_state([d], SAFE, "timeout")
+    assert d.log[1:] == ["SON False", "STO A False", "brake 500000000"]
+    assert not rep.ok
+    bad = {a["action"]: a["detail"] for a in rep.actions if not a["ok"]}
+    assert bad == {"controlword disable_voltage (0x00)": "TimeoutError: no SDO answer",
+                   "wait BRKR off (brake engaged)": ""}
+
+
+def test_a_dead_drive_is_reported_and_nothing_is_claimed_for_it():
+    dead, live = FakeDrive("a", gone="exit code -9"), FakeDrive("b")
+    rep = run_safe_state([dead, live], SAFE, "drive died")
+    assert dead.log == [] and live.log[0] == "cw 0x0"
+    assert rep.actions[0] == {"drive": "a", "action": "drive process alive", "ok": False,
+                              "detail": "exit code -9"}
+    assert not rep.ok
+
+
+def test_runner_and_gateway_both_use_the_one_routine(monkeypatch):
+    calls: list[str] = []
+
+    def spy(drives, safe, reason, record=None):
+        calls.append(type(drives[0]).__name__)
+        return run_safe_state(drives, safe, reason, record)
+
+    monkeypatch.setattr(plan_safety, "run_safe_state", spy)
+    monkeypatch.setattr(gateway_mod, "run_safe_state", spy)
+
+    class Spec:
+        can, dio, di, do, sto = "", "", {}, {}, {}
+
+    class DIO:
+        spec, _cia, dio = Spec(), None, None
+
+    session = SimpleNamespace(bench=SimpleNamespace(safe_state=SAFE), drives={"d": DIO()})
+    plan_safety.go_safe(session, "end")
+    gw = SimpleNamespace(bench=SimpleNamespace(safe_state=SAFE, drives={"d": Spec()}), can={},
+                         dio={}, recorder=None)
+    gateway_mod.default_safe_state(gw, "lease lost")
+    assert calls == ["_SessionDrive", "_GatewayDrive"]
+
+
+def test_gateway_controlword_frame_is_the_cia301_expedited_download():
+    """2Bh = expedited download of 2 bytes (L16960-L16964) to 6040h:00 on 0x600 + node."""
+    m = gateway_mod.sdo_write_controlword(5, 0x06)
+    assert m.arbitration_id == 0x605
+    assert bytes(m.data) == bytes([0x2B, 0x40, 0x60, 0x00, 0x06, 0x00, 0x00, 0x00])
