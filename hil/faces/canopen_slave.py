@@ -290,6 +290,8 @@ class CanopenSlave:
         if self.on_alarm is not None:
             self._callback("on_alarm", self.on_alarm, alarm)
         behaviour = self._values.get((0x1029, 1), 0)
+        if self._opt("dev_1029h_behaviour") is not None:  # deviation knob: 1029h not honoured
+            behaviour = self._opt("dev_1029h_behaviour")
         if behaviour == 0 and self.state == "OPERATIONAL":
             self._set_state("PRE-OPERATIONAL")
         elif behaviour == 2:

@@ -289,3 +289,24 @@ def test_comm_timeout_deviation_makes_al020_late():
     assert "AL020" not in drive.alarms.active
     drive.advance(2 * MS)
     assert "AL020" in drive.alarms.active
+
+
+@pytest.mark.parametrize("alarm", ["AL111", "AL112", "AL3E3"])
+@pytest.mark.parametrize("clear", ["6040h", "nmt"])
+def test_servo_on_comm_alarms_clear_by_6040h_or_nmt(rig, alarm, clear):
+    """"Clear: NMT reset or 0x6040 reset" (AL111 L19937, AL112 L19945, AL3E3 L20169): with
+    the servo on (these alarms keep it on, so CiA 402 is not in FAULT) the bit 7 edge on top
+    of controlword 0Fh clears them and the servo stays on; an NMT reset clears them too."""
+    rig.enable()
+    rig.slave._comm_alarm(alarm)
+    assert alarm in rig.alarms and rig.drive.servo_on
+    if clear == "6040h":
+        rig.drive.write_object(0x6040, 0, 0x8F)
+        rig.run(2)
+        rig.drive.write_object(0x6040, 0, 0x0F)
+        rig.run(2)
+        assert rig.drive.cia402.state == "OPERATION ENABLED"
+    else:
+        rig.feed(0x000, bytes([0x82, NODE]))  # NMT reset communication
+        rig.run(2)
+    assert alarm not in rig.alarms

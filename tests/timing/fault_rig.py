@@ -177,6 +177,7 @@ class FaultRig:
         return self.drive.alarms.active
 
 
-def verdicts(path: Path, spec_id: str) -> list:
+def verdicts(path: Path, spec_id: str, constants: dict[str, float] | None = None) -> list:
     spec = load_spec(fixture("timing", f"{spec_id}.yaml"))
-    return check(spec, RecordingSource(path), binding={"drive": "drive1", "bus": BUS})
+    return check(spec, RecordingSource(path), binding={"drive": "drive1", "bus": BUS},
+                 constants=constants)
