@@ -143,6 +143,7 @@ class CanopenSlave:
         # communication monitoring (issue 16, docs/faults.md)
         self._sdo_prev_sent: int | None = None  # sender time of the last SDO request
         self._sdo_answered = 0  # wall ns when the last SDO answer left
+        self._sdo_replied = False  # the request being served was answered
         self._pdo_prev: dict[int, tuple[int, int]] = {}  # RPDO COB-ID -> (sent, processed)
         self.rx_error_counter = 0  # receive error counter (AL185, L20029)
         self._bus_error_raised = False
@@ -415,8 +416,10 @@ class CanopenSlave:
         if cid == self._values.get((0x1200, 1), cop.SDO_REQUEST + nid) & 0x7FF:
             if not msg.is_remote_frame:
                 self._check_sdo_flood(sent_ns(msg))
+                self._sdo_replied = False
                 self._on_sdo(data, now)
-                self._sdo_answered = time.time_ns()
+                if not self._sdo_replied:  # no answer: the buffer is free now
+                    self._sdo_answered = time.time_ns()
             return
         if cid == self._values.get((0x1005, 0), 0x80) & 0x7FF:
             if self.state == "OPERATIONAL":
@@ -654,6 +657,10 @@ class CanopenSlave:
 
     # ------------------------------------------------------------------ SDO
     def _sdo_send(self, data: bytes) -> None:
+        # stamped before the answer leaves: a master that sends its next request once it has
+        # the answer is never "before the answer" (AL111), however late this thread runs on
+        self._sdo_answered = time.time_ns()
+        self._sdo_replied = True
         self._send(self._values.get((0x1200, 2), cop.SDO_RESPONSE + self.node_id) & 0x7FF, data)
 
     def _sdo_abort(self, index: int, sub: int, code: int) -> None:

@@ -310,3 +310,32 @@ def test_servo_on_comm_alarms_clear_by_6040h_or_nmt(rig, alarm, clear):
         rig.feed(0x000, bytes([0x82, NODE]))  # NMT reset communication
         rig.run(2)
     assert alarm not in rig.alarms
+
+
+def test_sdo_request_sent_after_the_answer_left_is_no_flood():
+    """A master that waits for each answer never overflows (L19933-19937, choice
+    `sdo_flood_window_us`), even when it is faster than the drive's own bookkeeping: here the
+    drive's thread is held up 3 ms right after its answer left, and the next request is sent
+    0.1 ms after that answer (a zenoh bench under load does this)."""
+    r = Rig()
+    try:
+        left: list[float] = []
+        real_send = r.bus.send
+
+        def send(msg, timeout=None):
+            real_send(msg, timeout)
+            if msg.arbitration_id == 0x580 + NODE:
+                left.append(time.time())
+                time.sleep(0.003)  # preempted between sending and anything after it
+
+        r.bus.send = send
+        up = struct.pack("<BHBI", 0x40, 0x1000, 0, 0)
+        r.feed(0x600 + NODE, up)
+        assert left
+        nxt = can.Message(arbitration_id=0x600 + NODE, data=up, is_extended_id=False,
+                          timestamp=left[0] + 0.0001)
+        with r.slave.lock:
+            r.slave.handle_frame(nxt)
+        assert "AL111" not in r.alarms
+    finally:
+        r.close()
