@@ -14,8 +14,8 @@ from __future__ import annotations
 import time
 
 from hil.model.drive import Drive
-from hil.model.pr import encode, pr_params
 from hil.model.timebase import MS
+from hil.profile.pr import encode, pr_params
 
 PARAMS = {"P1.001": 0x0001, "P2.010": 0x0101}
 

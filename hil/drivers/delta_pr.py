@@ -10,7 +10,7 @@
     pr.trigger(1)                  # P5.007 = 1 (L11174)
     pr.wait(1, "in_position", timeout_s=5)   # P5.007 reads 20001 (L11185)
 
-PR words come from `hil.model.pr.encode` and are checked with `decode` — the model's own
+PR words come from `hil.profile.pr.encode` and are checked with `decode` — the model's own
 decoder — before anything is sent: a table the drive would refuse is never half-written.
 """
 
@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
-from hil.model.pr import PrError, decode, encode, pr_params
+from hil.profile.pr import PrError, decode, encode, pr_params
 
 STATES = {"running": 0, "done": 10000, "in_position": 20000}  # P5.007 read-back (L11185)
 

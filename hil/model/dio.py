@@ -25,6 +25,9 @@ from hil.profile.dio import (  # tables 8.1 / 8.2 and the mapping parameters (th
     DO_FUNCTIONS,
     DO_PARAMS,
     DO_SYMBOLS,
+    N_DI,
+    N_DO,
+    N_PHYSICAL_DI,
     decode_mapping,
 )
 
@@ -73,9 +76,6 @@ OVERLAY_DI_SYMBOLS = ("ABSQ",)
 
 OVERLAY_DO_SYMBOLS = ("ABSR", "ABSD")  # L15409, L15413
 
-N_PHYSICAL_DI = 10
-N_DI = len(DI_PARAMS)  # 13 incl. VDI11-13
-N_DO = len(DO_PARAMS)
 
 # P0.046 status bits (L7460-7475).
 P0046_BITS = {

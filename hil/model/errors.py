@@ -6,6 +6,7 @@ from __future__ import annotations
 from hil.profile.errors import (
     ModelError,
     ObjectError,
+    OutOfRange,
     ParamError,
     UnknownFunction,
     UnknownParameter,
@@ -32,11 +33,8 @@ from hil.protocol.canopen import (  # noqa: F401  (re-exported for the model and
     ABORT_WRITE_ONLY,
 )
 
-__all__ = ["ModelError", "ObjectError", "ParamError", "UnknownFunction", "UnknownParameter"]
-
-
-class OutOfRange(ParamError):
-    rule = "out of range"
+__all__ = ["ModelError", "ObjectError", "OutOfRange", "ParamError", "UnknownFunction",
+           "UnknownParameter"]
 
 
 class InertFunction(OutOfRange):

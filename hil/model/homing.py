@@ -16,7 +16,7 @@
   point; PR: P6.001 at the reference, L12641) and an absolute encoder, if the drive has one
   (`drive.absolute`), gets its origin (L16458).
 
-Method tables: `hil.model.homing_methods`. Choices and deviation knobs (ModelOptions
+Method tables: `hil.profile.homing_methods`. Choices and deviation knobs (ModelOptions
 .extra["homing"]): `HomingOptions`, docs/manual-choices.md#homing.
 """
 
@@ -28,7 +28,9 @@ from typing import TYPE_CHECKING, Any
 
 from hil.model.errors import ModelError
 from hil.model.events import HomingPhase
-from hil.model.homing_methods import (
+from hil.model.motion import puu_to_counts
+from hil.model.timebase import MS, Timer, ms
+from hil.profile.homing_methods import (
     EDGE,
     HERE,
     INDEX,
@@ -38,8 +40,6 @@ from hil.model.homing_methods import (
     check_p5004,
     pr_plan,
 )
-from hil.model.motion import puu_to_counts
-from hil.model.timebase import MS, Timer, ms
 
 if TYPE_CHECKING:
     from hil.model.drive import Drive

@@ -43,7 +43,8 @@ from typing import TYPE_CHECKING, Any
 
 from hil.model.errors import ModelError, OutOfRange, ParamError, ReadOnly
 from hil.model.motion import counts_to_puu, puu_per_s_to_rpm, puu_to_counts
-from hil.model.pr import (
+from hil.model.timebase import MS, Timer, ms
+from hil.profile.pr import (
     ARRAY_SIZE,
     INDEX,
     JUMP,
@@ -53,7 +54,6 @@ from hil.model.pr import (
     PrPath,
     read_path,
 )
-from hil.model.timebase import MS, Timer, ms
 
 if TYPE_CHECKING:
     from hil.model.drive import Drive

@@ -11,13 +11,6 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from hil.model.dio import (
-    INERT_DI_FUNCTIONS,
-    N_PHYSICAL_DI,
-    inert_mapping,
-)
-from hil.model.mechanics import Mechanics
-from hil.model.options import ModelOptions
 from hil.paths import fixture
 from hil.plan.param_rules import check_param
 from hil.plan.yamlio import (
@@ -31,8 +24,9 @@ from hil.plan.yamlio import (
     load_yaml_file,
     load_yaml_text,
 )
-from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS
+from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS, N_DO, N_PHYSICAL_DI
 from hil.transport.urls import TransportUrlError, parse_url
+from hil.virtual.checks import INERT_DI_FUNCTIONS, Mechanics, ModelOptions, inert_mapping
 
 # Named timeouts (ns) and their defaults; a bench overrides any of them. The CiA 402 ones
 # are handed to hil.drivers.cia402.Cia402Driver (same names).
@@ -57,7 +51,6 @@ PROCESSES = ("inproc", "subprocess")
 PROFILES = ("asda-a3",)
 PARAM_VIAS = ("modbus", "sdo")
 STO_CHANNELS = {"A": "STO_A", "B": "STO_B"}
-N_DO = len(DO_PARAMS)
 _LINE_RE = re.compile(r"^(DI|DO)(\d{1,2})(?::([ab]))?$")
 _PARAM_RE = re.compile(r"^P[0-7]\.\d{3}$")
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
@@ -383,9 +376,10 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
     _drive_dio(v, spec, d, where, subprocess_virtual=process == "subprocess" and virtual)
     if not (spec.can or spec.rs485 or spec.dio):
         raise v.err(d.line, where, "a drive needs at least one of can, rs485, dio")
-    _drive_lines(v, spec, d, where)
+    _drive_lines(v, spec, d, where, virtual)
     if "params" in d:
-        spec.params = _params(v, d["params"], d.kline("params"), join(where, "params"))
+        spec.params = _params(v, d["params"], d.kline("params"), join(where, "params"),
+                              virtual=virtual)
     _drive_param_via(v, spec, d, where)
     _drive_model(v, spec, d, where)
     return spec
@@ -438,13 +432,13 @@ def _drive_dio(v: Checker, spec: DriveSpec, d: LDict, where: str,
         raise v.err(d.kline("dio_map"), join(where, "dio_map"), "needs `dio:`")
 
 
-def _drive_lines(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
+def _drive_lines(v: Checker, spec: DriveSpec, d: LDict, where: str, virtual: bool) -> None:
     """`wiring:` (DI/DO functions on lines) and `sto:` (channels on lines)."""
     if "wiring" in d:
         if not spec.dio:
             raise v.err(d.kline("wiring"), join(where, "wiring"), "needs `dio:` (the lines)")
         _wiring(v, spec, v.mapping(d["wiring"], d.kline("wiring"), join(where, "wiring")),
-                join(where, "wiring"))
+                join(where, "wiring"), virtual)
     if "sto" in d:
         m = v.mapping(d["sto"], d.kline("sto"), join(where, "sto"))
         v.keys(m, STO_CHANNELS, join(where, "sto"))
@@ -503,7 +497,9 @@ def _known(v: Checker, m: LDict, cls: type, where: str) -> None:
     v.keys(m, known, where)
 
 
-def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str) -> None:
+def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str, virtual: bool) -> None:
+    """`wiring:` FUNCTION: LINE[:b]. A virtual bench refuses a DI function its drive does not
+    model (issue 13 item 6); a real drive has them all."""
     used: dict[str, str] = {}
     for key, value in m.items():
         fw = join(where, key)
@@ -520,7 +516,7 @@ def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str) -> None:
         if func not in table:
             raise v.err(m.kline(key), fw, f"unknown {kind} function {func!r} (manual table "
                         f"8.{1 if kind == 'DI' else 2}); known: {', '.join(sorted(table))}")
-        if kind == "DI" and func in INERT_DI_FUNCTIONS:  # issue 13 item 6
+        if virtual and kind == "DI" and func in INERT_DI_FUNCTIONS:  # issue 13 item 6
             raise v.err(m.kline(key), fw, f"DI function {func} is not modelled by the "
                         f"virtual drive: {INERT_DI_FUNCTIONS[func]}")
         limit = N_PHYSICAL_DI if kind == "DI" else N_DO
@@ -536,7 +532,10 @@ def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str) -> None:
         target[func] = Wire(func, line, contact)
 
 
-def _params(v: Checker, obj: Any, line: int, where: str) -> dict[str, int]:
+def _params(v: Checker, obj: Any, line: int, where: str, *, virtual: bool = False
+            ) -> dict[str, int]:
+    """`params:` Pn.nnn: value. With `virtual`, a mapping of a DI function the virtual drive
+    does not model is refused (issue 13 item 6); plans are checked against the bench later."""
     m = v.mapping(obj, line, where)
     out: dict[str, int] = {}
     for k, val in m.items():
@@ -545,7 +544,7 @@ def _params(v: Checker, obj: Any, line: int, where: str) -> dict[str, int]:
         if isinstance(val, bool) or not isinstance(val, int):
             raise v.err(m.kline(k), join(where, k),
                         f"must be an integer (raw communication units), got {val!r}")
-        if why := inert_mapping(k, val):  # issue 13 item 6
+        if virtual and (why := inert_mapping(k, val)):  # issue 13 item 6
             raise v.err(m.kline(k), join(where, k), f"0x{val:04X} maps {why}")
         check_param(v, m.kline(k), join(where, k), k, val, write=True)
         out[k] = val

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from functools import cache
 
-from hil.model.dio import DI_PARAMS, DO_PARAMS
-from hil.model.errors import ParamError
-from hil.model.params import ParamTable
 from hil.plan.yamlio import Checker, PlanFileError
+from hil.profile.dio import DI_PARAMS, DO_PARAMS
+from hil.profile.errors import ParamError
+from hil.profile.params import ParamTable
 
 
 @cache

@@ -11,15 +11,14 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from hil.model.dio import N_PHYSICAL_DI, inert_mapping
-from hil.model.options import ModelOptions
 from hil.paths import plans_dir as _pd
 from hil.plan.bench import Bench, DriveSpec, Wire, _params
 from hil.plan.kinds import CheckContext
 from hil.plan.kinds.timing import bind_line
 from hil.plan.steps import Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
-from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS
+from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS, N_PHYSICAL_DI
+from hil.virtual.checks import ModelOptions, inert_mapping
 
 __all__ = ["Plan", "bind_line", "check_plan", "find_plans", "load_plan", "loads_plan", "mapping_of",
            "plan_spec", "step_spec"]
@@ -74,6 +73,8 @@ def parse_plan(data: Any, file: str, text: str = "") -> Plan:
         plan.drive = v.text(top, "drive", "")
     if "params" in top:
         plan.params = _params(v, top["params"], top.kline("params"), "params")
+        pm = top["params"]
+        plan._lines |= {f"params.{k}": pm.kline(k) for k in plan.params if hasattr(pm, "kline")}
     if "options" in top:
         om = v.mapping(top["options"], top.kline("options"), "options")
         v.keys(om, {f.name for f in fields(ModelOptions)}, "options")
@@ -109,8 +110,6 @@ def mapping_of(name: str, value: int) -> tuple[str, Wire | None] | None:
         raise ValueError(f"0x{value:04X} maps {line} to no function of table "
                          f"{'8.1' if line[1] == 'I' else '8.2'} (0x01xx a-contact, 0x00xx "
                          "b-contact)")
-    if why := inert_mapping(name, value):  # issue 13 item 6: not modelled, so refused
-        raise ValueError(f"0x{value:04X} maps {why}")
     if not code:
         return line, None
     return line, Wire(codes[code], line, "a" if value & 0x100 else "b")
@@ -168,6 +167,12 @@ def check_plan(plan: Plan, bench: Bench, spec_ids: set[str] | None = None) -> No
     if plan.params and not any(d.param_via for d in bench.drives.values()):
         raise v.err(plan.key_line("params"), "params",
                     f"bench {bench.name!r} has no parameter access (rs485 or can)")
+    if bench.virtual:  # the virtual drive refuses a DI function it does not model (issue 13)
+        for name, value in plan.params.items():
+            if why := inert_mapping(name, value):
+                raise v.err(plan._lines.get(f"params.{name}", plan.key_line("params")),
+                            join("params", name),
+                            f"0x{value:04X} maps {why} (bench {bench.name!r} is virtual)")
     for s in plan.steps:
         _check_step(v, s, plan, bench, spec_ids)
 

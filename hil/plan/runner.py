@@ -32,6 +32,7 @@ from hil.plan.context import (
 from hil.plan.plan import Plan, check_plan, plan_spec
 from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, Session, open_session
+from hil.timing.registry import SpecRegistry, load_specs
 from hil.virtual.truth import SensorTap, bench_with_options
 
 __all__ = ["Cancelled", "PlanResult", "StepContext", "StepFailed", "StepResult", "run_plan",
@@ -72,29 +73,10 @@ class PlanResult:
         return self.status == PASS
 
 
-def timing_specs(extra_dirs: list[Path] | None = None) -> dict[str, Any]:
-    """Timing specs by id: the shipped ones plus any in `extra_dirs`."""
-    from hil.timing.spec import load_spec, shipped_specs
-
-    paths = list(shipped_specs())
-    for d in extra_dirs or []:
-        paths += sorted(Path(d).glob("*.yaml"))
-    from hil.timing.spec import SpecError
-
-    out = {}
-    BROKEN_SPECS.clear()
-    for p in paths:
-        try:
-            s = load_spec(p)
-        except SpecError as e:  # one broken spec must not stop plans that do not use it
-            BROKEN_SPECS[p.stem] = str(e)
-            continue
-        out[s.id] = s
-    return out
-
-
-#: Spec files that failed to load (file stem -> error), filled by `timing_specs()`.
-BROKEN_SPECS: dict[str, str] = {}
+def timing_specs(extra_dirs: list[Path] | None = None) -> SpecRegistry:
+    """Timing specs by id: the shipped ones plus any in `extra_dirs` (`.broken` says which
+    files did not load)."""
+    return load_specs(extra_dirs)
 
 
 class Progress:

@@ -118,6 +118,9 @@ DI_PARAMS = (
     "P2.036", "P2.037", "P2.038", "P2.039", "P2.040",
 )  # fmt: skip
 DO_PARAMS = ("P2.018", "P2.019", "P2.020", "P2.021", "P2.022", "P2.041")
+N_PHYSICAL_DI = 10  # DI1-DI10, the physical inputs (VDI11-13 are virtual)
+N_DI = len(DI_PARAMS)  # 13 incl. VDI11-13
+N_DO = len(DO_PARAMS)
 
 
 def decode_mapping(kind: str, value: int, where: str) -> tuple[int, bool]:

@@ -21,6 +21,10 @@ class ParamError(ModelError):
         self.param = param
 
 
+class OutOfRange(ParamError):
+    rule = "out of range"
+
+
 class UnknownParameter(ParamError):
     rule = "unknown parameter"
 

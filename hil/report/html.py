@@ -10,11 +10,13 @@ the safe-state actions, the bus log of each failing step, parameters, bench and 
 from __future__ import annotations
 
 import html
+from collections.abc import Mapping
 from dataclasses import fields
 from pathlib import Path
 
 from hil.report.data import RunData, bus_around, bus_log, load_run
 from hil.timing.checker import Verdict
+from hil.timing.registry import load_specs
 from hil.timing.render import svg
 from hil.timing.source import RecordingSource
 
@@ -83,10 +85,8 @@ def _window_svg(v: dict) -> str:
 MAX_DIAGRAMS = 6  # per checked spec: failing occurrences first
 
 
-def _spec_by_id() -> dict[str, object]:
-    from hil.plan.runner import timing_specs
-
-    return timing_specs()
+def _spec_by_id() -> Mapping[str, object]:
+    return load_specs()
 
 
 def timing_diagrams(run: RunData) -> list[tuple[str, str]]:

@@ -77,7 +77,9 @@ def test_diff_side_by_side_verdicts_and_edges(runs):
     rise = next(r for r in do6["edges"] if r["value"] is True)
     assert 27 <= rise["delta_ms"] <= 33 and rise["step"] == 2  # `wait_until BRKR on`
     son = next(s for s in d["signals"] if s["signal"] == "DI1 SON")
-    assert not son["differs"]  # the harness's own edges line up step by step
+    # the harness's own edges line up step by step: within scheduling jitter, far below the
+    # 30 ms knob (a busy machine can delay a step's first action by a few ms)
+    assert son["max_delta_ms"] is not None and son["max_delta_ms"] < 10, son
 
 
 @pytest.mark.integration

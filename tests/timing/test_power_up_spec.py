@@ -40,3 +40,29 @@ def test_drive_ignoring_power_up_levels_fails(tmp_path) -> None:
     failed = {v.constraint for v in verdicts(path, "emgs_power_up") if v.status == "fail"}
     assert "SON does not switch the servo on under EMGS" in failed
     assert "AL013 present while EMGS is active from power-up" in failed
+
+
+def run_limit_power_up(tmp_path: Path, options: ModelOptions | None = None) -> Path:
+    """Powered up on the negative limit: DI6 (NL, b-contact) open, EMGS and PL closed."""
+    path = tmp_path / "limit.mcap"
+    drive = Drive(options=options, params=BENCH, inputs={7: True, 8: True}, sensors={})
+    with Recorder(path) as rec:
+        tap = ModelTap(drive, rec)
+        tap.advance(20 * MS)
+        tap.set_di(1, True)  # SON closes while NL is active (a WARN: the servo may go on)
+        tap.advance(200 * MS)
+        tap.set_di(6, True)  # the axis leaves the switch
+        tap.advance(100 * MS)
+        tap.close()
+    return path
+
+
+def test_limit_at_power_up_faithful_drive_passes(tmp_path) -> None:
+    """L2829-2831, L15188-15191: AL014 from power-up, cleared once NL is released."""
+    assert_all_pass(verdicts(run_limit_power_up(tmp_path), "limit_power_up"))
+
+
+def test_limit_at_power_up_fails_on_a_drive_ignoring_power_up_levels(tmp_path) -> None:
+    path = run_limit_power_up(tmp_path, ModelOptions(dev_di_levels_ignored_at_power_up=True))
+    failed = {v.constraint for v in verdicts(path, "limit_power_up") if v.status == "fail"}
+    assert "AL014 present while NL is active from power-up" in failed

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 
 from hil.model.options import ModelOptions
-from hil.model.pr import encode
 from hil.model.timebase import MS
 from hil.paths import fixture
+from hil.profile.pr import encode
 from hil.timing.checker import check
 from hil.timing.source import RecordingSource
 from hil.timing.spec import load_spec

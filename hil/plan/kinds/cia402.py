@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from hil.model.homing_methods import CANOPEN_METHODS
 from hil.plan.context import Outcome
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.yamlio import Checker, join
+from hil.profile.homing_methods import CANOPEN_METHODS
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext

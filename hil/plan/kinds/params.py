@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from hil.model.dio import inert_mapping
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.param_rules import check_param
 from hil.plan.session import refusal_code
 from hil.plan.yamlio import Checker, LDict, join
+from hil.virtual.checks import inert_mapping
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
@@ -46,18 +46,20 @@ class Write(StepKind):
                             f"(got {', '.join(out['values'])})")
             fields.check_expect_error(v, m.kline("expect_error"), fw, code, via)
             out["expect_error"] = code
-        else:
-            for k, val in out["values"].items():
-                if why := inert_mapping(k, val):  # issue 13 item 6: the drive refuses it
-                    raise v.err(m.kline(k), join(where, k), f"0x{val:04X} maps {why}; a write "
-                                "that expects the refusal needs expect_error (0x06090030 / 3)")
         return out
 
     def check(self, cc: CheckContext) -> None:
         fields.check_via(cc, "", self.args["via"])
+        raw = cc.step.raw.get(self.name)
+        if cc.bench.virtual and self.args.get("expect_error") is None:
+            for k, val in self.args["values"].items():
+                if why := inert_mapping(k, val):  # issue 13 item 6: the virtual drive refuses
+                    line = raw.kline(k) if hasattr(raw, "kline") else cc.step.line
+                    raise cc.err(f"0x{val:04X} maps {why}; on a virtual bench a write that "
+                                 "expects the refusal needs expect_error (0x06090030 / 3)", k,
+                                 line=line)
         if self.args.get("expect_error") is not None:
             via = self.args["via"] or cc.drive.param_via
-            raw = cc.step.raw.get(self.name)
             line = raw.kline("expect_error") if hasattr(raw, "kline") else cc.step.line
             fields.check_expect_error(cc.v, line, join(cc.field, "expect_error"),
                                  self.args["expect_error"], via)

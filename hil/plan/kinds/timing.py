@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from hil.plan.context import Inconclusive, Outcome, StepFailed
@@ -12,6 +13,7 @@ from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.yamlio import Checker, join
 from hil.profile.dio import DI_SYMBOLS, DO_SYMBOLS
 from hil.timing.checker import check, constants_for, occurrences_since
+from hil.timing.registry import SpecRegistry
 from hil.timing.source import RecordingSource
 
 if TYPE_CHECKING:
@@ -86,7 +88,7 @@ class CheckTiming(StepKind):
                 raise cc.err(f"drive {cc.dname} has no line wired to {x} (wired: "
                              f"{', '.join(wired) or 'none'})", f"bind.{name}")
         specs = cc.specs
-        spec = specs.get(a["spec"]) if isinstance(specs, dict) else None
+        spec = specs.get(a["spec"]) if isinstance(specs, Mapping) else None
         if spec is not None:
             known = set(spec.binding()) | set(spec.bind)
             for name in a.get("bind", {}):
@@ -100,11 +102,8 @@ class CheckTiming(StepKind):
                                  f"{', '.join(sorted(spec.constants)) or 'none'}",
                                  f"constants.{name}")
         if specs is not None and a["spec"] not in specs:
-            from hil.plan.runner import BROKEN_SPECS
-
-            if a["spec"] in BROKEN_SPECS:
-                raise cc.err(f"timing spec {a['spec']!r} does not load: "
-                             f"{BROKEN_SPECS[a['spec']]}")
+            if isinstance(specs, SpecRegistry):
+                raise cc.err(specs.why_missing(a["spec"]))
             raise cc.err(f"no timing spec {a['spec']!r}; known: {', '.join(sorted(specs))}")
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING, Any
 
-from hil.model.options import ModelOptions
 from hil.plan.context import Outcome
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import StepKind
 from hil.plan.yamlio import Checker, join
+from hil.virtual.checks import ModelOptions
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext

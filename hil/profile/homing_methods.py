@@ -43,7 +43,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hil.model.errors import OutOfRange
+from hil.profile.errors import OutOfRange
 
 EDGE, INDEX, TORQUE, HERE = "edge", "index", "torque", "here"
 RESERVED_METHODS = frozenset({15, 16, 31, 32})

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 
-from hil.model.errors import ModelError
+from hil.profile.errors import ModelError
 from hil.profile.params import ParamTable, parse_name
 
 N_PATHS = 100  # PR#0 homing + PR#1..#99 (L4148)
