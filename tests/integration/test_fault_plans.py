@@ -36,7 +36,7 @@ def test_fault_plans_cover_every_reaction_family():
     names = {p.stem for p in FAULT_PLANS}
     assert {"fault_heartbeat", "fault_life_guarding", "fault_1029h", "fault_sdo_flood",
             "fault_duplicate_pdo", "fault_bus_error", "fault_sync_ip", "fault_rs485",
-            } <= names
+            "fault_di_bounce"} <= names
 
 
 def test_fault_plans_on_the_virtual_bench(tmp_path):

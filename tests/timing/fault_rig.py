@@ -172,6 +172,23 @@ class FaultRig:
         self.serial.write(mb.rtu_encode(1, mb.write_single_request(address, value)))
         self.run(5)
 
+    # -- DI/DO -------------------------------------------------------------------------------
+    def bounce(self, n: int, level: bool, *, bounces: int = 3, period_ms: float = 1.0) -> None:
+        """DI `n` set to `level` through a contact that bounces, as `FaultyDio` does it
+        (level, period, not level, period, ... then level), with the /faults record, in
+        model time."""
+        sink = _ModelSink(self)
+        sink.fault("bounce", "dio:drive1", True, 900 + n, line=f"DI{n}", bounces=bounces,
+                   period_ms=period_ms)
+        for _ in range(bounces):
+            self.tap.set_di(n, level)
+            self.run(period_ms)
+            self.tap.set_di(n, not level)
+            self.run(period_ms)
+        self.tap.set_di(n, level)
+        sink.fault("bounce", "dio:drive1", False, 900 + n, line=f"DI{n}", bounces=bounces,
+                   period_ms=period_ms)
+
     @property
     def alarms(self) -> tuple[str, ...]:
         return self.drive.alarms.active

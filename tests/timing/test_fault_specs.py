@@ -113,6 +113,16 @@ def master_silent(rig: FaultRig) -> None:
     rig.serial.faults.stop(f)
 
 
+def son_bouncing(rig: FaultRig) -> None:
+    """SON (DI1) closed and later opened through a contact bouncing 3 x 1 ms, shorter than
+    P2.009 = 2 ms (factory, L9229)."""
+    rig.run(50)
+    rig.bounce(1, True)
+    rig.run(300)
+    rig.bounce(1, False)
+    rig.run(300)
+
+
 def _msg(cid: int, data: bytes, *, error: bool = False) -> can.Message:
     return can.Message(arbitration_id=cid, data=data, is_extended_id=False,
                        is_error_frame=error)
@@ -130,6 +140,8 @@ CASES = {
                        "1029h = 1 -> the NMT state is kept", "AL180"),
     "fault_1029h[2]": (behaviour_1029h(2), {"dev_1029h_behaviour": 1},
                        "1029h = 2 -> STOPPED", "AL180"),
+    "fault_di_bounce": (son_bouncing, {"dev_di_filter_delay_only": True},
+                        "no servo change while SON bounces on", "-"),
     "fault_sdo_flood": (sdo_flood, {"dev_ignore_sdo_flood": True},
                         "AL111 within one scan", "AL111"),
     "fault_duplicate_pdo": (duplicate_pdo, {"dev_ignore_pdo_overflow": True},
@@ -159,7 +171,7 @@ def run_case(tmp_path, spec_id: str, **knob):
 @pytest.mark.parametrize("spec_id", list(CASES))
 def test_fault_spec_passes_on_the_model(tmp_path, spec_id):
     vs, seen = run_case(tmp_path, spec_id)
-    assert CASES[spec_id][3] in seen
+    assert CASES[spec_id][3] in (*seen, "-")
     assert_all_pass(vs)
     main = CASES[spec_id][2]
     assert [v.status for v in vs if main in v.constraint] == ["pass"]
