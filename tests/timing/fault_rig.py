@@ -34,6 +34,7 @@ from hil.virtual.model_tap import EPOCH_NS, ModelTap
 NODE = 1
 MASTER = 0x7F
 BUS = "can0"
+PORT = "rs485"
 WALL0 = time.time() - 1e5  # s: the wall time of model t = 0 for frame sender stamps
 FRAME_NS = 111_000  # one 8-byte standard frame at 1 Mbit/s occupies the bus ~111 bit times
 
@@ -61,6 +62,7 @@ class _Line:
         self.rig = rig
 
     def write(self, data: bytes, **_kw: Any) -> None:
+        self.rig.rec.serial(PORT, bytes(data), "tx", self.rig.t())
         self.rig.modbus.feed(bytes(data), self.rig.drive.now)
 
 
@@ -87,7 +89,7 @@ class FaultRig:
                                   own_timer=False, clock=lambda: self.drive.now)
         self.slave.start()
         self.modbus = ModbusSlave(self.drive.params, station=1,
-                                  send=lambda adu: None,
+                                  send=lambda adu: self.rec.serial(PORT, adu, "rx", self.t()),
                                   on_timeout=lambda _t: self.drive.raise_alarm("AL020"),
                                   on_comm_error=lambda c, _m: self.drive.modbus_comm_error(c))
         self.serial = FaultySerial(_Line(self), "rs485", sink=sink, seed=1)

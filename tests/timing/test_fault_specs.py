@@ -111,6 +111,8 @@ def master_silent(rig: FaultRig) -> None:
         rig.run(95)
         rig.modbus_read()  # swallowed by the fault layer
     rig.serial.faults.stop(f)
+    rig.modbus_write(0x0308, 0)
+    rig.modbus_write(0x0154, 5000)  # P1.042 = 5000: out of range, exception 03 (L19592)
 
 
 def son_bouncing(rig: FaultRig) -> None:
@@ -186,3 +188,15 @@ def test_fault_spec_fails_on_its_deviation_knob(tmp_path, spec_id):
     vs, _ = run_case(tmp_path, spec_id, **knob)
     failed = [v for v in judged(vs) if v.status == "fail" and constraint in v.constraint]
     assert failed, [(v.constraint, v.status, v.message) for v in vs]
+
+
+def test_rs485_al019_rule_fails_without_al019(tmp_path):
+    """The AL019 rule of fault_rs485: judged (pass) above; a drive that answers exception 03
+    without raising AL019 (option modbus_al019_exceptions = ()) fails it."""
+    rig = FaultRig(tmp_path / "run.mcap", ModelOptions(modbus_al019_exceptions=()))
+    try:
+        master_silent(rig)
+    finally:
+        path = rig.close()
+    vs = verdicts(path, "fault_rs485")
+    assert [v.status for v in vs if "AL019" in v.constraint] == ["fail"], vs
