@@ -360,7 +360,7 @@ class CanopenSlave:
         if prev is None:
             return
         dt = sent - prev
-        if dt < self._opt("sync_early_ratio") * period:
+        if dt < self._opt("sync_early_ratio") * period and not self._opt("dev_ignore_early_sync"):
             self._comm_alarm("AL3E2")  # SYNC too early (L20159-20163)
             return
         window = max(1, int(self._opt("sync_fail_window")))
@@ -495,6 +495,9 @@ class CanopenSlave:
             self._sync_deadline = None  # re-armed by the next SYNC
             if self._ip_sync_monitored():
                 self._comm_alarm("AL3E3")  # SYNC timeout in IP mode (L20165-20169)
+                # synchronisation lost: a resumed SYNC starts anew, the gap is no interval
+                self._sync_prev_sent = None
+                self._sync_intervals.clear()
         for n in range(4):
             if self._tpdo_active(n) and self._values[(0x1800 + n, 2)] >= 254:
                 self._event_tpdo(n, now)

@@ -339,3 +339,18 @@ def test_sdo_request_sent_after_the_answer_left_is_no_flood():
         assert "AL111" not in r.alarms
     finally:
         r.close()
+
+
+def test_sync_resumed_after_timeout_restarts_the_monitoring(rig):
+    """SYNC lost (AL3E3, L20165-20169), then back at the right cycle: the gap is not a SYNC
+    interval, so no AL301 (L20123-20127) follows from it (choice, docs/manual-choices.md)."""
+    ip_rig(rig)
+    for k in range(5):
+        rig.feed(0x80, at_ms=10 * k)
+        rig.run(10)
+    rig.run(100)
+    assert rig.alarms == ("AL3E3",)
+    for k in range(12):
+        rig.feed(0x80, at_ms=200 + 10 * k)
+        rig.run(10)
+    assert rig.alarms == ("AL3E3",)

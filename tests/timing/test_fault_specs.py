@@ -13,6 +13,7 @@ import can
 import pytest
 
 from hil.model.options import ModelOptions
+from hil.transport.faults import CanMatch
 from tests.timing.fault_rig import MASTER, NODE, FaultRig, verdicts
 from tests.timing.test_specs_on_model import assert_all_pass, judged
 
@@ -98,6 +99,14 @@ def sync_lost(rig: FaultRig) -> None:
     f = rig.drop("sync")
     rig.run(200)
     rig.stop(f)
+    rig.sdo_write(0x6040, 0, 0x8F, 2)  # 6040h reset clears AL3E3 (L20169)
+    rig.sdo_write(0x6040, 0, 0x0F, 2)
+    rig.run(200)
+    assert rig.alarms == ()
+    f = rig.bus.inject("duplicate", match=CanMatch(functions=("sync",)))  # SYNC too early
+    rig.run(30)
+    rig.stop(f)
+    rig.run(100)
 
 
 def master_silent(rig: FaultRig) -> None:
@@ -151,7 +160,7 @@ CASES = {
     "fault_bus_error": (bus_error, {"dev_bus_error_limit": 200},
                         "AL185 within one scan", "AL185"),
     "fault_sync_ip": (sync_lost, {"dev_sync_timeout_extra_ms": 40},
-                      "AL3E3 after the SYNC timeout", "AL3E3"),
+                      "AL3E3 after the SYNC timeout", "AL3E2"),
     "fault_rs485": (master_silent, {"dev_comm_timeout_extra_ms": 50},
                     "AL020 after the P3.004", "AL020"),
 }
@@ -200,3 +209,15 @@ def test_rs485_al019_rule_fails_without_al019(tmp_path):
         path = rig.close()
     vs = verdicts(path, "fault_rs485")
     assert [v.status for v in vs if "AL019" in v.constraint] == ["fail"], vs
+
+
+def test_sync_ip_early_sync_rule_fails_without_al3e2(tmp_path):
+    """The AL3E2 rule of fault_sync_ip: judged (pass) with the family above; a drive that
+    lets an early SYNC through (dev_ignore_early_sync) fails it."""
+    rig = FaultRig(tmp_path / "run.mcap", ModelOptions(dev_ignore_early_sync=True))
+    try:
+        sync_lost(rig)
+    finally:
+        path = rig.close()
+    vs = verdicts(path, "fault_sync_ip")
+    assert [v.status for v in vs if "AL3E2" in v.constraint] == ["fail"], vs
