@@ -5,8 +5,10 @@ Like `ModelTap` (which it wraps), but the harness side is the real fault layer
 frames reach the faces at model time: a frame the harness sends is queued and handed to
 the slave at the next delivery (a burst arrives together, as on a bus). Frame sender stamps
 (`msg.timestamp`, what the faces read for AL111/AL112/AL301/AL3E2) are model time mapped to
-a wall epoch far enough in the past that "sent before the previous one was processed"
-means what it means on a real bus. Everything is deterministic: no wall-clock sleeps.
+a wall epoch in the past (`WALL0`): intervals between frames are model intervals, and every
+frame counts as sent before the face's (wall-clock) "answered / processed" stamps, so in
+this rig AL111/AL112 turn on the 1 ms window alone (the scenarios space ordinary requests
+>= 1 ms apart). Everything is deterministic: no wall-clock sleeps.
 """
 
 from __future__ import annotations
