@@ -250,3 +250,15 @@ def test_rs485_crc_errors_rule(tmp_path, knob, status):
         path = rig.close()
     vs = verdicts(path, "fault_rs485")
     assert [v.status for v in vs if "CRC-garbled" in v.constraint] == [status], vs
+
+
+def test_every_fault_spec_has_a_model_case_and_a_plan():
+    """A new fixtures/timing/fault_*.yaml needs a scenario + deviation knob here and a plan
+    that checks it (issue 16: each spec fails on a deviation knob; plans use the specs)."""
+    from hil.paths import fixture
+    from hil.plan.plan import find_plans
+
+    specs = {p.stem for p in fixture("timing").glob("fault_*.yaml")}
+    assert specs == {c.partition("[")[0] for c in CASES}
+    checked = "".join(p.read_text() for p in find_plans() if p.stem.startswith("fault_"))
+    assert all(f"check_timing: {s}" in checked or f"spec: {s}" in checked for s in specs)
