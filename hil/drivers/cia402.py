@@ -285,8 +285,17 @@ class Cia402Driver:
         self._go(CW_QUICK_STOP, "QUICK STOP ACTIVE")
 
     def fault_reset(self) -> None:
-        """Bit 7 rising edge (0x00 then 0x80) -> SWITCH ON DISABLED (transition 15)."""
+        """Bit 7 rising edge (0x00 then 0x80) -> SWITCH ON DISABLED (transition 15).
+
+        Outside FAULT the edge still resets alarms: "NMT reset or 0x6040 reset" clears
+        AL111/AL112/AL3E3 (servo-on alarms / warnings, L19937, L19945, L20169). It is sent
+        on top of the present controlword (read back: a plan may have written 6040h by
+        other means), which is then restored: the power state stays."""
         if self.state != "FAULT":
+            cw = self.read(0x6040, 0) & ~CW_FAULT_RESET
+            self._step("controlword", value=cw | CW_FAULT_RESET, target="alarm reset")
+            self._cw(cw | CW_FAULT_RESET)
+            self._cw(cw)
             return
         self._cw(CW_DISABLE_VOLTAGE)
         self._cw(CW_FAULT_RESET)

@@ -143,6 +143,7 @@ class CanopenSlave:
         # communication monitoring (issue 16, docs/faults.md)
         self._sdo_prev_sent: int | None = None  # sender time of the last SDO request
         self._sdo_answered = 0  # wall ns when the last SDO answer left
+        self._sdo_replied = False  # the request being served was answered
         self._pdo_prev: dict[int, tuple[int, int]] = {}  # RPDO COB-ID -> (sent, processed)
         self.rx_error_counter = 0  # receive error counter (AL185, L20029)
         self._bus_error_raised = False
@@ -290,6 +291,8 @@ class CanopenSlave:
         if self.on_alarm is not None:
             self._callback("on_alarm", self.on_alarm, alarm)
         behaviour = self._values.get((0x1029, 1), 0)
+        if self._opt("dev_1029h_behaviour") is not None:  # deviation knob: 1029h not honoured
+            behaviour = self._opt("dev_1029h_behaviour")
         if behaviour == 0 and self.state == "OPERATIONAL":
             self._set_state("PRE-OPERATIONAL")
         elif behaviour == 2:
@@ -357,7 +360,7 @@ class CanopenSlave:
         if prev is None:
             return
         dt = sent - prev
-        if dt < self._opt("sync_early_ratio") * period:
+        if dt < self._opt("sync_early_ratio") * period and not self._opt("dev_ignore_early_sync"):
             self._comm_alarm("AL3E2")  # SYNC too early (L20159-20163)
             return
         window = max(1, int(self._opt("sync_fail_window")))
@@ -413,8 +416,10 @@ class CanopenSlave:
         if cid == self._values.get((0x1200, 1), cop.SDO_REQUEST + nid) & 0x7FF:
             if not msg.is_remote_frame:
                 self._check_sdo_flood(sent_ns(msg))
+                self._sdo_replied = False
                 self._on_sdo(data, now)
-                self._sdo_answered = time.time_ns()
+                if not self._sdo_replied:  # no answer: the buffer is free now
+                    self._sdo_answered = time.time_ns()
             return
         if cid == self._values.get((0x1005, 0), 0x80) & 0x7FF:
             if self.state == "OPERATIONAL":
@@ -490,6 +495,9 @@ class CanopenSlave:
             self._sync_deadline = None  # re-armed by the next SYNC
             if self._ip_sync_monitored():
                 self._comm_alarm("AL3E3")  # SYNC timeout in IP mode (L20165-20169)
+                # synchronisation lost: a resumed SYNC starts anew, the gap is no interval
+                self._sync_prev_sent = None
+                self._sync_intervals.clear()
         for n in range(4):
             if self._tpdo_active(n) and self._values[(0x1800 + n, 2)] >= 254:
                 self._event_tpdo(n, now)
@@ -652,6 +660,10 @@ class CanopenSlave:
 
     # ------------------------------------------------------------------ SDO
     def _sdo_send(self, data: bytes) -> None:
+        # stamped before the answer leaves: a master that sends its next request once it has
+        # the answer is never "before the answer" (AL111), however late this thread runs on
+        self._sdo_answered = time.time_ns()
+        self._sdo_replied = True
         self._send(self._values.get((0x1200, 2), cop.SDO_RESPONSE + self.node_id) & 0x7FF, data)
 
     def _sdo_abort(self, index: int, sub: int, code: int) -> None:

@@ -10,7 +10,8 @@ While a `Lease` is held, every zenoh transport in this process that puts under
 how the gateway tells the holder's frames from anyone else's. The lease is kept alive by a
 liveliness token (the gateway notices at once when this process dies) and by renewals
 every timeout/4 (a hung process loses it after the timeout). `lease.lost` is set if the
-gateway ends it.
+gateway ends it, or when it answered no renewal for the lease timeout (gateway killed or
+paused, zenoh link lost: `lost_reason` says so).
 """
 
 from __future__ import annotations
@@ -131,6 +132,7 @@ class Lease:
 
     def _keepalive(self) -> None:
         period = max(0.01, self.lease_timeout_s / 4)
+        answered = time.monotonic()  # last renew the gateway answered
         while not self._stop.wait(period):
             try:
                 ans = _query(self.session, keys.lease(self.prefix),
@@ -138,12 +140,25 @@ class Lease:
                              min(self.query_timeout_s, self.lease_timeout_s))
             except zenoh.ZError:
                 ans = None
-            if ans is not None and not ans.get("granted"):
-                self.lost_reason = (f"the gateway ended the lease (now: "
-                                    f"{ans.get('holder') or 'free'})")
-                set_lease_token(self.prefix, None)
-                self.lost.set()
+            if self._stop.is_set():
                 return
+            if ans is not None and not ans.get("granted"):
+                self._lose(f"the gateway ended the lease (now: {ans.get('holder') or 'free'})")
+                return
+            if ans is not None:
+                answered = time.monotonic()
+            elif (silent := time.monotonic() - answered) > self.lease_timeout_s:
+                # the gateway itself is gone: killed, paused, or the zenoh link lost; by
+                # now it has expired the lease on its side too if it still runs
+                self._lose(f"no answer from the gateway for {silent:.1f} s (gateway killed "
+                           f"or paused, or the zenoh link to "
+                           f"{', '.join(self.connect) or 'it'} lost)")
+                return
+
+    def _lose(self, reason: str) -> None:
+        self.lost_reason = reason
+        set_lease_token(self.prefix, None)
+        self.lost.set()
 
     def release(self) -> None:
         """Give the bench back (the gateway then drives its safe state); idempotent."""

@@ -138,7 +138,10 @@ class Drive:
         self.alarms = AlarmManager(
             None, self.sched, self.params, self._on_alarm, AlarmOptions(override)
         )
-        self.dio = DigitalIO(self.params, self.sched, self._on_dio_event, name=self.name)
+        # P2.009 filter (L9229-9236): "stable" drops bounces; deviation knob: a pure delay
+        filter_mode = "delay" if self.options.dev_di_filter_delay_only else "stable"
+        self.dio = DigitalIO(self.params, self.sched, self._on_dio_event, name=self.name,
+                             filter_mode=filter_mode)
         self.axis = Axis(self.mech)
         self.brake = Brake(
             self.sched,

@@ -157,3 +157,15 @@ def test_cancel_ends_a_wait_at_once(rig):
     with pytest.raises(Cia402Cancelled):
         drv.wait_state("OPERATION ENABLED", timeout=5.0)
     assert time.monotonic() - t0 < 1.0
+
+
+def test_fault_reset_outside_fault_sends_the_edge_and_keeps_the_state(rig):
+    """AL111/AL112/AL3E3 keep the servo on (no FAULT) yet clear with "NMT reset or 0x6040
+    reset" (L19937, L19945, L20169): the bit 7 edge goes out on top of the present
+    controlword, which is restored, so OPERATION ENABLED stays."""
+    b, drv = rig
+    drv.enable_operation()
+    n = len(b.drive.writes)
+    drv.fault_reset()
+    assert [w[2] for w in b.drive.writes[n:] if w[0] == 0x6040] == [0x8F, 0x0F]
+    assert drv.state == "OPERATION ENABLED"

@@ -289,3 +289,68 @@ def test_comm_timeout_deviation_makes_al020_late():
     assert "AL020" not in drive.alarms.active
     drive.advance(2 * MS)
     assert "AL020" in drive.alarms.active
+
+
+@pytest.mark.parametrize("alarm", ["AL111", "AL112", "AL3E3"])
+@pytest.mark.parametrize("clear", ["6040h", "nmt"])
+def test_servo_on_comm_alarms_clear_by_6040h_or_nmt(rig, alarm, clear):
+    """"Clear: NMT reset or 0x6040 reset" (AL111 L19937, AL112 L19945, AL3E3 L20169): with
+    the servo on (these alarms keep it on, so CiA 402 is not in FAULT) the bit 7 edge on top
+    of controlword 0Fh clears them and the servo stays on; an NMT reset clears them too."""
+    rig.enable()
+    rig.slave._comm_alarm(alarm)
+    assert alarm in rig.alarms and rig.drive.servo_on
+    if clear == "6040h":
+        rig.drive.write_object(0x6040, 0, 0x8F)
+        rig.run(2)
+        rig.drive.write_object(0x6040, 0, 0x0F)
+        rig.run(2)
+        assert rig.drive.cia402.state == "OPERATION ENABLED"
+    else:
+        rig.feed(0x000, bytes([0x82, NODE]))  # NMT reset communication
+        rig.run(2)
+    assert alarm not in rig.alarms
+
+
+def test_sdo_request_sent_after_the_answer_left_is_no_flood():
+    """A master that waits for each answer never overflows (L19933-19937, choice
+    `sdo_flood_window_us`), even when it is faster than the drive's own bookkeeping: here the
+    drive's thread is held up 3 ms right after its answer left, and the next request is sent
+    0.1 ms after that answer (a zenoh bench under load does this)."""
+    r = Rig()
+    try:
+        left: list[float] = []
+        real_send = r.bus.send
+
+        def send(msg, timeout=None):
+            real_send(msg, timeout)
+            if msg.arbitration_id == 0x580 + NODE:
+                left.append(time.time())
+                time.sleep(0.003)  # preempted between sending and anything after it
+
+        r.bus.send = send
+        up = struct.pack("<BHBI", 0x40, 0x1000, 0, 0)
+        r.feed(0x600 + NODE, up)
+        assert left
+        nxt = can.Message(arbitration_id=0x600 + NODE, data=up, is_extended_id=False,
+                          timestamp=left[0] + 0.0001)
+        with r.slave.lock:
+            r.slave.handle_frame(nxt)
+        assert "AL111" not in r.alarms
+    finally:
+        r.close()
+
+
+def test_sync_resumed_after_timeout_restarts_the_monitoring(rig):
+    """SYNC lost (AL3E3, L20165-20169), then back at the right cycle: the gap is not a SYNC
+    interval, so no AL301 (L20123-20127) follows from it (choice, docs/manual-choices.md)."""
+    ip_rig(rig)
+    for k in range(5):
+        rig.feed(0x80, at_ms=10 * k)
+        rig.run(10)
+    rig.run(100)
+    assert rig.alarms == ("AL3E3",)
+    for k in range(12):
+        rig.feed(0x80, at_ms=200 + 10 * k)
+        rig.run(10)
+    assert rig.alarms == ("AL3E3",)

@@ -45,3 +45,19 @@ def test_malformed_fault_step(tmp_path, step, problem):
     with pytest.raises(PlanFileError, match=problem) as e:
         load_plan(p)
     assert "p.yaml:3" in str(e.value)
+
+
+def test_hil_run_check_refuses_every_fault_plan_on_a_bench_without_faults_allowed(capsys):
+    """`hil run --check` (nothing moves) on the real-bench example: every shipped plan with a
+    `fault:` step is refused, naming the file:line of the step and the bench key."""
+    from hil.cli import main
+    from hil.plan.plan import find_plans
+
+    bench = str(fixture("benches", "example-asda-a3-socketcan.yaml"))
+    with_faults = [p for p in find_plans() if "\n  - fault:" in p.read_text()]
+    assert len(with_faults) >= 8
+    for plan in with_faults:
+        assert main(["run", "--check", "--bench", bench, str(plan)]) == 2
+        err = capsys.readouterr().err
+        assert f"{plan.name}:" in err and "faults_allowed: false" in err, err
+    assert main(["run", "--check", str(with_faults[0])]) == 0  # the virtual bench allows them

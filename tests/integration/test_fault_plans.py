@@ -1,0 +1,49 @@
+"""The fault plans (issue 16) on the in-process virtual bench and on the zenoh subprocess
+bench (`hil drive` as a child process, CAN and DI/DO over zenoh on loopback, RS-485 on a
+pty): every step and every timing verdict (fixtures/timing/fault_*.yaml) must pass."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+
+from hil.paths import fixture
+from hil.plan.bench import load_bench
+from hil.plan.plan import find_plans, load_plan
+from hil.plan.runner import run_plans
+from hil.record import topics as T
+from hil.record.reader import Recording
+
+pytestmark = pytest.mark.integration
+
+FAULT_PLANS = [p for p in find_plans() if p.stem.startswith("fault_")]
+
+
+def _run_all(bench_file, tmp_path):
+    bench = load_bench(bench_file) if bench_file else load_bench()
+    results = run_plans([load_plan(p) for p in FAULT_PLANS], bench, tmp_path,
+                        stream=io.StringIO())
+    for r in results:
+        assert r.passed, (r.plan, [(s.label, s.status, s.message) for s in r.steps
+                                        if s.status != "pass"])
+        counts = Recording.open(r.recording).counts()
+        assert counts.get(T.FAULTS, 0) >= 2, r.plan  # every fault: start and end
+    return results
+
+
+def test_fault_plans_cover_every_reaction_family():
+    names = {p.stem for p in FAULT_PLANS}
+    assert {"fault_heartbeat", "fault_life_guarding", "fault_1029h", "fault_sdo_flood",
+            "fault_duplicate_pdo", "fault_bus_error", "fault_sync_ip", "fault_rs485",
+            "fault_di_bounce"} <= names
+
+
+def test_fault_plans_on_the_virtual_bench(tmp_path):
+    _run_all(None, tmp_path)
+
+
+def test_fault_plans_on_the_zenoh_subprocess_bench(tmp_path):
+    bench_file = fixture("benches", "virtual-zenoh.yaml")
+    assert load_bench(bench_file).process == "subprocess"
+    _run_all(bench_file, tmp_path)
