@@ -1,7 +1,13 @@
 """pytest plugin `hil` (entry point `pytest11`): benches, drives and recordings as fixtures.
 
     pytest -m hil                          # the virtual bench (built in)
-    pytest -m hil --hil-bench bench.yaml   # a real bench
+    pytest -m hil --hil-bench bench.yaml   # a real bench (or HIL_BENCH=bench.yaml)
+
+Plan files as tests: with the ini option `hil_plans = plans` (a directory, relative to the
+rootdir; several may be given) every `*.yaml` plan in it is collected as a test item, marked
+`hil` and with each of its `tags:` as a marker (`pytest -m "hil and brake"`), `-k` selects
+by name. It runs through the same runner as `hil run`; a failing plan shows its failing steps
+and verdicts. Works with pytest-xdist (`-n 2`): each item runs its own virtual bench.
 
 Marker `hil`: the test uses a bench. Fixtures:
 
@@ -19,6 +25,7 @@ Marker `hil`: the test uses a bench. Fixtures:
 
 from __future__ import annotations
 
+import os
 import re
 import warnings
 from collections.abc import Callable, Iterator
@@ -39,8 +46,11 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         action="store",
         default=None,
         metavar="FILE",
-        help="bench file for tests marked `hil` (default: the built-in virtual bench)",
+        help="bench file for tests marked `hil` (default: $HIL_BENCH if set, else the "
+        "built-in virtual bench)",
     )
+    parser.addini("hil_plans", "directories whose *.yaml plan files are collected as tests",
+                  type="paths", default=[])
     group.addoption(
         "--hil-out",
         action="store",
@@ -53,6 +63,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 @pytest.hookimpl(tryfirst=True)
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "hil: runs against a bench (virtual by default)")
+    for d in _plan_dirs(config):  # plan tags are markers: `pytest -m brake` stays strict-clean
+        for tag in sorted(_tags_in(d)):
+            config.addinivalue_line("markers", f"{tag}: plans tagged {tag} (hil_plans)")
     # Per-test properties (the recording path) need the xunit1 JUnit family; keep an
     # explicit `junit_family` setting of the project if it has one.
     with warnings.catch_warnings():  # inicfg: the only way to set a default before junitxml
@@ -61,11 +74,92 @@ def pytest_configure(config: pytest.Config) -> None:
             config.inicfg["junit_family"] = "xunit1"
 
 
+def _bench_option(config: pytest.Config) -> str | None:
+    return config.getoption("--hil-bench") or os.environ.get("HIL_BENCH") or None
+
+
+def _plan_dirs(config: pytest.Config) -> list[Path]:
+    return [Path(p).resolve() for p in config.getini("hil_plans")]
+
+
+def pytest_collect_file(file_path: Path, parent: pytest.Collector) -> pytest.Collector | None:
+    """A `*.yaml` file in a `hil_plans` directory is a plan: one test item."""
+    if file_path.suffix not in (".yaml", ".yml"):
+        return None
+    dirs = _plan_dirs(parent.config)
+    if not any(file_path.resolve().parent == d for d in dirs):
+        return None
+    return PlanFile.from_parent(parent, path=file_path)
+
+
+class PlanFile(pytest.File):
+    """One plan file: a single `PlanItem` named after the plan."""
+
+    def collect(self) -> Iterator[pytest.Item]:
+        from hil.plan.plan import load_plan
+        from hil.plan.yamlio import PlanFileError
+
+        try:
+            plan = load_plan(self.path)
+        except PlanFileError as e:
+            raise self.CollectError(str(e)) from None
+        item = PlanItem.from_parent(self, name=plan.name, plan=plan)
+        item.add_marker("hil")
+        for tag in plan.tags:
+            item.add_marker(tag)
+        yield item
+
+
+class PlanItem(pytest.Item):
+    """Runs one plan on the bench (`--hil-bench` / HIL_BENCH / virtual)."""
+
+    def __init__(self, *, plan: Any, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.plan = plan
+
+    def runtest(self) -> None:
+        from hil.plan.bench import load_bench
+        from hil.plan.runner import run_plan
+
+        bench = load_bench(_bench_option(self.config))
+        result = run_plan(self.plan, bench, _out_dir(self.config))
+        self.user_properties.append(("hil_recording", result.recording))
+        if not result.passed:
+            raise PlanFailed(explain(result))
+
+    def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None
+                     ) -> str:
+        if isinstance(excinfo.value, PlanFailed):
+            return str(excinfo.value)
+        return super().repr_failure(excinfo)
+
+    def reportinfo(self) -> tuple[Path, int, str]:
+        return self.path, 0, f"plan: {self.plan.name}"
+
+
+class PlanFailed(AssertionError):
+    """A plan collected from `hil_plans` did not pass (message: its failing steps)."""
+
+
 def _out_dir(config: pytest.Config) -> Path:
     out = config.getoption("--hil-out") or Path(str(config.rootpath)) / "reports" / "pytest"
     path = Path(out)
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+def _tags_in(directory: Path) -> set[str]:
+    """The `tags:` of the plan files in `directory` (unparsable files are left to collection)."""
+    from hil.plan.plan import load_plan
+    from hil.plan.yamlio import PlanFileError
+
+    tags: set[str] = set()
+    for p in sorted(directory.glob("*.y*ml")):
+        try:
+            tags.update(load_plan(p).tags)
+        except PlanFileError:
+            continue
+    return tags
 
 
 def _safe_name(nodeid: str) -> str:
@@ -77,7 +171,7 @@ def hil_bench(pytestconfig: pytest.Config) -> Any:
     """The bench of this pytest run (`--hil-bench FILE`, default: the virtual bench)."""
     from hil.plan.bench import load_bench
 
-    return load_bench(pytestconfig.getoption("--hil-bench"))
+    return load_bench(_bench_option(pytestconfig))
 
 
 @pytest.fixture

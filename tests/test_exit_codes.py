@@ -71,6 +71,7 @@ def cases(w: dict[str, Path]) -> dict[tuple[str, int], object]:
                                  "--plans", str(plans_dir())]),
         ("run", 1): lambda: hil(["run", "-q", str(d / "fails.yaml"), "--out", str(d / "o1")]),
         ("run", 2): lambda: hil(["run", "no_such_plan"]),
+        ("run", 5): lambda: hil(["run", "--list", "-m", "no_such_tag"]),
         ("drive", 0): drive_stopped_by_sigterm,
         ("drive", 1): lambda: hil(["drive", "--rs485", f"serial:{d}/no_such_tty"]),
         ("drive", 2): lambda: hil(["drive"]),

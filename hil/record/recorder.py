@@ -43,6 +43,9 @@ from hil.record.schemas import SCHEMA_BYTES, schema_for_topic
 from hil.record.sdo_pairing import SdoPairing
 
 log_ = logging.getLogger(__name__)
+# foxglove.LogLevel 1-5 -> logging levels (the same line also goes to Python logging)
+_STD_LEVELS = {1: logging.DEBUG, 2: logging.INFO, 3: logging.WARNING, 4: logging.ERROR,
+               5: logging.CRITICAL}
 
 #: Values of the `publish_time_source` channel metadata key.
 SOURCES = ("model", "adapter", "gateway", "harness")
@@ -309,6 +312,7 @@ class Recorder:
             "line": int(line),
         }
         self._put(topics.LOG, "foxglove.Log", "harness", dumps(payload), t, None)
+        logging.getLogger(name or "hil").log(_STD_LEVELS[lvl], "%s", message)  # --log-level
 
     def verdict(self, data: Any = None, /, *, t: int | None = None, **fields: Any) -> None:
         """One judged timing constraint: a dict/dataclass and/or fields; needs `status`

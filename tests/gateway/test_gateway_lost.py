@@ -21,8 +21,9 @@ import time
 import pytest
 
 from hil.plan.bench import load_bench
+from hil.plan.listeners import StepLines
 from hil.plan.plan import loads_plan
-from hil.plan.runner import Progress, run_plan
+from hil.plan.runner import run_plan
 from hil.virtual.world import CTL
 from tests.children import ChildProcess, children
 from tests.gateway.conftest import bench_yaml
@@ -102,7 +103,7 @@ safe_state:
     t0 = time.monotonic()
     try:
         result = run_plan(loads_plan(PLAN), load_bench(runner), tmp_path / "out",
-                          progress=Progress(stream))
+                          listeners=[StepLines(stream)])
     finally:
         if how == "pause":
             os.kill(gw.proc.pid, signal.SIGCONT)

@@ -1,0 +1,100 @@
+"""Plan selection for `hil run`: -k / -m expressions, globs, --list, HIL_BENCH (issue 18)."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from hil.paths import fixture
+from hil.plan.plan import find_plans
+from hil.plan.select import Expr, ExprError, matches, select
+from hil.plan.yamlio import PlanFileError
+
+
+def P(name, tags=(), path=None):
+    return SimpleNamespace(name=name, tags=list(tags), path=path or f"plans/{name}.yaml")
+
+
+@pytest.mark.parametrize(("expr", "names", "want"), [
+    ("brake", {"servo_on_off_brake"}, True),
+    ("BRAKE", {"servo_on_off_brake"}, True),  # -k is case-insensitive, like pytest
+    ("brake and not sto", {"sto_both", "brake"}, False),
+    ("brake and not sto", {"servo_brake_settings"}, True),
+    ("(pr or homing) and not capture", {"capture_pr50", "pr"}, False),
+    ("(pr or homing) and not capture", {"homing_limits"}, True),
+    ("not not pr", {"pr_jump_loop"}, True),
+])
+def test_keyword_expressions(expr, names, want):
+    assert matches(expr, names) is want
+
+
+def test_marker_expressions_match_whole_tags_or_globs():
+    assert not Expr.parse("bra").match(["brake"], exact=True)  # -m: a tag, not a substring
+    assert Expr.parse("brake or sto").match(["sto"], exact=True)
+    assert Expr.parse("fault_*").match(["fault_can"], exact=True)
+
+
+@pytest.mark.parametrize(("expr", "why"), [
+    ("", "empty expression"), ("brake and", "ends too early"), ("(brake", "missing ')'"),
+    ("brake sto", "unexpected 'sto'"), ("and brake", "unexpected 'and'"),
+    ("brake or )", "unexpected ')'"), ("a;b", "unexpected 'a;b'"),
+])
+def test_malformed_expressions_say_what_is_wrong(expr, why):
+    with pytest.raises(ExprError, match=re.escape(why)):
+        Expr.parse(expr)
+
+
+def test_select_applies_k_and_m_together():
+    plans = [P("servo_on_off_brake", ["brake"]), P("sto_both", ["sto", "brake"]),
+             P("pr_jump_loop", ["pr", "motion"])]
+    assert [p.name for p in select(plans, marker="brake")] == ["servo_on_off_brake", "sto_both"]
+    assert [p.name for p in select(plans, "not sto", "brake")] == ["servo_on_off_brake"]
+    assert [p.name for p in select(plans, "motion")] == ["pr_jump_loop"]  # -k sees tags too
+
+
+def test_globs_pick_plans_by_name(tmp_path):
+    for n in ("pr_a", "pr_b", "sto_c"):
+        (tmp_path / f"{n}.yaml").write_text("name: x\nsteps:\n  - wait: 1ms\n")
+    assert [p.stem for p in find_plans(["pr_*"], tmp_path)] == ["pr_a", "pr_b"]
+    assert [p.stem for p in find_plans(["pr_b", "pr_*"], tmp_path)] == ["pr_b", "pr_a"]
+    with pytest.raises(PlanFileError, match="no plan matches 'zz_\\*'"):
+        find_plans(["zz_*"], tmp_path)
+
+
+def _hil(*args: str, env: dict | None = None, cwd: Path | None = None
+         ) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "hil.cli", "run", *args], capture_output=True,
+                          text=True, timeout=120, env={**os.environ, **(env or {})}, cwd=cwd)
+
+
+def test_list_shows_selected_plans_with_tags_and_runs_nothing(tmp_path):
+    r = _hil("--list", "-m", "sto", "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    names = [line.split()[0] for line in r.stdout.splitlines()]
+    assert names == ["sto_both", "sto_short_dropout", "sto_single_channel"]
+    assert "sto, safety" in r.stdout
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_expression_is_a_usage_error_and_empty_selection_exit_5():
+    r = _hil("--list", "-k", "brake and")
+    assert r.returncode == 2 and "-k/-m: 'brake and': expression ends too early" in r.stderr
+    r = _hil("--list", "-m", "no_such_tag")
+    assert r.returncode == 5 and "none selected by -k/-m" in r.stderr
+
+
+def test_hil_bench_environment_variable_chooses_the_bench(tmp_path):
+    bench = tmp_path / "mine.yaml"
+    bench.write_text(fixture("benches", "virtual.yaml").read_text().replace(
+        "name: virtual", "name: from_env", 1))
+    r = _hil("--check", "servo_on_off_brake", env={"HIL_BENCH": str(bench)})
+    assert r.returncode == 0, r.stderr
+    assert f"bench: {bench} (from $HIL_BENCH)" in r.stderr
+    r = _hil("--check", "servo_on_off_brake", env={"HIL_BENCH": str(tmp_path / "nope.yaml")})
+    assert r.returncode == 2 and "nope.yaml" in r.stderr

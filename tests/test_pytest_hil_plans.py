@@ -1,0 +1,73 @@
+"""`pytest -m hil` in a user's own project: plan files from the `hil_plans` directory are
+collected as tests (issue 18 item 1), with tags as markers, and run under pytest-xdist."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PASSING = """name: brake_ok
+tags: [brake, quick]
+steps:
+  - di: {SON: on}
+  - wait_until: {do: {BRKR: on}, timeout: 2s}
+  - di: {SON: off}
+"""
+FAILING = """name: never_on
+tags: [quick]
+steps:
+  - expect: {do: {BRKR: on}}
+"""
+
+
+def _project(tmp_path: Path) -> Path:
+    (tmp_path / "plans").mkdir()
+    (tmp_path / "plans" / "brake_ok.yaml").write_text(PASSING)
+    (tmp_path / "plans" / "never_on.yaml").write_text(FAILING)
+    (tmp_path / "pytest.ini").write_text("[pytest]\nhil_plans = plans\n"
+                                         "addopts = -p no:cacheprovider --strict-markers\n")
+    return tmp_path
+
+
+def _pytest(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pytest", "-q", "--hil-out", str(cwd / "out"),
+                           *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.integration
+def test_plans_are_collected_run_and_explained(tmp_path):
+    proj = _project(tmp_path)
+    r = _pytest(proj, "-m", "hil")
+    assert "1 failed, 1 passed" in r.stdout, r.stdout + r.stderr
+    assert "plan never_on: fail" in r.stdout  # the runner's explanation, not a traceback
+    assert "expected DO BRKR on, saw BRKR off" in r.stdout
+    assert (proj / "out" / "brake_ok.mcap").exists() and (proj / "out" / "never_on.mcap").exists()
+
+
+@pytest.mark.integration
+def test_tags_are_markers_and_k_selects_by_name(tmp_path):
+    proj = _project(tmp_path)
+    r = _pytest(proj, "-m", "brake")
+    assert "1 passed, 1 deselected" in r.stdout, r.stdout + r.stderr
+    r = _pytest(proj, "-k", "never", "--collect-only")
+    assert "never_on" in r.stdout and "brake_ok" not in r.stdout
+
+
+@pytest.mark.integration
+def test_a_malformed_plan_is_a_collection_error_naming_file_and_line(tmp_path):
+    proj = _project(tmp_path)
+    (proj / "plans" / "broken.yaml").write_text("name: b\nsteps:\n  - frobnicate: 1\n")
+    r = _pytest(proj, "--collect-only")
+    assert r.returncode != 0
+    assert "broken.yaml:3: steps[0].frobnicate: unknown step kind" in r.stdout + r.stderr
+
+
+@pytest.mark.integration
+def test_xdist_runs_plans_in_parallel_workers(tmp_path):
+    proj = _project(tmp_path)
+    r = _pytest(proj, "-n", "2", "-m", "hil")
+    assert "1 failed, 1 passed" in r.stdout, r.stdout + r.stderr
+    assert "[gw" in r.stdout or "2 workers" in r.stdout
