@@ -11,6 +11,8 @@ import importlib
 import os
 import sys
 
+from hil import __version__
+
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("hil.plan.cli", "run plans on a bench (default: every shipped plan, virtual bench)"),
@@ -34,8 +36,6 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         description="Hardware-in-the-loop test harness for servo drives "
         "(real benches or the built-in virtual Delta ASDA-A3).",
     )
-    from hil import __version__
-
     parser.add_argument("--version", action="version", version=f"hil {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     wanted = None

@@ -25,6 +25,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import serial
+
 from hil.profile.errors import UnknownParameter
 from hil.profile.params import ParamTable
 from hil.protocol import modbus as mb
@@ -139,8 +141,6 @@ class DeltaModbus:
     # ------------------------------------------------------------------ port
 
     def _open(self, path: str) -> Any:
-        import serial
-
         fmt = self.char_format
         parity = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD}
         return serial.Serial(

@@ -13,6 +13,10 @@ import threading
 import time
 from pathlib import Path
 
+from hil.gateway.gateway import Gateway, GatewayConfig
+from hil.gateway.tls import GatewaySecurityError, TlsFiles
+from hil.plan.bench import PlanFileError, load_bench
+
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 
 
@@ -49,10 +53,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def build(args: argparse.Namespace):
     """The Gateway an argument set stands for (not started); raises ValueError on bad input."""
-    from hil.gateway.gateway import Gateway, GatewayConfig
-    from hil.gateway.tls import GatewaySecurityError, TlsFiles
-    from hil.plan.bench import load_bench
-
     bench = load_bench(args.bench)
     tls_args = (args.tls_ca, args.tls_cert, args.tls_key)
     if any(tls_args) and not all(tls_args):
@@ -74,8 +74,6 @@ def build(args: argparse.Namespace):
 
 
 def main(args: argparse.Namespace) -> int:
-    from hil.plan.bench import PlanFileError
-
     try:
         gw = build(args)
     except (ValueError, PlanFileError, OSError) as e:

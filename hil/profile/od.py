@@ -8,7 +8,9 @@ size, rw (ro for read-only ★ parameters), PDO-mappable (L18141-L18156).
 from __future__ import annotations
 
 import csv
+import io
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -301,9 +303,7 @@ def to_canopen(od: ObjectDictionary | None = None) -> Any:
 
 def generate_eds(od: ObjectDictionary | None = None) -> str:
     """The EDS text, written by canopen's `export_od` (deterministic: fixed file info)."""
-    import io
-
-    from canopen.objectdictionary import eds
+    from canopen.objectdictionary import eds  # lazy: the model must not load canopen
 
     buf = io.StringIO()
     file_info = {
@@ -322,6 +322,4 @@ def write_eds(path: Path = EDS_PATH) -> Path:
 
 
 if __name__ == "__main__":
-    import sys
-
     print(write_eds(Path(sys.argv[1]) if len(sys.argv) > 1 else EDS_PATH))

@@ -9,6 +9,11 @@ import argparse
 import sys
 from pathlib import Path
 
+from hil.record.reader import RecordingError
+from hil.report.html import write_html
+from hil.report.index import write_index
+from hil.report.junit import write_junit
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", nargs="+", help="MCAP recording(s) of plan runs")
@@ -20,10 +25,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from hil.record.reader import RecordingError
-    from hil.report.html import write_html
-    from hil.report.junit import write_junit
-
     if args.output and len(args.recording) > 1:
         print("hil report: -o takes one recording", file=sys.stderr)
         return 2
@@ -34,8 +35,6 @@ def main(args: argparse.Namespace) -> int:
         if args.junit:
             print(write_junit(args.recording, Path(args.junit)))
         if args.index:
-            from hil.report.index import write_index
-
             print(write_index(args.recording, args.index))
     except RecordingError as e:  # not a readable recording: bad input, like every command
         print(f"hil report: {e}", file=sys.stderr)

@@ -10,6 +10,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from hil.record.reader import RecordingError
+from hil.report.diff import write_diff
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("a", metavar="A.mcap", help="reference recording")
@@ -19,9 +22,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from hil.record.reader import RecordingError
-    from hil.report.diff import write_diff
-
     out = Path(args.output) if args.output else Path(args.b).with_suffix(".diff.html")
     try:
         d, html_out, json_out = write_diff(args.a, args.b, out, args.json)

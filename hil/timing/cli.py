@@ -18,7 +18,23 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hil.timing.checker import Verdict, check, constants_for, missing_data, summary
+from hil.record.reader import RecordingError
+from hil.timing.checker import (
+    Verdict,
+    check,
+    constants_for,
+    missing_data,
+    occurrences_since,
+    summary,
+)
+from hil.timing.render import svg
+from hil.timing.source import (
+    RecordingSource,
+    infer_places,
+    recorded_checks,
+    recorded_constants,
+    recorded_specs,
+)
 from hil.timing.spec import Spec, SpecError, load_spec, shipped_specs
 
 
@@ -144,9 +160,6 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
             consts: dict, res: dict) -> int:
     """Re-judge every `check_timing` step of a plan recording on what the run had seen by then,
     with the step's binding, parameters, constants and `since` (the live verdicts, offline)."""
-    from hil.timing.checker import occurrences_since
-    from hil.timing.source import RecordingSource
-
     verdicts: list[Verdict] = []
     cache: dict[int, RecordingSource] = {}
     for run in runs:
@@ -182,21 +195,11 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: {args.recording}: no such file", file=sys.stderr)
         return 2
     try:
-        from hil.timing.source import (
-            RecordingSource,
-            infer_places,
-            recorded_checks,
-            recorded_constants,
-            recorded_specs,
-        )
-
         source = RecordingSource(args.recording, time=args.time)
     except ImportError as e:
         print(f"hil check: cannot read recordings ({e})", file=sys.stderr)
         return 2
     except Exception as e:
-        from hil.record.reader import RecordingError
-
         why = str(e) if isinstance(e, RecordingError) else f"{args.recording}: cannot read: {e}"
         print(f"hil check: {why}", file=sys.stderr)
         return EXIT_USAGE
@@ -226,8 +229,6 @@ def main(args: argparse.Namespace) -> int:
         if args.spec and not _judged(vs):  # a spec the user asked for must judge something
             incomplete.append(_why_nothing(spec, vs, source, bind))
         if args.svg:
-            from hil.timing.render import svg
-
             out = Path(args.svg)
             out.mkdir(parents=True, exist_ok=True)
             (out / f"{spec.id}.svg").write_text(svg(spec, source, vs, params, bind),

@@ -31,6 +31,7 @@ from collections.abc import Callable, Mapping
 from typing import Literal
 
 import zenoh
+from pymodbus.client import ModbusTcpClient
 
 from hil.record.tap import Tap
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
@@ -379,8 +380,6 @@ class ModbusTcpDio(DioPort):
         if role != "harness":
             raise TransportUrlError(url, "modbus-tcp DI/DO is a remote I/O module: only "
                                          "role='harness' can use it")
-        from pymodbus.client import ModbusTcpClient
-
         self.map = parse_mapping(url, mapping)
         self.unit = u.int_param("unit", 1, 0, 255)
         self.poll_s = u.float_param("poll_ms", 5.0, 0.5, 10_000) / 1000

@@ -16,6 +16,8 @@ import re
 from dataclasses import dataclass, field
 from typing import Literal
 
+from can.interfaces import VALID_INTERFACES
+
 Kind = Literal["can", "serial", "dio"]
 
 # Schemes every kind accepts besides python-can interfaces (CAN only).
@@ -252,8 +254,6 @@ def parse_url(url: str, kind: Kind) -> TransportUrl:
         if kind != "can" or scheme in ("pty", "modbus-tcp"):
             raise TransportUrlError(url, f"scheme {scheme!r} is not a {kind} transport "
                                          f"(use one of {_schemes_text(kind)})")
-        from can.interfaces import VALID_INTERFACES
-
         if scheme not in VALID_INTERFACES:
             raise TransportUrlError(url, f"{scheme!r} is neither {', '.join(allowed)} "
                                          "nor a python-can interface (can.VALID_INTERFACES)")

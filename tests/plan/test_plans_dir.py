@@ -17,8 +17,9 @@ from hil.plan.plansdir import checkout_root
 PLAN = "edited_brake"  # a plan that exists only in the user's checkout
 
 
-def hil_run(cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hil.cli", "run", "-q", *args], cwd=cwd,
+def hil_run(cwd: Path, *args: str, quiet: bool = True) -> subprocess.CompletedProcess:
+    flags = ["-q"] if quiet else []  # -q hides the "plans: <dir> (<why>)" line
+    return subprocess.run([sys.executable, "-m", "hil.cli", "run", *flags, *args], cwd=cwd,
                           capture_output=True, text=True, timeout=120)
 
 
@@ -45,7 +46,7 @@ def test_checkout_root_needs_project_name_hil_and_plans(checkout, tmp_path):
 
 def test_inside_a_checkout_runs_its_plans(checkout, tmp_path):
     out = tmp_path / "out"
-    res = hil_run(checkout / "docs", PLAN, "--out", str(out))
+    res = hil_run(checkout / "docs", PLAN, "--out", str(out), quiet=False)
     assert res.returncode == 0, res.stdout + res.stderr
     assert f"plans: {checkout.resolve() / 'plans'} (checkout {checkout.resolve()})" in res.stderr
     assert (out / f"{PLAN}.mcap").is_file()
@@ -54,13 +55,13 @@ def test_inside_a_checkout_runs_its_plans(checkout, tmp_path):
 def test_outside_a_checkout_runs_the_installed_plans(checkout, tmp_path):
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    res = hil_run(elsewhere, PLAN, "--out", str(tmp_path / "out"))
+    res = hil_run(elsewhere, PLAN, "--out", str(tmp_path / "out"), quiet=False)
     assert res.returncode == 2
     assert f"plans: {plans_dir()} (installed)" in res.stderr
     assert f"{PLAN}:0: (plan): no such plan file, nor a plan of that name in" in res.stderr
     # --plans DIR: the user's directory from anywhere
     res = hil_run(elsewhere, PLAN, "--plans", str(checkout / "plans"), "--out",
-                  str(tmp_path / "out"))
+                  str(tmp_path / "out"), quiet=False)
     assert res.returncode == 0, res.stdout + res.stderr
     assert f"plans: {checkout.resolve() / 'plans'} (--plans)" in res.stderr
 
