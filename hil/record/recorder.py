@@ -299,8 +299,13 @@ class Recorder:
         file: str = "",
         line: int = 0,
         t: int | None = None,
+        forward: bool = True,
     ) -> None:
-        """A harness log line in the foxglove.Log shape (level 1-5 or a logging level)."""
+        """A harness log line in the foxglove.Log shape (level 1-5 or a logging level).
+
+        The line also goes to Python logging (what `--log-level` shows) unless `forward` is
+        false: `LogHandler` passes false, as the record came from Python logging already.
+        """
         lvl = self._level(level)
         t = time.time_ns() if t is None else t
         payload = {
@@ -312,7 +317,9 @@ class Recorder:
             "line": int(line),
         }
         self._put(topics.LOG, "foxglove.Log", "harness", dumps(payload), t, None)
-        logging.getLogger(name or "hil").log(_STD_LEVELS[lvl], "%s", message)  # --log-level
+        if forward:  # marked, so a LogHandler on that logger does not record it twice
+            logging.getLogger(name or "hil").log(_STD_LEVELS[lvl], "%s", message,
+                                                 extra={"hil_recorded": True})
 
     def verdict(self, data: Any = None, /, *, t: int | None = None, **fields: Any) -> None:
         """One judged timing constraint: a dict/dataclass and/or fields; needs `status`
@@ -758,6 +765,8 @@ class LogHandler(logging.Handler):
         self.recorder = recorder
 
     def emit(self, record: logging.LogRecord) -> None:
+        if getattr(record, "hil_recorded", False):  # it came from Recorder.log: on /log already
+            return
         try:
             self.recorder.log(
                 record.levelno,
@@ -766,6 +775,7 @@ class LogHandler(logging.Handler):
                 file=record.pathname,
                 line=record.lineno,
                 t=int(record.created * 1e9),
+                forward=False,  # the record is already in Python logging: no loop
             )
         except Exception:
             self.handleError(record)

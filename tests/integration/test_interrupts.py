@@ -45,7 +45,7 @@ def _start(tmp_path: Path, plan_text: str, *extra: str) -> tuple[subprocess.Pope
     plan.write_text(plan_text)
     out = tmp_path / "out"
     hil = str(Path(sys.executable).with_name("hil"))
-    p = subprocess.Popen([hil, "run", str(plan), "--out", str(out), *extra],
+    p = subprocess.Popen([hil, "run", "-v", str(plan), "--out", str(out), *extra],  # -v: step lines
                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                          env=dict(os.environ, PYTHONUNBUFFERED="1"))
     return p, out / f"{plan.stem}.mcap"

@@ -288,6 +288,25 @@ def test_log_handler_and_levels(tmp_path):
     assert levels == [(4, "boom 3"), (1, "fine"), (5, "x"), (1, "y")]
 
 
+def test_log_handler_on_the_forwarding_logger_records_each_line_once(tmp_path):
+    """Recorder.log forwards to Python logging; a LogHandler there must neither loop nor
+    record the line a second time."""
+    import logging
+
+    p = tmp_path / "log.mcap"
+    lg = logging.getLogger("hil")
+    with Recorder(p) as rec:
+        h = LogHandler(rec, logging.DEBUG)
+        lg.addHandler(h)
+        try:
+            rec.log(logging.WARNING, "once")
+            logging.getLogger("hil.child").warning("from logging")
+        finally:
+            lg.removeHandler(h)
+    messages = [o["message"] for *_x, o in Recording.open(p).messages("/log")]
+    assert messages == ["once", "from logging"]
+
+
 def test_flush_makes_data_readable_before_close(tmp_path):
     p = tmp_path / "live.mcap"
     rec = Recorder(p)
