@@ -5,6 +5,7 @@
     - produce: {guard: 20ms}                  #   (node guarding RTR to 700h + node)
     - sdo: {"1016:1": 0x007F0064, "1006": 10000}   # communication objects, SDO download
     - fault: {can: drop, match: {function: sync}, for: 200ms}   # drop|delay|corrupt|duplicate
+    - fault: {can: drop, match: {function: sync}, every: 2}     # every 2nd frame (rate: random)
     - fault: {can: sdo_flood, count: 3}        # SDO requests back to back (AL111)
     - fault: {can: duplicate_pdo, cob_id: 0x205, data: "060000"}   # (AL112)
     - fault: {can: bus_error, count: 17}       # error frames (AL185)
@@ -101,10 +102,16 @@ def p_fault(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         if out["duration"] <= 0:
             raise v.err(m.kline("for"), join(where, "for"), "must be > 0")
     if t == "can" and kind in CAN_ACTIONS:
-        v.keys(m, {"can", "match", "for", "rate", "delay", "bus"}, where)
+        v.keys(m, {"can", "match", "for", "rate", "every", "delay", "bus"}, where)
         out["match"] = (_match(v, m["match"], m.kline("match"), join(where, "match"))
                         if "match" in m else {"cob_ids": [], "ranges": [], "functions": []})
         out["rate"] = _rate(v, m, where)
+        out["every"] = 1
+        if "every" in m:
+            out["every"] = _int(v, m["every"], m.kline("every"), join(where, "every"), 1, 1000)
+            if "rate" in m:
+                raise v.err(m.kline("every"), join(where, "every"),
+                            "every (each n-th frame) or rate (a random fraction), not both")
         out["delay"] = v.duration(m, "delay", where, 10_000_000 if kind == "delay" else 0)
     elif t == "can" and kind in CAN_BURSTS:
         v.keys(m, {"can", "count", "cob_id", "data", "bus"}, where)
@@ -235,7 +242,8 @@ def x_fault(ctx: Any, s: Any, d: Any) -> str:
             mt = a["match"]
             match = CanMatch(frozenset(mt["cob_ids"]), tuple(mt["ranges"]),
                              tuple(mt["functions"]))
-            bus.inject(kind, match=match, duration_ns=dur, rate=a["rate"], delay_ns=a["delay"])
+            bus.inject(kind, match=match, duration_ns=dur, rate=a["rate"], delay_ns=a["delay"],
+                       every=a.get("every", 1))
             return f"{kind} {match.describe() or 'every frame'} on can:{bus.name}"
         node = _node(d)
         if kind == "sdo_flood":  # 1000h uploads back to back: well within 1 ms

@@ -107,9 +107,14 @@ class Fault:
     rate: float = 1.0
     params: dict[str, Any] = field(default_factory=dict)
     match: CanMatch | None = None
+    every: int = 1  # hit only every n-th matching frame (1st..n-1th pass): deterministic
     id: int = field(default_factory=lambda: next(_ids))
+    seen: int = 0  # matching frames so far
 
     def hits(self, rng: random.Random) -> bool:
+        if self.every > 1:
+            self.seen += 1
+            return self.seen % self.every == 0
         return self.rate >= 1.0 or rng.random() < self.rate
 
 
@@ -203,15 +208,21 @@ class FaultyCanBus(can.BusABC):
     # -- injection ---------------------------------------------------------------------
     def inject(self, action: str, *, match: CanMatch | None = None,
                duration_ns: int | None = None, rate: float = 1.0,
-               delay_ns: int = 0) -> Fault:
-        """Start `action` (drop | delay | corrupt | duplicate) on matching frames we send."""
+               delay_ns: int = 0, every: int = 1) -> Fault:
+        """Start `action` (drop | delay | corrupt | duplicate) on matching frames we send:
+        each with probability `rate`, or exactly every `every`-th one (e.g. 2: every other
+        SYNC dropped, the cycle doubled without a timeout; AL301)."""
         if action not in CAN_ACTIONS:
             raise ValueError(f"CAN fault {action!r}: one of {', '.join(CAN_ACTIONS)}")
         if not 0.0 < rate <= 1.0:
             raise ValueError(f"rate {rate}: a fraction in (0, 1]")
-        params = {"delay_ms": delay_ns / 1e6} if action == "delay" else {}
+        if every < 1 or (every > 1 and rate < 1.0):
+            raise ValueError(f"every {every}: an integer >= 1, not with a rate")
+        params: dict[str, Any] = {"every": every}  # recorded: specs tell the faults apart
+        if action == "delay":
+            params["delay_ms"] = delay_ns / 1e6
         f = Fault(action, self.faults.transport, rate=rate, params=params,
-                  match=match or CanMatch())
+                  match=match or CanMatch(), every=every)
         return self.faults.start(f, duration_ns)
 
     def burst(self, kind: str, frames: Iterable[can.Message], **detail: Any) -> int:

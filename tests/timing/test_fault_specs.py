@@ -4,7 +4,8 @@ Each scenario runs the model behind its CANopen / Modbus faces on the injected c
 (`fault_rig.FaultRig`): the harness's own traffic goes through the real fault layer, whose
 /faults records carry model time, and the checker reads the MCAP file back like any run.
 Lines: AL180 L17097-17126 / L20021-20025, AL111 L19933-19937, AL112 L19941-19945,
-AL185 L20027-20031, AL3E3 L20165-20169, AL020 L10571-10578 / L19598-19602, EMCY L17061-17069.
+AL185 L20027-20031, AL3E3 L20165-20169, AL3E2 L20159-20163, AL301 L20123-20127,
+AL020 L10571-10578 / L19598-19602, EMCY L17061-17069.
 """
 
 from __future__ import annotations
@@ -107,6 +108,15 @@ def sync_lost(rig: FaultRig) -> None:
     rig.run(30)
     rig.stop(f)
     rig.run(100)
+    rig.sdo_write(0x6040, 0, 0x8F, 2)  # 6040h reset clears AL3E2 (L20163)
+    rig.sdo_write(0x6040, 0, 0x0F, 2)
+    rig.run(200)
+    assert rig.alarms == ()
+    # every 2nd SYNC dropped: a 40 ms cycle, no 60 ms gap: AL301, not AL3E3 (L20123-20127)
+    f = rig.bus.inject("drop", match=CanMatch(functions=("sync",)), every=2)
+    rig.run(200)
+    rig.stop(f)
+    rig.run(300)
 
 
 def master_silent(rig: FaultRig) -> None:
@@ -160,7 +170,7 @@ CASES = {
     "fault_bus_error": (bus_error, {"dev_bus_error_limit": 200},
                         "AL185 within one scan", "AL185"),
     "fault_sync_ip": (sync_lost, {"dev_sync_timeout_extra_ms": 40},
-                      "AL3E3 after the SYNC timeout", "AL3E2"),
+                      "AL3E3 after the SYNC timeout", "AL301"),
     "fault_rs485": (master_silent, {"dev_comm_timeout_extra_ms": 50},
                     "AL020 after the P3.004", "AL020"),
 }
@@ -222,6 +232,19 @@ def test_sync_ip_early_sync_rule_fails_without_al3e2(tmp_path):
         path = rig.close()
     vs = verdicts(path, "fault_sync_ip")
     assert [v.status for v in vs if "AL3E2" in v.constraint] == ["fail"], vs
+
+
+def test_sync_ip_cycle_rule_fails_without_al301(tmp_path):
+    """The AL301 rule of fault_sync_ip: judged (pass) with the family above; a drive that
+    does not check the SYNC cycle against 1006h (dev_ignore_sync_cycle) fails it."""
+    rig = FaultRig(tmp_path / "run.mcap", ModelOptions(dev_ignore_sync_cycle=True))
+    try:
+        sync_lost(rig)
+    finally:
+        path = rig.close()
+    vs = verdicts(path, "fault_sync_ip")
+    assert [v.status for v in vs if v.constraint.startswith("AL301")] == ["fail"], vs
+    assert "AL301" not in rig.alarms
 
 
 def master_garbled(rig: FaultRig) -> None:
