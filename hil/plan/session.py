@@ -23,7 +23,7 @@ from hil.plan.bench import CIA402_TIMEOUTS, Bench, DriveSpec
 from hil.profile.params import parse_name
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
-from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial
+from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial, fault_ids
 from hil.transport.serial_line import open_serial
 
 
@@ -221,6 +221,8 @@ def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
         raise BenchError(f"bench {gw.lab}/{gw.bench}: gateway not reachable at "
                          f"{', '.join(gw.connect)}: {e}") from e
     s._closers.insert(0, s.lease.release)  # released last, after every transport closed
+    s.lease.on_fault = _link_fault_recorder(s.recorder, f"zenoh:{gw.lab}/{gw.bench}",
+                                            ",".join(gw.connect))
     s.recorder.log("info", f"lease of {gw.lab}/{gw.bench} taken as {s.lease.holder}",
                    name="hil.gateway")
     out = dict(urls)
@@ -237,6 +239,18 @@ def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
         else:
             out[key] = s.lease.dio_url(name)
     return out
+
+
+def _link_fault_recorder(rec: Any, transport: str, target: str) -> Callable[..., None]:
+    """Lease.on_fault -> the /faults channel: a lost gateway link (or a lease the gateway
+    ended) is a fault on the wire like an injected one, with its start and its end."""
+    fault_id = next(fault_ids)
+
+    def record(kind: str, active: bool, t_ns: int, reason: str) -> None:
+        rec.fault(kind, transport, active, fault_id, t=t_ns, target=target, reason=reason)
+        if active:
+            rec.log("error", f"{transport}: {reason}", name="hil.gateway")
+    return record
 
 
 def _open_harness(s: Session, urls: dict[str, str]) -> None:

@@ -46,7 +46,7 @@ _FUNCTION_SETS: dict[str, tuple[tuple[int, int], ...]] = {
 }
 SERIAL_FAULTS = ("crc", "partial", "split", "late", "noise", "silence")
 DIO_FAULTS = ("bounce", "stuck")
-_ids = itertools.count(1)
+fault_ids = itertools.count(1)  # /faults ids, unique in the process
 
 
 class FaultSink(Protocol):
@@ -108,7 +108,7 @@ class Fault:
     params: dict[str, Any] = field(default_factory=dict)
     match: CanMatch | None = None
     every: int = 1  # hit only every n-th matching frame (1st..n-1th pass): deterministic
-    id: int = field(default_factory=lambda: next(_ids))
+    id: int = field(default_factory=lambda: next(fault_ids))
     seen: int = 0  # matching frames so far
 
     def hits(self, rng: random.Random) -> bool:
