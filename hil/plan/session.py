@@ -17,7 +17,12 @@ import can
 import canopen
 
 from hil.drivers.cia402 import Cia402Driver, SdoError
-from hil.drivers.delta_modbus import DeltaModbus, ModbusExceptionError
+from hil.drivers.delta_modbus import (
+    DeltaModbus,
+    ModbusExceptionError,
+    ModbusReplyError,
+    ModbusTimeoutError,
+)
 from hil.gateway.client import LeaseRefused, acquire
 from hil.plan.bench import CIA402_TIMEOUTS, Bench, DriveSpec
 from hil.profile.params import parse_name
@@ -102,6 +107,21 @@ def refusal_code(exc: BaseException) -> int | None:
         return int(exc.code)
     if isinstance(exc, SdoError) and exc.abort_code is not None:
         return int(exc.abort_code)
+    return None
+
+
+# What the harness itself found wrong on the line (`read: {..., expect_error: timeout}`):
+# no (complete) reply in time, or a reply that is no valid answer (bad CRC, wrong station
+# or function); comm_error = either. Never a value.
+LINE_ERRORS = ("timeout", "bad_reply", "comm_error")
+
+
+def line_error(exc: BaseException) -> str | None:
+    """"timeout" / "bad_reply" for the harness master's own line errors, else None."""
+    if isinstance(exc, ModbusTimeoutError):
+        return "timeout"
+    if isinstance(exc, ModbusReplyError):
+        return "bad_reply"
     return None
 
 
