@@ -146,12 +146,15 @@ class Session:
         self.fault_serial: dict[str, Any] = {}
         self.fault_dio: dict[str, Any] = {}
 
-    def stop_faults(self) -> None:
-        """End every injected fault now (before a safe-state action needs the wire)."""
-        for layer in (*self.fault_can.values(), *self.fault_serial.values(),
-                      *self.fault_dio.values()):
+    def stop_faults(self, restore: bool = True) -> None:
+        """End every injected fault now (`fault: off`; before a safe-state action needs the
+        wire, with restore=False: a freed stuck DI keeps its level, no last command replayed)."""
+        for layer in (*self.fault_can.values(), *self.fault_serial.values()):
             with contextlib.suppress(Exception):
                 layer.stop_all()
+        for dio in self.fault_dio.values():
+            with contextlib.suppress(Exception):
+                dio.stop_all(restore=restore)
 
     def check_lease(self) -> None:
         """Raise BenchError when the gateway lease was lost (the gateway made the bench safe)."""

@@ -457,6 +457,7 @@ class FaultyDio:
         self.port = port
         self.faults = _Faults(f"dio:{name}", sink, seed)
         self._wanted: dict[str, bool] = {}  # line -> the level the harness set last
+        self._restore = True  # a stuck line freed goes to _wanted (not on the safe path)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.port, name)
@@ -468,14 +469,20 @@ class FaultyDio:
         f = Fault(kind, self.faults.transport, params={"line": line, **params})
         if kind == "stuck":
             self._wanted.setdefault(line, bool(self.port.get(line)))
-            f.on_end = lambda: self.port.set(line, self._wanted[line])
+            f.on_end = lambda: self._restore and self.port.set(line, self._wanted[line])
         self.faults.start(f, duration_ns)
         if kind == "stuck":
             self.port.set(line, bool(params.get("level", False)))
         return f
 
-    def stop_all(self) -> None:
-        self.faults.stop_all()
+    def stop_all(self, restore: bool = True) -> None:
+        """End every fault; restore=False (the safe-state path): a stuck line keeps its
+        level rather than going to the level the harness set last."""
+        self._restore = restore
+        try:
+            self.faults.stop_all()
+        finally:
+            self._restore = True
 
     def set(self, line: str, level: bool, *args: Any, **kw: Any) -> None:
         self._wanted[line] = bool(level)

@@ -264,3 +264,14 @@ def test_stuck_line_holds_then_goes_to_the_harness_level():
     f = dio.inject("stuck", "DI3", level=True, duration_ns=20 * MS)  # never set: back to open
     time.sleep(0.1)
     assert port.sets[-2:] == [("DI3", True), ("DI3", False)]
+
+
+def test_stuck_line_is_not_replayed_on_the_safe_state_path():
+    """The safe state ends faults with restore=False: a SON stuck open is not closed again
+    just before the safe state (which then sets every line itself)."""
+    port = Port()
+    dio = FaultyDio(port, "drive1", sink=Sink())
+    dio.inject("stuck", "DI1", level=False)
+    dio.set("DI1", True)
+    dio.stop_all(restore=False)
+    assert port.sets == [("DI1", False)] and not dio.faults.active
