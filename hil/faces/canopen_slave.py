@@ -369,7 +369,8 @@ class CanopenSlave:
             self._sync_intervals.popleft()
         if len(self._sync_intervals) == window:
             mean = sum(self._sync_intervals) / window
-            if abs(mean - period) > self._opt("sync_fail_tolerance") * period:
+            off = abs(mean - period) > self._opt("sync_fail_tolerance") * period
+            if off and not self._opt("dev_ignore_sync_cycle"):
                 self._comm_alarm("AL301")  # synchronisation failure (L20123-20127)
                 self._sync_intervals.clear()
 

@@ -11,7 +11,8 @@ how the gateway tells the holder's frames from anyone else's. The lease is kept 
 liveliness token (the gateway notices at once when this process dies) and by renewals
 every timeout/4 (a hung process loses it after the timeout). `lease.lost` is set if the
 gateway ends it, or when it answered no renewal for the lease timeout (gateway killed or
-paused, zenoh link lost: `lost_reason` says so).
+paused, zenoh link lost: `lost_reason` says so). `lease.on_fault` hears the start and end of
+either (the plan session records them on /faults, docs/faults.md).
 """
 
 from __future__ import annotations
@@ -108,6 +109,11 @@ class Lease:
         self._alive: Any = None
         self._thread: threading.Thread | None = None
         self.released = False
+        # on_fault(kind, active, t_ns, reason): the lease ends (`lease_lost`: the gateway
+        # ended it; `link_lost`: no answer for the lease timeout, from the first unanswered
+        # renewal) and that fault ends (the gateway answers again, or the lease is released)
+        self.on_fault: Any = None
+        self._fault: tuple[str, int] | None = None
 
     # -- protocol ----------------------------------------------------------------------------
     def _acquire(self) -> None:
@@ -133,32 +139,59 @@ class Lease:
     def _keepalive(self) -> None:
         period = max(0.01, self.lease_timeout_s / 4)
         answered = time.monotonic()  # last renew the gateway answered
+        unanswered_ns: int | None = None  # wall time of the first renew not answered since
         while not self._stop.wait(period):
-            try:
-                ans = _query(self.session, keys.lease(self.prefix),
-                             {"op": "renew", "token": self.token.hex()},
-                             min(self.query_timeout_s, self.lease_timeout_s))
-            except zenoh.ZError:
-                ans = None
+            asked_ns = time.time_ns()
+            ans = self._ask({"op": "renew", "token": self.token.hex()})
             if self._stop.is_set():
                 return
             if ans is not None and not ans.get("granted"):
-                self._lose(f"the gateway ended the lease (now: {ans.get('holder') or 'free'})")
+                self._lose(f"the gateway ended the lease (now: {ans.get('holder') or 'free'})",
+                           "lease_lost", asked_ns)
                 return
             if ans is not None:
-                answered = time.monotonic()
-            elif (silent := time.monotonic() - answered) > self.lease_timeout_s:
+                answered, unanswered_ns = time.monotonic(), None
+                continue
+            unanswered_ns = unanswered_ns or asked_ns
+            if (silent := time.monotonic() - answered) > self.lease_timeout_s:
                 # the gateway itself is gone: killed, paused, or the zenoh link lost; by
                 # now it has expired the lease on its side too if it still runs
                 self._lose(f"no answer from the gateway for {silent:.1f} s (gateway killed "
                            f"or paused, or the zenoh link to "
-                           f"{', '.join(self.connect) or 'it'} lost)")
+                           f"{', '.join(self.connect) or 'it'} lost)", "link_lost",
+                           unanswered_ns)
+                self._probe(period)
                 return
 
-    def _lose(self, reason: str) -> None:
+    def _ask(self, payload: dict) -> dict | None:
+        try:
+            return _query(self.session, keys.lease(self.prefix), payload,
+                          min(self.query_timeout_s, self.lease_timeout_s))
+        except zenoh.ZError:
+            return None
+
+    def _probe(self, period: float) -> None:
+        """After a lost link: ask for the lease status until the gateway answers again (the
+        link is back: the end of the `link_lost` fault; the lease stays lost) or release."""
+        while not self._stop.wait(period):
+            if self._ask({"op": "status"}) is not None and not self._stop.is_set():
+                self._fault_end("the gateway answers again (the lease stays lost)")
+                return
+
+    def _lose(self, reason: str, kind: str = "lease_lost", since_ns: int | None = None) -> None:
         self.lost_reason = reason
         set_lease_token(self.prefix, None)
         self.lost.set()
+        self._fault = (kind, since_ns or time.time_ns())
+        if self.on_fault is not None:
+            with contextlib.suppress(Exception):  # recording must not break the keep-alive
+                self.on_fault(kind, True, self._fault[1], reason)
+
+    def _fault_end(self, reason: str) -> None:
+        fault, self._fault = self._fault, None
+        if fault is not None and self.on_fault is not None:
+            with contextlib.suppress(Exception):
+                self.on_fault(fault[0], False, time.time_ns(), reason)
 
     def release(self) -> None:
         """Give the bench back (the gateway then drives its safe state); idempotent."""
@@ -168,6 +201,7 @@ class Lease:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(5)
+        self._fault_end("lease released")
         set_lease_token(self.prefix, None)
         with contextlib.suppress(zenoh.ZError, ValueError):
             if not self.lost.is_set() and self.session is not None:

@@ -109,6 +109,7 @@ class DigitalIO:
         name: str = "drive",
         *,
         filter_mode: str = "stable",
+        extra_delay_ns: int = 0,
     ) -> None:
         if filter_mode not in FILTER_MODES:
             raise ValueError(f"filter_mode {filter_mode!r} not one of {FILTER_MODES}")
@@ -117,6 +118,7 @@ class DigitalIO:
         self.emit = emit or (lambda event: None)
         self.name = name
         self.filter_mode = filter_mode
+        self.extra_delay_ns = extra_delay_ns  # deviation knob dev_di_filter_extra_ms
         self._raw = [False] * N_PHYSICAL_DI  # contact level at the terminal
         self._accepted = [False] * N_PHYSICAL_DI  # after the P2.009 filter
         self._pending: list[Timer | None] = [None] * N_PHYSICAL_DI
@@ -196,7 +198,7 @@ class DigitalIO:
             pending.cancel()  # due at this very instant: accept it before the new change
             self._accept(i, not self._accepted[i])
         self._raw[i] = closed
-        delay = self.params.get("P2.009") * MS  # L9229-9236
+        delay = self.params.get("P2.009") * MS + self.extra_delay_ns  # L9229-9236
         if self.filter_mode == "delay":
             if delay == 0:
                 self._accept(i, closed)

@@ -67,7 +67,7 @@ from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
 from hil.model.pr_engine import attach_pr
 from hil.model.sto import Sto
-from hil.model.timebase import Scheduler, ms
+from hil.model.timebase import MS, Scheduler, ms
 from hil.protocol.cia402 import MODE_NAMES
 
 # Physical wiring of the virtual bench's sensors: function -> (DI number, contact type).
@@ -141,7 +141,8 @@ class Drive:
         # P2.009 filter (L9229-9236): "stable" drops bounces; deviation knob: a pure delay
         filter_mode = "delay" if self.options.dev_di_filter_delay_only else "stable"
         self.dio = DigitalIO(self.params, self.sched, self._on_dio_event, name=self.name,
-                             filter_mode=filter_mode)
+                             filter_mode=filter_mode,
+                             extra_delay_ns=round(self.options.dev_di_filter_extra_ms * MS))
         self.axis = Axis(self.mech)
         self.brake = Brake(
             self.sched,

@@ -113,7 +113,9 @@ class ModelOptions:
     dev_comm_timeout_extra_ms: float = 0.0  # AL020 raised this much after P3.004
     dev_1029h_behaviour: int | None = None  # AL180 acts as if 1029h sub1 were this (e.g. 1)
     dev_di_filter_delay_only: bool = False  # P2.009 delays each DI edge, drops no bounce
+    dev_di_filter_extra_ms: float = 0.0  # each DI edge taken this much after P2.009
     dev_ignore_early_sync: bool = False  # no AL3E2 for a SYNC that comes too early
+    dev_ignore_sync_cycle: bool = False  # no AL301 for a SYNC cycle off 1006h
     extra: dict[str, Any] = field(default_factory=dict)  # options of other rooms (homing, abs)
 
     @classmethod

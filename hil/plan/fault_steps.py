@@ -5,10 +5,12 @@
     - produce: {guard: 20ms}                  #   (node guarding RTR to 700h + node)
     - sdo: {"1016:1": 0x007F0064, "1006": 10000}   # communication objects, SDO download
     - fault: {can: drop, match: {function: sync}, for: 200ms}   # drop|delay|corrupt|duplicate
+    - fault: {can: drop, match: {function: sync}, every: 2}     # every 2nd frame (rate: random)
     - fault: {can: sdo_flood, count: 3}        # SDO requests back to back (AL111)
     - fault: {can: duplicate_pdo, cob_id: 0x205, data: "060000"}   # (AL112)
     - fault: {can: bus_error, count: 17}       # error frames (AL185)
     - fault: {rs485: silence, for: 2s}         # crc|partial|split|late|noise|silence
+    - fault: {rs485: reply_late, delay: 700ms} # reply_late|reply_partial|reply_split|reply_noise
     - fault: {dio: stuck, line: DI5, level: false, for: 1s}   # bounce|stuck
     - fault: off                               # end every fault now
     - nmt: start                               # NMT command to the drive's node
@@ -36,6 +38,11 @@ from hil.transport.faults import (
 )
 
 CAN_BURSTS = ("sdo_flood", "duplicate_pdo", "bus_error")
+# the keys each RS-485 fault uses (hil/transport/faults.py FaultySerial); recorded on /faults
+_SERIAL_PARAMS: dict[str, tuple[str, ...]] = {
+    "crc": (), "partial": (), "silence": (), "split": ("gap_ms",), "late": ("delay_ms",),
+    "noise": ("bytes", "gap_ms"), "reply_late": ("delay_ms",), "reply_partial": ("bytes",),
+    "reply_split": ("bytes", "gap_ms"), "reply_noise": ("bytes",)}
 _OBJ_RE = re.compile(r"^(?:0x)?([0-9A-Fa-f]{4})h?(?::(\d{1,3}))?$")
 _LINE_RE = re.compile(r"^(DI\d{1,2}|STO_[AB])$")
 
@@ -101,10 +108,16 @@ def p_fault(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         if out["duration"] <= 0:
             raise v.err(m.kline("for"), join(where, "for"), "must be > 0")
     if t == "can" and kind in CAN_ACTIONS:
-        v.keys(m, {"can", "match", "for", "rate", "delay", "bus"}, where)
+        v.keys(m, {"can", "match", "for", "rate", "every", "delay", "bus"}, where)
         out["match"] = (_match(v, m["match"], m.kline("match"), join(where, "match"))
                         if "match" in m else {"cob_ids": [], "ranges": [], "functions": []})
         out["rate"] = _rate(v, m, where)
+        out["every"] = 1
+        if "every" in m:
+            out["every"] = _int(v, m["every"], m.kline("every"), join(where, "every"), 1, 1000)
+            if "rate" in m:
+                raise v.err(m.kline("every"), join(where, "every"),
+                            "every (each n-th frame) or rate (a random fraction), not both")
         out["delay"] = v.duration(m, "delay", where, 10_000_000 if kind == "delay" else 0)
     elif t == "can" and kind in CAN_BURSTS:
         v.keys(m, {"can", "count", "cob_id", "data", "bus"}, where)
@@ -123,10 +136,11 @@ def p_fault(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     elif t == "rs485" and kind in SERIAL_FAULTS:
         v.keys(m, {"rs485", "for", "rate", "delay", "gap", "bytes", "line"}, where)
         out["rate"] = _rate(v, m, where)
-        out["params"] = {"delay_ms": v.duration(m, "delay", where, 20_000_000) / 1e6,
-                         "gap_ms": v.duration(m, "gap", where, 5_000_000) / 1e6,
-                         "bytes": _int(v, m.get("bytes", 3), m.kline("bytes") if "bytes" in m
-                                       else line, join(where, "bytes"), 1, 256)}
+        params = {"delay_ms": v.duration(m, "delay", where, 20_000_000) / 1e6,
+                  "gap_ms": v.duration(m, "gap", where, 5_000_000) / 1e6,
+                  "bytes": _int(v, m.get("bytes", 3), m.kline("bytes") if "bytes" in m
+                                else line, join(where, "bytes"), 1, 256)}
+        out["params"] = {k: x for k, x in params.items() if k in _SERIAL_PARAMS[kind]}
     elif t == "dio" and kind in DIO_FAULTS:
         v.keys(m, {"dio", "line", "for", "level", "bounces", "period"}, where)
         ln = m.get("line")
@@ -134,10 +148,12 @@ def p_fault(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
             raise v.err(m.kline("line") if "line" in m else line, join(where, "line"),
                         f"{ln!r}: a harness-driven line like DI5 or STO_A")
         out["line"] = ln
-        out["params"] = {"level": v.boolean(m, "level", where, False),
-                         "bounces": _int(v, m.get("bounces", 3), line, join(where, "bounces"),
-                                         1, 100),
-                         "period_ms": v.duration(m, "period", where, 1_000_000) / 1e6}
+        if kind == "stuck":
+            out["params"] = {"level": v.boolean(m, "level", where, False)}
+        else:
+            out["params"] = {"bounces": _int(v, m.get("bounces", 3), line,
+                                             join(where, "bounces"), 1, 100),
+                             "period_ms": v.duration(m, "period", where, 1_000_000) / 1e6}
     else:
         known = {"can": CAN_ACTIONS + CAN_BURSTS, "rs485": SERIAL_FAULTS, "dio": DIO_FAULTS}[t]
         raise v.err(m.kline(t), join(where, t), f"{kind!r}: one of {', '.join(known)}")
@@ -235,7 +251,8 @@ def x_fault(ctx: Any, s: Any, d: Any) -> str:
             mt = a["match"]
             match = CanMatch(frozenset(mt["cob_ids"]), tuple(mt["ranges"]),
                              tuple(mt["functions"]))
-            bus.inject(kind, match=match, duration_ns=dur, rate=a["rate"], delay_ns=a["delay"])
+            bus.inject(kind, match=match, duration_ns=dur, rate=a["rate"], delay_ns=a["delay"],
+                       every=a.get("every", 1))
             return f"{kind} {match.describe() or 'every frame'} on can:{bus.name}"
         node = _node(d)
         if kind == "sdo_flood":  # 1000h uploads back to back: well within 1 ms

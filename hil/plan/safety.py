@@ -58,7 +58,9 @@ class _SessionDrive:
 def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:
     """Drive every drive of `session` to `session.bench.safe_state`; never raises."""
     if hasattr(session, "stop_faults"):
-        session.stop_faults()  # injected faults end before the safe state needs the wire
+        # injected faults end before the safe state needs the wire; a stuck DI stays at
+        # its stuck level (not back to what the plan last asked) until the safe state sets it
+        session.stop_faults(restore=False)
     dead_drives = getattr(session, "dead_drives", None)
     dead = dead_drives() if callable(dead_drives) else {}
     drives = [_SessionDrive(n, d, dead.get(n)) for n, d in session.drives.items()]

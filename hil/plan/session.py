@@ -17,13 +17,18 @@ import can
 import canopen
 
 from hil.drivers.cia402 import Cia402Driver, SdoError
-from hil.drivers.delta_modbus import DeltaModbus, ModbusExceptionError
+from hil.drivers.delta_modbus import (
+    DeltaModbus,
+    ModbusExceptionError,
+    ModbusReplyError,
+    ModbusTimeoutError,
+)
 from hil.gateway.client import LeaseRefused, acquire
 from hil.plan.bench import CIA402_TIMEOUTS, Bench, DriveSpec
 from hil.profile.params import parse_name
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
-from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial
+from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial, fault_ids
 from hil.transport.serial_line import open_serial
 
 
@@ -105,6 +110,21 @@ def refusal_code(exc: BaseException) -> int | None:
     return None
 
 
+# What the harness itself found wrong on the line (`read: {..., expect_error: timeout}`):
+# no (complete) reply in time, or a reply that is no valid answer (bad CRC, wrong station
+# or function); comm_error = either. Never a value.
+LINE_ERRORS = ("timeout", "bad_reply", "comm_error")
+
+
+def line_error(exc: BaseException) -> str | None:
+    """"timeout" / "bad_reply" for the harness master's own line errors, else None."""
+    if isinstance(exc, ModbusTimeoutError):
+        return "timeout"
+    if isinstance(exc, ModbusReplyError):
+        return "bad_reply"
+    return None
+
+
 def _od_index(name: str) -> int:
     """Parameter Px.yyy -> object 2xyyh (L16860: 2000h + group << 8 + index)."""
 
@@ -126,12 +146,15 @@ class Session:
         self.fault_serial: dict[str, Any] = {}
         self.fault_dio: dict[str, Any] = {}
 
-    def stop_faults(self) -> None:
-        """End every injected fault now (before a safe-state action needs the wire)."""
-        for layer in (*self.fault_can.values(), *self.fault_serial.values(),
-                      *self.fault_dio.values()):
+    def stop_faults(self, restore: bool = True) -> None:
+        """End every injected fault now (`fault: off`; before a safe-state action needs the
+        wire, with restore=False: a freed stuck DI keeps its level, no last command replayed)."""
+        for layer in (*self.fault_can.values(), *self.fault_serial.values()):
             with contextlib.suppress(Exception):
                 layer.stop_all()
+        for dio in self.fault_dio.values():
+            with contextlib.suppress(Exception):
+                dio.stop_all(restore=restore)
 
     def check_lease(self) -> None:
         """Raise BenchError when the gateway lease was lost (the gateway made the bench safe)."""
@@ -221,6 +244,8 @@ def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
         raise BenchError(f"bench {gw.lab}/{gw.bench}: gateway not reachable at "
                          f"{', '.join(gw.connect)}: {e}") from e
     s._closers.insert(0, s.lease.release)  # released last, after every transport closed
+    s.lease.on_fault = _link_fault_recorder(s.recorder, f"zenoh:{gw.lab}/{gw.bench}",
+                                            ",".join(gw.connect))
     s.recorder.log("info", f"lease of {gw.lab}/{gw.bench} taken as {s.lease.holder}",
                    name="hil.gateway")
     out = dict(urls)
@@ -237,6 +262,18 @@ def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
         else:
             out[key] = s.lease.dio_url(name)
     return out
+
+
+def _link_fault_recorder(rec: Any, transport: str, target: str) -> Callable[..., None]:
+    """Lease.on_fault -> the /faults channel: a lost gateway link (or a lease the gateway
+    ended) is a fault on the wire like an injected one, with its start and its end."""
+    fault_id = next(fault_ids)
+
+    def record(kind: str, active: bool, t_ns: int, reason: str) -> None:
+        rec.fault(kind, transport, active, fault_id, t=t_ns, target=target, reason=reason)
+        if active:
+            rec.log("error", f"{transport}: {reason}", name="hil.gateway")
+    return record
 
 
 def _open_harness(s: Session, urls: dict[str, str]) -> None:

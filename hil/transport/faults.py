@@ -44,9 +44,12 @@ _FUNCTION_SETS: dict[str, tuple[tuple[int, int], ...]] = {
     "tpdo": ((0x180, 0x1FF), (0x280, 0x2FF), (0x380, 0x3FF), (0x480, 0x4FF)),
     "rpdo": ((0x200, 0x27F), (0x300, 0x37F), (0x400, 0x47F), (0x500, 0x57F)),
 }
-SERIAL_FAULTS = ("crc", "partial", "split", "late", "noise", "silence")
+# on the harness's requests (what it writes) / on the replies it reads (its own receiver)
+REQUEST_FAULTS = ("crc", "partial", "split", "late", "noise", "silence")
+REPLY_FAULTS = ("reply_late", "reply_partial", "reply_split", "reply_noise")
+SERIAL_FAULTS = REQUEST_FAULTS + REPLY_FAULTS
 DIO_FAULTS = ("bounce", "stuck")
-_ids = itertools.count(1)
+fault_ids = itertools.count(1)  # /faults ids, unique in the process
 
 
 class FaultSink(Protocol):
@@ -107,9 +110,15 @@ class Fault:
     rate: float = 1.0
     params: dict[str, Any] = field(default_factory=dict)
     match: CanMatch | None = None
-    id: int = field(default_factory=lambda: next(_ids))
+    every: int = 1  # hit only every n-th matching frame (1st..n-1th pass): deterministic
+    id: int = field(default_factory=lambda: next(fault_ids))
+    seen: int = 0  # matching frames so far
+    on_end: Any = None  # called once the end is recorded (a stuck line let go)
 
     def hits(self, rng: random.Random) -> bool:
+        if self.every > 1:
+            self.seen += 1
+            return self.seen % self.every == 0
         return self.rate >= 1.0 or rng.random() < self.rate
 
 
@@ -146,6 +155,8 @@ class _Faults:
         if timer is not None and timer is not threading.current_thread():
             timer.cancel()
         self._record(fault, False)
+        if fault.on_end is not None:
+            fault.on_end()
 
     def stop_all(self) -> None:
         for f in list(self.active):
@@ -203,15 +214,21 @@ class FaultyCanBus(can.BusABC):
     # -- injection ---------------------------------------------------------------------
     def inject(self, action: str, *, match: CanMatch | None = None,
                duration_ns: int | None = None, rate: float = 1.0,
-               delay_ns: int = 0) -> Fault:
-        """Start `action` (drop | delay | corrupt | duplicate) on matching frames we send."""
+               delay_ns: int = 0, every: int = 1) -> Fault:
+        """Start `action` (drop | delay | corrupt | duplicate) on matching frames we send:
+        each with probability `rate`, or exactly every `every`-th one (e.g. 2: every other
+        SYNC dropped, the cycle doubled without a timeout; AL301)."""
         if action not in CAN_ACTIONS:
             raise ValueError(f"CAN fault {action!r}: one of {', '.join(CAN_ACTIONS)}")
         if not 0.0 < rate <= 1.0:
             raise ValueError(f"rate {rate}: a fraction in (0, 1]")
-        params = {"delay_ms": delay_ns / 1e6} if action == "delay" else {}
+        if every < 1 or (every > 1 and rate < 1.0):
+            raise ValueError(f"every {every}: an integer >= 1, not with a rate")
+        params: dict[str, Any] = {"every": every}  # recorded: specs tell the faults apart
+        if action == "delay":
+            params["delay_ms"] = delay_ns / 1e6
         f = Fault(action, self.faults.transport, rate=rate, params=params,
-                  match=match or CanMatch())
+                  match=match or CanMatch(), every=every)
         return self.faults.start(f, duration_ns)
 
     def burst(self, kind: str, frames: Iterable[can.Message], **detail: Any) -> int:
@@ -313,18 +330,33 @@ def error_frames(n: int) -> list[can.Message]:
 
 
 class FaultySerial:
-    """The harness's RS-485 line with a fault layer on what it writes; reads untouched.
+    """The harness's RS-485 line with a fault layer on what it writes and on what it reads;
+    the drive's side of the line is never touched.
 
-    crc: the CRC/LRC bytes garbled; partial: only the first half sent; split: the frame
-    sent in two halves `gap_ms` apart (RTU: longer than t3.5 splits it in two frames);
-    late: each request held back `delay_ms`; noise: `noise_bytes` random bytes ahead of
+    Requests: crc: the CRC/LRC bytes garbled; partial: only the first half sent; split: the
+    frame sent in two halves `gap_ms` apart (RTU: longer than t3.5 splits it in two frames);
+    late: each request held back `delay_ms`; noise: `bytes` random bytes `gap_ms` ahead of
     each request; silence: nothing sent at all (master silence, AL020 after P3.004).
+
+    Replies, as the harness's receiver sees the reply to each request (the harness master's
+    own reaction is what they test): reply_late: nothing readable until `delay_ms` after the
+    request; reply_partial: the reply cut after `bytes` bytes, the rest lost; reply_split:
+    the reply's first `bytes` bytes, the rest `gap_ms` later; reply_noise: `bytes` random
+    bytes ahead of the reply.
+
+    `sleep` waits on the request side (a rig on a model clock passes its own).
     """
 
     def __init__(self, line: Any, name: str, *, sink: FaultSink | None = None,
-                 seed: int | None = None) -> None:
+                 seed: int | None = None, sleep: Any = time.sleep) -> None:
         self.line = line
         self.faults = _Faults(f"rs485:{name}", sink, seed)
+        self._sleep = sleep
+        self._rx: dict[str, Fault] = {}  # reply faults of the current transaction
+        self._rx_count = 0  # reply bytes handed over
+        self._rx_hold: float | None = None  # monotonic s: nothing readable before
+        self._rx_noise = b""  # noise still to hand over ahead of the reply
+        self._rx_split = False  # the split gap was taken
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.line, name)
@@ -341,12 +373,13 @@ class FaultySerial:
 
     def write(self, data: bytes, **kw: Any) -> Any:
         if not self.faults.active:
+            self._rx = {}
             return self.line.write(data, **kw)
         rng = self.faults.rng
         data = bytes(data)
-        for f in self.faults.current():
-            if not f.hits(rng):
-                continue
+        hits = [f for f in self.faults.current() if f.hits(rng)]
+        self._arm_reply([f for f in hits if f.kind in REPLY_FAULTS])
+        for f in hits:
             if f.kind == "silence":
                 return None
             if f.kind == "crc":
@@ -356,28 +389,75 @@ class FaultySerial:
             elif f.kind == "noise":
                 n = int(f.params.get("bytes", 3))
                 self.line.write(bytes(rng.randrange(256) for _ in range(n)))
-                time.sleep(float(f.params.get("gap_ms", 5)) / 1e3)
+                self._sleep(float(f.params.get("gap_ms", 5)) / 1e3)
             elif f.kind == "late":
-                time.sleep(float(f.params.get("delay_ms", 20)) / 1e3)
+                self._sleep(float(f.params.get("delay_ms", 20)) / 1e3)
             elif f.kind == "split":
                 half = max(1, len(data) // 2)
                 self.line.write(data[:half], **kw)
-                time.sleep(float(f.params.get("gap_ms", 5)) / 1e3)
+                self._sleep(float(f.params.get("gap_ms", 5)) / 1e3)
                 return self.line.write(data[half:])
         return self.line.write(data, **kw)
+
+    def _arm_reply(self, faults: list[Fault]) -> None:
+        """A new request: the reply faults that hit apply to its reply."""
+        self._rx = {f.kind: f for f in faults}
+        self._rx_count, self._rx_hold, self._rx_split = 0, None, False
+        self._rx_noise = b""
+        if (f := self._rx.get("reply_late")) is not None:
+            self._rx_hold = time.monotonic() + float(f.params.get("delay_ms", 20)) / 1e3
+        if (f := self._rx.get("reply_noise")) is not None:
+            rng = self.faults.rng
+            self._rx_noise = bytes(rng.randrange(256) for _ in range(int(f.params.get("bytes",
+                                                                                     3))))
+
+    def read(self, n: int = 1, timeout: float | None = None) -> bytes:
+        if not self._rx:
+            return self.line.read(n, timeout)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        if self._rx_noise:
+            out, self._rx_noise = self._rx_noise[:n], self._rx_noise[n:]
+            return out
+        if self._rx_hold is not None:  # late / split: nothing readable before the hold ends
+            wait = self._rx_hold - time.monotonic()
+            if deadline is not None:
+                wait = min(wait, deadline - time.monotonic())
+            if wait > 0:
+                time.sleep(wait)
+            if time.monotonic() < self._rx_hold:
+                return b""
+            self._rx_hold = None
+        left = None if deadline is None else max(0.0, deadline - time.monotonic())
+        cut_f = self._rx.get("reply_partial") or self._rx.get("reply_split")
+        cut = int(cut_f.params.get("bytes", 3)) if cut_f is not None else None
+        if cut is not None and "reply_partial" in self._rx and self._rx_count >= cut:
+            self.line.read(n, left)  # the rest of the reply is lost on its way to us
+            return b""
+        if cut is not None and self._rx_count < cut:
+            n = min(n, cut - self._rx_count)
+        data = self.line.read(n, left)
+        self._rx_count += len(data)
+        split = self._rx.get("reply_split")
+        if split is not None and not self._rx_split and cut is not None and self._rx_count >= cut:
+            self._rx_split = True
+            self._rx_hold = time.monotonic() + float(split.params.get("gap_ms", 5)) / 1e3
+        return data
 
 
 class FaultyDio:
     """The harness's DI/DO port with a fault layer on the DI lines it drives.
 
     bounce: each level change becomes `bounces` toggles `period_ms` apart before it
-    settles; stuck: the line holds `level` whatever the harness sets.
+    settles; stuck: the line holds `level` whatever the harness sets, and when the fault
+    ends it goes to the level the harness set last (as a freed contact would).
     """
 
     def __init__(self, port: Any, name: str, *, sink: FaultSink | None = None,
                  seed: int | None = None) -> None:
         self.port = port
         self.faults = _Faults(f"dio:{name}", sink, seed)
+        self._wanted: dict[str, bool] = {}  # line -> the level the harness set last
+        self._restore = True  # a stuck line freed goes to _wanted (not on the safe path)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.port, name)
@@ -387,15 +467,25 @@ class FaultyDio:
         if kind not in DIO_FAULTS:
             raise ValueError(f"DI/DO fault {kind!r}: one of {', '.join(DIO_FAULTS)}")
         f = Fault(kind, self.faults.transport, params={"line": line, **params})
+        if kind == "stuck":
+            self._wanted.setdefault(line, bool(self.port.get(line)))
+            f.on_end = lambda: self._restore and self.port.set(line, self._wanted[line])
         self.faults.start(f, duration_ns)
         if kind == "stuck":
             self.port.set(line, bool(params.get("level", False)))
         return f
 
-    def stop_all(self) -> None:
-        self.faults.stop_all()
+    def stop_all(self, restore: bool = True) -> None:
+        """End every fault; restore=False (the safe-state path): a stuck line keeps its
+        level rather than going to the level the harness set last."""
+        self._restore = restore
+        try:
+            self.faults.stop_all()
+        finally:
+            self._restore = True
 
     def set(self, line: str, level: bool, *args: Any, **kw: Any) -> None:
+        self._wanted[line] = bool(level)
         if not self.faults.active:
             self.port.set(line, level, *args, **kw)
             return

@@ -6,7 +6,9 @@ that the drive consumes (1016h, L17097-17115), the gateway is killed or paused:
 * the drive reacts on its own: no heartbeat -> AL180 after the consumer time, EMCY 8130h
   (L20021-20025, L17061-17069), seen by an observer connected to the drive directly;
 * the runner reports it: the lease keep-alive gets no answer for the lease timeout, the
-  next step check ends the plan with ERROR naming the lost gateway, nothing hangs.
+  next step check ends the plan with ERROR naming the lost gateway, nothing hangs;
+* the lost link is a fault on the /faults channel of the runner's recording: `link_lost`
+  from the first unanswered renewal, ended when the lease is released.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from hil.plan.bench import load_bench
 from hil.plan.listeners import StepLines
 from hil.plan.plan import loads_plan
 from hil.plan.runner import run_plan
+from hil.record import topics as T
+from hil.record.reader import Recording
 from hil.virtual.world import CTL
 from tests.children import ChildProcess, children
 from tests.gateway.conftest import bench_yaml
@@ -120,6 +124,23 @@ safe_state:
     assert raised, states[-3:]
     assert raised[0] > stream.lost_ns  # not before: the heartbeat came while the gateway ran
     assert not any("AL180" in alarms for t, alarms in states if t < stream.lost_ns)
+    # the lost link is on /faults: one start, one end, both after the gateway was lost (the
+    # start is the first renewal without an answer: at most a renewal period, 0.25 s, and
+    # its query before the loss was seen)
+    faults = _faults(result.recording)
+    assert [(f["fault"], f["active"]) for _, f in faults] == [("link_lost", True),
+                                                             ("link_lost", False)], faults
+    (t_start, start), (t_end, end) = faults
+    assert start["transport"] == "zenoh:lab/lostbench" and start["id"] == end["id"]
+    assert start["detail"]["target"] == gw_ep
+    assert "no answer from the gateway" in start["detail"]["reason"]
+    assert end["detail"]["reason"] == "lease released"
+    assert stream.lost_ns - 300_000_000 < t_start < t_end
+
+
+def _faults(path) -> list[tuple[int, dict]]:
+    rec = Recording.open(path)
+    return [(pt, msg) for _topic, _lt, pt, msg in rec.messages(T.FAULTS)]
 
 
 def _alarms(lines: list[str]) -> list[tuple[int, tuple[str, ...]]]:

@@ -27,16 +27,26 @@ def _run_all(bench_file, tmp_path):
     for r in results:
         assert r.passed, (r.plan, [(s.label, s.status, s.message) for s in r.steps
                                         if s.status != "pass"])
-        counts = Recording.open(r.recording).counts()
-        assert counts.get(T.FAULTS, 0) >= 2, r.plan  # every fault: start and end
+        _every_fault_starts_and_ends(r.plan, r.recording)
     return results
+
+
+def _every_fault_starts_and_ends(plan: str, path) -> None:
+    """Each fault on /faults (by id): one start, then one end, not before it (issue 16)."""
+    by_id: dict[int, list[tuple[int, bool]]] = {}
+    for _topic, _lt, t, msg in Recording.open(path).messages(T.FAULTS):
+        by_id.setdefault(msg["id"], []).append((t, msg["active"]))
+    assert by_id, plan
+    for fid, recs in by_id.items():
+        assert [a for _, a in recs] == [True, False], (plan, fid, recs)
+        assert recs[0][0] <= recs[1][0], (plan, fid, recs)
 
 
 def test_fault_plans_cover_every_reaction_family():
     names = {p.stem for p in FAULT_PLANS}
     assert {"fault_heartbeat", "fault_life_guarding", "fault_1029h", "fault_sdo_flood",
             "fault_duplicate_pdo", "fault_bus_error", "fault_sync_ip", "fault_rs485",
-            "fault_di_bounce"} <= names
+            "fault_rs485_line", "fault_di_bounce", "fault_di_stuck"} <= names
 
 
 def test_fault_plans_on_the_virtual_bench(tmp_path):

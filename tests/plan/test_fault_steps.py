@@ -38,6 +38,9 @@ def test_real_bench_may_allow_faults(tmp_path):
     ("{can: drop, rate: 2}", "fraction"),
     ("{can: duplicate_pdo}", "cob_id"),
     ("{dio: stuck, line: DO3}", "harness-driven line"),
+    ("{can: drop, every: 0}", "integer 1..1000"),
+    ("{can: drop, every: 2, rate: 0.5}", "not both"),
+    ("{rs485: reply_slow}", "one of crc"),
 ])
 def test_malformed_fault_step(tmp_path, step, problem):
     p = tmp_path / "p.yaml"
@@ -61,3 +64,24 @@ def test_hil_run_check_refuses_every_fault_plan_on_a_bench_without_faults_allowe
         err = capsys.readouterr().err
         assert f"{plan.name}:" in err and "faults_allowed: false" in err, err
     assert main(["run", "--check", str(with_faults[0])]) == 0  # the virtual bench allows them
+
+
+@pytest.mark.parametrize(("step", "problem"), [
+    ("{P3.004: null, via: modbus, expect_error: lost}", "one of timeout, bad_reply"),
+    ("{P3.004: null, via: sdo, expect_error: timeout}", "via: modbus"),
+])
+def test_malformed_read_expecting_a_line_error(tmp_path, step, problem):
+    p = tmp_path / "p.yaml"
+    p.write_text(f"name: p\nsteps:\n  - read: {step}\n")
+    with pytest.raises(PlanFileError, match=problem) as e:
+        load_plan(p)
+    assert "p.yaml:3" in str(e.value)
+
+
+def test_every_rs485_fault_kind_parses():
+    from hil.plan.plan import loads_plan
+    from hil.transport.faults import SERIAL_FAULTS
+
+    steps = "".join(f"  - fault: {{rs485: {k}, for: 1s}}\n" for k in SERIAL_FAULTS)
+    plan = loads_plan(f"name: p\nsteps:\n{steps}")
+    assert [s.args["kind"] for s in plan.steps] == list(SERIAL_FAULTS)

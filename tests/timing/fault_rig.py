@@ -30,7 +30,7 @@ from hil.record.recorder import Recorder
 from hil.timing.checker import check
 from hil.timing.source import RecordingSource
 from hil.timing.spec import load_spec
-from hil.transport.faults import CanMatch, FaultyCanBus, FaultySerial
+from hil.transport.faults import CanMatch, FaultyCanBus, FaultyDio, FaultySerial
 from hil.virtual.model_tap import EPOCH_NS, ModelTap
 
 NODE = 1
@@ -68,6 +68,19 @@ class _Line:
         self.rig.modbus.feed(bytes(data), self.rig.drive.now)
 
 
+class _Dio:
+    """The harness's DI lines: a level reaches the drive's terminal at model time."""
+
+    def __init__(self, rig: FaultRig) -> None:
+        self.rig = rig
+
+    def set(self, line: str, level: bool) -> None:
+        self.rig.tap.set_di(int(line.removeprefix("DI")), level)
+
+    def get(self, line: str) -> bool:
+        return self.rig.drive.dio.input_level(int(line.removeprefix("DI")))
+
+
 class _ModelSink:
     """`Recorder.fault` with the model time as the record time."""
 
@@ -94,7 +107,9 @@ class FaultRig:
                                   send=lambda adu: self.rec.serial(PORT, adu, "rx", self.t()),
                                   on_timeout=lambda _t: self.drive.raise_alarm("AL020"),
                                   on_comm_error=lambda c, _m: self.drive.modbus_comm_error(c))
-        self.serial = FaultySerial(_Line(self), "rs485", sink=sink, seed=1)
+        self.serial = FaultySerial(_Line(self), "rs485", sink=sink, seed=1,
+                                   sleep=lambda s: self.run(s * 1e3))  # gaps in model time
+        self.dio = FaultyDio(_Dio(self), "drive1", sink=sink, seed=1)  # stuck (no sleeps)
         self.producers: dict[str, tuple[int, int, Any]] = {}  # name -> (period, next, send)
 
     # -- time --------------------------------------------------------------------------

@@ -9,7 +9,9 @@ import uuid
 import can
 import pytest
 
-from hil.transport.faults import CanMatch, FaultyCanBus, FaultySerial, error_frames
+from hil.drivers.delta_modbus import DeltaModbus, ModbusReplyError, ModbusTimeoutError
+from hil.protocol import modbus as mb
+from hil.transport.faults import CanMatch, FaultyCanBus, FaultyDio, FaultySerial, error_frames
 
 MS = 1_000_000
 
@@ -155,3 +157,121 @@ def test_serial_faults():
     f = s.inject("partial")
     s.write(req)
     assert line.writes == [req, req[:-1] + bytes([req[-1] ^ 0xFF]), req[:4], req[4:], req[:4]]
+
+
+class AnsweringLine:
+    """A line whose far end answers every request at once with register value 1 (station
+    1); reads as `SerialLine.read(n, timeout)`."""
+
+    def __init__(self) -> None:
+        self.buf = bytearray()
+        self.writes: list[bytes] = []
+
+    def write(self, data: bytes, **kw) -> None:
+        self.writes.append(bytes(data))
+        self.buf += mb.rtu_encode(1, bytes([0x03, 0x02, 0x00, 0x01]))
+
+    def read(self, n: int = 1, timeout: float | None = None) -> bytes:
+        if not self.buf:
+            time.sleep(min(timeout or 0.0, 0.01))
+            return b""
+        out = bytes(self.buf[:n])
+        del self.buf[:n]
+        return out
+
+    def reset_input_buffer(self) -> None:
+        self.buf.clear()
+
+
+def _master(kind: str | None, **params):
+    line = AnsweringLine()
+    sink = Sink()
+    s = FaultySerial(line, "rs0", sink=sink, seed=1)
+    if kind:
+        s.inject(kind, **params)
+    return DeltaModbus(s, station=1, timeout_s=0.2, silence_s=0.0), s, sink
+
+
+def test_reply_faults_give_the_master_line_errors_never_a_value():
+    """The harness's receiver (docs/faults.md): a reply later than the master's timeout or
+    cut short is a timeout; noise ahead of it a bad reply or a timeout."""
+    for kind, params, errors in (("reply_late", {"delay_ms": 300}, ModbusTimeoutError),
+                                 ("reply_partial", {"bytes": 3}, ModbusTimeoutError),
+                                 ("reply_noise", {"bytes": 2},
+                                  (ModbusTimeoutError, ModbusReplyError))):
+        m, s, sink = _master(kind, **params)
+        with pytest.raises(errors):
+            m.read_registers(0x0308, 1)
+        s.stop_all()
+        assert m.read_registers(0x0308, 1) == [1], kind  # the next transaction is clean
+        assert [(r[0], r[2]) for r in sink.records] == [(kind, True), (kind, False)]
+
+
+def test_split_and_short_late_replies_are_read_whole():
+    m, s, _ = _master("reply_split", bytes=3, gap_ms=50)
+    t0 = time.monotonic()
+    assert m.read_registers(0x0308, 1) == [1]
+    assert time.monotonic() - t0 >= 0.045
+    s.stop_all()
+    m, s, _ = _master("reply_late", delay_ms=50)
+    assert m.read_registers(0x0308, 1) == [1]
+
+
+def test_request_gaps_use_the_given_sleep():
+    slept: list[float] = []
+    line = Line()
+    s = FaultySerial(line, "rs0", seed=1, sleep=slept.append)
+    req = bytes.fromhex("7F0300000002CED5")
+    s.inject("noise", bytes=4, gap_ms=15)
+    s.write(req)
+    assert slept == [0.015] and len(line.writes[0]) == 4 and line.writes[1] == req
+
+
+def test_every_nth_frame_is_hit_exactly(pair):
+    bus, peer, sink = pair
+    bus.inject("drop", match=CanMatch(functions=("sync",)), every=2)
+    for _ in range(6):
+        bus.send(frame(0x80, b""))
+    assert len(drain(peer)) == 3  # the 2nd, 4th, 6th dropped
+    assert sink.records[0][4]["every"] == 2
+    with pytest.raises(ValueError, match="every"):
+        bus.inject("drop", every=2, rate=0.5)
+
+
+class Port:
+    def __init__(self) -> None:
+        self.levels: dict[str, bool] = {}
+        self.sets: list[tuple[str, bool]] = []
+
+    def set(self, line: str, level: bool) -> None:
+        self.levels[line] = level
+        self.sets.append((line, level))
+
+    def get(self, line: str) -> bool:
+        return self.levels.get(line, False)
+
+
+def test_stuck_line_holds_then_goes_to_the_harness_level():
+    port, sink = Port(), Sink()
+    dio = FaultyDio(port, "drive1", sink=sink)
+    f = dio.inject("stuck", "DI1", level=False)
+    dio.set("DI1", True)  # swallowed
+    dio.set("DI2", True)  # another line: passes
+    assert port.levels == {"DI1": False, "DI2": True}
+    dio.faults.stop(f)
+    assert port.levels["DI1"] is True  # freed: the level the harness set last
+    assert [(r[0], r[2]) for r in sink.records] == [("stuck", True), ("stuck", False)]
+    f = dio.inject("stuck", "DI3", level=True, duration_ns=20 * MS)  # never set: back to open
+    time.sleep(0.1)
+    assert port.sets[-2:] == [("DI3", True), ("DI3", False)]
+
+
+def test_stuck_line_is_not_replayed_on_the_safe_state_path():
+    """The safe state ends faults with restore=False: a SON stuck open is not closed again
+    just before the safe state (which then sets every line itself)."""
+    port = Port()
+    dio = FaultyDio(port, "drive1", sink=Sink())
+    dio.inject("stuck", "DI1", level=False)
+    dio.set("DI1", True)
+    dio.stop_all(restore=False)
+    assert port.sets == [("DI1", False)] and not dio.faults.active

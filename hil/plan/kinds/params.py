@@ -8,7 +8,7 @@ from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.param_rules import check_param
-from hil.plan.session import refusal_code
+from hil.plan.session import LINE_ERRORS, line_error, refusal_code
 from hil.plan.yamlio import Checker, LDict, join
 from hil.virtual.checks import inert_mapping
 
@@ -100,7 +100,9 @@ class Write(StepKind):
 
 
 class Read(StepKind):
-    """`read: P0.001` or `read: {P1.042: 150}` (a value to expect, or null to only record)."""
+    """`read: P0.001` or `read: {P1.042: 150}` (a value to expect, or null to only record);
+    `expect_error: timeout | bad_reply | comm_error` (via modbus): the read must fail on the
+    line as the harness master sees it, with no value (RS-485 faults, docs/faults.md)."""
 
     name = "read"
 
@@ -110,15 +112,27 @@ class Read(StepKind):
             if not fields.PARAM_RE.match(obj):
                 raise v.err(line, where, f"{obj!r}: a parameter name like P1.042")
             check_param(v, line, where, obj, None, write=False)
-            return {"values": {obj: None}, "via": None}
+            return {"values": {obj: None}, "via": None, "expect_error": None}
         m = v.mapping(obj, line, where)
-        return {"values": fields.param_values(v, m, where, True),
-                "via": fields.parse_via(v, m, where)}
+        out = {"values": fields.param_values(v, m, where, True),
+               "via": fields.parse_via(v, m, where), "expect_error": None}
+        if "expect_error" in m:
+            fw = join(where, "expect_error")
+            if m["expect_error"] not in LINE_ERRORS:
+                raise v.err(m.kline("expect_error"), fw, f"{m['expect_error']!r}: one of "
+                            f"{', '.join(LINE_ERRORS)} (the harness master's line errors)")
+            if out["via"] != "modbus":
+                raise v.err(m.kline("expect_error"), fw, "line errors need via: modbus")
+            out["expect_error"] = m["expect_error"]
+        return out
 
     def check(self, cc: CheckContext) -> None:
         fields.check_via(cc, "", self.args["via"])
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        want = self.args.get("expect_error")
+        if want is not None:
+            return Outcome(self._line_error(d, want))
         got, bad = [], []
         for p, want in self.args["values"].items():
             val = d.read_param(p, self.args["via"])
@@ -129,8 +143,24 @@ class Read(StepKind):
             raise StepFailed("; ".join(bad))
         return Outcome(", ".join(got))
 
+    def _line_error(self, d: DriveIO, want: str) -> str:
+        """A read that must fail on the line with `want` (never return a value)."""
+        names = ", ".join(self.args["values"])
+        try:
+            vals = [d.read_param(p, self.args["via"]) for p in self.args["values"]]
+        except Exception as e:
+            got = line_error(e)
+            if got is None:
+                raise
+            if want not in (got, "comm_error"):
+                raise StepFailed(f"read {names}: {got} ({e}), expected {want}") from None
+            return f"read {names}: {got} as expected: {e}"
+        raise StepFailed(f"read {names} returned {vals}; expected {want} (a line fault "
+                         "that lets a value through)")
+
     def describe(self) -> str:
-        return f"read {', '.join(self.args['values'])} via {self.args['via'] or '-'}"
+        err = f" expecting {self.args['expect_error']}" if self.args.get("expect_error") else ""
+        return f"read {', '.join(self.args['values'])} via {self.args['via'] or '-'}{err}"
 
 
 KINDS = (Write, Read)
