@@ -44,7 +44,8 @@ def _every_fault_starts_and_ends(plan: str, path) -> None:
 
 def test_fault_plans_cover_every_reaction_family():
     names = {p.stem for p in FAULT_PLANS}
-    assert {"fault_heartbeat", "fault_life_guarding", "fault_1029h", "fault_sdo_flood",
+    assert {"fault_heartbeat", "fault_heartbeat_moving", "fault_life_guarding", "fault_1029h",
+            "fault_sdo_flood",
             "fault_duplicate_pdo", "fault_bus_error", "fault_sync_ip", "fault_rs485",
             "fault_rs485_line", "fault_di_bounce", "fault_di_stuck"} <= names
 

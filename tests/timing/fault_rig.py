@@ -22,6 +22,7 @@ import can
 from hil.faces.canopen_slave import CanopenSlave
 from hil.faces.modbus_slave import ModbusSlave
 from hil.model.drive import Drive
+from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
 from hil.model.timebase import MS
 from hil.paths import fixture
@@ -92,9 +93,11 @@ class _ModelSink:
 
 
 class FaultRig:
-    def __init__(self, path: Path, options: ModelOptions | None = None, **params: int) -> None:
+    def __init__(self, path: Path, options: ModelOptions | None = None,
+                 mechanics: Mechanics | None = None, **params: int) -> None:
         self.path = path
-        self.drive = Drive(options=options, inputs={8: True}, params={"P2.041": 0x0108} | params)
+        self.drive = Drive(options=options, mechanics=mechanics, inputs={8: True},
+                           params={"P2.041": 0x0108} | params)
         self.rec = Recorder(path)
         self.tap = ModelTap(self.drive, self.rec, bus=BUS)
         self._queue: list[can.Message] = []

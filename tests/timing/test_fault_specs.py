@@ -13,6 +13,7 @@ from __future__ import annotations
 import can
 import pytest
 
+from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
 from hil.transport.faults import CanMatch
 from tests.timing.fault_rig import MASTER, NODE, FaultRig, verdicts
@@ -349,3 +350,50 @@ def test_rs485_line_fault_rules(tmp_path, knob, poll, want):
     got = {k: [v.status for v in vs if f"of {k} requests" in v.constraint
                or f"while {k} requests" in v.constraint] for k in want}
     assert got == {k: [w] for k, w in want.items()}, vs
+
+
+def heartbeat_lost_moving(rig: FaultRig) -> None:
+    """As `heartbeat_lost`, but in PV at 200 rpm (6060h = 3, 60FFh in 0.1 rpm, L17299-17331)
+    when the heartbeat goes: the 605Eh reaction (servo off, L18264) must stop the motion and
+    the brake must engage by the alarm rule (L1361-1362, L8516)."""
+    rig.nmt(0x01)
+    rig.sdo_write(0x6060, 0, 3, 1)
+    enable(rig)
+    rig.sdo_write(0x60FF, 0, 2000)
+    rig.sdo_write(0x1016, 1, MASTER << 16 | 100)
+    rig.produce("hb", 20, 0x700 + MASTER, b"\x05")
+    rig.run(300)
+    assert abs(rig.drive.axis.velocity) > 0
+    f = rig.drop("heartbeat")
+    rig.run(1500)
+    rig.stop(f)
+
+
+MOVING_RULES = ("the motion stops after the fault reaction",
+                "the brake engages per the alarm rule after the fault reaction")
+
+
+@pytest.mark.parametrize(("knob", "mechanics", "params", "failing"), [
+    ({}, None, {}, ()),
+    # BRKR waits for P1.043 although the motor is below P1.038 already (43 ms < 50 ms)
+    ({"dev_ignore_speed_rule": True}, None, {}, (MOVING_RULES[1],)),
+    # no dynamic brake, no friction and BRKR on no output (P2.041 = 0: the brake never
+    # clamps): the motor coasts on for longer than stop_max
+    ({}, Mechanics(friction_torque=0.0, dynamic_brake_torque=0.0), {"P2.041": 0},
+     (MOVING_RULES[0],)),
+])
+def test_heartbeat_fault_reaction_while_moving(tmp_path, knob, mechanics, params, failing):
+    rig = FaultRig(tmp_path / "run.mcap", ModelOptions(**knob), mechanics,
+                   **({"P1.043": 50} | params))
+    try:
+        heartbeat_lost_moving(rig)
+        assert "AL180" in rig.alarms
+    finally:
+        path = rig.close()
+    vs = verdicts(path, "fault_heartbeat")
+    status = {v.constraint: v.status for v in vs}
+    for rule in MOVING_RULES:
+        if rule in failing:
+            assert [s for c, s in status.items() if c.startswith(rule)] == ["fail"], status
+        elif not params:  # with BRKR on no output the brake rule has no BRKR line to judge
+            assert [s for c, s in status.items() if c.startswith(rule)] == ["pass"], status
