@@ -31,6 +31,7 @@ from hil.model.canopen_init import HOME_OFFSET_INIT, load_canopen_init
 from hil.model.capture import attach_capture
 from hil.model.cia402 import Cia402, Cia402Options
 from hil.model.compare import attach_compare
+from hil.model.di_functions import attach_di_functions
 from hil.model.dio import DigitalIO
 from hil.model.errors import (
     ABORT_DATA_STATE,
@@ -115,6 +116,7 @@ class Drive:
         self.pr = attach_pr(self)  # PR#1-#99 (chapter 7, docs/pr.md)
         self.capture = attach_capture(self)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
         self.compare = attach_compare(self)  # COMPARE on DO4 (§7.2.3, docs/capture.md)
+        self.difunc = attach_di_functions(self)  # PFQS, JOG, TRQLM/SPDLM, ZCLAMP, CCLR, GAINUP
         self._boot()
 
     # ------------------------------------------------------------------ construction
@@ -135,6 +137,8 @@ class Drive:
         override = {}
         if options.dev_al501_cleared_by_arst:
             override = {"AL501": "reset", "AL502": "reset"}
+        if options.pfqs_clear == "reset":  # the DI table's reading (L15253), not L20145/L20157
+            override.update({"AL35F": "reset", "AL3CF": "reset"})
         self.alarms = AlarmManager(
             None, self.sched, self.params, self._on_alarm, AlarmOptions(override)
         )
@@ -175,6 +179,7 @@ class Drive:
         )
         self._step_hooks: list[Callable[[], None]] = []  # after each motion substep
         self._servo_on_hooks: list[Callable[[], None]] = []  # after the servo turned on
+        self._servo_off_hooks: list[Callable[[], None]] = []  # after the servo turned off
         self._boot_hooks: list[Callable[[], None]] = []  # at power-up, before outputs settle
         self._hold_timer = None
         self._dout_cache: dict[str, bool] = {}
@@ -375,6 +380,7 @@ class Drive:
             # terminal levels DI1..DI10 (the bench's sensors drive some: ORGP, NL, PL)
             "di": [self.dio.input_level(n) for n in range(1, 11)],
             "homing_phase": self.homing.phase if hasattr(self, "homing") else "",
+            "gain_switched": self.difunc.gain_switched if hasattr(self, "difunc") else False,
         }
 
     # ------------------------------------------------------------------ internals
@@ -429,6 +435,8 @@ class Drive:
         self.cia402.limit_decel_ms = min(self._p5003_decel(0), self._p5003_decel(1))
 
     def _on_object_written(self, index: int, sub: int, value: int) -> None:
+        if index == 0x6060:  # the mode decides which DI functions act (di_functions.py)
+            self.difunc.refresh()
         if index == 0x6093 and sub in (1, 2):  # 6093h = P1.044 / P1.045 (L18838-18854)
             name = "P1.044" if sub == 1 else "P1.045"
             if self.params.read(name) != value:
@@ -508,6 +516,8 @@ class Drive:
             self.axis.set_power(not self.sto.torque_cut)
             self._hold_timer = self.sched.after(hold, lambda: self.axis.set_power(False))
         self._set_do("SON", False)
+        for hook in self._servo_off_hooks:
+            hook()
 
     def _follow_absolute(self) -> None:
         """With a valid absolute coordinate, 6064h reads the absolute PUU (chapter 10)."""
