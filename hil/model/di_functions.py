@@ -84,6 +84,7 @@ class DiFunctions:
         d.alarms.raise_alarm("AL35F")  # WARN, servo stays on (L19413)
         d.axis.ramp_stop(d._p5003_decel(6))  # digit C = PFQS
         d.axis.lock("PFQS")  # nothing starts the motor during the quick stop
+        d.cia402.drop_setpoints()
 
     def _pfqs_step(self) -> None:
         """At zero speed: AL3CF and Servo Off (L20153-20155)."""
@@ -98,7 +99,7 @@ class DiFunctions:
         if not self.d.options.pfqs_keeps_al35f:
             alarms.clear("AL35F")
         alarms.raise_alarm("AL3CF")  # WARN, servo off (L19414): the drive's alarm reaction
-        ax.unlock("PFQS")
+        self._release("PFQS")
 
     # -- JOGU / JOGD ---------------------------------------------------------------------
     def update_jog(self, *_: object) -> None:
@@ -113,14 +114,21 @@ class DiFunctions:
             rpm = min(d.params.get("P4.005"), d.axis.mech.max_speed)  # L10857
             d.axis.lock("JOG")
             d.axis.run_velocity(want * rpm, ramp, ramp, by="JOG")
+            d.cia402.drop_setpoints()
         elif self.jog:
-            d.axis.unlock("JOG")
+            self._release("JOG")
             d.axis.ramp_stop(ramp)
         self.jog = want
 
+    def _release(self, owner: str) -> None:
+        """`owner` gives the axis back; what the host commanded meanwhile was dropped."""
+        if owner in self.d.axis.locks:
+            self.d.axis.unlock(owner)
+            self.d.cia402.drop_setpoints()
+
     def _end_jog(self) -> None:
         self.jog = 0
-        self.d.axis.unlock("JOG")
+        self._release("JOG")
 
     def on_servo_on(self) -> None:
         self._end_jog()
@@ -136,9 +144,10 @@ class DiFunctions:
         d = self.d
         level = d.params.get("P2.050") & 1
         if not active or self.control_mode() not in POSITION_MODES:
-            d.axis.unlock("CCLR")
+            self._release("CCLR")
             return
         d._clear_position_error()
+        d.cia402.drop_setpoints()  # the pending position command is gone
         if level:
             d.axis.lock("CCLR")
 

@@ -265,6 +265,11 @@ class Axis:
         self._locks.discard(owner)
 
     @property
+    def base_kpp(self) -> float:
+        """The position gain without a GAINUP ratio."""
+        return self._kpp0
+
+    @property
     def locks(self) -> frozenset[str]:
         return frozenset(self._locks)
 

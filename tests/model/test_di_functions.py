@@ -321,9 +321,9 @@ def test_cclr_level_keeps_the_error_cleared_while_on() -> None:
     drive.write_object(0x6040, 0, 0x1F)
     drive.advance(200 * MS)
     assert drive.axis.position == start
-    press(drive, 5, False)  # a new set-point (change immediately: the dropped one is gone)
+    press(drive, 5, False)  # a new set-point starts: the dropped one does not block it
     drive.write_object(0x6040, 0, 0x0F)
-    drive.write_object(0x6040, 0, 0x3F)
+    drive.write_object(0x6040, 0, 0x1F)
     drive.advance(1 * S)
     assert drive.axis.position != start
 
@@ -350,11 +350,39 @@ def test_gainup_switches_by_p2027_x(p2027: int, di_on: bool, switched: bool) -> 
     Y = 0: position gain x P2.001 (L9455-9459). The state shows in the snapshot."""
     drive, _ = make(di5=0x03, **{"P2.027": p2027, "P2.001": 200, "P2.005": 150})
     enable(drive, PP)
-    base = drive.axis._kpp0
+    base = drive.axis.base_kpp
     if di_on:
         press(drive, 5)
     assert drive.snapshot()["gain_switched"] is switched
     assert drive.axis.kpp == pytest.approx(base * (2.0 if switched else 1.0))
+
+
+def cruise_following_error(drive: Drive) -> float:
+    """Following error 500 ms into a 300 rpm PP move (constant speed after 100 ms): signed,
+    demand minus feedback."""
+    drive.write_object(0x607A, 0, 500_000)  # 5 rev
+    drive.write_object(0x6081, 0, 500_000)  # 5 rev/s = 300 rpm
+    drive.write_object(0x6083, 0, 1000)
+    drive.write_object(0x6084, 0, 1000)
+    drive.write_object(0x6040, 0, 0x1F)
+    drive.advance(500 * MS)
+    return drive.axis.following_error
+
+
+def test_gainup_position_loop_runs_with_p2001_times_the_gain() -> None:
+    """GAINUP with P2.001 = 300 %: the position gain is tripled (L15085, L9455-9459). At
+    cruise the axis' loop gives Kpp x (e + v dt) = (1 - feed-forward) x v (1 ms substeps)."""
+    errors = []
+    for di_on in (False, True):
+        drive, _ = make(di5=0x03, **{"P2.027": 0x01, "P2.001": 300})
+        enable(drive, PP)
+        if di_on:
+            press(drive, 5)
+        errors.append(cruise_following_error(drive))
+    v = 300 / 60 * 16777216  # counts/s
+    kpp = [0.05 * v / (e + v * 1e-3) for e in errors]
+    assert kpp[0] == pytest.approx(100.0, rel=1e-3)
+    assert kpp[1] == pytest.approx(300.0, rel=1e-3)
 
 
 def test_gainup_integrator_switch_is_recorded_only() -> None:
@@ -363,7 +391,7 @@ def test_gainup_integrator_switch_is_recorded_only() -> None:
     enable(drive, PP)
     press(drive, 5)
     assert drive.difunc.gain_switched
-    assert drive.axis.kpp == drive.axis._kpp0
+    assert drive.axis.kpp == drive.axis.base_kpp
 
 
 def test_gainup_not_in_torque_mode() -> None:
