@@ -82,7 +82,8 @@ class DiFunctions:
         self.pfqs_stopping = True
         self._end_jog()
         d.alarms.raise_alarm("AL35F")  # WARN, servo stays on (L19413)
-        d.axis.ramp_stop(d._p5003_decel(6))  # digit C = PFQS
+        dev = d.options.dev_pfqs_ramp_ms  # deviation knob: a wrong ramp
+        d.axis.ramp_stop(d._p5003_decel(6) if dev is None else dev)  # digit C = PFQS
         d.axis.lock("PFQS")  # nothing starts the motor during the quick stop
         d.cia402.drop_setpoints()
 

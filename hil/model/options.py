@@ -136,6 +136,7 @@ class ModelOptions:
     dev_1029h_behaviour: int | None = None  # AL180 acts as if 1029h sub1 were this (e.g. 1)
     dev_di_filter_delay_only: bool = False  # P2.009 delays each DI edge, drops no bounce
     dev_ignore_early_sync: bool = False  # no AL3E2 for a SYNC that comes too early
+    dev_pfqs_ramp_ms: float | None = None  # PFQS ramps with this (ms / 3000 rpm), not P5.003.C
     extra: dict[str, Any] = field(default_factory=dict)  # options of other rooms (homing, abs)
 
     @classmethod
