@@ -5,6 +5,8 @@
   option `pfqs_clear`.
 * JOGU / JOGD (0x37 / 0x38, level, All, L15209-15212): while held and the servo is on, jog
   at P4.005 rpm (L10846-10861), capped at P1.055; both or neither held: ramp to a stop.
+  Jog through P4.005 (communication, L10863-10866): 4998 jogs CCW, 4999 CW, 0 stops, any
+  other value is the jog speed.
 * TRQLM (0x09, level, PT/PR/S, L15101): with DI.TRQLM on or P1.002.Y = 1 (an OR, L7845) the
   torque is limited to the TCM0/TCM1 source: 00 analog T_REF x P1.041 / 10 V, 01-11
   |P1.012|-|P1.014| % (L4042-4044, L7993-8031), together with 60E0h/60E1h.
@@ -57,6 +59,8 @@ class DiFunctions:
         self.d = drive
         self.pfqs_stopping = False  # AL35F ramp running
         self.jog = 0  # +1 JOGU, -1 JOGD, 0 none
+        self.comm_jog = 0  # P4.005 = 4998 / 4999: +1 / -1 (axis direction), 0 none
+        self.jog_rpm = self._speed_of(drive.params.get("P4.005"), 20)
         self.gain_switched = False
         self.torque_limit_pct: float | None = None  # TRQLM limit in effect (%)
         self.speed_limit_rpm: float | None = None  # SPDLM limit in effect (rpm)
@@ -80,6 +84,7 @@ class DiFunctions:
         if self.pfqs_stopping or "AL3CF" in d.alarms.active:
             return
         self.pfqs_stopping = True
+        self.comm_jog = 0
         self._end_jog()
         d.alarms.raise_alarm("AL35F")  # WARN, servo stays on (L19413)
         dev = d.options.dev_pfqs_ramp_ms  # deviation knob: a wrong ramp
@@ -103,16 +108,35 @@ class DiFunctions:
         self._release("PFQS")
 
     # -- JOGU / JOGD ---------------------------------------------------------------------
+    @staticmethod
+    def _speed_of(value: int, old: int) -> int:
+        return old if value in (0, 4998, 4999) else value
+
+    def on_p4005(self, _name: str, _old: int, new: int) -> None:
+        """P4.005 written: a jog command (4998 CCW, 4999 CW, 0 stop) or the speed (L10865)."""
+        if new in (4998, 4999):
+            ccw = new == 4998
+            self.comm_jog = 1 if ccw != self.d.absolute.cw_positive else -1
+        elif new == 0:
+            self.comm_jog = 0
+        self.jog_rpm = self._speed_of(new, self.jog_rpm)
+        if not self.d.servo_on:
+            self.comm_jog = 0  # jogging needs Servo On (L2937)
+        self.update_jog()
+
     def update_jog(self, *_: object) -> None:
-        """Jog while exactly one of JOGU/JOGD is on and the servo is on (L15209-15212)."""
+        """Jog while exactly one of JOGU/JOGD is on (L15209-15212), else by P4.005's command,
+        and the servo is on (L2937)."""
         d = self.d
         up, down = d.dio.function_active("JOGU"), d.dio.function_active("JOGD")
         want = (1 if up else -1) if up != down else 0
+        if not (up or down):
+            want = self.comm_jog
         if not d.servo_on or self.pfqs_stopping or "PFQS" in d.axis.locks:
             want = 0
         ramp = d.options.jog_ramp_ms
         if want:
-            rpm = min(d.params.get("P4.005"), d.axis.mech.max_speed)  # L10857
+            rpm = min(self.jog_rpm, d.axis.mech.max_speed)  # L10857
             d.axis.lock("JOG")
             d.axis.run_velocity(want * rpm, ramp, ramp, by="JOG")
             d.cia402.drop_setpoints()
@@ -137,7 +161,8 @@ class DiFunctions:
         self.refresh()
 
     def on_servo_off(self) -> None:
-        self._end_jog()  # the power stage is off: the jog ends (a new servo on restarts it)
+        self._end_jog()  # the power stage is off: the jog ends (a held DI restarts it)
+        self.comm_jog = 0
 
     # -- CCLR ----------------------------------------------------------------------------
     def on_cclr(self, active: bool) -> None:
@@ -214,7 +239,7 @@ def attach_di_functions(drive: Drive) -> DiFunctions:
         dio.on_function(sym, fns.refresh)
     for name in _PARAMS:
         drive.params.on_write(name, fns.refresh)
-    drive.params.on_write("P4.005", lambda *_: fns.jog and fns.update_jog())
+    drive.params.on_write("P4.005", fns.on_p4005)
     drive._step_hooks.append(fns.after_step)
     drive._servo_on_hooks.append(fns.on_servo_on)
     drive._servo_off_hooks.append(fns.on_servo_off)

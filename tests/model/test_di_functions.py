@@ -157,6 +157,34 @@ def test_jog_needs_the_servo_on() -> None:
     assert drive.axis.velocity_rpm == pytest.approx(300, abs=1)
 
 
+def test_jog_through_p4005_speed_then_4998_ccw_4999_cw_0_stop() -> None:
+    """P4.005 communication control (L10863-10866): 1-5000 speed, 4998 CCW, 4999 CW, 0 stop.
+    P1.001.Z = 0: CCW is the positive direction (docs/manual-choices.md, P1.001.Z)."""
+    drive, _ = make()
+    enable(drive, PV)
+    drive.params.write("P4.005", 600)
+    drive.advance(50 * MS)
+    assert drive.axis.velocity_rpm == 0.0  # a speed alone does not move
+    drive.params.write("P4.005", 4998)
+    drive.advance(200 * MS)
+    assert drive.axis.velocity_rpm == pytest.approx(600, abs=1)
+    drive.params.write("P4.005", 4999)
+    drive.advance(300 * MS)
+    assert drive.axis.velocity_rpm == pytest.approx(-600, abs=1)
+    drive.params.write("P4.005", 0)
+    drive.advance(300 * MS)
+    assert abs(drive.axis.velocity_rpm) < 0.5
+
+
+def test_jog_through_p4005_needs_the_servo_on() -> None:
+    """Jogging works only while Servo On (L2937)."""
+    drive, _ = make()
+    drive.params.write("P4.005", 4998)
+    enable(drive, PV)
+    drive.advance(200 * MS)
+    assert drive.axis.velocity_rpm == 0.0
+
+
 # -- TRQLM / SPDLM -------------------------------------------------------------------------
 
 
