@@ -14,6 +14,7 @@ Servo logic (choices in docs/manual-choices.md):
   P5.003 X/Y deceleration: L15188-15191, L8329, L11084-11100);
 * DO.SRDY while no ALM-class alarm (L15263), DO.SON while the servo is on (L15266),
   ZSPD |v| < P1.038 (L15269), TSPD v > P1.039 (L15272), TPOS |error| < P1.054 (L15275),
+  TQL while the torque is held at a limit, not in T/Tz (L15278),
   ALRM/WARN from the alarm classes (L15282, L15307), BRKR from `brake.py`.
 """
 
@@ -627,6 +628,8 @@ class Drive:
         self._set_do("ZSPD", abs(rpm) < self.params.get("P1.038") / 10.0)
         self._set_do("TSPD", rpm > self.params.get("P1.039"))
         self._set_do("TPOS", abs(ax.following_error) < self.params.get("P1.054"))
+        if hasattr(self, "difunc"):  # TQL: torque at a limit, not in T/Tz (L15278)
+            self._set_do("TQL", ax.torque_limited and self.difunc.control_mode() not in ("T", "Tz"))
 
     def _update_sensors(self, force: bool = False) -> None:
         """Drive the sensor DIs from the axis position (force: at power-up, unfiltered)."""

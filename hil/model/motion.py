@@ -205,6 +205,7 @@ class Axis:
         self._kpp0 = kpp
         self._tau_v0 = self._tau_v
         self._locks: set[str] = set()
+        self.torque_limited = False  # the last step clipped the torque at a limit (DO.TQL)
         self.moving = False
 
     # ---- controls ----------------------------------------------------------------
@@ -222,6 +223,7 @@ class Axis:
         if not on:
             self._mode = _HOLD
             self.torque_nm = 0.0
+            self.torque_limited = False
         elif self._mode == _STOP and self.velocity == 0.0:
             self._mode = _HOLD
         self.moving = self.moving or (on and self._mode != _HOLD)
@@ -523,10 +525,12 @@ class Axis:
             tq = min(tt, tq + d) if tt > tq else max(tt, tq - d)
             self._tq_dem = tq
             done = False
+        limited = tq > self._tmax or tq < self._tmin
         if tq > self._tmax:
             tq = self._tmax
         elif tq < self._tmin:
             tq = self._tmin
+        self.torque_limited = limited
         net = tq - ext
         if v == 0.0:
             if -fr <= net <= fr:
@@ -561,12 +565,16 @@ class Axis:
         nv = v + (vcmd - v) * self._alpha
         f = fr if nv > 0.0 else (-fr if nv < 0.0 else 0.0)
         tq = (nv - v) / (k * dt) + ext + f
+        limited = True
         if tq > self._tmax:
             tq = self._tmax
             nv = v + (tq - ext - f) * k * dt
         elif tq < self._tmin:
             tq = self._tmin
             nv = v + (tq - ext - f) * k * dt
+        else:
+            limited = False
+        self.torque_limited = limited
         self.torque_nm = tq
         return nv
 

@@ -207,6 +207,22 @@ def test_trqlm_limits_torque_to_p1012_selected_by_tcm0() -> None:
     assert peak_torque(drive, 3000) == pytest.approx(30.0, abs=0.1)
 
 
+def test_do_tql_while_the_torque_is_at_the_trqlm_limit() -> None:
+    """DO.TQL "當扭矩限制中時" (L15278): on while accelerating against the 30 % limit, off at
+    cruise (DO4 mapped to TQL, P2.021 = 0x0106)."""
+    drive, _ = make(di5=0x09, **{"P1.012": 30, "P2.021": 0x0106})
+    enable(drive, PV)
+    press(drive, 3)
+    press(drive, 5)
+    assert not drive.do(4)
+    run_pv(drive, 1000, accel_ms=1)
+    drive.advance(5 * MS)
+    assert drive.do(4)
+    drive.advance(1 * 1000 * MS)
+    assert drive.axis.velocity_rpm == pytest.approx(1000, abs=1)
+    assert not drive.do(4)
+
+
 def test_without_trqlm_the_torque_is_not_limited() -> None:
     drive, _ = make(di5=0x09, **{"P1.012": 30})
     enable(drive, PV)
