@@ -100,6 +100,9 @@ class DiFunctions:
         zspd = self.d.params.get("P1.038") / 10.0
         if self.d.options.pfqs_zero == "zspd" and abs(ax.velocity_rpm) >= zspd:
             return
+        self._pfqs_done()
+
+    def _pfqs_done(self) -> None:
         self.pfqs_stopping = False
         alarms = self.d.alarms
         if not self.d.options.pfqs_keeps_al35f:
@@ -163,6 +166,8 @@ class DiFunctions:
     def on_servo_off(self) -> None:
         self._end_jog()  # the power stage is off: the jog ends (a held DI restarts it)
         self.comm_jog = 0
+        if self.pfqs_stopping:  # another servo off cut the PFQS ramp short: it ends here
+            self._pfqs_done()
 
     # -- CCLR ----------------------------------------------------------------------------
     def on_cclr(self, active: bool) -> None:

@@ -105,6 +105,21 @@ def test_pfqs_option_reset_follows_the_di_table() -> None:
     assert drive.alarms.active == ()
 
 
+def test_a_servo_off_during_the_pfqs_ramp_ends_it_with_al3cf() -> None:
+    """SON/CiA 402 servo off while AL35F ramps: the quick stop ends there (AL3CF) and nothing
+    stays locked (choice, docs/manual-choices.md#di-functions)."""
+    drive, _ = make(di5=0x47)
+    enable(drive, PV)
+    run_pv(drive, 1500)
+    drive.advance(300 * MS)
+    press(drive, 5)
+    drive.write_object(0x6040, 0, 0x07)  # disable operation: servo off mid-ramp
+    drive.advance(5 * MS)
+    assert not drive.servo_on
+    assert drive.alarms.active == ("AL3CF",)
+    assert drive.axis.locks == frozenset()
+
+
 def test_pfqs_acts_in_s_not_in_tz() -> None:
     """PFQS modes: PT, PR, T, S (L15253); Tz (P1.001 = 5) is not one of them."""
     drive, events = make(di5=0x47, **{"P1.001": 0x0005})
