@@ -45,7 +45,7 @@ POSITION_MODES = ("PT", "PR")  # CCLR L15088
 TRQLM_MODES = ("PT", "PR", "S", "Sz")  # L15101; P1.012 lists Sz too (L7994)
 SPDLM_MODES = ("T", "Tz")  # L15121, "只在 T / Tz 模式有效" L7831
 ZCLAMP_MODES = ("S", "Sz")  # "在速度模式" L9906
-GAINUP_MODES = ("PT", "PR", "S", "Sz")  # L15085, P2.027 table "P / S" (L9455)
+GAINUP_MODES = ("PT", "PR", "S", "Sz")  # L15085, P2.027 table "P / S" (L9458)
 
 _TRIGGERS = ("TRQLM", "SPDLM", "TCM0", "TCM1", "SPD0", "SPD1", "ZCLAMP", "GAINUP")
 _PARAMS = ("P1.001", "P1.002", "P1.009", "P1.010", "P1.011", "P1.012", "P1.013", "P1.014",
@@ -222,7 +222,7 @@ class DiFunctions:
         x, y = p2027 & 0xF, (p2027 >> 4) & 0xF
         on = d.dio.function_active("GAINUP")
         self.gain_switched = mode in GAINUP_MODES and ((x == 1 and on) or (x == 5 and not on))
-        if self.gain_switched and y == 0:  # gain ratio (L9455-9459)
+        if self.gain_switched and y == 0:  # gain ratio (L9454-9460)
             d.axis.set_gain_ratio(d.params.get("P2.001") / 100.0, d.params.get("P2.005") / 100.0)
         else:  # Y = 1 switches an integrator the axis does not have: recorded only
             d.axis.set_gain_ratio(1.0, 1.0)

@@ -406,7 +406,7 @@ def test_cclr_does_nothing_in_speed_mode() -> None:
                           (0x05, True, False), (0x00, True, False)])
 def test_gainup_switches_by_p2027_x(p2027: int, di_on: bool, switched: bool) -> None:
     """P2.027.X = 1: switched while GAINUP is on; 5: while it is off; 0: never (L9435-9447);
-    Y = 0: position gain x P2.001 (L9455-9459). The state shows in the snapshot."""
+    Y = 0: position gain x P2.001 (L9454-9460). The state shows in the snapshot."""
     drive, _ = make(di5=0x03, **{"P2.027": p2027, "P2.001": 200, "P2.005": 150})
     enable(drive, PP)
     base = drive.axis.base_kpp
@@ -429,7 +429,7 @@ def cruise_following_error(drive: Drive) -> float:
 
 
 def test_gainup_position_loop_runs_with_p2001_times_the_gain() -> None:
-    """GAINUP with P2.001 = 300 %: the position gain is tripled (L15085, L9455-9459). At
+    """GAINUP with P2.001 = 300 %: the position gain is tripled (L15085, L9454-9460). At
     cruise the axis' loop gives Kpp x (e + v dt) = (1 - feed-forward) x v (1 ms substeps)."""
     errors = []
     for di_on in (False, True):
@@ -445,7 +445,7 @@ def test_gainup_position_loop_runs_with_p2001_times_the_gain() -> None:
 
 
 def test_gainup_integrator_switch_is_recorded_only() -> None:
-    """P2.027.Y = 1 switches P2.006/P2.026 on (L9461-9463): the axis has no integrator."""
+    """P2.027.Y = 1 switches P2.006/P2.026 on (L9456, L9461-9462): the axis has no integrator."""
     drive, _ = make(di5=0x03, **{"P2.027": 0x11, "P2.001": 200})
     enable(drive, PP)
     press(drive, 5)
