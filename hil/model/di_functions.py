@@ -228,8 +228,10 @@ class DiFunctions:
             d.axis.set_gain_ratio(1.0, 1.0)
 
     def after_step(self) -> None:
-        self._pfqs_step()
-        self._cclr_step()
+        if self.pfqs_stopping:
+            self._pfqs_step()
+        if self.d.axis.locked:
+            self._cclr_step()
 
 
 def attach_di_functions(drive: Drive) -> DiFunctions:

@@ -628,8 +628,8 @@ class Drive:
         self._set_do("ZSPD", abs(rpm) < self.params.get("P1.038") / 10.0)
         self._set_do("TSPD", rpm > self.params.get("P1.039"))
         self._set_do("TPOS", abs(ax.following_error) < self.params.get("P1.054"))
-        if hasattr(self, "difunc"):  # TQL: torque at a limit, not in T/Tz (L15278)
-            self._set_do("TQL", ax.torque_limited and self.difunc.control_mode() not in ("T", "Tz"))
+        # TQL: torque at a limit, not in T/Tz (L15278)
+        self._set_do("TQL", ax.torque_limited and self.difunc.control_mode() not in ("T", "Tz"))
 
     def _update_sensors(self, force: bool = False) -> None:
         """Drive the sensor DIs from the axis position (force: at power-up, unfiltered)."""

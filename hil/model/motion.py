@@ -272,6 +272,10 @@ class Axis:
         return self._kpp0
 
     @property
+    def locked(self) -> bool:
+        return bool(self._locks)
+
+    @property
     def locks(self) -> frozenset[str]:
         return frozenset(self._locks)
 
