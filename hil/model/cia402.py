@@ -380,6 +380,12 @@ class Cia402:
             self._homing_active = False
         self._update_window()
 
+    def drop_setpoints(self) -> None:
+        """The drive took the axis (DI JOG, PFQS, CCLR): the PP set-points are gone, so the
+        next one starts at once instead of waiting for a move that no longer runs."""
+        self._pp_active = self._pp_queue = None
+        self._ip_target = None
+
     def set_gear(self, p1_044: int, p1_045: int) -> None:
         """Mirror P1.044/P1.045 into 6093h sub 1/2 (no checks beyond > 0)."""
         if p1_044 <= 0 or p1_045 <= 0:

@@ -33,22 +33,26 @@ from hil.profile.dio import (  # tables 8.1 / 8.2 and the mapping parameters (th
 
 # Table 8.1 functions the virtual drive does not model (issue 13 item 6). Mapping one of them
 # by a P2.010-P2.017 / P2.036-P2.040 write, or in a bench, is refused: a mapped function that
-# silently does nothing would make a test pass for the wrong reason. Factory defaults that
-# carry one (P2.011 = 0x0104 CCLR) stay as they are: they are never active unless driven.
+# silently does nothing would make a test pass for the wrong reason. The motion functions
+# PFQS, JOGU/JOGD, TRQLM/SPDLM, ZCLAMP, CCLR and GAINUP are modelled (di_functions.py); what
+# stays here needs an input the virtual drive has not (pulse train, analog position command,
+# linear scale, gantry, E-cam) or a mode switch it does not model (mixed modes).
+_NO_PULSE = "the pulse-train command (PT) is not modelled"
 INERT_DI_FUNCTIONS: dict[str, str] = {
-    "GAINUP": "gain switching (P2.027 = 1, gain x change ratio) is not modelled; "
-    "the axis has fixed gains (L15085)",
-    "CCLR": "the pulse command (PT) and its accumulated pulse error (P2.050) are not "
-    "modelled (L15088)",
-    "ZCLAMP": "speed mode S (zero-speed clamp below P1.038) is not modelled (L15091)",
-    "TRQLM": "the torque limit from P1.012-P1.014 selected by TCM0/TCM1 is not modelled "
-    "(L15101); use 60E0h/60E1h",
-    "SPDLM": "the speed limit from P1.009-P1.011 selected by SPD0/SPD1 in torque mode T is "
-    "not modelled (L15121); use P1.055 / 6080h",
-    "JOGU": "jog at P4.005 is not modelled (L15209)",
-    "JOGD": "jog at P4.005 is not modelled (L15212)",
-    "PFQS": "the PFQS quick stop (AL35F, P5.003 ramp, AL3CF + Servo Off) is not modelled "
-    "(L15253)",
+    "CMDINV": "command inversion of the analog S/T command is not modelled (L15094)",
+    "CTRY": "the gantry function (P1.074 = 2) is not modelled (L15104)",
+    "VPL": "the analog position command latch is not modelled (L15107)",
+    "VPRS": "the analog position command clear is not modelled (L15113)",
+    "FEC": "the full-closed loop (linear scale) is not modelled (L15117)",
+    "S-P": "mixed-mode switching (P1.001 = 6/8) is not modelled (L15172)",
+    "S-T": "mixed-mode switching (P1.001 = 0x0A) is not modelled (L15176)",
+    "T-P": "mixed-mode switching (P1.001 = 7/9) is not modelled (L15180)",
+    "PT-PR": "mixed-mode switching (P1.001 = 0x0D-0x0F) is not modelled (L15200)",
+    "ALGN": "E-cam alignment (P2.076) is not modelled (L15203)",
+    "CAM": "the E-cam (P5.088) is not modelled (L15206)",
+    "GNUM0": f"e-gear numerator selection P2.060-P2.062: {_NO_PULSE} (L15239)",
+    "GNUM1": f"e-gear numerator selection P2.060-P2.062: {_NO_PULSE} (L15239)",
+    "INHP": f"pulse inhibit: {_NO_PULSE} (L15244)",
 }
 
 

@@ -14,6 +14,7 @@ Servo logic (choices in docs/manual-choices.md):
   P5.003 X/Y deceleration: L15188-15191, L8329, L11084-11100);
 * DO.SRDY while no ALM-class alarm (L15263), DO.SON while the servo is on (L15266),
   ZSPD |v| < P1.038 (L15269), TSPD v > P1.039 (L15272), TPOS |error| < P1.054 (L15275),
+  TQL while the torque is held at a limit, not in T/Tz (L15278),
   ALRM/WARN from the alarm classes (L15282, L15307), BRKR from `brake.py`.
 """
 
@@ -31,6 +32,7 @@ from hil.model.canopen_init import HOME_OFFSET_INIT, load_canopen_init
 from hil.model.capture import attach_capture
 from hil.model.cia402 import Cia402, Cia402Options
 from hil.model.compare import attach_compare
+from hil.model.di_functions import attach_di_functions
 from hil.model.dio import DigitalIO
 from hil.model.errors import (
     ABORT_DATA_STATE,
@@ -115,6 +117,7 @@ class Drive:
         self.pr = attach_pr(self)  # PR#1-#99 (chapter 7, docs/pr.md)
         self.capture = attach_capture(self)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
         self.compare = attach_compare(self)  # COMPARE on DO4 (§7.2.3, docs/capture.md)
+        self.difunc = attach_di_functions(self)  # PFQS, JOG, TRQLM/SPDLM, ZCLAMP, CCLR, GAINUP
         self._boot()
 
     # ------------------------------------------------------------------ construction
@@ -135,6 +138,8 @@ class Drive:
         override = {}
         if options.dev_al501_cleared_by_arst:
             override = {"AL501": "reset", "AL502": "reset"}
+        if options.pfqs_clear == "reset":  # the DI table's reading (L15253), not L20145/L20157
+            override.update({"AL35F": "reset", "AL3CF": "reset"})
         self.alarms = AlarmManager(
             None, self.sched, self.params, self._on_alarm, AlarmOptions(override)
         )
@@ -176,6 +181,7 @@ class Drive:
         )
         self._step_hooks: list[Callable[[], None]] = []  # after each motion substep
         self._servo_on_hooks: list[Callable[[], None]] = []  # after the servo turned on
+        self._servo_off_hooks: list[Callable[[], None]] = []  # after the servo turned off
         self._boot_hooks: list[Callable[[], None]] = []  # at power-up, before outputs settle
         self._hold_timer = None
         self._dout_cache: dict[str, bool] = {}
@@ -376,6 +382,7 @@ class Drive:
             # terminal levels DI1..DI10 (the bench's sensors drive some: ORGP, NL, PL)
             "di": [self.dio.input_level(n) for n in range(1, 11)],
             "homing_phase": self.homing.phase if hasattr(self, "homing") else "",
+            "gain_switched": self.difunc.gain_switched if hasattr(self, "difunc") else False,
         }
 
     # ------------------------------------------------------------------ internals
@@ -430,6 +437,8 @@ class Drive:
         self.cia402.limit_decel_ms = min(self._p5003_decel(0), self._p5003_decel(1))
 
     def _on_object_written(self, index: int, sub: int, value: int) -> None:
+        if index == 0x6060:  # the mode decides which DI functions act (di_functions.py)
+            self.difunc.refresh()
         if index == 0x6093 and sub in (1, 2):  # 6093h = P1.044 / P1.045 (L18838-18854)
             name = "P1.044" if sub == 1 else "P1.045"
             if self.params.read(name) != value:
@@ -509,6 +518,8 @@ class Drive:
             self.axis.set_power(not self.sto.torque_cut)
             self._hold_timer = self.sched.after(hold, lambda: self.axis.set_power(False))
         self._set_do("SON", False)
+        for hook in self._servo_off_hooks:
+            hook()
 
     def _follow_absolute(self) -> None:
         """With a valid absolute coordinate, 6064h reads the absolute PUU (chapter 10)."""
@@ -618,6 +629,8 @@ class Drive:
         self._set_do("ZSPD", abs(rpm) < self.params.get("P1.038") / 10.0)
         self._set_do("TSPD", rpm > self.params.get("P1.039"))
         self._set_do("TPOS", abs(ax.following_error) < self.params.get("P1.054"))
+        # TQL: torque at a limit, not in T/Tz (L15278)
+        self._set_do("TQL", ax.torque_limited and self.difunc.control_mode() not in ("T", "Tz"))
 
     def _update_sensors(self, force: bool = False) -> None:
         """Drive the sensor DIs from the axis position (force: at power-up, unfiltered)."""

@@ -26,7 +26,14 @@ Public API (all that the drive, CiA 402 and homing use)::
     axis.brake_clamped = bool      # mechanical brake holds: velocity forced to 0
     axis.set_torque_limits(pos_0p1, neg_0p1)   # 60E0h / 60E1h, 0.1 % of rated
     axis.max_speed_rpm             # P1.055 / 6080h: caps every profile speed and torque mode
-    # commands (act while power is on; issued while off they wait for power)
+    # DI functions of table 8.1 (hil/model/di_functions.py)
+    axis.set_internal_torque_limit(pct_0p1 | None)   # TRQLM: the smaller of it and 60E0h/60E1h
+    axis.speed_limit_rpm = rpm | None   # SPDLM: torque-mode speed limit below P1.055
+    axis.zero_clamp = "" | "lock" | "zero"   # ZCLAMP in velocity mode, below zero_clamp_rpm
+    axis.set_gain_ratio(kpp_ratio, speed_ratio)   # GAINUP: gains x P2.001 / P2.005
+    axis.lock(owner) / axis.unlock(owner)   # JOG/PFQS/CCLR own the axis: other commands wait
+    # commands (act while power is on; issued while off they wait for power); while another
+    # owner holds a lock they are ignored (`by=` names the owner); stops always act
     axis.hold()                                  # keep the current demand position
     axis.move_to(target_counts, speed_rpm, accel_ms, decel_ms)   # trapezoid, from current state
     axis.run_velocity(rpm, accel_ms, decel_ms)
@@ -189,6 +196,16 @@ class Axis:
         self.max_speed_rpm = mech.rated_speed  # P1.055 default = rated speed (L6882)
         self._tmax = 3.0 * mech.rated_torque
         self._tmin = -3.0 * mech.rated_torque
+        self._tq_obj = (3.0 * mech.rated_torque, -3.0 * mech.rated_torque)  # 60E0h / 60E1h
+        self._tq_internal: float | None = None  # N·m, DI.TRQLM (P1.012-P1.014)
+        self.speed_limit_rpm: float | None = None  # DI.SPDLM (P1.009-P1.011), torque mode
+        self.zero_clamp = ""  # DI.ZCLAMP: "" off, "lock" position, "zero" speed 0
+        self.zero_clamp_rpm = zero_speed_rpm  # P1.038
+        self._zc_pos: float | None = None
+        self._kpp0 = kpp
+        self._tau_v0 = self._tau_v
+        self._locks: set[str] = set()
+        self.torque_limited = False  # the last step clipped the torque at a limit (DO.TQL)
         self.moving = False
 
     # ---- controls ----------------------------------------------------------------
@@ -206,6 +223,7 @@ class Axis:
         if not on:
             self._mode = _HOLD
             self.torque_nm = 0.0
+            self.torque_limited = False
         elif self._mode == _STOP and self.velocity == 0.0:
             self._mode = _HOLD
         self.moving = self.moving or (on and self._mode != _HOLD)
@@ -213,8 +231,56 @@ class Axis:
     def set_torque_limits(self, pos_0p1: float, neg_0p1: float) -> None:
         """Torque limits 60E0h / 60E1h in 0.1 % of rated torque (both given as magnitudes)."""
         rated = self.mech.rated_torque
-        self._tmax = abs(pos_0p1) * rated / 1000.0
-        self._tmin = -abs(neg_0p1) * rated / 1000.0
+        self._tq_obj = (abs(pos_0p1) * rated / 1000.0, -abs(neg_0p1) * rated / 1000.0)
+        self._apply_torque_limits()
+
+    def set_internal_torque_limit(self, pct_0p1: float | None) -> None:
+        """An internal torque limit (0.1 % of rated, both directions) on top of 60E0h/60E1h;
+        None removes it. The smaller limit acts."""
+        rated = self.mech.rated_torque
+        self._tq_internal = None if pct_0p1 is None else abs(pct_0p1) * rated / 1000.0
+        self._apply_torque_limits()
+
+    def _apply_torque_limits(self) -> None:
+        tmax, tmin = self._tq_obj
+        lim = self._tq_internal
+        if lim is not None:
+            tmax, tmin = min(tmax, lim), max(tmin, -lim)
+        self._tmax, self._tmin = tmax, tmin
+
+    @property
+    def torque_limited_0p1(self) -> float:
+        """The acting positive torque limit in 0.1 % of rated."""
+        return self._tmax * 1000.0 / self.mech.rated_torque
+
+    def set_gain_ratio(self, kpp_ratio: float, speed_ratio: float) -> None:
+        """Position gain x `kpp_ratio`, speed-loop bandwidth x `speed_ratio` (1.0 = base)."""
+        self.kpp = self._kpp0 * kpp_ratio
+        self._tau_v = self._tau_v0 / speed_ratio
+        self._alpha_dt = -1
+
+    def lock(self, owner: str) -> None:
+        """`owner` holds the axis: move/velocity/torque/IP commands of others are ignored."""
+        self._locks.add(owner)
+
+    def unlock(self, owner: str) -> None:
+        self._locks.discard(owner)
+
+    @property
+    def base_kpp(self) -> float:
+        """The position gain without a GAINUP ratio."""
+        return self._kpp0
+
+    @property
+    def locked(self) -> bool:
+        return bool(self._locks)
+
+    @property
+    def locks(self) -> frozenset[str]:
+        return frozenset(self._locks)
+
+    def _refused(self, by: str) -> bool:
+        return bool(self._locks) and by not in self._locks
 
     def hold(self) -> None:
         """Stop the profile now and hold the current demand position."""
@@ -222,11 +288,14 @@ class Axis:
         self.demand_velocity = 0.0
 
     def move_to(
-        self, target_counts: float, speed_rpm: float, accel_ms: float, decel_ms: float
+        self, target_counts: float, speed_rpm: float, accel_ms: float, decel_ms: float,
+        *, by: str = "",
     ) -> None:
         """Trapezoidal move of the demand to `target_counts` (physical), starting from the
         current demand position and speed (so calling it during a move is a change-set-
         immediately)."""
+        if self._refused(by):
+            return
         if self._mode not in (_POS, _HOLD, _STOP, _INTERP):
             self.demand = self.position  # leaving a velocity/torque mode: start bumpless
             self.demand_velocity = self.velocity
@@ -238,8 +307,10 @@ class Axis:
         self._dec = accel_from_ms(decel_ms, self.cpr)
         self.moving = True
 
-    def run_velocity(self, rpm: float, accel_ms: float, decel_ms: float) -> None:
+    def run_velocity(self, rpm: float, accel_ms: float, decel_ms: float, *, by: str = "") -> None:
         """Profile velocity: ramp the speed to `rpm` (capped by `max_speed_rpm`)."""
+        if self._refused(by):
+            return
         if self._mode == _TORQUE:
             self.demand_velocity = self.velocity  # bumpless from the actual speed
         lim = self.max_speed_rpm
@@ -250,9 +321,11 @@ class Axis:
         self._dec = accel_from_ms(decel_ms, self.cpr)
         self.moving = True
 
-    def run_torque(self, target_0p1: float, slope_ms: float) -> None:
+    def run_torque(self, target_0p1: float, slope_ms: float, *, by: str = "") -> None:
         """Profile torque: ramp the torque demand to `target_0p1` (0.1 % of rated) with a
         slope of `slope_ms` per 100 % (6087h, L18803-18817); 0 ms = step."""
+        if self._refused(by):
+            return
         rated = self.mech.rated_torque
         if self._mode != _TORQUE:
             self._tq_dem = self.torque_nm if self.power else 0.0
@@ -272,10 +345,12 @@ class Axis:
         self._acc = self._dec
         self.moving = True
 
-    def interpolate_to(self, target_counts: float, period_ns: int) -> None:
+    def interpolate_to(self, target_counts: float, period_ns: int, *, by: str = "") -> None:
         """IP mode: move the demand linearly to `target_counts` within `period_ns`."""
         if period_ns <= 0:
             raise ValueError(f"Axis.interpolate_to: period must be > 0 ns, got {period_ns}")
+        if self._refused(by):
+            return
         if self._mode in (_TORQUE, _VEL):
             self.demand = self.position
         self._mode = _INTERP
@@ -366,7 +441,10 @@ class Axis:
                 nv, ramp_done = self._torque_loop(v, dt)
                 done = done and ramp_done
                 vd = nv
+            elif mode == _VEL and self.zero_clamp and self._clamping(vd, p):
+                nv = self._clamp_loop(v, p, dt_ns, dt)
             else:
+                self._zc_pos = None
                 nv = self._velocity_loop(v, p, pd, vd, mode, dt_ns, dt)
         else:
             nv = self._coast(v, dt)
@@ -422,6 +500,23 @@ class Axis:
                 vd = 0.0
         return mode, pd, vd, done
 
+    def _clamping(self, vd: float, p: float) -> bool:
+        """ZCLAMP: the (ramped) speed command is below `zero_clamp_rpm`; the lock position is
+        where the clamp began."""
+        if abs(vd) * 60.0 / self.cpr >= self.zero_clamp_rpm:
+            self._zc_pos = None
+            return False
+        if self._zc_pos is None:
+            self._zc_pos = p
+        return True
+
+    def _clamp_loop(self, v: float, p: float, dt_ns: int, dt: float) -> float:
+        """Hold the clamp position ("lock") or command speed 0 ("zero")."""
+        lock = self._zc_pos
+        if self.zero_clamp == "lock" and lock is not None:
+            return self._velocity_loop(v, p, lock, 0.0, _POS, dt_ns, dt)
+        return self._velocity_loop(v, p, p, 0.0, _VEL, dt_ns, dt)
+
     def _torque_loop(self, v: float, dt: float) -> tuple[float, bool]:
         """Torque mode: ramp the torque demand, limit it, integrate the speed (P1.055 speed
         limit). Returns (new speed, ramp done)."""
@@ -434,10 +529,12 @@ class Axis:
             tq = min(tt, tq + d) if tt > tq else max(tt, tq - d)
             self._tq_dem = tq
             done = False
+        limited = tq > self._tmax or tq < self._tmin
         if tq > self._tmax:
             tq = self._tmax
         elif tq < self._tmin:
             tq = self._tmin
+        self.torque_limited = limited
         net = tq - ext
         if v == 0.0:
             if -fr <= net <= fr:
@@ -449,7 +546,11 @@ class Axis:
         nv = v + net * k * dt
         if v != 0.0 and nv * v < 0.0 and (tq - ext) * v <= 0.0:
             nv = 0.0
-        lim = self.max_speed_rpm * self.cpr / 60.0
+        lim_rpm = self.max_speed_rpm
+        sl = self.speed_limit_rpm
+        if sl is not None and sl < lim_rpm:  # DI.SPDLM (P1.009-P1.011)
+            lim_rpm = sl
+        lim = lim_rpm * self.cpr / 60.0
         if nv > lim or nv < -lim:  # speed-limited torque mode (P1.055)
             nv = lim if nv > 0.0 else -lim
             tq = (nv - v) / (k * dt) + ext + (fr if nv > 0.0 else -fr)
@@ -468,12 +569,16 @@ class Axis:
         nv = v + (vcmd - v) * self._alpha
         f = fr if nv > 0.0 else (-fr if nv < 0.0 else 0.0)
         tq = (nv - v) / (k * dt) + ext + f
+        limited = True
         if tq > self._tmax:
             tq = self._tmax
             nv = v + (tq - ext - f) * k * dt
         elif tq < self._tmin:
             tq = self._tmin
             nv = v + (tq - ext - f) * k * dt
+        else:
+            limited = False
+        self.torque_limited = limited
         self.torque_nm = tq
         return nv
 

@@ -95,6 +95,28 @@ class ModelOptions:
     # AL019 "communication address / value incorrect" (L19592-19596): the Modbus exception
     # codes that raise it (02 illegal address, 03 illegal value). () = never.
     modbus_al019_exceptions: tuple[int, ...] = (2, 3)
+    # --- DI functions of table 8.1 (issue 13 item 6, hil/model/di_functions.py) ---
+    # Which table 8.1 "控制模式" column the drive is in when P1.001 is PT (0) or CANopen (0x0C)
+    # and a CiA 402 mode runs (the table names PT/PR/S/T only, L15075-15255): True = the mode
+    # of operation 6061h decides (PP/HM/IP/CSP -> PR, PV/CSV -> S, PT/CST -> T); False =
+    # P1.001 alone (CANopen mode is then none of PT/PR/S/T: only "All" functions act).
+    di_modes_follow_cia402: bool = True
+    # AL35F/AL3CF (PFQS) clear: "power_cycle" per chapter 13 (L20145, L20157) or "reset" per
+    # the DI table ("需要異警重置", L15253).
+    pfqs_clear: str = "power_cycle"
+    # AL35F stays active next to AL3CF once the PFQS ramp reached 0 (L15253 "跳出 AL3CF"
+    # names no clearing of AL35F); False: AL3CF replaces it (AL35F means "decelerating").
+    pfqs_keeps_al35f: bool = False
+    # "減速至 0 後" (L15253, L20143): "command" = the P5.003.C ramp of the command reached 0;
+    # "zspd" = and the motor speed is below P1.038 (ZSPD, L15269).
+    pfqs_zero: str = "command"
+    # Jog ramp (DI.JOGU/JOGD at P4.005): the manual gives no DI jog ramp; the one number it
+    # gives for jogging is ASDA-Soft's 500 ms default (L3237). ms per 3000 rpm.
+    jog_ramp_ms: float = 500.0
+    # The virtual drive has no analog inputs: the voltage on V_REF / T_REF that TRQLM / SPDLM
+    # use when TCM0/TCM1 (SPD0/SPD1) select the analog source (00, L4036-4044).
+    analog_v_ref: float = 0.0  # V, x P1.040 / 10 V -> speed limit (L8453)
+    analog_t_ref: float = 0.0  # V, x P1.041 / 10 V -> torque limit (L3955-3960)
     # --- deviations (deliberately wrong drive) ---
     dev_brake_on_delay_ms: float = 0.0  # added to P1.042 (e.g. 5: BRKR 5 ms late)
     dev_brake_off_delay_ms: float = 0.0  # added to the P1.043 rule
@@ -116,6 +138,7 @@ class ModelOptions:
     dev_di_filter_extra_ms: float = 0.0  # each DI edge taken this much after P2.009
     dev_ignore_early_sync: bool = False  # no AL3E2 for a SYNC that comes too early
     dev_ignore_sync_cycle: bool = False  # no AL301 for a SYNC cycle off 1006h
+    dev_pfqs_ramp_ms: float | None = None  # PFQS ramps with this (ms / 3000 rpm), not P5.003.C
     extra: dict[str, Any] = field(default_factory=dict)  # options of other rooms (homing, abs)
 
     @classmethod
@@ -138,6 +161,10 @@ class ModelOptions:
             raise ValueError(f"{where}.shutdown_option_scope: 'state_machine' or 'never'")
         if data.get("negative_p1043", "brake_first") not in ("brake_first", "as_zero"):
             raise ValueError(f"{where}.negative_p1043: 'brake_first' or 'as_zero'")
+        if data.get("pfqs_clear", "power_cycle") not in ("power_cycle", "reset"):
+            raise ValueError(f"{where}.pfqs_clear: 'power_cycle' or 'reset'")
+        if data.get("pfqs_zero", "command") not in ("command", "zspd"):
+            raise ValueError(f"{where}.pfqs_zero: 'command' or 'zspd'")
         if data.get("sto_servo_off", "acknowledged") not in STO_SERVO_OFF:
             raise ValueError(f"{where}.sto_servo_off: one of {', '.join(STO_SERVO_OFF)}")
         return cls(**data)

@@ -2,9 +2,12 @@
 
 Issue 13 item 6: a mapped function that silently does nothing is refused with a clear error
 naming the function and why: by the P2.010-P2.017 / P2.036-P2.040 write (SDO abort
-0609 0030, Modbus exception 03) and by `hil run --check` (tests/plan/test_loading.py).
-Functions and lines: GAINUP L15085, CCLR L15088, ZCLAMP L15091, TRQLM L15101, SPDLM L15121,
-JOGU L15209, JOGD L15212, PFQS L15253.
+0609 0030, Modbus exception 03) and by `hil run --check` (tests/plan/test_malformed.py).
+Refused (table 8.1, L15075-15255): CMDINV L15094, CTRY L15104, VPL L15107, VPRS L15113,
+FEC L15117, S-P L15172, S-T L15176, T-P L15180, PT-PR L15200, ALGN L15203, CAM L15206,
+GNUM0/GNUM1 L15239, INHP L15244. Modelled, so accepted (tests/model/test_di_functions.py):
+GAINUP L15085, CCLR L15088, ZCLAMP L15091, TRQLM L15101, SPDLM L15121, JOGU/JOGD
+L15209-15212, PFQS L15253.
 """
 
 from __future__ import annotations
@@ -18,12 +21,25 @@ from hil.model.errors import InertFunction, ObjectError
 from hil.profile.dio import DI_PARAMS
 from hil.protocol import modbus as mb
 
-CODES = {"GAINUP": 0x03, "CCLR": 0x04, "ZCLAMP": 0x05, "TRQLM": 0x09, "SPDLM": 0x10,
-         "JOGU": 0x37, "JOGD": 0x38, "PFQS": 0x47}  # table 8.1 set values (L15075-15255)
+CODES = {"CMDINV": 0x06, "CTRY": 0x0A, "VPL": 0x0C, "VPRS": 0x0D, "FEC": 0x0E, "S-P": 0x18,
+         "S-T": 0x19, "T-P": 0x20, "PT-PR": 0x2B, "ALGN": 0x35, "CAM": 0x36, "GNUM0": 0x43,
+         "GNUM1": 0x44, "INHP": 0x45}  # table 8.1 set values (L15075-15255)
+MODELLED = {"GAINUP": 0x03, "CCLR": 0x04, "ZCLAMP": 0x05, "TRQLM": 0x09, "SPDLM": 0x10,
+            "JOGU": 0x37, "JOGD": 0x38, "PFQS": 0x47}  # issue 13 item 6
 
 
-def test_the_refused_set_is_the_issue_list() -> None:
+def test_the_refused_set_is_the_unmodelled_list() -> None:
     assert set(INERT_DI_FUNCTIONS) == set(CODES)
+    assert not set(INERT_DI_FUNCTIONS) & set(MODELLED)
+
+
+@pytest.mark.parametrize("symbol", sorted(MODELLED))
+def test_modelled_functions_map_over_sdo(symbol: str) -> None:
+    drive = Drive(inputs={8: True})
+    drive.write_object(0x220E, 0, 0x0100 | MODELLED[symbol])  # P2.014 (DI5)
+    assert drive.params.read("P2.014") == 0x0100 | MODELLED[symbol]
+    drive.power_cycle()  # the mapping acts after a power cycle (L9256)
+    assert drive.dio.di_function(5) == symbol
 
 
 @pytest.mark.parametrize("symbol", sorted(CODES))
@@ -37,17 +53,17 @@ def test_mapping_write_is_refused_naming_the_function(symbol: str) -> None:
 
 @pytest.mark.parametrize("param", DI_PARAMS)
 def test_every_di_mapping_parameter_refuses(param: str) -> None:
-    assert inert_mapping(param, 0x0137)  # JOGU
-    assert inert_mapping(param, 0x0101) is None  # SON is modelled
-    assert inert_mapping("P2.018", 0x0103) is None  # DO3 ZSPD: a DO, not GAINUP
+    assert inert_mapping(param, 0x0136)  # CAM
+    assert inert_mapping(param, 0x0137) is None  # JOGU is modelled
+    assert inert_mapping("P2.018", 0x0106) is None  # DO3 TQL: a DO, not CMDINV
 
 
 def test_sdo_write_aborts_0609_0030() -> None:
     drive = Drive(inputs={8: True})
     with pytest.raises(ObjectError) as info:
-        drive.write_object(0x220E, 0, 0x0109)  # P2.014 (DI5) = TRQLM (L18156: 2aBCh)
+        drive.write_object(0x220E, 0, 0x0145)  # P2.014 (DI5) = INHP (L18156: 2aBCh)
     assert info.value.abort_code == 0x06090030
-    assert "TRQLM" in str(info.value)
+    assert "INHP" in str(info.value)
 
 
 def test_modbus_write_answers_exception_03() -> None:
@@ -55,12 +71,13 @@ def test_modbus_write_answers_exception_03() -> None:
     out: list[bytes] = []
     slave = ModbusSlave(drive.params, send=out.append, station=1)
     address = drive.params.spec("P2.014").modbus_address  # 021CH
-    slave.feed(mb.rtu_encode(1, mb.write_single_request(address, 0x0147)), 0)  # PFQS
+    slave.feed(mb.rtu_encode(1, mb.write_single_request(address, 0x0143)), 0)  # GNUM0
     slave.tick(100_000_000)
     assert out == [mb.rtu_encode(1, mb.exception_response(0x06, mb.ILLEGAL_DATA_VALUE))]
 
 
-def test_factory_default_cclr_stays_loadable() -> None:
-    """P2.011 factory value 0x0104 (CCLR, L1860-1880) is not a write: the drive boots."""
+def test_factory_default_cclr_is_modelled() -> None:
+    """P2.011 factory value 0x0104 (CCLR, L1860-1880): the function acts (L15088)."""
     drive = Drive(inputs={8: True})
     assert drive.dio.di_function(2) == "CCLR"
+    assert inert_mapping("P2.011", 0x0104) is None

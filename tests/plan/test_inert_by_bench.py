@@ -49,3 +49,14 @@ def test_expect_error_write_is_fine_on_a_virtual_bench():
     plan = loads_plan(f"name: p\nsteps:\n  - write: {{P2.013: 0x{value:04X}, via: sdo, "
                       "expect_error: 0x06090030}\n")
     check_plan(plan, load_bench(), timing_specs())
+
+
+@pytest.mark.parametrize("func", ["PFQS", "JOGU", "JOGD", "TRQLM", "SPDLM", "ZCLAMP", "CCLR",
+                                  "GAINUP"])
+def test_virtual_bench_accepts_the_modelled_motion_functions(func):
+    """Issue 13 item 6: these are modelled now (hil/model/di_functions.py; L15085-15121,
+    L15209-15212, L15253), so a virtual bench takes them in params and write steps."""
+    value = 0x0100 | DI_SYMBOLS[func]
+    for text in (f"name: p\nparams:\n  P2.013: 0x{value:04X}\nsteps:\n  - wait: 1ms\n",
+                 f"name: p\nsteps:\n  - write: {{P2.013: 0x{value:04X}}}\n"):
+        check_plan(loads_plan(text, file="p.yaml"), load_bench(), timing_specs())
