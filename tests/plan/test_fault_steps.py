@@ -50,13 +50,19 @@ def test_malformed_fault_step(tmp_path, step, problem):
     assert "p.yaml:3" in str(e.value)
 
 
-def test_hil_run_check_refuses_every_fault_plan_on_a_bench_without_faults_allowed(capsys):
+def test_hil_run_check_refuses_every_fault_plan_on_a_bench_without_faults_allowed(
+        capsys, tmp_path):
     """`hil run --check` (nothing moves) on the real-bench example: every shipped plan with a
-    `fault:` step is refused, naming the file:line of the step and the bench key."""
+    `fault:` step is refused, naming the file:line of the step and the bench key. (Motion is
+    allowed in this copy, so a plan that also moves is refused for its faults alone.)"""
     from hil.cli import main
     from hil.plan.plan import find_plans
 
-    bench = str(fixture("benches", "example-asda-a3-socketcan.yaml"))
+    example = fixture("benches", "example-asda-a3-socketcan.yaml").read_text()
+    assert "motion_allowed: false" in example
+    bench_file = tmp_path / "example-asda-a3-socketcan.yaml"
+    bench_file.write_text(example.replace("motion_allowed: false", "motion_allowed: true"))
+    bench = str(bench_file)
     with_faults = [p for p in find_plans() if "\n  - fault:" in p.read_text()]
     assert len(with_faults) >= 8
     for plan in with_faults:
