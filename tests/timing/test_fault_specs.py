@@ -232,41 +232,24 @@ def test_fault_spec_fails_on_its_deviation_knob(tmp_path, spec_id):
     assert failed, [(v.constraint, v.status, v.message) for v in vs]
 
 
-def test_rs485_al019_rule_fails_without_al019(tmp_path):
-    """The AL019 rule of fault_rs485: judged (pass) above; a drive that answers exception 03
-    without raising AL019 (option modbus_al019_exceptions = ()) fails it."""
-    rig = FaultRig(tmp_path / "run.mcap", ModelOptions(modbus_al019_exceptions=()))
+# A rule judged (pass) with its family above, and the option that must fail it:
+# AL019 (fault_rs485): a drive that answers exception 03 without raising AL019;
+# AL3E2 (fault_sync_ip): a drive that lets an early SYNC through;
+# AL301 (fault_sync_ip): a drive that does not check the SYNC cycle against 1006h.
+@pytest.mark.parametrize(("spec", "rule", "option", "scenario"), [
+    ("fault_rs485", "AL019", {"modbus_al019_exceptions": ()}, "master_silent"),
+    ("fault_sync_ip", "AL3E2", {"dev_ignore_early_sync": True}, "sync_lost"),
+    ("fault_sync_ip", "AL301", {"dev_ignore_sync_cycle": True}, "sync_lost"),
+])
+def test_alarm_rule_fails_without_the_alarm(tmp_path, spec, rule, option, scenario):
+    rig = FaultRig(tmp_path / "run.mcap", ModelOptions(**option))
     try:
-        master_silent(rig)
+        globals()[scenario](rig)
     finally:
         path = rig.close()
-    vs = verdicts(path, "fault_rs485")
-    assert [v.status for v in vs if v.constraint.startswith("AL019")] == ["fail"], vs
-
-
-def test_sync_ip_early_sync_rule_fails_without_al3e2(tmp_path):
-    """The AL3E2 rule of fault_sync_ip: judged (pass) with the family above; a drive that
-    lets an early SYNC through (dev_ignore_early_sync) fails it."""
-    rig = FaultRig(tmp_path / "run.mcap", ModelOptions(dev_ignore_early_sync=True))
-    try:
-        sync_lost(rig)
-    finally:
-        path = rig.close()
-    vs = verdicts(path, "fault_sync_ip")
-    assert [v.status for v in vs if v.constraint.startswith("AL3E2")] == ["fail"], vs
-
-
-def test_sync_ip_cycle_rule_fails_without_al301(tmp_path):
-    """The AL301 rule of fault_sync_ip: judged (pass) with the family above; a drive that
-    does not check the SYNC cycle against 1006h (dev_ignore_sync_cycle) fails it."""
-    rig = FaultRig(tmp_path / "run.mcap", ModelOptions(dev_ignore_sync_cycle=True))
-    try:
-        sync_lost(rig)
-    finally:
-        path = rig.close()
-    vs = verdicts(path, "fault_sync_ip")
-    assert [v.status for v in vs if v.constraint.startswith("AL301")] == ["fail"], vs
-    assert "AL301" not in rig.alarms
+    vs = verdicts(path, spec)
+    assert [v.status for v in vs if v.constraint.startswith(rule)] == ["fail"], vs
+    assert rule not in rig.alarms
 
 
 def master_garbled(rig: FaultRig) -> None:
