@@ -202,6 +202,8 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
     if interrupted is None and intr.requested:
         interrupted = KeyboardInterrupt("signal while the bench was made safe")
     if interrupted is not None:
+        with contextlib.suppress(AttributeError):
+            interrupted.plan_result = res  # type: ignore[attr-defined]  # for `-j N` workers
         raise interrupted
     return res
 
