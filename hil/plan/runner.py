@@ -313,8 +313,8 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
         events.emit(StepEnded(plan, s, r, d.name, rec))
         ok = r.status == PASS or (r.status == INCONCLUSIVE and allow_inconclusive)
         if not ok:
-            if res.status == PASS:
-                res.status = FAIL if r.status in (FAIL, INCONCLUSIVE) else ERROR
+            if res.status in (PASS, INCONCLUSIVE):  # a plan only inconclusive says so
+                res.status = {FAIL: FAIL, INCONCLUSIVE: INCONCLUSIVE}.get(r.status, ERROR)
             if not s.action.judge_only:
                 rec.log("error", f"step {s.index + 1} ({r.label}) {r.status}: {r.message}",
                         name="hil.runner", file=s.file, line=s.line)
