@@ -89,12 +89,22 @@ def test_only_a_bench_private_to_each_process_runs_in_parallel():
     assert parallel_blocker(auto) is None
 
 
-def test_j2_on_a_real_bench_says_it_runs_one_at_a_time(tmp_path, capsys):
+def test_j2_on_a_real_bench_runs_one_plan_at_a_time_and_says_so(tmp_path, capsys,
+                                                                monkeypatch):
+    import hil.plan.cli as run_cli
+
+    def no_parallel(*a, **kw):
+        raise AssertionError("a real bench must not run plans in parallel")
+
+    monkeypatch.setattr(run_cli, "run_parallel", no_parallel)
     bench = Path(__file__).resolve().parents[2] / "fixtures/benches/example-asda-a3-socketcan.yaml"
-    code = hil(["run", "param_access", "emgs", "--bench", str(bench), "-j", "2", "--check"])
-    assert code == 0  # --check moves nothing; -j is not even considered
-    code = hil(["run", "param_access", "--out", str(tmp_path), "-j", "x"])
-    assert code == 2
+    # no SocketCAN here: each plan ends in a bench error, one after the other
+    code = hil(["run", "param_access", "emgs", "--bench", str(bench), "-j", "2", "--out",
+                str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "-j 2: bench lab-a3-axis1 is not virtual" in err and "one at a time" in err
+    assert hil(["run", "param_access", "--out", str(tmp_path), "-j", "x"]) == 2
     assert "-j: 'x'" in capsys.readouterr().err
 
 
