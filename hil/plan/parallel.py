@@ -23,9 +23,13 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
+import logging
 import multiprocessing
 import os
 import signal
+import sys
+import threading
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -81,9 +85,11 @@ def parallel_blocker(bench: Bench) -> str | None:
 _stop_requested = False
 
 
-def _worker_init() -> None:
+def _worker_init(log_level: int) -> None:
     """A worker between plans: SIGINT/SIGTERM only mark it stopped (`run_plan` installs its
-    own handlers while a plan runs and restores these after)."""
+    own handlers while a plan runs and restores these after). Logs as `hil run` does."""
+    logging.basicConfig(level=log_level, stream=sys.stderr,
+                        format="%(levelname)s %(name)s: %(message)s")
 
     def mark(signum: int, frame: Any) -> None:
         global _stop_requested
@@ -121,7 +127,7 @@ def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
     try:
         res = run_plan(plan, bench, Path(job.out_dir), listeners=[notes],
                        allow_inconclusive=job.allow_inconclusive, index=job.index,
-                       total=job.total)
+                       total=job.total, stop=lambda: _stop_requested)
     except KeyboardInterrupt as e:
         _stop_requested = True
         res = getattr(e, "plan_result", None) or _interrupted_result(plan, bench, job)
@@ -166,16 +172,24 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
     done = 0
     ctx = multiprocessing.get_context("spawn")
     pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(plans)), mp_context=ctx,
-                                  initializer=_worker_init)
+                                  initializer=_worker_init,
+                                  initargs=(logging.getLogger().getEffectiveLevel(),))
     running: dict[cf.Future, _Job] = {}
-    old_term = signal.signal(signal.SIGTERM, _term_as_interrupt)
+    main = threading.current_thread() is threading.main_thread()
+    old_handlers = {sig: signal.signal(sig, _as_interrupt)  # as run_plan does with -j 1
+                    for sig in (signal.SIGINT, signal.SIGTERM)} if main else {}
     interrupted = False
 
     def collect(finished: set[cf.Future]) -> None:
         nonlocal done, interrupted
         for fut in finished:
             job = running.pop(fut)
-            res, notes, stopped = fut.result()
+            try:
+                res, notes, stopped = fut.result()
+            except BrokenProcessPool:
+                if interrupted:  # killed while it started up: it ran nothing
+                    continue
+                raise
             interrupted |= stopped
             if res is not None:
                 results[job.index] = res
@@ -194,14 +208,15 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
         interrupted = True
         collect(_stop_workers(pool, running))
     finally:
-        signal.signal(signal.SIGTERM, old_term)
+        for sig, handler in old_handlers.items():
+            signal.signal(sig, handler)
         pool.shutdown(wait=True, cancel_futures=True)
     if interrupted:
         raise KeyboardInterrupt("interrupted (Ctrl-C / SIGTERM)")
     return [results[i] for i in range(1, len(plans) + 1)]
 
 
-def _term_as_interrupt(signum: int, frame: Any) -> None:
+def _as_interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
 
@@ -209,9 +224,10 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, running: dict[cf.Future, _Job]
                   ) -> set[cf.Future]:
     """Forward the interrupt to every worker and wait for their plans to end safely; a further
     Ctrl-C here only prints a notice."""
+    main = threading.current_thread() is threading.main_thread()
     old = {sig: signal.signal(sig, lambda *_: os.write(
         2, b"hil: stopping the workers (benches going safe, recordings closing)\n"))
-        for sig in (signal.SIGINT, signal.SIGTERM)}
+        for sig in (signal.SIGINT, signal.SIGTERM)} if main else {}
     try:
         for pid in list(getattr(pool, "_processes", {}) or {}):
             with contextlib.suppress(OSError):
