@@ -7,9 +7,11 @@ Observation model: a change observed at t on a signal with resolution r happened
 `present` are half-open [from + min, from + max). Times are integer ns; messages use ms.
 
 Under load (docs/timing.md): a DI/STO edge the harness stamped at t reached a virtual drive
-`lag` later (recorded per edge on /drive/{drive}/inputs), so the drive saw it in [t, t + lag].
-A failure whose excess over the limit fits within the lags of the edges involved is
-`inconclusive` (the message names the delay); passes and larger failures are unchanged.
+`lag` later (recorded per edge on /drive/{drive}/inputs), so the drive saw it in [t, t + lag];
+a change first seen in a periodic state sample at t (no model event then) happened after the
+previous sample, up to `early` before t. A failure whose excess over the limit fits within
+these delays of the edges involved is `inconclusive` (the message names them); passes and
+larger failures are unchanged.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import fnmatch
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from hil.record import topics
@@ -79,11 +81,13 @@ class Verdict:
 @dataclass(frozen=True)
 class Occ:
     """An event occurrence observed at t (ns); it really happened in [t - res, t]. When it
-    comes from an input edge, the drive saw that edge up to `lag` ns after t."""
+    comes from an input edge, the drive saw that edge up to `lag` ns after t; when it was
+    first seen in a periodic state sample, it may have happened up to `early` ns before t."""
 
     t: int
     res: int = 0
     lag: int = 0
+    early: int = 0
 
 
 @dataclass(frozen=True)
@@ -99,7 +103,12 @@ class Trace:
     times: list[int]
     values: list[Any]
     res: int
-    lags: dict[int, int] = field(default_factory=dict)  # change time -> input delivery lag
+    # change time -> (input delivery lag, state sampling gap): delays under load
+    lags: dict[int, tuple[int, int]] = field(default_factory=dict)
+
+    def occ(self, t: int) -> Occ:
+        lag, early = self.lags.get(t, (0, 0))
+        return Occ(t, self.res, lag, early)
 
     def value_before(self, t: int) -> Any:
         """Value just before t (or at t when nothing earlier); None when unknown."""
@@ -186,12 +195,15 @@ class Context:
                 return _ns(e.eval(env))
         return _ns(default.eval(env)) if default is not None else 0
 
-    def _lags(self, s: SignalDef, raw: list[tuple[int, Any]]) -> dict[int, int]:
-        """Delivery delay of each recorded edge of an input line (DI/STO) the virtual drive
-        reported on /drive/{drive}/inputs: the record of the same line and level whose
-        harness stamp is nearest (within 1 ms) to the edge."""
+    def _lags(self, s: SignalDef, topic: str, raw: list[tuple[int, Any]]
+              ) -> dict[int, tuple[int, int]]:
+        """Delays under load of each sample: (delivery, 0) for an input line (DI/STO) edge
+        the virtual drive reported on /drive/{drive}/inputs (the record of the same line and
+        level whose harness stamp is nearest, within 1 ms); (0, gap) for a message marked
+        `periodic` (the virtual bench's state samples between model events): the gap since the
+        previous message of its topic."""
         if s.kind not in ("line", "function"):
-            return {}
+            return self._sampling(topic, raw)
         if self._deliveries is None:
             self._deliveries = {}
             drive = self.binding.get("drive")
@@ -208,7 +220,20 @@ class Context:
             near = [(abs(sent - t), d) for sent, lv, d in recs if lv == bool(v)
                     and abs(sent - t) <= MS]
             if near and (d := min(near)[1]) > 0:
-                out[t] = d
+                out[t] = (d, 0)
+        return out
+
+    def _sampling(self, topic: str, raw: list[tuple[int, Any]]) -> dict[int, tuple[int, int]]:
+        msgs = self.source.messages(topic)
+        periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
+        if not periodic:
+            return {}
+        times = [t for t, _m in msgs]
+        out = {}
+        for t, _v in raw:
+            i = bisect.bisect_left(times, t)
+            if t in periodic and i > 0:
+                out[t] = (0, t - times[i - 1])
         return out
 
     def trace(self, name: str) -> Trace:
@@ -238,7 +263,7 @@ class Context:
             else:
                 pts = raw
             pts = self._transform(s, pts)
-            return self._held(s, _compress(s.name, pts, res, self._lags(s, raw)))
+            return self._held(s, _compress(s.name, pts, res, self._lags(s, topic, raw)))
         if s.kind == "signal":
             parent = self.trace(s.source or "")
             pts = self._transform(s, list(zip(parent.times, parent.values, strict=True)))
@@ -327,8 +352,7 @@ class Context:
             if ev.kind in ("rise", "fall", "change", "becomes", "raised", "cleared"):
                 tr = self.trace(ev.signal or "")
                 kind = {"raised": "rise", "cleared": "fall"}.get(ev.kind, ev.kind)
-                self._occs[name] = [Occ(t, tr.res, tr.lags.get(t, 0))
-                                    for t in tr.edges(kind, ev.value)]
+                self._occs[name] = [tr.occ(t) for t in tr.edges(kind, ev.value)]
             else:
                 occ = Scope(self, 0, NEG_INF, POS_INF).resolve(name)
                 self._occs[name] = [occ] if isinstance(occ, Occ) else []
@@ -367,7 +391,7 @@ def _alarm_active(v: Any, codes: list[str]) -> bool:
 
 
 def _compress(name: str, pts: list[tuple[int, Any]], res: int,
-              lags: Mapping[int, int] | None = None) -> Trace:
+              lags: Mapping[int, tuple[int, int]] | None = None) -> Trace:
     pts = sorted(pts, key=lambda p: p[0])
     times: list[int] = []
     values: list[Any] = []
@@ -397,9 +421,9 @@ def _combine(name: str, kind: str, parents: list[Trace]) -> Trace:
         vals = [bool(p.value_at(t)) for p in parents]
         v = all(vals) if kind == "all" else any(vals) if kind == "any" else not vals[0]
         pts.append((t, v))
-        lag = max(p.lags.get(t, 0) for p in parents)
-        if lag:
-            lags[t] = lag
+        got = [p.lags[t] for p in parents if t in p.lags]
+        if got:
+            lags[t] = (max(g[0] for g in got), max(g[1] for g in got))
     return _compress(name, pts, max(p.res for p in parents), lags)
 
 
@@ -433,8 +457,7 @@ class Scope:
             base = self.resolve(ev.refs[0])
             if isinstance(base, Missing):
                 return base
-            return Occ(base.t + _ns(ev.plus.eval(ctx.env(base.t))), base.res,  # type: ignore[union-attr]
-                       base.lag)  # type: ignore[union-attr]
+            return replace(base, t=base.t + _ns(ev.plus.eval(ctx.env(base.t))))  # type: ignore[union-attr]
         if ev.kind in ("earliest_of", "latest_of"):
             got = [self.resolve(r) for r in ev.refs]
             occs = [o for o in got if isinstance(o, Occ)]
@@ -443,7 +466,8 @@ class Scope:
             pick = min if ev.kind == "earliest_of" else max
             t = pick(o.t for o in occs)
             lo = pick(o.t - o.res for o in occs)
-            return Occ(t, t - lo, max(o.lag for o in occs if o.t == t))
+            return Occ(t, t - lo, max(o.lag for o in occs if o.t == t),
+                       max(o.early for o in occs if o.t == t))
         lo, hi, anchor = self.start, self.end, None
         if ev.after:
             a = self.resolve(ev.after)
@@ -476,9 +500,8 @@ class Scope:
             if tr.times and tr.value_at(start) and start < hi:
                 if anchor is not None and start == anchor.t:
                     return [anchor]
-                return [Occ(start, tr.res, tr.lags.get(start, 0))]
-            return [Occ(t, tr.res, tr.lags.get(t, 0)) for t in tr.edges("rise")
-                    if lo <= t < hi][:1]
+                return [tr.occ(start)]
+            return [tr.occ(t) for t in tr.edges("rise") if lo <= t < hi][:1]
         occs = self.ctx.occurrences(ev.name)
         ts = [o.t for o in occs]
         return occs[bisect.bisect_left(ts, lo):bisect.bisect_left(ts, hi)]
@@ -620,23 +643,31 @@ def _judge_window(ctx, c, sc, f: Occ, base) -> Verdict:
         tail = (f"observation resolution (−{_ms(to.res):g}/+{_ms(f.res):g} ms) straddles "
                 f"the {'upper' if dhi > fhi else 'lower'} limit")
     unc = (_ms(to.res), _ms(f.res))
-    if status == "fail" and (f.lag or to.lag):
-        # the drive saw an input edge up to `lag` after the harness stamped it
-        llo, lhi = dlo - _ms(f.lag), dhi + _ms(to.lag)
+    lower, higher = f.lag + to.early, to.lag + f.early  # delays under load (ns)
+    if status == "fail" and (lower or higher):
+        llo, lhi = dlo - _ms(lower), dhi + _ms(higher)
         if not (lhi < flo or llo > fhi):
-            status, unc = "inconclusive", (unc[0] + _ms(f.lag), unc[1] + _ms(to.lag))
-            tail += f", {_lag_reason(f.lag + to.lag)}"
+            status, unc = "inconclusive", (unc[0] + _ms(lower), unc[1] + _ms(higher))
+            tail += f", {_load_reason(f.lag + to.lag, f.early + to.early)}"
         else:
-            tail += (f" (up to {_ms(f.lag + to.lag):.3f} ms of it the input edge's delivery "
-                     "to the drive)")
+            tail += f" (beyond {_load_what(f.lag + to.lag, f.early + to.early)})"
     return Verdict(**common, status=status, to_ns=to.t, measured_ms=d,
                    uncertainty_ms=unc, margin_ms=margin,
                    message=f"{head}; allowed {allowed}: {tail}")
 
 
-def _lag_reason(lag: int) -> str:
-    return (f"within the {_ms(lag):.3f} ms the input edge took to reach the drive after the "
-            "harness stamped it (delivery delay under load): inconclusive")
+def _load_what(lag: int, early: int) -> str:
+    parts = []
+    if lag:
+        parts.append(f"the {_ms(lag):.3f} ms the input edge took to reach the drive after "
+                     "the harness stamped it")
+    if early:
+        parts.append(f"the {_ms(early):.3f} ms since the drive's previous state sample")
+    return " and ".join(parts)
+
+
+def _load_reason(lag: int, early: int) -> str:
+    return f"within {_load_what(lag, early)} (delays under load): inconclusive"
 
 
 def _span(ctx, c, sc, f: Occ) -> tuple[int, int, int, int, float | None, float | None, dict]:
@@ -670,11 +701,13 @@ def _judge_forbid(ctx, c, sc, f: Occ, base) -> Verdict:
         status, hit, why = "pass", None, " (within the observation resolution)"
         for o in occs:
             if o.t - o.res >= slo and o.t < shi:
-                if o.t - o.res >= slo + f.lag and o.t + o.lag < shi:
+                if (o.t - o.res - o.early >= slo + f.lag
+                        and o.t + o.lag < shi - f.early):
                     status, hit = "fail", o
                     break
-                if status != "inconclusive":  # surely inside but for the inputs' delivery
-                    status, hit, why = "inconclusive", o, f" ({_lag_reason(f.lag + o.lag)})"
+                if status != "inconclusive":  # surely inside but for the delays under load
+                    status, hit = "inconclusive", o
+                    why = f" ({_load_reason(f.lag + o.lag, f.early + o.early)})"
             if o.t >= plo and o.t - o.res < phi and status == "pass":
                 status, hit = "inconclusive", o
         what = ctx.label(c.target)
@@ -706,8 +739,9 @@ def _judge_level(ctx, c, f: Occ, common: dict, where: str,
         status = "pass"
         if any(a < shi and b > slo for a, b in surely_bad):
             status = "fail"
-            if f.lag and not any(a < shi and b > slo + f.lag for a, b in surely_bad):
-                status, late = "inconclusive", f" ({_lag_reason(f.lag)})"
+            if (f.lag or f.early) and not any(a < shi - f.early and b > slo + f.lag
+                                              for a, b in surely_bad):
+                status, late = "inconclusive", f" ({_load_reason(f.lag, f.early)})"
         elif any(a < phi and b > plo for a, b in maybe_bad):
             status = "inconclusive"
     state = "true" if not want else "false"

@@ -155,7 +155,7 @@ class GroundTruth:
 
     def sample(self) -> None:
         """One state sample now (call under the host lock): what a check reads is current."""
-        self.rec.drive_state(self.name, self.drive.snapshot(),
+        self.rec.drive_state(self.name, {**self.drive.snapshot(), "periodic": True},
                              source_t=self.host.wall_ns(self.drive.now))
 
     def input_applied(self, line: str, level: bool, sent_ns: int, model_t: int) -> None:
@@ -165,9 +165,12 @@ class GroundTruth:
             record(self.name, line, level, sent_ns, self.host.wall_ns(model_t))
 
     def _tick(self, now: int) -> None:
+        # `periodic`: a change first seen here happened after the previous sample (the timing
+        # checker's sampling delay under load); the samples at model events are exact
         if now >= self._next:
             self._next = now + self.period_ns
-            self.rec.drive_state(self.name, self.drive.snapshot(), source_t=self.host.wall_ns(now))
+            self.rec.drive_state(self.name, {**self.drive.snapshot(), "periodic": True},
+                                 source_t=self.host.wall_ns(now))
 
     def _on_event(self, ev: Any) -> None:
         t = getattr(ev, "t", self.drive.now)

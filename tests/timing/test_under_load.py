@@ -86,6 +86,38 @@ def test_a_forbidden_event_before_the_drive_saw_the_edge_is_inconclusive():
     assert _verdict(msgs, name).status == "fail"
 
 
+TORQUE = "torque off within 20 ms of a channel lost"  # L2474
+
+
+def _torque_cut(samples: list[tuple[float, bool, bool]]) -> dict:
+    """STO_A lost at T0; state samples (ms after T0, torque_enabled, periodic)."""
+    state = [(0, {"alarms": [], "torque_enabled": True, "periodic": True})]
+    state += [(T0 + round(ms * MS), {"alarms": [], "torque_enabled": on,
+                                     **({"periodic": True} if periodic else {})})
+              for ms, on, periodic in samples]
+    return {topics.dio("drive1", "STO_A"): [(0, {"level": True}), (T0, {"level": False})],
+            topics.dio("drive1", "STO_B"): [(0, {"level": True})],
+            topics.drive_state("drive1"): state}
+
+
+def test_a_change_seen_in_a_late_periodic_sample_is_inconclusive_within_the_gap():
+    # the host's ticker ran 32 ms late: torque off first seen 22 ms after the loss, in a
+    # periodic sample; it happened somewhere after the previous sample (-10 ms)
+    late = _torque_cut([(-10, True, True), (22, False, True)])
+    v = _verdict(late, TORQUE)
+    assert v.status == "inconclusive", v.message
+    assert "32.000 ms since the drive's previous state sample" in v.message
+    # the same change at a model event (an exact sample) is a fail
+    exact = _torque_cut([(-10, True, True), (22, False, False)])
+    assert _verdict(exact, TORQUE).status == "fail"
+    # still on at 24 ms, off at 30 ms: late whichever instant in between
+    beyond = _torque_cut([(24, True, True), (30, False, True)])
+    v = _verdict(beyond, TORQUE)
+    assert v.status == "fail" and "since the drive's previous state sample" in v.message
+    # and a pass stays a pass
+    assert _verdict(_torque_cut([(-10, True, True), (8, False, True)]), TORQUE).status == "pass"
+
+
 def _record(path, msgs: dict) -> None:
     with Recorder(path, metadata={"plan": "synthetic"}) as rec:
         for topic, items in msgs.items():
