@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 
 from hil.paths import plans_dir
+from hil.record import topics
+from hil.record.reader import Recording
 
 SUITE_18 = [
     "absolute_handshake", "absolute_overflow", "absolute_power_cycle", "alarm_reset",
@@ -64,11 +66,27 @@ def main(argv: list[str]) -> int:
         wn, cn, sn = _run(plans, args.jobs, Path(tmp) / f"j{args.jobs}")
         print(f"-j {args.jobs}: {wn:7.2f} s  exit {cn}  "
               f"{sum(v == 'PASS' for v in sn.values())}/{len(plans)} passed")
-    print(f"ratio -j {args.jobs} / -j 1 = {wn / w1:.2f} (speed-up {w1 / wn:.2f}x)")
-    differ = {p: (s1.get(p), sn.get(p)) for p in plans if s1.get(p) != sn.get(p)}
-    for p, (a, b) in differ.items():
-        print(f"  {p}: -j 1 {a}, -j {args.jobs} {b}")
+        print(f"ratio -j {args.jobs} / -j 1 = {wn / w1:.2f} (speed-up {w1 / wn:.2f}x)")
+        differ = {p: (s1.get(p), sn.get(p)) for p in plans if s1.get(p) != sn.get(p)}
+        for p, (a, b) in differ.items():
+            print(f"  {p}: -j 1 {a}, -j {args.jobs} {b}")
+            for run, st in (("1", a), (str(args.jobs), b)):
+                if st != "PASS":
+                    for why in _not_passed(Path(tmp) / f"j{run}" / f"{p}.mcap"):
+                        print(f"    -j {run}: {why}")
     return 0 if c1 == cn and not differ else 1
+
+
+def _not_passed(path: Path) -> list[str]:
+    """The steps and timing verdicts of a recording that did not pass."""
+    rec = Recording.open(path)
+    out = [f"step {m.get('step')}: {m.get('status')}: {m.get('message')}"
+           for *_t, m in rec.messages(topics.PLAN_STEPS)
+           if m.get("status") not in (None, "pass", "skipped")]
+    out += [f"{m.get('spec')}: {m.get('constraint')}: {m.get('status')}: {m.get('message')}"
+            for *_t, m in rec.messages(topics.TIMING_VERDICTS)
+            if m.get("status") in ("fail", "inconclusive")]
+    return out
 
 
 if __name__ == "__main__":
