@@ -1,5 +1,6 @@
 """`hil run [PLAN ...] [--bench FILE] [--out DIR]`, with selection (`-k`, `-m`, globs,
-`--list`), progress (`-q`, `-v`, `--log-level`) and `HIL_BENCH`."""
+`--list`), progress (`-q`, `-v`, `--log-level`), `HIL_BENCH` and plans in parallel (`-j N`,
+hil/plan/parallel.py)."""
 
 from __future__ import annotations
 
