@@ -3,13 +3,20 @@
 Inputs seen on the port (`DI<n>`, `STO_A`, `STO_B`, electrical levels) go to the model;
 the model's DO and FDBK changes are published on the port. a/b-contact logic stays inside
 the drive, as on hardware (docs/transports.md, DI/DO over zenoh).
+
+Each input edge the harness stamped is reported to `on_input(line, level, sent_ns,
+model_t)`: the harness's stamp (wall ns) and the model time the drive applied it, so the
+delivery delay of a loaded machine is on the record (docs/timing.md, "Under load").
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from hil.model.events import DoChanged, FdbkChanged
+
+InputHook = Callable[[str, bool, int, int], None]
 
 N_DO = 6
 
@@ -17,9 +24,10 @@ N_DO = 6
 class DioFace:
     """Connects a `DioPort(role="drive")` to a `Drive` owned by a `DriveHost`."""
 
-    def __init__(self, port: Any, host: Any) -> None:
+    def __init__(self, port: Any, host: Any, on_input: InputHook | None = None) -> None:
         self.port = port
         self.host = host
+        self.on_input = on_input
         self.errors: list[str] = []
         with host.lock:
             drive = host.drive
@@ -30,7 +38,7 @@ class DioFace:
             for line, level in port.levels().items():
                 if not port.owns(line):
                     self._apply(line, level)
-        self._unsub_port = port.subscribe(self._on_line)
+        self._unsub_port = port.subscribe(self._on_line, source=True)
 
     def _on_event(self, event: Any) -> None:
         t = self.host.wall_ns(event.t)  # the model's own time of the change
@@ -39,18 +47,23 @@ class DioFace:
         elif isinstance(event, FdbkChanged):
             self.port.set("FDBK", event.closed, source_t=t)
 
-    def _on_line(self, line: str, level: bool, t: int) -> None:
-        self.host.call(self._apply, line, level)
+    def _on_line(self, line: str, level: bool, t: int, source_t: int | None = None) -> None:
+        self.host.call(self._apply, line, level, source_t)
 
-    def _apply(self, line: str, level: bool) -> None:
+    def _apply(self, line: str, level: bool, sent_ns: int | None = None) -> None:
         drive = self.host.drive
         try:
             if line in ("STO_A", "STO_B"):
                 drive.set_sto(line[-1], level)
             elif line.startswith("DI"):
                 drive.set_di(int(line[2:]), level)
+            else:
+                return
         except (ValueError, KeyError) as exc:  # e.g. DI11 on the wire: not a terminal
             self.errors.append(f"{line}: {exc}")
+            return
+        if sent_ns is not None and self.on_input is not None:
+            self.on_input(line, level, sent_ns, drive.now)
 
     def close(self) -> None:
         self._unsub_port()

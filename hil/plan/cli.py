@@ -1,5 +1,6 @@
 """`hil run [PLAN ...] [--bench FILE] [--out DIR]`, with selection (`-k`, `-m`, globs,
-`--list`), progress (`-q`, `-v`, `--log-level`) and `HIL_BENCH`."""
+`--list`), progress (`-q`, `-v`, `--log-level`), `HIL_BENCH` and plans in parallel (`-j N`,
+hil/plan/parallel.py)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,10 @@ import os
 import sys
 from pathlib import Path
 
-from hil.plan.bench import load_bench
+from hil.plan.bench import Bench, load_bench
 from hil.plan.events import Listener
 from hil.plan.listeners import StepLines
+from hil.plan.parallel import jobs_from_arg, parallel_blocker, run_parallel
 from hil.plan.plan import Plan, check_plan, find_plans, load_plan
 from hil.plan.plansdir import choose_plans_dir
 from hil.plan.progress import RunProgress
@@ -48,6 +50,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-level", choices=LOG_LEVELS, metavar="LEVEL",
                         help=f"log messages of this level and above to stderr "
                         f"({', '.join(LOG_LEVELS)}; default: warning)")
+    parser.add_argument("-j", "--jobs", metavar="N", default="1",
+                        help="run N plans at a time, each in its own process on its own "
+                        "virtual bench (0 or auto: one per CPU; default 1). A bench that is "
+                        "not virtual, or shares a fixed transport, runs plans one at a time")
     parser.add_argument("--allow-inconclusive", action="store_true",
                         help="count inconclusive timing verdicts as passed")
     parser.add_argument("--check", action="store_true",
@@ -84,8 +90,24 @@ def _listeners(args: argparse.Namespace, plans: list[Plan]) -> list[Listener]:
     return [RunProgress(sum(len(p.steps) for p in plans), len(plans))]
 
 
+def _jobs(args: argparse.Namespace, bench: Bench, n_plans: int) -> int:
+    """Plans at a time: `-j`, but 1 where the bench cannot be shared (said on stderr)."""
+    jobs = min(jobs_from_arg(args.jobs), n_plans)
+    if jobs > 1 and (why := parallel_blocker(bench)) is not None:
+        print(f"hil run: -j {args.jobs}: {why}; running plans one at a time", file=sys.stderr)
+        return 1
+    if jobs > 1 and not args.quiet:
+        print(f"jobs: {jobs} plans at a time, each on its own virtual bench", file=sys.stderr)
+    return jobs
+
+
 def main(args: argparse.Namespace) -> int:
     _logging(args)
+    try:
+        jobs_from_arg(args.jobs)
+    except ValueError as e:
+        print(f"hil run: -j: {e}", file=sys.stderr)
+        return 2
     try:
         plans_dir, why = choose_plans_dir(args.plans_dir)
     except ValueError as e:
@@ -122,8 +144,14 @@ def main(args: argparse.Namespace) -> int:
                 print(f"{p.path}: ok ({len(p.steps)} steps)")
             return 0
         out = Path(args.out)
-        results = run_plans(plans, bench, out, allow_inconclusive=args.allow_inconclusive,
-                            listeners=_listeners(args, plans))
+        jobs = _jobs(args, bench, len(plans))
+        if jobs > 1:
+            results = run_parallel(plans, bench, out, jobs=jobs,
+                                   allow_inconclusive=args.allow_inconclusive,
+                                   listeners=_listeners(args, plans))
+        else:
+            results = run_plans(plans, bench, out, allow_inconclusive=args.allow_inconclusive,
+                                listeners=_listeners(args, plans))
     except PlanFileError as e:
         print(f"hil run: {e}", file=sys.stderr)
         return 2

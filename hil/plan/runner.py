@@ -135,10 +135,12 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
              listeners: list[Listener] | None = None,
              session_factory: Callable[[Bench, Any], Session] = open_session,
              allow_inconclusive: bool = False, reports: bool = True, index: int = 1,
-             total: int = 1) -> PlanResult:
+             total: int = 1, stop: Callable[[], bool] | None = None) -> PlanResult:
     """Run one plan (checked here against the bench first); raises KeyboardInterrupt after
     leaving the bench safe. Listeners hear plan and step events; the recording's step records
-    and, with `reports`, the JUnit and HTML reports are listeners too."""
+    and, with `reports`, the JUnit and HTML reports are listeners too. `stop()` true once the
+    signal handlers are in place: a stop asked for while the plan was being set up (a `-j`
+    worker's signal), handled as Ctrl-C."""
     specs = specs if specs is not None else timing_specs()
     check_plan(plan, bench, specs)
     res, rec, stem = _open_recording(plan, bench, out_dir)
@@ -156,6 +158,8 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
     with _Interrupts() as intr:
         try:
             try:
+                if stop is not None and stop():
+                    raise KeyboardInterrupt("stopped before the plan began")
                 sbench = bench_with_options(bench, plan.options, tmp)
                 truth = SensorTap(rec) if bench.virtual else rec
                 session = steps.run(lambda: session_factory(sbench, truth),
@@ -202,6 +206,8 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
     if interrupted is None and intr.requested:
         interrupted = KeyboardInterrupt("signal while the bench was made safe")
     if interrupted is not None:
+        with contextlib.suppress(AttributeError):
+            interrupted.plan_result = res  # type: ignore[attr-defined]  # for `-j N` workers
         raise interrupted
     return res
 
@@ -311,8 +317,8 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
         events.emit(StepEnded(plan, s, r, d.name, rec))
         ok = r.status == PASS or (r.status == INCONCLUSIVE and allow_inconclusive)
         if not ok:
-            if res.status == PASS:
-                res.status = FAIL if r.status in (FAIL, INCONCLUSIVE) else ERROR
+            if res.status in (PASS, INCONCLUSIVE):  # a plan only inconclusive says so
+                res.status = {FAIL: FAIL, INCONCLUSIVE: INCONCLUSIVE}.get(r.status, ERROR)
             if not s.action.judge_only:
                 rec.log("error", f"step {s.index + 1} ({r.label}) {r.status}: {r.message}",
                         name="hil.runner", file=s.file, line=s.line)

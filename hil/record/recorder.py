@@ -383,6 +383,15 @@ class Recorder:
             topics.drive_events(drive), "hil.DriveEvent", "model", dumps(_plain(event)), t, source_t
         )
 
+    def input_delivery(self, drive: str, line: str, level: bool, sent_ns: int,
+                       applied_ns: int) -> None:
+        """A DI/STO edge the virtual drive applied: the harness's stamp of it and when the
+        model applied it (both wall ns); publish_time = applied_ns."""
+        payload = {"line": line, "level": bool(level), "sent_ns": int(sent_ns),
+                   "applied_ns": int(applied_ns), "delay_ns": int(applied_ns - sent_ns)}
+        self._put(topics.drive_inputs(drive), "hil.InputDelivery", "model", dumps(payload),
+                  None, int(applied_ns))
+
     def drive_params(
         self,
         drive: str,

@@ -123,6 +123,17 @@ SCHEMAS: dict[str, dict] = {
     "hil.DriveEvent": _obj(
         "hil.DriveEvent", {"type": {"type": "string", "description": "event class"}}, ["type"]
     ),
+    "hil.InputDelivery": _obj(
+        "hil.InputDelivery",
+        {
+            "line": {"type": "string", "description": "DI<n>, STO_A or STO_B"},
+            "level": {"type": "boolean", "description": "electrical level, True = closed"},
+            "sent_ns": {"type": "integer", "description": "the harness's stamp of the edge"},
+            "applied_ns": {"type": "integer", "description": "when the model applied it"},
+            "delay_ns": {"type": "integer", "description": "applied_ns - sent_ns"},
+        },
+        ["line", "level", "sent_ns", "applied_ns", "delay_ns"],
+    ),
     "hil.DriveParams": _obj(
         "hil.DriveParams",
         {"snapshot": {"type": "boolean"}, "values": {"type": "object"}},
@@ -238,5 +249,6 @@ def schema_for_topic(topic: str) -> str:
             "state": "hil.DriveState",
             "events": "hil.DriveEvent",
             "params": "hil.DriveParams",
+            "inputs": "hil.InputDelivery",
         }.get(parts[-1], "hil.Json")
     return "hil.Json"

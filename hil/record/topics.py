@@ -49,6 +49,12 @@ def drive_events(drive: str) -> str:
     return f"/drive/{drive}/events"
 
 
+def drive_inputs(drive: str) -> str:
+    """Virtual-bench input delivery: per DI/STO edge the harness's stamp (`sent_ns`), when
+    the model applied it (`applied_ns`) and the difference (`delay_ns`), docs/timing.md."""
+    return f"/drive/{drive}/inputs"
+
+
 def drive_params(drive: str) -> str:
     """Parameter values as the drive reports them (snapshot at start, changes after)."""
     return f"/drive/{drive}/params"

@@ -5,6 +5,13 @@ Observation model: a change observed at t on a signal with resolution r happened
 [d - r_to, d + r_from]; a verdict is `pass` when that whole range is inside the window,
 `fail` when it is wholly outside, otherwise `inconclusive`. Windows of `forbid`/`absent`/
 `present` are half-open [from + min, from + max). Times are integer ns; messages use ms.
+
+Under load (docs/timing.md): a DI/STO edge the harness stamped at t reached a virtual drive
+`lag` later (recorded per edge on /drive/{drive}/inputs), so the drive saw it in [t, t + lag];
+a change first seen in a periodic state sample at t (no model event then) happened after the
+previous sample, up to `early` before t. A failure whose excess over the limit fits within
+these delays of the edges involved is `inconclusive` (the message names them); passes and
+larger failures are unchanged.
 """
 
 from __future__ import annotations
@@ -14,7 +21,7 @@ import fnmatch
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from hil.record import topics
@@ -73,10 +80,14 @@ class Verdict:
 
 @dataclass(frozen=True)
 class Occ:
-    """An event occurrence observed at t (ns); it really happened in [t - res, t]."""
+    """An event occurrence observed at t (ns); it really happened in [t - res, t]. When it
+    comes from an input edge, the drive saw that edge up to `lag` ns after t; when it was
+    first seen in a periodic state sample, it may have happened up to `early` ns before t."""
 
     t: int
     res: int = 0
+    lag: int = 0
+    early: int = 0
 
 
 @dataclass(frozen=True)
@@ -92,6 +103,12 @@ class Trace:
     times: list[int]
     values: list[Any]
     res: int
+    # change time -> (input delivery lag, state sampling gap): delays under load
+    lags: dict[int, tuple[int, int]] = field(default_factory=dict)
+
+    def occ(self, t: int) -> Occ:
+        lag, early = self.lags.get(t, (0, 0))
+        return Occ(t, self.res, lag, early)
 
     def value_before(self, t: int) -> Any:
         """Value just before t (or at t when nothing earlier); None when unknown."""
@@ -133,6 +150,7 @@ class Context:
         self.const_over = dict(constants or {})
         self._traces: dict[str, Trace] = {}
         self._occs: dict[str, list[Occ]] = {}
+        self._deliveries: dict[str, list[tuple[int, bool, int]]] | None = None
         end = source.end_time()
         self.end = end if end is not None else 0
 
@@ -177,6 +195,47 @@ class Context:
                 return _ns(e.eval(env))
         return _ns(default.eval(env)) if default is not None else 0
 
+    def _lags(self, s: SignalDef, topic: str, raw: list[tuple[int, Any]]
+              ) -> dict[int, tuple[int, int]]:
+        """Delays under load of each sample: (delivery, 0) for an input line (DI/STO) edge
+        the virtual drive reported on /drive/{drive}/inputs (the record of the same line and
+        level whose harness stamp is nearest, within 1 ms); (0, gap) for a message marked
+        `periodic` (the virtual bench's state samples between model events): the gap since the
+        previous message of its topic."""
+        if s.kind not in ("line", "function"):
+            return self._sampling(topic, raw)
+        if self._deliveries is None:
+            self._deliveries = {}
+            drive = self.binding.get("drive")
+            for _t, m in self.source.messages(topics.drive_inputs(drive)) if drive else []:
+                with_line = self._deliveries.setdefault(str(m.get("line")), [])
+                with_line.append((int(m["sent_ns"]), bool(m["level"]), int(m["delay_ns"])))
+        line = (self.binding.get(s.function or "", "") if s.kind == "function"
+                else s.io_line or "").partition(":")[0]
+        recs = self._deliveries.get(line)
+        if not recs:
+            return {}
+        out = {}
+        for t, v in raw:
+            near = [(abs(sent - t), d) for sent, lv, d in recs if lv == bool(v)
+                    and abs(sent - t) <= MS]
+            if near and (d := min(near)[1]) > 0:
+                out[t] = (d, 0)
+        return out
+
+    def _sampling(self, topic: str, raw: list[tuple[int, Any]]) -> dict[int, tuple[int, int]]:
+        msgs = self.source.messages(topic)
+        periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
+        if not periodic:
+            return {}
+        times = [t for t, _m in msgs]
+        out = {}
+        for t, _v in raw:
+            i = bisect.bisect_left(times, t)
+            if t in periodic and i > 0:
+                out[t] = (0, t - times[i - 1])
+        return out
+
     def trace(self, name: str) -> Trace:
         if name not in self._traces:
             self._traces[name] = self._build(name)
@@ -204,11 +263,11 @@ class Context:
             else:
                 pts = raw
             pts = self._transform(s, pts)
-            return self._held(s, _compress(s.name, pts, res))
+            return self._held(s, _compress(s.name, pts, res, self._lags(s, topic, raw)))
         if s.kind == "signal":
             parent = self.trace(s.source or "")
             pts = self._transform(s, list(zip(parent.times, parent.values, strict=True)))
-            return self._held(s, _compress(s.name, pts, parent.res))
+            return self._held(s, _compress(s.name, pts, parent.res, parent.lags))
         parents = [self.trace(p) for p in s.parts]
         return _combine(s.name, s.kind, parents)
 
@@ -259,6 +318,7 @@ class Context:
         if "held" not in s.transforms:
             return tr
         pts: list[tuple[int, Any]] = []
+        lags = dict(tr.lags)
         for i, t in enumerate(tr.times):
             if not tr.values[i]:
                 pts.append((t, False))
@@ -268,7 +328,9 @@ class Context:
             due = t + _ns(s.transforms["held"].eval(self.env(t)))
             if due < nxt and due <= self.end:
                 pts.append((due, True))
-        return _compress(tr.name, pts, tr.res)
+                if t in tr.lags:  # the timer started when the drive saw the edge
+                    lags[due] = tr.lags[t]
+        return _compress(tr.name, pts, tr.res, lags)
 
     def _thresholds(self, tf: dict[str, Any]):
         keys = [k for k in ("below", "above") if k in tf]  # `held` is applied after
@@ -290,7 +352,7 @@ class Context:
             if ev.kind in ("rise", "fall", "change", "becomes", "raised", "cleared"):
                 tr = self.trace(ev.signal or "")
                 kind = {"raised": "rise", "cleared": "fall"}.get(ev.kind, ev.kind)
-                self._occs[name] = [Occ(t, tr.res) for t in tr.edges(kind, ev.value)]
+                self._occs[name] = [tr.occ(t) for t in tr.edges(kind, ev.value)]
             else:
                 occ = Scope(self, 0, NEG_INF, POS_INF).resolve(name)
                 self._occs[name] = [occ] if isinstance(occ, Occ) else []
@@ -328,7 +390,8 @@ def _alarm_active(v: Any, codes: list[str]) -> bool:
     return any(c in items for c in codes)
 
 
-def _compress(name: str, pts: list[tuple[int, Any]], res: int) -> Trace:
+def _compress(name: str, pts: list[tuple[int, Any]], res: int,
+              lags: Mapping[int, tuple[int, int]] | None = None) -> Trace:
     pts = sorted(pts, key=lambda p: p[0])
     times: list[int] = []
     values: list[Any] = []
@@ -341,7 +404,8 @@ def _compress(name: str, pts: list[tuple[int, Any]], res: int) -> Trace:
         elif not values or values[-1] != v:
             times.append(t)
             values.append(v)
-    return Trace(name, times, values, res)
+    kept = {t: lags[t] for t in times if t in lags} if lags else {}
+    return Trace(name, times, values, res, kept)
 
 
 def _combine(name: str, kind: str, parents: list[Trace]) -> Trace:
@@ -350,13 +414,17 @@ def _combine(name: str, kind: str, parents: list[Trace]) -> Trace:
     if start is None or any(not p.times for p in parents):
         return Trace(name, [], [], max(p.res for p in parents))
     pts = []
+    lags = {}
     for t in all_t:
         if t < start:
             continue
         vals = [bool(p.value_at(t)) for p in parents]
         v = all(vals) if kind == "all" else any(vals) if kind == "any" else not vals[0]
         pts.append((t, v))
-    return _compress(name, pts, max(p.res for p in parents))
+        got = [p.lags[t] for p in parents if t in p.lags]
+        if got:
+            lags[t] = (max(g[0] for g in got), max(g[1] for g in got))
+    return _compress(name, pts, max(p.res for p in parents), lags)
 
 
 class Scope:
@@ -389,7 +457,7 @@ class Scope:
             base = self.resolve(ev.refs[0])
             if isinstance(base, Missing):
                 return base
-            return Occ(base.t + _ns(ev.plus.eval(ctx.env(base.t))), base.res)  # type: ignore[union-attr]
+            return replace(base, t=base.t + _ns(ev.plus.eval(ctx.env(base.t))))  # type: ignore[union-attr]
         if ev.kind in ("earliest_of", "latest_of"):
             got = [self.resolve(r) for r in ev.refs]
             occs = [o for o in got if isinstance(o, Occ)]
@@ -398,7 +466,8 @@ class Scope:
             pick = min if ev.kind == "earliest_of" else max
             t = pick(o.t for o in occs)
             lo = pick(o.t - o.res for o in occs)
-            return Occ(t, t - lo)
+            return Occ(t, t - lo, max(o.lag for o in occs if o.t == t),
+                       max(o.early for o in occs if o.t == t))
         lo, hi, anchor = self.start, self.end, None
         if ev.after:
             a = self.resolve(ev.after)
@@ -431,8 +500,8 @@ class Scope:
             if tr.times and tr.value_at(start) and start < hi:
                 if anchor is not None and start == anchor.t:
                     return [anchor]
-                return [Occ(start, tr.res)]
-            return [Occ(t, tr.res) for t in tr.edges("rise") if lo <= t < hi][:1]
+                return [tr.occ(start)]
+            return [tr.occ(t) for t in tr.edges("rise") if lo <= t < hi][:1]
         occs = self.ctx.occurrences(ev.name)
         ts = [o.t for o in occs]
         return occs[bisect.bisect_left(ts, lo):bisect.bisect_left(ts, hi)]
@@ -573,9 +642,32 @@ def _judge_window(ctx, c, sc, f: Occ, base) -> Verdict:
         status = "inconclusive"
         tail = (f"observation resolution (−{_ms(to.res):g}/+{_ms(f.res):g} ms) straddles "
                 f"the {'upper' if dhi > fhi else 'lower'} limit")
+    unc = (_ms(to.res), _ms(f.res))
+    lower, higher = f.lag + to.early, to.lag + f.early  # delays under load (ns)
+    if status == "fail" and (lower or higher):
+        llo, lhi = dlo - _ms(lower), dhi + _ms(higher)
+        if not (lhi < flo or llo > fhi):
+            status, unc = "inconclusive", (unc[0] + _ms(lower), unc[1] + _ms(higher))
+            tail += f", {_load_reason(f.lag + to.lag, f.early + to.early)}"
+        else:
+            tail += f" (beyond {_load_what(f.lag + to.lag, f.early + to.early)})"
     return Verdict(**common, status=status, to_ns=to.t, measured_ms=d,
-                   uncertainty_ms=(_ms(to.res), _ms(f.res)), margin_ms=margin,
+                   uncertainty_ms=unc, margin_ms=margin,
                    message=f"{head}; allowed {allowed}: {tail}")
+
+
+def _load_what(lag: int, early: int) -> str:
+    parts = []
+    if lag:
+        parts.append(f"the {_ms(lag):.3f} ms the input edge took to reach the drive after "
+                     "the harness stamped it")
+    if early:
+        parts.append(f"the {_ms(early):.3f} ms since the drive's previous state sample")
+    return " and ".join(parts)
+
+
+def _load_reason(lag: int, early: int) -> str:
+    return f"within {_load_what(lag, early)} (delays under load): inconclusive"
 
 
 def _span(ctx, c, sc, f: Occ) -> tuple[int, int, int, int, float | None, float | None, dict]:
@@ -606,11 +698,16 @@ def _judge_forbid(ctx, c, sc, f: Occ, base) -> Verdict:
         occs = (ctx.occurrences(c.target) if ev.kind in
                 ("rise", "fall", "change", "becomes", "raised", "cleared") else
                 [o for o in [sc.resolve(c.target)] if isinstance(o, Occ)])
-        status, hit = "pass", None
+        status, hit, why = "pass", None, " (within the observation resolution)"
         for o in occs:
             if o.t - o.res >= slo and o.t < shi:
-                status, hit = "fail", o
-                break
+                if (o.t - o.res - o.early >= slo + f.lag
+                        and o.t + o.lag < shi - f.early):
+                    status, hit = "fail", o
+                    break
+                if status != "inconclusive":  # surely inside but for the delays under load
+                    status, hit = "inconclusive", o
+                    why = f" ({_load_reason(f.lag + o.lag, f.early + o.early)})"
             if o.t >= plo and o.t - o.res < phi and status == "pass":
                 status, hit = "inconclusive", o
         what = ctx.label(c.target)
@@ -620,9 +717,15 @@ def _judge_forbid(ctx, c, sc, f: Occ, base) -> Verdict:
         return Verdict(**common, status=status, to_ns=hit.t, measured_ms=d,
                        margin_ms=-abs(d) if status == "fail" else None,
                        message=f"{what} {d:.1f} ms after {ctx.label(c.frm or c.at)}: "
-                       f"must not happen {where}"
-                       + ("" if status == "fail" else " (within the observation resolution)"))
-    # absent / present: the signal must be false / true over the window
+                       f"must not happen {where}" + ("" if status == "fail" else why))
+    return _judge_level(ctx, c, f, common, where, (plo, phi, slo, shi))
+
+
+def _judge_level(ctx, c, f: Occ, common: dict, where: str,
+                 span: tuple[int, int, int, int]) -> Verdict:
+    """absent / present: the signal must be false / true over the window."""
+    plo, phi, slo, shi = span
+    late = ""
     tr = ctx.trace(c.target)
     want = c.kind == "present"
     surely_bad, maybe_bad = _bad_spans(tr, want, ctx.end)
@@ -636,6 +739,9 @@ def _judge_forbid(ctx, c, sc, f: Occ, base) -> Verdict:
         status = "pass"
         if any(a < shi and b > slo for a, b in surely_bad):
             status = "fail"
+            if (f.lag or f.early) and not any(a < shi - f.early and b > slo + f.lag
+                                              for a, b in surely_bad):
+                status, late = "inconclusive", f" ({_load_reason(f.lag, f.early)})"
         elif any(a < phi and b > plo for a, b in maybe_bad):
             status = "inconclusive"
     state = "true" if not want else "false"
@@ -650,7 +756,8 @@ def _judge_forbid(ctx, c, sc, f: Occ, base) -> Verdict:
         if first is not None and c.frm and not c.at:
             offs = f" ({_ms(first - f.t):.1f} ms after {ctx.label(c.frm)})"
         msg = f"{c.target} was {state} {where}{offs}" + (
-            "" if status == "fail" else " — possibly, within the observation resolution")
+            "" if status == "fail" else late or
+            " — possibly, within the observation resolution")
     return Verdict(**common, status=status, message=msg)
 
 

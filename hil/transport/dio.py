@@ -73,7 +73,7 @@ class DioPort:
         self.name = name
         self.tap = tap
         self._levels: dict[str, tuple[bool, int]] = {}  # line -> (level, t_ns of change)
-        self._listeners: list[Listener] = []
+        self._listeners: list[tuple[Callable[..., None], bool]] = []
         self._cond = threading.Condition()
         self._closed = False
 
@@ -115,15 +115,17 @@ class DioPort:
         with self._cond:
             return {line: lv for line, (lv, _) in sorted(self._levels.items())}
 
-    def subscribe(self, fn: Listener) -> Callable[[], None]:
-        """Call fn(line, level, t_ns) on every change of the other side's lines.
-        Returns a function that unsubscribes."""
+    def subscribe(self, fn: Listener, *, source: bool = False) -> Callable[[], None]:
+        """Call fn(line, level, t_ns) on every change of the other side's lines (with
+        `source`, fn(line, level, t_ns, source_t): the other side's own stamp of the change,
+        None when it sent none). Returns a function that unsubscribes."""
+        entry = (fn, source)
         with self._cond:
-            self._listeners.append(fn)
+            self._listeners.append(entry)
 
         def unsubscribe() -> None:
             with self._cond, contextlib.suppress(ValueError):
-                self._listeners.remove(fn)
+                self._listeners.remove(entry)
 
         return unsubscribe
 
@@ -158,8 +160,11 @@ class DioPort:
             self._cond.notify_all()
         if self.tap is not None:
             self.tap.dio(self.name, line, level, t, source_t)
-        for fn in listeners:
-            fn(line, level, t)
+        for fn, with_source in listeners:
+            if with_source:
+                fn(line, level, t, source_t)
+            else:
+                fn(line, level, t)
 
     def _publish(self, line: str, level: bool, t: int) -> None:
         raise NotImplementedError

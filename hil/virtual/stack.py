@@ -76,6 +76,8 @@ class VirtualDriveStack:
         self.dio_face: DioFace | None = None
         self._closers: list[Any] = []
         self._unsub: Any = None
+        # (line, level, sent_ns, model_t) per input edge the DI/DO face applied (GroundTruth)
+        self.on_input: Any = None
 
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self) -> VirtualDriveStack:
@@ -93,7 +95,7 @@ class VirtualDriveStack:
 
             self.dio_port = open_dio(spec.dio, role="drive", name=f"{spec.name}-dio")
             self._closers.append(self.dio_port.close)
-            self.dio_face = DioFace(self.dio_port, host)
+            self.dio_face = DioFace(self.dio_port, host, self._input_applied)
             self._closers.append(self.dio_face.close)
         if spec.can:
 
@@ -151,6 +153,10 @@ class VirtualDriveStack:
         self.stop()
 
     # -- helpers -----------------------------------------------------------------------------
+    def _input_applied(self, line: str, level: bool, sent_ns: int, model_t: int) -> None:
+        if self.on_input is not None:
+            self.on_input(line, level, sent_ns, model_t)
+
     def _on_event(self, event: object) -> None:
         if isinstance(event, PowerCycled) and self.modbus is not None:
             self.modbus.power_cycle()

@@ -155,13 +155,22 @@ class GroundTruth:
 
     def sample(self) -> None:
         """One state sample now (call under the host lock): what a check reads is current."""
-        self.rec.drive_state(self.name, self.drive.snapshot(),
+        self.rec.drive_state(self.name, {**self.drive.snapshot(), "periodic": True},
                              source_t=self.host.wall_ns(self.drive.now))
 
+    def input_applied(self, line: str, level: bool, sent_ns: int, model_t: int) -> None:
+        """An input edge the drive applied at `model_t`, stamped `sent_ns` by the harness."""
+        record = getattr(self.rec, "input_delivery", None)  # test doubles may lack it
+        if record is not None:
+            record(self.name, line, level, sent_ns, self.host.wall_ns(model_t))
+
     def _tick(self, now: int) -> None:
+        # `periodic`: a change first seen here happened after the previous sample (the timing
+        # checker's sampling delay under load); the samples at model events are exact
         if now >= self._next:
             self._next = now + self.period_ns
-            self.rec.drive_state(self.name, self.drive.snapshot(), source_t=self.host.wall_ns(now))
+            self.rec.drive_state(self.name, {**self.drive.snapshot(), "periodic": True},
+                                 source_t=self.host.wall_ns(now))
 
     def _on_event(self, ev: Any) -> None:
         t = getattr(ev, "t", self.drive.now)
@@ -214,6 +223,7 @@ class VirtualDrive:
         self.drive, self.host = self.stack.drive, self.stack.host
         self.truth = GroundTruth(spec.name, self.drive, self.host, recorder,
                                  options.state_publish_ms)
+        self.stack.on_input = self.truth.input_applied
         if spec.dio:
             declare = getattr(recorder, "declare_source", None)
             if declare is not None:  # DO levels carry the model's own time (exact to 1 µs)
@@ -312,7 +322,7 @@ class _LineRecorder:
         self._write = write
 
     def __getattr__(self, method: str) -> Callable[..., None]:
-        if method not in ("drive_state", "drive_event", "drive_params"):
+        if method not in ("drive_state", "drive_event", "drive_params", "input_delivery"):
             raise AttributeError(method)
 
         def call(*args: Any, **kw: Any) -> None:
@@ -349,6 +359,7 @@ class StdioControl:
         st = self.stack
         self.truth = GroundTruth(st.spec.name, st.drive, st.host, _LineRecorder(self.write),
                                  st.spec.options.state_publish_ms)
+        st.on_input = self.truth.input_applied
         self._thread = threading.Thread(target=self._serve, name="hil-drive-ctl", daemon=True)
         self._thread.start()
 

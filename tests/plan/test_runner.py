@@ -10,6 +10,8 @@ from pathlib import Path
 from fakes import FAKE_BENCH, fake_session_factory
 
 from hil.plan.bench import loads_bench
+from hil.plan.context import Inconclusive, StepFailed
+from hil.plan.kinds.base import StepKind
 from hil.plan.plan import loads_plan
 from hil.plan.runner import run_plans, summary_table
 from hil.record import topics as T
@@ -112,3 +114,33 @@ def test_virtual_only_steps_reach_the_world(tmp_path):
             "  - power_cycle: {}\n  - expect: {alarm: none}\n")
     r, _ = _run(tmp_path, text)
     assert r.passed, [(s.label, s.status, s.message) for s in r.steps]
+
+
+class _Undecided(StepKind):
+    """A judging step the observation cannot decide (e.g. timing under load)."""
+
+    name, judge_only = "undecided", True
+
+    def run(self, ctx, step, drive):
+        raise Inconclusive("cannot decide")
+
+
+class _Fails(_Undecided):
+    def run(self, ctx, step, drive):
+        raise StepFailed("really failed")
+
+
+def test_a_plan_only_inconclusive_says_so_and_a_failure_still_wins(tmp_path):
+    import dataclasses
+
+    bench = loads_bench(FAKE_BENCH, "fake.yaml")
+    plan = loads_plan(PASSING, f"{tmp_path}/p.yaml")
+    plan.steps[2] = dataclasses.replace(plan.steps[2], action=_Undecided({}))
+    res = run_plans([plan], bench, tmp_path / "a", quiet=True,
+                    session_factory=fake_session_factory(tmp_path))[0]
+    assert res.status == "inconclusive" and not res.passed
+    assert "INCONCLUSIVE" in summary_table([res])
+    plan.steps[4] = dataclasses.replace(plan.steps[4], action=_Fails({}))
+    res = run_plans([plan], bench, tmp_path / "b", quiet=True,
+                    session_factory=fake_session_factory(tmp_path))[0]
+    assert res.status == "fail"

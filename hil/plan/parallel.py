@@ -1,0 +1,238 @@
+"""`hil run -j N`: plans in worker processes, each on its own virtual bench.
+
+    results = run_parallel(plans, bench, Path("reports"), jobs=2, listeners=[...])
+
+Each worker process (spawn context) loads the plan and the bench from their files and runs
+`run_plan` as `-j 1` does, on its own virtual bench: `auto` transports resolve to names,
+ptys and loopback ports of that process, so plans never share a bus, a line or a temporary
+file; each writes its own recording and reports. At most `jobs` plans are in flight; the
+results come back in the plans' order. Events are replayed in this process, plan by plan in
+the order they complete (plan N of M counts completed plans), so progress displays and step
+lines read as in a sequential run.
+
+Only a virtual bench whose every transport is private to a process runs in parallel
+(`parallel_blocker`): a real bench has one set of drives (and a gateway lease for one holder),
+so its plans run one after the other.
+
+Ctrl-C (SIGINT/SIGTERM) stops the workers: each running plan is stopped, its bench driven
+safe and its recording closed (as in `-j 1`), plans not started are not run, then
+KeyboardInterrupt is raised here as `run_plans` does.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import logging
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hil.plan.bench import Bench, load_bench
+from hil.plan.events import Listener, Note, Notifier, PlanEnded, PlanStarted, StepEnded
+from hil.plan.plan import Plan, check_plan, load_plan
+from hil.plan.runner import PlanResult, run_plan, timing_specs
+
+__all__ = ["jobs_from_arg", "parallel_blocker", "run_parallel"]
+
+STOP_GRACE_S = 60.0  # how long a stopped worker may take to go safe and close its recording
+
+
+def jobs_from_arg(text: str) -> int:
+    """`-j N`: a positive count; `0` or `auto` = the number of CPUs."""
+    if text.strip().lower() == "auto":
+        return os.cpu_count() or 1
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise ValueError(f"{text!r}: a number of plans at a time (0 or auto = CPUs)")
+    return n or os.cpu_count() or 1
+
+
+def parallel_blocker(bench: Bench) -> str | None:
+    """Why `bench` cannot run plans in parallel (None when it can): it must be virtual, with
+    every transport private to the process that opens it (`virtual:` in process, or an
+    `auto` target with `auto` loopback ports)."""
+    if not bench.virtual:
+        how = " behind a gateway lease" if bench.gateway is not None else ""
+        return f"bench {bench.name} is not virtual{how}: one set of drives"
+    urls = [*bench.can.values(), *bench.rs485.values(),
+            *(d.dio for d in bench.drives.values() if d.dio)]
+    for url in urls:
+        scheme, _, rest = url.partition(":")
+        target, _, query = rest.partition("?")
+        if scheme == "virtual" and bench.process == "inproc":
+            continue
+        fixed_port = any(ep.rsplit(":", 1)[-1] != "auto"
+                         for item in query.split("&") if item.startswith(("listen=", "connect="))
+                         for ep in item.partition("=")[2].split(","))
+        if target != "auto" or fixed_port:
+            return f"bench {bench.name}: transport {url} is shared by every run"
+    return None
+
+
+# --- the worker side ---------------------------------------------------------------------
+
+
+_stop_requested = False
+
+
+def _worker_init(log_level: int) -> None:
+    """A worker between plans: SIGINT/SIGTERM only mark it stopped (`run_plan` installs its
+    own handlers while a plan runs and restores these after). Logs as `hil run` does."""
+    logging.basicConfig(level=log_level, stream=sys.stderr,
+                        format="%(levelname)s %(name)s: %(message)s")
+
+    def mark(signum: int, frame: Any) -> None:
+        global _stop_requested
+        _stop_requested = True
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, mark)
+
+
+class _Notes(Listener):
+    def __init__(self) -> None:
+        self.texts: list[str] = []
+
+    def note(self, e: Note) -> None:
+        self.texts.append(e.text)
+
+
+@dataclass
+class _Job:
+    plan_path: str
+    bench_path: str | None
+    out_dir: str
+    allow_inconclusive: bool
+    index: int
+    total: int
+
+
+def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
+    """In a worker: (result, notes, interrupted). None when stopped before it began."""
+    global _stop_requested
+    if _stop_requested:
+        return None, [], True
+    plan, bench = load_plan(job.plan_path), load_bench(job.bench_path)
+    notes = _Notes()
+    try:
+        res = run_plan(plan, bench, Path(job.out_dir), listeners=[notes],
+                       allow_inconclusive=job.allow_inconclusive, index=job.index,
+                       total=job.total, stop=lambda: _stop_requested)
+    except KeyboardInterrupt as e:
+        _stop_requested = True
+        res = getattr(e, "plan_result", None) or _interrupted_result(plan, bench, job)
+        return res, notes.texts, True
+    return res, notes.texts, False
+
+
+def _interrupted_result(plan: Plan, bench: Bench, job: _Job) -> PlanResult:
+    """What `run_plan` wrote for a stopped plan: its recording and reports are on disk."""
+    stem = Path(plan.path).stem
+    out = Path(job.out_dir)
+    return PlanResult(plan.name, plan.path, bench.name, status="aborted",
+                      recording=str(out / f"{stem}.mcap"), html=str(out / f"{stem}.html"),
+                      junit=str(out / f"{stem}.junit.xml"), error="interrupted")
+
+
+# --- the parent side ---------------------------------------------------------------------
+
+
+def _replay(events: Notifier, plan: Plan, res: PlanResult, notes: list[str], index: int,
+            total: int, bench: Bench) -> None:
+    events.emit(PlanStarted(plan, bench, index, total))
+    for s, r in zip(plan.steps, res.steps, strict=False):
+        events.emit(StepEnded(plan, s, r, plan.drive or ""))
+    for text in notes:
+        events.emit(Note(plan, text))
+    events.emit(PlanEnded(plan, res, index, total))
+
+
+def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
+                 allow_inconclusive: bool = False,
+                 listeners: list[Listener] | None = None) -> list[PlanResult]:
+    """Run `plans` at most `jobs` at a time in worker processes; results in plan order.
+    Every plan is checked against the bench first (nothing runs on a bad file)."""
+    specs = timing_specs()
+    for p in plans:
+        check_plan(p, bench, specs)
+    events = Notifier(listeners)
+    todo = [_Job(str(p.path), bench.path or None, str(out_dir), allow_inconclusive, i,
+                 len(plans)) for i, p in enumerate(plans, 1)]
+    results: dict[int, PlanResult] = {}
+    done = 0
+    ctx = multiprocessing.get_context("spawn")
+    pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(plans)), mp_context=ctx,
+                                  initializer=_worker_init,
+                                  initargs=(logging.getLogger().getEffectiveLevel(),))
+    running: dict[cf.Future, _Job] = {}
+    main = threading.current_thread() is threading.main_thread()
+    old_handlers = {sig: signal.signal(sig, _as_interrupt)  # as run_plan does with -j 1
+                    for sig in (signal.SIGINT, signal.SIGTERM)} if main else {}
+    interrupted = False
+
+    def collect(finished: set[cf.Future]) -> None:
+        nonlocal done, interrupted
+        for fut in finished:
+            job = running.pop(fut)
+            try:
+                res, notes, stopped = fut.result()
+            except BrokenProcessPool:
+                if interrupted:  # killed while it started up: it ran nothing
+                    continue
+                raise
+            interrupted |= stopped
+            if res is not None:
+                results[job.index] = res
+                done += 1
+                _replay(events, plans[job.index - 1], res, notes, done, len(plans), bench)
+
+    try:
+        while (todo and not interrupted) or running:
+            while todo and not interrupted and len(running) < jobs:
+                job = todo.pop(0)
+                running[pool.submit(_run_one, job)] = job
+            collect(cf.wait(running, return_when=cf.FIRST_COMPLETED)[0])
+            if interrupted and running:
+                collect(_stop_workers(pool, running))
+    except KeyboardInterrupt:
+        interrupted = True
+        collect(_stop_workers(pool, running))
+    finally:
+        for sig, handler in old_handlers.items():
+            signal.signal(sig, handler)
+        pool.shutdown(wait=True, cancel_futures=True)
+    if interrupted:
+        raise KeyboardInterrupt("interrupted (Ctrl-C / SIGTERM)")
+    return [results[i] for i in range(1, len(plans) + 1)]
+
+
+def _as_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def _stop_workers(pool: cf.ProcessPoolExecutor, running: dict[cf.Future, _Job]
+                  ) -> set[cf.Future]:
+    """Forward the interrupt to every worker and wait for their plans to end safely; a further
+    Ctrl-C here only prints a notice."""
+    main = threading.current_thread() is threading.main_thread()
+    old = {sig: signal.signal(sig, lambda *_: os.write(
+        2, b"hil: stopping the workers (benches going safe, recordings closing)\n"))
+        for sig in (signal.SIGINT, signal.SIGTERM)} if main else {}
+    try:
+        for pid in list(getattr(pool, "_processes", {}) or {}):
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGINT)
+        return cf.wait(running, timeout=STOP_GRACE_S)[0]
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)

@@ -1,0 +1,144 @@
+"""`hil run -j N` (issue 18, item 2): plans in worker processes, each on its own virtual
+bench; the same verdicts, reports and exit codes as `-j 1`; Ctrl-C leaves every recording
+readable and every bench safe."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from hil.cli import main as hil
+from hil.plan.bench import load_bench
+from hil.plan.parallel import jobs_from_arg, parallel_blocker
+from hil.record.reader import Recording
+
+# the quickest shipped plans (about 0.5 s each on the virtual bench)
+QUICK = ["alarm_reset", "param_access", "emgs"]
+FAILS = "name: fails\ndescription: BRKR is never on at rest\nsteps:\n  - expect: {do: {BRKR: on}}\n"
+HOLD = "name: {name}\nsteps:\n  - di: {{SON: on}}\n  - wait: 20s\n  - di: {{SON: off}}\n"
+
+
+def _files(out: Path) -> list[str]:
+    return sorted(p.name for p in out.iterdir())
+
+
+def _statuses(out: Path, names: list[str]) -> dict[str, tuple[str, list[str]]]:
+    got = {}
+    for n in names:
+        rec = Recording.open(out / f"{n}.mcap")
+        steps = [m["status"] for *_t, m in rec.messages("/plan/steps") if m.get("status")]
+        got[n] = (rec.metadata()["hil.result"]["status"], steps)
+    return got
+
+
+def test_j2_gives_the_same_verdicts_reports_and_exit_code_as_j1(tmp_path, capsys):
+    one, two = tmp_path / "j1", tmp_path / "j2"
+    assert hil(["run", *QUICK, "--out", str(one), "-q"]) == 0
+    out1 = capsys.readouterr().out
+    assert hil(["run", *QUICK, "--out", str(two), "-j", "2", "-q"]) == 0
+    out2 = capsys.readouterr().out
+    assert _files(one) == _files(two)
+    assert {f"{n}.{x}" for n in QUICK for x in ("mcap", "html", "junit.xml")} | {
+        "index.html", "junit.xml"} == set(_files(two))
+    assert _statuses(one, QUICK) == _statuses(two, QUICK)
+    # the summary lists the plans in the order given, whichever finished first
+    rows = [ln.split()[0] for ln in out2.splitlines() if ln.split() and ln.split()[0] in QUICK]
+    assert rows == QUICK
+    assert out1.count("PASS") == out2.count("PASS") == 3
+
+
+def test_a_failing_plan_under_j2_exits_1_and_its_neighbours_still_pass(tmp_path, capsys):
+    plan = tmp_path / "fails.yaml"
+    plan.write_text(FAILS)
+    code = hil(["run", "param_access", str(plan), "emgs", "--out", str(tmp_path / "o"),
+                "-j", "2"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    table = [ln.split()[:2] for ln in out.splitlines() if ln.split()[:1] in (
+        ["param_access"], ["fails"], ["emgs"])]
+    assert table == [["param_access", "PASS"], ["fails", "FAIL"], ["emgs", "PASS"]]
+    assert "[3/3]" in err  # plan N of M, counted as plans complete
+
+
+def test_jobs_argument():
+    assert jobs_from_arg("3") == 3
+    assert jobs_from_arg("0") == jobs_from_arg("auto") == (os.cpu_count() or 1)
+    for bad in ("-1", "two"):
+        with pytest.raises(ValueError, match="plans at a time"):
+            jobs_from_arg(bad)
+
+
+def test_only_a_bench_private_to_each_process_runs_in_parallel():
+    virtual = load_bench(None)
+    assert parallel_blocker(virtual) is None
+    real = replace(virtual, virtual=False)
+    assert "not virtual" in (parallel_blocker(real) or "")
+    fixed = replace(virtual, can={"can0": "socketcan:vcan0"})
+    assert "socketcan:vcan0" in (parallel_blocker(fixed) or "")
+    port = replace(virtual, process="subprocess",
+                   can={"can0": "zenoh:auto?listen=tcp/127.0.0.1:7447"})
+    assert "7447" in (parallel_blocker(port) or "")
+    auto = replace(port, can={"can0": "zenoh:auto?listen=tcp/127.0.0.1:auto"})
+    assert parallel_blocker(auto) is None
+
+
+def test_j2_on_a_real_bench_runs_one_plan_at_a_time_and_says_so(tmp_path, capsys,
+                                                                monkeypatch):
+    import hil.plan.cli as run_cli
+
+    def no_parallel(*a, **kw):
+        raise AssertionError("a real bench must not run plans in parallel")
+
+    monkeypatch.setattr(run_cli, "run_parallel", no_parallel)
+    bench = Path(__file__).resolve().parents[2] / "fixtures/benches/example-asda-a3-socketcan.yaml"
+    # no SocketCAN here: each plan ends in a bench error, one after the other
+    code = hil(["run", "param_access", "emgs", "--bench", str(bench), "-j", "2", "--out",
+                str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "-j 2: bench lab-a3-axis1 is not virtual" in err and "one at a time" in err
+    assert hil(["run", "param_access", "--out", str(tmp_path), "-j", "x"]) == 2
+    assert "-j: 'x'" in capsys.readouterr().err
+
+
+def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
+    plans = []
+    for name in ("hold_a", "hold_b"):
+        p = tmp_path / f"{name}.yaml"
+        p.write_text(HOLD.format(name=name))
+        plans.append(str(p))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "run", *plans, "--out", str(out),
+                             "-j", "2", "-q"], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (
+                out.is_dir() and len(list(out.glob("*.mcap"))) == 2):
+            time.sleep(0.1)
+        time.sleep(1.5)  # both plans are in their 20 s wait
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)  # to the parent only: it stops its workers
+        output, _ = proc.communicate(timeout=60)
+        assert time.monotonic() - t0 < 20, "the plans ran on instead of stopping"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == 130, output
+    for name in ("hold_a", "hold_b"):
+        rec = Recording.open(out / f"{name}.mcap")
+        assert not rec.corrupt, rec.error
+        result = rec.metadata()["hil.result"]
+        assert result["status"] == "aborted"
+        assert "interrupted" in result["reason"]
+        safety = [m for *_t, m in rec.messages("/safety")]
+        assert safety, f"{name}: no safe-state record"
+        assert (out / f"{name}.html").exists() and (out / f"{name}.junit.xml").exists()
