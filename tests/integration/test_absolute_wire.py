@@ -210,7 +210,10 @@ def test_absolute_position_agrees_over_dio_modbus_and_sdo(bench, tmp_path) -> No
         bench.tap.start(rec, bench.dio)
         late = bench.reader(LateLines(bench.dio, bit=5, late_ms=260)).read()
         bench.tap.rec = None
-    assert late.attempts == 2 and "bit 5: ABSW on" in late.errors[0]
+    # the late answer costs exactly one attempt; a loaded machine may spoil the retry too
+    # (a T_Q miss, as above), so a third attempt is allowed, but only for that reason
+    assert late.attempts >= 2 and "bit 5: ABSW on" in late.errors[0]
+    assert all("within T_Q" in e for e in late.errors[1:]), late.errors
     assert (late.status, late.position) == (0, puu)
     # abort_max (the drive's reaction to T_R / ABSE off) is a chosen bound, the manual gives
     # none (⚠); measured across two processes it includes the zenoh hop and the drive's 1 ms
