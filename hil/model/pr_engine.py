@@ -78,6 +78,12 @@ class PrOptions:
     dev_cmd_ok_ignores_dly: bool = False  # Cmd_OK at command end, DLY forgotten
     dev_mc_ok_ignores_tpos: bool = False  # MC_OK = Cmd_OK
     dev_soft_limit_on_feedback: bool = False  # P5.008/P5.009 judged on the feedback
+    # sequential DLY counted from the command start, not from reaching the target (L4934)
+    dev_dly_from_start: bool = False
+    dev_jump_ignores_dly: bool = False  # the jump target is read at once (DLY: L4505, L4982)
+    dev_jump_falls_through: bool = False  # a jump continues with PR n+1 (target: L4505-4527)
+    # software-limit stop with this deceleration (ms per 3000 rpm) instead of P5.003 Z/U
+    dev_soft_limit_decel_ms: float | None = None
 
     def __post_init__(self) -> None:
         if self.group_limit < 1:
@@ -278,17 +284,22 @@ class PrEngine:
         c = self.cmd
         if c is None:
             return 0
+        if self.options.dev_dly_from_start:
+            return None if c.done is None else max(c.done, c.start + c.dly_ns)
         if c.done is None:
             return None
         return c.done + c.dly_ns
 
     def _advance_cursor(self, path: PrPath) -> None:
         d = self.drive
+        o = self.options
         self._prev_t = d.now
         self._prev_dly = self._dly_ns(path.dly) if not (path.ovlp and path.is_motion) else 0
+        if path.type == JUMP and o.dev_jump_ignores_dly:
+            self._prev_dly = 0
         self._prev_motion = path.is_motion
-        if path.type == JUMP:
-            self.cursor = path.data
+        if path.type == JUMP:  # DLY counts from the jump's read (L4505)
+            self.cursor = path.number + 1 if o.dev_jump_falls_through else path.data
         elif path.continues:
             self.cursor = path.number + 1
             if self.cursor > 99:
@@ -448,7 +459,7 @@ class PrEngine:
         ax = d.axis
         pr_mode = get("P1.001") & 0xF == 1
         pos = ax.user_position if self.options.dev_soft_limit_on_feedback else ax.user_demand
-        puu = counts_to_puu(pos, get("P1.044"), get("P1.045"))
+        puu = round(counts_to_puu(pos, get("P1.044"), get("P1.045")))  # integer PUU (L4180)
         for code, over, sym, digit, sign in (
             ("AL283", puu > get("P5.008"), "SPL", 2, 1),
             ("AL285", puu < get("P5.009"), "SNL", 3, -1),
@@ -461,7 +472,10 @@ class PrEngine:
                 self.trace.append((d.now, f"{code}:{int(over)}"))
             if over and ax.demand_velocity * sign > 0 and ax.mode != "stop":
                 self.cursor = None
-                ax.ramp_stop(d._p5003_decel(digit))  # P5.003 Z SPL / U SNL (L11091-11100)
+                decel = self.options.dev_soft_limit_decel_ms
+                if decel is None:
+                    decel = d._p5003_decel(digit)  # P5.003 Z SPL / U SNL (L11091-11100)
+                ax.ramp_stop(decel)
                 self.cmd = _Cmd(None, d.now, 0)
 
     # ---------------------------------------------------------------- outputs
