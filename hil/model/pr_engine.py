@@ -19,15 +19,18 @@ Rules, each from the manual (choices: docs/manual-choices.md#pr, `PrOptions`):
   INS is read right after the previous one, after the previous one's DLY counted from its
   start (internal interrupt, L4982-4986). A non-INS PR after a write/jump runs in the next ms
   (L5083). OVLP: the command counts as done when its deceleration starts, its DLY is ignored
-  (L5051-5057); INS beats OVLP.
+  (L5051-5057); INS beats OVLP. A jump's DLY counts from its read and the target is read
+  when it ran out (L4505, L4982).
 * Targets (L4468-4471, L5000): ABS = data; INC = previous Cmd_E + data; REL = Fb_PUU + data
   when triggered, previous Cmd_E + data inside a chain (internal interrupt); CAP = last
-  capture + data. STP keeps Cmd_E, so INC 0 finishes the move and REL 0 discards it (000:605).
+  capture + data (`capture_puu`, set by capture.py for every captured point). STP keeps
+  Cmd_E, so INC 0 finishes the move and REL 0 discards it (000:605).
 * Completion (L4195-4201, L8596-8633, L15319-15326): Cmd_OK when the program has nothing
   left and the last command plus its DLY is done; MC_OK = Cmd_OK and TPOS; P1.048.X holds
   MC_OK, P1.048.Y raises AL380 when TPOS drops after MC_OK; a new trigger clears both.
   P5.007 reads n / n+10000 / n+20000 (L11185).
-* Software limits P5.008/P5.009 in PR mode, judged on the command position (L20105-20116):
+* Software limits P5.008/P5.009 in PR mode, judged on the command position in whole PUU,
+  strictly beyond (L20105-20116):
   AL283/AL285 and DO.SPL/SNL, stop with the P5.003 Z/U deceleration, auto-clear when the
   command is back inside.
 * Alarms: AL249 path > 99 (L20099), AL237 index before homing (L4593), AL207/AL209/AL213/

@@ -147,28 +147,30 @@ def test_soft_limit_scenario_overshoots_the_limit_with_the_feedback(tmp_path) ->
     assert not any(v.status == "fail" for v in vs)
 
 
+DEVIATIONS = [  # (case, knob, the constraint it breaks)
+    ("pr_completion", {"dev_start_delay_ms": 5}, "motion starts after the P2.009 filter"),
+    ("pr_completion", {"dev_cmd_ok_ignores_dly": True}, "Cmd_OK rises DLY after"),
+    ("pr_completion", {"dev_dly_offset_ms": 5}, "Cmd_OK rises DLY after the command time"),
+    ("pr_completion", {"dev_dly_offset_ms": 40}, "Cmd_OK rises DLY after the command ends"),
+    ("pr_completion/no_dly", {"dev_mc_ok_ignores_tpos": True},
+     "MC_OK rises once Cmd_OK and TPOS are both on"),
+    ("pr_delay", {"dev_dly_offset_ms": 5}, "PR b starts PR a's command time plus DLY a"),
+    ("pr_delay", {"dev_dly_offset_ms": 50}, "PR b starts DLY a after PR a arrived"),
+    ("pr_delay", {"dev_dly_from_start": True}, "PR b starts DLY a after PR a arrived"),
+    ("pr_delay", {"dev_cmd_ok_ignores_dly": True}, "Cmd_OK rises DLY b after"),
+    ("pr_delay", {"dev_cmd_ok_ignores_dly": True}, "Cmd_OK rises PR b's command time"),
+    ("pr_jump", {"dev_jump_ignores_dly": True}, "PR b starts the jump's DLY"),
+    ("pr_jump", {"dev_dly_offset_ms": 5}, "PR b starts PR a's command time plus the jump"),
+    ("pr_jump", {"dev_dly_offset_ms": 50}, "PR b starts the jump's DLY"),
+    ("pr_soft_limit", {"dev_soft_limit_on_feedback": True},
+     "no AL283 while only the feedback is past P5.008"),
+    ("pr_soft_limit", {"dev_soft_limit_decel_ms": 5000},
+     "the motor stops with the P5.003.Z deceleration"),
+]
+
+
 @pytest.mark.parametrize(
-    ("case", "knob", "constraint"),
-    [
-        ("pr_completion", {"dev_start_delay_ms": 5}, "motion starts after the P2.009 filter"),
-        ("pr_completion", {"dev_cmd_ok_ignores_dly": True}, "Cmd_OK rises DLY after"),
-        ("pr_completion", {"dev_dly_offset_ms": 5}, "Cmd_OK rises DLY after the command time"),
-        ("pr_completion", {"dev_dly_offset_ms": 40}, "Cmd_OK rises DLY after the command ends"),
-        ("pr_completion/no_dly", {"dev_mc_ok_ignores_tpos": True},
-         "MC_OK rises once Cmd_OK and TPOS are both on"),
-        ("pr_delay", {"dev_dly_offset_ms": 5}, "PR b starts PR a's command time plus DLY a"),
-        ("pr_delay", {"dev_dly_offset_ms": 50}, "PR b starts DLY a after PR a arrived"),
-        ("pr_delay", {"dev_dly_from_start": True}, "PR b starts DLY a after PR a arrived"),
-        ("pr_delay", {"dev_cmd_ok_ignores_dly": True}, "Cmd_OK rises DLY b after"),
-        ("pr_delay", {"dev_cmd_ok_ignores_dly": True}, "Cmd_OK rises PR b's command time"),
-        ("pr_jump", {"dev_jump_ignores_dly": True}, "PR b starts the jump's DLY"),
-        ("pr_jump", {"dev_dly_offset_ms": 5}, "PR b starts PR a's command time plus the jump"),
-        ("pr_jump", {"dev_dly_offset_ms": 50}, "PR b starts the jump's DLY"),
-        ("pr_soft_limit", {"dev_soft_limit_on_feedback": True},
-         "no AL283 while only the feedback is past P5.008"),
-        ("pr_soft_limit", {"dev_soft_limit_decel_ms": 5000},
-         "the motor stops with the P5.003.Z deceleration"),
-    ],
+    ("case", "knob", "constraint"), DEVIATIONS,
     ids=lambda x: next(iter(x)) if isinstance(x, dict) else x,
 )
 def test_deviating_drive_fails(tmp_path, case, knob, constraint) -> None:
@@ -187,3 +189,16 @@ def test_deviating_drive_fails(tmp_path, case, knob, constraint) -> None:
 )
 def test_deviating_drive_breaks_a_state_rule(tmp_path, case, knob, constraint) -> None:
     assert_constraint_fails(judge(tmp_path, case, **knob), constraint)
+
+
+def test_every_pr_spec_has_a_model_case_a_knob_and_a_plan() -> None:
+    """A new fixtures/timing/pr_*.yaml needs a scenario and a deviation knob here and a plan
+    that checks it (issue 14: each spec can fail; plans use the specs)."""
+    from hil.plan.plan import find_plans
+
+    specs = {p.stem for p in fixture("timing").glob("pr_*.yaml")}
+    assert specs == {c.partition("/")[0] for c in CASES}
+    knobbed = {c.partition("/")[0] for c, _k, _n in DEVIATIONS}
+    assert specs <= knobbed
+    checked = "".join(p.read_text() for p in find_plans() if p.stem.startswith("pr_"))
+    assert all(f"check_timing: {s}" in checked or f"spec: {s}" in checked for s in specs)
