@@ -1,6 +1,6 @@
 """The PR timing specs pass on the faithful drive and fail on each PR deviation knob
 (A3 chapter 7: completion L4195-4201, L8596-8633, L15319; DLY L4934-4947; jump L4505-4527,
-L4982; software limit L11191-11198, L20105-20109, L11084-11100)."""
+L4982; overlap L5051-5057; software limit L11191-11198, L20105-20109, L11084-11100)."""
 
 from __future__ import annotations
 
@@ -77,6 +77,16 @@ def pr_two_paths(tap) -> None:
     ctrg(tap, 1, 1200)
 
 
+def pr_overlapping_paths(tap) -> None:
+    """PR#1 AUTO with OVLP -> PR#2, both 300 rpm, 20 ms ramps (figure 7.1.6.11(b))."""
+    table(tap, {
+        1: (("auto", 50000), {"cmd": "INC", "spd": 4, "ovlp": True}),
+        2: (("single", 30000), {"cmd": "INC", "spd": 4}),
+    })
+    servo_on(tap)
+    ctrg(tap, 1, 800)
+
+
 def pr_jump_chain(tap) -> None:
     """PR#1 AUTO -> PR#2 JUMP to PR#4 with DLY #1 (100 ms); PR#3 (to 250000) is skipped."""
     table(tap, {
@@ -117,6 +127,7 @@ CASES = {  # spec id -> (scenario, params, constants)
     "pr_completion/no_dly": (pr_move_no_dly, PARAMS, {"dly": 0, "move": MOVE_50K}),
     "pr_delay": (pr_two_paths, PARAMS, {"move_a": MOVE_50K, "move_b": MOVE_30K}),
     "pr_jump": (pr_jump_chain, PARAMS, {"move_a": MOVE_50K}),
+    "pr_overlap": (pr_overlapping_paths, PARAMS, {"move_a": MOVE_50K, "move_b": MOVE_30K}),
     "pr_soft_limit": (pr_soft_limit, SOFT_LIMIT, {}),
 }
 
@@ -162,6 +173,8 @@ DEVIATIONS = [  # (case, knob, the constraint it breaks)
     ("pr_jump", {"dev_jump_ignores_dly": True}, "PR b starts the jump's DLY"),
     ("pr_jump", {"dev_dly_offset_ms": 5}, "PR b starts PR a's command time plus the jump"),
     ("pr_jump", {"dev_dly_offset_ms": 50}, "PR b starts the jump's DLY"),
+    ("pr_overlap", {"dev_ovlp_ignored": True}, "the axis slows down only at the end of PR b"),
+    ("pr_overlap", {"dev_ovlp_ignored": True}, "Cmd_OK rises the overlapped ramp earlier"),
     ("pr_soft_limit", {"dev_soft_limit_on_feedback": True},
      "no AL283 while only the feedback is past P5.008"),
     ("pr_soft_limit", {"dev_soft_limit_decel_ms": 5000},
