@@ -1,6 +1,7 @@
 """The PR timing specs pass on the faithful drive and fail on each PR deviation knob
 (A3 chapter 7: completion L4195-4201, L8596-8633, L15319; DLY L4934-4947; jump L4505-4527,
-L4982; overlap L5051-5057; software limit L11191-11198, L20105-20109, L11084-11100)."""
+L4982; speed DLY L4934, L4951; overlap L5051-5057; software limit L11191-11198,
+L20105-20109, L11084-11100)."""
 
 from __future__ import annotations
 
@@ -87,6 +88,17 @@ def pr_overlapping_paths(tap) -> None:
     ctrg(tap, 1, 800)
 
 
+def pr_speed_paths(tap) -> None:
+    """SPEED 300 rpm (DLY #1) -> 600 rpm (DLY #1) -> 0, ACC #0 = 200 ms (figure 7.1.6.3(b))."""
+    table(tap, {
+        1: (("speed", 3000), {"auto": True, "dly": 1}),
+        2: (("speed", 6000), {"auto": True, "dly": 1}),
+        3: (("speed", 0), {}),
+    })
+    servo_on(tap)
+    ctrg(tap, 1, 600)
+
+
 def pr_jump_chain(tap) -> None:
     """PR#1 AUTO -> PR#2 JUMP to PR#4 with DLY #1 (100 ms); PR#3 (to 250000) is skipped."""
     table(tap, {
@@ -127,6 +139,7 @@ CASES = {  # spec id -> (scenario, params, constants)
     "pr_completion/no_dly": (pr_move_no_dly, PARAMS, {"dly": 0, "move": MOVE_50K}),
     "pr_delay": (pr_two_paths, PARAMS, {"move_a": MOVE_50K, "move_b": MOVE_30K}),
     "pr_jump": (pr_jump_chain, PARAMS, {"move_a": MOVE_50K}),
+    "pr_speed_delay": (pr_speed_paths, PARAMS, {}),
     "pr_overlap": (pr_overlapping_paths, PARAMS, {"move_a": MOVE_50K, "move_b": MOVE_30K}),
     "pr_soft_limit": (pr_soft_limit, SOFT_LIMIT, {}),
 }
@@ -173,6 +186,8 @@ DEVIATIONS = [  # (case, knob, the constraint it breaks)
     ("pr_jump", {"dev_jump_ignores_dly": True}, "PR b starts the jump's DLY"),
     ("pr_jump", {"dev_dly_offset_ms": 5}, "PR b starts PR a's command time plus the jump"),
     ("pr_jump", {"dev_dly_offset_ms": 50}, "PR b starts the jump's DLY"),
+    ("pr_speed_delay", {"dev_dly_from_start": True}, "PR c starts DLY b after PR b's command"),
+    ("pr_speed_delay", {"dev_dly_offset_ms": 8}, "PR b starts DLY a after PR a's command"),
     ("pr_overlap", {"dev_ovlp_ignored": True}, "the axis slows down only at the end of PR b"),
     ("pr_overlap", {"dev_ovlp_ignored": True}, "Cmd_OK rises the overlapped ramp earlier"),
     ("pr_soft_limit", {"dev_soft_limit_on_feedback": True},
