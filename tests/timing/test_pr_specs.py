@@ -26,7 +26,9 @@ PARAMS = {
 }
 SOFT_LIMIT = PARAMS | {
     "P2.020": 0x0114,  # DO3 SPL (L15316)
+    "P2.021": 0x0113,  # DO4 SNL (L15313)
     "P5.008": 100000,  # positive software limit, PUU (L11191)
+    "P5.009": -100000,  # negative software limit, PUU (L11200)
 }
 
 
@@ -123,6 +125,18 @@ def pr_soft_limit(tap) -> None:
         ctrg(tap, n, 600)
 
 
+def pr_soft_limit_negative(tap) -> None:
+    """P5.009 = -100000: to -200000 (AL285), back to 0, to -99900 (only the feedback passes)."""
+    table(tap, {
+        1: (("single", -200000), {"spd": 4}),
+        2: (("single", 0), {"spd": 4}),
+        3: (("single", -99900), {"spd": 4}),
+    })
+    servo_on(tap)
+    for n in (1, 2, 3):
+        ctrg(tap, n, 600)
+
+
 def verdicts(path, spec_id: str, **constants: float) -> list:
     spec = load_spec(fixture("timing", f"{spec_id}.yaml"))
     return check(spec, RecordingSource(path), constants=constants or None)
@@ -142,6 +156,7 @@ CASES = {  # spec id -> (scenario, params, constants)
     "pr_speed_delay": (pr_speed_paths, PARAMS, {}),
     "pr_overlap": (pr_overlapping_paths, PARAMS, {"move_a": MOVE_50K, "move_b": MOVE_30K}),
     "pr_soft_limit": (pr_soft_limit, SOFT_LIMIT, {}),
+    "pr_soft_limit_negative": (pr_soft_limit_negative, SOFT_LIMIT, {}),
 }
 
 
@@ -163,9 +178,11 @@ def test_faithful_drive_passes(tmp_path, case) -> None:
     assert_all_pass(judge(tmp_path, case))
 
 
-def test_soft_limit_scenario_overshoots_the_limit_with_the_feedback(tmp_path) -> None:
-    """Move 3 is the case L20107-20108 is about: the feedback passes P5.008, the command not."""
-    vs = judge(tmp_path, "pr_soft_limit")
+@pytest.mark.parametrize("case", ["pr_soft_limit", "pr_soft_limit_negative"])
+def test_soft_limit_scenario_overshoots_the_limit_with_the_feedback(tmp_path, case) -> None:
+    """Move 3 is the case L20107-20108 is about: the feedback passes the limit, the command
+    not."""
+    vs = judge(tmp_path, case)
     pre = [v for v in vs if v.constraint.startswith("the feedback of move 3")]
     assert pre and pre[0].status == "pass", pre
     assert not any(v.status == "fail" for v in vs)
@@ -194,6 +211,10 @@ DEVIATIONS = [  # (case, knob, the constraint it breaks)
      "no AL283 while only the feedback is past P5.008"),
     ("pr_soft_limit", {"dev_soft_limit_decel_ms": 5000},
      "the motor stops with the P5.003.Z deceleration"),
+    ("pr_soft_limit_negative", {"dev_soft_limit_on_feedback": True},
+     "no AL285 while only the feedback is past P5.009"),
+    ("pr_soft_limit_negative", {"dev_soft_limit_decel_ms": 5000},
+     "the motor stops with the P5.003.U deceleration"),
 ]
 
 
