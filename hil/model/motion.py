@@ -465,7 +465,12 @@ class Axis:
             r = tgt - pd
             if r != 0.0 or vd != 0.0:
                 dec = self._dec
-                vdes = math.sqrt(2.0 * dec * abs(r))
+                # the speed from which a stop at `dec` ends on the target after this step's
+                # Euler update (v·dt + v²/2dec = |r|): the demand never passes its target
+                ddt = dec * dt
+                vdes = math.sqrt(ddt * ddt + 2.0 * dec * abs(r)) - ddt
+                if vdes < ddt:  # the last step: land on the target, stop within one step
+                    vdes = min(ddt, abs(r) / dt)
                 if vdes > self._vmax:
                     vdes = self._vmax
                 if r < 0.0:

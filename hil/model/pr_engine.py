@@ -18,16 +18,19 @@ Rules, each from the manual (choices: docs/manual-choices.md#pr, `PrOptions`):
   (position: the command reached the target; speed: the target speed; L4934-4961); a PR with
   INS is read right after the previous one, after the previous one's DLY counted from its
   start (internal interrupt, L4982-4986). A non-INS PR after a write/jump runs in the next ms
-  (L5083). OVLP: the command counts as done when its deceleration starts, its DLY is ignored
-  (L5051-5057); INS beats OVLP.
+  (L5083). OVLP: the command counts as done when its deceleration starts, its DLY counts
+  from the command start (L5051-5057); INS beats OVLP. A jump's DLY counts from its read
+  and the target is read when it ran out (L4505, L4982).
 * Targets (L4468-4471, L5000): ABS = data; INC = previous Cmd_E + data; REL = Fb_PUU + data
   when triggered, previous Cmd_E + data inside a chain (internal interrupt); CAP = last
-  capture + data. STP keeps Cmd_E, so INC 0 finishes the move and REL 0 discards it (000:605).
+  capture + data (`capture_puu`, set by capture.py for every captured point). STP keeps
+  Cmd_E, so INC 0 finishes the move and REL 0 discards it (000:605).
 * Completion (L4195-4201, L8596-8633, L15319-15326): Cmd_OK when the program has nothing
   left and the last command plus its DLY is done; MC_OK = Cmd_OK and TPOS; P1.048.X holds
   MC_OK, P1.048.Y raises AL380 when TPOS drops after MC_OK; a new trigger clears both.
   P5.007 reads n / n+10000 / n+20000 (L11185).
-* Software limits P5.008/P5.009 in PR mode, judged on the command position (L20105-20116):
+* Software limits P5.008/P5.009 in PR mode, judged on the command position in whole PUU,
+  strictly beyond (L20105-20116):
   AL283/AL285 and DO.SPL/SNL, stop with the P5.003 Z/U deceleration, auto-clear when the
   command is back inside.
 * Alarms: AL249 path > 99 (L20099), AL237 index before homing (L4593), AL207/AL209/AL213/
@@ -78,6 +81,13 @@ class PrOptions:
     dev_cmd_ok_ignores_dly: bool = False  # Cmd_OK at command end, DLY forgotten
     dev_mc_ok_ignores_tpos: bool = False  # MC_OK = Cmd_OK
     dev_soft_limit_on_feedback: bool = False  # P5.008/P5.009 judged on the feedback
+    # sequential DLY counted from the command start, not from reaching the target (L4934)
+    dev_dly_from_start: bool = False
+    dev_ovlp_ignored: bool = False  # OVLP acts as a sequential command (L5051-5057)
+    dev_jump_ignores_dly: bool = False  # the jump target is read at once (DLY: L4505, L4982)
+    dev_jump_falls_through: bool = False  # a jump continues with PR n+1 (target: L4505-4527)
+    # software-limit stop with this deceleration (ms per 3000 rpm) instead of P5.003 Z/U
+    dev_soft_limit_decel_ms: float | None = None
 
     def __post_init__(self) -> None:
         if self.group_limit < 1:
@@ -101,6 +111,15 @@ class _Cmd:
     start: int
     dly_ns: int
     done: int | None = None  # time the command output finished (or its decel began: OVLP)
+    dly_from_start: bool = False  # OVLP: the DLY counts from the command start (L5051)
+
+    def end(self) -> int | None:
+        """When the command and its DLY are over (None: still running)."""
+        if self.done is None:
+            return None
+        if self.dly_from_start:
+            return max(self.done, self.start + self.dly_ns)
+        return self.done + self.dly_ns
 
 
 class PrEngine:
@@ -278,17 +297,18 @@ class PrEngine:
         c = self.cmd
         if c is None:
             return 0
-        if c.done is None:
-            return None
-        return c.done + c.dly_ns
+        return c.end()
 
     def _advance_cursor(self, path: PrPath) -> None:
         d = self.drive
+        o = self.options
         self._prev_t = d.now
-        self._prev_dly = self._dly_ns(path.dly) if not (path.ovlp and path.is_motion) else 0
+        self._prev_dly = self._dly_ns(path.dly)  # from the read = the command start (L5051)
+        if path.type == JUMP and o.dev_jump_ignores_dly:
+            self._prev_dly = 0
         self._prev_motion = path.is_motion
-        if path.type == JUMP:
-            self.cursor = path.data
+        if path.type == JUMP:  # DLY counts from the jump's read (L4505)
+            self.cursor = path.number + 1 if o.dev_jump_falls_through else path.data
         elif path.continues:
             self.cursor = path.number + 1
             if self.cursor > 99:
@@ -326,7 +346,9 @@ class PrEngine:
             self.cmd_e = target
             ax.move_to(puu_to_counts(target, g44, g45) + ax.origin, rpm, acc, dec)
         self.trace.append((d.now, f"motion:{path.number}"))
-        self.cmd = _Cmd(path, d.now, self._dly_ns(path.dly) if not path.ovlp else 0)
+        ovlp = path.ovlp and not self.options.dev_ovlp_ignored
+        from_start = ovlp or self.options.dev_dly_from_start
+        self.cmd = _Cmd(path, d.now, self._dly_ns(path.dly), dly_from_start=from_start)
 
     def _target(self, path: PrPath, external: bool, g44: int, g45: int) -> int | None:
         d = self.drive
@@ -426,7 +448,7 @@ class PrEngine:
             return ax.at_target if c.path is not None else not ax.moving
         if ax.mode != "position":
             return True  # replaced by a stop / another mode
-        if c.path.ovlp:  # the deceleration began (L5051)
+        if c.path.ovlp and not self.options.dev_ovlp_ignored:  # the decel began (L5051)
             r = abs(ax.target - ax.demand)
             v = abs(ax.demand_velocity)
             return ax.at_target or (v > 0 and r <= v * v / (2.0 * ax._dec) + v * 1e-3)
@@ -448,7 +470,7 @@ class PrEngine:
         ax = d.axis
         pr_mode = get("P1.001") & 0xF == 1
         pos = ax.user_position if self.options.dev_soft_limit_on_feedback else ax.user_demand
-        puu = counts_to_puu(pos, get("P1.044"), get("P1.045"))
+        puu = round(counts_to_puu(pos, get("P1.044"), get("P1.045")))  # integer PUU (L4180)
         for code, over, sym, digit, sign in (
             ("AL283", puu > get("P5.008"), "SPL", 2, 1),
             ("AL285", puu < get("P5.009"), "SNL", 3, -1),
@@ -461,7 +483,10 @@ class PrEngine:
                 self.trace.append((d.now, f"{code}:{int(over)}"))
             if over and ax.demand_velocity * sign > 0 and ax.mode != "stop":
                 self.cursor = None
-                ax.ramp_stop(d._p5003_decel(digit))  # P5.003 Z SPL / U SNL (L11091-11100)
+                decel = self.options.dev_soft_limit_decel_ms
+                if decel is None:
+                    decel = d._p5003_decel(digit)  # P5.003 Z SPL / U SNL (L11091-11100)
+                ax.ramp_stop(decel)
                 self.cmd = _Cmd(None, d.now, 0)
 
     # ---------------------------------------------------------------- outputs
@@ -473,7 +498,9 @@ class PrEngine:
         if c is not None:
             if c.done is None:
                 return
-            end = c.done if self.options.dev_cmd_ok_ignores_dly else c.done + c.dly_ns
+            end = c.done
+            if not self.options.dev_cmd_ok_ignores_dly:
+                end = c.end() or end
             if end > self.drive.now:
                 self._wake_at(end)
                 return

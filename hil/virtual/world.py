@@ -128,13 +128,18 @@ def initial_params(spec: DriveSpec) -> dict[str, int]:
 
 
 class GroundTruth:
-    """Records the model's own view: state every period, events, parameter changes."""
+    """Records the model's own view: state every period, events, parameter changes.
+
+    The periodic samples are timers of the model's scheduler, so they fall every `period_ms`
+    of model time even when the host advances the model by several ms at once (a loaded
+    machine): a 1 ms ground truth stays 1 ms (timing specs rely on it)."""
 
     def __init__(self, name: str, drive: Any, host: Any, recorder: Any,
                  period_ms: float = 10.0) -> None:
         self.name, self.drive, self.host, self.rec = name, drive, host, recorder
         self.period_ns = int(period_ms * 1_000_000)
         self._next = 0
+        self._timer: Any = None
         self._last_event_state: dict[str, Any] | None = None
         self._unsub = drive.subscribe(self._on_event)
         host.add_tick(self._tick)
@@ -165,12 +170,21 @@ class GroundTruth:
             record(self.name, line, level, sent_ns, self.host.wall_ns(model_t))
 
     def _tick(self, now: int) -> None:
-        # `periodic`: a change first seen here happened after the previous sample (the timing
-        # checker's sampling delay under load); the samples at model events are exact
-        if now >= self._next:
-            self._next = now + self.period_ns
-            self.rec.drive_state(self.name, {**self.drive.snapshot(), "periodic": True},
-                                 source_t=self.host.wall_ns(now))
+        """Host tick (under the host lock): arm the model-time sampler once."""
+        if self._timer is None:
+            sched = getattr(self.drive, "sched", None)
+            if sched is None:  # not a model drive: sample at the host's ticks
+                if now >= self._next:
+                    self._next = now + self.period_ns
+                    self.sample()
+                return
+            self._timer = sched.at(max(now, self._next), self._on_timer)
+
+    def _on_timer(self) -> None:
+        now = self.drive.now
+        self._next = now + self.period_ns
+        self.sample()
+        self._timer = self.drive.sched.at(self._next, self._on_timer)
 
     def _on_event(self, ev: Any) -> None:
         t = getattr(ev, "t", self.drive.now)
@@ -190,6 +204,8 @@ class GroundTruth:
 
     def close(self) -> None:
         self.host.remove_tick(self._tick)
+        if self._timer is not None:
+            self._timer.cancel()
         with contextlib.suppress(Exception):
             self._unsub()
 

@@ -101,6 +101,24 @@ def test_pp_trapezoid_reaches_target_and_settles():
     assert 400 <= t <= 600
 
 
+@pytest.mark.parametrize("dist", [1.0, 0.997, 0.5987, 0.05, -0.7331])
+@pytest.mark.parametrize(("rpm", "dec_ms"), [(300, 200), (3000, 50), (1234, 777)])
+def test_pp_demand_lands_on_the_target_never_past_it(dist, rpm, dec_ms):
+    """The profile (Cmd_O) ends on its target (Cmd_E) without passing it: a position command
+    past its target would trip a software limit set at the target (AL283/AL285 judge the
+    command, L20107, L20113)."""
+    axis = powered()
+    target = round(dist * CPR)
+    axis.move_to(target, rpm, 200, dec_ms)
+    sign = 1 if target > 0 else -1
+    for _ in range(20_000):
+        axis.step(MS)
+        assert axis.demand * sign <= target * sign
+        if axis.demand == target and axis.demand_velocity == 0.0:
+            break
+    assert axis.demand == target and axis.demand_velocity == 0.0
+
+
 def test_pp_peak_speed_and_acceleration_slope():
     axis = powered()
     axis.move_to(10 * CPR, 3000, 100, 100)

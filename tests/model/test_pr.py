@@ -167,6 +167,22 @@ def test_sequential_dly_after_position_reached() -> None:
     assert puu(d) == 0
 
 
+@pytest.mark.parametrize(("dly", "start2"), [(0, 100), (1, 101), (3, 401)])
+def test_overlap_starts_at_the_deceleration_dly_from_the_command_start(dly, start2) -> None:
+    """OVLP: the next PR starts when PR#1 begins to decelerate (started at 1 ms, 50000 PUU
+    at 300 rpm with 20 ms ramps: from 100 ms); a DLY counts from PR#1's command start, so
+    DLY #3 (P5.043 = 400 ms) holds PR#2 until 401 ms (L5051)."""
+    d = make()
+    put(d, 1, type_="auto", data=50000, cmd="INC", spd=4, ovlp=True, dly=dly)
+    put(d, 2, type_="single", data=30000, cmd="INC", spd=4)
+    t0 = d.now // MS
+    d.params.write("P5.007", 1)
+    run(d, 1.0)
+    assert times(d, "motion:1")[0] - t0 == 1
+    assert times(d, "motion:2")[0] - t0 == start2
+    assert puu(d) == 80000
+
+
 def test_internal_interrupt_only_last_motion_of_a_group() -> None:
     """A2 case 2 (000:945, L5022): lead PR#1 then INS jump/write/INC: only PR#11 moves,
     0 -> 300000; P5.055 = 10 then 12 in the same ms."""
