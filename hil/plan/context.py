@@ -103,6 +103,8 @@ class StepContext:
         self.store: dict[str, Any] = {}  # readings kept by `abs_read: {store: name}`
         self.checked: dict[str, int] = {}  # spec id -> wall ns its last check_timing ended
         self.started: dict[str, int] = {}  # step name -> wall ns it (last) started
+        # (drive, parameter) -> value check_timing read from the drive (None: unreadable)
+        self.param_reads: dict[tuple[str, str], int | None] = {}
 
     def drive(self, step: Step | None) -> DriveIO:
         name = (step.drive if step else None) or self.plan.drive or self.bench.default_drive

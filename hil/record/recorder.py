@@ -400,9 +400,13 @@ class Recorder:
         snapshot: bool = False,
         t: int | None = None,
         source_t: int | None = None,
+        source: str | None = None,
     ) -> None:
-        """Parameter values as the drive reports them (`snapshot=True` for the full set)."""
-        payload = {"snapshot": snapshot, "values": dict(values)}
+        """Parameter values as the drive reports them (`snapshot=True` for the full set;
+        `source="read"` for values the harness read from the drive, which it held before)."""
+        payload: dict[str, Any] = {"snapshot": snapshot, "values": dict(values)}
+        if source is not None:
+            payload["source"] = source
         self._put(
             topics.drive_params(drive), "hil.DriveParams", "model", dumps(payload), t, source_t
         )

@@ -136,7 +136,8 @@ SCHEMAS: dict[str, dict] = {
     ),
     "hil.DriveParams": _obj(
         "hil.DriveParams",
-        {"snapshot": {"type": "boolean"}, "values": {"type": "object"}},
+        {"snapshot": {"type": "boolean"}, "values": {"type": "object"},
+         "source": {"type": "string"}},
         ["values"],
     ),
     "hil.PlanStep": _obj(

@@ -263,35 +263,62 @@ def infer_places(topics: Iterable[str]) -> dict[str, str]:
 
 
 class ParamTimeline:
-    """Drive parameters over time: snapshot(s) from /drive/<name>/params plus overrides."""
+    """Drive parameters over time: snapshot(s) from /drive/<name>/params plus overrides.
+
+    A parameter's first value from a snapshot or a read (`"source": "read"`, what the drive
+    reported when asked) also covers the times before it: the drive held that value since its
+    last recorded change, and there was none. A first value from a plain change (a write, a
+    `ParamChanged` event) does not; the earliest state still covers times before the first
+    record."""
 
     def __init__(self, changes: list[tuple[int, Mapping[str, Any]]] | None = None,
-                 overrides: Mapping[str, Any] | None = None) -> None:
+                 overrides: Mapping[str, Any] | None = None,
+                 held: list[tuple[int, Mapping[str, Any]]] | None = None) -> None:
+        """`changes`: (t, values) records; `held`: the records among them (snapshots,
+        reads) whose values the drive held before they were taken."""
         self._times: list[int] = []
         self._states: list[dict[str, Any]] = []
+        changes = sorted(changes or [], key=lambda c: c[0])
+        first: dict[str, int] = {}  # name -> time of its first record
+        for t, d in changes:
+            for k in d:
+                first.setdefault(str(k), t)
+        before: dict[str, Any] = {}  # values that also hold before their first record
+        for t, d in sorted(held or [], key=lambda c: c[0]):
+            for k, v in d.items():
+                if str(k) not in before and first.get(str(k), t) >= t:
+                    before[str(k)] = v
         cur: dict[str, Any] = {}
-        for t, d in sorted(changes or [], key=lambda c: c[0]):
+        for t, d in changes:
             cur = cur | {str(k): v for k, v in d.items()}
             if self._times and self._times[-1] == t:
-                self._states[-1] = cur
+                self._states[-1] = before | cur
             else:
                 self._times.append(t)
-                self._states.append(cur)
+                self._states.append(before | cur)
         self.overrides = dict(overrides or {})
 
     @classmethod
     def from_source(cls, source: SignalSource, topic: str,
                     overrides: Mapping[str, Any] | None = None) -> ParamTimeline:
-        changes = []
+        changes, held = [], []
         for t, msg in source.messages(topic):
-            # recorder payload: {"snapshot": bool, "values": {name: value}}
+            # recorder payload: {"snapshot": bool, "values": {name: value}, "source": "read"}
             d = msg.get("values", msg.get("params", msg)) if isinstance(msg, Mapping) else {}
             if isinstance(d, Mapping):
-                changes.append((t, {k: v for k, v in d.items() if isinstance(v, int | float)}))
-        return cls(changes, overrides)
+                vals = {k: v for k, v in d.items() if isinstance(v, int | float)}
+                changes.append((t, vals))
+                if isinstance(msg, Mapping) and (msg.get("snapshot")
+                                                 or msg.get("source") == "read"):
+                    held.append((t, vals))
+        return cls(changes, overrides, held)
+
+    def names(self) -> set[str]:
+        """Every parameter with a recorded value (overrides not included)."""
+        return set().union(*self._states) if self._states else set()
 
     def at(self, t: int | None) -> dict[str, Any]:
-        """Values in force at `t` (the first snapshot also covers times before it)."""
+        """Values in force at `t` (the earliest state also covers times before it)."""
         if not self._states:
             return dict(self.overrides)
         i = 0 if t is None else max(0, bisect.bisect_right(self._times, t) - 1)

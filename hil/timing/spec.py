@@ -142,6 +142,33 @@ class Spec:
         return out | dict(overrides or {})
 
 
+def spec_params(spec: Spec, constants: dict[str, Any] | None = None) -> set[str]:
+    """The drive parameters `spec`'s expressions read (windows, `when`, thresholds, `held`,
+    `plus`/`within`, resolutions, constants); a constant given in `constants` replaces its
+    expression."""
+    out: set[str] = set()
+    seen: set[int] = set()
+
+    def walk(x: Any) -> None:
+        if isinstance(x, Expr):
+            out.update(x.params)
+        elif isinstance(x, dict):
+            for v in x.values():
+                walk(v)
+        elif isinstance(x, list | tuple):
+            for v in x:
+                walk(v)
+        elif hasattr(x, "__dataclass_fields__") and id(x) not in seen:
+            seen.add(id(x))
+            for name in x.__dataclass_fields__:
+                walk(getattr(x, name))
+
+    given = constants or {}
+    walk({k: e for k, e in spec.constants.items() if k not in given})
+    walk([spec.signals, spec.events, spec.constraints, spec.resolution, spec.horizon])
+    return out
+
+
 # --- validation ------------------------------------------------------------------------
 
 _TRANSFORMS = {"map", "bit", "mask", "abs", "equals", "in", "below", "above", "nonempty", "held"}

@@ -2,19 +2,22 @@
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from hil.plan.context import Inconclusive, Outcome, StepFailed
+from hil.plan.context import Cancelled, Inconclusive, Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.yamlio import Checker, join
 from hil.profile.dio import DI_SYMBOLS, DO_SYMBOLS
+from hil.record import topics
 from hil.timing.checker import check, constants_for, occurrences_since
 from hil.timing.registry import SpecRegistry
-from hil.timing.source import RecordingSource
+from hil.timing.source import ParamTimeline, RecordingSource
+from hil.timing.spec import Spec, spec_params
 
 if TYPE_CHECKING:
     from hil.plan.bench import DriveSpec
@@ -24,6 +27,7 @@ if TYPE_CHECKING:
 
 BIND_LINE_RE = re.compile(r"^(DI\d{1,2}|DO\d)(:[ab])?$|^STO_[AB]$")
 SINCE = ("start", "last_check")
+log = logging.getLogger(__name__)
 
 
 def bind_line(value: str, d: DriveSpec) -> str:
@@ -31,6 +35,41 @@ def bind_line(value: str, d: DriveSpec) -> str:
     the drive, replaced by its line (ORGP -> DI9, NL -> DI6:b)."""
     wired = d.di | d.do
     return wired[value].binding if value in wired else value
+
+
+def read_unrecorded(ctx: StepContext, spec: Spec, source: RecordingSource,
+                    binding: Mapping[str, str], given: Mapping[str, Any],
+                    constants: Mapping[str, Any]) -> dict[str, int]:
+    """Read from the drive, once per plan, the parameters `spec` uses that the recording
+    does not hold (a real bench, or a virtual one whose ground truth has no snapshot) and the
+    step does not give, through the bench's parameter path (`param_via`, as `read:` steps),
+    and record them on /drive/<drive>/params marked `"source": "read"` so that `hil check`
+    judges the file alike. A parameter the bench cannot read stays missing: its constraints
+    are inconclusive as before. Returns what was read and recorded now."""
+    drive = binding.get("drive", "")
+    topic = topics.drive_params(drive)
+    recorded = ParamTimeline.from_source(source, topic).names()
+    want = sorted(spec_params(spec, dict(constants)) - recorded - set(given))
+    try:
+        d = ctx.session.drive(drive)
+    except Exception:  # a binding to a drive the session does not know
+        return {}
+    got: dict[str, int] = {}
+    for p in want:
+        key = (drive, p)
+        if key not in ctx.param_reads:
+            try:
+                ctx.param_reads[key] = d.read_param(p)
+            except Cancelled:
+                raise
+            except Exception as e:  # no line, refused, unknown: judged without it
+                log.info("check_timing %s: cannot read %s from %s: %s", spec.id, p, drive, e)
+                ctx.param_reads[key] = None
+            else:
+                got[p] = ctx.param_reads[key]
+    if got:
+        ctx.rec.drive_params(drive, got, source="read")
+    return got
 
 
 class CheckTiming(StepKind):
@@ -113,11 +152,14 @@ class CheckTiming(StepKind):
         if sample is not None:  # the model's state as of now, not as of its last sample
             sample()
         ctx.rec.flush()
-        until = time.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
         source = RecordingSource(ctx.rec.path)
         binding = d.spec.binding() | {k: bind_line(x, d.spec)
                                       for k, x in a.get("bind", {}).items()}
         constants = constants_for(spec, ctx.bench.timing_constants) | a.get("constants", {})
+        if read_unrecorded(ctx, spec, source, binding, a["params"], constants):
+            ctx.rec.flush()
+            source = RecordingSource(ctx.rec.path)  # with the values just read
+        until = time.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
         verdicts = check(spec, source, params=a["params"] or None, binding=binding,
                          constants=constants or None)
         since = a.get("since", "start")
