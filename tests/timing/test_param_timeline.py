@@ -1,0 +1,61 @@
+"""Parameters over time (/drive/<d>/params): a snapshot's or a read's first value covers the
+times before it, a plain change does not; which parameters a spec reads."""
+
+from __future__ import annotations
+
+from hil.timing.checker import check
+from hil.timing.source import MemorySource, ParamTimeline
+from hil.timing.registry import load_specs
+from hil.timing.spec import spec_params
+
+PARAMS = "/drive/drive1/params"
+MS = 1_000_000
+SPECS = load_specs()
+
+
+def timeline(*records: tuple[int, dict]) -> ParamTimeline:
+    return ParamTimeline.from_source(MemorySource({PARAMS: list(records)}), PARAMS)
+
+
+def test_a_change_before_the_first_snapshot_does_not_hide_the_snapshot():
+    # the subprocess bench: the drive process reports a P5.011 change, then its snapshot
+    tl = timeline((0, {"snapshot": False, "values": {"P5.011": 1}}),
+                  (5, {"snapshot": True, "values": {"P5.011": 2, "P5.008": 0}}),
+                  (9, {"snapshot": False, "values": {"P5.008": 100000}}))
+    assert tl.at(0) == {"P5.011": 1, "P5.008": 0}
+    assert tl.at(None) == {"P5.011": 1, "P5.008": 0}
+    assert tl.at(9) == {"P5.011": 2, "P5.008": 100000}
+
+
+def test_a_read_covers_the_times_before_it_a_write_does_not():
+    read = timeline((0, {"values": {"P1.043": 5}}),
+                    (50, {"snapshot": False, "source": "read", "values": {"P1.042": 150}}))
+    assert read.at(20) == {"P1.043": 5, "P1.042": 150}
+    write = timeline((0, {"values": {"P1.043": 5}}), (50, {"values": {"P1.042": 150}}))
+    assert write.at(20) == {"P1.043": 5}
+    assert write.at(50) == {"P1.043": 5, "P1.042": 150}
+
+
+def test_a_read_after_a_recorded_change_does_not_reach_back_past_it():
+    tl = timeline((0, {"values": {"P1.043": 5}}), (10, {"values": {"P1.042": 100}}),
+                  (50, {"source": "read", "values": {"P1.042": 100}}))
+    assert "P1.042" not in tl.at(5)
+    assert tl.names() == {"P1.043", "P1.042"}
+
+
+def test_a_threshold_on_a_parameter_is_judged_after_an_early_change():
+    """`above: P5.008` is evaluated at every parameter change, the first one included: with
+    the snapshot after it, P5.008 was "neither recorded nor given" (before this fix)."""
+    spec = SPECS["pr_soft_limit"]
+    src = MemorySource({PARAMS: [(0, {"values": {"P5.011": 1}}),
+                                 (MS, {"snapshot": True, "values": {"P5.008": 100000,
+                                                                    "P2.009": 2}})]})
+    msgs = [v.message for v in check(spec, src, binding={"drive": "drive1"})]
+    assert msgs and not any("neither recorded nor given" in m for m in msgs), msgs
+
+
+def test_spec_params_lists_the_parameters_of_windows_thresholds_and_constants():
+    assert spec_params(SPECS["servo_on_brake"]) == {"P1.042", "P2.009"}
+    assert spec_params(SPECS["servo_off_brake"]) == {"P1.038", "P1.043"}
+    assert spec_params(SPECS["pr_soft_limit"]) == {"P2.009", "P5.008"}
+    assert spec_params(SPECS["sto"]) == set()
