@@ -4,9 +4,9 @@ times before it, a plain change does not; which parameters a spec reads."""
 from __future__ import annotations
 
 from hil.timing.checker import check
-from hil.timing.source import MemorySource, ParamTimeline
 from hil.timing.registry import load_specs
-from hil.timing.spec import spec_params
+from hil.timing.source import MemorySource, ParamTimeline
+from hil.timing.spec import loads_spec, spec_params
 
 PARAMS = "/drive/drive1/params"
 MS = 1_000_000
@@ -43,15 +43,36 @@ def test_a_read_after_a_recorded_change_does_not_reach_back_past_it():
     assert tl.names() == {"P1.043", "P1.042"}
 
 
+BEYOND = """\
+id: beyond
+title: the feedback passes P5.008 10 ms after the start
+source: "P5.008 L11191"
+signals:
+  pos: {topic: "/drive/{drive}/state", field: pos}
+  beyond: {signal: pos, above: P5.008}
+  go: {topic: "/drive/{drive}/state", field: go}
+events:
+  start: {rise: go}
+  past: {first_true: beyond, after: start}
+constraints:
+  - name: past P5.008 after 10 ms
+    from: start
+    to: past
+    window: {min: 10, max: 10}
+"""
+
+
 def test_a_threshold_on_a_parameter_is_judged_after_an_early_change():
     """`above: P5.008` is evaluated at every parameter change, the first one included: with
-    the snapshot after it, P5.008 was "neither recorded nor given" (before this fix)."""
-    spec = SPECS["pr_soft_limit"]
+    the subprocess bench's snapshot after an early change, P5.008 was "neither recorded nor
+    given" there."""
+    state = [(0, {"pos": 0, "go": False}), (MS, {"pos": 0, "go": True}),
+             (11 * MS, {"pos": 200000, "go": True})]
     src = MemorySource({PARAMS: [(0, {"values": {"P5.011": 1}}),
-                                 (MS, {"snapshot": True, "values": {"P5.008": 100000,
-                                                                    "P2.009": 2}})]})
-    msgs = [v.message for v in check(spec, src, binding={"drive": "drive1"})]
-    assert msgs and not any("neither recorded nor given" in m for m in msgs), msgs
+                                 (MS, {"snapshot": True, "values": {"P5.008": 100000}})],
+                        "/drive/drive1/state": state})
+    [v] = check(loads_spec(BEYOND), src, binding={"drive": "drive1"})
+    assert v.status == "pass", v.message
 
 
 def test_spec_params_lists_the_parameters_of_windows_thresholds_and_constants():
