@@ -50,23 +50,26 @@ def read_unrecorded(ctx: StepContext, spec: Spec, source: RecordingSource,
     topic = topics.drive_params(drive)
     recorded = ParamTimeline.from_source(source, topic).names()
     want = sorted(spec_params(spec, dict(constants)) - recorded - set(given))
+    if not want:
+        return {}
     try:
         d = ctx.session.drive(drive)
     except Exception:  # a binding to a drive the session does not know
         return {}
+    cache = getattr(ctx, "param_reads", {})
     got: dict[str, int] = {}
     for p in want:
         key = (drive, p)
-        if key not in ctx.param_reads:
+        if key not in cache:
             try:
-                ctx.param_reads[key] = d.read_param(p)
+                cache[key] = d.read_param(p)
             except Cancelled:
                 raise
             except Exception as e:  # no line, refused, unknown: judged without it
                 log.info("check_timing %s: cannot read %s from %s: %s", spec.id, p, drive, e)
-                ctx.param_reads[key] = None
+                cache[key] = None
             else:
-                got[p] = ctx.param_reads[key]
+                got[p] = cache[key]
     if got:
         ctx.rec.drive_params(drive, got, source="read")
     return got
