@@ -67,3 +67,17 @@ def test_hil_drive_names_an_unknown_bench_drive():
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 2
     assert "--drive axis9: bench 'virtual-zenoh' has no such drive (drives: drive1)" in p.stderr
+
+
+def test_pr_soft_limit_judges_its_parameters_from_the_streamed_snapshot(tmp_path):
+    """P5.008 (written by the plan) and P2.009 (not written) without `params:` on the step:
+    the drive process's snapshot comes after its first change events and still covers them;
+    nothing needs a read (docs/timing.md, Parameters)."""
+    bench = load_bench(fixture("benches", "virtual-zenoh.yaml"))
+    [r] = run_plans([load_plan(p) for p in find_plans(["pr_soft_limit"])], bench, tmp_path,
+                    stream=io.StringIO())
+    assert r.passed, [(s.label, s.status, s.message) for s in r.steps if s.status != "pass"]
+    rec = Recording.open(r.recording)
+    params = [m for _t, _l, _p, m in rec.messages([T.drive_params("drive1")])]
+    assert any(m.get("snapshot") for m in params)
+    assert not any(m.get("source") == "read" for m in params)
