@@ -137,6 +137,8 @@ class DiFunctions:
             want = self.comm_jog
         if not d.servo_on or self.pfqs_stopping or "PFQS" in d.axis.locks:
             want = 0
+        if d.dio.function_active("PL" if want > 0 else "NL") and want:
+            want = 0  # PL/NL forbid running towards them in every mode (L15188-15191)
         ramp = d.options.jog_ramp_ms
         if want:
             rpm = min(self.jog_rpm, d.axis.mech.max_speed)  # L10857
