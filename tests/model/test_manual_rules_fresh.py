@@ -190,3 +190,89 @@ def test_p5007_1000_stops_the_running_command() -> None:
     d.params.write("P5.007", 1000)
     d.advance(300 * MS)
     assert rpm(d) == pytest.approx(0, abs=0.5)
+
+
+# -- PR external interruption (L5036-5040) and sequential commands (L4934) --------------------
+
+
+def _peak_after(d: Drive, ms: int) -> int:
+    top = d.snapshot()["position_puu"]
+    for _ in range(ms):
+        d.advance(1 * MS)
+        top = max(top, d.snapshot()["position_puu"])
+    return top
+
+
+def test_external_ins_acts_at_once_whatever_the_running_dly() -> None:
+    """External interruption: a triggered PR with INS goes to the motion generator at once,
+    "延遲時間的設定與否，則不對外部插斷命令造成影響" (L5036-5040)."""
+    d, _ = make_pr()
+    put(d, 1, type_="single", data=200_000, spd=4, dly=2)  # DLY P5.042 = 200 ms
+    put(d, 2, type_="single", data=0, spd=4, ins=True)
+    d.params.write("P5.007", 1)
+    d.advance(100 * MS)
+    at_trigger = d.snapshot()["position_puu"]
+    d.params.write("P5.007", 2)
+    top = _peak_after(d, 2000)
+    assert top < at_trigger + 10_000  # turned back at once (within one stop ramp)
+    assert d.snapshot()["position_puu"] == 0
+
+
+def test_triggered_pr_without_ins_waits_for_the_running_command() -> None:
+    """Sequential: "後面的命令會在前面的命令及其設定的延遲時間完成後，才能夠接續執行" (L4934);
+    the motion generator buffers the next motion command (L4924-4930)."""
+    d, _ = make_pr()
+    put(d, 1, type_="single", data=200_000, spd=4)
+    put(d, 2, type_="single", data=0, spd=4)
+    d.params.write("P5.007", 1)
+    d.advance(100 * MS)
+    d.params.write("P5.007", 2)
+    assert _peak_after(d, 2500) == pytest.approx(200_000, abs=500)  # the feedback settles
+    assert d.snapshot()["position_puu"] == 0
+
+
+# -- alarm classes and servo state (table 13.1, L19325-19480) --------------------------------
+
+
+@pytest.mark.parametrize(("code", "servo", "alm"), [
+    ("AL020", True, False),  # WARN, servo ON (L19345)
+    ("AL111", True, True),  # ALM, servo ON (L19433)
+    ("AL112", True, True),
+    ("AL180", False, True),  # ALM, servo OFF (L19453)
+    ("AL185", False, True),
+    ("AL301", True, False),  # WARN, servo ON
+    ("AL3E2", True, False),
+    ("AL3E3", True, False),  # WARN, servo ON (L19461)
+])
+def test_comm_alarm_class_and_servo_state(code: str, servo: bool, alm: bool) -> None:
+    """Table 13.1 columns ALM/WARN and servo ON/OFF; all clear with a 6040h fault reset
+    ("使用 0x6040 重置", L19937, L19945, L20025, L20031, L20163, L20169; AL020 L19602)."""
+    drive, _ = make()
+    enable(drive, PV)
+    drive.write_object(0x60FF, 0, 1000)  # 100 rpm
+    drive.advance(300 * MS)
+    drive.raise_alarm(code)
+    drive.advance(300 * MS)
+    assert drive.servo_on is servo
+    assert drive.dio.do_function_state("ALRM") is alm
+    assert drive.dio.do_function_state("WARN") is not alm
+    assert rpm(drive) == pytest.approx(100 if servo else 0, abs=1)
+    drive.write_object(0x6040, 0, 0x8F)
+    drive.advance(5 * MS)
+    assert drive.alarms.active == ()
+
+
+@pytest.mark.parametrize("p3003", [0, 1])
+def test_al020_p3003_warn_and_run_or_ramp_with_p5003_b(p3003: int) -> None:
+    """P3.003 = 0 "警告並繼續運轉", 1 "警告且減速停止(減速時間設於參數 P5.003.B)" (L10563-10566);
+    P5.003.B = 3 -> P5.023 (L11090-11100)."""
+    drive, _ = make(**{"P3.003": p3003, "P5.003": 0xEE3FEEFF, "P5.023": 600})
+    enable(drive, PV)
+    drive.write_object(0x60FF, 0, 15000)  # 1500 rpm
+    drive.advance(500 * MS)
+    drive.raise_alarm("AL020")
+    drive.advance(150 * MS)  # 600 ms per 3000 rpm: 1500 rpm takes 300 ms
+    assert drive.servo_on
+    assert rpm(drive) == pytest.approx(1500 if p3003 == 0 else 1500 - 750, abs=30)
+    drive.advance(200 * MS)
+    assert rpm(drive) == pytest.approx(1500 if p3003 == 0 else 0, abs=30)
