@@ -3,7 +3,8 @@
 Each test states one rule of the ASDA-A3 manual (lines L… of shared/seeds/002_…) as read
 before looking at the model: table 8.1 DI functions (L15075-15255), P4.005 jog
 (L10846-10866), P1.009-P1.014 limits (L7931-8031), PR mode (chapter 7, P5.007 L11165-11187,
-P5.008/P5.009 L11189-11201, AL283/AL285 L20105-20115).
+P5.008/P5.009 L11189-11201, AL283/AL285 L20105-20115), CAPTURE/COMPARE (P5.036-P5.039
+L11470-11535, P5.059 L11740-11766), communication alarms (table 13.1 L19325-19480).
 """
 
 from __future__ import annotations
@@ -11,7 +12,9 @@ from __future__ import annotations
 import pytest
 
 from hil.model.drive import Drive
+from hil.model.errors import ModelError
 from hil.model.events import AlarmChanged
+from hil.model.options import ModelOptions
 from hil.model.timebase import MS
 from hil.profile.pr import encode, pr_params
 
@@ -276,3 +279,37 @@ def test_al020_p3003_warn_and_run_or_ramp_with_p5003_b(p3003: int) -> None:
     assert rpm(drive) == pytest.approx(1500 if p3003 == 0 else 1500 - 750, abs=30)
     drive.advance(200 * MS)
     assert rpm(drive) == pytest.approx(1500 if p3003 == 0 else 0, abs=30)
+
+
+# -- CAPTURE axis registers (P5.037 L11485, P5.039.Y note L11528 / L11766) --------------------
+
+
+def test_p5037_is_not_writable_on_a_cn2_capture_axis() -> None:
+    """"當 CAPTURE 來源為 CN2 時，CAPTURE 軸位置等於馬達回授位置，本參數禁止寫入" (L11485)."""
+    drive = Drive(inputs={6: True, 7: True, 8: True})
+    drive.params.write("P5.039", 0x0030)  # Y = 3 CN2, stopped
+    with pytest.raises(ModelError, match="L11485"):
+        drive.params.write("P5.037", 123)
+    drive.params.write("P5.039", 0x0010)  # Y = 1 CN5: writable while stopped
+    drive.params.write("P5.037", 123)
+    assert drive.params.read("P5.037") == 123
+
+
+@pytest.mark.parametrize("y_lock", ["running", "always"])
+def test_capture_source_locked_when_compare_uses_the_capture_axis(y_lock: str) -> None:
+    """P5.059.Y = 0 (COMPARE on the capture axis): "CAPTURE 來源 Y 無法更改" (L11528, L11766);
+    while COMPARE runs in any reading, with COMPARE stopped only under `y_lock: always`."""
+    opts = ModelOptions(extra={"capture": {"y_lock": y_lock}})
+    drive = Drive(options=opts, inputs={6: True, 7: True, 8: True})
+    drive.params.write("P5.039", 0x0010)
+    drive.params.write("P5.059", 0x00640000)  # COMPARE source = capture axis, stopped
+    if y_lock == "always":
+        with pytest.raises(ModelError, match="L11528"):
+            drive.params.write("P5.039", 0x0030)
+    else:
+        drive.params.write("P5.039", 0x0030)
+        drive.params.write("P5.039", 0x0010)
+    drive.params.write("P5.058", 1)
+    drive.params.write("P5.059", 0x00640001)  # COMPARE runs
+    with pytest.raises(ModelError, match="L11528"):
+        drive.params.write("P5.039", 0x0030)
