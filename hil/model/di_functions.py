@@ -91,6 +91,9 @@ class DiFunctions:
         d.axis.ramp_stop(d._p5003_decel(6) if dev is None else dev)  # digit C = PFQS
         d.axis.lock("PFQS")  # nothing starts the motor during the quick stop
         d.cia402.drop_setpoints()
+        pr = getattr(d, "pr", None)
+        if pr is not None:
+            pr.abort()  # an emergency stop ends the PR program: no next path, no Cmd_OK
 
     def _pfqs_step(self) -> None:
         """At zero speed: AL3CF and Servo Off (L20153-20155)."""

@@ -167,6 +167,25 @@ def test_pfqs_stops_a_pr_move_al35f_then_al3cf() -> None:
     assert rpm(d) == pytest.approx(0, abs=1)
 
 
+
+def test_pfqs_ends_the_pr_program_no_next_path_no_completion() -> None:
+    """PFQS is an emergency stop (L15253, AL35F "緊急停止 (減速過程中)" L20141): an AUTO chain
+    does not go on to its next path, and the stopped command is no completed one - Cmd_OK /
+    MC_OK stay off and P5.007 never reads n + 10000 / n + 20000 (L11185, L15319)."""
+    d, _ = make_pr()
+    put(d, 1, type_="auto", data=1_000_000, spd=4)
+    put(d, 2, type_="single", data=0, spd=4)
+    d.params.write("P5.007", 1)
+    d.advance(200 * MS)
+    t0 = press(d, 5)
+    seen = set()
+    for _ in range(300):
+        d.advance(1 * MS)
+        seen.add((d.params.read("P5.007"), d.dio.do_function_state("MC_OK")))
+    assert seen == {(1, False)}
+    assert [w for t, w in d.pr.trace if t >= t0 and w.startswith("read")] == []
+    assert d.snapshot()["position_puu"] > 50_000  # stopped where the quick stop left it
+
 # -- P5.007 read-back (L11185-11187) ----------------------------------------------------------
 
 
