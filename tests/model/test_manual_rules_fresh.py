@@ -186,6 +186,25 @@ def test_pfqs_ends_the_pr_program_no_next_path_no_completion() -> None:
     assert [w for t, w in d.pr.trace if t >= t0 and w.startswith("read")] == []
     assert d.snapshot()["position_puu"] > 50_000  # stopped where the quick stop left it
 
+
+@pytest.mark.parametrize("kind", ["single", "speed"])
+def test_pr_towards_an_active_pl_does_not_run_away_from_it_does(kind: str) -> None:
+    """PL = "正向運轉禁止極限" in every control mode (L15191, AL015 L19565): a PR that would
+    run forwards while PL is already active does not move; one backwards does."""
+    d, _ = make_pr(**{"P2.016": 0x0023})  # DI7 = PL (b contact)
+    d.set_di(7, False)  # at the forward limit
+    d.advance(10 * MS)
+    assert "AL015" in d.alarms.active
+    fwd, back = (200_000, -50_000) if kind == "single" else (1000, -1000)
+    put(d, 1, type_=kind, data=fwd, spd=4)
+    put(d, 2, type_=kind, data=back, spd=4)
+    d.params.write("P5.007", 1)
+    d.advance(500 * MS)
+    assert d.snapshot()["position_puu"] == pytest.approx(0, abs=5)
+    d.params.write("P5.007", 2)
+    d.advance(500 * MS)
+    assert d.snapshot()["position_puu"] < -20_000
+
 # -- P5.007 read-back (L11185-11187) ----------------------------------------------------------
 
 
