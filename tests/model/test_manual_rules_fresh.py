@@ -205,6 +205,24 @@ def test_pr_towards_an_active_pl_does_not_run_away_from_it_does(kind: str) -> No
     d.advance(500 * MS)
     assert d.snapshot()["position_puu"] < -20_000
 
+
+def test_a_jog_during_a_pr_program_ends_it_without_completion() -> None:
+    """JOGU acts in every mode (L15209) and takes the axis: the PR program it interrupts is
+    not completed - no next path, Cmd_OK/MC_OK off, P5.007 reads the bare number (L11185)."""
+    d, _ = make_pr(**{"P2.014": 0x0137, "P4.005": 100})  # DI5 = JOGU
+    put(d, 1, type_="auto", data=1_000_000, spd=4)
+    put(d, 2, type_="single", data=0, spd=4)
+    d.params.write("P5.007", 1)
+    d.advance(200 * MS)
+    t0 = press(d, 5)
+    seen = set()
+    for _ in range(300):
+        d.advance(1 * MS)
+        seen.add((d.params.read("P5.007"), d.dio.do_function_state("MC_OK")))
+    assert rpm(d) == pytest.approx(100, abs=2)
+    assert seen == {(1, False)}
+    assert [w for t, w in d.pr.trace if t >= t0 and w.startswith("read")] == []
+
 # -- P5.007 read-back (L11185-11187) ----------------------------------------------------------
 
 
