@@ -153,7 +153,7 @@ class PrEngine:
     def trigger(self, n: int, source: str) -> None:
         """PR#n triggered by `source` (CTRG, P5.007, EV_RISE, EV_FALL)."""
         d = self.drive
-        if not d.servo_on:
+        if not d.servo_on or not pr_mode(d):
             return
         self._seq += 1
         self._queue.append((PRIORITY.get(source, 9), self._seq, f"{n}:{source}"))
@@ -597,6 +597,16 @@ class PrEngine:
             self.array[addr] = value
         params.set_internal("P5.011", (addr + 1) % ARRAY_SIZE)
         return value
+
+
+PR_MODES = (0x01, 0x08, 0x09, 0x0D, 0x0E, 0x0F)  # P1.001.YX with PR (L7749-7800)
+
+
+def pr_mode(drive: Drive) -> bool:
+    """PR triggers act: P1.001.YX selects a mode with PR (or the option says any mode)."""
+    if not drive.options.pr_triggers_need_pr_mode:
+        return True
+    return drive.params.get("P1.001") & 0xFF in PR_MODES
 
 
 def _pos_number(dio: Any) -> int:

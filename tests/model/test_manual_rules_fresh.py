@@ -290,6 +290,27 @@ def test_triggered_pr_without_ins_waits_for_the_running_command() -> None:
     assert d.snapshot()["position_puu"] == 0
 
 
+
+@pytest.mark.parametrize(("p1001", "runs"), [(0x0000, False), (0x0002, False), (0x0001, True),
+                                             (0x0008, True)])
+def test_pr_triggers_act_only_in_a_mode_with_pr(p1001: int, runs: bool) -> None:
+    """P5.007 "控制模式：PR" (L11168), CTRG "PR" (L15098); P1.001.YX 00 PT, 02 S, 01 PR,
+    08 PR-S (L7749-7800). Option `pr_triggers_need_pr_mode=False` lets them act anywhere."""
+    for gate in (True, False):
+        opts = ModelOptions(pr_triggers_need_pr_mode=gate)
+        d = Drive(options=opts, inputs={8: True}, params=PR_BENCH | {"P1.001": p1001},
+                  sensors={})
+        d.set_di(1, True)
+        d.advance(400 * MS)
+        assert d.servo_on
+        put(d, 1, type_="single", data=20_000, spd=4)
+        d.params.write("P5.007", 1)
+        d.set_di(3, True)  # POS0: CTRG selects PR#1 too
+        d.set_di(2, True)
+        d.advance(500 * MS)
+        moved = d.snapshot()["position_puu"] == 20_000
+        assert moved is (runs or not gate)
+
 # -- alarm classes and servo state (table 13.1, L19325-19480) --------------------------------
 
 
