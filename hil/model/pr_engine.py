@@ -202,6 +202,8 @@ class PrEngine:
     def stop(self, source: str = "STP") -> None:
         """DI.STP / P5.007 = 1000: stop the program and decelerate (L11183, L15249)."""
         d = self.drive
+        if not pr_mode(d):
+            return  # STP and P5.007 are PR-mode functions (L15249, L11168)
         self.trace.append((d.now, f"stop:{source}"))
         self.cursor = None
         self._cancel_wake()

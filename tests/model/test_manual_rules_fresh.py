@@ -311,6 +311,22 @@ def test_pr_triggers_act_only_in_a_mode_with_pr(p1001: int, runs: bool) -> None:
         moved = d.snapshot()["position_puu"] == 20_000
         assert moved is (runs or not gate)
 
+
+@pytest.mark.parametrize("how", ["STP", "P5.007"])
+def test_stp_is_a_pr_mode_function(how: str) -> None:
+    """STP "馬達停止, 正緣, PR" (L15249) and P5.007 = 1000 (L11181, "控制模式：PR" L11168)
+    leave a CiA 402 profile-velocity motion alone."""
+    drive, _ = make(di5=0x46)
+    enable(drive, PV)
+    drive.write_object(0x60FF, 0, 1000)  # 100 rpm
+    drive.advance(300 * MS)
+    if how == "STP":
+        press(drive, 5)
+    else:
+        drive.params.write("P5.007", 1000)
+    drive.advance(100 * MS)
+    assert rpm(drive) == pytest.approx(100, abs=1)
+
 # -- alarm classes and servo state (table 13.1, L19325-19480) --------------------------------
 
 
