@@ -223,6 +223,39 @@ def test_a_jog_during_a_pr_program_ends_it_without_completion() -> None:
     assert seen == {(1, False)}
     assert [w for t, w in d.pr.trace if t >= t0 and w.startswith("read")] == []
 
+
+def test_trqlm_limits_the_torque_of_a_pr_move() -> None:
+    """TRQLM "PT、PR、S" (L15101): in PR mode TCM0 selects P1.012 = 20 % (L15231, L7993)."""
+    peaks = []
+    for on in (False, True):
+        d, _ = make_pr(**{"P2.014": 0x0109, "P2.015": 0x0116, "P1.012": 20, "P5.020": 1})
+        if on:
+            press(d, 5)  # TRQLM
+            press(d, 6)  # TCM0
+        put(d, 1, type_="single", data=500_000, spd=4, acc=0, dec=0)  # P5.020 = 1 ms ramps
+        d.params.write("P5.007", 1)
+        peak = 0.0
+        for _ in range(300):
+            d.advance(1 * MS)
+            peak = max(peak, abs(d.axis.torque) / 10)
+        peaks.append(peak)
+    assert peaks[0] > 100
+    assert peaks[1] == pytest.approx(20, abs=0.5)
+
+
+def test_comm_jog_towards_an_active_limit_does_not_run() -> None:
+    """P4.005 = 4999 (CW, here the negative direction) with NL active (L10863-10866,
+    L15188)."""
+    drive, _ = make(**{"P4.005": 100})
+    enable(drive, PV)
+    press(drive, 6, False)  # NL open
+    drive.params.write("P4.005", 4999)
+    drive.advance(300 * MS)
+    assert rpm(drive) == pytest.approx(0, abs=0.5)
+    drive.params.write("P4.005", 4998)  # CCW: away from NL
+    drive.advance(300 * MS)
+    assert rpm(drive) == pytest.approx(100, abs=2)
+
 # -- P5.007 read-back (L11185-11187) ----------------------------------------------------------
 
 
