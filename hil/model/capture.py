@@ -55,6 +55,9 @@ class CaptureOptions:
     trigger: str = "DI7"  # what drives the capture input on this bench: DI7 or the motor Z
     cn5_per_puu: float = 1.0  # CN5 auxiliary encoder pulses per motor PUU (bench wiring)
     compare_retrigger: bool = True  # a match during a DO4 pulse restarts its width
+    # P5.039.Y locked when COMPARE's source is the capture axis (L11528, L11766): "running"
+    # = only while COMPARE runs, "always" = whenever P5.059.Y = 0 (the note's letter)
+    y_lock: str = "running"
     # --- deviations ---
     dev_capture_delay_us: float = 0.0  # extra latch delay after the edge
     dev_compare_width_extra_ms: float = 0.0  # DO4 pulse longer than P5.059.CBA
@@ -64,6 +67,8 @@ class CaptureOptions:
     def __post_init__(self) -> None:
         if self.trigger not in TRIGGERS:
             raise ValueError(f"capture.trigger: {self.trigger!r} not one of {TRIGGERS}")
+        if self.y_lock not in ("running", "always"):
+            raise ValueError(f"capture.y_lock: {self.y_lock!r} not 'running' or 'always'")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> CaptureOptions:
@@ -141,9 +146,10 @@ class Capture:
                              "stop it (L5155)")
         compare = getattr(self.drive, "compare", None)
         if ((value >> 4) & 0xF) != ((old >> 4) & 0xF) and compare is not None \
-                and compare.running and compare.source == 0:
-            raise OutOfRange("P5.039", "COMPARE runs on the capture axis: P5.039.Y may not "
-                             "change (L11528)")
+                and compare.source == 0 \
+                and (compare.running or self.options.y_lock == "always"):
+            raise OutOfRange("P5.039", "COMPARE's source is the capture axis (P5.059.Y = 0): "
+                             "P5.039.Y may not change (L11528)")
         if value & 1 and self.drive.params.stored("P5.036") + \
                 self.drive.params.stored("P5.038") > ARRAY_SIZE:
             raise OutOfRange("P5.039", "P5.036 + P5.038 exceeds the 800-entry data array "

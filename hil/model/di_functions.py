@@ -91,6 +91,7 @@ class DiFunctions:
         d.axis.ramp_stop(d._p5003_decel(6) if dev is None else dev)  # digit C = PFQS
         d.axis.lock("PFQS")  # nothing starts the motor during the quick stop
         d.cia402.drop_setpoints()
+        self._end_pr()  # an emergency stop ends the PR program: no next path, no Cmd_OK
 
     def _pfqs_step(self) -> None:
         """At zero speed: AL3CF and Servo Off (L20153-20155)."""
@@ -137,8 +138,12 @@ class DiFunctions:
             want = self.comm_jog
         if not d.servo_on or self.pfqs_stopping or "PFQS" in d.axis.locks:
             want = 0
+        if d.dio.function_active("PL" if want > 0 else "NL") and want:
+            want = 0  # PL/NL forbid running towards them in every mode (L15188-15191)
         ramp = d.options.jog_ramp_ms
         if want:
+            if not self.jog:
+                self._end_pr()  # the jog takes the axis: the PR program ends unfinished
             rpm = min(self.jog_rpm, d.axis.mech.max_speed)  # L10857
             d.axis.lock("JOG")
             d.axis.run_velocity(want * rpm, ramp, ramp, by="JOG")
@@ -147,6 +152,12 @@ class DiFunctions:
             self._release("JOG")
             d.axis.ramp_stop(ramp)
         self.jog = want
+
+    def _end_pr(self) -> None:
+        """A PR program in progress ends without completing (Cmd_OK/MC_OK stay off)."""
+        pr = getattr(self.d, "pr", None)
+        if pr is not None and not pr.cmd_ok and (pr.cursor is not None or pr.cmd is not None):
+            pr.abort()
 
     def _release(self, owner: str) -> None:
         """`owner` gives the axis back; what the host commanded meanwhile was dropped."""

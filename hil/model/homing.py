@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 from hil.model.errors import ModelError
 from hil.model.events import HomingPhase
 from hil.model.motion import puu_to_counts
+from hil.model.pr_engine import pr_mode
 from hil.model.timebase import MS, Timer, ms
 from hil.profile.homing_methods import (
     EDGE,
@@ -152,6 +153,8 @@ class Homing:
         d = self.drive
         if not d.servo_on or self._pending is not None or self.route == "canopen":
             return
+        if source != "BOOT" and not pr_mode(d):
+            return  # SHOM / CTRG / P5.007 = 0 are PR-mode triggers (L15197, L11174)
         self._set_home(False)  # "goes Off immediately when homing is triggered" (L15290)
         self.trace.append((d.now, f"trigger:{source}"))
         tick = (d.now // MS + 1) * MS

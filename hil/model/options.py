@@ -101,6 +101,11 @@ class ModelOptions:
     # of operation 6061h decides (PP/HM/IP/CSP -> PR, PV/CSV -> S, PT/CST -> T); False =
     # P1.001 alone (CANopen mode is then none of PT/PR/S/T: only "All" functions act).
     di_modes_follow_cia402: bool = True
+    # PR triggers (CTRG, P5.007, EV1-4, SHOM, CAPTURE/COMPARE PR#50/#45) and STP act only when
+    # P1.001.YX selects a mode with PR (01, 08, 09, 0D-0F): "控制模式 PR" of P5.007 (L11168),
+    # CTRG/POS/SHOM/EV rows of table 8.1 (L15098, L15133, L15197, L15218-15227), P1.001
+    # L7749-7800. False: they act in any control mode.
+    pr_triggers_need_pr_mode: bool = True
     # AL35F/AL3CF (PFQS) clear: "power_cycle" per chapter 13 (L20145, L20157) or "reset" per
     # the DI table ("需要異警重置", L15253).
     pfqs_clear: str = "power_cycle"

@@ -153,7 +153,7 @@ class PrEngine:
     def trigger(self, n: int, source: str) -> None:
         """PR#n triggered by `source` (CTRG, P5.007, EV_RISE, EV_FALL)."""
         d = self.drive
-        if not d.servo_on:
+        if not d.servo_on or not pr_mode(d):
             return
         self._seq += 1
         self._queue.append((PRIORITY.get(source, 9), self._seq, f"{n}:{source}"))
@@ -202,6 +202,8 @@ class PrEngine:
     def stop(self, source: str = "STP") -> None:
         """DI.STP / P5.007 = 1000: stop the program and decelerate (L11183, L15249)."""
         d = self.drive
+        if not pr_mode(d):
+            return  # STP and P5.007 are PR-mode functions (L15249, L11168)
         self.trace.append((d.now, f"stop:{source}"))
         self.cursor = None
         self._cancel_wake()
@@ -338,17 +340,30 @@ class PrEngine:
         if path.type == SPEED:
             rpm = puu_per_s_to_rpm(path.data, g44, g45) if path.unit_pps else path.data / 10.0
             ax.run_velocity(rpm, acc, dec)
+            direction = rpm
         else:
             rpm = get(f"P5.{60 + path.spd:03d}") / 10.0  # 0.1 rpm (L11783)
             target = self._target(path, external, g44, g45)
             if target is None:
                 return
             self.cmd_e = target
-            ax.move_to(puu_to_counts(target, g44, g45) + ax.origin, rpm, acc, dec)
+            counts = puu_to_counts(target, g44, g45) + ax.origin
+            direction = counts - ax.demand
+            ax.move_to(counts, rpm, acc, dec)
         self.trace.append((d.now, f"motion:{path.number}"))
+        self._limit_inhibit(direction)
         ovlp = path.ovlp and not self.options.dev_ovlp_ignored
         from_start = ovlp or self.options.dev_dly_from_start
         self.cmd = _Cmd(path, d.now, self._dly_ns(path.dly), dly_from_start=from_start)
+
+    def _limit_inhibit(self, direction: float) -> None:
+        """PL/NL already active: "正向/反向運轉禁止極限" in every mode (L15188-15191) - a PR
+        towards it stops at once with P5.003 X (PL) / Y (NL), as an NL/PL edge stops one."""
+        d = self.drive
+        fn = "PL" if direction > 0 else "NL"
+        if direction and d.dio.function_active(fn):
+            d.axis.ramp_stop(d._p5003_decel(0 if fn == "PL" else 1))
+            self.trace.append((d.now, f"inhibit:{fn}"))
 
     def _target(self, path: PrPath, external: bool, g44: int, g45: int) -> int | None:
         d = self.drive
@@ -584,6 +599,16 @@ class PrEngine:
             self.array[addr] = value
         params.set_internal("P5.011", (addr + 1) % ARRAY_SIZE)
         return value
+
+
+PR_MODES = (0x01, 0x08, 0x09, 0x0D, 0x0E, 0x0F)  # P1.001.YX with PR (L7749-7800)
+
+
+def pr_mode(drive: Drive) -> bool:
+    """PR triggers act: P1.001.YX selects a mode with PR (or the option says any mode)."""
+    if not drive.options.pr_triggers_need_pr_mode:
+        return True
+    return drive.params.get("P1.001") & 0xFF in PR_MODES
 
 
 def _pos_number(dio: Any) -> int:

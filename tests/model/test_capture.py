@@ -311,7 +311,7 @@ def test_compare_cyclic_pr45_and_capture_chain() -> None:
     """P5.059 bit1 cyclic reload (L11742), bit2 starts CAPTURE after the last point with its
     previous count (L11744), U bit0 PR#45 (L11762); P5.039 bit2 starts COMPARE at the first
     capture (L5157)."""
-    d = make_cmp()
+    d = make(**{"P2.021": 0, "P1.001": 0x0001})  # PR mode: PR#45 may start (L11168)
     d.params.write("P5.039", 0x0030)
     d.params.write("P5.038", 2)
     pv(d, 60.0)  # 100 000 PUU/s

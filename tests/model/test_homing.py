@@ -23,7 +23,8 @@ from hil.model.timebase import MS
 NL, PL, LO, HI, Z0 = -4.0, 4.0, -0.5, 0.5, 0.25
 STARTS = {"neg": -2.0, "on": 0.0, "pos": 2.0, "on_NL": -4.2, "on_PL": 4.2}
 # DI9 = ORGP (a), DI10 = SHOM (a), DI2 = CTRG (a), DI3 = POS0 (a); EMGS (DI8, b) closed.
-BENCH = {"P2.036": 0x0124, "P2.037": 0x0127, "P2.011": 0x0108, "P2.012": 0x0111}
+BENCH = {"P2.036": 0x0124, "P2.037": 0x0127, "P2.011": 0x0108, "P2.012": 0x0111,
+         "P1.001": 0x0001}  # PR mode: SHOM, CTRG, P5.007 are PR triggers (L11168, L15197)
 
 
 def mech(s: float, **kw: float | None) -> Mechanics:

@@ -27,7 +27,7 @@ def test_check_rejects_a_table_the_drive_refuses() -> None:
 
 def test_driver_writes_reads_back_triggers_and_waits() -> None:
     """DeltaPr over the drive's parameters: table, P5.007 trigger, n+20000 read-back (L11185)."""
-    d = Drive(inputs={8: True}, params={"P2.010": 0x0101}, sensors={})
+    d = Drive(inputs={8: True}, params={"P2.010": 0x0101, "P1.001": 0x0001}, sensors={})
     d.set_di(1, True)
     d.advance(400 * MS)
     class Access:  # the model's parameters, as a bus would reach them

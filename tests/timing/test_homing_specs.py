@@ -30,7 +30,7 @@ from hil.virtual.model_tap import ModelTap
 NL, PL, LO, HI, Z0 = -4.0, 4.0, -0.5, 0.5, 0.25
 STARTS = {"neg": -2.0, "on": 0.0, "pos": 2.0, "on_NL": -4.2, "on_PL": 4.2}
 # DI9 = ORGP (a), DI10 = SHOM (a); EMGS (DI8, b) closed; DO3 = HOME (factory).
-BENCH = {"P2.036": 0x0124, "P2.037": 0x0127}
+BENCH = {"P2.036": 0x0124, "P2.037": 0x0127, "P1.001": 0x0001}  # PR mode (L15197)
 V1, V2 = 120, 30  # rpm: 6099h sub1/sub2 = 1200/300, P5.005/P5.006 = 1200/300 (0.1 rpm)
 OFFSET = 1234
 
