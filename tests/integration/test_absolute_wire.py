@@ -139,8 +139,9 @@ class Bench:
             self.proc.stop()  # SIGINT: the drive saves DIR/absolute.json (Drive.close)
             self.proc = None
 
-    def reader(self, lines=None) -> AbsPositionReader:
-        return AbsPositionReader(lines or self.dio, abse="DI2", absc="DI3", absw="DO4")
+    def reader(self, lines=None, retries: int = 2) -> AbsPositionReader:
+        return AbsPositionReader(lines or self.dio, abse="DI2", absc="DI3", absw="DO4",
+                                 retries=retries)
 
     def by_modbus(self) -> tuple[int, int, int]:
         self.mb.write_param("P0.049", 1)  # latch P0.050-P0.052 (L7477-7491)
@@ -208,7 +209,7 @@ def test_absolute_position_agrees_over_dio_modbus_and_sdo(bench, tmp_path) -> No
     # A host that answers too late gets ABSW (T_R, L16513); the retry succeeds.
     with Recorder(tmp_path / "late.mcap") as rec:
         bench.tap.start(rec, bench.dio)
-        late = bench.reader(LateLines(bench.dio, bit=5, late_ms=260)).read()
+        late = bench.reader(LateLines(bench.dio, bit=5, late_ms=260), retries=4).read()
         bench.tap.rec = None
     # the late answer costs exactly one attempt; a loaded machine may spoil the retry too
     # (a T_Q miss, as above), so a third attempt is allowed, but only for that reason
