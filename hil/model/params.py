@@ -175,8 +175,10 @@ class ParameterStore:
             raise ValueError(f"negative word count {count}")
         words: list[int] = []
         values: dict[str, int] = {}  # one read per parameter: read hooks may count (P5.012)
-        for addr in range(address, address + count):
-            spec = self.table.by_modbus_address(addr)
+        # every address resolved before any read hook runs: a read refused for an undefined
+        # address (exception 02h) must not advance the data-array address P5.011 (L5108-5114)
+        specs = [self.table.by_modbus_address(a) for a in range(address, address + count)]
+        for addr, spec in zip(range(address, address + count), specs, strict=True):
             if spec.param not in values:
                 values[spec.param] = self.read(spec.param)
             low, high = spec.to_words(values[spec.param])

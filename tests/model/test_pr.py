@@ -370,3 +370,17 @@ def test_data_array_modbus_example() -> None:
     d.params.modbus_write(base, [11])
     assert d.params.modbus_read(base, 6) == [11, 0, 100, 0, 200, 0]
     assert d.params.modbus_read(base, 6) == [13, 0, 300, 0, 0, 0]
+
+
+def test_data_array_refused_read_does_not_advance_p5011() -> None:
+    """A 03h read over P5.012, P5.013 and the undefined 051CH (P5.014) is refused as a whole
+    (exception 02h): the windows' auto-increment (L5108-5114) must not run for it, or the
+    master's next read skips two array entries it never got."""
+    d = make()
+    d.pr.array[11:13] = [100, 200]
+    base = d.params.spec("P5.011").modbus_address
+    d.params.modbus_write(base, [11])
+    with pytest.raises(ModelError):  # UnknownParameter: exception 02h at the face
+        d.params.modbus_read(base + 2, 6)  # 0518H-051DH
+    assert d.params.stored("P5.011") == 11
+    assert d.params.modbus_read(base, 6) == [11, 0, 100, 0, 200, 0]
