@@ -195,6 +195,19 @@ def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: Any) ->
     action.check(cc)
 
 
+def _glob(n: str, plans_dir: Path) -> list[Path]:
+    """Plans a glob names: with a `/` from the working directory (or the root, for an
+    absolute one), else in the plans directory."""
+    pattern = n if n.endswith((".yaml", ".yml")) else f"{n}.yaml"
+    base, p = plans_dir if "/" not in n else Path(), Path(pattern)
+    if p.is_absolute():  # pathlib globs relative patterns only
+        base, pattern = Path(p.anchor), str(p.relative_to(p.anchor))
+    try:  # `**` inside a component (x**.yaml) is refused
+        return sorted(base.glob(pattern))
+    except (ValueError, NotImplementedError) as exc:
+        raise PlanFileError(n, 0, "(plan)", f"{n!r}: not a usable glob ({exc})") from None
+
+
 def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) -> list[Path]:
     """Plan files by path, by name (`servo_on_brake` -> plans/servo_on_brake.yaml) or by glob
     (`pr_*`); no names: every plan in the plans directory, sorted."""
@@ -209,9 +222,7 @@ def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) ->
             out.append(p)
             continue
         if is_glob(n):  # `pr_*` or `plans/fault_*.yaml`: every plan it matches, sorted
-            pattern = n if n.endswith((".yaml", ".yml")) else f"{n}.yaml"
-            found = sorted(Path().glob(pattern)) if "/" in n else sorted(
-                plans_dir.glob(pattern))
+            found = _glob(n, plans_dir)
             if not found:
                 raise PlanFileError(n, 0, "(plan)", f"no plan matches {n!r} in "
                                     f"{plans_dir if '/' not in n else Path.cwd()}")

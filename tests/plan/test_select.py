@@ -67,6 +67,23 @@ def test_globs_pick_plans_by_name(tmp_path):
         find_plans(["zz_*"], tmp_path)
 
 
+def test_absolute_and_bad_globs(tmp_path):
+    """An absolute glob (pathlib globs relative patterns only) and `**` inside a name gave a
+    traceback; now the plans it matches, or a PlanFileError that `hil run` reports (exit 2)."""
+    for n in ("pr_a", "pr_b"):
+        (tmp_path / f"{n}.yaml").write_text("name: x\nsteps:\n  - wait: 1ms\n")
+    assert find_plans([f"{tmp_path}/pr_*"], tmp_path) == [tmp_path / "pr_a.yaml",
+                                                           tmp_path / "pr_b.yaml"]
+    with pytest.raises(PlanFileError, match="no plan matches"):
+        find_plans([f"{tmp_path}/zz_*.yaml"], tmp_path)
+    for bad in ("x**", f"{tmp_path}/**"):
+        with pytest.raises(PlanFileError, match="not a usable glob"):
+            find_plans([bad], tmp_path)
+    r = _hil("--list", "/nonexistent-hil/*.yaml")
+    assert r.returncode == 2 and "no plan matches '/nonexistent-hil/*.yaml'" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
 def _hil(*args: str, env: dict | None = None, cwd: Path | None = None
          ) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "hil.cli", "run", *args], capture_output=True,
