@@ -15,7 +15,7 @@ from hil.paths import plans_dir as _pd
 from hil.plan.bench import Bench, DriveSpec, Wire, _params
 from hil.plan.kinds import CheckContext
 from hil.plan.kinds.timing import bind_line
-from hil.plan.select import is_glob
+from hil.plan.select import KEYWORDS, TAG_WORD, is_glob
 from hil.plan.steps import Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
 from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS, N_PHYSICAL_DI
@@ -86,8 +86,20 @@ def parse_plan(data: Any, file: str, text: str = "") -> Plan:
         plan.options = dict(om)
     _mapping_overlay(v, plan, top)
     if "tags" in top:
-        plan.tags = [str(t) for t in v.seq(top["tags"], top.kline("tags"), "tags")]
+        plan.tags = _tags(v, top)
     return plan
+
+
+def _tags(v: Checker, top: LDict) -> list[str]:
+    """`tags:` words that `-m` can select: not a list, a null or `and` (docs/plans.md)."""
+    seq = v.seq(top["tags"], top.kline("tags"), "tags")
+    for i, t in enumerate(seq):
+        if isinstance(t, int) and not isinstance(t, bool):
+            t = seq[i] = str(t)
+        if not isinstance(t, str) or not TAG_WORD.match(t) or t in KEYWORDS:
+            raise v.err(seq.item_lines[i], f"tags[{i}]", f"{t!r}: a tag is one word "
+                        "(letters, digits, _ . - : /) other than and, or, not")
+    return list(seq)
 
 
 # --- the plan's own DI/DO mapping ---------------------------------------------------------

@@ -15,10 +15,12 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-__all__ = ["Expr", "ExprError", "is_glob", "matches", "select"]
+__all__ = ["KEYWORDS", "TAG_WORD", "Expr", "ExprError", "is_glob", "matches", "select"]
 
 _TOKEN = re.compile(r"\s*(\(|\)|[^\s()]+)")
 _WORD = re.compile(r"^[\w.*?\[\]:/-]+$")
+TAG_WORD = re.compile(r"^[\w.:/-]+$")  # a plan's tag: a word without glob characters
+KEYWORDS = ("and", "or", "not")
 MAX_DEPTH = 100  # nested `not` / parentheses: an ExprError beyond, not a RecursionError
 
 
