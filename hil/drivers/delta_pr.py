@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+from hil.profile.errors import ParamError
 from hil.profile.pr import PrError, decode, encode, pr_params
 
 STATES = {"running": 0, "done": 10000, "in_position": 20000}  # P5.007 read-back (L11185)
@@ -47,7 +48,7 @@ def table_words(table: Mapping[int, Mapping[str, Any]]) -> dict[str, int]:
             definition, data = encode(kind, f.pop("data", 0), **f)
             decode(n, definition, data)
             p_def, p_data = pr_params(n)
-        except (PrError, TypeError) as exc:
+        except (PrError, TypeError, ParamError) as exc:  # ParamError: dest no parameter
             raise PrTableError(f"PR#{n}: {exc}") from None
         out[p_def], out[p_data] = definition, data
     return out

@@ -60,6 +60,7 @@ class ParameterStore:
         self._effective: dict[str, int] = {}
         self._write_hooks: dict[str, list[WriteHook]] = {}
         self._read_hooks: dict[str, ReadHook] = {}
+        self._peek_hooks: dict[str, ReadHook] = {}  # current value without read side effects
         self._validators: dict[str, list[Validator]] = {}
         self._listeners: list[ChangeListener] = []
         self._set_all_defaults()
@@ -152,6 +153,11 @@ class ParameterStore:
         """Compute `name` on every read()/get()/Modbus read (live monitor values)."""
         self._read_hooks[self.table.spec(name).param] = fn
 
+    def on_peek(self, name: str, fn: ReadHook) -> None:
+        """The current value of `name` where a read has side effects (the data-array windows
+        P5.012/P5.013 advance P5.011): the other half of a one-word Modbus write."""
+        self._peek_hooks[self.table.spec(name).param] = fn
+
     def on_validate(self, name: str, fn: Validator) -> None:
         """fn(name, value) runs before every write() of `name` and may raise a ModelError."""
         self._validators.setdefault(self.table.spec(name).param, []).append(fn)
@@ -175,8 +181,10 @@ class ParameterStore:
             raise ValueError(f"negative word count {count}")
         words: list[int] = []
         values: dict[str, int] = {}  # one read per parameter: read hooks may count (P5.012)
-        for addr in range(address, address + count):
-            spec = self.table.by_modbus_address(addr)
+        # every address resolved before any read hook runs: a read refused for an undefined
+        # address (exception 02h) must not advance the data-array address P5.011 (L5108-5114)
+        specs = [self.table.by_modbus_address(a) for a in range(address, address + count)]
+        for addr, spec in zip(range(address, address + count), specs, strict=True):
             if spec.param not in values:
                 values[spec.param] = self.read(spec.param)
             low, high = spec.to_words(values[spec.param])
@@ -208,7 +216,8 @@ class ParameterStore:
             spec, got = specs[key], halves[key]
             if spec.size == 16 and 0 not in got:
                 continue  # only the (ignored) high word of a 16-bit parameter
-            cur_low, cur_high = spec.to_words(self._stored[key])
+            peek = self._peek_hooks.get(key)
+            cur_low, cur_high = spec.to_words(int(peek()) if peek else self._stored[key])
             value = spec.from_words(got.get(0, cur_low), got.get(1, cur_high))
             plan.append((self.check_write(key, value), value))
         for spec, value in plan:

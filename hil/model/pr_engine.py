@@ -587,6 +587,11 @@ class PrEngine:
         self._wake_t = None
 
     # ---------------------------------------------------------------- data array
+    def array_entry(self) -> int:
+        """The data-array entry at P5.011, read without advancing it."""
+        addr = self.drive.params.stored("P5.011")
+        return self.array[addr] if 0 <= addr < ARRAY_SIZE else 0
+
     def array_window(self, name: str, value: int | None = None) -> int:
         """Read (value None) or write P5.012/P5.013 at P5.011, then P5.011 += 1 (L5111-5114)."""
         params = self.drive.params
@@ -657,6 +662,7 @@ def attach_pr(drive: Drive, options: PrOptions | None = None) -> PrEngine:
     for name in ("P5.012", "P5.013"):
         params.on_write(name, lambda n, _o, new: pr.array_window(n, new))
         params.on_read(name, lambda n=name: pr.array_window(n))
+        params.on_peek(name, pr.array_entry)  # a one-word write keeps the entry's other half
     for k in range(4):  # P5.100-P5.103: address +0..+3, no increment (L5138-5147)
 
         def window(k: int = k) -> int:
@@ -669,6 +675,7 @@ def attach_pr(drive: Drive, options: PrOptions | None = None) -> PrEngine:
                 pr.array[addr] = new
 
         params.on_read(f"P5.{100 + k:03d}", window)
+        params.on_peek(f"P5.{100 + k:03d}", window)
         params.on_write(f"P5.{100 + k:03d}", write)
     params.on_read("P5.010", lambda: ARRAY_SIZE)
 

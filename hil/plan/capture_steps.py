@@ -40,7 +40,7 @@ STORE = "capture_armed:"
 def _choice(v: Checker, m: Any, key: str, where: str, table: dict[str, int], default: str
             ) -> int:
     x = m.get(key, default)
-    if x not in table:
+    if not isinstance(x, str) or x not in table:  # a list / mapping is no name either
         raise v.err(m.kline(key), join(where, key), f"{x!r}: one of {', '.join(table)}")
     return table[x]
 
@@ -120,7 +120,7 @@ def _range(v: Checker, m: Any, key: str, where: str) -> tuple[float, float] | No
     lo, hi = r.get("min", float("-inf")), r.get("max", float("inf"))
     for k, x in (("min", lo), ("max", hi)):
         if isinstance(x, bool) or not isinstance(x, int | float):
-            raise v.err(r.kline(k), join(where, key, k), f"{x!r}: a number (counts)")
+            raise v.err(r.kline(k), join(join(where, key), k), f"{x!r}: a number (counts)")
     if lo > hi:
         raise v.err(r.line, join(where, key), f"min {lo} > max {hi}")
     return float(lo), float(hi)

@@ -76,7 +76,7 @@ def _match(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     if "function" in m:
         fs = m["function"] if isinstance(m["function"], list) else [m["function"]]
         for f in fs:
-            if f not in CAN_FUNCTIONS:
+            if not isinstance(f, str) or f not in CAN_FUNCTIONS:
                 raise v.err(m.kline("function"), join(where, "function"),
                             f"{f!r}: one of {', '.join(CAN_FUNCTIONS)}")
         out["functions"] = list(fs)
@@ -203,7 +203,7 @@ NMT_COMMANDS = {"start": 0x01, "stop": 0x02, "pre-operational": 0x80, "reset_nod
 
 
 def p_nmt(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-    if obj not in NMT_COMMANDS:
+    if not isinstance(obj, str) or obj not in NMT_COMMANDS:
         raise v.err(line, where, f"{obj!r}: one of {', '.join(NMT_COMMANDS)}")
     return {"command": obj}
 

@@ -29,6 +29,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +41,8 @@ from hil.plan.plan import Plan, check_plan, load_plan
 from hil.plan.runner import PlanResult, run_plan, timing_specs
 
 __all__ = ["jobs_from_arg", "parallel_blocker", "run_parallel"]
+
+log = logging.getLogger(__name__)
 
 STOP_GRACE_S = 60.0  # how long a stopped worker may take to go safe and close its recording
 
@@ -97,6 +100,26 @@ def _worker_init(log_level: int) -> None:
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, mark)
+    threading.Thread(target=_orphan_watch, args=(os.getppid(),), name="hil-orphan-watch",
+                     daemon=True).start()
+
+
+_busy = threading.Event()  # a plan is running in this worker
+
+
+def _orphan_watch(parent: int, period_s: float = 0.2) -> None:
+    """A worker whose `hil run` died (kill -9, OOM) is reparented and would wait on the pool's
+    queue forever: stop its plan as Ctrl-C does (bench safe, recording closed), then exit."""
+    global _stop_requested
+    while os.getppid() == parent:
+        time.sleep(period_s)
+    log.warning("hil run (pid %d) is gone: stopping this worker (pid %d)", parent, os.getpid())
+    _stop_requested = True
+    os.kill(os.getpid(), signal.SIGINT)  # a running plan stops; an idle worker is marked
+    end = time.monotonic() + STOP_GRACE_S
+    while _busy.is_set() and time.monotonic() < end:
+        time.sleep(period_s)
+    os._exit(1)
 
 
 class _Notes(Listener):
@@ -120,19 +143,23 @@ class _Job:
 def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
     """In a worker: (result, notes, interrupted). None when stopped before it began."""
     global _stop_requested
-    if _stop_requested:
-        return None, [], True
-    plan, bench = load_plan(job.plan_path), load_bench(job.bench_path)
-    notes = _Notes()
+    _busy.set()  # before the check: the orphan watch either sees it or stops this plan
     try:
-        res = run_plan(plan, bench, Path(job.out_dir), listeners=[notes],
-                       allow_inconclusive=job.allow_inconclusive, index=job.index,
-                       total=job.total, stop=lambda: _stop_requested)
-    except KeyboardInterrupt as e:
-        _stop_requested = True
-        res = getattr(e, "plan_result", None) or _interrupted_result(plan, bench, job)
-        return res, notes.texts, True
-    return res, notes.texts, False
+        if _stop_requested:
+            return None, [], True
+        plan, bench = load_plan(job.plan_path), load_bench(job.bench_path)
+        notes = _Notes()
+        try:
+            res = run_plan(plan, bench, Path(job.out_dir), listeners=[notes],
+                           allow_inconclusive=job.allow_inconclusive, index=job.index,
+                           total=job.total, stop=lambda: _stop_requested)
+        except KeyboardInterrupt as e:
+            _stop_requested = True
+            res = getattr(e, "plan_result", None) or _interrupted_result(plan, bench, job)
+            return res, notes.texts, True
+        return res, notes.texts, False
+    finally:
+        _busy.clear()
 
 
 def _interrupted_result(plan: Plan, bench: Bench, job: _Job) -> PlanResult:

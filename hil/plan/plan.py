@@ -15,7 +15,7 @@ from hil.paths import plans_dir as _pd
 from hil.plan.bench import Bench, DriveSpec, Wire, _params
 from hil.plan.kinds import CheckContext
 from hil.plan.kinds.timing import bind_line
-from hil.plan.select import is_glob
+from hil.plan.select import KEYWORDS, TAG_WORD, is_glob
 from hil.plan.steps import Step, parse_steps
 from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
 from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS, N_PHYSICAL_DI
@@ -86,8 +86,20 @@ def parse_plan(data: Any, file: str, text: str = "") -> Plan:
         plan.options = dict(om)
     _mapping_overlay(v, plan, top)
     if "tags" in top:
-        plan.tags = [str(t) for t in v.seq(top["tags"], top.kline("tags"), "tags")]
+        plan.tags = _tags(v, top)
     return plan
+
+
+def _tags(v: Checker, top: LDict) -> list[str]:
+    """`tags:` words that `-m` can select: not a list, a null or `and` (docs/plans.md)."""
+    seq = v.seq(top["tags"], top.kline("tags"), "tags")
+    for i, t in enumerate(seq):
+        if isinstance(t, int) and not isinstance(t, bool):
+            t = seq[i] = str(t)
+        if not isinstance(t, str) or not TAG_WORD.match(t) or t in KEYWORDS:
+            raise v.err(seq.item_lines[i], f"tags[{i}]", f"{t!r}: a tag is one word "
+                        "(letters, digits, _ . - : /) other than and, or, not")
+    return list(seq)
 
 
 # --- the plan's own DI/DO mapping ---------------------------------------------------------
@@ -195,6 +207,19 @@ def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: Any) ->
     action.check(cc)
 
 
+def _glob(n: str, plans_dir: Path) -> list[Path]:
+    """Plans a glob names: with a `/` from the working directory (or the root, for an
+    absolute one), else in the plans directory."""
+    pattern = n if n.endswith((".yaml", ".yml")) else f"{n}.yaml"
+    base, p = plans_dir if "/" not in n else Path(), Path(pattern)
+    if p.is_absolute():  # pathlib globs relative patterns only
+        base, pattern = Path(p.anchor), str(p.relative_to(p.anchor))
+    try:  # `**` inside a component (x**.yaml) is refused
+        return sorted(base.glob(pattern))
+    except (ValueError, NotImplementedError) as exc:
+        raise PlanFileError(n, 0, "(plan)", f"{n!r}: not a usable glob ({exc})") from None
+
+
 def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) -> list[Path]:
     """Plan files by path, by name (`servo_on_brake` -> plans/servo_on_brake.yaml) or by glob
     (`pr_*`); no names: every plan in the plans directory, sorted."""
@@ -209,9 +234,7 @@ def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) ->
             out.append(p)
             continue
         if is_glob(n):  # `pr_*` or `plans/fault_*.yaml`: every plan it matches, sorted
-            pattern = n if n.endswith((".yaml", ".yml")) else f"{n}.yaml"
-            found = sorted(Path().glob(pattern)) if "/" in n else sorted(
-                plans_dir.glob(pattern))
+            found = _glob(n, plans_dir)
             if not found:
                 raise PlanFileError(n, 0, "(plan)", f"no plan matches {n!r} in "
                                     f"{plans_dir if '/' not in n else Path.cwd()}")

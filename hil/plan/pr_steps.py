@@ -23,6 +23,12 @@ from hil.plan.yamlio import Checker, LDict, join
 
 PATH_KEYS = {"type", "data", "ins", "auto", "ovlp", "cmd", "unit_pps", "acc", "dec", "spd",
              "dly", "dest", "dest_array", "source", "rom", "direction", "s_low"}
+# the YAML type of each path field (hil.profile.pr.encode): a quoted "false" is no false
+_FLAGS = ("ins", "auto", "ovlp", "unit_pps", "dest_array", "rom", "s_low")
+_FIELD_TYPES: dict[str, tuple[type, ...]] = (
+    {k: (bool,) for k in _FLAGS} | {k: (int,) for k in ("data", "acc", "dec", "spd", "dly")}
+    | {k: (str,) for k in ("cmd", "source", "direction")}
+    | {"type": (str, int), "dest": (str, int)})
 BY = ("p5007", "di")
 POS = ("POS0", "POS1", "POS2", "POS3", "POS4", "POS5", "POS6")
 
@@ -43,6 +49,7 @@ def p_pr_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
             raise v.err(kl, fw, "a PR number 1..99 (PR#0 is homing: P5.004/P6.000)")
         pm = v.mapping(m[k], kl, fw)
         v.keys(pm, PATH_KEYS, fw, required=("type",))
+        _field_types(v, pm, fw)
         fields = dict(pm)
         try:
             table_words({n: fields})
@@ -52,6 +59,15 @@ def p_pr_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     if not table:
         raise v.err(m.line, where, "name at least one path, e.g. 1: {type: single, data: 1000}")
     return {"table": table, "via": via}
+
+
+def _field_types(v: Checker, pm: LDict, where: str) -> None:
+    for key, x in pm.items():
+        want = _FIELD_TYPES[key]
+        if (isinstance(x, bool) and bool not in want) or not isinstance(x, want):
+            names = " or ".join({bool: "true/false", int: "an integer", str: "a name"}[t]
+                                for t in want)
+            raise v.err(pm.kline(key), join(where, key), f"{x!r}: {names}")
 
 
 def p_pr_trigger(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
@@ -73,7 +89,7 @@ def p_pr_wait(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     v.keys(m, {"pr", "state", "timeout", "via"}, where, required=("pr",))
     out = {"pr": v.integer(m, "pr", where, 0, 99), "state": m.get("state", "in_position"),
            "timeout": v.duration(m, "timeout", where, 5_000_000_000), "via": m.get("via")}
-    if out["state"] not in STATES:
+    if not isinstance(out["state"], str) or out["state"] not in STATES:
         raise v.err(m.kline("state"), join(where, "state"), f"{out['state']!r}: one of "
                     f"{', '.join(STATES)}")
     return out

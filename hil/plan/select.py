@@ -15,10 +15,13 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-__all__ = ["Expr", "ExprError", "is_glob", "matches", "select"]
+__all__ = ["KEYWORDS", "TAG_WORD", "Expr", "ExprError", "is_glob", "matches", "select"]
 
 _TOKEN = re.compile(r"\s*(\(|\)|[^\s()]+)")
 _WORD = re.compile(r"^[\w.*?\[\]:/-]+$")
+TAG_WORD = re.compile(r"^[\w.:/-]+$")  # a plan's tag: a word without glob characters
+KEYWORDS = ("and", "or", "not")
+MAX_DEPTH = 100  # nested `not` / parentheses: an ExprError beyond, not a RecursionError
 
 
 class ExprError(ValueError):
@@ -36,7 +39,7 @@ class Expr:
         tokens = _TOKEN.findall(text)
         if not tokens:
             raise ExprError(f"{text!r}: empty expression")
-        pos = 0
+        pos = depth = 0
 
         def peek() -> str | None:
             return tokens[pos] if pos < len(tokens) else None
@@ -46,37 +49,47 @@ class Expr:
             pos += 1
             return tokens[pos - 1]
 
-        def p_or() -> Expr:
-            left = p_and()
+        def p_or() -> Expr:  # a chain is one n-ary node: `a or b or ...` never nests
+            items = [p_and()]
             while peek() == "or":
                 take()
-                left = Expr("or", (left, p_and()))
-            return left
+                items.append(p_and())
+            return items[0] if len(items) == 1 else Expr("or", tuple(items))
 
         def p_and() -> Expr:
-            left = p_not()
+            items = [p_not()]
             while peek() == "and":
                 take()
-                left = Expr("and", (left, p_not()))
-            return left
+                items.append(p_not())
+            return items[0] if len(items) == 1 else Expr("and", tuple(items))
 
         def p_not() -> Expr:
+            nonlocal depth
             tok = peek()
             if tok is None:
                 raise ExprError(f"{text!r}: expression ends too early")
-            if tok == "not":
-                take()
-                return Expr("not", (p_not(),))
-            if tok == "(":
-                take()
-                inner = p_or()
-                if peek() != ")":
-                    raise ExprError(f"{text!r}: missing ')'")
-                take()
-                return inner
+            if tok in ("not", "("):
+                depth += 1
+                if depth > MAX_DEPTH:
+                    raise ExprError(f"{text[:40]!r}...: nested more than {MAX_DEPTH} deep")
+                try:
+                    return p_nested(tok)
+                finally:
+                    depth -= 1
             if tok in ("and", "or", ")") or not _WORD.match(tok):
                 raise ExprError(f"{text!r}: unexpected {tok!r}")
             return Expr("word", word=take())
+
+        def p_nested(tok: str) -> Expr:
+            if tok == "not":
+                take()
+                return Expr("not", (p_not(),))
+            take()
+            inner = p_or()
+            if peek() != ")":
+                raise ExprError(f"{text!r}: missing ')'")
+            take()
+            return inner
 
         out = p_or()
         if pos != len(tokens):

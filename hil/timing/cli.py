@@ -6,7 +6,8 @@ shipped spec in fixtures/timing/.
 Exit codes: 0 every judged verdict passed; 1 any failed; 2 bad input (usage, no such file, not
 an MCAP file, not a hil recording, bad spec); 3 none failed but some were inconclusive; 4
 incomplete: nothing was judged at all, a spec named with --spec found no data, or the recording
-is damaged mid-file (a corrupt chunk: everything after it is unreadable). Nothing judged is not
+is damaged mid-file (a corrupt chunk: everything after it is unreadable) or cut (no footer: a
+killed run). Nothing judged is not
 a pass, so 4 always comes with the reason on stderr.
 """
 
@@ -144,6 +145,9 @@ def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> i
     if source.corrupt:
         incomplete = [f"{source.path}: damaged: {source.error}; nothing after it was read",
                       *incomplete]
+    elif getattr(source, "truncated", False):  # what the run did after the cut is unknown
+        incomplete = [f"{source.path}: truncated (no footer: the run was killed or is still "
+                      "recording); judged only what it holds", *incomplete]
     if not _judged(verdicts):
         incomplete = [*incomplete, "nothing was judged"]
     code = exit_code(verdicts)

@@ -160,6 +160,7 @@ class RecordingSource(MemorySource):
             #: mid-file (`corrupt`) rather than a killed run's cut tail
             self.error: str | None = rec.error
             self.corrupt: bool = rec.corrupt
+            self.truncated: bool = rec.truncated  # no footer: a killed (or running) recorder
             self.schemas: set[str] = {c.schema for c in rec.channels()}
         finally:
             close = getattr(rec, "close", None)

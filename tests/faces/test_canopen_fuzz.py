@@ -248,3 +248,97 @@ def test_canopen_fuzz_20k_frames(rig, caplog):
     assert rig.slave._thread.is_alive()
     assert rig.slave.last_resort.count == 0, rig.slave.last_resort.last  # no drive exception
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
+
+
+# ---------------------------------------------------------------- PR-mode surfaces, clock on
+
+
+class _ListBus:
+    """A bus that keeps what the slave sends; frames go in through `handle_frame`."""
+
+    def __init__(self) -> None:
+        self.sent: list[can.Message] = []
+
+    def send(self, msg: can.Message) -> None:
+        self.sent.append(msg)
+
+    def recv(self, timeout: float | None = None) -> None:
+        time.sleep(timeout or 0)
+
+
+def test_sdo_fuzz_pr_surfaces_with_the_model_running(caplog):
+    """The SDO side of tests/faces/test_modbus_fuzz.py's PR fuzz: PR mode, servo on, the
+    model's clock running; expedited (1/2/4 bytes, size given or not) and segmented downloads
+    and uploads of 2xxxh objects: the PR table (2600h-2763h), P5.007 triggers (0, 1-99,
+    100-999, 1000, 10000+, negative, L11174-11183), P4.005 jog (4998/4999/0), the data array
+    and capture / compare (P5.010-P5.013, P5.036-P5.039, P5.056-P5.059), DI mapping codes
+    0x00-0xFF with the contact digit. Every request gets one answer paired by index/sub (60h,
+    43h-4Fh, 41h + segments, or an abort that is never the last-resort 0800 0000)."""
+    from hil.model.timebase import MS as MS_
+
+    bench = {"P1.001": 0x0001, "P2.010": 0x0101, "P2.011": 0x0108, "P2.012": 0x0111,
+             "P2.013": 0x0112, "P2.014": 0x0146, "P2.015": 0x0139, "P2.016": 0, "P2.036": 0}
+    drive = Drive(inputs={8: True}, params=bench, sensors={})
+    drive.set_di(1, True)
+    drive.advance(400 * MS_)
+    bus = _ListBus()
+    slave = CanopenSlave(bus, drive, node_id=NODE, own_timer=False, clock=lambda: drive.now)
+    objs = ([0x2600 + i for i in range(100)] + [0x2700 + i for i in range(100)]
+            + [0x2507] * 40 + [0x2405] * 10 + [0x2500 + n for n in (8, 9, 10, 11, 12, 13, 36,
+                                                                     37, 38, 39, 56, 57, 58, 59)]
+            + [0x2200 + n for n in (*range(11, 18), *range(36, 41))] * 2)
+    rng = random.Random(3011)
+    problems: list[str] = []
+    owed = aborts = 0
+
+    def ask(data: bytes) -> bytes | None:
+        bus.sent.clear()
+        with slave.lock:
+            slave.handle_frame(can.Message(arbitration_id=SDO_REQ, data=data,
+                                           is_extended_id=False))
+        got = [bytes(m.data) for m in bus.sent if m.arbitration_id == SDO_RSP]
+        return got[0] if len(got) == 1 else None
+
+    with caplog.at_level(logging.ERROR), slave:
+        for _ in range(3000):
+            index = rng.choice(objs)
+            value = rng.choice([0, 1, 99, 100, 999, 1000, 4998, 4999, 10000, 20050, -1, -100,
+                                0x7FFFFFFF, -2**31, rng.randrange(0x200),
+                                rng.randrange(1 << 32)])
+            size = rng.choice([4, 4, 2, 1])
+            raw = (value & ((1 << 8 * size) - 1)).to_bytes(size, "little")
+            head = struct.pack("<HB", index, 0)
+            r = rng.random()
+            if r < 0.6:  # expedited, size given (or not: 22h)
+                cs = 0x23 | (4 - size) << 2 if rng.random() < 0.9 else 0x22
+                frames = [bytes([cs]) + head + raw + bytes(4 - size)]
+            elif r < 0.8:  # segmented: initiate with the size, then 7-byte segments
+                body = raw if rng.random() < 0.7 else rng.randbytes(rng.choice([5, 8]))
+                frames = [bytes([0x21]) + head + struct.pack("<I", len(body))]
+                for k, pos in enumerate(range(0, len(body), 7)):
+                    chunk = body[pos:pos + 7]
+                    last = pos + 7 >= len(body)
+                    frames.append(bytes([(k & 1) << 4 | (7 - len(chunk)) << 1 | last])
+                                  + chunk + bytes(7 - len(chunk)))
+            else:
+                frames = [bytes([0x40]) + head + bytes(4)]
+            for f in frames:
+                owed += 1
+                got = ask(f)
+                if got is None or (f[0] >> 5 in (1, 2) and got[0] != 0x80
+                                   and got[1:4] != f[1:4]):
+                    problems.append(f"{f.hex()} -> {got.hex() if got else None}")
+                    break
+                if got[0] == 0x80:
+                    aborts += 1
+                    assert struct.unpack_from("<I", got, 4)[0] != 0x08000000, f.hex()
+                    break  # an aborted transfer ends: no more segments
+            if rng.random() < 0.1:
+                drive.set_di(rng.choice([2, 3, 4, 5, 6, 7]), rng.random() < 0.5)
+            with slave.lock:
+                drive.advance(rng.choice([1, 1, 5, 20]) * MS_)
+        assert ask(bytes([0x40, 0x00, 0x10, 0x00]) + bytes(4))[:4] == bytes.fromhex("43001000")
+    assert problems == [], problems[:5]
+    assert owed > 3000 and aborts > 400, (owed, aborts)
+    assert slave.last_resort.count == 0, slave.last_resort.last
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR]

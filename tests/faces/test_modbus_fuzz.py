@@ -133,3 +133,97 @@ def test_modbus_fuzz_over_a_real_pty(tmp_path, caplog):
     assert face.last_resort.count == 0, face.last_resort.last
     assert stack.host.errors == []
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
+
+
+# ---------------------------------------------------------------- PR-mode surfaces, clock on
+
+PR_BENCH = {"P1.001": 0x0001, "P2.010": 0x0101, "P2.011": 0x0108, "P2.012": 0x0111,
+            "P2.013": 0x0112, "P2.014": 0x0146, "P2.015": 0x0139, "P2.016": 0, "P2.036": 0}
+# the surfaces of PR mode, capture and compare (A3 ch. 7), jog (P4.005) and DI mapping
+PR_SURFACE = (["P5.007"] * 8 + ["P4.005"] * 3 + ["P0.001"] + [f"P5.{n:03d}" for n in (
+    8, 9, 10, 11, 12, 13, 15, 16, 20, 35, 36, 37, 38, 39, 56, 57, 58, 59, 60, 64, 76, 98, 99,
+    100, 101, 102, 103)] + [f"P2.{n:03d}" for n in (*range(11, 18), *range(36, 41))])
+TRIGGERS = [0, 1, 99, 100, 999, 1000, 1001, 9999, 10000, 10001, 20050, 65535, -1, -100]
+
+
+def _pr_value(rng: random.Random, name: str, spec) -> int:
+    if name == "P5.007":
+        return rng.choice([*TRIGGERS, rng.randint(1, 99)])
+    if name == "P0.001":
+        return 0  # alarm reset (L7079-7083): the PR engine keeps running
+    if name == "P4.005":
+        return rng.choice([0, 4998, 4999, 1, 100, 5000, 5001, -1])
+    if name.startswith("P2."):
+        return rng.choice([0, 0x100, 0x200, 0x1000]) | rng.randrange(0x100)  # a/b digit, code
+    if rng.random() < 0.5:
+        return rng.choice([0, 1, -1, 99, 100, 799, 800, 0x7FFFFFFF, -2**31, 0xFFFF, 0x10000])
+    return rng.randint(spec.min, spec.max)
+
+
+def _pr_path(rng: random.Random) -> tuple[int, int]:
+    """A PR definition and data word: mostly defined TYPEs with random fields, some garbage."""
+    typ = rng.choice([1, 2, 3, 7, 8, 0xA, 0xB, 0, 4, 5, 9, 0xC, 0xF])
+    definition = rng.randrange(1 << 28) << 4 | typ
+    data = rng.choice([0, 1, 99, 100, 799, 800, -1, 0x0107, 0x0507, rng.randint(-200000, 200000),
+                       rng.randint(-2**31, 2**31 - 1)])
+    return definition, data
+
+
+def test_modbus_fuzz_pr_surfaces_with_the_model_running(caplog):
+    """PR mode with the servo on and the model's clock running: random PR tables (P6.000-
+    P7.099, every TYPE, garbage fields) written by 10h, then P5.007 triggers (0 homing, 1-99,
+    100-999 refused L11176, 1000 stop L11183, 10000+ and negative out of range), P4.005 jog
+    commands (4998/4999/0, L10863-10866), the data array (P5.010-P5.013, P5.100-P5.103),
+    capture / compare (P5.036-P5.039, P5.056-P5.059), DI mapping codes 0x00-0xFF with the
+    contact digit, 03h reads of odd ranges and single 32-bit halves, while DIs toggle. Every
+    request is answered (a reply or an exception), the model never raises, the face's
+    last-resort counter stays 0, and the drive still answers afterwards."""
+    drive = Drive(inputs={8: True}, params=PR_BENCH, sensors={})
+    drive.set_di(1, True)
+    drive.advance(400 * MS)
+    assert drive.servo_on
+    face = ModbusSlave(drive.params, station=STATION, send=lambda _a: None,
+                       lock=threading.RLock())
+    table = drive.params.table
+    rng = random.Random(7007)
+    owed = answered = refused = on = 0
+    with caplog.at_level(logging.ERROR):
+        for _ in range(80):
+            for name, value in PR_BENCH.items():  # the fuzz may have mapped EMGS, NL, PL...
+                if name.startswith("P2."):
+                    drive.params.write(name, value)
+            drive.params.write("P0.001", 0)  # alarm reset (L7079-7083)
+            drive.advance(10 * MS)
+            if not drive.servo_on:  # AL809 (a statement PR) clears by power cycle only (L20232)
+                drive.power_cycle()
+                drive.advance(400 * MS)
+            for n in rng.sample(range(1, 100), 8):
+                base = table.spec(f"P6.{2 * n:03d}" if n < 50 else f"P7.{2 * n - 100:03d}")
+                d, v = (x & 0xFFFFFFFF for x in _pr_path(rng))
+                pdu = mb.write_multiple_request(base.modbus_address,
+                                                [d & 0xFFFF, d >> 16, v & 0xFFFF, v >> 16])
+                owed += 1
+                answered += face._process(pdu, broadcast=False) is not None
+            for _ in range(40):
+                name = rng.choice(PR_SURFACE)
+                spec = table.spec(name)
+                value = _pr_value(rng, name, spec) & 0xFFFFFFFF
+                a = spec.modbus_address
+                pdu = rng.choice([
+                    mb.write_multiple_request(a, [value & 0xFFFF, value >> 16]),
+                    mb.write_single_request(a, value & 0xFFFF),
+                    mb.write_single_request(a + 1, value >> 16),
+                    mb.read_request(a + rng.randrange(2), rng.randint(1, 10))])
+                reply = face._process(pdu, broadcast=False)
+                owed += 1
+                answered += reply is not None
+                refused += bool(reply and reply[0] & 0x80)
+                if rng.random() < 0.15:
+                    drive.set_di(rng.choice([2, 3, 4, 5, 6, 7]), rng.random() < 0.5)
+                drive.advance(rng.choice([1, 1, 5, 20]) * MS)
+                on += drive.servo_on
+        assert face._process(mb.read_request(0x0000, 2), broadcast=False)[0] == 0x03
+    assert answered == owed > 3000 and refused > 300, (answered, owed, refused)
+    assert on > 2000 and len(drive.pr.trace) > 300, (on, len(drive.pr.trace))  # PR ran
+    assert face.last_resort.count == 0, face.last_resort.last
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR]

@@ -370,3 +370,36 @@ def test_data_array_modbus_example() -> None:
     d.params.modbus_write(base, [11])
     assert d.params.modbus_read(base, 6) == [11, 0, 100, 0, 200, 0]
     assert d.params.modbus_read(base, 6) == [13, 0, 300, 0, 0, 0]
+
+
+def test_data_array_refused_read_does_not_advance_p5011() -> None:
+    """A 03h read over P5.012, P5.013 and the undefined 051CH (P5.014) is refused as a whole
+    (exception 02h): the windows' auto-increment (L5108-5114) must not run for it, or the
+    master's next read skips two array entries it never got."""
+    d = make()
+    d.pr.array[11:13] = [100, 200]
+    base = d.params.spec("P5.011").modbus_address
+    d.params.modbus_write(base, [11])
+    with pytest.raises(ModelError):  # UnknownParameter: exception 02h at the face
+        d.params.modbus_read(base + 2, 6)  # 0518H-051DH
+    assert d.params.stored("P5.011") == 11
+    assert d.params.modbus_read(base, 6) == [11, 0, 100, 0, 200, 0]
+
+
+def test_data_array_one_word_write_keeps_the_entry_other_half() -> None:
+    """06h writes only the low word of the 32-bit window P5.012 (L5124 lists 06h among the
+    data-array commands). Its high half is that of the array entry written (docs/manual-
+    choices.md#parameters), not the stale half of the previous entry: after -1 at #5, 7 at #6
+    is 7, not 0xFFFF0007. The same for P5.100-P5.103 (address + k, L5138-5147)."""
+    d = make()
+    d.pr.array[6] = 0x00020000
+    base = d.params.spec("P5.011").modbus_address
+    d.params.modbus_write(base, [5])
+    d.params.modbus_write(base + 2, [0xFFFF, 0xFFFF])  # #5 = -1, P5.011 -> 6
+    d.params.modbus_write(base + 2, [7])  # low word of #6
+    assert d.pr.array[5:7] == [-1, 0x00020007]
+    assert d.params.stored("P5.011") == 7
+    d.params.modbus_write(base, [5])
+    p5100 = d.params.spec("P5.100").modbus_address
+    d.params.modbus_write(p5100 + 2, [9])  # P5.101: #6, low word only
+    assert d.pr.array[5:7] == [-1, 0x00020009]

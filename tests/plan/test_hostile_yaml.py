@@ -115,3 +115,60 @@ def test_hil_run_check_refuses_a_bomb_quickly(tmp_path):
     assert time.monotonic() - t0 < 30
     assert r.returncode == 2, r.stdout + r.stderr
     assert f"{p}:" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+# ---------------------------------------------------------------- type confusion in steps
+
+_WEIRD = [None, True, False, 0, -1, 1.5, float("nan"), 10**30, "", "x", "-5ms", "off",
+          "P9.999", [], {}, ["CN2"], {"a": 1}]
+
+
+def _paths(o, pre=()):
+    if isinstance(o, dict):
+        for k, x in o.items():
+            yield (*pre, k)
+            yield from _paths(x, (*pre, k))
+    elif isinstance(o, list):
+        for i, x in enumerate(o):
+            yield (*pre, i)
+            yield from _paths(x, (*pre, i))
+
+
+def test_mutated_shipped_plans_are_refused_with_file_line_field():
+    """Every shipped plan, one value inside its steps swapped for a value of the wrong
+    type (a list for a name, a mapping for a command, a string for a flag...), or a key
+    dropped: the loader and `check_plan` accept it or refuse it with file, line and field,
+    never another exception. Found: `nmt: {..}`, `pr_wait.state: {..}`, `capture_arm.source:
+    [..]`, `fault.match.function: {..}` (unhashable), `latch.window.min: x` (the error
+    itself failed), `pr_table` fields `type: [..]`, `ins: "off"`, `dest: nan`."""
+    import copy
+
+    import yaml
+
+    from hil.paths import fixture, plans_dir
+    from hil.plan.plan import check_plan, loads_plan
+    from hil.plan.runner import timing_specs
+    from hil.plan.yamlio import PlanFileError
+
+    bench, specs = load_bench(fixture("benches", "virtual.yaml")), timing_specs()
+    rng = random.Random(77)
+    plans = [yaml.safe_load(p.read_text()) for p in sorted(plans_dir().glob("*.yaml"))]
+    assert len(plans) > 30
+    refused = 0
+    for i in range(120):  # ~20 ms each; the corpus in malformed/ pins what it found
+        doc = copy.deepcopy(rng.choice(plans))
+        path = rng.choice([p for p in _paths(doc) if p[0] == "steps" and len(p) > 2])
+        parent = doc
+        for k in path[:-1]:
+            parent = parent[k]
+        if isinstance(parent, dict) and rng.random() < 0.15:
+            del parent[path[-1]]
+        else:
+            parent[path[-1]] = rng.choice(_WEIRD)
+        text = yaml.safe_dump(doc, sort_keys=False)
+        try:
+            check_plan(loads_plan(text, f"m{i}.yaml"), bench, specs)
+        except PlanFileError as e:
+            assert e.line > 0 and e.field.startswith("steps["), (str(e), text)
+            refused += 1
+    assert refused > 60

@@ -142,3 +142,62 @@ def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
         safety = [m for *_t, m in rec.messages("/safety")]
         assert safety, f"{name}: no safe-state record"
         assert (out / f"{name}.html").exists() and (out / f"{name}.junit.xml").exists()
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:  # a zombie has exited: its new parent may not reap it
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+def test_kill_9_of_hil_run_stops_its_orphaned_workers_and_closes_the_recordings(tmp_path):
+    """`kill -9` of `hil run -j 2` (OOM, a CI timeout) left its workers waiting on the pool's
+    queue for ever, each holding its virtual bench. Now each worker sees its parent gone,
+    stops its plan as Ctrl-C does (bench safe, recording closed, reports) and exits."""
+    plans = []
+    for name in ("hold_a", "hold_b"):
+        p = tmp_path / f"{name}.yaml"
+        p.write_text(HOLD.format(name=name))
+        plans.append(str(p))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "run", *plans, "--out", str(out),
+                             "-j", "2", "-q"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    kids: list[int] = []
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (
+                out.is_dir() and len(list(out.glob("*.mcap"))) == 2):
+            time.sleep(0.1)
+        time.sleep(1.0)  # both plans are in their 20 s wait
+        kids = _children(proc.pid)
+        assert len(kids) >= 2, kids
+        proc.kill()
+        proc.wait(10)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and any(_alive(k) for k in kids):
+            time.sleep(0.1)
+        assert not [k for k in kids if _alive(k)], "workers outlived hil run"
+    finally:
+        for k in kids:
+            if _alive(k):
+                os.kill(k, signal.SIGKILL)
+    for name in ("hold_a", "hold_b"):
+        rec = Recording.open(out / f"{name}.mcap")
+        assert not rec.truncated and not rec.corrupt, rec.error
+        assert rec.metadata()["hil.result"]["status"] == "aborted"
+        assert [m for *_t, m in rec.messages("/safety")], f"{name}: no safe-state record"

@@ -67,6 +67,35 @@ def test_globs_pick_plans_by_name(tmp_path):
         find_plans(["zz_*"], tmp_path)
 
 
+def test_long_and_deep_expressions_give_an_error_not_a_recursion_error():
+    """`x or x or ...` 20 000 times matched through 20 000 nested calls and `((((...` or
+    `not not ...` 5 000 deep recursed in the parser: RecursionError tracebacks. Chains are
+    now flat, and nesting beyond MAX_DEPTH is an ExprError (exit 2 in `hil run`)."""
+    assert matches(" or ".join(["zz"] * 20_000 + ["brake"]), {"servo_on_off_brake"})
+    assert not matches(" and ".join(["brake"] * 20_000 + ["zz"]), {"servo_on_off_brake"})
+    assert matches("(" * 50 + "not " * 40 + "brake" + ")" * 50, {"brake"})
+    for deep in ("(" * 5000 + "pr" + ")" * 5000, "not " * 5000 + "pr"):
+        with pytest.raises(ExprError, match="nested more than 100 deep"):
+            Expr.parse(deep)
+
+
+def test_absolute_and_bad_globs(tmp_path):
+    """An absolute glob (pathlib globs relative patterns only) and `**` inside a name gave a
+    traceback; now the plans it matches, or a PlanFileError that `hil run` reports (exit 2)."""
+    for n in ("pr_a", "pr_b"):
+        (tmp_path / f"{n}.yaml").write_text("name: x\nsteps:\n  - wait: 1ms\n")
+    assert find_plans([f"{tmp_path}/pr_*"], tmp_path) == [tmp_path / "pr_a.yaml",
+                                                           tmp_path / "pr_b.yaml"]
+    with pytest.raises(PlanFileError, match="no plan matches"):
+        find_plans([f"{tmp_path}/zz_*.yaml"], tmp_path)
+    for bad in ("x**", f"{tmp_path}/**"):
+        with pytest.raises(PlanFileError, match="not a usable glob"):
+            find_plans([bad], tmp_path)
+    r = _hil("--list", "/nonexistent-hil/*.yaml")
+    assert r.returncode == 2 and "no plan matches '/nonexistent-hil/*.yaml'" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
 def _hil(*args: str, env: dict | None = None, cwd: Path | None = None
          ) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "hil.cli", "run", *args], capture_output=True,

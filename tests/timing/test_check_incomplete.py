@@ -113,3 +113,16 @@ def test_not_an_mcap_file(tmp_path, capsys):
     p.write_text("hello")
     assert hil(["check", str(p)]) == 2
     assert f"{p}: not an MCAP file" in capsys.readouterr().err
+
+
+def test_cut_recording_of_a_killed_run_is_incomplete_not_pass(recording, tmp_path, capsys):
+    """`kill -9` of a run leaves the chunks written so far and no summary or footer
+    (docs/recording.md, crash safety). What the plan did after the cut was never recorded:
+    exit 4 with the reason, as for a damaged chunk, not a silent pass."""
+    data = recording.read_bytes()
+    offsets = chunk_offsets(data)
+    assert len(offsets) > 2
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: offsets[2]])  # two whole chunks, then the file ends
+    assert hil(["check", str(cut)]) == 4
+    assert "truncated (no footer" in capsys.readouterr().err
