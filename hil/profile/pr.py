@@ -176,7 +176,8 @@ def _check_write(p: PrPath, where: str) -> None:
     """Static checks of a write PR (alarms AL207/AL209/AL231 at run time, L20044-20081)."""
     if p.dest_array:
         if p.dest >= ARRAY_SIZE:
-            raise PrError(f"{where}: destination array index {p.dest} > 799 (L5097)")
+            raise PrError(f"{where}: destination array index {p.dest} > 799 (L5097; AL213)",
+                          "AL213")
     elif not _known_param(p.dest_param):
         raise PrError(f"{where}: destination {p.dest_param} does not exist (AL213)", "AL213")
     if p.source == "parameter":
@@ -184,7 +185,8 @@ def _check_write(p: PrPath, where: str) -> None:
             raise PrError(f"{where}: source {p.source_param} does not exist (AL209)", "AL209")
     elif p.source == "array":
         if not 0 <= p.data < ARRAY_SIZE:
-            raise PrError(f"{where}: source array index {p.data} outside 0..799 (L5097)")
+            raise PrError(f"{where}: source array index {p.data} outside 0..799 (L5097; AL209)",
+                          "AL209")
     elif p.source == "monitor" and p.data not in MONITOR_CODES:
         raise PrError(f"{where}: monitor code {p.data} not available (AL231)", "AL231")
 

@@ -359,6 +359,24 @@ def test_write_pr_changes_speed_of_following_moves() -> None:
     assert d.params.get("P5.064") == 600 and puu(d) == 10000
 
 
+@pytest.mark.parametrize(("fields", "alarm"), [
+    ({"source": "array", "data": 5000, "dest": "P5.064"}, "AL209"),
+    ({"source": "array", "data": -1, "dest": "P5.064"}, "AL209"),
+    ({"source": "constant", "data": 7, "dest": 4095, "dest_array": True}, "AL213"),
+])
+def test_write_pr_with_an_array_index_outside_the_array_raises_its_alarm(fields, alarm) -> None:
+    """The data array has 800 entries (L5097). A write PR whose source index lies outside is
+    a source number out of range (AL209, L20049-20052); a destination index outside is a
+    parameter setting error (AL213, L20054-20057) (choice: docs/manual-choices.md). Before,
+    the program ended with no alarm, and -1 would have read the last entry."""
+    d = make()
+    put(d, 1, type_="write", **fields)
+    d.params.write("P5.007", 1)
+    run(d, 0.2)
+    assert alarm in d.alarms.active
+    assert d.params.get("P5.064") != 7
+
+
 def test_data_array_modbus_example() -> None:
     """L5124-5136: 0x10 at P5.011 {11, 100, 200}, {13, 300}; 0x06 P5.011 = 11; 0x03 reads
     11, 100, 200 then 13, 300, 0 (auto-increment)."""
