@@ -58,3 +58,16 @@ def test_output_into_head_stops_quietly(tmp_path, argv):
     _, err = p.communicate(timeout=60)
     assert "Traceback" not in err and "BrokenPipe" not in err, err
     assert p.returncode == 141, (p.returncode, err)
+
+
+@pytest.mark.parametrize(("flag", "url", "needle"), [
+    ("--rs485", "pty:/tmp/hil-cli-inputs?baud=abc", "baud='abc' is not an integer"),
+    ("--rs485", "pty:?baud=115200", "pty: needs a target"),
+    ("--dio", "nope:x", "scheme 'nope' is not a dio transport"),
+])
+def test_drive_malformed_transport_url_is_bad_input(flag, url, needle):
+    """A URL that cannot be parsed is a usage error (2), named; one that parses but cannot
+    be opened stays exit 1 (README exit-code table)."""
+    r = subprocess.run([HIL, "drive", flag, url], capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert needle in r.stderr and "Traceback" not in r.stderr, r.stderr

@@ -19,6 +19,7 @@ from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
 from hil.plan.bench import load_bench
 from hil.plan.yamlio import PlanFileError
+from hil.transport.urls import TransportUrlError, parse_url
 from hil.virtual.stack import DriveSpec, VirtualDriveStack
 from hil.virtual.world import StdioControl, idle_inputs, initial_params
 from hil.yamlio import load_yaml_file
@@ -186,6 +187,13 @@ def main(args: argparse.Namespace) -> int:
         if err:
             print(f"hil drive: {err}", file=sys.stderr)
             return 2
+    try:  # a malformed URL is bad input (2); one that cannot be opened is exit 1
+        for url, kind in ((spec.can, "can"), (spec.rs485, "serial"), (spec.dio, "dio")):
+            if url:
+                parse_url(url, kind)
+    except TransportUrlError as e:
+        print(f"hil drive: {e}", file=sys.stderr)
+        return 2
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
