@@ -93,6 +93,7 @@ class Occ:
 @dataclass(frozen=True)
 class Missing:
     why: str
+    root: bool = False  # an event with no `after`/`before` never happened: no such scenario
 
 
 @dataclass
@@ -153,6 +154,8 @@ class Context:
         self._deliveries: dict[str, list[tuple[int, bool, int]]] | None = None
         end = source.end_time()
         self.end = end if end is not None else 0
+        starts = [msgs[0][0] for topic in source.topics() if (msgs := source.messages(topic))]
+        self.start = min(starts) if starts else 0  # first timestamp (for "never in <span>")
 
     # --- names ------------------------------------------------------------------------
     def env(self, t: int | None) -> dict[str, Any]:
@@ -488,10 +491,10 @@ class Scope:
         occs = self._candidates(ev, lo, hi, anchor)
         if occs:
             return occs[0]
-        span = min(hi, ctx.end) - (anchor.t if anchor else max(lo, 0))
+        span = min(hi, ctx.end) - (anchor.t if anchor else max(lo, ctx.start))
         after = f" after {ctx.label(ev.after)}" if ev.after else ""
         return Missing(f"expected {ctx.expectation(ev.name)}{after}; it never did in "
-                       f"{_dur(max(span, 0))}")
+                       f"{_dur(max(span, 0))}", root=not ev.after)
 
     def _candidates(self, ev: EventDef, lo: int, hi: int, anchor: Occ | None) -> list[Occ]:
         if ev.kind == "first_true":
@@ -582,6 +585,11 @@ def _judge(ctx: Context, c: ConstraintDef, sc: Scope) -> Verdict:
             return Verdict(**base, status="skipped", t_ns=t_ref,
                            message=f"not applicable: `{c.when}` is false ({used})")
     if isinstance(ref, Missing):
+        # the event the constraint starts from hangs off one that never happened at all:
+        # the scenario is not in this recording (as a for_each with no trigger)
+        if ref.root:
+            return Verdict(**base, status="skipped", t_ns=t_ref,
+                           message=f"not applicable: {ref.why}")
         status = "fail" if c.kind == "window" else "skipped"
         return Verdict(**base, status=status, t_ns=t_ref, message=ref.why)
     assert ref is not None

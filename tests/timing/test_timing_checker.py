@@ -297,3 +297,41 @@ def test_earliest_latest_forbid_present():
     assert vs["first"].status == "pass" and vs["last"].status == "fail"
     assert "never did" in vs["last"].message
     assert vs["no B"].status == "fail" and vs["A held"].status == "fail"
+
+
+ROOTED = """
+id: rooted
+title: a constraint with no for_each whose start event is a plain edge
+source: "-"
+signals:
+  A: {topic: /a, field: v}
+  B: {topic: /b, field: v}
+events:
+  a: {rise: A}
+  b: {rise: B, after: a, within: 100}
+  a_plus: {at: a, plus: 5}
+constraints:
+  - name: B after A
+    from: a
+    to: b
+    window: {max: 10}
+  - name: B after A + 5
+    from: a_plus
+    to: b
+    window: {max: 10}
+"""
+
+
+def test_a_start_event_that_never_happens_is_not_applicable():
+    """No rise of A at all: the scenario is not in the recording, as for a for_each with no
+    trigger ("not applicable", skipped); A that rises with no B after it is a failure, and
+    "never did" counts from the recording's start, not from the epoch."""
+    spec = loads_spec(ROOTED)
+    t0 = 1_700_000_000_000  # ms: epoch-stamped like a real recording
+    src = source({("/a", "v"): [(t0, 0)], ("/b", "v"): [(t0, 0), (t0 + 50, 1)]})
+    vs = check(spec, src)
+    assert [v.status for v in vs] == ["skipped", "skipped"], [v.message for v in vs]
+    assert all(v.message.startswith("not applicable: expected A to rise") for v in vs)
+    assert all("never did in 50.0 ms" in v.message for v in vs), [v.message for v in vs]
+    src = source({("/a", "v"): [(t0, 0), (t0 + 10, 1)], ("/b", "v"): [(t0, 0)]})
+    assert [v.status for v in check(spec, src)] == ["fail", "fail"]
