@@ -17,6 +17,7 @@ from hil.model.events import AlarmChanged
 from hil.model.options import ModelOptions
 from hil.model.timebase import MS
 from hil.profile.pr import encode, pr_params
+from tests.model.test_di_functions import enable
 
 PV, PT, PP = 3, 4, 1  # 6060h modes
 # EMGS wired closed (DI8), BRKR on DO6; NL (DI6, b) and PL (DI7, b) closed, no sensors.
@@ -32,12 +33,6 @@ def make(di5: int = 0, di10: int = 0, **params: int) -> tuple[Drive, list]:
     return drive, events
 
 
-def enable(drive: Drive, mode: int) -> None:
-    drive.write_object(0x6060, 0, mode)
-    for cw in (0x06, 0x07, 0x0F):
-        drive.write_object(0x6040, 0, cw)
-    drive.advance(1 * MS)
-    assert drive.servo_on
 
 
 def press(drive: Drive, n: int, closed: bool = True) -> int:
@@ -168,20 +163,28 @@ def test_pfqs_stops_a_pr_move_al35f_then_al3cf() -> None:
 
 
 
+
+def interrupt_a_chain(d: Drive, di: int) -> tuple[int, set]:
+    """PR#1 AUTO 1 000 000 PUU -> PR#2, started by P5.007; DI `di` pressed 200 ms in; then
+    300 ms of (P5.007, MC_OK) pairs as seen each ms. Returns (press time, pairs)."""
+    put(d, 1, type_="auto", data=1_000_000, spd=4)
+    put(d, 2, type_="single", data=0, spd=4)
+    d.params.write("P5.007", 1)
+    d.advance(200 * MS)
+    t0 = press(d, di)
+    seen = set()
+    for _ in range(300):
+        d.advance(1 * MS)
+        seen.add((d.params.read("P5.007"), d.dio.do_function_state("MC_OK")))
+    return t0, seen
+
+
 def test_pfqs_ends_the_pr_program_no_next_path_no_completion() -> None:
     """PFQS is an emergency stop (L15253, AL35F "緊急停止 (減速過程中)" L20141): an AUTO chain
     does not go on to its next path, and the stopped command is no completed one - Cmd_OK /
     MC_OK stay off and P5.007 never reads n + 10000 / n + 20000 (L11185, L15319)."""
     d, _ = make_pr()
-    put(d, 1, type_="auto", data=1_000_000, spd=4)
-    put(d, 2, type_="single", data=0, spd=4)
-    d.params.write("P5.007", 1)
-    d.advance(200 * MS)
-    t0 = press(d, 5)
-    seen = set()
-    for _ in range(300):
-        d.advance(1 * MS)
-        seen.add((d.params.read("P5.007"), d.dio.do_function_state("MC_OK")))
+    t0, seen = interrupt_a_chain(d, di=5)
     assert seen == {(1, False)}
     assert [w for t, w in d.pr.trace if t >= t0 and w.startswith("read")] == []
     assert d.snapshot()["position_puu"] > 50_000  # stopped where the quick stop left it
@@ -210,15 +213,7 @@ def test_a_jog_during_a_pr_program_ends_it_without_completion() -> None:
     """JOGU acts in every mode (L15209) and takes the axis: the PR program it interrupts is
     not completed - no next path, Cmd_OK/MC_OK off, P5.007 reads the bare number (L11185)."""
     d, _ = make_pr(**{"P2.014": 0x0137, "P4.005": 100})  # DI5 = JOGU
-    put(d, 1, type_="auto", data=1_000_000, spd=4)
-    put(d, 2, type_="single", data=0, spd=4)
-    d.params.write("P5.007", 1)
-    d.advance(200 * MS)
-    t0 = press(d, 5)
-    seen = set()
-    for _ in range(300):
-        d.advance(1 * MS)
-        seen.add((d.params.read("P5.007"), d.dio.do_function_state("MC_OK")))
+    t0, seen = interrupt_a_chain(d, di=5)
     assert rpm(d) == pytest.approx(100, abs=2)
     assert seen == {(1, False)}
     assert [w for t, w in d.pr.trace if t >= t0 and w.startswith("read")] == []
