@@ -227,16 +227,24 @@ class Context:
         return out
 
     def _sampling(self, topic: str, raw: list[tuple[int, Any]]) -> dict[int, tuple[int, int]]:
+        """(0, gap) for samples that are observations, not events: a virtual bench's periodic
+        state sample (gap since the previous message of its topic) and a value the harness
+        polled, an SDO upload response (`kind: sdo_tx`; gap since the previous sample of the
+        same field: a change first seen there happened after that one, e.g. a statusword
+        polled late by a loaded harness)."""
         msgs = self.source.messages(topic)
         periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
-        if not periodic:
+        polled = {t for t, m in msgs if isinstance(m, dict) and m.get("kind") == "sdo_tx"}
+        if not periodic and not polled:
             return {}
         times = [t for t, _m in msgs]
         out = {}
-        for t, _v in raw:
+        for k, (t, _v) in enumerate(raw):
             i = bisect.bisect_left(times, t)
             if t in periodic and i > 0:
                 out[t] = (0, t - times[i - 1])
+            elif t in polled and k > 0:
+                out[t] = (0, t - raw[k - 1][0])
         return out
 
     def trace(self, name: str) -> Trace:
@@ -670,7 +678,8 @@ def _load_what(lag: int, early: int) -> str:
         parts.append(f"the {_ms(lag):.3f} ms the input edge took to reach the drive after "
                      "the harness stamped it")
     if early:
-        parts.append(f"the {_ms(early):.3f} ms since the drive's previous state sample")
+        parts.append(f"the {_ms(early):.3f} ms since the previous observation (a state sample "
+                     "or a poll)")
     return " and ".join(parts)
 
 

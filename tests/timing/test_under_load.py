@@ -106,16 +106,49 @@ def test_a_change_seen_in_a_late_periodic_sample_is_inconclusive_within_the_gap(
     late = _torque_cut([(-10, True, True), (22, False, True)])
     v = _verdict(late, TORQUE)
     assert v.status == "inconclusive", v.message
-    assert "32.000 ms since the drive's previous state sample" in v.message
+    assert "32.000 ms since the previous observation (a state sample" in v.message
     # the same change at a model event (an exact sample) is a fail
     exact = _torque_cut([(-10, True, True), (22, False, False)])
     assert _verdict(exact, TORQUE).status == "fail"
     # still on at 24 ms, off at 30 ms: late whichever instant in between
     beyond = _torque_cut([(24, True, True), (30, False, True)])
     v = _verdict(beyond, TORQUE)
-    assert v.status == "fail" and "since the drive's previous state sample" in v.message
+    assert v.status == "fail" and "since the previous observation" in v.message
     # and a pass stays a pass
     assert _verdict(_torque_cut([(-10, True, True), (8, False, True)]), TORQUE).status == "pass"
+
+
+
+SOD = "transitions 7/9/10/12: Disable voltage -> SWITCH ON DISABLED"
+
+
+def _polled_disable(polls: list[tuple[float, int]]) -> list:
+    """Disable voltage (6040h = 0) written by SDO at 0 ms; the harness polls 6041h by SDO
+    upload (`sdo_tx` responses) at the given ms with the statusword it got back."""
+    bus = "/canopen/can0"
+    msgs = [(-10 * MS, {"kind": "sdo_rx", "index": 0x6040, "controlword": 0x0F}),
+            (-5 * MS, {"kind": "sdo_tx", "index": 0x6041, "statusword": 0x0637}),
+            (0, {"kind": "sdo_rx", "index": 0x6040, "controlword": 0x00})]
+    msgs += [(round(t * MS), {"kind": "sdo_tx", "index": 0x6041, "statusword": sw})
+             for t, sw in polls]
+    src = MemorySource({bus: sorted(msgs, key=lambda m: m[0])}, {})
+    spec = load_spec(fixture("timing", "cia402_transitions.yaml"))
+    return [v for v in check(spec, src, binding={"bus": "can0"}) if v.constraint == SOD]
+
+
+def test_a_state_first_seen_in_a_late_poll_is_inconclusive_within_the_poll_gap():
+    """Seen once under load (cia402_power_states, xdist + three more processes on 2 cores):
+    SWITCH ON DISABLED first seen 14.5 ms after Disable voltage, allowed <= 10 ms. A value
+    the harness polled changed somewhere after its previous poll: if that poll still showed
+    the old state at 1 ms, the transition lies in (1, 14.5] ms - inconclusive. A poll that
+    still showed the old state at 12 ms makes it late for sure - fail."""
+    (v,) = _polled_disable([(1, 0x0637), (14.5, 0x0250)])
+    assert v.status == "inconclusive", v.message
+    assert "13.500 ms since the previous observation" in v.message
+    (v,) = _polled_disable([(1, 0x0637), (12, 0x0637), (14.5, 0x0250)])
+    assert v.status == "fail", v.message
+    (v,) = _polled_disable([(1, 0x0637), (3, 0x0250)])
+    assert v.status == "pass", v.message
 
 
 def _record(path, msgs: dict) -> None:
