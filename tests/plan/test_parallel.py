@@ -11,6 +11,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -108,7 +109,9 @@ def test_j2_on_a_real_bench_runs_one_plan_at_a_time_and_says_so(tmp_path, capsys
     assert "-j: 'x'" in capsys.readouterr().err
 
 
-def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
+
+def _start_two_holds(tmp_path: Path, **popen: Any) -> tuple[subprocess.Popen, Path]:
+    """`hil run -j 2 -q` of two HOLD plans; returns once both recordings exist (or 60 s)."""
     plans = []
     for name in ("hold_a", "hold_b"):
         p = tmp_path / f"{name}.yaml"
@@ -116,13 +119,18 @@ def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
         plans.append(str(p))
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "run", *plans, "--out", str(out),
-                             "-j", "2", "-q"], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+                             "-j", "2", "-q"], **popen)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (
+            out.is_dir() and len(list(out.glob("*.mcap"))) == 2):
+        time.sleep(0.1)
+    return proc, out
+
+
+def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
+    proc, out = _start_two_holds(tmp_path, stdout=subprocess.PIPE,
+                                 stderr=subprocess.STDOUT, text=True)
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not (
-                out.is_dir() and len(list(out.glob("*.mcap"))) == 2):
-            time.sleep(0.1)
         time.sleep(1.5)  # both plans are in their 20 s wait
         t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)  # to the parent only: it stops its workers
@@ -168,21 +176,10 @@ def test_kill_9_of_hil_run_stops_its_orphaned_workers_and_closes_the_recordings(
     """`kill -9` of `hil run -j 2` (OOM, a CI timeout) left its workers waiting on the pool's
     queue for ever, each holding its virtual bench. Now each worker sees its parent gone,
     stops its plan as Ctrl-C does (bench safe, recording closed, reports) and exits."""
-    plans = []
-    for name in ("hold_a", "hold_b"):
-        p = tmp_path / f"{name}.yaml"
-        p.write_text(HOLD.format(name=name))
-        plans.append(str(p))
-    out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "run", *plans, "--out", str(out),
-                             "-j", "2", "-q"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    proc, out = _start_two_holds(tmp_path, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
     kids: list[int] = []
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not (
-                out.is_dir() and len(list(out.glob("*.mcap"))) == 2):
-            time.sleep(0.1)
         time.sleep(1.0)  # both plans are in their 20 s wait
         kids = _children(proc.pid)
         assert len(kids) >= 2, kids
