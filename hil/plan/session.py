@@ -194,6 +194,10 @@ class Session:
                 d.set_line(line, True)
         time.sleep(0.02)  # beyond the P2.009 DI filter (L9229-9236) before the first step
 
+    def on_close(self, fn: Callable[[], None]) -> None:
+        """Run `fn` when the session closes, before the transports opened so far close."""
+        self._closers.append(fn)
+
     def close(self) -> None:
         for fn in reversed(self._closers):
             with contextlib.suppress(Exception):

@@ -364,10 +364,23 @@ class Context:
                 tr = self.trace(ev.signal or "")
                 kind = {"raised": "rise", "cleared": "fall"}.get(ev.kind, ev.kind)
                 self._occs[name] = [tr.occ(t) for t in tr.edges(kind, ev.value)]
+            elif ev.kind == "message":
+                self._occs[name] = self._messages(ev.signal or "")
             else:
                 occ = Scope(self, 0, NEG_INF, POS_INF).resolve(name)
                 self._occs[name] = [occ] if isinstance(occ, Occ) else []
         return self._occs[name]
+
+    def _messages(self, name: str) -> list[Occ]:
+        """`message: SIG`: every recorded message of the signal's topic that passes its
+        `where` and whose value (after the transforms) is true, e.g. each SYNC frame the
+        harness put on the wire; a repeated value is an event each time."""
+        s = self._signal_def(name)
+        topic, fld, _ = self._where_from(s)
+        raw = samples(self.source, topic, fld, s.where)
+        res = self._resolution(topic, s)
+        lags = self._lags(s, topic, raw)
+        return [Occ(t, res, *lags.get(t, (0, 0))) for t, v in self._transform(s, raw) if v]
 
     def label(self, name: str) -> str:
         ev = self.spec.events[name]
@@ -375,7 +388,7 @@ class Context:
             return ev.label
         sig = (ev.signal or "").removeprefix("alarm:")
         verbs = {"rise": "rose", "fall": "fell", "change": "changed", "raised": "raised",
-                 "cleared": "cleared", "first_true": "true"}
+                 "cleared": "cleared", "first_true": "true", "message": "message"}
         if ev.kind in verbs:
             return f"{sig} {verbs[ev.kind]}"
         if ev.kind == "becomes":
@@ -391,6 +404,7 @@ class Context:
             "rise": f"{sig} to rise", "fall": f"{sig} to fall", "change": f"{sig} to change",
             "becomes": f"{sig} to become {ev.value}", "raised": f"{sig} to be raised",
             "cleared": f"{sig} to clear", "first_true": f"{sig} to be true",
+            "message": f"a {sig} message",
         }.get(ev.kind, self.label(name))
 
 
@@ -713,7 +727,7 @@ def _judge_forbid(ctx, c, sc, f: Occ, base) -> Verdict:
     if c.kind == "forbid":
         ev = ctx.spec.events[c.target]
         occs = (ctx.occurrences(c.target) if ev.kind in
-                ("rise", "fall", "change", "becomes", "raised", "cleared") else
+                ("rise", "fall", "change", "becomes", "raised", "cleared", "message") else
                 [o for o in [sc.resolve(c.target)] if isinstance(o, Occ)])
         status, hit, why = "pass", None, " (within the observation resolution)"
         for o in occs:

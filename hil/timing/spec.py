@@ -80,7 +80,7 @@ class SignalDef:
 @dataclass
 class EventDef:
     name: str
-    kind: str  # rise fall change becomes raised cleared first_true at earliest_of latest_of
+    kind: str  # rise fall change becomes raised cleared first_true message at earliest_of latest_of
     line: int
     signal: str | None = None
     value: Any = None
@@ -182,8 +182,8 @@ _SIGNAL_KEYS = {
     "any": {"any"},
     "not": {"not"},
 }
-_EVENT_KINDS = ("rise", "fall", "change", "becomes", "raised", "cleared", "first_true", "at",
-                "earliest_of", "latest_of")
+_EVENT_KINDS = ("rise", "fall", "change", "becomes", "raised", "cleared", "first_true",
+                "message", "at", "earliest_of", "latest_of")
 _EVENT_MODS = {"after", "before", "within", "label"}
 _CONSTRAINT_KEYS = {"name", "from", "to", "until", "at", "window", "when", "for_each",
                     "source", "note", "forbid", "absent", "present"}
@@ -431,10 +431,13 @@ def _event(v: _V, name: str, d: LDict, line: int, where: str, signals, events) -
     v.keys(d, allowed, where, ("value",) if kind == "becomes" else ())
     ev = EventDef(name=name, kind=kind, line=line)
     kl = d.key_lines[kind]
-    if kind in ("rise", "fall", "change", "becomes", "first_true"):
+    if kind in ("rise", "fall", "change", "becomes", "first_true", "message"):
         sig = d[kind]
         if sig not in signals:
             raise v.err(kl, f"{where}.{kind}", f"unknown signal {sig!r}")
+        if kind == "message" and signals[sig].kind != "topic":
+            raise v.err(kl, f"{where}.{kind}", f"signal {sig!r} is not read from a topic: "
+                        "`message` needs a {topic: ..., field: ...} signal")
         ev.signal = sig
         ev.value = d.get("value")
     elif kind in ("raised", "cleared"):

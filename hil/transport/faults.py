@@ -50,6 +50,8 @@ REPLY_FAULTS = ("reply_late", "reply_partial", "reply_split", "reply_noise")
 SERIAL_FAULTS = REQUEST_FAULTS + REPLY_FAULTS
 DIO_FAULTS = ("bounce", "stuck")
 fault_ids = itertools.count(1)  # /faults ids, unique in the process
+# Bursts whose frames must go out within a window: AL111/AL112 "within 1 ms" (L19933, L19941).
+BURST_WINDOW_NS = {"sdo_flood": 1_000_000, "duplicate_pdo": 1_000_000}
 
 
 class FaultSink(Protocol):
@@ -162,17 +164,12 @@ class _Faults:
         for f in list(self.active):
             self.stop(f)
 
-    def instant(self, kind: str, **detail: Any) -> None:
-        """A fault that is one action (a burst): start and end recorded around it."""
+    def span(self, kind: str, t0: int, t1: int, **detail: Any) -> None:
+        """A fault that was one action (a burst), recorded after it: start at `t0`, end at
+        `t1` (wall ns), both with `detail` (what it measured, e.g. its spread)."""
         f = Fault(kind, self.transport, params=detail)
-        self._record(f, True)
-        self._pending_instant = f
-
-    def instant_end(self) -> None:
-        f = getattr(self, "_pending_instant", None)
-        if f is not None:
-            self._record(f, False)
-            self._pending_instant = None
+        self._record(f, True, t0)
+        self._record(f, False, t1)
 
     def current(self) -> list[Fault]:
         now = time.monotonic_ns()
@@ -184,7 +181,7 @@ class _Faults:
                 out.append(f)
         return out
 
-    def _record(self, f: Fault, active: bool) -> None:
+    def _record(self, f: Fault, active: bool, t: int | None = None) -> None:
         if self.sink is None:
             return
         detail = dict(f.params)
@@ -194,7 +191,7 @@ class _Faults:
         if f.rate < 1.0:
             detail["rate"] = f.rate
         try:
-            self.sink.fault(f.kind, self.transport, active, f.id, **detail)
+            self.sink.fault(f.kind, self.transport, active, f.id, t=t, **detail)
         except Exception:  # a recording problem must not change what is injected
             pass
 
@@ -207,6 +204,7 @@ class FaultyCanBus(can.BusABC):
         self.bus = bus
         self.name = name
         self.faults = _Faults(f"can:{name}", sink, seed)
+        self.last_spread_ns = 0  # of the last burst: first send to last return
         self.channel_info = f"{bus.channel_info} (fault layer)"
         self._can_protocol = bus.protocol
         super().__init__(channel=getattr(bus, "channel", name))
@@ -231,16 +229,27 @@ class FaultyCanBus(can.BusABC):
                   match=match or CanMatch(), every=every)
         return self.faults.start(f, duration_ns)
 
-    def burst(self, kind: str, frames: Iterable[can.Message], **detail: Any) -> int:
+    def burst(self, kind: str, frames: Iterable[can.Message], *, within_ns: int | None = None,
+              **detail: Any) -> int:
         """Send `frames` back to back (an SDO flood, a duplicate PDO, error frames);
-        recorded as one fault `kind` from the first frame to the last. Returns the count."""
+        recorded as one fault `kind` from the first frame to the last, with its measured
+        `spread_us` and, with a window (`within_ns`, default BURST_WINDOW_NS[kind]), `tight`
+        (spread < window: a loaded host can stretch a burst past the window the fault
+        needs, AL111/AL112's 1 ms). Returns the count; `last_spread_ns` keeps the spread."""
         frames = list(frames)
-        self.faults.instant(kind, frames=len(frames), **detail)
+        if within_ns is None:
+            within_ns = BURST_WINDOW_NS.get(kind)
+        t0 = time.time_ns()
         try:
             for m in frames:
                 self.bus.send(m)
         finally:
-            self.faults.instant_end()
+            t1 = time.time_ns()
+            self.last_spread_ns = t1 - t0
+            info: dict[str, Any] = {"frames": len(frames), "spread_us": round((t1 - t0) / 1e3, 1)}
+            if within_ns is not None:
+                info["tight"] = t1 - t0 < within_ns
+            self.faults.span(kind, t0, t1, **info, **detail)
         return len(frames)
 
     def stop_all(self) -> None:

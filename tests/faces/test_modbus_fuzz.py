@@ -28,6 +28,7 @@ import threading
 import time
 import tty
 
+import pytest
 from modbus_fuzz import STATION, check_replies, units
 
 from hil.faces.modbus_slave import ModbusSlave
@@ -95,6 +96,7 @@ def _read_replies(fd: int, count: int, timeout: float) -> list[bytes]:
     return out
 
 
+@pytest.mark.integration  # real pty, the drive host ticking in real time
 def test_modbus_fuzz_over_a_real_pty(tmp_path, caplog):
     link = tmp_path / "ttyA3"
     spec = DriveSpec(name="fuzz", rs485=f"pty:{link}?baud=115200", station=STATION)

@@ -91,3 +91,24 @@ def test_every_rs485_fault_kind_parses():
     steps = "".join(f"  - fault: {{rs485: {k}, for: 1s}}\n" for k in SERIAL_FAULTS)
     plan = loads_plan(f"name: p\nsteps:\n{steps}")
     assert [s.args["kind"] for s in plan.steps] == list(SERIAL_FAULTS)
+
+
+def test_a_burst_the_host_stretched_past_1ms_is_sent_again():
+    """duplicate_pdo / sdo_flood need their frames within 1 ms (L19933, L19941): a burst
+    a loaded host stretched is recorded `tight: false` and sent again; the message says so.
+    A host that never manages it fails the step instead of claiming a fault it did not make."""
+    from hil.plan.fault_steps import BURST_ATTEMPTS, _burst
+    from hil.transport.faults import FaultyCanBus
+    from tests.transport.test_faults import Sink, SlowBus, frame
+
+    sink = Sink()
+    bus = FaultyCanBus(SlowBus([0, 0.003, 0, 0]), "can0", sink=sink)
+    msg = _burst(bus, "duplicate_pdo", [frame(0x201)] * 2)
+    assert "2 frames back to back" in msg and "sent again" in msg and "over the 1 ms" in msg
+    starts = [r[4]["tight"] for r in sink.records if r[2]]
+    assert starts[0] is False and starts[-1] is True and not any(starts[1:-1])  # retried
+    slow = FaultyCanBus(SlowBus([0, 0.0015] * BURST_ATTEMPTS), "can0", sink=Sink())
+    with pytest.raises(RuntimeError, match=r"could not send 2 frames within 1 ms in 5 tries"):
+        _burst(slow, "sdo_flood", [frame(0x601)] * 2)
+    assert "sent again" not in _burst(FaultyCanBus(SlowBus([0.002] * 3), "can0"),
+                                      "bus_error", [frame(0)] * 3)  # no window

@@ -89,7 +89,7 @@ class _ModelSink:
         self.rig = rig
 
     def fault(self, *args: Any, t: int | None = None, **detail: Any) -> None:
-        self.rig.rec.fault(*args, t=self.rig.t(), **detail)
+        self.rig.rec.fault(*args, t=self.rig.model_t_of(t), **detail)
 
 
 class FaultRig:
@@ -101,6 +101,7 @@ class FaultRig:
         self.rec = Recorder(path)
         self.tap = ModelTap(self.drive, self.rec, bus=BUS)
         self._queue: list[can.Message] = []
+        self._sent: list[tuple[int, int]] = []  # (wall ns, model record time) per frame sent
         sink = _ModelSink(self)
         self.bus = FaultyCanBus(_Wire(self._harness_sent), BUS, sink=sink, seed=1)
         self.slave = CanopenSlave(_Wire(self._drive_sent), self.drive, node_id=NODE,
@@ -118,6 +119,15 @@ class FaultRig:
     # -- time --------------------------------------------------------------------------
     def t(self) -> int:
         return EPOCH_NS + self.drive.now
+
+    def model_t_of(self, wall_ns: int | None) -> int:
+        """The record time of a fault stamped `wall_ns` after the fact (a burst's start,
+        taken before its first frame): the model time that frame went out; else now."""
+        if wall_ns is not None:
+            for wall, model in self._sent:
+                if wall >= wall_ns:
+                    return model
+        return self.t()
 
     def run(self, ms: float) -> None:
         """Let `ms` pass: cyclic producers, frame delivery, drive and face timers per 1 ms."""
@@ -143,6 +153,7 @@ class FaultRig:
 
     # -- CAN -----------------------------------------------------------------------------
     def _harness_sent(self, msg: can.Message) -> None:
+        self._sent = [*self._sent[-63:], (time.time_ns(), self.t())]
         self.drive.advance(FRAME_NS)  # a burst takes bus time: its start and end differ
         msg.timestamp = WALL0 + self.drive.now / 1e9
         self.rec.can(BUS, msg, "tx", self.t())

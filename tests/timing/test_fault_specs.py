@@ -15,6 +15,7 @@ import pytest
 
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
+from hil.timing.source import RecordingSource
 from hil.transport.faults import CanMatch
 from tests.timing.fault_rig import MASTER, NODE, FaultRig, verdicts
 from tests.timing.test_specs_on_model import assert_all_pass, judged
@@ -380,3 +381,59 @@ def test_heartbeat_fault_reaction_while_moving(tmp_path, knob, mechanics, params
             assert [s for c, s in status.items() if c.startswith(rule)] == ["fail"], status
         elif not params:  # with BRKR on no output the brake rule has no BRKR line to judge
             assert [s for c, s in status.items() if c.startswith(rule)] == ["pass"], status
+
+
+def sync_producer_late(rig: FaultRig) -> None:
+    """IP mode, SYNC every 20 ms; the harness's SYNC producer stalls right when the drop and
+    then the duplicate start (a loaded host): the last SYNC before the drop left 30-50 ms
+    before it, the first duplicated SYNC 45 ms after the duplicate fault started."""
+    rig.sdo_write(0x1006, 0, 20_000)
+    rig.sdo_write(0x6060, 0, 7, 1)
+    rig.nmt(0x01)
+    enable(rig)
+    rig.produce("sync", 20, 0x80)
+    rig.run(200)
+    del rig.producers["sync"]  # stalled
+    rig.run(30)
+    f = rig.drop("sync")
+    rig.produce("sync", 20, 0x80)
+    rig.run(200)
+    rig.stop(f)
+    del rig.producers["sync"]
+    rig.sdo_write(0x6040, 0, 0x8F, 2)  # 6040h reset clears AL3E3 (L20169)
+    rig.sdo_write(0x6040, 0, 0x0F, 2)
+    rig.run(10)
+    f = rig.bus.inject("duplicate", match=CanMatch(functions=("sync",)))
+    rig.run(45)  # stalled
+    rig.produce("sync", 20, 0x80)
+    rig.run(25)
+    rig.stop(f)
+    rig.run(50)
+
+
+def test_sync_rules_are_timed_from_the_wire_not_from_a_late_producer(tmp_path):
+    """AL3E3 and AL3E2 are judged from the SYNC frames on the wire (`message:` events), so
+    a SYNC producer that ran late (a loaded harness) does not fail the drive: AL3E3 comes
+    earlier after the drop's start than 2 x 20 ms, but 60 ms after the last SYNC; AL3E2 45 ms
+    after the duplicate started (> 20 + 20 ms), but within one scan of the SYNC."""
+    rig = FaultRig(tmp_path / "run.mcap")
+    try:
+        sync_producer_late(rig)
+    finally:
+        path = rig.close()
+    vs = {v.constraint: v for v in verdicts(path, "fault_sync_ip")}
+    e3 = vs["AL3E3 after the SYNC timeout"]
+    assert e3.status == "pass" and 59.0 <= e3.measured_ms <= 62.0, e3.message
+    e2 = vs["AL3E2 on the first early SYNC"]
+    assert e2.status == "pass" and e2.measured_ms <= 2.0, e2.message
+    src = RecordingSource(path)
+    faults = [(t, m["fault"]) for t, m in src.messages("/faults") if m["active"]]
+    (t_drop,) = [t for t, k in faults if k == "drop"]
+    (t_dup,) = [t for t, k in faults if k == "duplicate"]
+    alarms = {}
+    for t, m in src.messages("/drive/drive1/state"):
+        for a in m.get("alarms", []):
+            alarms.setdefault(a, t)
+    # from the fault's start (the old anchor, [2 x 20, 3 x 20 + 20] ms) both would fail
+    assert not 40 <= (alarms["AL3E3"] - t_drop) / 1e6 <= 80
+    assert (alarms["AL3E2"] - t_dup) / 1e6 > 40

@@ -335,3 +335,69 @@ def test_a_start_event_that_never_happens_is_not_applicable():
     assert all("never did in 50.0 ms" in v.message for v in vs), [v.message for v in vs]
     src = source({("/a", "v"): [(t0, 0), (t0 + 10, 1)], ("/b", "v"): [(t0, 0)]})
     assert [v.status for v in check(spec, src)] == ["fail", "fail"]
+
+
+WIRE = """
+id: wire
+title: events on frames recorded on the wire
+source: "-"
+signals:
+  SYNC: {topic: /canopen/can0, field: kind, where: {dir: tx, kind: sync}}
+  GO: {topic: /go, field: v}
+  DONE: {topic: /done, field: v}
+events:
+  go: {rise: GO}
+  sync: {message: SYNC}
+  first: {message: SYNC, after: go, label: the first SYNC after GO}
+  last: {message: SYNC, before: go, label: the last SYNC before GO}
+  done: {rise: DONE, after: go}
+constraints:
+  - {name: done after the first SYNC, from: first, to: done, window: {max: 5}}
+  - {name: done after the last SYNC, from: last, to: done, window: {max: 50}}
+  - {name: each SYNC, for_each: sync, forbid: done, from: sync, window: {min: 0, max: 1}}
+  - {name: no SYNC soon after GO, forbid: first, from: go, window: {min: 0, max: 20}}
+"""
+
+
+def _wire_source(syncs_ms, go_ms, done_ms):
+    from hil.timing.source import MemorySource
+    src = MemorySource()
+    frames = [(t, {"dir": "tx", "kind": "sync"}) for t in syncs_ms]
+    frames += [(t + 0.5, {"dir": "rx", "kind": "tpdo1"}) for t in syncs_ms]  # others ignored
+    for t, m in sorted(frames, key=lambda x: x[0]):
+        src.add("/canopen/can0", round(t * 1e6), m)
+    for topic, t in (("/go", go_ms), ("/done", done_ms)):
+        src.add(topic, 0, {"v": False})
+        src.add(topic, round(t * 1e6), {"v": True})
+    return src
+
+
+def test_message_events_are_every_recorded_frame_even_with_the_same_value():
+    """`message:` is each message of its signal (a SYNC frame every 20 ms, each "sync"):
+    `rise`/`first_true` would see one value and no edge. `after`/`before` pick the frame
+    next to the anchor; under `for_each` each frame is judged; `forbid` finds one."""
+    spec = loads_spec(WIRE)
+    src = _wire_source([0, 20, 40, 60, 80], go_ms=45, done_ms=62)
+    vs = {v.constraint: v for v in check(spec, src) if v.constraint != "each SYNC"}
+    assert vs["done after the first SYNC"].status == "pass"
+    assert vs["done after the first SYNC"].measured_ms == 2.0  # SYNC at 60, not GO at 45
+    assert "the first SYNC after GO" in vs["done after the first SYNC"].message
+    assert vs["done after the last SYNC"].measured_ms == 22.0  # the SYNC at 40
+    assert vs["no SYNC soon after GO"].status == "fail"  # the one at 60 is 15 ms after GO
+    each = [v for v in check(spec, src) if v.constraint == "each SYNC"]
+    assert [v.status for v in each] == ["pass"] * 5  # one verdict per frame
+    late = _wire_source([0, 20, 40, 90], go_ms=45, done_ms=97)  # the SYNC producer ran late
+    vs = {v.constraint: v for v in check(spec, late)}
+    assert vs["done after the first SYNC"].status == "fail"  # 7 ms after the SYNC at 90
+    assert vs["no SYNC soon after GO"].status == "pass"
+
+
+def test_message_event_needs_a_topic_signal():
+    bad = WIRE.replace("  first: {message: SYNC,", "  first: {message: GO_NOT,")
+    with pytest.raises(Exception, match=r":12: events.first.message: unknown signal 'GO_NOT'"):
+        loads_spec(bad)
+    bad = WIRE.replace("  DONE: {topic: /done, field: v}",
+                       "  DONE: {topic: /done, field: v}\n  NOT_GO: {not: GO}").replace(
+        "  first: {message: SYNC,", "  first: {message: NOT_GO,")
+    with pytest.raises(Exception, match=r"not read from a topic"):
+        loads_spec(bad)

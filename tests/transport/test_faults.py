@@ -19,9 +19,11 @@ MS = 1_000_000
 class Sink:
     def __init__(self) -> None:
         self.records: list[tuple] = []
+        self.times = []
 
     def fault(self, fault, transport, active, fault_id, *, t=None, **detail):
         self.records.append((fault, transport, active, fault_id, detail))
+        self.times.append(t)
 
 
 @pytest.fixture
@@ -122,6 +124,40 @@ def test_burst_is_one_recorded_fault(pair):
     got = drain(peer)
     assert len(got) == 17 and all(m.is_error_frame for m in got)
     assert [(r[0], r[2]) for r in sink.records] == [("bus_error", True), ("bus_error", False)]
+
+
+class SlowBus(can.BusABC):
+    """A bus whose sends take `delays` seconds each, in turn (a loaded host)."""
+
+    def __init__(self, delays):
+        self.delays = list(delays)
+        self.sent = []
+        super().__init__(channel="slow")
+
+    def send(self, msg, timeout=None):
+        time.sleep(self.delays.pop(0) if self.delays else 0)
+        self.sent.append(msg)
+
+    def _recv_internal(self, timeout):
+        return None, False
+
+
+def test_burst_records_its_spread_and_whether_it_was_tight():
+    """A burst is recorded start (before the first frame) and end (after the last) with its
+    measured spread; `tight` says whether it stayed within the window the fault needs."""
+    sink = Sink()
+    bus = FaultyCanBus(SlowBus([0, 0.003]), "can0", sink=sink)
+    frames = [frame(0x201, b"\0\0\0")] * 2
+    bus.burst("duplicate_pdo", frames, within_ns=MS)
+    (_, _, a0, id0, d0), (_, _, a1, id1, d1) = sink.records
+    assert (a0, a1) == (True, False) and id0 == id1
+    assert d0 == d1 and d0["tight"] is False and d0["spread_us"] >= 3000 and d0["frames"] == 2
+    assert sink.times[1] - sink.times[0] == bus.last_spread_ns >= 3 * MS
+    bus.burst("duplicate_pdo", frames, within_ns=10_000 * MS)  # no delay: well within
+    assert sink.records[-1][4]["tight"] is True and bus.last_spread_ns < 10_000 * MS
+    bus.burst("bus_error", error_frames(3))  # no window: no verdict on it
+    assert "tight" not in sink.records[-1][4]
+    bus.shutdown()
 
 
 def test_bad_fault_is_refused(pair):

@@ -1,0 +1,64 @@
+"""A cyclic producer (SYNC, heartbeat, node guarding) that never catches up in a burst.
+
+python-can's `send_periodic` keeps its phase: a thread that wakes 40 ms late sends the
+missed frames back to back. For SYNC that burst is a genuinely early SYNC (AL3E2,
+L20159-20163) and a cycle off 1006h (AL301, L20123-20127) that the harness made, not the
+drive. A real master's producer does not do that, so this one re-phases instead: a frame
+more than `rephase` x period late is sent at once and the cycle restarts from it. Every
+interval is then at least (1 - rephase) x period; a stall still makes one long interval
+(that is what a stalled master does) and is reported through `on_late`.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import can
+
+REPHASE = 0.25  # of the period: later than this, restart the cycle from the late frame
+
+
+class CyclicSender:
+    """Sends `msg` on `bus` every `period_s` from a daemon thread until `stop()`."""
+
+    def __init__(self, bus: can.BusABC, msg: can.Message, period_s: float, *,
+                 rephase: float = REPHASE,
+                 on_late: Callable[[int], None] | None = None) -> None:
+        if period_s <= 0:
+            raise ValueError(f"period {period_s} s: must be > 0")
+        self.bus, self.msg = bus, msg
+        self.period_ns = round(period_s * 1e9)
+        self.rephase_ns = round(self.period_ns * rephase)
+        self.on_late = on_late
+        self.sent = 0
+        self.rephased = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True,
+                                        name=f"cyclic-{msg.arbitration_id:03X}")
+        self._thread.start()
+
+    def _run(self) -> None:
+        due = time.perf_counter_ns()
+        while not self._stop.is_set():
+            now = time.perf_counter_ns()
+            if now - due > self.rephase_ns:  # woke late: no burst, a new phase
+                self.rephased += 1
+                if self.on_late is not None:
+                    self.on_late(now - due)
+                due = now
+            try:
+                self.bus.send(self.msg)
+                self.sent += 1
+            except Exception:  # a closed bus ends the producer, as a stopped master
+                return
+            due += self.period_ns
+            wait = due - time.perf_counter_ns()
+            if wait > 0 and self._stop.wait(wait / 1e9):
+                return
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=1.0)

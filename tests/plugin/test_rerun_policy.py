@@ -1,0 +1,49 @@
+"""The suite's rerun policy (tests/conftest.py), through pytester: a test marked
+`integration` (real time on a shared host) is rerun once; a unit test never; nothing is
+rerun when a bench file is given (a plan is never repeated on hardware by itself)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+pytest_plugins = ["pytester"]
+
+PROBE = """
+import pytest
+N = {"n": 0}
+
+@pytest.mark.integration
+def test_fails_once():
+    N["n"] += 1
+    assert N["n"] > 1
+
+@pytest.mark.integration
+def test_fails_always():
+    assert False
+
+def test_unit_fails():
+    assert False
+"""
+
+
+@pytest.fixture
+def probe(pytester: pytest.Pytester) -> pytest.Pytester:
+    pytester.makeconftest((Path(__file__).parents[1] / "conftest.py").read_text())
+    pytester.makeini("[pytest]\nmarkers =\n    integration: real time\n")
+    pytester.makepyfile(test_probe=PROBE)
+    return pytester
+
+
+def test_integration_tests_are_rerun_once_and_unit_tests_never(probe, monkeypatch):
+    monkeypatch.delenv("HIL_BENCH", raising=False)
+    res = probe.runpytest("-p", "no:cacheprovider", "-ra")
+    assert res.parseoutcomes() == {"passed": 1, "failed": 2, "rerun": 2}  # once each
+    res.stdout.fnmatch_lines(["*FAILED*test_fails_always*", "*FAILED*test_unit_fails*"])
+
+
+def test_nothing_is_rerun_against_a_bench_file(probe, monkeypatch):
+    monkeypatch.setenv("HIL_BENCH", "my-bench.yaml")
+    res = probe.runpytest("-p", "no:cacheprovider")
+    assert res.parseoutcomes() == {"failed": 3}
