@@ -29,11 +29,16 @@ def free_port_factory():
 # Tests marked `integration` run the virtual drive, buses and processes in real time on a host
 # that is not real-time (CI shares 2 cores): a stall of tens of ms can move one timing verdict
 # past its window. Each such test is rerun once on failure (pytest-rerunfailures); a failure
-# in both runs fails the suite, and every rerun is listed in the summary (`RERUN`, `-ra`).
+# in both runs fails the suite, and every rerun is listed with its traceback (`-raR`).
 # Tests on the injected clock are never rerun: they are deterministic. Nor is anything run
 # against a bench file (`--hil-bench` / HIL_BENCH): a failed plan is never repeated on
 # hardware without an engineer deciding so.
 INTEGRATION_RERUNS = 1
+
+
+def pytest_configure(config):
+    if hasattr(config.option, "rerun_show_tracebacks"):  # why each rerun happened, in the log
+        config.option.rerun_show_tracebacks = True
 
 
 def pytest_collection_modifyitems(config, items):

@@ -41,6 +41,9 @@ def test_integration_tests_are_rerun_once_and_unit_tests_never(probe, monkeypatc
     res = probe.runpytest("-p", "no:cacheprovider", "-ra")
     assert res.parseoutcomes() == {"passed": 1, "failed": 2, "rerun": 2}  # once each
     res.stdout.fnmatch_lines(["*FAILED*test_fails_always*", "*FAILED*test_unit_fails*"])
+    # why each rerun happened is in the log: the first attempt's traceback
+    res.stdout.fnmatch_lines(["*rerun test summary info*", "RERUN *test_fails_once",
+                              "*assert 1 > 1*", "PASSED *test_fails_once"])
 
 
 def test_nothing_is_rerun_against_a_bench_file(probe, monkeypatch):
