@@ -30,6 +30,7 @@ from typing import Any
 
 import can
 
+from hil.plan.param_rules import sdo_parameter
 from hil.plan.yamlio import Checker, join, parse_duration
 from hil.transport.cyclic import CyclicSender
 from hil.transport.faults import (
@@ -350,6 +351,9 @@ def x_produce(ctx: Any, s: Any, d: Any) -> str:
 def x_sdo(ctx: Any, s: Any, d: Any) -> str:
     for index, sub, value in s.args["values"]:
         d.cia.write(index, sub, value)
+        param = sdo_parameter(index, sub, value)
+        if param is not None and not ctx.bench.virtual:  # a virtual drive records its own
+            ctx.rec.drive_params(d.name, {param[0]: param[1]})
     return f"{len(s.args['values'])} object(s) written"
 
 

@@ -37,3 +37,16 @@ def check_param(v: Checker, line: int, field: str, name: str, value: int | None,
 
 
 __all__ = ["PlanFileError", "check_param"]
+
+
+def sdo_parameter(index: int, sub: int, value: int) -> tuple[str, int] | None:
+    """A raw SDO write to a 2xxxh object as the parameter it sets (Pa-bc <=> 2aBCh,
+    L18154-18156): (name, value as the parameter reads it), or None for any other object."""
+    if sub != 0 or not 0x2000 <= index <= 0x2FFF:
+        return None
+    try:
+        spec = _table().by_od_index(index)
+    except ParamError:
+        return None
+    low, high = spec.to_words(value)
+    return spec.param, spec.from_words(low, high)

@@ -137,3 +137,44 @@ def test_unrecorded_parameters_are_read_and_recorded(drive_process, tmp_path: Pa
                for v in json.loads(out.stdout)]
     assert offline == live[:1]
     assert json.loads(out.stdout)[0]["values"]["P1.042"] == 150
+
+
+SDO_PLAN = """\
+name: sdo_param
+description: P1.042 written as a raw SDO 212Ah; the brake timing is judged with it
+steps:
+  - sdo: {"212A": 100}
+  - wait_until: {do: {SRDY: on}, timeout: 2s}
+  - di: {SON: on}
+  - wait_until: {do: {BRKR: on}, timeout: 2s}
+  - di: {SON: off}
+  - wait_until: {do: {BRKR: off}, timeout: 2s}
+  - check_timing: son_brkr_wire
+"""
+
+
+def test_a_raw_sdo_write_to_a_parameter_object_is_recorded(drive_process, tmp_path: Path,
+                                                           free_port_factory) -> None:
+    """`sdo: {"212A": 100}` on a real bench is P1.042 = 100 (2aBCh <=> Pa-bc, L18154): it is
+    recorded as a parameter change, so `check_timing` judges with 100, not with what it
+    would otherwise read at the end, and `hil check` on the file agrees."""
+    can_port, dio_port = free_port_factory(), free_port_factory()
+    can_key, dio_key = f"t{can_port}/can", f"t{dio_port}/dio"
+    params = tmp_path / "params.json"
+    params.write_text('{"P2.041": 264, "P1.042": 150}')
+    drive_process("--can", f"zenoh:{can_key}?listen=tcp/127.0.0.1:{can_port}",
+                  "--node-id", "1", "--params", str(params),
+                  "--dio", f"zenoh:{dio_key}?listen=tcp/127.0.0.1:{dio_port}", "--di", "8=1")
+    specs_dir = tmp_path / "specs"
+    specs_dir.mkdir()
+    (specs_dir / "son_brkr_wire.yaml").write_text(SPEC)
+    bench = load_bench(real_bench(tmp_path, can_key, can_port, dio_key, dio_port))
+    plan = loads_plan(SDO_PLAN, str(tmp_path / "sdo_param.yaml"))
+    res = run_plan(plan, bench, tmp_path / "out", specs=load_specs([specs_dir]), reports=False)
+    assert res.passed, [(s.label, s.status, s.message) for s in res.steps]
+    rec = Recording.open(res.recording)
+    msgs = [m for _t, _l, _p, m in rec.messages([topics.drive_params("drive1")])]
+    assert {"snapshot": False, "values": {"P1.042": 100}} in msgs, msgs
+    assert [m["values"] for m in msgs if m.get("source") == "read"] == [{"P2.009": 2}]
+    (verdict,) = [v for _t, _l, _p, v in rec.messages([topics.TIMING_VERDICTS])]
+    assert verdict["values"]["P1.042"] == 100 and verdict["status"] == "pass"
