@@ -2,7 +2,7 @@
 
 Values are milliseconds (the manual's unit for P1.042, P1.043, P2.009). Numbers may carry a
 unit (`20 ms`, `1 s`, `500 us`), converted to ms. Allowed: + - * /, unary -, min max abs,
-comparisons and and/or/not (for `when:`). Parameter names are written as in the manual
+`bit(P5.039, 0)` (bit n of a value), comparisons and and/or/not (for `when:`). Parameter names are written as in the manual
 (`P1.042`); other names are spec constants or, in `when:`, signal names.
 """
 
@@ -16,7 +16,8 @@ from typing import Any
 PARAM_RE = re.compile(r"\bP(\d)\.(\d{3})\b")
 _UNIT_RE = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s*(ms|us|s)\b")
 _UNIT = {"ms": 1.0, "s": 1000.0, "us": 0.001}
-_FUNCS = {"min": min, "max": max, "abs": abs}
+_FUNCS = {"min": min, "max": max, "abs": abs,
+          "bit": lambda v, n: (int(v) >> int(n)) & 1}  # bit(P5.039, 0): a parameter bit
 _BINOPS = (ast.Add, ast.Sub, ast.Mult, ast.Div)
 _CMPOPS = (ast.Eq, ast.NotEq, ast.Lt, ast.LtE, ast.Gt, ast.GtE)
 
@@ -61,7 +62,7 @@ class Expr:
     def _check(self, node: ast.AST, pynames: set[str]) -> None:
         if isinstance(node, ast.Call):
             if not (isinstance(node.func, ast.Name) and node.func.id in _FUNCS):
-                raise ExprError(f"{self.text!r}: only min, max and abs may be called")
+                raise ExprError(f"{self.text!r}: only min, max, abs and bit may be called")
             if node.keywords or not node.args:
                 raise ExprError(f"{self.text!r}: {node.func.id}() takes plain arguments")
             return

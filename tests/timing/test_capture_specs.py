@@ -70,6 +70,27 @@ def test_capture_latency_faithful(tmp_path) -> None:
     assert_all_pass(vs)
 
 
+def test_capture_latency_is_not_judged_where_it_does_not_apply(tmp_path) -> None:
+    """DO3 is not CAP_OK (P2.020 = 0x0109), or an edge after the count ran out (P5.039 bit0
+    cleared at the last point, L5155): no capture to time, so `skipped`, never a failure
+    (`hil check` with every shipped spec on a plan wired otherwise)."""
+    path = run(tmp_path, capture_scenario, options(), **{**PARAMS, "P2.020": 0x0109})
+    vs = verdicts(path, "capture_latency")
+    assert vs and {v.status for v in vs} == {"skipped"}, [(v.status, v.message) for v in vs]
+
+    def extra_edge(tap) -> None:
+        capture_scenario(tap)
+        tap.set_di(7, False)  # the count ran out: bit0 is 0, this edge captures nothing
+        tap.advance(3 * MS)
+        tap.set_di(7, True)
+        tap.advance(10 * MS)
+
+    path = run(tmp_path / "x", extra_edge, options(), **PARAMS)
+    vs = verdicts(path, "capture_latency")
+    assert [v.status for v in vs] == ["pass", "pass", "pass", "skipped"], \
+        [(v.status, v.message) for v in vs]
+
+
 def test_capture_latency_fails_late(tmp_path) -> None:
     path = run(tmp_path, capture_scenario, options(dev_capture_delay_us=50), **PARAMS)
     assert_fails(verdicts(path, "capture_latency"), "CAP_OK rises 5 µs after the DI7 edge")

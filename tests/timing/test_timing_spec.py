@@ -62,7 +62,7 @@ BAD = [
     ('{min: "P1.042 - 1"', '{min: "P1.042 - tol"', 14, "constraints[0].window.min",
      "unknown name 'tol'"),
     ('{min: "P1.042 - 1"', '{min: "__import__(1)"', 14, "constraints[0].window.min",
-     "only min, max and abs"),
+     "only min, max, abs and bit"),
     ('window: {min: "P1.042 - 1", max: "P1.042 + 1"}', "window: {}", 14,
      "constraints[0].window", "needs `min`, `max` or both"),
     ('window: {min: "P1.042 - 1", max: "P1.042 + 1"}', "window: {low: 1}", 14,
