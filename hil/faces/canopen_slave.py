@@ -109,6 +109,7 @@ class CanopenSlave:
         block_transfer: bool = False,
         on_alarm: Callable[[str], None] | None = None,
         on_nmt_reset: Callable[[str], None] | None = None,
+        on_frame: Callable[[can.Message, int, int], None] | None = None,
     ) -> None:
         if pdo_defaults not in ("harness", "manual"):
             raise ValueError(f"pdo_defaults: {pdo_defaults!r} is not 'harness' or 'manual'")
@@ -123,6 +124,8 @@ class CanopenSlave:
         self.clock = clock
         self.sdo_timeout_ns = sdo_timeout_ms * MS
         self.on_alarm = on_alarm or getattr(drive, "raise_alarm", None)
+        # (frame, its sender stamp, model time it acted) per frame handled: delivery delay
+        self.on_frame = on_frame
         self.on_nmt_reset = on_nmt_reset or getattr(drive, "nmt_reset", None)
         self._fixed_node_id = node_id
         self.node_id = 0
@@ -381,6 +384,8 @@ class CanopenSlave:
             self._handle(msg)
         except Exception as exc:  # malformed traffic must never stop the slave
             self.last_resort(f"frame 0x{msg.arbitration_id:03X}", exc)
+        if self.on_frame is not None and not msg.is_error_frame:
+            self._callback("on_frame", self.on_frame, msg, sent_ns(msg), self.clock())
 
     def _callback(self, name: str, fn: Callable[..., Any], *args: Any) -> None:
         """Call an owner's callback; a failing one must not stop the protocol action."""

@@ -51,8 +51,17 @@ def drive_events(drive: str) -> str:
 
 def drive_inputs(drive: str) -> str:
     """Virtual-bench input delivery: per DI/STO edge the harness's stamp (`sent_ns`), when
-    the model applied it (`applied_ns`) and the difference (`delay_ns`), docs/timing.md."""
+    the model applied it (`applied_ns`) and the difference (`delay_ns`), docs/timing.md;
+    also per CAN frame that reached the model CAN_LATE_NS or more late (`line` = can_line)."""
     return f"/drive/{drive}/inputs"
+
+
+CAN_LATE_NS = 500_000  # a CAN frame's delivery is recorded from 0.5 ms late (under load)
+
+
+def can_line(cob_id: int) -> str:
+    """The `line` of a CAN frame's delivery record: `CAN 080h`."""
+    return f"CAN {cob_id:03X}h"
 
 
 def drive_params(drive: str) -> str:

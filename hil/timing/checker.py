@@ -206,16 +206,13 @@ class Context:
         `periodic` (the virtual bench's state samples between model events): the gap since the
         previous message of its topic."""
         if s.kind not in ("line", "function"):
-            return self._sampling(topic, raw)
-        if self._deliveries is None:
-            self._deliveries = {}
-            drive = self.binding.get("drive")
-            for _t, m in self.source.messages(topics.drive_inputs(drive)) if drive else []:
-                with_line = self._deliveries.setdefault(str(m.get("line")), [])
-                with_line.append((int(m["sent_ns"]), bool(m["level"]), int(m["delay_ns"])))
+            out = self._sampling(topic, raw)
+            for t, lag in self._frame_lags(topic, raw).items():
+                out[t] = (lag, out.get(t, (0, 0))[1])
+            return out
         line = (self.binding.get(s.function or "", "") if s.kind == "function"
                 else s.io_line or "").partition(":")[0]
-        recs = self._deliveries.get(line)
+        recs = self._delivery_records().get(line)
         if not recs:
             return {}
         out = {}
@@ -224,6 +221,36 @@ class Context:
                     and abs(sent - t) <= MS]
             if near and (d := min(near)[1]) > 0:
                 out[t] = (d, 0)
+        return out
+
+    def _delivery_records(self) -> dict[str, list[tuple[int, bool, int]]]:
+        """line -> [(sent_ns, level, delay_ns)] from /drive/{drive}/inputs (DI/STO edges,
+        and CAN frames under `CAN 080h` lines)."""
+        if self._deliveries is None:
+            self._deliveries = {}
+            drive = self.binding.get("drive")
+            for _t, m in self.source.messages(topics.drive_inputs(drive)) if drive else []:
+                with_line = self._deliveries.setdefault(str(m.get("line")), [])
+                with_line.append((int(m["sent_ns"]), bool(m["level"]), int(m["delay_ns"])))
+        return self._deliveries
+
+    def _frame_lags(self, topic: str, raw: list[tuple[int, Any]]) -> dict[int, int]:
+        """Delivery delay of frames the harness sent (`dir: tx` on /canopen/...) that the
+        virtual drive reported late: the records of the same COB-ID whose sender stamp lies
+        within 5 ms before the frame's record (the tap stamps after the send); the largest."""
+        deliveries = self._delivery_records()
+        if not raw or not any(k.startswith("CAN ") for k in deliveries):
+            return {}
+        cobs: dict[int, set[int]] = {}
+        for t, m in self.source.messages(topic):
+            if isinstance(m, dict) and m.get("dir") == "tx" and "cob_id" in m:
+                cobs.setdefault(t, set()).add(int(m["cob_id"]))
+        out = {}
+        for t, _v in raw:
+            lags = [d for c in cobs.get(t, ()) for sent, _lv, d in
+                    deliveries.get(topics.can_line(c), ()) if 0 <= t - sent <= 5 * MS]
+            if lags:
+                out[t] = max(lags)
         return out
 
     def _sampling(self, topic: str, raw: list[tuple[int, Any]]) -> dict[int, tuple[int, int]]:
@@ -689,7 +716,7 @@ def _judge_window(ctx, c, sc, f: Occ, base) -> Verdict:
 def _load_what(lag: int, early: int) -> str:
     parts = []
     if lag:
-        parts.append(f"the {_ms(lag):.3f} ms the input edge took to reach the drive after "
+        parts.append(f"the {_ms(lag):.3f} ms the input took to reach the drive after "
                      "the harness stamped it")
     if early:
         parts.append(f"the {_ms(early):.3f} ms since the previous observation (a state sample "

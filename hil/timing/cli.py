@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.record.reader import RecordingError
+from hil.timing.applicable import not_applicable
 from hil.timing.checker import (
     Verdict,
     check,
@@ -225,10 +226,14 @@ def main(args: argparse.Namespace) -> int:
     bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
     incomplete: list[str] = []
+    survey = not (args.spec or rec_specs)  # every shipped spec: only where each applies
     for spec in specs:
         own = constants_for(spec, bench_consts)
-        vs = check(spec, source, params=params, binding=bind, constants=(own | consts) or None,
-                   resolution=res)
+        why = not_applicable(spec, source, bind) if survey else None
+        vs = [Verdict(spec.id, c.name, "skipped", f"not applicable: {why}", kind=c.kind,
+                      source=c.source) for c in spec.constraints] if why else check(
+            spec, source, params=params, binding=bind, constants=(own | consts) or None,
+            resolution=res)
         verdicts.extend(vs)
         if args.spec and not _judged(vs):  # a spec the user asked for must judge something
             incomplete.append(_why_nothing(spec, vs, source, bind))

@@ -2,8 +2,9 @@
 
 Values are milliseconds (the manual's unit for P1.042, P1.043, P2.009). Numbers may carry a
 unit (`20 ms`, `1 s`, `500 us`), converted to ms. Allowed: + - * /, unary -, min max abs,
-`bit(P5.039, 0)` (bit n of a value), comparisons and and/or/not (for `when:`). Parameter names are written as in the manual
-(`P1.042`); other names are spec constants or, in `when:`, signal names.
+`bit(P5.039, 0)` (bit n of a value), comparisons and and/or/not (for `when:`). Parameter
+names are written as in the manual (`P1.042`); other names are spec constants or, in
+`when:`, signal names.
 """
 
 from __future__ import annotations

@@ -135,6 +135,9 @@ class Spec:
     resolution: dict[str, Expr] = _f(default_factory=dict)  # topic glob -> ms; "default"
     horizon: Expr | None = None
     notes: str = ""
+    # parameters the scenario needs at some time in the recording (e.g. "bit(P5.059, 0) == 1":
+    # COMPARE ran); `hil check` with every shipped spec skips a recording where it never held
+    requires: Expr | None = None
 
     def binding(self, overrides: dict[str, str] | None = None) -> dict[str, str]:
         """Placeholders and function->line map: defaults < spec `bind` < overrides."""
@@ -188,7 +191,7 @@ _EVENT_MODS = {"after", "before", "within", "label"}
 _CONSTRAINT_KEYS = {"name", "from", "to", "until", "at", "window", "when", "for_each",
                     "source", "note", "forbid", "absent", "present"}
 _TOP = {"id", "title", "source", "signals", "events", "constraints", "for_each", "bind",
-        "constants", "resolution", "horizon", "notes"}
+        "constants", "resolution", "horizon", "notes", "requires"}
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
@@ -274,6 +277,11 @@ def parse_spec(data: Any, file: str = "<string>") -> Spec:
         else:
             resolution["default"] = v.expr(top, "resolution", "")
     horizon = v.expr(top, "horizon", "") if "horizon" in top else None
+    requires = v.expr(top, "requires", "") if "requires" in top else None
+    if requires is not None and (bad := [n for n in requires.names if not is_param(n)]):
+        raise v.err(top.key_lines["requires"], "requires",
+                    f"unknown name {bad[0]!r}: only parameters (P5.059), e.g. "
+                    "\"bit(P5.059, 0) == 1\"")
 
     binding = dict(DEFAULT_PLACES) | FACTORY_BINDING | bind
     signals = _signals(v, top, binding)
@@ -293,6 +301,7 @@ def parse_spec(data: Any, file: str = "<string>") -> Spec:
         id=sid, title=title, source=source, path=file, signals=signals, events=events,
         constraints=constraints, for_each=for_each, bind=bind, constants=constants,
         resolution=resolution, horizon=horizon, notes=str(top.get("notes", "") or ""),
+        requires=requires,
     )
 
 

@@ -23,6 +23,7 @@ from hil.model.drive import Drive
 from hil.model.events import PowerCycled
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
+from hil.record.topics import CAN_LATE_NS, can_line
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
 from hil.transport.serial_line import open_serial
@@ -109,6 +110,7 @@ class VirtualDriveStack:
                 own_timer=False,
                 clock=host.model_now,
                 pdo_defaults=spec.tpdo_defaults,
+                on_frame=self._frame_applied,
             )
             self.canopen.start()
             self._closers.append(self.canopen.close)
@@ -156,6 +158,12 @@ class VirtualDriveStack:
     def _input_applied(self, line: str, level: bool, sent_ns: int, model_t: int) -> None:
         if self.on_input is not None:
             self.on_input(line, level, sent_ns, model_t)
+
+    def _frame_applied(self, msg: Any, sent_ns: int, model_t: int) -> None:
+        """A CAN frame the CANopen face acted on: reported like an input edge (line
+        `CAN 080h`) when it reached the model CAN_LATE_NS or more after its sender stamp."""
+        if self.on_input is not None and self.host.wall_ns(model_t) - sent_ns >= CAN_LATE_NS:
+            self.on_input(can_line(msg.arbitration_id), True, sent_ns, model_t)
 
     def _on_event(self, event: object) -> None:
         if isinstance(event, PowerCycled) and self.modbus is not None:

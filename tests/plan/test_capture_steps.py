@@ -141,3 +141,17 @@ def test_real_bench_sources() -> None:
     ref = Reference.from_source(src, "/enc/ref", "counts")
     [r] = judge(edges, ref, [52], trigger_level=False, tolerance=3)
     assert (r.true_counts, r.error_counts, r.status) == (50.0, 2.0, "pass")
+
+
+@pytest.mark.integration
+def test_a_check_that_judges_nothing_does_not_pass(tmp_path) -> None:
+    """check_timing of a spec whose scenario never happened (servo_on_brake with no servo
+    on: every constraint skipped, "not applicable") fails the step: nothing judged is not
+    a pass, as for `hil check` (exit 4)."""
+    text = ("name: judged_nothing\nsteps:\n  - wait: 20ms\n"
+            "  - check_timing: servo_on_brake\n")
+    [r] = run_plans([loads_plan(text, str(tmp_path / "n.yaml"))], load_bench(), tmp_path,
+                    stream=io.StringIO())
+    step = r.steps[-1]
+    assert step.status == "fail", (step.status, step.message)
+    assert "nothing judged" in step.message and "not applicable" in step.message

@@ -231,3 +231,26 @@ def test_deviation_knob_fails_the_matching_rule(tmp_path, route, mode, start, kn
     failed = {v.constraint: v.message for v in vs if v.status == "fail"}
     assert rule in failed, [(v.constraint, v.status, v.message) for v in vs]
     assert failed[rule]  # the message names what was seen (e.g. "rev was false at ...")
+
+
+def test_homing_canopen_starts_only_in_homing_mode():
+    """6040h bit 4 is "new set-point" in PP and a homing start only in HM (6060h = 6): a PP
+    move's bit 4 is no homing start (every constraint "not applicable"), in HM it is."""
+    from hil.timing import MemorySource, check, load_spec
+
+    ms = 1_000_000
+
+    def src(mode: str) -> MemorySource:
+        return MemorySource({
+            "/canopen/can0": [(0, {"dir": "tx", "controlword": 0x0F}),
+                              (10 * ms, {"dir": "tx", "controlword": 0x1F})],
+            "/drive/drive1/state": [(0, {"mode": mode, "speed_rpm": 0.0, "statusword": 0x0637,
+                                         "homing_phase": "", "position_puu": 0})],
+        })
+
+    spec = load_spec(fixture("timing", "homing_canopen.yaml"))
+    bind = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
+    pp = check(spec, src("PP"), binding=bind)
+    assert pp and all(v.status == "skipped" for v in pp), [(v.status, v.message) for v in pp]
+    hm = check(spec, src("HM"), binding=bind)
+    assert [v for v in hm if v.status != "skipped"]  # judged (this stub has no motion: fails)

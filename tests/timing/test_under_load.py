@@ -53,7 +53,7 @@ def test_excess_within_the_delivery_delay_is_inconclusive():
     # 0.2 ms over fw_tol, within the 1.2 ms delay (the failure seen under load)
     v = _verdict(_sto_a_alone(1.2, 1.2))
     assert v.status == "inconclusive", v.message
-    assert "1.200 ms the input edge took to reach the drive" in v.message
+    assert "1.200 ms the input took to reach the drive" in v.message
     assert v.uncertainty_ms[0] >= 1.2
     assert _verdict(_sto_a_alone(1.2, None)).status == "fail"  # what it was before
 
@@ -216,3 +216,53 @@ def test_a_late_delivery_on_the_virtual_bench_is_recorded_and_judged_inconclusiv
     v = [v for v in check(spec, src, binding=BIND) if v.constraint == AL501]
     assert [x.status for x in v] == ["inconclusive"], [x.message for x in v]
     assert v[0].measured_ms >= 5.0
+
+
+def _sync_doubled(al3e2_after_ms: float, delay_ms: float | None) -> dict:
+    """fault_sync_ip's AL3E2 case on the wire: SYNC every 20 ms, the one at T0 sent twice
+    (the duplicate fault started 5 ms before); AL3E2 `al3e2_after_ms` after that SYNC; the
+    drive got the SYNC pair `delay_ms` after its sender stamp (None: no record)."""
+    bus = "/canopen/can0"
+    frames = [(T0 + k * 20 * MS, {"dir": "tx", "kind": "sync", "cob_id": 0x80})
+              for k in range(-3, 3)]
+    frames.append((T0 + 30_000, {"dir": "tx", "kind": "sync", "cob_id": 0x80}))  # the copy
+    t_alarm = T0 + round(al3e2_after_ms * MS)
+    msgs: dict[str, list[tuple[int, dict]]] = {
+        bus: sorted(frames, key=lambda x: x[0]),
+        "/faults": [(T0 - 5 * MS, {"fault": "duplicate", "active": True,
+                                   "detail": {"target": "sync", "every": 1}}),
+                    (T0 + 25 * MS, {"fault": "duplicate", "active": False,
+                                    "detail": {"target": "sync", "every": 1}})],
+        topics.drive_state("drive1"): [(0, {"alarms": []}), (t_alarm, {"alarms": ["AL3E2"]})],
+    }
+    if delay_ms is not None:
+        d = round(delay_ms * MS)
+        sent = T0 - 20_000  # the sender stamp comes before the tap's record
+        msgs[topics.drive_inputs("drive1")] = [
+            (sent + d, {"line": topics.can_line(0x80), "level": True, "sent_ns": sent,
+                        "applied_ns": sent + d, "delay_ns": d})]
+    return msgs
+
+
+def _sync_verdict(msgs: dict):
+    spec = load_spec(fixture("timing", "fault_sync_ip.yaml"))
+    vs = [v for v in check(spec, MemorySource(msgs), binding={**BIND, "bus": "can0"})
+          if v.constraint == "AL3E2 on the first early SYNC"]
+    assert len(vs) == 1, vs
+    return vs[0]
+
+
+def test_a_can_frame_the_drive_got_late_carries_its_delay():
+    """A SYNC the drive got 40 ms after its sender stamp (reported as `CAN 080h` on
+    /drive/{drive}/inputs): AL3E2 45 ms after the SYNC on the wire is 25 ms over `react`
+    (20 ms) but within the delay: inconclusive. Without the record it is a fail, as before;
+    beyond the delay it stays a fail; in time it passes."""
+    v = _sync_verdict(_sync_doubled(45, 40))
+    assert v.status == "inconclusive", v.message
+    assert "40.000 ms the input took to reach the drive" in v.message
+    assert _sync_verdict(_sync_doubled(45, None)).status == "fail"
+    assert _sync_verdict(_sync_doubled(80, 40)).status == "fail"
+    assert _sync_verdict(_sync_doubled(5, 40)).status == "pass"
+    far = _sync_doubled(45, 40)  # a record of another COB-ID: not this frame
+    far[topics.drive_inputs("drive1")][0][1]["line"] = topics.can_line(0x81)
+    assert _sync_verdict(far).status == "fail"

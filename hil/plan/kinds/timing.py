@@ -189,6 +189,9 @@ class CheckTiming(StepKind):
         if not verdicts:
             raise StepFailed(f"spec {spec.id}: nothing to judge (no occurrence in the "
                              "recording)")
+        if all(v.status == "skipped" for v in verdicts):  # nothing judged is not a pass
+            why = "; ".join(dict.fromkeys(v.message for v in verdicts))
+            raise StepFailed(f"spec {spec.id}: nothing judged ({text}): {why}", out)
         if counts.get("fail"):
             bad = [f"{v.constraint}: {v.message}" for v in verdicts if v.status == "fail"]
             raise StepFailed(f"{text}; " + "; ".join(bad[:3]), out)

@@ -1,0 +1,80 @@
+"""Does a spec apply to a recording's drive? Its DI/DO functions against the drive's mapping.
+
+A spec binds functions to lines (`BRKR: DO6`, the factory mapping, or its `bind:`). When the
+recording holds the drive's own mapping parameter of that line (P2.010-P2.022, P2.036-P2.041,
+L15243) and no value of it ever selects that function, the spec's scenario cannot be on this
+recording: `hil check` with every shipped spec says "not applicable" instead of judging, say,
+an absolute-encoder handshake on DO4 of a drive whose DO4 is TPOS. A line whose mapping is not
+recorded (a real bench) is taken as bound: judged as before. Likewise a spec's `requires:`
+(parameters its scenario needs at some time, e.g. COMPARE started) that never held.
+"""
+
+from __future__ import annotations
+
+import re
+
+from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS
+from hil.record import topics
+from hil.timing.expr import ExprError
+from hil.timing.source import SignalSource
+from hil.timing.spec import Spec
+
+_LINE = re.compile(r"(DI|DO)(\d+)")
+
+
+def mapping_param(line: str) -> tuple[str, dict[str, int]] | None:
+    """`DO4` -> ("P2.021", DO function codes); None for STO and lines beyond the table."""
+    m = _LINE.fullmatch(line)
+    if not m:
+        return None
+    kind, n = m.group(1), int(m.group(2))
+    params, symbols = (DI_PARAMS, DI_SYMBOLS) if kind == "DI" else (DO_PARAMS, DO_SYMBOLS)
+    if not 1 <= n <= len(params):
+        return None
+    return params[n - 1], symbols
+
+
+def not_applicable(spec: Spec, source: SignalSource, binding: dict[str, str]) -> str | None:
+    """Why `spec` does not apply to the recorded drive, or None (it applies, or unknown)."""
+    bind = spec.binding(binding)
+    recorded: dict[str, list[int]] = {}
+    for _t, msg in source.messages(topics.drive_params(bind.get("drive", "drive1"))):
+        for name, value in (msg.get("values") or {}).items():
+            recorded.setdefault(name, []).append(int(value))
+    if not recorded:
+        return None
+    if spec.requires is not None and (why := _never_required(spec, source, bind)):
+        return why
+    for sig in spec.signals.values():
+        if sig.kind != "function" or not sig.function:
+            continue
+        line = bind.get(sig.function, "").partition(":")[0]
+        found = mapping_param(line)
+        if found is None:
+            continue
+        param, symbols = found
+        code = symbols.get(sig.function)
+        values = recorded.get(param)
+        if code is None or not values:  # a spec-local name (MARK), or mapping not recorded
+            continue
+        if all(v & 0xFF != code for v in values):
+            shown = ", ".join(dict.fromkeys(f"0x{v:04X}" for v in values))
+            return (f"{line} is not {sig.function} on this drive ({param} = {shown}; "
+                    f"{sig.function} is 0x{code:02X})")
+    return None
+
+
+def _never_required(spec: Spec, source: SignalSource, bind: dict[str, str]) -> str | None:
+    """The spec's `requires` never held for the parameters in force at any record."""
+    assert spec.requires is not None
+    env: dict[str, int] = {}
+    seen = False
+    for _t, msg in source.messages(topics.drive_params(bind.get("drive", "drive1"))):
+        env.update({k: int(v) for k, v in (msg.get("values") or {}).items()})
+        try:
+            if spec.requires.eval(env):
+                return None
+            seen = True
+        except (KeyError, ExprError):  # not recorded (yet): unknown
+            continue
+    return f"{spec.requires} never held on this drive" if seen else None
