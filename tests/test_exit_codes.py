@@ -19,6 +19,8 @@ from hil.cli import main as hil
 from hil.paths import plans_dir
 from hil.record.recorder import Recorder
 
+pytestmark = pytest.mark.integration  # real plans / processes in real time
+
 README = Path(__file__).resolve().parents[1] / "README.md"
 #: documented but too slow or intrusive to run here, with where they are exercised
 NOT_RUN_HERE = {

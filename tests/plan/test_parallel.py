@@ -20,6 +20,8 @@ from hil.plan.bench import load_bench
 from hil.plan.parallel import jobs_from_arg, parallel_blocker
 from hil.record.reader import Recording
 
+pytestmark = pytest.mark.integration  # real plans / processes in real time
+
 # the quickest shipped plans (about 0.5 s each on the virtual bench)
 QUICK = ["alarm_reset", "param_access", "emgs"]
 FAILS = "name: fails\ndescription: BRKR is never on at rest\nsteps:\n  - expect: {do: {BRKR: on}}\n"

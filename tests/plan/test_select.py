@@ -16,6 +16,8 @@ from hil.plan.plan import find_plans
 from hil.plan.select import Expr, ExprError, matches, select
 from hil.plan.yamlio import PlanFileError
 
+pytestmark = pytest.mark.integration  # real plans / processes in real time
+
 
 def P(name, tags=(), path=None):
     return SimpleNamespace(name=name, tags=list(tags), path=path or f"plans/{name}.yaml")
