@@ -58,16 +58,20 @@ constraints:
     window: {max: "P9.999"}
 """
 
-PLAN = """\
-name: param_reads
-description: SON on/off; the brake timing is judged with P2.009 and P1.042 read from the drive
-steps:
+SON_CYCLE = """\
   - wait_until: {do: {SRDY: on}, timeout: 2s}
   - di: {SON: on}
   - wait_until: {do: {BRKR: on}, timeout: 2s}
   - di: {SON: off}
   - wait_until: {do: {BRKR: off}, timeout: 2s}
   - check_timing: son_brkr_wire
+"""
+
+PLAN = """\
+name: param_reads
+description: SON on/off; the brake timing is judged with P2.009 and P1.042 read from the drive
+steps:
+""" + SON_CYCLE + """\
   - check_timing: son_brkr_wire
   - check_timing: son_unreadable
 """
@@ -97,8 +101,9 @@ safe_state:
     return path
 
 
-def test_unrecorded_parameters_are_read_and_recorded(drive_process, tmp_path: Path,
-                                                      free_port_factory) -> None:
+def wire_drive(drive_process, tmp_path: Path, free_port_factory) -> tuple[Path, Path]:
+    """`hil drive` in its own process (P1.042 = 150, DO6 = BRKR) reached over zenoh as a
+    real bench; (bench file, specs dir with SPEC and UNREADABLE)."""
     can_port, dio_port = free_port_factory(), free_port_factory()
     can_key, dio_key = f"t{can_port}/can", f"t{dio_port}/dio"
     params = tmp_path / "params.json"
@@ -110,7 +115,13 @@ def test_unrecorded_parameters_are_read_and_recorded(drive_process, tmp_path: Pa
     specs_dir.mkdir()
     (specs_dir / "son_brkr_wire.yaml").write_text(SPEC)
     (specs_dir / "son_unreadable.yaml").write_text(UNREADABLE)
-    bench = load_bench(real_bench(tmp_path, can_key, can_port, dio_key, dio_port))
+    return real_bench(tmp_path, can_key, can_port, dio_key, dio_port), specs_dir
+
+
+def test_unrecorded_parameters_are_read_and_recorded(drive_process, tmp_path: Path,
+                                                      free_port_factory) -> None:
+    bench_file, specs_dir = wire_drive(drive_process, tmp_path, free_port_factory)
+    bench = load_bench(bench_file)
     plan = loads_plan(PLAN, str(tmp_path / "param_reads.yaml"))
     res = run_plan(plan, bench, tmp_path / "out", specs=load_specs([specs_dir]), reports=False)
     st = {s.index: s for s in res.steps}
@@ -144,13 +155,7 @@ name: sdo_param
 description: P1.042 written as a raw SDO 212Ah; the brake timing is judged with it
 steps:
   - sdo: {"212A": 100}
-  - wait_until: {do: {SRDY: on}, timeout: 2s}
-  - di: {SON: on}
-  - wait_until: {do: {BRKR: on}, timeout: 2s}
-  - di: {SON: off}
-  - wait_until: {do: {BRKR: off}, timeout: 2s}
-  - check_timing: son_brkr_wire
-"""
+""" + SON_CYCLE
 
 
 def test_a_raw_sdo_write_to_a_parameter_object_is_recorded(drive_process, tmp_path: Path,
@@ -158,17 +163,8 @@ def test_a_raw_sdo_write_to_a_parameter_object_is_recorded(drive_process, tmp_pa
     """`sdo: {"212A": 100}` on a real bench is P1.042 = 100 (2aBCh <=> Pa-bc, L18154): it is
     recorded as a parameter change, so `check_timing` judges with 100, not with what it
     would otherwise read at the end, and `hil check` on the file agrees."""
-    can_port, dio_port = free_port_factory(), free_port_factory()
-    can_key, dio_key = f"t{can_port}/can", f"t{dio_port}/dio"
-    params = tmp_path / "params.json"
-    params.write_text('{"P2.041": 264, "P1.042": 150}')
-    drive_process("--can", f"zenoh:{can_key}?listen=tcp/127.0.0.1:{can_port}",
-                  "--node-id", "1", "--params", str(params),
-                  "--dio", f"zenoh:{dio_key}?listen=tcp/127.0.0.1:{dio_port}", "--di", "8=1")
-    specs_dir = tmp_path / "specs"
-    specs_dir.mkdir()
-    (specs_dir / "son_brkr_wire.yaml").write_text(SPEC)
-    bench = load_bench(real_bench(tmp_path, can_key, can_port, dio_key, dio_port))
+    bench_file, specs_dir = wire_drive(drive_process, tmp_path, free_port_factory)
+    bench = load_bench(bench_file)
     plan = loads_plan(SDO_PLAN, str(tmp_path / "sdo_param.yaml"))
     res = run_plan(plan, bench, tmp_path / "out", specs=load_specs([specs_dir]), reports=False)
     assert res.passed, [(s.label, s.status, s.message) for s in res.steps]

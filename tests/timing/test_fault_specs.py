@@ -91,14 +91,19 @@ def bus_error(rig: FaultRig) -> None:
     rig.deliver()
 
 
-def sync_lost(rig: FaultRig) -> None:
-    """IP mode, 1006h = 20 ms, SYNC every 20 ms, then dropped (L20165-20169)."""
+def ip_sync_running(rig: FaultRig) -> None:
+    """IP mode, 1006h = 20 ms, servo on, SYNC every 20 ms for 200 ms (L17211-17232)."""
     rig.sdo_write(0x1006, 0, 20_000)
     rig.sdo_write(0x6060, 0, 7, 1)
     rig.nmt(0x01)
     enable(rig)
     rig.produce("sync", 20, 0x80)
     rig.run(200)
+
+
+def sync_lost(rig: FaultRig) -> None:
+    """IP mode, 1006h = 20 ms, SYNC every 20 ms, then dropped (L20165-20169)."""
+    ip_sync_running(rig)
     f = rig.drop("sync")
     rig.run(200)
     rig.stop(f)
@@ -387,12 +392,7 @@ def sync_producer_late(rig: FaultRig) -> None:
     """IP mode, SYNC every 20 ms; the harness's SYNC producer stalls right when the drop and
     then the duplicate start (a loaded host): the last SYNC before the drop left 30-50 ms
     before it, the first duplicated SYNC 45 ms after the duplicate fault started."""
-    rig.sdo_write(0x1006, 0, 20_000)
-    rig.sdo_write(0x6060, 0, 7, 1)
-    rig.nmt(0x01)
-    enable(rig)
-    rig.produce("sync", 20, 0x80)
-    rig.run(200)
+    ip_sync_running(rig)
     del rig.producers["sync"]  # stalled
     rig.run(30)
     f = rig.drop("sync")
