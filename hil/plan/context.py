@@ -106,6 +106,12 @@ class StepContext:
         # (drive, parameter) -> value check_timing read from the drive (None: unreadable)
         self.param_reads: dict[tuple[str, str], int | None] = {}
 
+    def written(self, drive: str, values: dict[str, int]) -> None:
+        """Record parameter values the plan wrote; only on a bench that is not virtual (a
+        virtual drive records its own changes, a real one has no ground truth)."""
+        if not self.bench.virtual:
+            self.rec.drive_params(drive, values)
+
     def drive(self, step: Step | None) -> DriveIO:
         name = (step.drive if step else None) or self.plan.drive or self.bench.default_drive
         return self.session.drive(name)

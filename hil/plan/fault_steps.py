@@ -252,7 +252,7 @@ def _burst(bus: FaultyCanBus, kind: str, frames: list[can.Message]) -> str:
     window = BURST_WINDOW_NS.get(kind)
     late: list[str] = []
     for _ in range(BURST_ATTEMPTS):
-        n = bus.burst(kind, frames, within_ns=window)
+        n = bus.burst(kind, frames)
         spread = f"{bus.last_spread_ns / 1e3:.0f} µs"
         if window is None or bus.last_spread_ns < window:
             again = (f" (sent again: the host took {', '.join(late)} before, over the "
@@ -351,9 +351,8 @@ def x_produce(ctx: Any, s: Any, d: Any) -> str:
 def x_sdo(ctx: Any, s: Any, d: Any) -> str:
     for index, sub, value in s.args["values"]:
         d.cia.write(index, sub, value)
-        param = sdo_parameter(index, sub, value)
-        if param is not None and not ctx.bench.virtual:  # a virtual drive records its own
-            ctx.rec.drive_params(d.name, {param[0]: param[1]})
+        if (param := sdo_parameter(index, sub, value)) is not None:
+            ctx.written(d.name, dict([param]))
     return f"{len(s.args['values'])} object(s) written"
 
 

@@ -36,9 +36,6 @@ def check_param(v: Checker, line: int, field: str, name: str, value: int | None,
                     "(chapter 8): the drive refuses the write")
 
 
-__all__ = ["PlanFileError", "check_param"]
-
-
 def sdo_parameter(index: int, sub: int, value: int) -> tuple[str, int] | None:
     """A raw SDO write to a 2xxxh object as the parameter it sets (Pa-bc <=> 2aBCh,
     L18154-18156): (name, value as the parameter reads it), or None for any other object."""
@@ -50,3 +47,7 @@ def sdo_parameter(index: int, sub: int, value: int) -> tuple[str, int] | None:
         return None
     low, high = spec.to_words(value)
     return spec.param, spec.from_words(low, high)
+
+
+__all__ = ["PlanFileError", "check_param", "sdo_parameter"]
+

@@ -114,8 +114,7 @@ def x_pr_table(ctx: Any, s: Any, d: Any) -> str:
         words = pr.write_table(s.args["table"])
     except PrTableError as exc:
         raise StepFailed(str(exc)) from None
-    if not ctx.bench.virtual:
-        ctx.rec.drive_params(d.name, words)
+    ctx.written(d.name, words)
     return f"{len(s.args['table'])} path(s) written and read back"
 
 

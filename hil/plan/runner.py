@@ -278,8 +278,7 @@ def _initial_params(ctx: StepContext, plan: Plan) -> None:
     ctx.rec.plan_step("params", "start", plan=plan.name, index=-1)
     for p, v in plan.params.items():
         d.write_param(p, v)
-        if not ctx.bench.virtual:
-            ctx.rec.drive_params(d.name, {p: v})
+        ctx.written(d.name, {p: v})
     ctx.rec.plan_step("params", "end", plan=plan.name, index=-1, status=PASS,
                       message=", ".join(f"{p}={v}" for p, v in plan.params.items()))
 

@@ -126,7 +126,8 @@ SCHEMAS: dict[str, dict] = {
     "hil.InputDelivery": _obj(
         "hil.InputDelivery",
         {
-            "line": {"type": "string", "description": "DI<n>, STO_A or STO_B"},
+            "line": {"type": "string",
+                     "description": "DI<n>, STO_A, STO_B, or CAN <cob>h for a late frame"},
             "level": {"type": "boolean", "description": "electrical level, True = closed"},
             "sent_ns": {"type": "integer", "description": "the harness's stamp of the edge"},
             "applied_ns": {"type": "integer", "description": "when the model applied it"},

@@ -15,7 +15,7 @@ import re
 
 from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS
 from hil.record import topics
-from hil.timing.expr import ExprError
+from hil.timing.expr import Expr, ExprError
 from hil.timing.source import SignalSource
 from hil.timing.spec import Spec
 
@@ -37,13 +37,15 @@ def mapping_param(line: str) -> tuple[str, dict[str, int]] | None:
 def not_applicable(spec: Spec, source: SignalSource, binding: dict[str, str]) -> str | None:
     """Why `spec` does not apply to the recorded drive, or None (it applies, or unknown)."""
     bind = spec.binding(binding)
+    records = [msg.get("values") or {} for _t, msg in
+               source.messages(topics.drive_params(bind.get("drive", "drive1")))]
     recorded: dict[str, list[int]] = {}
-    for _t, msg in source.messages(topics.drive_params(bind.get("drive", "drive1"))):
-        for name, value in (msg.get("values") or {}).items():
+    for values in records:
+        for name, value in values.items():
             recorded.setdefault(name, []).append(int(value))
     if not recorded:
         return None
-    if spec.requires is not None and (why := _never_required(spec, source, bind)):
+    if spec.requires is not None and (why := _never_required(spec.requires, records)):
         return why
     for sig in spec.signals.values():
         if sig.kind != "function" or not sig.function:
@@ -64,17 +66,16 @@ def not_applicable(spec: Spec, source: SignalSource, binding: dict[str, str]) ->
     return None
 
 
-def _never_required(spec: Spec, source: SignalSource, bind: dict[str, str]) -> str | None:
-    """The spec's `requires` never held for the parameters in force at any record."""
-    assert spec.requires is not None
+def _never_required(requires: Expr, records: list[dict]) -> str | None:
+    """`requires` never held for the parameters in force after any record."""
     env: dict[str, int] = {}
     seen = False
-    for _t, msg in source.messages(topics.drive_params(bind.get("drive", "drive1"))):
-        env.update({k: int(v) for k, v in (msg.get("values") or {}).items()})
+    for values in records:
+        env.update({k: int(v) for k, v in values.items()})
         try:
-            if spec.requires.eval(env):
+            if requires.eval(env):
                 return None
             seen = True
         except (KeyError, ExprError):  # not recorded (yet): unknown
             continue
-    return f"{spec.requires} never held on this drive" if seen else None
+    return f"{requires} never held on this drive" if seen else None

@@ -14,6 +14,7 @@ this rig AL111/AL112 turn on the 1 ms window alone (the scenarios space ordinary
 from __future__ import annotations
 
 import time
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -101,7 +102,8 @@ class FaultRig:
         self.rec = Recorder(path)
         self.tap = ModelTap(self.drive, self.rec, bus=BUS)
         self._queue: list[can.Message] = []
-        self._sent: list[tuple[int, int]] = []  # (wall ns, model record time) per frame sent
+        # (wall ns, model record time) of the last frames sent
+        self._sent: deque[tuple[int, int]] = deque(maxlen=64)
         sink = _ModelSink(self)
         self.bus = FaultyCanBus(_Wire(self._harness_sent), BUS, sink=sink, seed=1)
         self.slave = CanopenSlave(_Wire(self._drive_sent), self.drive, node_id=NODE,
@@ -153,7 +155,7 @@ class FaultRig:
 
     # -- CAN -----------------------------------------------------------------------------
     def _harness_sent(self, msg: can.Message) -> None:
-        self._sent = [*self._sent[-63:], (time.time_ns(), self.t())]
+        self._sent.append((time.time_ns(), self.t()))
         self.drive.advance(FRAME_NS)  # a burst takes bus time: its start and end differ
         msg.timestamp = WALL0 + self.drive.now / 1e9
         self.rec.can(BUS, msg, "tx", self.t())

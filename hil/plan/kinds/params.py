@@ -70,8 +70,7 @@ class Write(StepKind):
             return Outcome(self._refused(d, want))
         for p, val in self.args["values"].items():
             d.write_param(p, val, self.args["via"])
-            if not ctx.bench.virtual:  # a real drive has no ground truth: record what it took
-                ctx.rec.drive_params(d.name, {p: val})
+            ctx.written(d.name, {p: val})
         return Outcome()
 
     def _refused(self, d: DriveIO, want: int) -> str:
