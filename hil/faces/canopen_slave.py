@@ -102,7 +102,7 @@ class CanopenSlave:
         node_id: int | None = None,
         lock: threading.RLock | None = None,
         od: ObjectDictionary | None = None,
-        pdo_defaults: str = "harness",
+        pdo_defaults: str = "manual",
         own_timer: bool = True,
         clock: Callable[[], int] = time.monotonic_ns,
         sdo_timeout_ms: int = 1000,
@@ -127,6 +127,7 @@ class CanopenSlave:
         # (frame, its sender stamp, model time it acted) per frame handled: delivery delay
         self.on_frame = on_frame
         self.on_nmt_reset = on_nmt_reset or getattr(drive, "nmt_reset", None)
+        self.on_nmt_stop = getattr(drive, "nmt_stop", None)
         self._fixed_node_id = node_id
         self.node_id = 0
         self.bitrate = 0
@@ -277,6 +278,8 @@ class CanopenSlave:
             self._set_state("OPERATIONAL")
         elif cs == cop.NMT_STOP:
             self._set_state("STOPPED")
+            if self.on_nmt_stop is not None:  # the drive decides (nmt_stop_action)
+                self._callback("on_nmt_stop", self.on_nmt_stop)
         elif cs == cop.NMT_PRE_OPERATIONAL:
             self._set_state("PRE-OPERATIONAL")
         elif cs in (cop.NMT_RESET_NODE, cop.NMT_RESET_COMMUNICATION):
@@ -345,6 +348,14 @@ class CanopenSlave:
         except Exception:  # fake drives without 6061h
             return False
 
+    def _p3009_e(self) -> int:
+        """P3.009 digit E, the sync error range in 10 us (lowest digit, 1-9; L10629-10645)."""
+        try:
+            e = int(self.drive.params.get("P3.009")) & 0xF
+        except Exception:  # fake drives without parameters: the default 0x5055
+            e = 5
+        return min(max(e, 1), 9)
+
     def _sync_reset(self) -> None:
         self._sync_prev_sent = None
         self._sync_deadline = None
@@ -363,7 +374,12 @@ class CanopenSlave:
         if prev is None:
             return
         dt = sent - prev
-        if dt < self._opt("sync_early_ratio") * period and not self._opt("dev_ignore_early_sync"):
+        early_limit = self._opt("sync_early_ratio") * period
+        fail_tol = self._opt("sync_fail_tolerance") * period
+        if self._opt("sync_tolerance") == "p3009":  # P3.009 E x 10 us (L10629-10645)
+            e_us = self._p3009_e() * 10 * US
+            early_limit, fail_tol = period - e_us, e_us
+        if dt < early_limit and not self._opt("dev_ignore_early_sync"):
             self._comm_alarm("AL3E2")  # SYNC too early (L20159-20163)
             return
         window = max(1, int(self._opt("sync_fail_window")))
@@ -372,7 +388,7 @@ class CanopenSlave:
             self._sync_intervals.popleft()
         if len(self._sync_intervals) == window:
             mean = sum(self._sync_intervals) / window
-            off = abs(mean - period) > self._opt("sync_fail_tolerance") * period
+            off = abs(mean - period) > fail_tol
             if off and not self._opt("dev_ignore_sync_cycle"):
                 self._comm_alarm("AL301")  # synchronisation failure (L20123-20127)
                 self._sync_intervals.clear()

@@ -471,6 +471,10 @@ class ModbusSlave:
                 times.append(self._timeout_ref + limit * S)
         return min(times) if times else None
 
+    def rearm_timeout(self, t: int) -> None:
+        """The P3.004 timeout counts again from `t` (the drive cleared its AL020)."""
+        self._touch_timeout(t)
+
     def _touch_timeout(self, t: int) -> None:
         self._timeout_ref = t
         self._timeout_fired = False

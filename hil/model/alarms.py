@@ -27,6 +27,9 @@ class AlarmOptions:
     """Per-code override of the clear rule, e.g. {"AL501": "reset"} (deviation knob)."""
 
     clear_override: dict[str, str] = field(default_factory=dict)
+    # ModelOptions.fault_reset_clears == "listed": 6040h clears only the alarms whose row
+    # names it ("NMT or 6040h" rule, or a note citing 6040h such as AL500 L20199)
+    fault_reset_listed: bool = False
 
 
 class AlarmManager:
@@ -117,8 +120,8 @@ class AlarmManager:
                 reg |= 0x04
             elif top == 0x4:
                 reg |= 0x08
-            elif top == 0x8:
-                reg |= 0x10
+            elif top == 0x8 or emcy >> 8 == 0x75:
+                reg |= 0x10  # communication (L17534): 8xxxh and the serial interface 75xxh
             elif emcy == GENERIC_EMCY or top == 0xF:
                 reg |= 0x80
         return reg
@@ -177,6 +180,9 @@ class AlarmManager:
             if code in self._causes:
                 continue
             rule = self.clear_rule(code)
+            if source == "6040h" and self.options.fault_reset_listed and rule == "reset":
+                if "6040h" not in self.table.spec(code).note:
+                    continue
             if (rule == "reset" and source != "nmt") or (
                 rule == "nmt_or_reset" and source in ("6040h", "nmt")
             ):

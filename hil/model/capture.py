@@ -106,7 +106,7 @@ class Capture:
         """Position of the capture source (P5.039.Y) at motor position `counts` (now)."""
         d = self.drive
         ax = d.axis
-        user = ax.user_position if counts is None else counts - ax.origin
+        user = (d.feedback_counts() if counts is None else counts) - ax.origin  # hardware
         puu = counts_to_puu(user, d.params.get("P1.044"), d.params.get("P1.045"))
         src = self.source
         if src == 3:
@@ -198,11 +198,12 @@ class Capture:
         nc = (self.drive.params.get("P5.039") >> 8) & 0xF
         if closed == (nc == 0):  # NO: latch on closing; NC: on opening (L11530)
             delay = round((self.options.delay_us + self.options.dev_capture_delay_us) * 1e3)
+            d = self.drive  # the encoder is latched in hardware: between motion steps too
             if delay <= 0:
-                self.latch(self.position(), self.drive.now)
+                self.latch(self.position(), d.now)
             else:  # the hardware latches `delay` later: the position then, CAP_OK then
-                self.drive.sched.after(delay, lambda: self.running and self.latch(
-                    self.position(), self.drive.now))
+                d.sched.after(delay, lambda: self.running and self.latch(
+                    self.position(), d.now))
 
     def on_step(self) -> None:
         """`trigger: Z`: the Z pulses the last motion step passed (exact positions)."""

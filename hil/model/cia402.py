@@ -323,6 +323,24 @@ class Cia402:
         else:
             self._set_state(SWITCH_ON_DISABLED)
 
+    def comm_disable(self) -> None:
+        """The master can no longer command the drive (NMT Stop): transition 9/12 to
+        SWITCH ON DISABLED, as a "disable voltage" controlword would."""
+        if self.state in (OPERATION_ENABLED, QUICK_STOP_ACTIVE, SWITCHED_ON,
+                          READY):
+            self._disable(SWITCH_ON_DISABLED)
+
+    def reinit(self) -> None:
+        """An NMT reset re-initialises the state machine: FAULT while a servo-off alarm
+        remains, else SWITCH ON DISABLED (transition 15 from FAULT, L18265)."""
+        if self.state in (OPERATION_ENABLED, QUICK_STOP_ACTIVE, FAULT_REACTION_ACTIVE):
+            return  # the servo is still on: AL401 (the drive) takes it down first
+        if self._fault:
+            if self.state != FAULT:
+                self._set_state(FAULT)
+        elif self.state != SWITCH_ON_DISABLED:
+            self._set_state(SWITCH_ON_DISABLED)
+
     # ---- inputs from the drive -----------------------------------------------------
     def set_fault(self, active: bool) -> None:
         """A servo-off alarm is present (True) or gone. Rising: transition 13 (+14)."""

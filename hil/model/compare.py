@@ -81,7 +81,7 @@ class Compare:
         d = self.drive
         if self.source == 0:
             return d.capture.position() + self.offset
-        return d.axis.user_position * self._scale() + self.offset
+        return (d.feedback_counts() - d.axis.origin) * self._scale() + self.offset  # hardware
 
     def velocity(self) -> float:
         return self.drive.axis.velocity * self._scale()

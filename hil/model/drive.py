@@ -67,7 +67,7 @@ from hil.model.mechanics import Mechanics
 from hil.model.motion import Axis, counts_to_puu, puu_to_counts
 from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
-from hil.model.pr_engine import attach_pr
+from hil.model.pr_engine import PR_MODES, attach_pr
 from hil.model.sto import Sto
 from hil.model.timebase import MS, Scheduler, ms
 from hil.protocol.cia402 import MODE_NAMES
@@ -102,6 +102,7 @@ class Drive:
         self._subs: list[Callable[[DriveEvent], None]] = []
         self.brake_line: int | None = None  # DO line of the brake coil, resolved at power-up
         self._step_ns = max(1, ms(options.motion_step_ms))
+        self._axis_t = t0  # model time of the axis state (the last motion step)
         self.servo_on = False
         self.powered = False  # True from the end of `_boot()`: no servo on before power-up
 
@@ -141,7 +142,8 @@ class Drive:
         if options.pfqs_clear == "reset":  # the DI table's reading (L15253), not L20145/L20157
             override.update({"AL35F": "reset", "AL3CF": "reset"})
         self.alarms = AlarmManager(
-            None, self.sched, self.params, self._on_alarm, AlarmOptions(override)
+            None, self.sched, self.params, self._on_alarm,
+            AlarmOptions(override, fault_reset_listed=options.fault_reset_clears == "listed"),
         )
         # P2.009 filter (L9229-9236): "stable" drops bounces; deviation knob: a pure delay
         filter_mode = "delay" if self.options.dev_di_filter_delay_only else "stable"
@@ -221,6 +223,10 @@ class Drive:
         self.dio.on_function("ORGP", self.cia402.set_home_switch)
         self.dio.on_function("ARST", self._on_arst)
         self.params.on_write("P2.030", lambda *_: self._update_servo())
+        # the DO functions follow their parameters at standstill too (ZSPD P1.038, TSPD
+        # P1.039, TPOS P1.054, MC_OK hold / AL380 P1.048: L8608-8632, L15269-15275)
+        for name_ in ("P1.038", "P1.039", "P1.048", "P1.054"):
+            self.params.on_write(name_, lambda *_: self.refresh_outputs())
 
     # ------------------------------------------------------------------ public API
     @property
@@ -263,6 +269,12 @@ class Drive:
     def do(self, n: int) -> bool:
         """DO n (1..6): True = output transistor conducting."""
         return self.dio.do_level(n)
+
+    def feedback_counts(self) -> float:
+        """The motor position now, between two motion steps too: the encoder is read in
+        hardware (a capture edge, the ground truth), not on the 1 ms command cycle."""
+        ax = self.axis
+        return ax.position + ax.velocity * (self.sched.now - self._axis_t) * 1e-9
 
     def fdbk(self) -> bool:
         """STO FDBK output: True = closed."""
@@ -320,15 +332,35 @@ class Drive:
             self.axis.ramp_stop(self._p5003_decel(5))  # P3.003 = 1: P5.003.B ramp (L10559)
 
     def nmt_reset(self, kind: str) -> None:
-        """A CANopen NMT reset: AL401 if the servo is on (L20183-20187); resets CANopen alarms."""
+        """A CANopen NMT reset ("reset node" / "reset communication"): AL401 if the servo is
+        on (L20183-20187); clears the alarms an NMT reset clears (AL180 ..., L20025) and
+        re-initialises the CiA 402 state machine: FAULT if a servo-off alarm remains, else
+        SWITCH ON DISABLED (transition 15 "Alarm 清除", L18265). Reset node also returns the
+        6xxxh objects to their power-up values (CiA 301). Choice: docs/manual-choices.md."""
         if self.servo_on:
             self.alarms.raise_alarm("AL401")
         self.alarms.reset("nmt")
+        if self.options.nmt_reset_reinit_402:
+            if kind == "reset node" and not self.servo_on:
+                self.cia402.power_on()
+            else:
+                self.cia402.reinit()
         if load_canopen_init(self.params):  # "或是進行通訊重置後" (L10731)
             self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
             self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
             self._mirror_params()
             self.cia402.write(0x607C, 0, HOME_OFFSET_INIT)
+        elif self.options.nmt_reset_reinit_402 and kind == "reset node":
+            self._mirror_params()  # after power_on(), which resets 6093h to 1/1
+
+    def nmt_stop(self) -> None:
+        """NMT Stop: the node takes no RPDO, SDO or controlword any more (L17089-17095).
+        The manual names no motion reaction; `nmt_stop_action` "servo_off" (default)
+        disables the CiA 402 drive (P1.032.Y stop, BRKR engages) rather than leave an
+        axis turning that only NMT can reach (docs/manual-choices.md)."""
+        if self.options.nmt_stop_action == "servo_off" and self.servo_on:
+            self.cia402.comm_disable()
+            self._update_servo(source="cia402")
 
     def power_cycle(self, *, battery: bool = True, off_for: int = 0) -> None:
         """Switch the drive off (for `off_for` ns) and on again."""
@@ -358,6 +390,7 @@ class Drive:
     def snapshot(self) -> dict[str, Any]:
         """Ground truth for the recorder: what a real bench cannot see directly."""
         ax = self.axis
+        fb = self.feedback_counts()
         g44, g45 = self.params.get("P1.044"), self.params.get("P1.045")
         return {
             "t": self.sched.now,
@@ -365,8 +398,8 @@ class Drive:
             "mode": MODE_NAMES.get(self.cia402.mode, str(self.cia402.mode)),
             "servo_on": self.servo_on,
             "torque_enabled": ax.power,
-            "position_puu": round(counts_to_puu(ax.user_position, g44, g45)),
-            "position_counts": round(ax.position),
+            "position_puu": round(counts_to_puu(fb - ax.origin, g44, g45)),
+            "position_counts": round(fb),
             "speed_rpm": round(ax.velocity_rpm, 3),
             "torque_pct": round(ax.torque / 10.0, 2),
             "following_error_counts": round(ax.following_error),
@@ -591,23 +624,29 @@ class Drive:
     # -- motion -------------------------------------------------------------------------
     def _needs_steps(self) -> bool:
         ax = self.axis
-        return ax.moving or ax.velocity != 0.0
+        # a position pushed off its demand at standstill is corrected (and seen by TPOS)
+        return ax.moving or ax.velocity != 0.0 or (ax.power and ax.position != ax.demand)
 
     def _integrate_to(self, stop: int) -> None:
+        """Motion in whole steps of the drive's own grid (1 ms: the command generator's
+        cycle, L4178, L4909), whatever the caller's slices: between two grid points the
+        axis keeps the state of the last one, and a command given inside a cycle acts from
+        that cycle's start. So every slicing of the same scenario gives the same positions
+        at every grid point (tests/model/test_motion_grid.py)."""
         sched = self.sched
         step = self._step_ns
-        while sched.now < stop:
-            if not self._needs_steps():
-                sched.now = stop
-                return
-            grid = (sched.now // step + 1) * step
-            nxt = grid if grid < stop else stop
-            self.axis.step(nxt - sched.now)
-            sched.now = nxt
+        while True:
+            grid = (sched.now // step + 1) * step  # the next grid point after now
+            if grid > stop or not self._needs_steps():
+                break
+            self.axis.step(step)
+            sched.now = self._axis_t = grid
             self._after_step()
             due = sched.next_deadline()
             if due is not None and due < stop:  # a step scheduled something earlier
                 return
+        if sched.now < stop:
+            sched.now = stop
 
     def _after_step(self) -> None:
         self.brake.after_step()
@@ -623,14 +662,33 @@ class Drive:
         ):
             self.alarms.raise_alarm("AL009")  # position error excessive (L19539-19542)
 
+    def refresh_outputs(self) -> None:
+        """Recompute the DO functions whose inputs changed outside a motion step."""
+        if self.powered:
+            self._refresh_speed_outputs()
+            self.pr.refresh_outputs()
+
     def _refresh_speed_outputs(self) -> None:
         ax = self.axis
         rpm = ax.velocity_rpm
         self._set_do("ZSPD", abs(rpm) < self.params.get("P1.038") / 10.0)
         self._set_do("TSPD", rpm > self.params.get("P1.039"))
-        self._set_do("TPOS", abs(ax.following_error) < self.params.get("P1.054"))
+        self._set_do("TPOS", self.tpos())
         # TQL: torque at a limit, not in T/Tz (L15278)
         self._set_do("TQL", ax.torque_limited and self.difunc.control_mode() not in ("T", "Tz"))
+
+    def tpos(self) -> bool:
+        """TPOS (P1.054, L8689-8693): in PT mode the following error is inside P1.054; in PR
+        mode the PR's target minus the motor position is, and a new trigger clears TPOS until
+        the command has reached its target (L8624)."""
+        ax = self.axis
+        err = ax.following_error
+        if self.params.get("P1.001") & 0xFF in PR_MODES:
+            if self.pr.tpos_off:
+                return False
+            if ax.mode == "position":
+                err = ax.target - ax.position
+        return abs(err) < self.params.get("P1.054")
 
     def _update_sensors(self, force: bool = False) -> None:
         """Drive the sensor DIs from the axis position (force: at power-up, unfiltered)."""

@@ -373,7 +373,8 @@ class Homing:
                 self._torque_since = None
         elif phase == "stop":
             if not ax.moving:
-                if self.route == "canopen" and self.options.canopen_return:
+                back = ax.position != self.home_counts  # 35/37: already there, no move
+                if self.route == "canopen" and self.options.canopen_return and back:
                     self.phase = "return"
                     self.trace.append((d.now, "return"))
                     ax.move_to(self.home_counts, self._v2, self._acc, self._dec2)

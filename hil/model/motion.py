@@ -436,6 +436,7 @@ class Axis:
         p = self.position
         self.last_position = p
         if self.power:
+            pd0 = self.demand  # the error the loop sees is the one sampled at the step start
             mode, pd, vd, done = self._profile(dt_ns, dt)
             if mode == _TORQUE:
                 nv, ramp_done = self._torque_loop(v, dt)
@@ -445,7 +446,7 @@ class Axis:
                 nv = self._clamp_loop(v, p, dt_ns, dt)
             else:
                 self._zc_pos = None
-                nv = self._velocity_loop(v, p, pd, vd, mode, dt_ns, dt)
+                nv = self._velocity_loop(v, p, pd0, vd, mode, dt_ns, dt)
         else:
             nv = self._coast(v, dt)
             mode, done, vd, pd = _HOLD, True, 0.0, p

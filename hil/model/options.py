@@ -89,6 +89,31 @@ class ModelOptions:
     sync_timeout_cycles: float = 3.0
     sync_fail_window: int = 8
     sync_fail_tolerance: float = 0.1
+    # P3.009 E (sync error range, 1-9 x 10 us; digits E T D M listed from the lowest, as
+    # every digit table of chapter 8, so 0x5055 is E = 5, T = 5 -> 450 us, L10629-10645):
+    # "p3009" = a SYNC interval shorter than 1006h - E x 10 us is early (AL3E2), and an
+    # AL301 cycle mean off 1006h by more than E x 10 us fails; widening E is the remedy the
+    # alarm table gives (L20159-20169). "ratio" (default) = sync_early_ratio and
+    # sync_fail_tolerance above: the manual measures E on the SYNC's arrival inside the
+    # drive's cycle, not on the interval, and a harness SYNC producer on a host that is not
+    # real-time jitters 0.5-2 ms, 10-40 x the default E (docs/manual-choices.md).
+    sync_tolerance: str = "ratio"
+    # NMT reset node / reset communication re-initialise the CiA 402 state machine: FAULT
+    # while a servo-off alarm remains, else SWITCH ON DISABLED (transition 15, L18265;
+    # AL180 cleared by "NMT 重置", L20025). False: the state stays until a 6040h fault reset.
+    nmt_reset_reinit_402: bool = True
+    # NMT Stop while the servo is on (the manual is silent on motion, L17089-17095): the
+    # stopped node takes no RPDO/controlword, so "servo_off" disables (the P1.032.Y stop,
+    # BRKR engages) and raises nothing; "none" keeps the axis as it is (unreachable but by NMT).
+    nmt_stop_action: str = "servo_off"
+    # AL020 (P3.004 timeout) after an alarm reset with the line still silent: "reset" = the
+    # timeout counts again from the reset (a new AL020 after P3.004); "frame" = only the
+    # next valid frame re-arms it (L10571-10578, L19598-19602 say neither).
+    al020_rearm: str = "reset"
+    # What a 6040h fault reset (bit 7, L18231) clears: "alarm_reset" = what an alarm reset
+    # clears (DI.ARST / P0.001 = 0) plus the "NMT or 6040h" alarms; "listed" = only the alarms
+    # whose row names 0x6040 (AL180 ..., AL500), so AL020 ("異警重置" only, L19602) stays.
+    fault_reset_clears: str = "alarm_reset"
     # AL185 "Rx/Tx error counter > 128" (L20027-20031): an error frame adds this to the
     # receive error counter, a valid frame subtracts 1 (ISO 11898-1 fault confinement).
     can_error_frame_weight: int = 8
@@ -170,6 +195,12 @@ class ModelOptions:
             raise ValueError(f"{where}.pfqs_clear: 'power_cycle' or 'reset'")
         if data.get("pfqs_zero", "command") not in ("command", "zspd"):
             raise ValueError(f"{where}.pfqs_zero: 'command' or 'zspd'")
+        for key, allowed in (("sync_tolerance", ("p3009", "ratio")),
+                             ("nmt_stop_action", ("servo_off", "none")),
+                             ("al020_rearm", ("reset", "frame")),
+                             ("fault_reset_clears", ("alarm_reset", "listed"))):
+            if key in data and data[key] not in allowed:
+                raise ValueError(f"{where}.{key}: one of {', '.join(map(repr, allowed))}")
         if data.get("sto_servo_off", "acknowledged") not in STO_SERVO_OFF:
             raise ValueError(f"{where}.sto_servo_off: one of {', '.join(STO_SERVO_OFF)}")
         return cls(**data)

@@ -44,7 +44,14 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any
 
-from hil.model.errors import ModelError, OutOfRange, ParamError, ReadOnly
+from hil.model.errors import (
+    ModelError,
+    OutOfRange,
+    ParamError,
+    ProtectedParameter,
+    ReadOnly,
+    ServoOnLocked,
+)
 from hil.model.motion import counts_to_puu, puu_per_s_to_rpm, puu_to_counts
 from hil.model.timebase import MS, Timer, ms
 from hil.profile.pr import (
@@ -56,6 +63,7 @@ from hil.profile.pr import (
     PrError,
     PrPath,
     read_path,
+    source_error,
 )
 
 if TYPE_CHECKING:
@@ -138,6 +146,8 @@ class PrEngine:
         self.mc_ok = False
         self.trace: list[tuple[int, str]] = []  # (t, what) for tests and recordings
         self._mc_was_on = False
+        # TPOS off from a trigger until the command reached its target (L8624, L8689-8693)
+        self.tpos_off = False
         self._prev_t = 0  # read time of the previous PR of the chain
         self._prev_dly = 0  # its DLY, ns
         self._prev_motion = False
@@ -192,11 +202,13 @@ class PrEngine:
         self.trace.append((d.now, f"dispatch:{n}"))
         self.lead = n
         self.cursor = n
+        self.tpos_off = True  # "清除信號 2、4、5、6" (L8624): Cmd_OK, TPOS, MC_OK
         self._external = True
         self._prev_t = d.now
         self._prev_dly = 0
         self._prev_motion = False
         self._set_cmd_ok(False)
+        d.refresh_outputs()
         self._service()
 
     def stop(self, source: str = "STP") -> None:
@@ -233,6 +245,7 @@ class PrEngine:
         """The program ends without finishing (servo off, homing started, alarm)."""
         self.cursor = None
         self.cmd = None
+        self.tpos_off = False
         self._cancel_wake()
         self._set_cmd_ok(False)
 
@@ -407,10 +420,16 @@ class PrEngine:
             try:
                 d.params.write(path.dest_param, value)
             except ReadOnly as exc:
-                self._fail("AL215", str(exc))
+                self._fail("AL215", str(exc))  # read-only (L20059-20063)
+                return False
+            except ServoOnLocked as exc:
+                self._fail("AL217", str(exc))  # "伺服 ON 不可寫入" (L20065-20069)
+                return False
+            except ProtectedParameter as exc:
+                self._fail("AL219", str(exc))  # P5.097 write protection (L20071-20075)
                 return False
             except ParamError as exc:
-                self._fail("AL213", str(exc))
+                self._fail("AL213", str(exc))  # value outside its range (L20054-20057)
                 return False
         self.trace.append((d.now, f"write:{path.number}"))
         return True
@@ -422,6 +441,7 @@ class PrEngine:
         if path.source == "array":
             return self.array[path.data]
         if path.source == "parameter":
+            source_error(path, f"PR#{path.number}")
             return d.params.read(path.source_param)
         return self.monitor(path.data)
 
@@ -447,6 +467,7 @@ class PrEngine:
         c = self.cmd
         if c is not None and c.done is None and self._command_done(c):
             c.done = d.now
+            self.tpos_off = False
             self.trace.append((d.now, f"done:{c.path.number if c.path else 'stop'}"))
             if d.now % MS == 0:
                 self._service()
@@ -454,6 +475,10 @@ class PrEngine:
                 self._wake_at((d.now // MS + 1) * MS)
         if self._limit_check:
             self._soft_limits()
+        self.refresh_outputs()
+
+    def refresh_outputs(self) -> None:
+        """MC_OK and AL380 follow TPOS whenever it changes, moving or not (L8608-8632)."""
         if self.cmd_ok:
             self._update_mc_ok()
 
@@ -535,8 +560,7 @@ class PrEngine:
             self._update_mc_ok()
 
     def _tpos(self) -> bool:
-        d = self.drive
-        return abs(d.axis.following_error) < d.params.get("P1.054")  # L8685-8698
+        return self.drive.tpos()
 
     def _update_mc_ok(self) -> None:
         d = self.drive

@@ -181,14 +181,26 @@ def _check_write(p: PrPath, where: str) -> None:
     elif not _known_param(p.dest_param):
         raise PrError(f"{where}: destination {p.dest_param} does not exist (AL213)", "AL213")
     if p.source == "parameter":
-        if not _known_param(p.source_param):
-            raise PrError(f"{where}: source {p.source_param} does not exist (AL209)", "AL209")
+        source_error(p, where)
     elif p.source == "array":
         if not 0 <= p.data < ARRAY_SIZE:
             raise PrError(f"{where}: source array index {p.data} outside 0..799 (L5097; AL209)",
                           "AL209")
     elif p.source == "monitor" and p.data not in MONITOR_CODES:
         raise PrError(f"{where}: monitor code {p.data} not available (AL231)", "AL231")
+
+
+PARAM_GROUPS = range(8)  # P0..P7 (chapter 8)
+
+
+def source_error(p: PrPath, where: str) -> None:
+    """A source parameter the drive cannot read: its group does not exist (AL207,
+    L20044-20047) or its number does not (AL209, L20049-20052)."""
+    if (p.data >> 8) & 0xF not in PARAM_GROUPS:
+        raise PrError(f"{where}: source group P{(p.data >> 8) & 0xF} does not exist (AL207)",
+                      "AL207")
+    if not _known_param(p.source_param):
+        raise PrError(f"{where}: source {p.source_param} does not exist (AL209)", "AL209")
 
 
 @cache

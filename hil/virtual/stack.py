@@ -20,7 +20,7 @@ from hil.faces.canopen_slave import CanopenSlave
 from hil.faces.dio_face import DioFace
 from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
 from hil.model.drive import Drive
-from hil.model.events import PowerCycled
+from hil.model.events import AlarmChanged, PowerCycled
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
 from hil.record.topics import CAN_LATE_NS, can_line
@@ -47,7 +47,7 @@ class DriveSpec:
     state_path: Path | None = None  # retained parameters / battery-backed data
     modbus_mode: str | None = None  # "rtu" / "ascii" (default: P3.002)
     modbus_baud: int | None = None  # default: the URL's baud, else P3.001
-    tpdo_defaults: str = "harness"  # CANopen PDO defaults (hil.faces.canopen_slave)
+    tpdo_defaults: str = "manual"  # CANopen PDO defaults: none, as printed (L17940-18124)
 
 
 class VirtualDriveStack:
@@ -168,6 +168,9 @@ class VirtualDriveStack:
     def _on_event(self, event: object) -> None:
         if isinstance(event, PowerCycled) and self.modbus is not None:
             self.modbus.power_cycle()
+        if (isinstance(event, AlarmChanged) and event.code == "AL020" and not event.active
+                and self.modbus is not None and self.drive.options.al020_rearm == "reset"):
+            self.modbus.rearm_timeout(event.t)  # P3.004 counts again from the reset
 
     def describe(self) -> str:
         """One line naming the faces, for `hil drive`'s ready line."""

@@ -133,8 +133,15 @@ def test_write_only_and_timeout():
         b.close()
 
 
-def test_nmt_gating_and_heartbeat_states(bench):
-    b = bench
+def test_nmt_gating_and_heartbeat_states():
+    b = Bench(NODE, pdo_defaults="harness")  # a mapped TPDO1 (the manual ships none)
+    try:
+        _nmt_gating(b)
+    finally:
+        b.close()
+
+
+def _nmt_gating(b: Bench) -> None:
     assert upload(b, 0x1000)  # PRE-OPERATIONAL answers SDO
     b.send(0x000, bytes([0x02, 0]))  # stop (all nodes)
     assert b.sdo(struct.pack("<BHBI", 0x40, 0x1000, 0, 0), timeout=0.2) is None  # L17089-95
@@ -144,7 +151,7 @@ def test_nmt_gating_and_heartbeat_states(bench):
     assert bytes(b.expect(0x705).data) == bytes([0x84])
     b.send(0x000, bytes([0x01, NODE]))  # start
     assert upload(b, 0x1000)
-    assert b.expect(0x185) is not None  # TPDO1 (harness default) only in OPERATIONAL
+    assert b.expect(0x185) is not None  # TPDO1 only in OPERATIONAL
     b.send(0x000, bytes([0x80, NODE]))  # pre-op: TPDOs stop
     b.drain(0.05)
     assert not [m for m in b.drain(0.1) if m.arbitration_id == 0x185]

@@ -38,7 +38,8 @@ def pv(d: Drive, rpm: float) -> None:
 
 
 def fb_puu(d: Drive) -> float:
-    return d.axis.user_position * 100000 / 16777216
+    """The motor position now, as the encoder reads it between two motion steps too."""
+    return (d.feedback_counts() - d.axis.origin) * 100000 / 16777216
 
 
 def arm(d: Drive, start: int = 0, count: int = 1, ctrl: int = 0x0031) -> None:

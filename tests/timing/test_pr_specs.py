@@ -114,11 +114,11 @@ def pr_jump_chain(tap) -> None:
 
 
 def pr_soft_limit(tap) -> None:
-    """P5.008 = 100000: to 200000 (AL283), back to 0, to 99900 (only the feedback passes)."""
+    """P5.008 = 100000: to 200000 (AL283), back to 0, to 99990 (only the feedback passes)."""
     table(tap, {
         1: (("single", 200000), {"spd": 4}),
         2: (("single", 0), {"spd": 4}),
-        3: (("single", 99900), {"spd": 4}),
+        3: (("single", 99990), {"spd": 4}),
     })
     servo_on(tap)
     for n in (1, 2, 3):
@@ -126,11 +126,11 @@ def pr_soft_limit(tap) -> None:
 
 
 def pr_soft_limit_negative(tap) -> None:
-    """P5.009 = -100000: to -200000 (AL285), back to 0, to -99900 (only the feedback passes)."""
+    """P5.009 = -100000: to -200000 (AL285), back to 0, to -99990 (only the feedback passes)."""
     table(tap, {
         1: (("single", -200000), {"spd": 4}),
         2: (("single", 0), {"spd": 4}),
-        3: (("single", -99900), {"spd": 4}),
+        3: (("single", -99990), {"spd": 4}),
     })
     servo_on(tap)
     for n in (1, 2, 3):
@@ -191,7 +191,7 @@ def test_soft_limit_scenario_overshoots_the_limit_with_the_feedback(tmp_path, ca
 DEVIATIONS = [  # (case, knob, the constraint it breaks)
     ("pr_completion", {"dev_start_delay_ms": 5}, "motion starts after the P2.009 filter"),
     ("pr_completion", {"dev_cmd_ok_ignores_dly": True}, "Cmd_OK rises DLY after"),
-    ("pr_completion", {"dev_dly_offset_ms": 5}, "Cmd_OK rises DLY after the command time"),
+    ("pr_completion", {"dev_dly_offset_ms": 7}, "Cmd_OK rises DLY after the command time"),
     ("pr_completion", {"dev_dly_offset_ms": 40}, "Cmd_OK rises DLY after the command ends"),
     ("pr_completion/no_dly", {"dev_mc_ok_ignores_tpos": True},
      "MC_OK rises once Cmd_OK and TPOS are both on"),
