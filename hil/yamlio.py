@@ -21,6 +21,8 @@ from typing import Any
 
 import yaml
 
+from hil.fileio import FileProblem, read_limited
+
 
 class FileError(ValueError):
     """A malformed file: `file:line: field: problem`."""
@@ -165,11 +167,13 @@ def load_yaml_file(path: str | Path, error: type[FileError] = FileError) -> Any:
     p = Path(path)
     max_bytes = limit("HIL_YAML_MAX_BYTES", 1 << 20)
     try:
-        size = p.stat().st_size
-        if size > max_bytes:
-            raise error(str(p), 1, "(file)", f"{size} bytes, more than {max_bytes} "
-                        "(HIL_YAML_MAX_BYTES)")
-        data = p.read_bytes()
+        # the bytes actually read are capped: a device (/dev/zero) reports size 0
+        data = read_limited(p, max_bytes, "YAML file")
+    except FileProblem as e:
+        why = str(e).removeprefix(f"{p}: ")
+        if why.startswith("more than"):
+            why += " (HIL_YAML_MAX_BYTES)"
+        raise error(str(p), 1 if why.startswith("more than") else 0, "(file)", why) from None
     except OSError as e:
         raise error(str(p), 0, "(file)", f"cannot read: {e.strerror or e}") from None
     try:

@@ -64,6 +64,13 @@ def drive_stopped_by_sigterm() -> int:
             p.wait()
 
 
+def _cut(src: str, dst: Path) -> str:
+    """A copy of recording `src` cut short, as a killed run leaves it."""
+    data = Path(src).read_bytes()
+    dst.write_bytes(data[: len(data) * 2 // 3])
+    return str(dst)
+
+
 def cases(w: dict[str, Path]) -> dict[tuple[str, int], object]:
     d, rec = w["dir"], str(w["rec"])
     notes, can_rec = str(d / "notes.mcap"), str(d / "can.mcap")
@@ -86,6 +93,8 @@ def cases(w: dict[str, Path]) -> dict[tuple[str, int], object]:
         ("report", 2): lambda: hil(["report", notes]),
         ("diff", 0): lambda: hil(["diff", rec, rec, "-o", str(d / "diff.html")]),
         ("diff", 2): lambda: hil(["diff", rec, notes, "-o", str(d / "diff2.html")]),
+        ("diff", 4): lambda: hil(["diff", rec, _cut(rec, d / "cut.mcap"), "-o",
+                                  str(d / "diff4.html")]),
         ("inspect", 0): lambda: hil(["inspect", rec]),
         ("inspect", 2): lambda: hil(["inspect", notes]),
         ("export", 0): lambda: hil(["export", can_rec, "-o", str(d / "x.blf")]),

@@ -180,9 +180,9 @@ class AlarmManager:
             if code in self._causes:
                 continue
             rule = self.clear_rule(code)
-            if source == "6040h" and self.options.fault_reset_listed and rule == "reset":
-                if "6040h" not in self.table.spec(code).note:
-                    continue
+            if (source == "6040h" and self.options.fault_reset_listed and rule == "reset"
+                    and "6040h" not in self.table.spec(code).note):
+                continue
             if (rule == "reset" and source != "nmt") or (
                 rule == "nmt_or_reset" and source in ("6040h", "nmt")
             ):

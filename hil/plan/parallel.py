@@ -38,7 +38,7 @@ from typing import Any
 from hil.plan.bench import Bench, load_bench
 from hil.plan.events import Listener, Note, Notifier, PlanEnded, PlanStarted, StepEnded
 from hil.plan.plan import Plan, check_plan, load_plan
-from hil.plan.runner import PlanResult, run_plan, timing_specs
+from hil.plan.runner import PlanResult, output_stems, run_plan, timing_specs
 
 __all__ = ["jobs_from_arg", "parallel_blocker", "run_parallel"]
 
@@ -138,6 +138,7 @@ class _Job:
     allow_inconclusive: bool
     index: int
     total: int
+    stem: str  # output name, unique within the run (runner.output_stems)
 
 
 def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
@@ -152,7 +153,7 @@ def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
         try:
             res = run_plan(plan, bench, Path(job.out_dir), listeners=[notes],
                            allow_inconclusive=job.allow_inconclusive, index=job.index,
-                           total=job.total, stop=lambda: _stop_requested)
+                           total=job.total, stop=lambda: _stop_requested, stem=job.stem)
         except KeyboardInterrupt as e:
             _stop_requested = True
             res = getattr(e, "plan_result", None) or _interrupted_result(plan, bench, job)
@@ -164,7 +165,7 @@ def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
 
 def _interrupted_result(plan: Plan, bench: Bench, job: _Job) -> PlanResult:
     """What `run_plan` wrote for a stopped plan: its recording and reports are on disk."""
-    stem = Path(plan.path).stem
+    stem = job.stem
     out = Path(job.out_dir)
     return PlanResult(plan.name, plan.path, bench.name, status="aborted",
                       recording=str(out / f"{stem}.mcap"), html=str(out / f"{stem}.html"),
@@ -193,8 +194,9 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
     for p in plans:
         check_plan(p, bench, specs)
     events = Notifier(listeners)
+    stems = output_stems(plans)
     todo = [_Job(str(p.path), bench.path or None, str(out_dir), allow_inconclusive, i,
-                 len(plans)) for i, p in enumerate(plans, 1)]
+                 len(plans), stems[i - 1]) for i, p in enumerate(plans, 1)]
     results: dict[int, PlanResult] = {}
     done = 0
     ctx = multiprocessing.get_context("spawn")

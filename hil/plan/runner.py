@@ -135,15 +135,17 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
              listeners: list[Listener] | None = None,
              session_factory: Callable[[Bench, Any], Session] = open_session,
              allow_inconclusive: bool = False, reports: bool = True, index: int = 1,
-             total: int = 1, stop: Callable[[], bool] | None = None) -> PlanResult:
+             total: int = 1, stop: Callable[[], bool] | None = None,
+             stem: str | None = None) -> PlanResult:
     """Run one plan (checked here against the bench first); raises KeyboardInterrupt after
     leaving the bench safe. Listeners hear plan and step events; the recording's step records
     and, with `reports`, the JUnit and HTML reports are listeners too. `stop()` true once the
     signal handlers are in place: a stop asked for while the plan was being set up (a `-j`
-    worker's signal), handled as Ctrl-C."""
+    worker's signal), handled as Ctrl-C. `stem`: the output files' name (default: the plan
+    file's; `output_stems` makes them unique within a run)."""
     specs = specs if specs is not None else timing_specs()
     check_plan(plan, bench, specs)
-    res, rec, stem = _open_recording(plan, bench, out_dir)
+    res, rec, stem = _open_recording(plan, bench, out_dir, stem)
     events = Notifier([StepRecords(), *(listeners or [])]
                       + ([Reports(out_dir, stem)] if reports else []))
     events.emit(PlanStarted(plan, bench, index, total, rec))
@@ -212,11 +214,41 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
     return res
 
 
-def _open_recording(plan: Plan, bench: Bench, out_dir: Path) -> tuple[PlanResult, Recorder, str]:
+def plan_stem(plan: Plan) -> str:
+    """The name of a plan's output files: its file's stem (its name for a plan from text)."""
+    return Path(plan.path).stem if plan.path and plan.path != "<string>" else plan.name
+
+
+def output_stems(plans: list[Plan]) -> list[str]:
+    """One output name per plan, unique within the run: two `x.yaml` of different folders
+    become `a-x` and `b-x` (parent folders until they differ, then a number), so no
+    recording overwrites another, with or without `-j`."""
+    stems = [plan_stem(p) for p in plans]
+    out = list(stems)
+    for name in set(stems):
+        idx = [i for i, s in enumerate(stems) if s == name]
+        if len(idx) < 2:
+            continue
+        parents = [Path(plans[i].path).resolve().parent.parts for i in idx]
+        depth = 1
+        while depth <= max(len(p) for p in parents):
+            cand = ["-".join(p[-depth:]) + f"-{name}" for p in parents]
+            if len(set(cand)) == len(cand):
+                break
+            depth += 1
+        else:
+            cand = [f"{name}-{k}" for k in range(1, len(idx) + 1)]
+        for i, c in zip(idx, cand, strict=True):
+            out[i] = c
+    return out
+
+
+def _open_recording(plan: Plan, bench: Bench, out_dir: Path,
+                    stem: str | None = None) -> tuple[PlanResult, Recorder, str]:
     """The plan's result skeleton and its recording, with the plan, bench and timing
     metadata `hil check` and `hil report` read back."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    stem = Path(plan.path).stem if plan.path and plan.path != "<string>" else plan.name
+    stem = stem or plan_stem(plan)
     res = PlanResult(plan.name, plan.path, bench.name, recording=str(out_dir / f"{stem}.mcap"))
     res.steps = [StepResult(s.index, s.label, s.kind, s.line) for s in plan.steps]
     rec = Recorder(res.recording, metadata={"plan": plan.name, "plan_file": plan.path,
@@ -362,7 +394,8 @@ def run_plans(plans: list[Plan], bench: Bench, out_dir: Path, *, quiet: bool = F
         check_plan(p, bench, specs)
     if listeners is None:
         listeners = [] if quiet else [StepLines(stream)]
+    stems = output_stems(plans)
     return [run_plan(p, bench, out_dir, specs=specs, listeners=listeners,
                      session_factory=session_factory, allow_inconclusive=allow_inconclusive,
-                     index=i, total=len(plans))
-            for i, p in enumerate(plans, 1)]
+                     index=i, total=len(plans), stem=stem)
+            for i, (p, stem) in enumerate(zip(plans, stems, strict=True), 1)]

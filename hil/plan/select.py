@@ -120,9 +120,10 @@ def is_glob(name: str) -> bool:
 
 def select(plans: list, keyword: str | None = None, marker: str | None = None) -> list:
     """The plans (objects with `name`, `path`, `tags`) that `-k keyword` and `-m marker`
-    both accept; raises ExprError for a malformed expression."""
-    k = Expr.parse(keyword) if keyword else None
-    m = Expr.parse(marker) if marker else None
+    both accept; raises ExprError for a malformed expression, an empty one (`-k ''`) included:
+    it would select everything, which no one asks for by selecting."""
+    k = Expr.parse(keyword) if keyword is not None else None
+    m = Expr.parse(marker) if marker is not None else None
     out = []
     for p in plans:
         stem = p.path.rsplit("/", 1)[-1].removesuffix(".yaml") if p.path else p.name

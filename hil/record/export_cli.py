@@ -14,10 +14,11 @@ import io
 import sys
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 import can
 
+from hil.fileio import atomic_path, refuse_input
 from hil.record.canio import can_messages
 from hil.record.reader import Recording, RecordingError
 
@@ -106,6 +107,17 @@ def write_candump(items: Iterable[tuple[str, can.Message]], out: TextIO) -> int:
     return n
 
 
+def _write_can(fmt: str, target: Any, items: list[tuple[str, can.Message]]) -> int:
+    """Write `items` with python-can's writer for `fmt` (asc, blf, csv) to `target`."""
+    writer = {"asc": can.ASCWriter, "blf": can.BLFWriter, "csv": can.CSVWriter}[fmt](target)
+    try:
+        for _bus, msg in items:
+            writer.on_message_received(msg)
+    finally:
+        writer.stop()
+    return len(items)
+
+
 def main(args: argparse.Namespace) -> int:
     output = str(args.output)
     try:
@@ -114,6 +126,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil export: {exc}", file=sys.stderr)
         return 2
     try:
+        if output != STDOUT:
+            refuse_input(output, [args.file], "-o")
         rec = Recording.open(args.file)
         items = list(can_messages(rec, args.bus, time=args.time))
     except (RecordingError, ValueError) as exc:
@@ -132,19 +146,14 @@ def main(args: argparse.Namespace) -> int:
                 n = write_candump(items, sys.stdout)
                 sys.stdout.flush()
             else:
-                with open(output, "w", encoding="ascii") as f:
+                with atomic_path(output) as tmp, open(tmp, "w", encoding="ascii") as f:
                     n = write_candump(items, f)
+        elif to_stdout:
+            n = _write_can(fmt, _KeepOpen(sys.stdout.buffer, encoding="utf-8",
+                                          write_through=True), items)
         else:
-            target = (_KeepOpen(sys.stdout.buffer, encoding="utf-8", write_through=True)
-                      if to_stdout else output)
-            writer = {"asc": can.ASCWriter, "blf": can.BLFWriter, "csv": can.CSVWriter}[fmt](
-                target)
-            try:
-                for _bus, msg in items:
-                    writer.on_message_received(msg)
-            finally:
-                writer.stop()
-            n = len(items)
+            with atomic_path(output) as tmp:  # a failed export leaves the old file
+                n = _write_can(fmt, str(tmp), items)
     except OSError as exc:
         print(f"hil export: cannot write {output}: {exc}", file=sys.stderr)
         return 2

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hil.fileio import FileProblem, read_limited
 from hil.record.mcapio import Scan, iter_chunk, scan
 
 _loads = json.loads
@@ -76,7 +77,9 @@ class Recording:
         """Read `path`; raises `RecordingError` (naming the file) if it is no MCAP at all."""
         p = Path(path)
         try:
-            data = p.read_bytes()
+            data = read_limited(p, None, "recording")  # not a device: /dev/zero never ends
+        except FileProblem as exc:
+            raise RecordingError(str(exc)) from exc
         except OSError as exc:
             raise RecordingError(f"{p}: cannot read: {exc.strerror or exc}") from exc
         try:
@@ -211,3 +214,24 @@ class Recording:
             AttachmentInfo(a.name, a.media_type, a.log_time, a.create_time, a.data)
             for a in self._scan.attachments
         ]
+
+
+def not_hil(metadata: dict[str, Any], schemas: Iterable[str], topics: list[str]) -> str | None:
+    """Why a readable MCAP is not a hil recording, or None when it is one (it has the
+    recorder's `hil.run` metadata or `hil.*` schema channels). `hil check` and `hil diff`."""
+    if "hil.run" in metadata or any(s.startswith("hil.") for s in schemas):
+        return None
+    found = ", ".join(topics[:5]) or "none"
+    return ("not a hil recording: no hil.run metadata and no hil.* channels "
+            f"(channels: {found})")
+
+
+def incomplete(path: str | os.PathLike, *, corrupt: bool, truncated: bool,
+               error: str | None) -> str | None:
+    """Why what a reader judged of a recording is incomplete (exit 4), or None."""
+    if corrupt:
+        return f"{path}: damaged: {error}; nothing after it was read"
+    if truncated:
+        return (f"{path}: truncated (no footer: the run was killed or is still recording); "
+                "judged only what it holds")
+    return None

@@ -9,6 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from hil.fileio import FileProblem, refuse_input, same_file
 from hil.record.reader import RecordingError
 from hil.report.html import write_html
 from hil.report.index import write_index
@@ -24,9 +25,27 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "every recording (status, verdicts, duration, links)")
 
 
+def _refuse_clobber(args: argparse.Namespace) -> None:
+    """No output may be a recording it reads, nor another output of the same call."""
+    pages = [args.output or Path(r).with_suffix(".html") for r in args.recording]
+    outs = [("-o", p) for p in pages]
+    outs += [(flag, v) for flag, v in (("--junit", args.junit), ("--index", args.index)) if v]
+    for flag, out in outs:
+        refuse_input(out, args.recording, flag)
+    for i, (flag, out) in enumerate(outs):
+        for other_flag, other in outs[i + 1:]:
+            if same_file(out, other):
+                raise FileProblem(f"{other_flag} {other}: is also the {flag} output")
+
+
 def main(args: argparse.Namespace) -> int:
     if args.output and len(args.recording) > 1:
         print("hil report: -o takes one recording", file=sys.stderr)
+        return 2
+    try:
+        _refuse_clobber(args)
+    except FileProblem as e:
+        print(f"hil report: {e}", file=sys.stderr)
         return 2
     try:
         for r in args.recording:

@@ -28,6 +28,7 @@ from typing import Any
 
 import yaml
 
+from hil.fileio import write_text_atomic
 from hil.record import topics
 from hil.record.reader import Recording
 from hil.report.html import CSS
@@ -398,8 +399,6 @@ def write_diff(a: str | Path, b: str | Path, html_out: str | Path,
     d = diff(a, b)
     html_out = Path(html_out)
     json_out = Path(json_out) if json_out else html_out.with_suffix(".json")
-    for p in (html_out, json_out):
-        p.parent.mkdir(parents=True, exist_ok=True)
-    html_out.write_text(render_html(d), encoding="utf-8")
-    json_out.write_text(json.dumps(d, indent=1, default=str) + "\n", encoding="utf-8")
+    write_text_atomic(html_out, render_html(d))
+    write_text_atomic(json_out, json.dumps(d, indent=1, default=str) + "\n")
     return d, html_out, json_out

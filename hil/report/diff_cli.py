@@ -1,7 +1,9 @@
 """`hil diff A.mcap B.mcap [-o FILE.html] [--json FILE.json]`: the same plan recorded twice,
 aligned step by step (hil.report.diff).
 
-Exit 0 written (differences or not), 2 bad input (unreadable recording) or write error.
+Exit 0 written (differences or not), 2 bad input (unreadable or not a hil recording, an
+output that is one of the inputs) or write error, 4 written but a recording is damaged or cut
+short (as `hil check`).
 """
 
 from __future__ import annotations
@@ -10,7 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from hil.record.reader import RecordingError
+from hil.fileio import FileProblem, refuse_input, same_file
+from hil.record.reader import Recording, RecordingError, incomplete, not_hil
 from hil.report.diff import write_diff
 
 
@@ -21,11 +24,35 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", help="JSON file (default: the HTML name with .json)")
 
 
+def _check_inputs(paths: list[str]) -> tuple[str | None, list[str]]:
+    """(why an input is no hil recording, what is incomplete), with `hil check`'s reader
+    checks: a non-hil MCAP is bad input, a damaged or cut recording an incomplete result."""
+    partial = []
+    for p in paths:
+        rec = Recording.open(p)
+        chans = rec.channels()
+        why = not_hil(rec.metadata(), [c.schema for c in chans], rec.topics())
+        if why and not rec.corrupt:
+            return f"{p}: {why}", []
+        cut = incomplete(p, corrupt=rec.corrupt, truncated=rec.truncated, error=rec.error)
+        if cut:
+            partial.append(cut)
+    return None, partial
+
+
 def main(args: argparse.Namespace) -> int:
     out = Path(args.output) if args.output else Path(args.b).with_suffix(".diff.html")
+    json_out = Path(args.json) if args.json else out.with_suffix(".json")
     try:
-        d, html_out, json_out = write_diff(args.a, args.b, out, args.json)
-    except RecordingError as e:
+        bad, partial = _check_inputs([args.a, args.b])
+        if bad:
+            raise RecordingError(bad)
+        refuse_input(out, [args.a, args.b], "-o")
+        refuse_input(json_out, [args.a, args.b], "--json")
+        if same_file(out, json_out):
+            raise FileProblem(f"--json {json_out}: is the HTML output too")
+        d, html_out, json_out = write_diff(args.a, args.b, out, json_out)
+    except (RecordingError, FileProblem) as e:
         print(f"hil diff: {e}", file=sys.stderr)
         return 2
     except OSError as e:
@@ -40,4 +67,6 @@ def main(args: argparse.Namespace) -> int:
           f"differently, {len(d['states'])} state sequence(s) differ")
     print(html_out)
     print(json_out)
-    return 0
+    for why in partial:  # compared what the files hold; as `hil check`, that is exit 4
+        print(f"hil diff: incomplete: {why}", file=sys.stderr)
+    return 4 if partial else 0

@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from dataclasses import fields
 from pathlib import Path
 
+from hil.fileio import write_text_atomic
 from hil.report.data import RunData, bus_around, bus_log, load_run
 from hil.report.latch_html import LATCH_SPEC, latch_html
 from hil.timing.checker import Verdict
@@ -339,8 +340,7 @@ def _files_html(run: RunData) -> list[str]:
 def write_html(recording: str | Path, out: str | Path | None = None) -> Path:
     run = load_run(recording)
     out = Path(out) if out is not None else Path(recording).with_suffix(".html")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render_html(run), encoding="utf-8")
+    write_text_atomic(out, render_html(run))
     return out
 
 

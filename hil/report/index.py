@@ -12,6 +12,7 @@ import os
 from collections import Counter
 from pathlib import Path
 
+from hil.fileio import write_text_atomic
 from hil.record.reader import RecordingError
 from hil.report.data import load_run
 from hil.report.html import CSS, run_info_table
@@ -112,5 +113,5 @@ def render_index(recordings: list[str | Path], out: str | Path) -> str:
 def write_index(recordings: list[str | Path], out: str | Path) -> Path:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render_index(recordings, out), encoding="utf-8")
+    write_text_atomic(out, render_index(recordings, out))
     return out

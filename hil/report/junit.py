@@ -6,6 +6,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from hil.fileio import write_text_atomic
 from hil.report.data import RunData, load_run
 
 NOT_PASSED = {"fail": "failure", "inconclusive": "failure", "error": "error",
@@ -69,5 +70,5 @@ def junit_xml(recordings: list[str | Path]) -> str:
 def write_junit(recordings: list[str | Path], out: str | Path) -> Path:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(junit_xml(recordings), encoding="utf-8")
+    write_text_atomic(out, junit_xml(recordings))
     return out

@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from hil.record import topics
-from hil.timing.expr import ExprError, is_param
+from hil.timing.expr import ExprError, check_number, is_param
 from hil.timing.source import ParamTimeline, SignalSource, samples
 from hil.timing.spec import ConstraintDef, EventDef, SignalDef, Spec, WindowDef
 
@@ -43,7 +43,9 @@ def _dur(ns: int) -> str:
 
 
 def _ns(ms: float) -> int:
-    return round(ms * MS)
+    """ms -> ns; a value that is not a finite number within the magnitude limit (a NaN or inf
+    parameter, a text) is an ExprError: the constraint is `cannot judge`, never a crash."""
+    return round(check_number(ms, "a time in ms") * MS)
 
 
 @dataclass
@@ -649,8 +651,8 @@ def _judge(ctx: Context, c: ConstraintDef, sc: Scope) -> Verdict:
 
 def _window_values(ctx: Context, w: WindowDef, t: int) -> tuple[float | None, float | None, dict]:
     env = ctx.env(t)
-    lo = float(w.min.eval(env)) if w.min is not None else None
-    hi = float(w.max.eval(env)) if w.max is not None else None
+    lo = float(w.min.number(env)) if w.min is not None else None
+    hi = float(w.max.number(env)) if w.max is not None else None
     used = {n: env[n] for e in (w.min, w.max) if e for n in sorted(e.names)}
     return lo, hi, used
 

@@ -9,17 +9,27 @@ incomplete: nothing was judged at all, a spec named with --spec found no data, o
 is damaged mid-file (a corrupt chunk: everything after it is unreadable) or cut (no footer: a
 killed run). Nothing judged is not
 a pass, so 4 always comes with the reason on stderr.
+
+Flags are checked before anything is judged; a bad one is exit 2 naming it: `--const` must be
+a constant of the chosen specs, `--param` a parameter of the drive's table (chapter 8),
+`--bind` a placeholder or DI/DO function the chosen specs use (a function to a line such as
+DO4 or DI8:b); values are finite numbers within the expression limits (|x| <= 2**64),
+resolutions are not negative, `--svg` is a directory that can be created and written.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import re
 import sys
 from pathlib import Path
 from typing import Any
 
 from hil.record.reader import RecordingError
+from hil.record.reader import incomplete as reader_incomplete
+from hil.record.reader import not_hil as reader_not_hil
 from hil.timing.applicable import not_applicable
 from hil.timing.checker import (
     Verdict,
@@ -29,6 +39,7 @@ from hil.timing.checker import (
     occurrences_since,
     summary,
 )
+from hil.timing.expr import MAX_MAGNITUDE
 from hil.timing.render import svg
 from hil.timing.source import (
     RecordingSource,
@@ -37,7 +48,15 @@ from hil.timing.source import (
     recorded_constants,
     recorded_specs,
 )
-from hil.timing.spec import Spec, SpecError, load_spec, shipped_specs
+from hil.timing.spec import (
+    DEFAULT_PLACES,
+    LINE_RE,
+    PLACE_RE,
+    Spec,
+    SpecError,
+    load_spec,
+    shipped_specs,
+)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -66,21 +85,110 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _pairs(items: list[str], what: str, number: bool = False) -> dict[str, Any]:
+    """NAME=VALUE flags -> {name: value}; with `number`, each value a finite number within
+    the expression limits (ValueError naming the flag)."""
     out: dict[str, Any] = {}
     for item in items:
         key, sep, val = item.partition("=")
+        key = key.strip()
         if not sep or not key:
             raise ValueError(f"{what} {item!r}: expected NAME=VALUE")
         if number:
-            try:
-                out[key] = int(val, 0)
-            except ValueError:
-                try:
-                    out[key] = float(val)
-                except ValueError:
-                    raise ValueError(f"{what} {item!r}: {val!r} is not a number") from None
+            out[key] = _number(val.strip(), f"{what} {item!r}")
         else:
-            out[key] = val
+            out[key] = val.strip()
+    return out
+
+
+def _number(val: str, what: str) -> int | float:
+    try:
+        num: int | float = int(val, 0)
+    except ValueError:  # also a text of more than 4300 digits
+        try:
+            num = float(val)
+        except ValueError:
+            raise ValueError(f"{what}: {val[:40]!r} is not a number") from None
+    if isinstance(num, float) and not math.isfinite(num):
+        raise ValueError(f"{what}: {val[:40]!r} is not a finite number")
+    if abs(num) > MAX_MAGNITUDE:
+        raise ValueError(f"{what}: {val[:40]!r} is beyond the magnitude limit (|x| <= 2**64)")
+    return num
+
+
+def _known(names: set[str], most: int = 15) -> str:
+    shown = sorted(names)
+    more = f", … ({len(shown) - most} more)" if len(shown) > most else ""
+    return ", ".join(shown[:most]) + more or "none"
+
+
+def _bindable(spec: Spec) -> set[str]:
+    """The placeholders and DI/DO functions `spec` reads: `--bind` may set only these."""
+    out = set(DEFAULT_PLACES) | set(spec.bind)
+    texts = list(spec.resolution)
+    for s in spec.signals.values():
+        if s.function:
+            out.add(s.function)
+        texts += [s.topic or "", *(s.alarm or []), *(str(v) for v in s.where.values())]
+    for t in texts:
+        out.update(PLACE_RE.findall(t))
+    return out
+
+
+_PLACE_VALUE = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def check_flags(specs: list[Spec], binding: dict[str, str], params: dict[str, Any],
+                consts: dict[str, Any], res: dict[str, Any]) -> dict[str, Any]:
+    """Refuse flags the chosen specs cannot use (ValueError naming the flag); returns the
+    `--param` values under their canonical names (p1-42 -> P1.042)."""
+    from hil.profile.params import ParamTable, canonical
+
+    known = set().union(*(s.constants for s in specs)) if specs else set()
+    for k, val in consts.items():
+        if k not in known:
+            raise ValueError(f"--const {k}={val}: unknown constant {k!r} (constants of the "
+                             f"chosen specs: {_known(known)})")
+    table = ParamTable.load() if params else None
+    out: dict[str, Any] = {}
+    for k, val in params.items():
+        if table is None or k not in table:
+            raise ValueError(f"--param {k}={val}: unknown parameter {k!r}: not in the drive's "
+                             "parameter table (P<group>.<nnn>, e.g. P1.042)")
+        out[canonical(k)] = val
+    bindable = set().union(*(_bindable(s) for s in specs)) if specs else set(DEFAULT_PLACES)
+    for k, val in binding.items():
+        if k not in bindable:
+            raise ValueError(f"--bind {k}={val}: the chosen specs have no placeholder or "
+                             f"function {k!r} (they have: {_known(bindable)})")
+        if k.isupper() and k not in DEFAULT_PLACES and not LINE_RE.fullmatch(val):
+            raise ValueError(f"--bind {k}={val}: {val!r} is not a line (DI1..DI10, DO1..DO6, "
+                             "STO_A, STO_B, FDBK, with :b for a b-contact, e.g. DI8:b)")
+        if not _PLACE_VALUE.fullmatch(val):
+            raise ValueError(f"--bind {k}={val}: {val!r} is not a name (letters, digits, "
+                             "_ . -)")
+    for k, val in res.items():
+        if val < 0:
+            raise ValueError(f"--resolution {k}={val}: must not be negative")
+    return out
+
+
+def svg_dir(path: str, specs: list[Spec]) -> Path:
+    """The `--svg` directory, created now (ValueError naming `--svg` when it cannot be: a
+    regular file on the way, a diagram path that is a directory, no permission)."""
+    if not path.strip():
+        raise ValueError("--svg: empty directory name")
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--svg {path}: not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"--svg {path}: cannot create the directory: "
+                         f"{e.strerror or e}") from None
+    for spec in specs:
+        target = out / f"{spec.id}.svg"
+        if target.exists() and not target.is_file():
+            raise ValueError(f"--svg {path}: cannot write {target}: not a regular file")
     return out
 
 
@@ -132,23 +240,16 @@ def _why_nothing(spec: Spec, verdicts: list[Verdict], source: Any, binding: dict
 
 
 def not_hil(source: Any) -> str | None:
-    """Why a readable MCAP is not a hil recording, or None when it is one (it has the
-    recorder's `hil.run` metadata or `hil.*` schema channels)."""
-    if "hil.run" in source.meta or any(s.startswith("hil.") for s in source.schemas):
-        return None
-    found = ", ".join(source.topics()[:5]) or "none"
-    return ("not a hil recording: no hil.run metadata and no hil.* channels "
-            f"(channels: {found})")
+    """Why a readable MCAP is not a hil recording, or None when it is one."""
+    return reader_not_hil(source.meta, source.schemas, source.topics())
 
 
 def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> int:
     """The exit code, printing on stderr why a result is incomplete (exit 4)."""
-    if source.corrupt:
-        incomplete = [f"{source.path}: damaged: {source.error}; nothing after it was read",
-                      *incomplete]
-    elif getattr(source, "truncated", False):  # what the run did after the cut is unknown
-        incomplete = [f"{source.path}: truncated (no footer: the run was killed or is still "
-                      "recording); judged only what it holds", *incomplete]
+    why = reader_incomplete(source.path, corrupt=source.corrupt, error=source.error,
+                            truncated=getattr(source, "truncated", False))
+    if why:  # what the run did after the cut is unknown
+        incomplete = [why, *incomplete]
     if not _judged(verdicts):
         incomplete = [*incomplete, "nothing was judged"]
     code = exit_code(verdicts)
@@ -167,12 +268,19 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
     with the step's binding, parameters, constants and `since` (the live verdicts, offline)."""
     verdicts: list[Verdict] = []
     cache: dict[int, RecordingSource] = {}
+    specs: list[Spec] = []
     for run in runs:
         try:
-            (spec,) = resolve_specs([run["spec"]])
+            specs += resolve_specs([run["spec"]])
         except (SpecError, FileNotFoundError, ValueError) as e:
             print(f"hil check: step {run['step']}: {e}", file=sys.stderr)
             return 2
+    try:
+        params = check_flags(specs, binding, params, consts, res)
+    except ValueError as e:
+        print(f"hil check: {e}", file=sys.stderr)
+        return 2
+    for run, spec in zip(runs, specs, strict=True):
         until = int(run["until_ns"])
         src = cache.get(until) or cache.setdefault(
             until, RecordingSource(args.recording, time=args.time, until_log_ns=until))
@@ -197,7 +305,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: {e}", file=sys.stderr)
         return 2
     if not Path(args.recording).is_file():
-        print(f"hil check: {args.recording}: no such file", file=sys.stderr)
+        why = "not a regular file" if Path(args.recording).exists() else "no such file"
+        print(f"hil check: {args.recording}: {why}", file=sys.stderr)
         return 2
     try:
         source = RecordingSource(args.recording, time=args.time)
@@ -222,6 +331,12 @@ def main(args: argparse.Namespace) -> int:
     except (SpecError, FileNotFoundError) as e:
         print(f"hil check: {e}", file=sys.stderr)
         return 2
+    try:
+        params = check_flags(specs, binding, params, consts, res)
+        out_dir = svg_dir(args.svg, specs) if args.svg is not None else None
+    except ValueError as e:
+        print(f"hil check: {e}", file=sys.stderr)
+        return 2
     bind = infer_places(source.topics()) | rec_binding | binding
     bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
@@ -237,11 +352,14 @@ def main(args: argparse.Namespace) -> int:
         verdicts.extend(vs)
         if args.spec and not _judged(vs):  # a spec the user asked for must judge something
             incomplete.append(_why_nothing(spec, vs, source, bind))
-        if args.svg:
-            out = Path(args.svg)
-            out.mkdir(parents=True, exist_ok=True)
-            (out / f"{spec.id}.svg").write_text(svg(spec, source, vs, params, bind),
-                                                encoding="utf-8")
+        if out_dir is not None:
+            target = out_dir / f"{spec.id}.svg"
+            try:
+                target.write_text(svg(spec, source, vs, params, bind), encoding="utf-8")
+            except OSError as e:
+                print(f"hil check: --svg {args.svg}: cannot write {target}: "
+                      f"{e.strerror or e}", file=sys.stderr)
+                return 2
     if args.json:
         print(json.dumps([v.to_dict() for v in verdicts], indent=2, default=str))
     else:

@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from hil.paths import fixture
-from hil.timing.expr import Expr, ExprError, is_param
-from hil.yamlio import FileError, LDict, LList, join, load_yaml_text
+from hil.timing.expr import MAX_BIT, MAX_MAGNITUDE, Expr, ExprError, is_param
+from hil.yamlio import FileError, LDict, LList, join, load_yaml_file, load_yaml_text
 
 # Factory DI/DO assignment (L1860-1907, L9251-9336): function -> "LINE[:b]".
 # BRKR has no factory DO: the virtual bench maps it to DO6 with P2.041 = 0x0108 (a-contact).
@@ -195,11 +195,19 @@ _TOP = {"id", "title", "source", "signals", "events", "constraints", "for_each",
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
+_WANT = {"number": "a number of ms or an expression giving one (P1.042 + tol)",
+         "bool": "a condition (true or false), e.g. \"P1.043 >= 0\"", "any": "an expression"}
+_NAMES_HINT = "use a parameter (P1.042) or a name from `constants:`"
+
+
 class _V:
-    """Validation helper carrying the file name."""
+    """Validation helper carrying the file name, the spec's constant names (`consts`) and the
+    values of those that need no parameter (`static`, to check windows and limits now)."""
 
     def __init__(self, file: str) -> None:
         self.file = file
+        self.consts: set[str] = set()
+        self.static: dict[str, Any] = {}
 
     def err(self, line: int, where: str, what: str) -> SpecError:
         return SpecError(self.file, line, where or "(top)", what)
@@ -224,15 +232,48 @@ class _V:
             raise self.err(d.key_lines[key], join(where, key), "must be a non-empty string")
         return v.strip()
 
-    def expr(self, d: LDict, key: str, where: str) -> Expr:
+    def expr(self, d: LDict, key: str, where: str, want: str = "number",
+             names: set[str] | None = None, hint: str = _NAMES_HINT,
+             nonneg: bool = False) -> Expr:
+        """The expression at `d[key]`: it must parse within the limits (hil/timing/expr.py),
+        yield `want` ("number", "bool" or "any") as far as can be told, and read only
+        parameters and `names` (default: the spec's constants). A number needing no parameter
+        is evaluated now: refused when it cannot be (1 / 0) or, with `nonneg`, is negative."""
         v = d[key]
         line = d.key_lines[key]
+        fld = join(where, key)
         if isinstance(v, bool) or not isinstance(v, str | int | float):
-            raise self.err(line, join(where, key), f"must be an expression, got {_kind(v)}")
+            raise self.err(line, fld, f"must be {_WANT[want]}, got {_kind(v)}")
         try:
-            return Expr(v)
-        except ExprError as e:
-            raise self.err(line, join(where, key), f"bad expression: {e}") from None
+            e = Expr(v)
+        except ExprError as ex:
+            raise self.err(line, fld, f"bad expression: {ex}") from None
+        if want == "number" and e.kind in ("bool", "text"):
+            got = "text" if e.kind == "text" else "a condition"
+            raise self.err(line, fld, f"must be {_WANT[want]}, got {got} {e.text!r}")
+        if want == "bool" and e.kind in ("number", "text"):
+            got = "text" if e.kind == "text" else "a number"
+            raise self.err(line, fld, f"must be {_WANT[want]}, got {got} {e.text!r}")
+        known = self.consts if names is None else names
+        bad = sorted(n for n in e.names if not is_param(n) and n not in known)
+        if bad:
+            raise self.err(line, fld, f"unknown name {bad[0]!r}: {hint}")
+        if want == "number" and names is None:
+            val = self.value(e, line, fld)
+            if nonneg and val is not None and val < 0:
+                raise self.err(line, fld, f"must not be negative, got {val:g} ms")
+        return e
+
+    def value(self, e: Expr | None, line: int, fld: str) -> float | None:
+        """The value of `e` from the constants alone, None when it reads a parameter."""
+        if e is None:
+            return None
+        try:
+            return e.number(self.static)
+        except KeyError:
+            return None
+        except ExprError as ex:
+            raise self.err(line, fld, f"bad expression: {ex}") from None
 
     def name(self, v: Any, line: int, where: str) -> str:
         if not isinstance(v, str) or not _NAME_RE.fullmatch(v):
@@ -262,26 +303,19 @@ def parse_spec(data: Any, file: str = "<string>") -> Spec:
             if k.isupper() and not LINE_RE.fullmatch(val):
                 raise v.err(b.key_lines[k], f"bind.{k}", f"{val!r} is not a line (DI1, DO6, DI8:b)")
             bind[k] = val
-    constants: dict[str, Expr] = {}
-    if "constants" in top:
-        c = v.mapping(top["constants"], top.key_lines["constants"], "constants")
-        for k in c:
-            v.name(k, c.key_lines[k], f"constants.{k}")
-            constants[k] = v.expr(c, k, "constants")
+    constants = _constants(v, top)
     resolution: dict[str, Expr] = {}
     if "resolution" in top:
         r = top["resolution"]
         if isinstance(r, LDict):
             for k in r:
-                resolution[k] = v.expr(r, k, "resolution")
+                resolution[k] = v.expr(r, k, "resolution", nonneg=True)
         else:
-            resolution["default"] = v.expr(top, "resolution", "")
-    horizon = v.expr(top, "horizon", "") if "horizon" in top else None
-    requires = v.expr(top, "requires", "") if "requires" in top else None
-    if requires is not None and (bad := [n for n in requires.names if not is_param(n)]):
-        raise v.err(top.key_lines["requires"], "requires",
-                    f"unknown name {bad[0]!r}: only parameters (P5.059), e.g. "
-                    "\"bit(P5.059, 0) == 1\"")
+            resolution["default"] = v.expr(top, "resolution", "", nonneg=True)
+    horizon = v.expr(top, "horizon", "", nonneg=True) if "horizon" in top else None
+    requires = v.expr(top, "requires", "", want="bool", names=set(),
+                      hint="only parameters (P5.059), e.g. \"bit(P5.059, 0) == 1\"") \
+        if "requires" in top else None
 
     binding = dict(DEFAULT_PLACES) | FACTORY_BINDING | bind
     signals = _signals(v, top, binding)
@@ -290,13 +324,6 @@ def parse_spec(data: Any, file: str = "<string>") -> Spec:
     if "for_each" in top:
         for_each = _ref(v, top, "for_each", "", events, signals)
     constraints = _constraints(v, top, events, signals, set(constants), for_each)
-    _check_names(v, top, constants, signals)
-    for s in signals.values():
-        for t, e in s.transforms.items():
-            bad = [n for n in getattr(e, "names", ()) if not is_param(n) and n not in constants]
-            if bad:
-                raise v.err(s.line, f"signals.{s.name}.{t}", f"unknown name {bad[0]!r}: use a "
-                            "parameter (P1.038) or a name from `constants:`")
     return Spec(
         id=sid, title=title, source=source, path=file, signals=signals, events=events,
         constraints=constraints, for_each=for_each, bind=bind, constants=constants,
@@ -305,13 +332,42 @@ def parse_spec(data: Any, file: str = "<string>") -> Spec:
     )
 
 
-def _check_names(v: _V, top: LDict, constants: dict[str, Expr], signals) -> None:
-    """Every name in a window/plus/within/threshold is a parameter or a constant."""
-    for k, e in constants.items():
-        bad = [n for n in e.names if not is_param(n) and n not in constants]
-        if bad:
-            line = top["constants"].key_lines[k]
-            raise v.err(line, f"constants.{k}", f"unknown name {bad[0]!r}")
+def _constants(v: _V, top: LDict) -> dict[str, Expr]:
+    """`constants:` in dependency order (a constant may use those defined below it; none may
+    depend on itself); sets `v.consts` and `v.static` (the values that need no parameter)."""
+    if "constants" not in top:
+        return {}
+    c = v.mapping(top["constants"], top.key_lines["constants"], "constants")
+    raw: dict[str, Expr] = {}
+    for k in c:
+        v.name(k, c.key_lines[k], f"constants.{k}")
+    for k in c:
+        raw[k] = v.expr(c, k, "constants", names=set(c))
+    ordered: dict[str, Expr] = {}
+    state: dict[str, int] = {}
+
+    def visit(k: str, path: list[str]) -> None:
+        if state.get(k) == 2:
+            return
+        if state.get(k) == 1:
+            cycle = " -> ".join([*path[path.index(k):], k])
+            raise v.err(c.key_lines[k], f"constants.{k}",
+                        f"constant depends on itself ({cycle})")
+        state[k] = 1
+        for n in sorted(raw[k].names):
+            if n in raw:
+                visit(n, [*path, k])
+        state[k] = 2
+        ordered[k] = raw[k]
+
+    for k in raw:
+        visit(k, [])
+    v.consts = set(ordered)
+    for k, e in ordered.items():
+        val = v.value(e, c.key_lines[k], f"constants.{k}")
+        if val is not None:
+            v.static[k] = val
+    return ordered
 
 
 def _signals(v: _V, top: LDict, binding: dict[str, str]) -> dict[str, SignalDef]:
@@ -329,7 +385,7 @@ def _signals(v: _V, top: LDict, binding: dict[str, str]) -> dict[str, SignalDef]
         v.keys(d, _SIGNAL_KEYS[kind], where)
         s = SignalDef(name=name, kind=kind, line=line)
         if "resolution" in d:
-            s.resolution = v.expr(d, "resolution", where)
+            s.resolution = v.expr(d, "resolution", where, nonneg=True)
         if kind == "topic":
             s.topic = v.text(d, "topic", where)
             if "field" not in d:
@@ -373,9 +429,13 @@ def _signals(v: _V, top: LDict, binding: dict[str, str]) -> dict[str, SignalDef]
             tw = f"{where}.{t}"
             val = d[t]
             if t in ("below", "above", "held"):
-                s.transforms[t] = v.expr(d, t, where)
+                s.transforms[t] = v.expr(d, t, where, nonneg=t == "held")
             elif t in ("bit", "mask") and (isinstance(val, bool) or not isinstance(val, int)):
                 raise v.err(d.key_lines[t], tw, f"must be an integer, got {_kind(val)}")
+            elif t == "bit" and not 0 <= val <= MAX_BIT:
+                raise v.err(d.key_lines[t], tw, f"must be a bit index 0..{MAX_BIT}, got {val}")
+            elif t == "mask" and not 0 <= val <= MAX_MAGNITUDE:
+                raise v.err(d.key_lines[t], tw, f"must be 0..2**64, got {val}")
             elif t == "map" and not isinstance(val, LDict):
                 raise v.err(d.key_lines[t], tw, "must be a mapping value -> value")
             elif t in ("abs", "nonempty") and not isinstance(val, bool):
@@ -461,7 +521,7 @@ def _event(v: _V, name: str, d: LDict, line: int, where: str, signals, events) -
         ev.refs = [_ref(v, d, "at", where, events, signals)]
         if "plus" not in d:
             raise v.err(line, where, "missing field 'plus' (delay after the `at` event)")
-        ev.plus = v.expr(d, "plus", where)
+        ev.plus = v.expr(d, "plus", where)  # may be negative: a time before the event
     else:
         lst = d[kind]
         if not isinstance(lst, list) or len(lst) < 2:
@@ -476,7 +536,7 @@ def _event(v: _V, name: str, d: LDict, line: int, where: str, signals, events) -
     if ev.after and ev.before:
         raise v.err(line, where, "use either `after` or `before`, not both")
     if "within" in d:
-        ev.within = v.expr(d, "within", where)
+        ev.within = v.expr(d, "within", where, nonneg=True)
     ev.label = str(d.get("label", "") or "")
     return ev
 
@@ -547,19 +607,15 @@ def _constraints(v, top, events, signals, consts, spec_for_each) -> list[Constra
                 v.expr(w, "min", f"{where}.window") if "min" in w else None,
                 v.expr(w, "max", f"{where}.window") if "max" in w else None,
             )
-            for k in ("min", "max"):
-                e = getattr(c.window, k)
-                bad = [n for n in (e.names if e else ()) if not is_param(n) and n not in consts]
-                if bad:
-                    raise v.err(w.key_lines[k], f"{where}.window.{k}",
-                                f"unknown name {bad[0]!r}: use a parameter (P1.042) or a name "
-                                "from `constants:`")
+            lo = v.value(c.window.min, w.kline("min"), f"{where}.window.min")
+            hi = v.value(c.window.max, w.kline("max"), f"{where}.window.max")
+            if lo is not None and hi is not None and lo > hi:
+                raise v.err(d.key_lines["window"], f"{where}.window",
+                            f"min ({c.window.min} = {lo:g} ms) exceeds max ({c.window.max} = "
+                            f"{hi:g} ms): nothing can pass")
         if "when" in d:
-            c.when = v.expr(d, "when", where)
-            ok = consts | set(signals)
-            bad = [n for n in c.when.names if not is_param(n) and n not in ok]
-            if bad:
-                raise v.err(d.key_lines["when"], f"{where}.when", f"unknown name {bad[0]!r}")
+            c.when = v.expr(d, "when", where, want="bool", names=consts | set(signals),
+                            hint="use a parameter, a name from `constants:` or a signal")
         if kind == "window":
             for req in ("from", "to", "window"):
                 if req not in d:
@@ -582,12 +638,8 @@ def _constraints(v, top, events, signals, consts, spec_for_each) -> list[Constra
 
 def load_spec(path: str | Path) -> Spec:
     """Load and validate one spec file."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise SpecError(str(p), 0, "(file)", f"cannot read: {e.strerror}") from None
-    return parse_spec(load_yaml(text, str(p)), str(p))
+    p = Path(path)  # a regular file, at most HIL_YAML_MAX_BYTES read (not /dev/zero)
+    return parse_spec(load_yaml_file(p, SpecError), str(p))
 
 
 def loads_spec(text: str, file: str = "<string>") -> Spec:

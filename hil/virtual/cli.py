@@ -14,6 +14,7 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
+from hil.fileio import FileProblem, read_limited
 from hil.model.errors import ModelError
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
@@ -99,7 +100,9 @@ def _load_mapping(path: Path) -> dict[str, int]:
         where = lambda k: f"{path}:{data.kline(k)}: {k}"  # noqa: E731
     else:
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
+            data = json.loads(read_limited(path, 1 << 20, "JSON file").decode("utf-8"))
+        except FileProblem as e:
+            raise ParamsFileError(str(e)) from None
         except OSError as e:
             raise ParamsFileError(f"{path}: cannot read: {e.strerror or e}") from None
         except ValueError as e:

@@ -1,0 +1,101 @@
+"""Files in and out, safely: inputs that are regular files read with a cap, outputs that are
+never one of the inputs and are written atomically (a failed write leaves the old file).
+
+A leaf: every command that reads a user's file or writes a result uses these, so a device
+(`/dev/zero`), a directory or an output equal to an input gets the same clear error everywhere.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+
+class FileProblem(ValueError):
+    """A file that cannot be used as given (the message names it and the reason)."""
+
+
+def require_regular(path: str | os.PathLike, what: str = "file") -> os.stat_result:
+    """`stat` of `path`, which must be a regular file (not a device, FIFO or directory).
+    Raises `FileProblem`; a missing or unreadable file raises `OSError` as `open` would."""
+    st = os.stat(path)
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a directory" if stat.S_ISDIR(st.st_mode) else
+                "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else
+                "a FIFO" if stat.S_ISFIFO(st.st_mode) else "not a regular file")
+        raise FileProblem(f"{path}: {kind}, not a regular {what}")
+    return st
+
+
+def read_limited(path: str | os.PathLike, max_bytes: int | None, what: str = "file") -> bytes:
+    """The bytes of regular file `path`, at most `max_bytes` (None: no cap) actually read:
+    a file that grows while read (or lies about its size) cannot exhaust memory."""
+    require_regular(path, what)
+    with open(path, "rb") as f:
+        if max_bytes is None:
+            return f.read()
+        data = f.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise FileProblem(f"{path}: more than {max_bytes} bytes")
+    return data
+
+
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """True when `a` and `b` name one file (through links, `..` or another spelling)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one does not exist (yet): compare the resolved paths
+        return Path(a).resolve() == Path(b).resolve()
+
+
+def refuse_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike],
+                 flag: str) -> None:
+    """Raise `FileProblem` when output `out` is one of `inputs`: a result never destroys
+    what it was made from."""
+    for src in inputs:
+        if same_file(out, src):
+            raise FileProblem(f"{flag} {out}: is the input {src}; choose another output file")
+
+
+def _temp_for(path: Path) -> Path:
+    # same directory (os.replace is atomic only within a file system), same suffix (writers
+    # such as python-can's pick the format from it)
+    return path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; on success it replaces `path` in one rename, on
+    any error it is removed and `path` is left as it was."""
+    dest = Path(path)
+    if dest.is_dir():
+        raise IsADirectoryError(21, "is a directory", str(dest))
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _temp_for(dest)
+    try:
+        yield tmp
+        os.replace(tmp, dest)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+
+
+def write_text_atomic(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
+    """Write `text` to `path` atomically (temp file + rename); returns the path."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding=encoding)
+    return Path(path)
+
+
+__all__ = [
+    "FileProblem",
+    "atomic_path",
+    "read_limited",
+    "refuse_input",
+    "require_regular",
+    "same_file",
+    "write_text_atomic",
+]
