@@ -160,10 +160,12 @@ def check_flags(specs: list[Spec], binding: dict[str, str], params: dict[str, An
         if k not in bindable:
             raise ValueError(f"--bind {k}={val}: the chosen specs have no placeholder or "
                              f"function {k!r} (they have: {_known(bindable)})")
-        if k.isupper() and k not in DEFAULT_PLACES and not LINE_RE.fullmatch(val):
-            raise ValueError(f"--bind {k}={val}: {val!r} is not a line (DI1..DI10, DO1..DO6, "
-                             "STO_A, STO_B, FDBK, with :b for a b-contact, e.g. DI8:b)")
-        if not _PLACE_VALUE.fullmatch(val):
+        if k.isupper() and k not in DEFAULT_PLACES:  # a DI/DO function, as in a spec's bind:
+            if not LINE_RE.fullmatch(val):
+                raise ValueError(f"--bind {k}={val}: {val!r} is not a line (DI1..DI10, "
+                                 "DO1..DO6, STO_A, STO_B, FDBK, with :b for a b-contact, "
+                                 "e.g. DI8:b)")
+        elif not _PLACE_VALUE.fullmatch(val):
             raise ValueError(f"--bind {k}={val}: {val!r} is not a name (letters, digits, "
                              "_ . -)")
     for k, val in res.items():

@@ -158,7 +158,8 @@ class Expr:
     def _check(self, node: ast.AST, pynames: set[str]) -> None:
         if isinstance(node, ast.Call):
             if not (isinstance(node.func, ast.Name) and node.func.id in _FUNC_NAMES):
-                raise self._err("only min, max, abs and bit may be called")
+                what = f"{node.func.id}()" if isinstance(node.func, ast.Name) else "that call"
+                raise self._err(f"{what} not allowed: only min, max, abs and bit may be called")
             name = node.func.id
             self._callees.add(id(node.func))
             if node.keywords or any(isinstance(a, ast.Starred) for a in node.args):
