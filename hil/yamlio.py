@@ -23,11 +23,17 @@ import yaml
 
 from hil.fileio import FileProblem, read_limited
 
+MAX_PROBLEM = 400  # characters of an error's problem text
+
 
 class FileError(ValueError):
     """A malformed file: `file:line: field: problem`."""
 
     def __init__(self, file: str, line: int, field: str, problem: str) -> None:
+        if len(problem) > MAX_PROBLEM:  # a hostile value is named, not repeated in full
+            problem = f"{problem[:MAX_PROBLEM - 60]}... ({len(problem)} characters in all)"
+        if len(field) > 200:
+            field = field[:160] + "..."
         self.file, self.line, self.field, self.problem = file, line, field, problem
         super().__init__(f"{file}:{line}: {field}: {problem}")
 
@@ -57,8 +63,9 @@ def join(where: str, key: str | int) -> str:
 
 
 def _key_text(key: Any, knode: yaml.Node) -> str:
-    # `P1.042:` parses as a string; `on:`/`off:` would be booleans in YAML 1.1: keep the text
-    if isinstance(key, bool) and isinstance(knode, yaml.ScalarNode):
+    # a key is a name: keep its text as written. `P1.042:` parses as a string, but `on:` would
+    # be a boolean in YAML 1.1 and `0x1017:` the integer 4119 (an SDO object 4119h)
+    if not isinstance(key, str) and isinstance(knode, yaml.ScalarNode):
         return str(knode.value)
     return str(key)
 

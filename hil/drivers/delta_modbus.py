@@ -31,7 +31,7 @@ from hil.profile.errors import UnknownParameter
 from hil.profile.params import ParamTable
 from hil.protocol import modbus as mb
 
-_NAME_RE = re.compile(r"^\s*P([0-7M])[.\-](\d{1,3})\s*$", re.IGNORECASE)
+_NAME_RE = re.compile(r"^\s*P([0-7M])[.\-]([0-9]{1,3})\s*$", re.IGNORECASE)
 
 
 class ModbusError(Exception):

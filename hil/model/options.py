@@ -12,6 +12,7 @@ Two kinds of fields:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -182,6 +183,9 @@ class ModelOptions:
                 f"{where}: unknown model option(s) {', '.join(unknown)}; "
                 f"known: {', '.join(sorted(known))}"
             )
+        defaults = cls()
+        for key, value in data.items():
+            _check_type(key, value, getattr(defaults, key), where)
         if "fdbk_table" in data and isinstance(data["fdbk_table"], str):
             tables = {"as_printed": FDBK_AS_PRINTED, "sto_active": FDBK_STO_ACTIVE}
             if data["fdbk_table"] not in tables:
@@ -204,3 +208,32 @@ class ModelOptions:
         if data.get("sto_servo_off", "acknowledged") not in STO_SERVO_OFF:
             raise ValueError(f"{where}.sto_servo_off: one of {', '.join(STO_SERVO_OFF)}")
         return cls(**data)
+
+
+def _check_type(key: str, value: Any, default: Any, where: str) -> None:
+    """A bench's (or an `inject:`) option value has the type of the option's default: a
+    flag true/false, a time a finite number, a choice text, a table a mapping."""
+    def number(x: Any) -> bool:
+        return (isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+                and abs(x) <= 1e12)
+
+    if key == "fdbk_table":
+        ok, want = isinstance(value, dict | str), "a mapping or a table name"
+    elif default is None:  # an optional number (the deviation knobs)
+        ok, want = value is None or number(value), "a finite number or null"
+    elif isinstance(default, bool):
+        ok, want = isinstance(value, bool), "true or false"
+    elif isinstance(default, int | float):
+        ok, want = number(value), "a finite number"
+    elif isinstance(default, str):
+        ok, want = isinstance(value, str), "text"
+    elif isinstance(default, tuple):
+        ok = isinstance(value, list | tuple) and all(
+            isinstance(x, int) and not isinstance(x, bool) for x in value)
+        want = "a list of integers"
+    else:
+        ok, want = isinstance(value, type(default)), type(default).__name__
+    if not ok:
+        shown = repr(value)
+        shown = shown if len(shown) <= 40 else shown[:35] + "..."
+        raise ValueError(f"{where}.{key}: {shown} is not {want}")

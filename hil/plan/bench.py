@@ -51,8 +51,8 @@ PROCESSES = ("inproc", "subprocess")
 PROFILES = ("asda-a3",)
 PARAM_VIAS = ("modbus", "sdo")
 STO_CHANNELS = {"A": "STO_A", "B": "STO_B"}
-_LINE_RE = re.compile(r"^(DI|DO)(\d{1,2})(?::([ab]))?$")
-_PARAM_RE = re.compile(r"^P[0-7]\.\d{3}$")
+_LINE_RE = re.compile(r"^(DI|DO)([0-9]{1,2})(?::([ab]))?$")
+_PARAM_RE = re.compile(r"^P[0-7]\.[0-9]{3}$")
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
 
 _TOP = {"name", "description", "virtual", "process", "can", "rs485", "drives", "timeouts",

@@ -21,7 +21,7 @@ import time
 from typing import Any
 
 from hil.plan.context import Inconclusive, StepFailed
-from hil.plan.yamlio import Checker, join
+from hil.plan.yamlio import PARAM_ROUTES, Checker, join
 from hil.record import topics
 from hil.timing.latch import Reference, edges_from, judge
 from hil.timing.source import RecordingSource
@@ -68,7 +68,8 @@ def p_capture_arm(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]
            "reset": m.get("reset"), "cyclic": v.boolean(m, "cyclic", where, False),
            "run_pr50": v.boolean(m, "run_pr50", where, False),
            "start_compare": v.boolean(m, "start_compare", where, False),
-           "mask": v.integer(m, "mask", where, 0, 100_000_000, 0), "via": m.get("via")}
+           "mask": v.integer(m, "mask", where, 0, 100_000_000, 0),
+           "via": v.choice(m, "via", where, PARAM_ROUTES)}
     if out["reset"] is not None and (isinstance(out["reset"], bool)
                                      or not isinstance(out["reset"], int)):
         raise v.err(m.kline("reset"), join(where, "reset"), "an integer (P5.076)")
@@ -98,7 +99,7 @@ def p_compare_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, An
             "run_pr45": v.boolean(m, "run_pr45", where, False),
             "start_capture": v.boolean(m, "start_capture", where, False),
             "shift": v.integer(m, "shift", where, -10_000_000, 100_000_000, 0),
-            "axis": _axis(v, m, where), "via": m.get("via")}
+            "axis": _axis(v, m, where), "via": v.choice(m, "via", where, PARAM_ROUTES)}
 
 
 def _axis(v: Checker, m: Any, where: str) -> int | None:
@@ -121,6 +122,9 @@ def _range(v: Checker, m: Any, key: str, where: str) -> tuple[float, float] | No
     for k, x in (("min", lo), ("max", hi)):
         if isinstance(x, bool) or not isinstance(x, int | float):
             raise v.err(r.kline(k), join(join(where, key), k), f"{x!r}: a number (counts)")
+        if k in r and not -1e15 <= x <= 1e15:  # NaN and inf too
+            raise v.err(r.kline(k), join(join(where, key), k),
+                        f"{x!r}: a finite number of counts")
     if lo > hi:
         raise v.err(r.line, join(where, key), f"min {lo} > max {hi}")
     return float(lo), float(hi)
@@ -130,16 +134,9 @@ def p_latch(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     m = v.mapping(obj, line, where)
     v.keys(m, {"tolerance", "window", "width", "edges", "trigger", "start", "count",
                "reference", "via"}, where, required=("tolerance",))
-    tol = m["tolerance"]
-    if isinstance(tol, bool) or not isinstance(tol, int | float) or tol < 0:
-        raise v.err(m.kline("tolerance"), join(where, "tolerance"),
-                    f"{tol!r}: counts (capture-source pulses) >= 0")
-    edges = m.get("edges", "every")
-    if edges not in ("first", "every"):
-        raise v.err(m.kline("edges"), join(where, "edges"), f"{edges!r}: first or every")
-    trig = m.get("trigger", "DI7")
-    if trig not in ("DI7", "Z"):
-        raise v.err(m.kline("trigger"), join(where, "trigger"), f"{trig!r}: DI7 or Z")
+    tol = v.number(m, "tolerance", where, 0, 1e15)  # counts (capture-source pulses)
+    edges = v.choice(m, "edges", where, ("first", "every"), "every")
+    trig = v.choice(m, "trigger", where, ("DI7", "Z"), "DI7")
     ref = None
     if "reference" in m:
         r = v.mapping(m["reference"], m.kline("reference"), join(where, "reference"))
@@ -147,15 +144,18 @@ def p_latch(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         ref = (v.text(r, "topic", where), v.text(r, "field", where))
     return {"tolerance": float(tol), "window": _range(v, m, "window", where),
             "width": _range(v, m, "width", where), "every": edges == "every",
-            "trigger": trig, "start": m.get("start"), "count": m.get("count"),
-            "reference": ref, "via": m.get("via")}
+            "trigger": trig, "start": v.integer(m, "start", where, 0, ARRAY - 1, None)
+            if "start" in m else None,
+            "count": v.integer(m, "count", where, 1, ARRAY) if "count" in m else None,
+            "reference": ref, "via": v.choice(m, "via", where, PARAM_ROUTES)}
 
 
 def p_mark(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     m = v.mapping(obj, line, where)
     v.keys(m, {"width", "line"}, where)
     ln = m.get("line", "DI7")
-    if not isinstance(ln, str) or not ln.startswith("DI") or not ln[2:].isdigit() \
+    if not isinstance(ln, str) or not ln.startswith("DI") or not ln[2:].isascii() \
+            or not ln[2:].isdigit() \
             or not 1 <= int(ln[2:]) <= 10:
         raise v.err(m.kline("line"), join(where, "line"), f"{ln!r}: a DI line DI1..DI10")
     return {"width": v.duration(m, "width", where, 2_000_000), "line": ln}

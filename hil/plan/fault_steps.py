@@ -31,7 +31,7 @@ from typing import Any
 import can
 
 from hil.plan.param_rules import sdo_parameter
-from hil.plan.yamlio import Checker, join, parse_duration
+from hil.plan.yamlio import Checker, join, parse_duration, shorten
 from hil.transport.cyclic import CyclicSender
 from hil.transport.faults import (
     BURST_WINDOW_NS,
@@ -50,8 +50,9 @@ _SERIAL_PARAMS: dict[str, tuple[str, ...]] = {
     "crc": (), "partial": (), "silence": (), "split": ("gap_ms",), "late": ("delay_ms",),
     "noise": ("bytes", "gap_ms"), "reply_late": ("delay_ms",), "reply_partial": ("bytes",),
     "reply_split": ("bytes", "gap_ms"), "reply_noise": ("bytes",)}
-_OBJ_RE = re.compile(r"^(?:0x)?([0-9A-Fa-f]{4})h?(?::(\d{1,3}))?$")
-_LINE_RE = re.compile(r"^(DI\d{1,2}|STO_[AB])$")
+MIN_PRODUCE_NS = 1_000_000  # produce: SYNC / heartbeat / guard at most every 1 ms
+_OBJ_RE = re.compile(r"^(?:0x)?([0-9A-Fa-f]{4})h?(?::([0-9]{1,3}))?$")
+_LINE_RE = re.compile(r"^(DI[0-9]{1,2}|STO_[AB])$")
 
 
 def _int(v: Checker, obj: Any, line: int, where: str, lo: int, hi: int) -> int:
@@ -62,6 +63,8 @@ def _int(v: Checker, obj: Any, line: int, where: str, lo: int, hi: int) -> int:
 
 def _ids(v: Checker, obj: Any, line: int, where: str) -> list[int]:
     items = obj if isinstance(obj, list) else [obj]
+    if not items:
+        raise v.err(line, where, "one COB-ID 0..0x7FF or a list of them, not an empty list")
     return [_int(v, x, line, where, 0, 0x7FF) for x in items]
 
 
@@ -135,11 +138,17 @@ def p_fault(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
             if "cob_id" not in m:
                 raise v.err(line, join(where, "cob_id"), "missing: the RPDO's COB-ID")
             out["cob_id"] = _ids(v, m["cob_id"], m.kline("cob_id"), join(where, "cob_id"))[0]
-            data = str(m.get("data", ""))
+            data = m.get("data", "")
             try:
+                if not isinstance(data, str):
+                    raise ValueError
                 out["data"] = bytes.fromhex(data)
             except ValueError:
-                raise v.err(m.kline("data"), join(where, "data"), f"{data!r}: hex bytes") from None
+                raise v.err(m.kline("data"), join(where, "data"),
+                            f"{shorten(data)}: hex bytes as text, e.g. \"0F00\"") from None
+            if len(out["data"]) > 8:  # a classic CAN data field (CiA 301)
+                raise v.err(m.kline("data"), join(where, "data"),
+                            f"{len(out['data'])} bytes: a CAN frame carries at most 8")
     elif t == "rs485" and kind in SERIAL_FAULTS:
         v.keys(m, {"rs485", "for", "rate", "delay", "gap", "bytes", "line"}, where)
         out["rate"] = _rate(v, m, where)
@@ -184,8 +193,10 @@ def p_produce(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
             out[k] = parse_duration(m[k])
         except ValueError as e:
             raise v.err(m.kline(k), join(where, k), str(e)) from None
-        if out[k] <= 0:
-            raise v.err(m.kline(k), join(where, k), "a period > 0 or off")
+        if out[k] < MIN_PRODUCE_NS:
+            raise v.err(m.kline(k), join(where, k), "a period of at least 1ms, or off: the "
+                        "A3 takes SYNC cycles of 1-10 ms (L17211-17244) and counts 1017h / "
+                        "100Ch in ms; a shorter one floods the bus and starves the harness")
     if not any(k in out for k in ("heartbeat", "sync", "guard")):
         raise v.err(line, where, "heartbeat: PERIOD, sync: PERIOD and/or guard: PERIOD (or off)")
     return out
@@ -195,11 +206,20 @@ def p_sdo(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     m = v.mapping(obj, line, where)
     values: list[tuple[int, int, int]] = []
     for k, x in m.items():
-        mt = _OBJ_RE.match(str(k))
+        if not isinstance(k, str):  # (keys keep their text: hil.yamlio)
+            raise v.err(m.kline(k), join(where, str(k)), f"{k!r}: write the object as quoted "
+                        "hex text, e.g. \"1017\" or \"1016:1\" (YAML reads 0x1017 as the "
+                        "integer 4119)")
+        mt = _OBJ_RE.match(k)
         if not mt:
-            raise v.err(m.kline(k), join(where, str(k)), "an object like \"1016:1\" or 1006")
-        values.append((int(mt.group(1), 16), int(mt.group(2) or 0),
-                       _int(v, x, m.kline(k), join(where, str(k)), -(2**31), 2**32 - 1)))
+            raise v.err(m.kline(k), join(where, shorten(k)), "an object like \"1016:1\" or "
+                        "\"1006\"")
+        index, sub = int(mt.group(1), 16), int(mt.group(2) or 0)
+        if index == 0 or sub > 255:  # CiA 301: index 0000h is unused, sub-index 8 bits
+            raise v.err(m.kline(k), join(where, k), "object index 0001h..FFFFh, sub-index "
+                        "0..255")
+        values.append((index, sub,
+                       _int(v, x, m.kline(k), join(where, k), -(2**31), 2**32 - 1)))
     if not values:
         raise v.err(line, where, "one or more objects: {\"1016:1\": 0x007F0064}")
     return {"values": values}

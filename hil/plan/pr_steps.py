@@ -19,7 +19,7 @@ from typing import Any
 
 from hil.drivers.delta_pr import STATES, DeltaPr, PrTableError, table_words
 from hil.plan.context import StepFailed
-from hil.plan.yamlio import Checker, LDict, join
+from hil.plan.yamlio import PARAM_ROUTES, Checker, LDict, join
 
 PATH_KEYS = {"type", "data", "ins", "auto", "ovlp", "cmd", "unit_pps", "acc", "dec", "spd",
              "dly", "dest", "dest_array", "source", "rom", "direction", "s_low"}
@@ -40,11 +40,9 @@ def p_pr_table(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     for k in m:
         kl, fw = m.kline(k), join(where, str(k))
         if k == "via":
-            via = m[k]
-            if via not in ("modbus", "sdo"):
-                raise v.err(kl, fw, f"{via!r}: modbus or sdo")
+            via = v.choice(m, "via", where, PARAM_ROUTES)
             continue
-        n = int(k) if isinstance(k, str) and k.isdigit() else k
+        n = int(k) if isinstance(k, str) and k.isascii() and k.isdigit() else k
         if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 99:
             raise v.err(kl, fw, "a PR number 1..99 (PR#0 is homing: P5.004/P6.000)")
         pm = v.mapping(m[k], kl, fw)
@@ -77,18 +75,17 @@ def p_pr_trigger(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     else:
         m = v.mapping(obj, line, where)
     v.keys(m, {"pr", "by", "via", "width"}, where, required=("pr",))
-    out = {"pr": v.integer(m, "pr", where, 0, 99), "by": m.get("by", "p5007"),
-           "via": m.get("via"), "width": v.duration(m, "width", where, 20_000_000)}
-    if out["by"] not in BY:
-        raise v.err(m.kline("by"), join(where, "by"), f"{out['by']!r}: p5007 or di")
-    return out
+    return {"pr": v.integer(m, "pr", where, 0, 99), "by": v.choice(m, "by", where, BY, "p5007"),
+            "via": v.choice(m, "via", where, PARAM_ROUTES),
+            "width": v.duration(m, "width", where, 20_000_000)}
 
 
 def p_pr_wait(v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
     m = v.mapping(obj, line, where)
     v.keys(m, {"pr", "state", "timeout", "via"}, where, required=("pr",))
     out = {"pr": v.integer(m, "pr", where, 0, 99), "state": m.get("state", "in_position"),
-           "timeout": v.duration(m, "timeout", where, 5_000_000_000), "via": m.get("via")}
+           "timeout": v.duration(m, "timeout", where, 5_000_000_000),
+           "via": v.choice(m, "via", where, PARAM_ROUTES)}
     if not isinstance(out["state"], str) or out["state"] not in STATES:
         raise v.err(m.kline("state"), join(where, "state"), f"{out['state']!r}: one of "
                     f"{', '.join(STATES)}")

@@ -36,29 +36,37 @@ def load_yaml_file(path: str | Path) -> Any:
 
 # --- durations ---------------------------------------------------------------------------
 
-_DUR_RE = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ns|us|µs|ms|s|min)\s*$")
+_DUR_RE = re.compile(r"^\s*([0-9]{1,15}(?:\.[0-9]{0,15})?|\.[0-9]{1,15})\s*(ns|us|µs|ms|s|min)\s*$")
 _UNITS = {"ns": 1, "us": 1_000, "µs": 1_000, "ms": MS, "s": S, "min": 60 * S}
 
 
+PARAM_ROUTES = ("modbus", "sdo")  # `via:` of a parameter access (default: the bench's route)
 MAX_DURATION_NS = 24 * 3600 * 1_000_000_000  # an absurd duration is a typo, not a test
+
+
+def shorten(value: Any, limit: int = 40) -> str:
+    """`repr(value)` cut to `limit` characters, for error messages about hostile values."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 5] + "...'" + f" ({len(text)} chars)"
 
 
 def parse_duration(value: Any) -> int:
     """`150ms`, `1.5s`, `20 us`, `2min` -> integer ns. Raises ValueError with the rule."""
+    shown = shorten(value)
     if isinstance(value, bool) or not isinstance(value, str):
         raise ValueError(
-            f"duration {value!r}: write it with a unit, e.g. 150ms, 1.5s (units: "
+            f"duration {shown}: write it with a unit, e.g. 150ms, 1.5s (units: "
             f"{', '.join(_UNITS)})"
         )
     m = _DUR_RE.match(value)
     if not m:
         raise ValueError(
-            f"duration {value!r}: a number and a unit, e.g. 150ms, 1.5s (units: "
-            f"{', '.join(_UNITS)})"
+            f"duration {shown}: a number (ASCII digits, at most 15 before and after the "
+            f"point) and a unit, e.g. 150ms, 1.5s (units: {', '.join(_UNITS)})"
         )
     ns = round(float(m.group(1)) * _UNITS[m.group(2)])
     if ns > MAX_DURATION_NS:
-        raise ValueError(f"duration {value!r} is longer than {MAX_DURATION_NS // S // 3600} h, "
+        raise ValueError(f"duration {shown} is longer than {MAX_DURATION_NS // S // 3600} h, "
                          "the longest anything in a plan or bench may take")
     return ns
 
@@ -128,6 +136,32 @@ class Checker:
             raise self.err(d.kline(key), join(field, key), f"{v} is out of range {lo}..{hi}")
         return v
 
+    def number(self, d: LDict, key: str, field: str, lo: float, hi: float,
+               default: float | None = None) -> float:
+        """A finite number in lo..hi (NaN, inf and text refused)."""
+        if key not in d:
+            if default is None:
+                raise self.err(d.line, join(field, key), "missing (required)")
+            return default
+        v = d[key]
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise self.err(d.kline(key), join(field, key), f"must be a number, got {_kind(v)}")
+        if v != v or not lo <= v <= hi:  # v != v: NaN
+            raise self.err(d.kline(key), join(field, key),
+                           f"{shorten(v)} is out of range {lo:g}..{hi:g}")
+        return float(v)
+
+    def choice(self, d: LDict, key: str, field: str, allowed: tuple[str, ...],
+               default: str | None = None) -> str | None:
+        """One of `allowed` (None when absent and no default)."""
+        if key not in d:
+            return default
+        v = d[key]
+        if not isinstance(v, str) or v not in allowed:
+            names = " or ".join(allowed) if len(allowed) == 2 else "one of " + ", ".join(allowed)
+            raise self.err(d.kline(key), join(field, key), f"{shorten(v)}: {names}")
+        return v
+
     def boolean(self, d: LDict, key: str, field: str, default: bool) -> bool:
         if key not in d:
             return default
@@ -157,8 +191,8 @@ def _kind(v: Any) -> str:
     if isinstance(v, list):
         return "a list"
     if isinstance(v, int | float):
-        return f"a number ({v})"
-    return f"text ({v!r})"
+        return f"a number ({shorten(v)})"
+    return f"text ({shorten(v)})"
 
 
 def level(v: Any) -> bool | None:

@@ -150,7 +150,7 @@ def load_objects(path: Path = OBJECTS_CSV) -> list[Entry]:
     return out
 
 
-_PARAM = re.compile(r"^P(\d)\.(\d{3})$")
+_PARAM = re.compile(r"^P([0-9])\.([0-9]{3})$")
 _TRUE = {"1", "true", "yes", "y", "★", "ro", "x"}
 
 

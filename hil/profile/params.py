@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from hil.paths import fixture
 from hil.profile.errors import UnknownParameter
 
-_NAME_RE = re.compile(r"^\s*P([0-7])[.\-](\d{1,3})\s*$", re.IGNORECASE)
+_NAME_RE = re.compile(r"^\s*P([0-7])[.\-]([0-9]{1,3})\s*$", re.IGNORECASE)
 
 
 def parse_name(name: str) -> tuple[int, int]:

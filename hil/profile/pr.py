@@ -246,6 +246,8 @@ def encode(
 ) -> tuple[int, int]:
     """(definition, data) words of a PR given by field names (the inverse of `decode`)."""
     t = _type_of(type_)
+    if not -(1 << 31) <= data <= 0xFFFFFFFF:  # one 32-bit data word (P6.003 ..., L4440)
+        raise PrError(f"data {data}: a 32-bit word, -2147483648..4294967295")
     y = int(ins)
     c = 0
     a = spd
@@ -265,6 +267,8 @@ def encode(
         if isinstance(dest, str):
             g, i = parse_name(dest)
             dest = (g << 8) | i
+        if not 0 <= dest <= 0xFFF:  # A U Z: 12 bits (L4579-4581)
+            raise PrError(f"dest {dest}: a parameter (P5.064) or an index 0..0xFFF")
         z, u, a = dest & 0xF, (dest >> 4) & 0xF, (dest >> 8) & 0xF
     elif t == INDEX:
         if direction not in INDEX_DIRS:
@@ -281,12 +285,15 @@ def encode(
 
 
 def _type_of(type_: int | str) -> int:
+    names = ", ".join(v for v in TYPE_NAMES.values() if v != "none")
     if isinstance(type_, int):
+        if type_ not in TYPE_NAMES:  # a TYPE digit is 4 bits: 99 would set INS (L4440)
+            raise PrError(f"type {type_}: one of the TYPE codes "
+                          f"{', '.join(f'{k} ({v})' for k, v in TYPE_NAMES.items())}")
         return type_
     for k, v in TYPE_NAMES.items():
         if v == type_.lower():
             return k
-    names = ", ".join(v for v in TYPE_NAMES.values() if v != "none")
     raise PrError(f"type {type_!r}: one of {names}")
 
 

@@ -19,7 +19,7 @@ from hil.timing.expr import Expr, ExprError
 from hil.timing.source import SignalSource
 from hil.timing.spec import Spec
 
-_LINE = re.compile(r"(DI|DO)(\d+)")
+_LINE = re.compile(r"(DI|DO)([0-9]+)")
 
 
 def mapping_param(line: str) -> tuple[str, dict[str, int]] | None:

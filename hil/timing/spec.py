@@ -33,7 +33,7 @@ FACTORY_BINDING: dict[str, str] = {
     "BRKR": "DO6",  # P2.041 = 0x0108 on the virtual bench (docs/manual-choices.md#timing)
 }
 DEFAULT_PLACES: dict[str, str] = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
-LINE_RE = re.compile(r"(DI\d{1,2}|DO\d|STO_A|STO_B|FDBK)(?::([ab]))?")
+LINE_RE = re.compile(r"(DI[0-9]{1,2}|DO[0-9]|STO_A|STO_B|FDBK)(?::([ab]))?")
 PLACE_RE = re.compile(r"\{(\w+)\}")
 STATUSES = ("pass", "fail", "inconclusive", "skipped")
 

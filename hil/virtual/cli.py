@@ -157,7 +157,7 @@ def _inputs(values: list[str]) -> dict[int, bool]:
     out = {}
     for item in values:
         n, _, level = item.partition("=")
-        if not n.isdigit() or level not in ("0", "1"):
+        if not (n.isascii() and n.isdigit()) or level not in ("0", "1"):
             print(f"hil drive: --di {item!r}: expected N=0 or N=1, e.g. 8=1", file=sys.stderr)
             raise SystemExit(2)  # a usage error, as argparse exits
         out[int(n)] = level == "1"

@@ -12,6 +12,8 @@ from hil.plan.context import Outcome
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.yamlio import Checker
 
+DI_LINES = 10  # physical DI1..DI10 of CN1
+
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
     from hil.plan.session import DriveIO
@@ -44,6 +46,24 @@ class Fault(_Comm):
         if not cc.bench.faults_allowed:
             raise cc.err(f"fault injection is not allowed on bench {cc.bench.name!r} "
                          "(faults_allowed: false; docs/faults.md)")
+        a, d = self.args, cc.drive
+        t = a["transport"]
+        if t == "can":
+            bus = a.get("bus") or d.can
+            if bus is None:
+                raise cc.err(f"drive {cc.dname} has no CAN bus on bench {cc.bench.name!r}")
+            if bus not in cc.bench.can:
+                raise cc.err(f"no CAN bus {bus!r} on bench {cc.bench.name!r} (buses: "
+                             f"{', '.join(cc.bench.can) or 'none'})", "bus")
+        elif t == "rs485" and d.rs485 is None:
+            raise cc.err(f"drive {cc.dname} has no RS-485 line on bench {cc.bench.name!r}")
+        elif t == "dio":
+            line = a["line"]
+            if d.dio is None:
+                raise cc.err(f"drive {cc.dname} has no DI/DO lines on bench "
+                             f"{cc.bench.name!r}", "line")
+            if line.startswith("DI") and not 1 <= int(line[2:]) <= DI_LINES:
+                raise cc.err(f"{line!r}: the A3 has DI1..DI{DI_LINES} on CN1", "line")
 
 
 class Produce(_Comm):

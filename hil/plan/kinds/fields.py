@@ -24,7 +24,7 @@ COMMANDABLE = STATES[:-1]
 MODES = tuple(m for m in CIA402_MODES if m != "IP")  # a `mode:` step offers no IP
 VIAS = ("modbus", "sdo")
 STO = ("A", "B")
-PARAM_RE = re.compile(r"^P[0-7]\.\d{3}$")
+PARAM_RE = re.compile(r"^P[0-7]\.[0-9]{3}$")
 ALARM_RE = re.compile(r"^AL[0-9A-F]{3}$")
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 INT32 = (-(2**31), 2**31 - 1)

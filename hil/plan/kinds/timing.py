@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from hil.plan.session import DriveIO
     from hil.plan.steps import Step
 
-BIND_LINE_RE = re.compile(r"^(DI\d{1,2}|DO\d)(:[ab])?$|^STO_[AB]$")
+BIND_LINE_RE = re.compile(r"^(DI[0-9]{1,2}|DO[0-9])(:[ab])?$|^STO_[AB]$")
 SINCE = ("start", "last_check")
 log = logging.getLogger(__name__)
 

@@ -55,6 +55,10 @@ class Inject(StepKind):
         if "options" in m:
             om = v.mapping(m["options"], m.kline("options"), join(where, "options"))
             v.keys(om, {f.name for f in dataclasses.fields(ModelOptions)}, join(where, "options"))
+            try:  # the values too: a flag true/false, a time a finite number, a known choice
+                ModelOptions.from_dict(dict(om), join(where, "options"))
+            except (ValueError, TypeError) as e:
+                raise v.err(m.kline("options"), join(where, "options"), str(e)) from None
             out["options"] = dict(om)
         if "alarm" in m:
             a = m["alarm"]
