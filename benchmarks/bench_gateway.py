@@ -24,9 +24,9 @@ import can
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from hil.bench.bench import loads_bench
 from hil.gateway.client import acquire
 from hil.gateway.gateway import Gateway, GatewayConfig
-from hil.plan.bench import loads_bench
 from hil.protocol.modbus import read_request, rtu_encode
 from hil.transport.can_bus import open_can
 from hil.transport.serial_line import open_serial

@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
 from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plans
 

@@ -96,8 +96,8 @@ class PlanFile(pytest.File):
     """One plan file: a single `PlanItem` named after the plan."""
 
     def collect(self) -> Iterator[pytest.Item]:
+        from hil.bench.yamlio import PlanFileError
         from hil.plan.plan import load_plan
-        from hil.plan.yamlio import PlanFileError
 
         try:
             plan = load_plan(self.path)
@@ -118,7 +118,7 @@ class PlanItem(pytest.Item):
         self.plan = plan
 
     def runtest(self) -> None:
-        from hil.plan.bench import load_bench
+        from hil.bench.bench import load_bench
         from hil.plan.runner import run_plan
 
         bench = load_bench(_bench_option(self.config))
@@ -150,8 +150,8 @@ def _out_dir(config: pytest.Config) -> Path:
 
 def _tags_in(directory: Path) -> set[str]:
     """The `tags:` of the plan files in `directory` (unparsable files are left to collection)."""
+    from hil.bench.yamlio import PlanFileError
     from hil.plan.plan import load_plan
-    from hil.plan.yamlio import PlanFileError
 
     tags: set[str] = set()
     for p in sorted(directory.glob("*.y*ml")):
@@ -169,7 +169,7 @@ def _safe_name(nodeid: str) -> str:
 @pytest.fixture(scope="session")
 def hil_bench(pytestconfig: pytest.Config) -> Any:
     """The bench of this pytest run (`--hil-bench FILE`, default: the virtual bench)."""
-    from hil.plan.bench import load_bench
+    from hil.bench.bench import load_bench
 
     return load_bench(_bench_option(pytestconfig))
 

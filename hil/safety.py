@@ -29,7 +29,7 @@ class DriveGone(Exception):
 
 
 class SafeStateSpec(Protocol):
-    """A bench file's `safe_state:` (hil.plan.bench.SafeState)."""
+    """A bench file's `safe_state:` (hil.bench.bench.SafeState)."""
 
     controlword: str
     di: dict[str, bool]

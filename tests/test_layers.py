@@ -21,7 +21,7 @@ def _lint(cwd: Path) -> subprocess.CompletedProcess:
 def test_contracts_kept_on_the_tree():
     r = _lint(ROOT)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "5 kept, 0 broken" in r.stdout
+    assert "7 kept, 0 broken" in r.stdout
 
 
 def test_a_model_importing_a_bus_library_breaks_the_contract(tmp_path):
@@ -88,6 +88,65 @@ def test_the_import_graph_has_no_cycles():
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
     graph = grimp.build_graph("hil", exclude_type_checking_imports=True, cache_dir=None)
     assert _cycles(graph) == []
+
+
+class _Packages:
+    """The import graph of `hil.*` packages: `hil.plan.runner -> hil.virtual.truth` is an
+    edge hil.plan -> hil.virtual (top-level modules such as hil.cli count as their own)."""
+
+    def __init__(self, graph) -> None:
+        def pkg(m: str) -> str:
+            return ".".join(m.split(".")[:2])
+
+        self.edges: dict[str, set[str]] = {}
+        for m in graph.modules:
+            if not m.startswith("hil"):
+                continue
+            out = self.edges.setdefault(pkg(m), set())
+            out.update(pkg(w) for w in graph.find_modules_directly_imported_by(m)
+                       if w.startswith("hil.") and pkg(w) != pkg(m))
+        self.modules = frozenset(self.edges)
+
+    def find_modules_directly_imported_by(self, m: str) -> set[str]:
+        return self.edges.get(m, set())
+
+
+def test_no_cycle_between_hil_packages():
+    """One way between rooms: no package imports, however indirectly, one that imports it
+    back (hil.plan <-> hil.virtual was one). The virtual world is loaded by name
+    (hil.bench.virtual_module), which the graph rightly does not see."""
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+    graph = grimp.build_graph("hil", exclude_type_checking_imports=True, cache_dir=None)
+    assert _cycles(_Packages(graph)) == []
+
+
+def test_a_package_cycle_is_found(tmp_path):
+    """The package check fails when the virtual world imports the plans again."""
+    shutil.copytree(ROOT / "hil", tmp_path / "hil")
+    world = tmp_path / "hil" / "virtual" / "world.py"
+    world.write_text(world.read_text() + "\nimport hil.plan.runner  # noqa\n")
+    plan = tmp_path / "hil" / "plan" / "runner.py"
+    plan.write_text(plan.read_text() + "\nimport hil.virtual.world  # noqa\n")
+    code = ("import grimp; "
+            "from tests.test_layers import _Packages, _cycles; "
+            "g = grimp.build_graph('hil', exclude_type_checking_imports=True, cache_dir=None); "
+            "print(_cycles(_Packages(g)))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True,
+                       text=True, timeout=120, cwd=tmp_path,
+                       env={"PYTHONPATH": f"{tmp_path}:{ROOT}", "PATH": "/usr/bin:/bin"})
+    assert "hil.plan" in r.stdout and "hil.virtual" in r.stdout, r.stdout + r.stderr
+
+
+def test_a_real_bench_session_loads_no_model():
+    """docs/architecture.md: importing the runner and its session for a real bench must not
+    load the virtual drive (hil.model, hil.faces, hil.virtual)."""
+    code = ("import sys, hil.plan.session, hil.plan.runner, hil.bench.bench; "
+            "print(sorted(m for m in sys.modules if m.split('.')[:2] in "
+            "(['hil', 'model'], ['hil', 'faces'], ['hil', 'virtual'])))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "[]"
 
 
 def test_the_cycle_finder_finds_a_cycle():

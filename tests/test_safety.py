@@ -8,7 +8,7 @@ from typing import Any
 
 import hil.gateway.safe_state as gateway_mod
 import hil.plan.safety as plan_safety
-from hil.plan.bench import SafeState
+from hil.bench.bench import SafeState
 from hil.safety import run_safe_state
 
 

@@ -20,7 +20,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
-MS = 1_000_000
+from hil.units import MS
+
 FRAME_BITS = 80
 _CS_K = (0xA700, 0x605A, 0x30A5, 0x5A06)
 

@@ -31,11 +31,10 @@ from hil.model.events import AlarmChanged, PowerCycled
 from hil.model.options import ModelOptions
 from hil.profile.od import Entry, ObjectDictionary
 from hil.protocol import canopen as cop
+from hil.units import MS, US
 
 log = logging.getLogger(__name__)
 
-US = 1_000
-MS = 1_000_000
 
 # P3.001 digit Z -> bit rate (L10529-L10533; Z=3 is 800 kbit/s there, 750 kbit/s in L16844).
 BITRATES = {0: 125_000, 1: 250_000, 2: 500_000, 3: 750_000, 4: 1_000_000}
@@ -144,7 +143,7 @@ class CanopenSlave:
         self._life_deadline: int | None = None
         self._guard_toggle = 0
         self._history_cleared: tuple | None = None
-        # communication monitoring (issue 16, docs/faults.md)
+        # communication monitoring (docs/faults.md)
         self._sdo_prev_sent: int | None = None  # sender time of the last SDO request
         self._sdo_answered = 0  # wall ns when the last SDO answer left
         self._sdo_replied = False  # the request being served was answered

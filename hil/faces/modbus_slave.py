@@ -33,6 +33,7 @@ from typing import Any, Literal, Protocol
 from hil.faces.last_resort import LastResort
 from hil.model import errors
 from hil.protocol import modbus as mb
+from hil.units import S
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +44,6 @@ P3_002 = 0x0304  # protocol 0..8 (L10546-L10557); next frame (L16037)
 P3_004 = 0x0308  # comm timeout, s, 0 = off, "immediately" (L10571-L10578)
 P3_007 = 0x030E  # response delay (L10610-L10617); unit 0.5 ms (L10612) ⚠ 1 ms (L7020)
 
-S = 1_000_000_000
 
 
 class RegisterStore(Protocol):

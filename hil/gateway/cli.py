@@ -13,9 +13,9 @@ import threading
 import time
 from pathlib import Path
 
+from hil.bench.bench import PlanFileError, load_bench
 from hil.gateway.gateway import Gateway, GatewayConfig
 from hil.gateway.tls import GatewaySecurityError, TlsFiles
-from hil.plan.bench import PlanFileError, load_bench
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 

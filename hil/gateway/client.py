@@ -32,7 +32,6 @@ from typing import Any
 import zenoh
 
 from hil.gateway import keys
-from hil.gateway.lease import NS
 from hil.transport.zenoh_net import (
     close_session,
     make_config,
@@ -40,6 +39,7 @@ from hil.transport.zenoh_net import (
     set_lease_token,
     wait_connected,
 )
+from hil.units import S
 
 
 class LeaseRefused(RuntimeError):
@@ -47,7 +47,7 @@ class LeaseRefused(RuntimeError):
 
     def __init__(self, bench: str, holder: str, since_ns: int | None, reason: str = "held"):
         self.bench, self.holder, self.since_ns, self.reason = bench, holder, since_ns, reason
-        self.since = datetime.fromtimestamp(since_ns / NS).astimezone() if since_ns else None
+        self.since = datetime.fromtimestamp(since_ns / S).astimezone() if since_ns else None
         when = self.since.isoformat(timespec="seconds") if self.since else "?"
         super().__init__(f"bench {bench} is leased by {holder} since {when}"
                          + ("" if reason == "held" else f" ({reason})"))

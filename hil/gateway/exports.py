@@ -20,7 +20,6 @@ import zenoh
 
 from hil.gateway import keys
 from hil.gateway.health import BusHealth
-from hil.gateway.lease import NS
 from hil.transport.can_bus import TappedBus
 from hil.transport.dio import DioPort, is_input
 from hil.transport.serial_line import SerialLine, pack_chunk, unpack_chunk
@@ -28,6 +27,7 @@ from hil.transport.urls import parse_url
 from hil.transport.zenoh_can import SYNC_CHUNK
 from hil.transport.zenoh_can import pack as pack_can
 from hil.transport.zenoh_can import unpack as unpack_can
+from hil.units import S
 
 log = logging.getLogger(__name__)
 
@@ -194,9 +194,9 @@ class CanExport(_Export):
         now = time.time_ns()
         if not msg.timestamp:
             return now
-        t = int(msg.timestamp * NS) + self._offset_ns
-        if abs(t - now) > NS:
-            self._offset_ns = now - int(msg.timestamp * NS)
+        t = int(msg.timestamp * S) + self._offset_ns
+        if abs(t - now) > S:
+            self._offset_ns = now - int(msg.timestamp * S)
             t = now
         return t
 

@@ -44,7 +44,7 @@ from hil.gateway.exports import (
     SerialFactory,
     _Export,
 )
-from hil.gateway.lease import NS, LeaseInfo, LeaseTable, iso
+from hil.gateway.lease import LeaseInfo, LeaseTable, iso
 from hil.gateway.safe_state import default_safe_state, sdo_write_controlword
 from hil.gateway.tls import TlsFiles, acl_section, check_exposure
 from hil.record.recorder import Recorder
@@ -52,6 +52,7 @@ from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
 from hil.transport.serial_line import open_serial
 from hil.transport.zenoh_net import close_session, make_config, open_session, wait_connected
+from hil.units import S
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +85,7 @@ class GatewayConfig:
 
 
 class Gateway:
-    """Export `bench` (hil.plan.bench.Bench) under `<lab>/<bench>` (see module docstring).
+    """Export `bench` (hil.bench.bench.Bench) under `<lab>/<bench>` (see module docstring).
 
     Factories replace how buses are opened (tests inject unpluggable adapters);
     `safe_state(gateway, reason)` replaces the bench file's safe state.
@@ -264,7 +265,7 @@ class Gateway:
             info = self.lease.expired()
             if info is not None:
                 self._end(info, f"lease of {info.holder} expired: no keep-alive within "
-                                f"{info.timeout_ns / NS:g} s", safe=True)
+                                f"{info.timeout_ns / S:g} s", safe=True)
             now = time.monotonic()
             if self._health_dirty.is_set() or now >= next_health:
                 self._health_dirty.clear()

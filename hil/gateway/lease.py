@@ -14,7 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
-NS = 1_000_000_000
+from hil.units import S
 
 
 @dataclass(frozen=True)
@@ -29,11 +29,11 @@ class LeaseInfo:
     def public(self) -> dict:
         """What anyone may see: holder and since (never the token)."""
         return {"holder": self.holder, "since_ns": self.since_ns, "since": iso(self.since_ns),
-                "timeout_s": self.timeout_ns / NS}
+                "timeout_s": self.timeout_ns / S}
 
 
 def iso(t_ns: int) -> str:
-    return datetime.fromtimestamp(t_ns / NS, UTC).isoformat(timespec="milliseconds")
+    return datetime.fromtimestamp(t_ns / S, UTC).isoformat(timespec="milliseconds")
 
 
 class LeaseTable:
@@ -43,7 +43,7 @@ class LeaseTable:
                  wall: Callable[[], int] = time.time_ns) -> None:
         if not 0.05 <= timeout_s <= 3600:
             raise ValueError(f"lease timeout {timeout_s:g} s: must be 0.05..3600 s")
-        self.timeout_ns = round(timeout_s * NS)
+        self.timeout_ns = round(timeout_s * S)
         self._mono, self._wall = mono, wall
         self._lock = threading.Lock()
         self.current: LeaseInfo | None = None

@@ -9,9 +9,9 @@ from typing import TYPE_CHECKING, Any
 import can
 
 from hil.gateway.exports import DioExport
-from hil.gateway.lease import NS
 from hil.protocol import canopen
 from hil.safety import run_safe_state
+from hil.units import S
 
 if TYPE_CHECKING:
     from hil.gateway.gateway import Gateway
@@ -38,7 +38,7 @@ class _GatewayDrive:
 
     def write_controlword(self, cw: int) -> str | bool:
         export, node = self.gw.can[self.d.can], self.d.node_id
-        timeout_s = self.gw.bench.safe_state.timeout_ns / NS
+        timeout_s = self.gw.bench.safe_state.timeout_ns / S
         ans = export.request(
             sdo_write_controlword(node, cw),
             lambda m: m.arbitration_id == canopen.SDO_RESPONSE + node
@@ -71,7 +71,7 @@ class _GatewayDrive:
         if port is None:
             return False
         wire = self.d.do["BRKR"]
-        port.wait_for(wire.line, wire.level_for(False), timeout_ns / NS)
+        port.wait_for(wire.line, wire.level_for(False), timeout_ns / S)
         return "BRKR off: brake engaged"
 
 

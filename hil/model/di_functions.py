@@ -1,4 +1,4 @@
-"""DI functions of table 8.1 that act on the motion (issue 13 item 6).
+"""DI functions of table 8.1 that act on the motion (docs/manual-choices.md).
 
 * PFQS (0x47, rising edge, PT/PR/T/S, L15253): AL35F and a ramp with the P5.003 digit C
   deceleration (L11084-11100); at zero speed AL3CF and Servo Off (L20141-20157). Clearing:

@@ -31,7 +31,7 @@ from hil.profile.dio import (  # tables 8.1 / 8.2 and the mapping parameters (th
     decode_mapping,
 )
 
-# Table 8.1 functions the virtual drive does not model (issue 13 item 6). Mapping one of them
+# Table 8.1 functions the virtual drive does not model (docs/manual-choices.md). Mapping one of them
 # by a P2.010-P2.017 / P2.036-P2.040 write, or in a bench, is refused: a mapped function that
 # silently does nothing would make a test pass for the wrong reason. The motion functions
 # PFQS, JOGU/JOGD, TRQLM/SPDLM, ZCLAMP, CCLR and GAINUP are modelled (di_functions.py); what

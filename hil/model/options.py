@@ -54,7 +54,7 @@ class ModelOptions:
     # When the firmware enters Servo Off on an STO loss (L2474-2482): "acknowledged" = only
     # when it acknowledges the loss (both lost 10 ms -> AL500, one lost 1 s -> AL501/AL502);
     # a shorter glitch cuts torque in hardware but DO.SON, BRKR and the CiA 402 state stay.
-    # "at_loss" = servo off at the first lost channel (the model before issue 13).
+    # "at_loss" = servo off at the first lost channel (an earlier reading).
     sto_servo_off: str = "acknowledged"
     fdbk_table: dict[tuple[bool, bool], bool] = field(
         default_factory=lambda: dict(FDBK_AS_PRINTED)
@@ -72,7 +72,7 @@ class ModelOptions:
     # --- timing of the model's outputs ---
     motion_step_ms: float = 1.0  # integration substep while anything moves
     state_publish_ms: float = 10.0  # ground-truth snapshots when recorded
-    # --- communication faults (issue 16, docs/faults.md) ---
+    # --- communication faults (docs/faults.md) ---
     # AL111: "more than one SDO received within 1 ms" overflows the SDO Rx buffer
     # (L19933-19937). Counted only for a request the master sent before the drive answered
     # the previous one: a master that waits for each answer never overflows a one-deep buffer.
@@ -121,7 +121,7 @@ class ModelOptions:
     # AL019 "communication address / value incorrect" (L19592-19596): the Modbus exception
     # codes that raise it (02 illegal address, 03 illegal value). () = never.
     modbus_al019_exceptions: tuple[int, ...] = (2, 3)
-    # --- DI functions of table 8.1 (issue 13 item 6, hil/model/di_functions.py) ---
+    # --- DI functions of table 8.1 (hil/model/di_functions.py) ---
     # Which table 8.1 "控制模式" column the drive is in when P1.001 is PT (0) or CANopen (0x0C)
     # and a CiA 402 mode runs (the table names PT/PR/S/T only, L15075-15255): True = the mode
     # of operation 6061h decides (PP/HM/IP/CSP -> PR, PV/CSV -> S, PT/CST -> T); False =

@@ -12,10 +12,7 @@ import itertools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-NS = 1
-US = 1_000
-MS = 1_000_000
-S = 1_000_000_000
+from hil.units import MS, NS, US, S  # the one definition, re-exported for the model
 
 
 def ms(value: float) -> int:
@@ -82,3 +79,6 @@ class Scheduler:
             self.now = max(self.now, nxt)
             self.run_due()
         self.now = max(self.now, t)
+
+
+__all__ = ["MS", "NS", "US", "S", "Scheduler", "Timer", "ms"]

@@ -20,8 +20,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from hil.bench.yamlio import PARAM_ROUTES, Checker, join
 from hil.plan.context import Inconclusive, StepFailed
-from hil.plan.yamlio import PARAM_ROUTES, Checker, join
 from hil.record import topics
 from hil.timing.latch import Reference, edges_from, judge
 from hil.timing.source import RecordingSource

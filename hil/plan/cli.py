@@ -10,7 +10,8 @@ import os
 import sys
 from pathlib import Path
 
-from hil.plan.bench import Bench, load_bench
+from hil.bench.bench import Bench, load_bench
+from hil.bench.yamlio import PlanFileError
 from hil.plan.events import Listener
 from hil.plan.listeners import StepLines
 from hil.plan.parallel import jobs_from_arg, parallel_blocker, run_parallel
@@ -19,7 +20,6 @@ from hil.plan.plansdir import choose_plans_dir
 from hil.plan.progress import RunProgress
 from hil.plan.runner import run_plans, summary_table, timing_specs
 from hil.plan.select import ExprError, select
-from hil.plan.yamlio import PlanFileError
 from hil.report.index import write_index
 from hil.report.junit import write_junit
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from hil.plan.bench import Bench
+    from hil.bench.bench import Bench
     from hil.plan.plan import Plan
     from hil.plan.runner import PlanResult, StepResult
     from hil.plan.steps import Step

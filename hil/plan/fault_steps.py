@@ -1,4 +1,4 @@
-"""Plan steps for communication faults (issue 16, docs/faults.md):
+"""Plan steps for communication faults (docs/faults.md):
 
     - produce: {heartbeat: 50ms, node: 127}   # harness traffic the drive monitors;
     - produce: {sync: 10ms}                   #   `off` stops it
@@ -30,8 +30,8 @@ from typing import Any
 
 import can
 
-from hil.plan.param_rules import sdo_parameter
-from hil.plan.yamlio import Checker, join, parse_duration, shorten
+from hil.bench.param_rules import sdo_parameter
+from hil.bench.yamlio import Checker, join, parse_duration, shorten
 from hil.transport.cyclic import CyclicSender
 from hil.transport.faults import (
     BURST_WINDOW_NS,

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hil.plan.bench import Bench, load_bench
+from hil.bench.bench import Bench, load_bench
 from hil.plan.events import Listener, Note, Notifier, PlanEnded, PlanStarted, StepEnded
 from hil.plan.plan import Plan, check_plan, load_plan
 from hil.plan.runner import PlanResult, output_stems, run_plan, timing_specs

@@ -11,15 +11,15 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from hil.bench import virtual_rules
+from hil.bench.bench import Bench, DriveSpec, Wire, _params
+from hil.bench.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
 from hil.paths import plans_dir as _pd
-from hil.plan.bench import Bench, DriveSpec, Wire, _params
 from hil.plan.kinds import CheckContext
 from hil.plan.kinds.timing import bind_line
 from hil.plan.select import KEYWORDS, TAG_WORD, is_glob
 from hil.plan.steps import Step, parse_steps
-from hil.plan.yamlio import Checker, LDict, PlanFileError, join, load_yaml_file, load_yaml_text
 from hil.profile.dio import DI_FUNCTIONS, DI_PARAMS, DO_FUNCTIONS, DO_PARAMS, N_PHYSICAL_DI
-from hil.virtual.checks import ModelOptions, inert_mapping
 
 __all__ = ["Plan", "bind_line", "check_plan", "find_plans", "load_plan", "loads_plan", "mapping_of",
            "plan_spec", "step_spec"]
@@ -78,9 +78,10 @@ def parse_plan(data: Any, file: str, text: str = "") -> Plan:
         plan._lines |= {f"params.{k}": pm.kline(k) for k in plan.params if hasattr(pm, "kline")}
     if "options" in top:
         om = v.mapping(top["options"], top.kline("options"), "options")
-        v.keys(om, {f.name for f in fields(ModelOptions)}, "options")
+        options = virtual_rules().ModelOptions
+        v.keys(om, {f.name for f in fields(options)}, "options")
         try:
-            ModelOptions.from_dict(dict(om), where="options")
+            options.from_dict(dict(om), where="options")
         except (ValueError, TypeError) as e:
             raise v.err(om.line, "options", str(e)) from None
         plan.options = dict(om)
@@ -180,9 +181,9 @@ def check_plan(plan: Plan, bench: Bench, spec_ids: set[str] | None = None) -> No
     if plan.params and not any(d.param_via for d in bench.drives.values()):
         raise v.err(plan.key_line("params"), "params",
                     f"bench {bench.name!r} has no parameter access (rs485 or can)")
-    if bench.virtual:  # the virtual drive refuses a DI function it does not model (issue 13)
+    if bench.virtual:  # the virtual drive refuses a DI function it does not model
         for name, value in plan.params.items():
-            if why := inert_mapping(name, value):
+            if why := virtual_rules().inert_mapping(name, value):
                 raise v.err(plan._lines.get(f"params.{name}", plan.key_line("params")),
                             join("params", name),
                             f"0x{value:04X} maps {why} (bench {bench.name!r} is virtual)")

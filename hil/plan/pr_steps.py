@@ -17,9 +17,9 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from hil.bench.yamlio import PARAM_ROUTES, Checker, LDict, join
 from hil.drivers.delta_pr import STATES, DeltaPr, PrTableError, table_words
 from hil.plan.context import StepFailed
-from hil.plan.yamlio import PARAM_ROUTES, Checker, LDict, join
 
 PATH_KEYS = {"type", "data", "ins", "auto", "ovlp", "cmd", "unit_pps", "acc", "dec", "spd",
              "dly", "dest", "dest_array", "source", "rom", "direction", "s_low"}

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-from hil.plan.bench import Bench
+from hil.bench import virtual_module
+from hil.bench.bench import Bench
 from hil.plan.context import (
     Cancelled,
     Inconclusive,
@@ -44,7 +45,6 @@ from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, Session, open_session
 from hil.record.recorder import Recorder
 from hil.timing.registry import SpecRegistry, load_specs
-from hil.virtual.truth import SensorTap, bench_with_options
 
 __all__ = ["Cancelled", "PlanResult", "StepContext", "StepFailed", "StepResult", "run_plan",
            "run_plans", "summary_table", "timing_specs"]
@@ -162,8 +162,11 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
             try:
                 if stop is not None and stop():
                     raise KeyboardInterrupt("stopped before the plan began")
-                sbench = bench_with_options(bench, plan.options, tmp)
-                truth = SensorTap(rec) if bench.virtual else rec
+                sbench, truth = bench, rec
+                if bench.virtual:  # the virtual world's ground truth and model options
+                    vt = virtual_module("truth")
+                    sbench = vt.bench_with_options(bench, plan.options, tmp)
+                    truth = vt.SensorTap(rec)
                 session = steps.run(lambda: session_factory(sbench, truth),
                                     bench.timeouts["ready"] + 5_000_000_000, cancel)
                 ctx = StepContext(session, rec, plan, specs, cancel, steps)  # type: ignore[arg-type]

@@ -16,6 +16,8 @@ from typing import Any
 import can
 import canopen
 
+from hil.bench import virtual_module
+from hil.bench.bench import CIA402_TIMEOUTS, Bench, DriveSpec
 from hil.drivers.cia402 import Cia402Driver, SdoError
 from hil.drivers.delta_modbus import (
     DeltaModbus,
@@ -24,7 +26,6 @@ from hil.drivers.delta_modbus import (
     ModbusTimeoutError,
 )
 from hil.gateway.client import LeaseRefused, acquire
-from hil.plan.bench import CIA402_TIMEOUTS, Bench, DriveSpec
 from hil.profile.params import parse_name
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
@@ -214,10 +215,9 @@ def open_session(bench: Bench, recorder: Any, *, world_factory: Callable | None 
     world = None
     urls: dict[str, str] = {}
     if bench.virtual:
-        if world_factory is None:
-            from hil.virtual.world import SubprocessWorld, VirtualWorld
-
-            world_factory = VirtualWorld if bench.process == "inproc" else SubprocessWorld
+        if world_factory is None:  # loaded by name: a real bench never imports the model
+            vw = virtual_module("world")
+            world_factory = vw.VirtualWorld if bench.process == "inproc" else vw.SubprocessWorld
         world = world_factory(bench, recorder)
         urls = world.harness_urls()
     else:

@@ -10,10 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from hil.bench.yamlio import Checker, LList, join
 from hil.plan.kinds import StepKind, kinds
 from hil.plan.kinds.fields import Condition
 from hil.plan.kinds.timing import SINCE
-from hil.plan.yamlio import Checker, LList, join
 
 __all__ = ["COMMON", "Condition", "Step", "describe", "parse_step", "parse_steps"]
 

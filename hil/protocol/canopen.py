@@ -145,6 +145,35 @@ def abort_text(code: int) -> str:
     return ABORT_TEXTS.get(code, "unknown abort code")
 
 
+# CANopen functions by COB-ID span (CiA 301 pre-defined connection set, L16873-L16899): the
+# one classification the fault matcher, the recorder and the plans use
+FUNCTION_SPANS: dict[str, tuple[tuple[int, int], ...]] = {
+    "nmt": ((0x000, 0x000),),
+    "sync": ((0x080, 0x080),),
+    "emcy": ((0x081, 0x0FF),),
+    "pdo": ((0x180, 0x57F),),
+    "tpdo": ((0x180, 0x1FF), (0x280, 0x2FF), (0x380, 0x3FF), (0x480, 0x4FF)),
+    "rpdo": ((0x200, 0x27F), (0x300, 0x37F), (0x400, 0x47F), (0x500, 0x57F)),
+    "sdo": ((0x580, 0x67F),),
+    "sdo_rx": ((0x600, 0x67F),),
+    "heartbeat": ((0x700, 0x77F),),
+}
+
+
+def is_function(name: str, can_id: int) -> bool:
+    """True if `can_id` belongs to CANopen function `name` (a key of FUNCTION_SPANS)."""
+    return any(lo <= can_id <= hi for lo, hi in FUNCTION_SPANS[name])
+
+
+def is_pdo(can_id: int) -> bool:
+    return 0x180 <= can_id <= 0x57F
+
+
+def is_sdo(can_id: int) -> bool:
+    """An SDO request or response (0x581-0x67F: 0x580 itself is no node's)."""
+    return 0x580 < can_id <= 0x67F
+
+
 def classify(can_id: int) -> tuple[str, int | None]:
     """(kind, node) of an 11-bit COB-ID per the CiA 301 pre-defined connection set."""
     node = can_id & 0x7F

@@ -28,6 +28,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import IO, Any
 
+from hil.protocol.canopen import is_pdo, is_sdo
 from hil.record import topics
 from hil.record.mcapio import McapWriter
 from hil.record.modbus_pairing import AduAssembler, ModbusPairing, guess_mode
@@ -666,7 +667,7 @@ class Recorder:
                     cache_[key] = enc
                     suffix = b'"data":"' + hx.encode() + b'"}'
                     if (
-                        0x180 <= cid < 0x580
+                        is_pdo(cid)
                         and not rtr
                         and enc.endswith(suffix)
                         and enc.count(b'"') == 14
@@ -680,7 +681,7 @@ class Recorder:
                 if len(enc) > 2
                 else b'{"dir":"%s"}' % d.encode(),
             )
-        if 0x580 < cid <= 0x67F:
+        if is_sdo(cid):
             for txn in pairing.feed(cid, data, pt):
                 w.add_message(sdo_cid, t, pt, dumps(txn))
 

@@ -32,8 +32,8 @@ from hil.fileio import write_text_atomic
 from hil.record import topics
 from hil.record.reader import Recording
 from hil.report.html import CSS
+from hil.units import MS
 
-MS = 1_000_000
 TRUTH_EDGES = ("servo_on", "brkr", "brake_released", "torque_enabled", "sto_a", "sto_b")
 MIN_DELTA_MS = 1.0  # smaller differences are jitter of an in-process bench
 

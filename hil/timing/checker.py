@@ -28,8 +28,8 @@ from hil.record import topics
 from hil.timing.expr import ExprError, check_number, is_param
 from hil.timing.source import ParamTimeline, SignalSource, samples
 from hil.timing.spec import ConstraintDef, EventDef, SignalDef, Spec, WindowDef
+from hil.units import MS
 
-MS = 1_000_000
 NEG_INF = -(2**62)
 POS_INF = 2**62
 

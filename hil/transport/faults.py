@@ -1,4 +1,4 @@
-"""Fault injection on the harness's own side of a transport (issue 16, docs/faults.md).
+"""Fault injection on the harness's own side of a transport (docs/faults.md).
 
 Wrappers that stop, delay, garble or multiply what the *harness sends*; what the drive
 sends is passed through untouched (on a real bench only our side may be touched):
@@ -27,23 +27,11 @@ from typing import Any, Protocol
 
 import can
 
+from hil.protocol.canopen import FUNCTION_SPANS, is_function
+
 CAN_ACTIONS = ("drop", "delay", "corrupt", "duplicate")
-# CANopen functions by COB-ID range (CiA 301 pre-defined connection set, L16873-L16899)
-CAN_FUNCTIONS: dict[str, tuple[int, int]] = {
-    "nmt": (0x000, 0x000),
-    "sync": (0x080, 0x080),
-    "emcy": (0x081, 0x0FF),
-    "pdo": (0x180, 0x57F),
-    "tpdo": (0x180, 0x1FF),  # and 0x280.., 0x380.., 0x480.. (see `_FUNCTION_SETS`)
-    "rpdo": (0x200, 0x27F),
-    "sdo": (0x580, 0x67F),
-    "sdo_rx": (0x600, 0x67F),
-    "heartbeat": (0x700, 0x77F),
-}
-_FUNCTION_SETS: dict[str, tuple[tuple[int, int], ...]] = {
-    "tpdo": ((0x180, 0x1FF), (0x280, 0x2FF), (0x380, 0x3FF), (0x480, 0x4FF)),
-    "rpdo": ((0x200, 0x27F), (0x300, 0x37F), (0x400, 0x47F), (0x500, 0x57F)),
-}
+# CANopen functions a fault may match: the classification of hil.protocol.canopen
+CAN_FUNCTIONS = tuple(FUNCTION_SPANS)
 # on the harness's requests (what it writes) / on the replies it reads (its own receiver)
 REQUEST_FAULTS = ("crc", "partial", "split", "late", "noise", "silence")
 REPLY_FAULTS = ("reply_late", "reply_partial", "reply_split", "reply_noise")
@@ -79,11 +67,7 @@ class CanMatch:
         cid = msg.arbitration_id
         if cid in self.cob_ids or any(lo <= cid <= hi for lo, hi in self.ranges):
             return True
-        for f in self.functions:
-            spans = _FUNCTION_SETS.get(f, (CAN_FUNCTIONS[f],))
-            if any(lo <= cid <= hi for lo, hi in spans):
-                return True
-        return False
+        return any(is_function(f, cid) for f in self.functions)
 
     def target(self) -> str:
         """One string naming what is matched ("heartbeat", "0x205", "any"), for timing specs."""

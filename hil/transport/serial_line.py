@@ -47,8 +47,7 @@ from hil.transport.zenoh_net import (
     wait_connected,
     wait_matching,
 )
-
-NS = 1_000_000_000
+from hil.units import S
 
 
 def t35_s(settings: SerialSettings) -> float:
@@ -168,9 +167,9 @@ class SerialLine:
         Waits up to `timeout` s for the first byte (None: forever); returns None if none.
         Returns only once the silence has elapsed on the (emulated) line.
         """
-        silence = round((self.t35_s if silence_s is None else silence_s) * NS)
+        silence = round((self.t35_s if silence_s is None else silence_s) * S)
         c = self.char_time_ns
-        first_deadline = None if timeout is None else time.monotonic_ns() + round(timeout * NS)
+        first_deadline = None if timeout is None else time.monotonic_ns() + round(timeout * S)
         out: list[tuple[int, int, int | None]] = []
         with self._cond:
             while True:
@@ -198,7 +197,7 @@ class SerialLine:
                     candidates = [t for t in (self._rx[0][1] if self._rx else None,
                                               first_deadline) if t is not None]
                     until = min(candidates) if candidates else None
-                self._cond.wait(None if until is None else max(0, until - now) / NS)
+                self._cond.wait(None if until is None else max(0, until - now) / S)
         return self._deliver(out)
 
     def reset_input_buffer(self) -> None:
@@ -207,7 +206,7 @@ class SerialLine:
             self._rx.clear()
 
     def _take(self, n: int, timeout: float | None) -> SerialFrame | None:
-        deadline = None if timeout is None else time.monotonic_ns() + round(timeout * NS)
+        deadline = None if timeout is None else time.monotonic_ns() + round(timeout * S)
         out: list[tuple[int, int, int | None]] = []
         with self._cond:
             while len(out) < n:
@@ -220,7 +219,7 @@ class SerialLine:
                 candidates = [t for t in (self._rx[0][1] if self._rx else None, deadline)
                               if t is not None]
                 until = min(candidates) if candidates else None
-                self._cond.wait(None if until is None else max(0, until - now) / NS)
+                self._cond.wait(None if until is None else max(0, until - now) / S)
         return self._deliver(out) if out else None
 
     def _deliver(self, out: list[tuple[int, int, int | None]]) -> SerialFrame:
@@ -355,7 +354,7 @@ class PtyLine(SerialLine):
                     due.append(self._tx.popleft()[0])
                 wait_ns = self._tx[0][1] - now if (self._tx and not due) else 0
                 if not due:
-                    self._tx_cond.wait(wait_ns / NS)
+                    self._tx_cond.wait(wait_ns / S)
                     continue
             try:
                 os.write(self._master, bytes(due))
@@ -443,7 +442,7 @@ class PySerialLine(SerialLine):
 # version, sender wall ns at the first character's start, sender wall ns at publishing, n
 CHUNK = struct.Struct("<BqqH")
 CHUNK_VERSION = 1
-MAX_GAP_NS = NS  # longer sender pauses are not reproduced (clock steps, idle lines)
+MAX_GAP_NS = S  # longer sender pauses are not reproduced (clock steps, idle lines)
 
 
 def pack_chunk(data: bytes, t0_wall_ns: int, rel_ends_ns: list[int] | tuple[int, ...],

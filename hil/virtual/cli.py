@@ -14,12 +14,12 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import PlanFileError
 from hil.fileio import FileProblem, read_limited
 from hil.model.errors import ModelError
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
-from hil.plan.bench import load_bench
-from hil.plan.yamlio import PlanFileError
 from hil.transport.urls import TransportUrlError, parse_url
 from hil.virtual.stack import DriveSpec, VirtualDriveStack
 from hil.virtual.world import StdioControl, idle_inputs, initial_params

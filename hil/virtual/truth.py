@@ -12,8 +12,8 @@ from typing import Any
 
 import yaml
 
+from hil.bench.bench import Bench
 from hil.model.drive import DEFAULT_SENSORS
-from hil.plan.bench import Bench
 
 
 class SensorTap:

@@ -28,9 +28,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from hil.bench.bench import Bench, DriveSpec
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
-from hil.plan.bench import Bench, DriveSpec
 from hil.virtual.stack import DriveSpec as StackSpec
 from hil.virtual.stack import VirtualDriveStack
 

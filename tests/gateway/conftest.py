@@ -12,8 +12,8 @@ from pathlib import Path
 import can
 import pytest
 
+from hil.bench.bench import load_bench
 from hil.gateway.gateway import Gateway, GatewayConfig
-from hil.plan.bench import load_bench
 from hil.transport import zenoh_net
 from hil.virtual.stack import DriveSpec, VirtualDriveStack
 from tests.children import ChildProcess, children, hil

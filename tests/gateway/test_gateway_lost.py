@@ -22,7 +22,7 @@ import time
 
 import pytest
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
 from hil.plan.listeners import StepLines
 from hil.plan.plan import loads_plan
 from hil.plan.runner import run_plan

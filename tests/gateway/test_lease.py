@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from hil.gateway.lease import NS, LeaseTable
+from hil.gateway.lease import LeaseTable
+from hil.units import S
 
 A, B = b"A" * 16, b"B" * 16
 
@@ -12,7 +13,7 @@ A, B = b"A" * 16, b"B" * 16
 class Clock:
     def __init__(self) -> None:
         self.mono = 0
-        self.wall = 1_700_000_000 * NS
+        self.wall = 1_700_000_000 * S
 
     def m(self) -> int:
         return self.mono
@@ -31,10 +32,10 @@ def test_second_holder_refused_with_holder_and_since(table):
     t, c = table
     ok, info = t.acquire("alice", A, "a1")
     assert ok and info["holder"] == "alice" and info["since_ns"] == c.wall
-    c.wall += 5 * NS
+    c.wall += 5 * S
     ok, info = t.acquire("bob", B, "b1")
     assert not ok
-    assert info["holder"] == "alice" and info["since_ns"] == 1_700_000_000 * NS
+    assert info["holder"] == "alice" and info["since_ns"] == 1_700_000_000 * S
     assert info["reason"] == "held" and info["since"].startswith("2023-11-14T22:13:20")
     assert "token" not in info  # the secret never leaves the table
     assert t.allows(A) and not t.allows(B) and not t.allows(None)
@@ -43,17 +44,17 @@ def test_second_holder_refused_with_holder_and_since(table):
 def test_reacquire_by_holder_keeps_since(table):
     t, c = table
     t.acquire("alice", A, "a1")
-    c.wall += NS
+    c.wall += S
     ok, info = t.acquire("alice", A, "a1")
-    assert ok and info["since_ns"] == 1_700_000_000 * NS
+    assert ok and info["since_ns"] == 1_700_000_000 * S
 
 
 def test_keepalive_expiry_then_safing_blocks_until_done(table):
     t, c = table
     t.acquire("alice", A, "a1")
-    c.mono += 1 * NS
+    c.mono += 1 * S
     assert t.renew(A) and not t.renew(B)
-    c.mono += 2 * NS  # exactly the timeout: still held
+    c.mono += 2 * S  # exactly the timeout: still held
     assert t.expired() is None
     c.mono += 1
     ended = t.expired()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
 from hil.plan.plan import loads_plan
 from hil.plan.runner import run_plan
 from hil.plan.session import BenchError, open_session
@@ -74,7 +74,7 @@ def test_plan_runs_through_the_gateway_under_a_lease(tmp_path: Path, make_rig) -
 
 
 def test_gateway_transports_need_a_gateway_section(tmp_path: Path) -> None:
-    from hil.plan.yamlio import PlanFileError
+    from hil.bench.yamlio import PlanFileError
 
     path = tmp_path / "bad.yaml"
     path.write_text("name: b\ncan:\n  can0: gateway\ndrives:\n  d: {can: can0, node_id: 1}\n")

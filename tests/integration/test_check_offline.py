@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
 from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plan
 from hil.record import topics

@@ -8,8 +8,8 @@ import io
 
 import pytest
 
+from hil.bench.bench import load_bench
 from hil.paths import fixture
-from hil.plan.bench import load_bench
 from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plans
 from hil.record import topics as T

@@ -9,7 +9,7 @@ from collections import Counter
 import pytest
 from mcap.reader import make_reader
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
 from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plan
 

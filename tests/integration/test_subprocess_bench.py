@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
+from hil.bench.bench import load_bench, loads_bench
 from hil.paths import fixture
-from hil.plan.bench import load_bench, loads_bench
 from hil.plan.plan import find_plans, load_plan, loads_plan
 from hil.plan.runner import run_plans
 from hil.record import topics as T

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from hil.bench.bench import load_bench
 from hil.paths import fixture
-from hil.plan.bench import load_bench
 from hil.transport.urls import parse_url
 from hil.virtual.world import harness_side, resolve_auto
 

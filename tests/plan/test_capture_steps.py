@@ -7,11 +7,11 @@ import math
 
 import pytest
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import Checker, PlanFileError, load_yaml_text
 from hil.plan.plan import find_plans, load_plan, loads_plan
 from hil.plan.runner import run_plans
 from hil.plan.steps import parse_steps
-from hil.plan.yamlio import Checker, PlanFileError, load_yaml_text
 from hil.report.html import write_html
 from hil.timing.latch import Edge, Reference, judge
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import PlanFileError
 from hil.paths import fixture
-from hil.plan.bench import load_bench
 from hil.plan.plan import check_plan, load_plan
-from hil.plan.yamlio import PlanFileError
 
 PLAN = "plans/fault_heartbeat.yaml"
 

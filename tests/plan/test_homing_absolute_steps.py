@@ -11,8 +11,8 @@ from types import SimpleNamespace
 import pytest
 import yaml
 
+from hil.bench.bench import load_bench
 from hil.paths import fixture
-from hil.plan.bench import load_bench
 from hil.plan.context import StepFailed
 from hil.plan.kinds import absolute
 from hil.plan.plan import bind_line, check_plan, loads_plan, mapping_of, plan_spec

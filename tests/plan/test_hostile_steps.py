@@ -16,11 +16,11 @@ from pathlib import Path
 import pytest
 import yaml
 
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import PlanFileError
 from hil.paths import plans_dir
-from hil.plan.bench import load_bench
 from hil.plan.plan import loads_plan
 from hil.plan.runner import check_plan, timing_specs
-from hil.plan.yamlio import PlanFileError
 
 HOSTILE = ["²", "٣", "", "9" * 400, "9" * 400 + "ms", "9" * 20 + ".5s", ".nan", "nan",
            float("nan"), float("inf"), -1, 2**40, -(2**70), "abc", [], {}, None, True, "1e400",

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
 from hil.plan.plan import load_plan
 from hil.yamlio import FileError
 
@@ -145,10 +145,10 @@ def test_mutated_shipped_plans_are_refused_with_file_line_field():
 
     import yaml
 
+    from hil.bench.yamlio import PlanFileError
     from hil.paths import fixture, plans_dir
     from hil.plan.plan import check_plan, loads_plan
     from hil.plan.runner import timing_specs
-    from hil.plan.yamlio import PlanFileError
 
     bench, specs = load_bench(fixture("benches", "virtual.yaml")), timing_specs()
     rng = random.Random(77)

@@ -7,11 +7,11 @@ from dataclasses import replace
 
 import pytest
 
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import PlanFileError
 from hil.model.dio import INERT_DI_FUNCTIONS
-from hil.plan.bench import load_bench
 from hil.plan.plan import check_plan, loads_plan
 from hil.plan.runner import timing_specs
-from hil.plan.yamlio import PlanFileError
 from hil.profile.dio import DI_SYMBOLS
 
 pytestmark = pytest.mark.skipif(not INERT_DI_FUNCTIONS, reason="every DI function is modelled")

@@ -9,12 +9,12 @@ from typing import Any
 import pytest
 
 import hil.plan.kinds as kinds_mod
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import PlanFileError
 from hil.plan.context import Outcome
 from hil.plan.kinds import BUILTIN, StepKind, kinds
 from hil.plan.plan import check_plan, loads_plan
 from hil.plan.runner import timing_specs
-from hil.plan.yamlio import PlanFileError
 
 
 def test_every_builtin_kind_is_a_named_class_with_its_own_key():

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import MS, S, parse_duration
 from hil.paths import fixture
-from hil.plan.bench import load_bench
 from hil.plan.plan import check_plan, find_plans, load_plan
 from hil.plan.runner import timing_specs
-from hil.plan.yamlio import MS, S, parse_duration
 
 
 def test_durations():

@@ -12,11 +12,11 @@ from pathlib import Path
 
 import pytest
 
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import PlanFileError
 from hil.paths import fixture
-from hil.plan.bench import load_bench
 from hil.plan.plan import check_plan, load_plan
 from hil.plan.runner import timing_specs
-from hil.plan.yamlio import PlanFileError
 
 CORPUS = sorted((Path(__file__).parent / "malformed").glob("*.yaml"))
 

@@ -15,8 +15,8 @@ from typing import Any
 
 import pytest
 
+from hil.bench.bench import load_bench
 from hil.cli import main as hil
-from hil.plan.bench import load_bench
 from hil.plan.parallel import jobs_from_arg, parallel_blocker
 from hil.record.reader import Recording
 

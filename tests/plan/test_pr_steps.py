@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
+from hil.bench.yamlio import Checker, PlanFileError, load_yaml_text
 from hil.drivers.delta_pr import DeltaPr, PrTableError
 from hil.model.drive import Drive
 from hil.model.timebase import MS
 from hil.plan.steps import parse_steps
-from hil.plan.yamlio import Checker, PlanFileError, load_yaml_text
 
 TEXT = """steps:
   - pr_table:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from fakes import FAKE_BENCH, fake_session_factory
 
-from hil.plan.bench import loads_bench
+from hil.bench.bench import loads_bench
 from hil.plan.context import Inconclusive, StepFailed
 from hil.plan.kinds.base import StepKind
 from hil.plan.plan import loads_plan

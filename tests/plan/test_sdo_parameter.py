@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from hil.plan.param_rules import sdo_parameter
+from hil.bench.param_rules import sdo_parameter
 
 
 @pytest.mark.parametrize(("index", "sub", "value", "want"), [

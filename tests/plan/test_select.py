@@ -11,10 +11,10 @@ from types import SimpleNamespace
 
 import pytest
 
+from hil.bench.yamlio import PlanFileError
 from hil.paths import fixture
 from hil.plan.plan import find_plans
 from hil.plan.select import Expr, ExprError, matches, select
-from hil.plan.yamlio import PlanFileError
 
 pytestmark = pytest.mark.integration  # real plans / processes in real time
 

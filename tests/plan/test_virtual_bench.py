@@ -6,7 +6,7 @@ import io
 
 import pytest
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
 from hil.plan.plan import find_plans, load_plan, loads_plan
 from hil.plan.runner import run_plans
 from hil.record import topics as T

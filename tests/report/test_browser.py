@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.plan.bench import load_bench
+from hil.bench.bench import load_bench
 from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plans
 

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 from mcap.writer import Writer
 
+from hil.bench.bench import load_bench
 from hil.cli import main as hil
-from hil.plan.bench import load_bench
 from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plan
 

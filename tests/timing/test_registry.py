@@ -6,10 +6,10 @@ import shutil
 
 import pytest
 
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import PlanFileError
 from hil.paths import fixture
-from hil.plan.bench import load_bench
 from hil.plan.plan import check_plan, loads_plan
-from hil.plan.yamlio import PlanFileError
 from hil.timing.registry import load_specs
 
 

@@ -186,7 +186,7 @@ def test_a_late_delivery_on_the_virtual_bench_is_recorded_and_judged_inconclusiv
     import threading
     import time
 
-    from hil.plan.bench import load_bench
+    from hil.bench.bench import load_bench
     from hil.plan.session import open_session
 
     path = tmp_path / "late.mcap"

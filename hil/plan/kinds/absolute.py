@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from hil.bench.yamlio import Checker, join
 from hil.drivers.abs_reader import AbsPositionReader, AbsReadError
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.session import BenchError
-from hil.plan.yamlio import Checker, join
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext

@@ -12,10 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from hil.plan.yamlio import Checker, PlanFileError, join
+from hil.bench.yamlio import Checker, PlanFileError, join
 
 if TYPE_CHECKING:
-    from hil.plan.bench import Bench, DriveSpec
+    from hil.bench.bench import Bench, DriveSpec
     from hil.plan.context import Outcome, StepContext
     from hil.plan.plan import Plan
     from hil.plan.session import DriveIO

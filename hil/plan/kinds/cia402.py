@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from hil.bench.yamlio import Checker, join
 from hil.plan.context import Outcome
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
-from hil.plan.yamlio import Checker, join
 from hil.profile.homing_methods import CANOPEN_METHODS
 
 if TYPE_CHECKING:

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from hil.bench.yamlio import Checker
 from hil.plan import fault_steps
 from hil.plan.context import Outcome
 from hil.plan.kinds.base import CheckContext, StepKind
-from hil.plan.yamlio import Checker
 
 DI_LINES = 10  # physical DI1..DI10 of CN1
 

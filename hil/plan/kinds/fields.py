@@ -1,6 +1,6 @@
 """The vocabulary step kinds share: states, conditions, DI/STO level maps, parameter values.
 
-Parse helpers raise `PlanFileError` with file, line and field (hil/plan/yamlio.py).
+Parse helpers raise `PlanFileError` with file, line and field (hil/bench/yamlio.py).
 """
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from hil.plan.param_rules import check_param
-from hil.plan.yamlio import Checker, LDict, join, level
+from hil.bench.param_rules import check_param
+from hil.bench.yamlio import Checker, LDict, join, level
 from hil.profile.dio import DO_SYMBOLS
 from hil.protocol.cia402 import MODES as CIA402_MODES
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, Any
 
+from hil.bench.yamlio import Checker
 from hil.plan.context import Outcome
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
-from hil.plan.yamlio import Checker
 from hil.profile.dio import DI_SYMBOLS
 
 if TYPE_CHECKING:

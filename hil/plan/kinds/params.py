@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from hil.bench import virtual_rules
+from hil.bench.param_rules import check_param
+from hil.bench.yamlio import Checker, LDict, join
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
-from hil.plan.param_rules import check_param
 from hil.plan.session import LINE_ERRORS, line_error, refusal_code
-from hil.plan.yamlio import Checker, LDict, join
-from hil.virtual.checks import inert_mapping
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
@@ -53,7 +53,7 @@ class Write(StepKind):
         raw = cc.step.raw.get(self.name)
         if cc.bench.virtual and self.args.get("expect_error") is None:
             for k, val in self.args["values"].items():
-                if why := inert_mapping(k, val):  # issue 13 item 6: the virtual drive refuses
+                if why := virtual_rules().inert_mapping(k, val):  # the virtual drive refuses
                     line = raw.kline(k) if hasattr(raw, "kline") else cc.step.line
                     raise cc.err(f"0x{val:04X} maps {why}; on a virtual bench a write that "
                                  "expects the refusal needs expect_error (0x06090030 / 3)", k,

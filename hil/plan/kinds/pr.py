@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from hil.bench.yamlio import Checker
 from hil.plan import pr_steps
 from hil.plan.context import Outcome
 from hil.plan.kinds.base import StepKind
-from hil.plan.yamlio import Checker
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext

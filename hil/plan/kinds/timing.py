@@ -8,10 +8,10 @@ import time
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
+from hil.bench.yamlio import Checker, join
 from hil.plan.context import Cancelled, Inconclusive, Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
-from hil.plan.yamlio import Checker, join
 from hil.profile.dio import DI_SYMBOLS, DO_SYMBOLS
 from hil.record import topics
 from hil.timing.checker import check, constants_for, occurrences_since
@@ -20,7 +20,7 @@ from hil.timing.source import ParamTimeline, RecordingSource
 from hil.timing.spec import Spec, spec_params
 
 if TYPE_CHECKING:
-    from hil.plan.bench import DriveSpec
+    from hil.bench.bench import DriveSpec
     from hil.plan.context import StepContext
     from hil.plan.session import DriveIO
     from hil.plan.steps import Step

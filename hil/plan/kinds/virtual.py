@@ -5,11 +5,11 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING, Any
 
+from hil.bench import virtual_rules
+from hil.bench.yamlio import Checker, join
 from hil.plan.context import Outcome
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import StepKind
-from hil.plan.yamlio import Checker, join
-from hil.virtual.checks import ModelOptions
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
@@ -54,9 +54,10 @@ class Inject(StepKind):
         out: dict[str, Any] = {}
         if "options" in m:
             om = v.mapping(m["options"], m.kline("options"), join(where, "options"))
-            v.keys(om, {f.name for f in dataclasses.fields(ModelOptions)}, join(where, "options"))
+            options = virtual_rules().ModelOptions
+            v.keys(om, {f.name for f in dataclasses.fields(options)}, join(where, "options"))
             try:  # the values too: a flag true/false, a time a finite number, a known choice
-                ModelOptions.from_dict(dict(om), join(where, "options"))
+                options.from_dict(dict(om), join(where, "options"))
             except (ValueError, TypeError) as e:
                 raise v.err(m.kline("options"), join(where, "options"), str(e)) from None
             out["options"] = dict(om)

@@ -5,12 +5,12 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, Any
 
+from hil.bench.yamlio import Checker, parse_duration
 from hil.drivers.cia402 import decode_state
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.kinds.fields import Condition
-from hil.plan.yamlio import Checker, parse_duration
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext

@@ -11,14 +11,13 @@ import re
 from pathlib import Path
 from typing import Any
 
+from hil.units import MS, S
 from hil.yamlio import FileError, LDict, LList, join
 from hil.yamlio import load_yaml_file as _load_file
 from hil.yamlio import load_yaml_text as _load_text
 
 __all__ = ["LDict", "LList", "join"]  # re-exported for the plan room
 
-MS = 1_000_000
-S = 1_000_000_000
 
 
 class PlanFileError(FileError):

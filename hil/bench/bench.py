@@ -11,9 +11,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from hil.paths import fixture
-from hil.plan.param_rules import check_param
-from hil.plan.yamlio import (
+from hil.bench import virtual_rules
+from hil.bench.param_rules import check_param
+from hil.bench.yamlio import (
     MS,
     Checker,
     LDict,
@@ -24,9 +24,9 @@ from hil.plan.yamlio import (
     load_yaml_file,
     load_yaml_text,
 )
+from hil.paths import fixture
 from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS, N_DO, N_PHYSICAL_DI
 from hil.transport.urls import TransportUrlError, parse_url
-from hil.virtual.checks import INERT_DI_FUNCTIONS, Mechanics, ModelOptions, inert_mapping
 
 # Named timeouts (ns) and their defaults; a bench overrides any of them. The CiA 402 ones
 # are handed to hil.drivers.cia402.Cia402Driver (same names).
@@ -468,17 +468,19 @@ def _drive_model(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
     classes."""
     if "mechanics" in d:
         m = v.mapping(d["mechanics"], d.kline("mechanics"), join(where, "mechanics"))
-        _known(v, m, Mechanics, join(where, "mechanics"))
+        rules = virtual_rules()
+        _known(v, m, rules.Mechanics, join(where, "mechanics"))
         try:
-            Mechanics.from_dict(dict(m))
+            rules.Mechanics.from_dict(dict(m))
         except (ValueError, TypeError) as e:
             raise v.err(m.line, join(where, "mechanics"), str(e)) from None
         spec.mechanics = dict(m)
     if "options" in d:
         m = v.mapping(d["options"], d.kline("options"), join(where, "options"))
-        _known(v, m, ModelOptions, join(where, "options"))
+        rules = virtual_rules()
+        _known(v, m, rules.ModelOptions, join(where, "options"))
         try:
-            ModelOptions.from_dict(_plain(m), where=join(where, "options"))
+            rules.ModelOptions.from_dict(_plain(m), where=join(where, "options"))
         except (ValueError, TypeError) as e:
             raise v.err(m.line, join(where, "options"), str(e)) from None
         spec.options = _plain(m)
@@ -499,7 +501,7 @@ def _known(v: Checker, m: LDict, cls: type, where: str) -> None:
 
 def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str, virtual: bool) -> None:
     """`wiring:` FUNCTION: LINE[:b]. A virtual bench refuses a DI function its drive does not
-    model (issue 13 item 6); a real drive has them all."""
+    model; a real drive has them all."""
     used: dict[str, str] = {}
     for key, value in m.items():
         fw = join(where, key)
@@ -516,9 +518,10 @@ def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str, virtual: bool) ->
         if func not in table:
             raise v.err(m.kline(key), fw, f"unknown {kind} function {func!r} (manual table "
                         f"8.{1 if kind == 'DI' else 2}); known: {', '.join(sorted(table))}")
-        if virtual and kind == "DI" and func in INERT_DI_FUNCTIONS:  # issue 13 item 6
+        inert = virtual_rules().INERT_DI_FUNCTIONS if virtual and kind == "DI" else {}
+        if func in inert:  # a DI function the virtual drive does not model
             raise v.err(m.kline(key), fw, f"DI function {func} is not modelled by the "
-                        f"virtual drive: {INERT_DI_FUNCTIONS[func]}")
+                        f"virtual drive: {inert[func]}")
         limit = N_PHYSICAL_DI if kind == "DI" else N_DO
         if not 1 <= n <= limit:
             raise v.err(m.kline(key), fw, f"{kind}{n}: the A3 has {kind}1..{kind}{limit}")
@@ -535,7 +538,7 @@ def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str, virtual: bool) ->
 def _params(v: Checker, obj: Any, line: int, where: str, *, virtual: bool = False
             ) -> dict[str, int]:
     """`params:` Pn.nnn: value. With `virtual`, a mapping of a DI function the virtual drive
-    does not model is refused (issue 13 item 6); plans are checked against the bench later."""
+    does not model is refused; plans are checked against the bench later."""
     m = v.mapping(obj, line, where)
     out: dict[str, int] = {}
     for k, val in m.items():
@@ -544,7 +547,7 @@ def _params(v: Checker, obj: Any, line: int, where: str, *, virtual: bool = Fals
         if isinstance(val, bool) or not isinstance(val, int):
             raise v.err(m.kline(k), join(where, k),
                         f"must be an integer (raw communication units), got {val!r}")
-        if virtual and (why := inert_mapping(k, val)):  # issue 13 item 6
+        if virtual and (why := virtual_rules().inert_mapping(k, val)):  # not modelled
             raise v.err(m.kline(k), join(where, k), f"0x{val:04X} maps {why}")
         check_param(v, m.kline(k), join(where, k), k, val, write=True)
         out[k] = val

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from functools import cache
 
-from hil.plan.yamlio import Checker, PlanFileError
+from hil.bench.yamlio import Checker, PlanFileError
 from hil.profile.dio import DI_PARAMS, DO_PARAMS
 from hil.profile.errors import ParamError
 from hil.profile.params import ParamTable
