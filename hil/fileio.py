@@ -32,9 +32,13 @@ def require_regular(path: str | os.PathLike, what: str = "file") -> os.stat_resu
 
 def read_limited(path: str | os.PathLike, max_bytes: int | None, what: str = "file") -> bytes:
     """The bytes of regular file `path`, at most `max_bytes` (None: no cap) actually read:
-    a file that grows while read (or lies about its size) cannot exhaust memory."""
+    a file that grows while read (or lies about its size) cannot exhaust memory. Opened
+    without blocking and checked on the open file, so a FIFO swapped in cannot hang it."""
     require_regular(path, what)
-    with open(path, "rb") as f:
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise FileProblem(f"{path}: not a regular {what}")
         if max_bytes is None:
             return f.read()
         data = f.read(max_bytes + 1)
@@ -69,10 +73,15 @@ def _temp_for(path: Path) -> Path:
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside `path`; on success it replaces `path` in one rename, on
-    any error it is removed and `path` is left as it was."""
-    dest = Path(path)
+    any error it is removed and `path` is left as it was. A symbolic link is written through
+    (its target is replaced); a device or FIFO (`/dev/null`, `/dev/stdout`) is written in
+    place, since renaming over it would replace the device node."""
+    dest = Path(os.path.realpath(path))
     if dest.is_dir():
-        raise IsADirectoryError(21, "is a directory", str(dest))
+        raise IsADirectoryError(21, "is a directory", str(path))
+    if dest.exists() and not dest.is_file():
+        yield dest
+        return
     dest.parent.mkdir(parents=True, exist_ok=True)
     tmp = _temp_for(dest)
     try:

@@ -82,6 +82,16 @@ def _plan_dirs(config: pytest.Config) -> list[Path]:
     return [Path(p).resolve() for p in config.getini("hil_plans")]
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Unique output names for the collected plans (`hil run`'s rule, runner.output_stems)."""
+    plans = [i for i in items if isinstance(i, PlanItem)]
+    if plans:
+        from hil.plan.runner import output_stems
+
+        for item, stem in zip(plans, output_stems([i.plan for i in plans]), strict=True):
+            item.stem = stem
+
+
 def pytest_collect_file(file_path: Path, parent: pytest.Collector) -> pytest.Collector | None:
     """A `*.yaml` file in a `hil_plans` directory is a plan: one test item."""
     if file_path.suffix not in (".yaml", ".yml"):
@@ -116,13 +126,14 @@ class PlanItem(pytest.Item):
     def __init__(self, *, plan: Any, **kw: Any) -> None:
         super().__init__(**kw)
         self.plan = plan
+        self.stem: str | None = None  # output name, unique in the session (collection)
 
     def runtest(self) -> None:
         from hil.bench.bench import load_bench
         from hil.plan.runner import run_plan
 
         bench = load_bench(_bench_option(self.config))
-        result = run_plan(self.plan, bench, _out_dir(self.config))
+        result = run_plan(self.plan, bench, _out_dir(self.config), stem=self.stem)
         self.user_properties.append(("hil_recording", result.recording))
         if not result.passed:
             raise PlanFailed(explain(result))

@@ -223,6 +223,19 @@ def test_output_names_are_unique_within_a_run(tmp_path: Path) -> None:
         tmp_path.mkdir()
 
 
+def test_unique_names_stay_inside_the_output_folder_and_never_collide(tmp_path: Path) -> None:
+    """Folders up to the root, a renamed name that equals another plan's, case: all unique,
+    all plain file names (no separator, no anchor)."""
+    paths = [_plan_file(tmp_path / "a" / "x.yaml", "p1"),
+             _plan_file(tmp_path / "b" / "a" / "x.yaml", "p2"),
+             _plan_file(tmp_path / "c" / "a-x.yaml", "p3"),
+             _plan_file(tmp_path / "d" / "A-X.yaml", "p4"),
+             _plan_file(tmp_path / "e" / "x-2.yaml", "p5")]
+    stems = output_stems([load_plan(p) for p in paths])
+    assert len({s.casefold() for s in stems}) == len(stems), stems
+    assert all("/" not in s and s and not s.startswith("-") for s in stems), stems
+
+
 def test_unique_names_keep_single_plans_as_they_were(tmp_path: Path) -> None:
     plans = [load_plan(_plan_file(tmp_path / "a" / "x.yaml", "x")),
              load_plan(_plan_file(tmp_path / "b" / "y.yaml", "y"))]
@@ -238,3 +251,17 @@ def test_same_named_plans_of_two_folders_both_keep_their_recording(tmp_path, job
     assert _rc(["run", "-q", "-j", jobs, str(a), str(b), "--out", str(out)]) == 0
     recordings = sorted(p.name for p in out.glob("*.mcap"))
     assert recordings == ["a-same.mcap", "b-same.mcap"]
+
+
+def test_outputs_onto_devices_and_links_keep_them(tmp_path: Path) -> None:
+    """Writing a report to /dev/null leaves the device a device; a link is written through."""
+    before = os.stat("/dev/null")
+    write_text_atomic("/dev/null", "report")
+    after = os.stat("/dev/null")
+    assert (after.st_mode, after.st_rdev) == (before.st_mode, before.st_rdev)
+    target = tmp_path / "real.html"
+    target.write_text("old")
+    link = tmp_path / "link.html"
+    os.symlink(target, link)
+    write_text_atomic(link, "new")
+    assert link.is_symlink() and target.read_text() == "new"

@@ -71,3 +71,21 @@ def test_xdist_runs_plans_in_parallel_workers(tmp_path):
     r = _pytest(proj, "-n", "2", "-m", "hil")
     assert "1 failed, 1 passed" in r.stdout, r.stdout + r.stderr
     assert "[gw" in r.stdout or "2 workers" in r.stdout
+
+
+@pytest.mark.integration
+def test_same_named_plans_of_two_folders_keep_both_recordings(tmp_path):
+    """`hil run`'s naming rule under pytest too: two plan directories a/ and b/ (`hil_plans =
+    a b`) with a same.yaml each -> a-same.mcap
+    and b-same.mcap, not one over the other."""
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir(parents=True)
+        (tmp_path / folder / "same.yaml").write_text(
+            FAILING.replace("never_on", f"same_{folder}").replace(
+                "expect: {do: {BRKR: on}}", "expect: {do: {BRKR: off}}"))
+    (tmp_path / "pytest.ini").write_text("[pytest]\nhil_plans = a b\n"
+                                         "addopts = -p no:cacheprovider\n")
+    r = _pytest(tmp_path, "-m", "hil")
+    assert "2 passed" in r.stdout, r.stdout + r.stderr
+    assert sorted(p.name for p in (tmp_path / "out").glob("*.mcap")) == [
+        "a-same.mcap", "b-same.mcap"]

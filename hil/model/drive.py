@@ -103,6 +103,7 @@ class Drive:
         self.brake_line: int | None = None  # DO line of the brake coil, resolved at power-up
         self._step_ns = max(1, ms(options.motion_step_ms))
         self._axis_t = t0  # model time of the axis state (the last motion step)
+        self._ahead = False  # the axis state is that of the end of the cycle in progress
         self.servo_on = False
         self.powered = False  # True from the end of `_boot()`: no servo on before power-up
 
@@ -251,11 +252,13 @@ class Drive:
             self._integrate_to(stop)
             if sched.now >= t and (nxt is None or nxt > t):
                 break
+            self._commit_cycle()  # a timer inside a cycle may command the axis
             sched.run_due()
         sched.now = max(sched.now, t)
 
     def set_di(self, n: int, closed: bool) -> None:
         """Physical DI n (1..10): True = contact closed (24 V)."""
+        self._commit_cycle()
         changed = self.dio.input_level(n) != bool(closed)
         self.dio.set_input(n, closed)
         if changed:  # the terminal edge, for the ground truth (a latch is judged against it)
@@ -263,6 +266,7 @@ class Drive:
 
     def set_sto(self, channel: str, on: bool) -> None:
         """STO channel "A"/"B" (or "STO_A"/"STO_B"): True = 24 V present."""
+        self._commit_cycle()
         self.sto.set_channel(channel, on)
         self._update_servo()
 
@@ -292,6 +296,7 @@ class Drive:
 
     def write_object(self, index: int, sub: int, value: int) -> None:
         """Write a 2000h-2FFFh or 6000h-6FFFh object; refusals carry the SDO abort code."""
+        self._commit_cycle()
         if 0x2000 <= index <= 0x2FFF:
             name = self._param_of(index, sub)
             try:
@@ -314,6 +319,7 @@ class Drive:
 
     def raise_alarm(self, code: str) -> None:
         """An alarm a face detected (AL020 RS-485 timeout, AL180 heartbeat, ...)."""
+        self._commit_cycle()
         extra = self.options.dev_comm_timeout_extra_ms
         if code == "AL020" and extra > 0:  # deviation: AL020 late by `extra` ms
             self.sched.after(round(extra * 1e6), lambda: self._raise_face_alarm(code))
@@ -337,6 +343,7 @@ class Drive:
         re-initialises the CiA 402 state machine: FAULT if a servo-off alarm remains, else
         SWITCH ON DISABLED (transition 15 "Alarm 清除", L18265). Reset node also returns the
         6xxxh objects to their power-up values (CiA 301). Choice: docs/manual-choices.md."""
+        self._commit_cycle()
         if self.servo_on:
             self.alarms.raise_alarm("AL401")
         self.alarms.reset("nmt")
@@ -358,6 +365,7 @@ class Drive:
         The manual names no motion reaction; `nmt_stop_action` "servo_off" (default)
         disables the CiA 402 drive (P1.032.Y stop, BRKR engages) rather than leave an
         axis turning that only NMT can reach (docs/manual-choices.md)."""
+        self._commit_cycle()
         if self.options.nmt_stop_action == "servo_off" and self.servo_on:
             self.cia402.comm_disable()
             self._update_servo(source="cia402")
@@ -627,15 +635,38 @@ class Drive:
         # a position pushed off its demand at standstill is corrected (and seen by TPOS)
         return ax.moving or ax.velocity != 0.0 or (ax.power and ax.position != ax.demand)
 
+    def _commit_cycle(self) -> None:
+        """An input arrives inside a 1 ms cycle: the cycle runs to its end with the command
+        it began with (computed now, its outputs still due at its end), and the input acts
+        from the next cycle, as a drive samples its commands at the cycle start (causal)."""
+        step = self._step_ns
+        now = self.sched.now
+        if self._ahead or now % step == 0:
+            return
+        if self._needs_steps():
+            self.axis.step(step)
+        self._axis_t = (now // step + 1) * step
+        self._ahead = True
+
     def _integrate_to(self, stop: int) -> None:
         """Motion in whole steps of the drive's own grid (1 ms: the command generator's
         cycle, L4178, L4909), whatever the caller's slices: between two grid points the
         axis keeps the state of the last one, and a command given inside a cycle acts from
-        that cycle's start. So every slicing of the same scenario gives the same positions
-        at every grid point (tests/model/test_motion_grid.py)."""
+        the next one (`_commit_cycle`). So every slicing of the same scenario gives the same
+        positions at every grid point (tests/model/test_manual_rules_wave3.py)."""
         sched = self.sched
         step = self._step_ns
         while True:
+            if self._ahead:  # a cycle computed at an input inside it: its outputs are due now
+                if self._axis_t > stop:
+                    break
+                sched.now = self._axis_t
+                self._ahead = False
+                self._after_step()
+                due = sched.next_deadline()
+                if due is not None and due < stop:
+                    return
+                continue
             grid = (sched.now // step + 1) * step  # the next grid point after now
             if grid > stop or not self._needs_steps():
                 break
@@ -683,7 +714,8 @@ class Drive:
         the command has reached its target (L8624)."""
         ax = self.axis
         err = ax.following_error
-        if self.params.get("P1.001") & 0xFF in PR_MODES:
+        # PR control mode by P1.001 (a dual mode only while its PR side is the one in effect)
+        if self.params.get("P1.001") & 0xFF in PR_MODES and self.difunc.control_mode() == "PR":
             if self.pr.tpos_off:
                 return False
             if ax.mode == "position":

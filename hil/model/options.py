@@ -210,9 +210,16 @@ class ModelOptions:
         return cls(**data)
 
 
+# Numeric options that may be negative (volts on V_REF / T_REF); every other is >= 0
+_SIGNED = {"analog_v_ref", "analog_t_ref"}
+# Options that must be strictly positive: a 0 ms motion step would never end
+_POSITIVE = {"motion_step_ms", "state_publish_ms", "sync_fail_window", "sync_timeout_cycles"}
+
+
 def _check_type(key: str, value: Any, default: Any, where: str) -> None:
-    """A bench's (or an `inject:`) option value has the type of the option's default: a
-    flag true/false, a time a finite number, a choice text, a table a mapping."""
+    """A bench's (or an `inject:`) option value has the type of the option's default (a flag
+    true/false, a count an integer, a time a finite number, a choice text, a list of the
+    default's element type) and a sane range (no negative times, no 0 ms motion step)."""
     def number(x: Any) -> bool:
         return (isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
                 and abs(x) <= 1e12)
@@ -223,16 +230,24 @@ def _check_type(key: str, value: Any, default: Any, where: str) -> None:
         ok, want = value is None or number(value), "a finite number or null"
     elif isinstance(default, bool):
         ok, want = isinstance(value, bool), "true or false"
-    elif isinstance(default, int | float):
+    elif isinstance(default, int):
+        ok, want = number(value) and isinstance(value, int), "an integer"
+    elif isinstance(default, float):
         ok, want = number(value), "a finite number"
     elif isinstance(default, str):
         ok, want = isinstance(value, str), "text"
     elif isinstance(default, tuple):
+        kind = type(default[0]) if default else int
         ok = isinstance(value, list | tuple) and all(
-            isinstance(x, int) and not isinstance(x, bool) for x in value)
-        want = "a list of integers"
+            isinstance(x, kind) and not isinstance(x, bool) for x in value)
+        want = f"a list of {'integers' if kind is int else 'names'}"
     else:
         ok, want = isinstance(value, type(default)), type(default).__name__
+    if ok and number(value) and key not in _SIGNED:
+        if value < 0 or (key in _POSITIVE and value <= 0):
+            ok, want = False, "> 0" if key in _POSITIVE else ">= 0"
+        elif key == "motion_step_ms" and value > 1:
+            ok, want = False, "at most 1 (ms): the drive's command cycle"
     if not ok:
         shown = repr(value)
         shown = shown if len(shown) <= 40 else shown[:35] + "..."

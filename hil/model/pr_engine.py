@@ -556,8 +556,9 @@ class PrEngine:
         if not on:  # a new trigger clears Cmd_OK and MC_OK (L8624)
             self._mc_was_on = False
             self._set_mc_ok(False)
-        else:
-            self._update_mc_ok()
+        else:  # the command is output (a write / jump / stop ended it too): TPOS judges again
+            self.tpos_off = False
+            d.refresh_outputs()
 
     def _tpos(self) -> bool:
         return self.drive.tpos()

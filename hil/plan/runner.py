@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import signal
 import threading
 import time
@@ -223,27 +224,37 @@ def plan_stem(plan: Plan) -> str:
 
 
 def output_stems(plans: list[Plan]) -> list[str]:
-    """One output name per plan, unique within the run: two `x.yaml` of different folders
-    become `a-x` and `b-x` (parent folders until they differ, then a number), so no
-    recording overwrites another, with or without `-j`."""
+    """One output name per plan, unique within the run (case-folded): two `x.yaml` of
+    different folders become `a-x` and `b-x` (parent folders until they differ), and any
+    name still taken gets a number, so no recording overwrites another, with or without
+    `-j`. Names are file names: no path separator, no anchor."""
     stems = [plan_stem(p) for p in plans]
     out = list(stems)
-    for name in set(stems):
-        idx = [i for i, s in enumerate(stems) if s == name]
+    groups: dict[str, list[int]] = {}
+    for i, s in enumerate(stems):
+        groups.setdefault(s.casefold(), []).append(i)
+    for idx in groups.values():
         if len(idx) < 2:
             continue
-        parents = [Path(plans[i].path).resolve().parent.parts for i in idx]
-        depth = 1
-        while depth <= max(len(p) for p in parents):
-            cand = ["-".join(p[-depth:]) + f"-{name}" for p in parents]
-            if len(set(cand)) == len(cand):
+        parents = [Path(plans[i].path).resolve().parent.parts[1:] for i in idx]
+        for depth in range(1, max(len(p) for p in parents) + 1):
+            cand = ["-".join((*p[-depth:], stems[i])) for p, i in zip(parents, idx, strict=True)]
+            if len({c.casefold() for c in cand}) == len(cand):
                 break
-            depth += 1
-        else:
-            cand = [f"{name}-{k}" for k in range(1, len(idx) + 1)]
         for i, c in zip(idx, cand, strict=True):
             out[i] = c
+    seen: set[str] = set()
+    for i, s in enumerate(out):
+        s = _SAFE_NAME.sub("_", s) or "plan"
+        base, k = s, 2
+        while s.casefold() in seen:
+            s, k = f"{base}-{k}", k + 1
+        seen.add(s.casefold())
+        out[i] = s
     return out
+
+
+_SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
 
 
 def _open_recording(plan: Plan, bench: Bench, out_dir: Path,

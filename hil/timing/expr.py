@@ -30,8 +30,8 @@ import re
 from collections.abc import Callable, Mapping
 from typing import Any
 
-PARAM_RE = re.compile(r"\bP(\d)\.(\d{3})\b")
-_UNIT_RE = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s*(ms|us|s)\b")
+PARAM_RE = re.compile(r"\bP([0-9])\.([0-9]{3})\b")
+_UNIT_RE = re.compile(r"(?<![\w.])([0-9]+(?:\.[0-9]+)?)\s*(ms|us|s)\b")
 _UNIT = {"ms": 1.0, "s": 1000.0, "us": 0.001}
 _FUNC_NAMES = ("min", "max", "abs", "bit")
 _ARITY = {"min": (2, None), "max": (2, None), "abs": (1, 1), "bit": (2, 2)}
@@ -75,7 +75,7 @@ def _to_python(text: str) -> str:
 
 
 def _display(pyname: str) -> str:
-    m = re.fullmatch(r"P(\d)_(\d{3})", pyname)
+    m = re.fullmatch(r"P([0-9])_([0-9]{3})", pyname)
     return f"P{m.group(1)}.{m.group(2)}" if m else pyname
 
 

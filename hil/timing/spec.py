@@ -33,7 +33,7 @@ FACTORY_BINDING: dict[str, str] = {
     "BRKR": "DO6",  # P2.041 = 0x0108 on the virtual bench (docs/manual-choices.md#timing)
 }
 DEFAULT_PLACES: dict[str, str] = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
-LINE_RE = re.compile(r"(DI[0-9]{1,2}|DO[0-9]|STO_A|STO_B|FDBK)(?::([ab]))?")
+LINE_RE = re.compile(r"(DI(?:10|[1-9])|DO[1-6]|STO_A|STO_B|FDBK)(?::([ab]))?")  # A3 lines
 PLACE_RE = re.compile(r"\{(\w+)\}")
 STATUSES = ("pass", "fail", "inconclusive", "skipped")
 
@@ -442,6 +442,8 @@ def _signals(v: _V, top: LDict, binding: dict[str, str]) -> dict[str, SignalDef]
                 raise v.err(d.key_lines[t], tw, "must be true or false")
             elif t == "in" and not isinstance(val, list):
                 raise v.err(d.key_lines[t], tw, "must be a list of values")
+            elif t == "map":  # keys keep their text (hil.yamlio): 0x1637 is the number 5687
+                s.transforms[t] = {_map_key(k): x for k, x in val.items()}
             else:
                 s.transforms[t] = dict(val) if isinstance(val, LDict) else val
         if "mask" in s.transforms and "equals" not in s.transforms:
@@ -650,3 +652,14 @@ def shipped_specs() -> list[Path]:
     """The spec files shipped in fixtures/timing/."""
 
     return sorted(fixture("timing").glob("*.yaml"))
+
+
+def _map_key(key: str) -> Any:
+    """A `map:` key as the value it matches: a number written as a number (`0x1637`, `12`,
+    `1.5`) is that number, anything else its text."""
+    for conv in (lambda k: int(k, 0), float):
+        try:
+            return conv(key.replace("_", ""))
+        except ValueError:
+            pass
+    return key

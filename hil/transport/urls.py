@@ -196,8 +196,8 @@ def _parse_query(url: str, query: str) -> dict[str, str]:
     return params
 
 
-_LOOPBACK = re.compile(r"^(?:tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):(\d{1,5}|auto)$")
-_ANY_TCP = re.compile(r"^(tcp|tls|quic)/(.+):(\d{1,5})$")
+_LOOPBACK = re.compile(r"^(?:tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):([0-9]{1,5}|auto)$")
+_ANY_TCP = re.compile(r"^(tcp|tls|quic)/(.+):([0-9]{1,5})$")
 
 
 class ZenohConfigError(ValueError):

@@ -170,7 +170,9 @@ class VirtualDriveStack:
             self.modbus.power_cycle()
         if (isinstance(event, AlarmChanged) and event.code == "AL020" and not event.active
                 and self.modbus is not None and self.drive.options.al020_rearm == "reset"):
-            self.modbus.rearm_timeout(event.t)  # P3.004 counts again from the reset
+            # P3.004 counts again from the reset, on the face's own (line) clock
+            runner = self.modbus_runner
+            self.modbus.rearm_timeout(runner.clock() if runner is not None else event.t)
 
     def describe(self) -> str:
         """One line naming the faces, for `hil drive`'s ready line."""

@@ -138,3 +138,33 @@ def test_al020_counts_again_from_an_alarm_reset() -> None:
         slave.tick(d.now)
     assert len(fired) == 2
     assert fired[1] - reset_at == pytest.approx(S, abs=2 * MS)
+
+
+@pytest.mark.integration  # a real pty and the drive host in real time
+def test_al020_rearm_in_a_drive_process_counts_from_the_reset(tmp_path) -> None:
+    """The same rule through `VirtualDriveStack` (the face's line clock and the model's clock
+    differ): after the reset AL020 stays off for P3.004, then comes again."""
+    import time
+
+    from hil.virtual.stack import DriveSpec, VirtualDriveStack
+
+    spec = DriveSpec(name="al020", rs485=f"pty:{tmp_path / 'tty'}?baud=115200", station=1)
+    with VirtualDriveStack(spec) as stack:
+        d = stack.drive
+
+        def active() -> bool:
+            return stack.host.call(lambda: "AL020" in d.alarms.active)
+
+        stack.host.call(d.params.write, "P3.004", 1)
+        end = time.monotonic() + 5
+        while not active() and time.monotonic() < end:
+            time.sleep(0.02)
+        assert active()
+        stack.host.call(d.alarms.reset, "di")
+        t_reset = time.monotonic()
+        time.sleep(0.5)
+        assert not active()  # not at the next tick: P3.004 = 1 s counts from the reset
+        while not active() and time.monotonic() < t_reset + 5:
+            time.sleep(0.02)
+        assert active()
+        assert 0.9 <= time.monotonic() - t_reset <= 3.0

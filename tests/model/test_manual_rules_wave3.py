@@ -261,3 +261,45 @@ def test_al020_and_the_6040h_fault_reset(scope: str, cleared: bool) -> None:
     assert ("AL020" not in d.alarms.active) is cleared
     d.alarms.reset("di")
     assert "AL020" not in d.alarms.active
+
+
+@pytest.mark.parametrize("inside_us", [1, 300, 999])
+def test_a_command_inside_a_cycle_acts_from_the_next_cycle(inside_us: int) -> None:
+    """Causal: a set-point given inside a 1 ms cycle moves nothing before that cycle ends,
+    and from then on exactly as one given at the cycle's end."""
+    def run(offset_ns: int) -> list[float]:
+        d = Drive(inputs={8: True})
+        d.write_object(0x6060, 0, 3)
+        for cw in (0x06, 0x07, 0x0F):
+            d.write_object(0x6040, 0, cw)
+            d.advance(2 * MS)
+        d.advance(100 * MS)  # at rest, brake released
+        t_cycle = (d.now // MS + 1) * MS
+        d.advance_to(t_cycle - MS + offset_ns)
+        at_command = d.axis.position
+        d.write_object(0x60FF, 0, 1000)  # 100 rpm
+        out = []
+        for k in range(5):
+            d.advance_to(t_cycle + k * MS)
+            out.append(d.axis.position - at_command)
+        return out
+
+    inside = run(inside_us * 1000)
+    at_end = run(MS)
+    assert inside[0] == 0.0  # the cycle the command arrived in ran without it
+    assert inside == at_end
+
+
+@pytest.mark.parametrize("path", [
+    {"type_": "write", "source": "constant", "data": 100, "dest": "P5.064"},
+    {"type_": "jump", "data": 3},  # to an empty path
+])
+def test_tpos_returns_after_a_trigger_that_moves_nothing(path: dict) -> None:
+    """L8624 clears TPOS at the trigger; with no motion the command is output at once, so
+    TPOS (the target is where the motor is) and MC_OK come back."""
+    d = make()
+    put(d, 1, **path)
+    d.params.write("P5.007", 1)
+    run(d, 0.1)
+    assert d.pr.cmd_ok
+    assert tpos(d) and d.dio.do_function_state("MC_OK")

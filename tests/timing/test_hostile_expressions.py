@@ -612,3 +612,19 @@ def test_the_console_script_refuses_without_a_traceback(rec, tmp_path):
                            timeout=120)
         assert r.returncode == 2, r.stdout + r.stderr
         assert words in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("line", ["DO9", "DO0", "DI0", "DI11", "DI99:b", "DO7:a"])
+def test_bind_to_a_line_the_a3_does_not_have_is_refused(line: str) -> None:
+    """DI1..DI10 and DO1..DO6 (CN1): a binding to another line can never be judged."""
+    from hil.timing.spec import LINE_RE
+
+    assert not LINE_RE.fullmatch(line)
+
+
+@pytest.mark.parametrize("text", ["P١.٠٤٢ > 0", "٣ ms > 1 ms", "P1.٠42 > 0"])
+def test_non_ascii_digits_are_refused_in_expressions(text: str) -> None:
+    from hil.timing.expr import Expr, ExprError
+
+    with pytest.raises(ExprError):
+        Expr(text)
