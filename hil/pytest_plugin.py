@@ -82,8 +82,21 @@ def _plan_dirs(config: pytest.Config) -> list[Path]:
     return [Path(p).resolve() for p in config.getini("hil_plans")]
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Unique output names for the collected plans (`hil run`'s rule, runner.output_stems)."""
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """A bad `--hil-bench` / HIL_BENCH is one usage error before anything runs (not one
+    traceback per test); unique output names for the collected plans (`hil run`'s rule)."""
+    uses_bench = any(isinstance(i, PlanItem) or "hil_bench" in getattr(i, "fixturenames", ())
+                     for i in items)
+    path = _bench_option(config)
+    if uses_bench and path is not None:
+        from hil.bench.bench import load_bench
+        from hil.bench.yamlio import PlanFileError
+
+        try:
+            load_bench(path)
+        except PlanFileError as e:
+            where = "--hil-bench" if config.getoption("--hil-bench") else "HIL_BENCH"
+            raise pytest.UsageError(f"{where}: {e}") from None
     plans = [i for i in items if isinstance(i, PlanItem)]
     if plans:
         from hil.plan.runner import output_stems

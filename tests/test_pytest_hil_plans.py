@@ -89,3 +89,21 @@ def test_same_named_plans_of_two_folders_keep_both_recordings(tmp_path):
     assert "2 passed" in r.stdout, r.stdout + r.stderr
     assert sorted(p.name for p in (tmp_path / "out").glob("*.mcap")) == [
         "a-same.mcap", "b-same.mcap"]
+
+
+def test_a_bad_hil_bench_is_one_clear_error(tmp_path):
+    """A malformed or missing bench is one usage error naming the file, not one traceback per
+    plan (issue: a bad HIL_BENCH printed 1 600 lines)."""
+    proj = _project(tmp_path)
+    bad = tmp_path / "bench.yaml"
+    bad.write_text("name: b\ndrives: 7\n")
+    import os
+
+    for env in ({"HIL_BENCH": str(bad)}, {"HIL_BENCH": str(tmp_path / "none.yaml")}):
+        r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-m", "hil"], cwd=proj,
+                           capture_output=True, text=True, timeout=120,
+                           env={**os.environ, **env})
+        out = r.stdout + r.stderr
+        assert r.returncode == 4, out  # pytest's usage error
+        assert "HIL_BENCH:" in out and env["HIL_BENCH"] in out
+        assert "Traceback" not in out and len(out.splitlines()) < 20, out

@@ -8,7 +8,6 @@ Files are ordinary hil recordings: frames go to `/can/<bus>/raw` (+ decoded CANo
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -80,7 +79,7 @@ class McapCanWriter(MessageWriter):
 
     def on_message_received(self, msg: can.Message) -> None:
         bus = msg.channel if isinstance(msg.channel, str) and msg.channel else self.channel
-        t = int(msg.timestamp * 1e9) if msg.timestamp else time.time_ns()
+        t = round(msg.timestamp * 1e9)  # 0.0 is a time (a converted log's start), not "now"
         self.recorder.can(bus, msg, "rx" if msg.is_rx else "tx", t, None)
 
     def file_size(self) -> int:

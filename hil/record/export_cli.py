@@ -1,9 +1,10 @@
-"""`hil export FILE -o OUT [-f candump|asc|blf|csv] [--bus NAME]`: CAN traffic out.
+"""`hil export FILE -o OUT [-f candump|asc|blf|csv|trc|mf4] [--bus NAME]`: CAN traffic out.
 
 The format comes from OUT's extension, the one python-can's `LogReader` reads it by: `.log`
-candump (`candump -L`), `.asc`, `.blf`, `.csv`. `-f` names it where the extension says nothing
-(`-o traffic.txt -f candump`) and must agree with a known extension. `-o -` writes a text
-format to stdout (default candump); BLF is binary and is refused there.
+candump (`candump -L`), `.asc`, `.blf`, `.csv`, `.trc` (PCAN), `.mf4` (ASAM MDF, with
+`python-can[mf4]`). `-f` names it where the extension says nothing (`-o traffic.txt -f
+candump`) and must agree with a known extension. `-o -` writes a text format to stdout
+(default candump); BLF and MF4 are binary and are refused there.
 Exit 0 written, 2 bad input (usage, unreadable recording, unknown bus, format) or write error.
 """
 
@@ -22,9 +23,11 @@ from hil.fileio import atomic_path, refuse_input
 from hil.record.canio import can_messages
 from hil.record.reader import Recording, RecordingError
 
-FORMATS = ("candump", "asc", "blf", "csv")
+FORMATS = ("candump", "asc", "blf", "csv", "trc", "mf4")
 #: OUT extension -> format (the suffixes python-can's LogReader/Logger use)
-EXTENSIONS = {".log": "candump", ".asc": "asc", ".blf": "blf", ".csv": "csv"}
+EXTENSIONS = {".log": "candump", ".asc": "asc", ".blf": "blf", ".csv": "csv", ".trc": "trc",
+              ".mf4": "mf4"}
+BINARY = ("blf", "mf4")  # never to stdout
 CAN_ERR_FLAG = 0x20000000  # linux/can.h: error frames carry it in the id
 STDOUT = "-"
 
@@ -36,8 +39,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "-f",
         choices=FORMATS,
         default=None,
-        help="output format (default: from the -o extension: .log candump, .asc, .blf, .csv; "
-        "candump for -o -)",
+        help="output format (default: from the -o extension: .log candump, .asc, .blf, .csv, "
+        ".trc (PCAN), .mf4 (ASAM MDF, needs `pip install 'python-can[mf4]'`); candump for -o -)",
     )
     parser.add_argument("-o", "--output", required=True, metavar="OUT",
                         help="output file, or - for stdout (text formats only)")
@@ -55,8 +58,9 @@ def output_format(output: str, fmt: str | None) -> str:
     contradicts the file name."""
     if output == STDOUT:
         fmt = fmt or "candump"
-        if fmt == "blf":
-            raise ValueError("-o -: BLF is binary and is not written to stdout; give a .blf file")
+        if fmt in BINARY:
+            raise ValueError(f"-o -: {fmt.upper()} is binary and is not written to stdout; give "
+                             f"a .{fmt} file")
         return fmt
     ext = Path(output).suffix.lower()
     by_ext = EXTENSIONS.get(ext)
@@ -65,10 +69,16 @@ def output_format(output: str, fmt: str | None) -> str:
         if by_ext is None:
             raise ValueError(f"-o {output}: cannot tell the format from {ext or 'no extension'!r}"
                              f"; use one of {known}, or give -f")
-        return by_ext
-    if by_ext is not None and by_ext != fmt:
+        fmt = by_ext
+    elif by_ext is not None and by_ext != fmt:
         raise ValueError(f"-o {output} names a {by_ext} file but -f is {fmt}; "
                          f"python-can would read it as {by_ext} (extensions: {known})")
+    if fmt == "mf4":
+        try:
+            import asammdf  # noqa: F401  (python-can's MF4Writer needs it)
+        except ImportError:
+            raise ValueError("-o .mf4: MF4 needs the asammdf package: "
+                             "pip install 'python-can[mf4]'") from None
     return fmt
 
 
@@ -109,7 +119,8 @@ def write_candump(items: Iterable[tuple[str, can.Message]], out: TextIO) -> int:
 
 def _write_can(fmt: str, target: Any, items: list[tuple[str, can.Message]]) -> int:
     """Write `items` with python-can's writer for `fmt` (asc, blf, csv) to `target`."""
-    writer = {"asc": can.ASCWriter, "blf": can.BLFWriter, "csv": can.CSVWriter}[fmt](target)
+    writer = {"asc": can.ASCWriter, "blf": can.BLFWriter, "csv": can.CSVWriter,
+              "trc": can.TRCWriter, "mf4": can.MF4Writer}[fmt](target)
     try:
         for _bus, msg in items:
             writer.on_message_received(msg)

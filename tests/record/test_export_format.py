@@ -62,3 +62,36 @@ def test_dash_is_stdout(tmp_path, monkeypatch):
                           "-f", "blf"], capture_output=True, timeout=60)
     assert res.returncode == 2 and res.stdout == b""
     assert b"BLF is binary" in res.stderr
+
+
+def test_trc_is_written_and_read_back(tmp_path):
+    """PCAN .trc, which python-can reads and writes (TRCReader / TRCWriter)."""
+    p = make(tmp_path / "a.mcap")
+    out = tmp_path / "x.trc"
+    assert hil(["export", str(p), "-o", str(out)]) == 0
+    back = list(can.LogReader(out))  # TRC has no remote or error frames: the data frames
+    assert [m.arbitration_id for m in back] == [0x123, 0x1ABCDEF0, 0x181]
+    assert bytes(back[0].data) == bytes.fromhex("DEADBEEF")
+
+
+def test_mf4_names_its_missing_package_or_is_written(tmp_path, capsys):
+    p = make(tmp_path / "a.mcap")
+    code = hil(["export", str(p), "-o", str(tmp_path / "x.mf4")])
+    try:
+        import asammdf  # noqa: F401
+    except ImportError:
+        assert code == 2
+        assert "pip install 'python-can[mf4]'" in capsys.readouterr().err
+    else:
+        assert code == 0
+    assert hil(["export", str(p), "-f", "mf4", "-o", "-"]) == 2
+
+
+def test_a_frame_at_time_zero_keeps_its_time(tmp_path):
+    """The .mcap writer: 0.0 is a time (a converted log's start), not "now"."""
+    out = tmp_path / "zero.mcap"
+    with can.Logger(str(out)) as log:
+        log.on_message_received(can.Message(arbitration_id=0x181, data=b"\x01", timestamp=0.0))
+        log.on_message_received(can.Message(arbitration_id=0x181, data=b"\x02", timestamp=1.5))
+    stamps = [m.timestamp for m in can.LogReader(str(out))]
+    assert stamps == [0.0, 1.5]
