@@ -134,6 +134,14 @@ def load_run(path: str | Path) -> RunData:
 
 
 _NOISE = {"raw", "adu", "mode", "role", "data_hex", "frame"}
+# ids and object indexes as CANopen people read them: 601h, 6040h (CiA 301 notation)
+_HEX = {"cob_id": 3, "index": 4, "node": 0, "abort": 8, "code": 4, "error_code": 4}
+
+
+def _value(key: str, v: object) -> str:
+    if key in _HEX and isinstance(v, int) and not isinstance(v, bool):
+        return f"{v:0{_HEX[key]}X}h" if _HEX[key] else str(v)
+    return json.dumps(v, default=str) if isinstance(v, dict | list) else str(v)
 
 
 def _brief(msg: dict, width: int = 160) -> str:
@@ -156,7 +164,7 @@ def _brief(msg: dict, width: int = 160) -> str:
         for k, v in msg.items():
             if k in _NOISE or v in (None, "", [], {}):
                 continue
-            parts.append(f"{k}={json.dumps(v, default=str) if isinstance(v, dict | list) else v}")
+            parts.append(f"{k}={_value(k, v)}")
         text = " ".join(parts)
     text = str(text)
     return text if len(text) <= width else text[: width - 1] + "…"
