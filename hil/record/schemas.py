@@ -48,6 +48,32 @@ SCHEMAS: dict[str, dict] = {
         "hil.CanOpenFrame",
         {
             "dir": _DIR,
+            "kind": {"type": "string", "description": "nmt, sync, emcy, tpdo1, rpdo1, sdo_rx, "
+                     "sdo_tx, heartbeat, ... (CiA 301 pre-defined connection set)"},
+            "node": {"type": ["integer", "null"]},
+            "cob_id": {"type": "integer"},
+            "dlc": {"type": "integer"},
+            "data": {"type": "string", "description": "payload as lowercase hex"},
+            "remote": {"type": "boolean"},
+            "command": {"type": "string", "description": "NMT command"},
+            "target": {"type": "integer", "description": "NMT target node (0 = all)"},
+            "state": {"type": "string", "description": "NMT state of a heartbeat"},
+            "toggle": {"type": "integer", "description": "node guarding toggle bit"},
+            "ccs": {"type": "integer", "description": "SDO client command specifier"},
+            "scs": {"type": "integer", "description": "SDO server command specifier"},
+            "cs": {"type": "integer", "description": "SDO command byte"},
+            "index": {"type": "integer", "description": "object index"},
+            "sub": {"type": "integer"},
+            "expedited": {"type": "boolean"},
+            "value": {"type": "integer"},
+            "abort_code": {"type": "integer"},
+            "abort_text": {"type": "string"},
+            "error_code": {"type": "integer", "description": "EMCY error code"},
+            "error_register": {"type": "integer", "description": "EMCY 1001h"},
+            "manufacturer": {"type": "string", "description": "EMCY bytes 3-7 as hex"},
+            "alarm": {"type": "string", "description": "the Delta alarm of an EMCY"},
+            "controlword": {"type": "integer"},
+            "statusword": {"type": "integer"},
             "error": {"type": "string", "description": "why the frame could not be decoded"},
         },
         ["dir"],
@@ -70,6 +96,7 @@ SCHEMAS: dict[str, dict] = {
             "latency_ns": {"type": ["integer", "null"]},
             "latency_us": {"type": ["number", "null"]},
             "frames": {"type": "integer"},
+            "t_request": {"type": "integer", "description": "ns of the request's first frame"},
             "error": {"type": "string"},
         },
         ["node", "status"],
@@ -98,6 +125,9 @@ SCHEMAS: dict[str, dict] = {
             "rtt_ns": {"type": ["integer", "null"]},
             "rtt_us": {"type": ["number", "null"]},
             "unanswered": {"type": "boolean"},
+            "t_request": {"type": "integer", "description": "ns of the request"},
+            "adu": {"type": "object", "description": "the decoded ADU (function_name, address, "
+                    "values, exception, ...)"},
             "error": {"type": "string"},
         },
         ["dir", "mode", "raw", "role"],
@@ -109,19 +139,60 @@ SCHEMAS: dict[str, dict] = {
     ),
     "hil.DriveState": _obj(
         "hil.DriveState",
-        {
+        {  # the fields of hil.model.drive.Drive.snapshot() (ground truth)
+            "t": {"type": "integer", "description": "model time, ns"},
+            "periodic": {"type": "boolean", "description": "a periodic sample (not an event)"},
             "state": {"type": "string", "description": "CiA 402 state name"},
-            "mode": {"type": ["string", "integer"]},
-            "position": {"type": "number"},
-            "velocity": {"type": "number"},
-            "torque": {"type": "number"},
-            "brake": {"type": ["boolean", "string"]},
-            "alarms": {"type": "array"},
+            "mode": {"type": ["string", "integer"], "description": "mode of operation"},
+            "servo_on": {"type": "boolean"},
+            "torque_enabled": {"type": "boolean"},
+            "position_puu": {"type": "integer", "description": "feedback, PUU"},
+            "position_counts": {"type": "integer", "description": "feedback, encoder counts"},
+            "speed_rpm": {"type": "number"},
+            "torque_pct": {"type": "number", "description": "% of rated torque"},
+            "following_error_counts": {"type": "integer"},
+            "brkr": {"type": "boolean", "description": "DO BRKR function"},
+            "brake_released": {"type": "boolean", "description": "the mechanical brake"},
+            "sto_a": {"type": "boolean"},
+            "sto_b": {"type": "boolean"},
+            "alarms": {"type": "array", "items": {"type": "string"}},
+            "abs_turns": {"type": "integer"},
+            "abs_single_turn": {"type": "integer"},
+            "statusword": {"type": "integer", "description": "6041h"},
+            "do": {"type": "array", "items": {"type": "boolean"}, "description": "DO1..DO6"},
+            "di": {"type": "array", "items": {"type": "boolean"}, "description": "DI1..DI10"},
+            "homing_phase": {"type": "string"},
+            "gain_switched": {"type": "boolean"},
         },
         [],
+        extra=False,
     ),
     "hil.DriveEvent": _obj(
-        "hil.DriveEvent", {"type": {"type": "string", "description": "event class"}}, ["type"]
+        "hil.DriveEvent",
+        {  # the fields of the events in hil.model.events
+            "type": {"type": "string", "description": "event class"},
+            "t": {"type": "integer", "description": "model time, ns"},
+            "n": {"type": "integer", "description": "DO / DI line"},
+            "level": {"type": "boolean"},
+            "function": {"type": "string"},
+            "closed": {"type": "boolean"},
+            "code": {"type": "string", "description": "alarm code"},
+            "active": {"type": "boolean"},
+            "emcy_code": {"type": "integer"},
+            "name": {"type": "string", "description": "parameter name"},
+            "value": {"type": "integer"},
+            "old": {"type": "string"},
+            "new": {"type": "string"},
+            "battery": {"type": "boolean"},
+            "clamped": {"type": "boolean"},
+            "phase": {"type": "string", "description": "homing phase"},
+            "index": {"type": "integer", "description": "capture / compare point"},
+            "address": {"type": "integer", "description": "data array address"},
+            "target": {"type": "integer"},
+            "position_puu": {"type": "number"},
+        },
+        ["type"],
+        extra=False,
     ),
     "hil.InputDelivery": _obj(
         "hil.InputDelivery",
@@ -150,20 +221,47 @@ SCHEMAS: dict[str, dict] = {
             "event": {"type": "string", "enum": ["start", "end"]},
             "status": {"type": ["string", "null"]},
             "message": {"type": "string"},
+            "kind": {"type": "string", "description": "step kind"},
+            "drive": {"type": "string"},
+            "file": {"type": "string"},
+            "line": {"type": "integer"},
+            "duration_ns": {"type": "integer"},
         },
         ["step", "event"],
+        extra=False,
     ),
     "hil.TimingVerdict": _obj(
         "hil.TimingVerdict",
         {
-            "status": {"type": "string", "enum": ["pass", "fail", "inconclusive"]},
+            "status": {"type": "string",
+                       "enum": ["pass", "fail", "inconclusive", "skipped"]},
             "spec": {"type": "string"},
             "constraint": {"type": "string"},
-            "measured": {},
-            "limit": {},
-            "margin": {},
+            "kind": {"type": "string"},
+            "message": {"type": "string"},
+            "source": {"type": "string", "description": "the manual lines"},
+            "plan": {"type": "string"},
+            "step": {"type": "integer"},
+            "occurrence": {"type": "integer"},
+            "measured_ms": {"type": ["number", "null"]},
+            "margin_ms": {"type": ["number", "null"]},
+            "window_ms": {"type": "array"},
+            "window_expr": {"type": "string"},
+            "uncertainty_ms": {"type": "array"},
+            "from_ns": {"type": "integer"},
+            "to_ns": {"type": ["integer", "null"]},
+            "t_ns": {"type": "integer"},
+            "values": {"type": "object"},
+            "binding": {"type": "object"},
+            "check_constants": {"type": "object"},
+            "check_params": {"type": "object"},
+            "check_since_ns": {"type": ["integer", "null"]},
+            "check_until_ns": {"type": "integer"},
+            "latch": {"type": "object"},
+            "tolerance_counts": {"type": "number"},
         },
         ["status"],
+        extra=False,
     ),
     "hil.SafetyAction": _obj(
         "hil.SafetyAction",
@@ -171,8 +269,14 @@ SCHEMAS: dict[str, dict] = {
             "action": {"type": "string"},
             "reason": {"type": "string"},
             "source": {"type": "string"},
+            "drive": {"type": "string"},
+            "ok": {"type": "boolean"},
+            "detail": {"type": "string"},
+            "duration_ms": {"type": "number"},
+            "timeout_ms": {"type": "number"},
         },
         ["action", "reason"],
+        extra=False,
     ),
     "hil.Fault": _obj(
         "hil.Fault",
@@ -254,3 +358,34 @@ def schema_for_topic(topic: str) -> str:
             "inputs": "hil.InputDelivery",
         }.get(parts[-1], "hil.Json")
     return "hil.Json"
+
+
+_JSON_TYPES = {"boolean": bool, "integer": int, "number": (int, float), "string": str,
+               "array": list, "object": dict, "null": type(None)}
+
+
+def _type_ok(value: Any, want: Any) -> bool:
+    names = want if isinstance(want, list) else [want]
+    for n in names:
+        t = _JSON_TYPES[n]
+        if isinstance(value, t) and not (isinstance(value, bool) and n in ("integer", "number")):
+            return True
+    return False
+
+
+def message_problems(schema_name: str, message: Any) -> list[str]:
+    """What a decoded message has that its channel's schema does not say: undeclared fields,
+    wrong types, missing required fields (the test over every shipped plan's recording)."""
+    schema = SCHEMAS.get(schema_name)
+    if schema is None or schema_name == "hil.Json":
+        return []
+    if not isinstance(message, dict):
+        return [f"{schema_name}: not an object"]
+    props = schema["properties"]
+    out = [f"{schema_name}: undeclared field {k!r}" for k in message if k not in props]
+    out += [f"{schema_name}: missing {k!r}" for k in schema["required"] if k not in message]
+    for k, v in message.items():
+        want = props.get(k, {}).get("type")
+        if want is not None and not _type_ok(v, want):
+            out.append(f"{schema_name}: {k!r} is {type(v).__name__}, not {want}")
+    return out
