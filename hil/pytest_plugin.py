@@ -13,7 +13,7 @@ Marker `hil`: the test uses a bench. Fixtures:
 
 * `hil_bench`    the loaded bench file (session scope; `--hil-bench`, default: virtual)
 * `hil_recorder` a `Recorder` writing `<hil-out>/<test id>.mcap`; its path is attached to the
-                 JUnit XML as the property `hil_recording`
+                 JUnit XML as the property `recording`
 * `hil_session`  the bench's resources opened for this test (virtual drives started); on
                  teardown the bench is driven to its declared safe state, and that is recorded
 * `hil_drive`    the default drive of the session (`DriveIO`: DI/DO functions, parameters,
@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import os
 import re
-import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -66,12 +65,18 @@ def pytest_configure(config: pytest.Config) -> None:
     for d in _plan_dirs(config):  # plan tags are markers: `pytest -m brake` stays strict-clean
         for tag in sorted(_tags_in(d)):
             config.addinivalue_line("markers", f"{tag}: plans tagged {tag} (hil_plans)")
-    # Per-test properties (the recording path) need the xunit1 JUnit family; keep an
-    # explicit `junit_family` setting of the project if it has one.
-    with warnings.catch_warnings():  # inicfg: the only way to set a default before junitxml
-        warnings.simplefilter("ignore")  # reads it (deprecated for pytest 10)
-        if "junit_family" not in config.inicfg:
-            config.inicfg["junit_family"] = "xunit1"
+
+
+def _junit_dir(config: pytest.Config) -> Path | None:
+    """The folder of `--junitxml` (recording paths are written relative to it), or None."""
+    xml = getattr(config.option, "xmlpath", None)
+    return Path(xml).resolve().parent if xml else None
+
+
+def _recording_property(config: pytest.Config, path: str | Path) -> str:
+    from hil.report.junit import recording_ref
+
+    return recording_ref(path, _junit_dir(config))
 
 
 def _bench_option(config: pytest.Config) -> str | None:
@@ -147,7 +152,12 @@ class PlanItem(pytest.Item):
 
         bench = load_bench(_bench_option(self.config))
         result = run_plan(self.plan, bench, _out_dir(self.config), stem=self.stem)
-        self.user_properties.append(("hil_recording", result.recording))
+        from hil.report.data import load_run
+        from hil.report.junit import case_properties
+
+        # `hil run`'s JUnit shape: recording (relative to the JUnit file), steps, verdicts
+        self.user_properties.extend(case_properties(load_run(result.recording),
+                                                    _junit_dir(self.config)))
         if not result.passed:
             raise PlanFailed(explain(result))
 
@@ -199,12 +209,14 @@ def hil_bench(pytestconfig: pytest.Config) -> Any:
 
 
 @pytest.fixture
-def hil_recorder(request: pytest.FixtureRequest, record_property: Callable) -> Iterator[Any]:
-    """One MCAP recording per test, attached to the JUnit XML as `hil_recording`."""
+def hil_recorder(request: pytest.FixtureRequest) -> Iterator[Any]:
+    """One MCAP recording per test, attached to the JUnit XML as the property `recording`
+    (relative to the JUnit file), as `hil run` names it."""
     from hil.record.recorder import Recorder
 
     path = _out_dir(request.config) / f"{_safe_name(request.node.nodeid)}.mcap"
-    record_property("hil_recording", str(path))
+    request.node.user_properties.append(("recording", _recording_property(request.config,
+                                                                         path)))
     rec = Recorder(path, metadata={"pytest_nodeid": request.node.nodeid})
     yield rec
     rec.close()
@@ -234,9 +246,7 @@ def hil_drive(hil_session: Any) -> Any:
 
 
 @pytest.fixture
-def hil_run_plan(
-    hil_bench: Any, request: pytest.FixtureRequest, record_property: Callable
-) -> Callable[[str | Path], Any]:
+def hil_run_plan(hil_bench: Any, request: pytest.FixtureRequest) -> Callable[[str | Path], Any]:
     """Run a plan (name or path) on the bench; returns the `PlanResult`."""
     from hil.plan.plan import find_plans, load_plan
     from hil.plan.runner import run_plan
@@ -246,7 +256,8 @@ def hil_run_plan(
         if not path.exists():
             path = find_plans([str(plan)])[0]
         result = run_plan(load_plan(path), hil_bench, _out_dir(request.config))
-        record_property("hil_recording", result.recording)
+        request.node.user_properties.append(
+            ("recording", _recording_property(request.config, result.recording)))
         return result
 
     return run

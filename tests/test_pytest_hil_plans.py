@@ -107,3 +107,27 @@ def test_a_bad_hil_bench_is_one_clear_error(tmp_path):
         assert r.returncode == 4, out  # pytest's usage error
         assert "HIL_BENCH:" in out and env["HIL_BENCH"] in out
         assert "Traceback" not in out and len(out.splitlines()) < 20, out
+
+
+@pytest.mark.integration
+def test_pytest_and_hil_run_write_one_junit_shape(tmp_path):
+    """One testcase per plan from either entry point, the same properties (recording relative
+    to the JUnit file, bench, status, a property per step), and the project's junit_family
+    left alone (pytest's default xunit2: no `file` attribute on testcases)."""
+    import xml.etree.ElementTree as ET
+
+    proj = _project(tmp_path)
+    r = _pytest(proj, "-m", "brake", f"--junitxml={proj / 'py.xml'}")
+    assert "1 passed" in r.stdout, r.stdout + r.stderr
+    [py_case] = ET.parse(proj / "py.xml").getroot().iter("testcase")
+    assert py_case.get("file") is None  # xunit2, not forced to xunit1
+    run = subprocess.run([sys.executable, "-m", "hil.cli", "run", "-q", "brake_ok",
+                          "--plans", str(proj / "plans"), "--out", str(proj / "run")],
+                         cwd=proj, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout + run.stderr
+    [run_case] = ET.parse(proj / "run" / "junit.xml").getroot().iter("testcase")
+    py = {p.get("name"): p.get("value") for p in py_case.iter("property")}
+    hr = {p.get("name"): p.get("value") for p in run_case.iter("property")}
+    assert list(py) == list(hr)
+    assert py["recording"] == "out/brake_ok.mcap" and hr["recording"] == "brake_ok.mcap"
+    assert run_case.get("name") == "brake_ok"

@@ -1,8 +1,10 @@
-"""JUnit XML from recordings: one testsuite per plan run, one testcase per step and one per
-timing verdict, the recording path as a suite property (read by CI test tabs)."""
+"""JUnit XML from recordings, the one shape both entry points write (`hil run`, `hil report
+--junit` and the pytest plugin): one testcase per plan run, its steps and timing verdicts as
+properties and in system-out, the recording path relative to the JUnit file."""
 
 from __future__ import annotations
 
+import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -11,58 +13,81 @@ from hil.report.data import RunData, load_run
 
 NOT_PASSED = {"fail": "failure", "inconclusive": "failure", "error": "error",
               "aborted": "error"}
+CLASSNAME = "hil.plans"
 
 
-def _case(suite: ET.Element, classname: str, name: str, seconds: float, status: str,
-          message: str, detail: str = "") -> None:
-    tc = ET.SubElement(suite, "testcase", classname=classname, name=name, time=f"{seconds:.6f}")
-    if status == "pass":
-        return
-    if status == "skipped":
-        ET.SubElement(tc, "skipped", message=message or "not run")
-        return
-    tag = NOT_PASSED.get(status, "error")
-    el = ET.SubElement(tc, tag, message=message or status, type=status)
-    el.text = detail or message
+def recording_ref(path: str | Path, junit_dir: str | Path | None) -> str:
+    """The recording's path as the JUnit file names it: relative to the JUnit file's folder
+    (the pair survives being archived together), absolute when there is no JUnit file."""
+    if junit_dir is None:
+        return str(Path(path).resolve())
+    return os.path.relpath(Path(path).resolve(), Path(junit_dir).resolve())
 
 
-def suite(run: RunData) -> ET.Element:
-    cls = f"hil.{run.plan}"
-    s = ET.Element("testsuite", name=run.plan)
-    props = ET.SubElement(s, "properties")
-    for k, v in (("recording", run.path), ("bench", run.bench), ("status", run.status),
-                 ("truncated", str(run.truncated).lower())):
-        ET.SubElement(props, "property", name=k, value=str(v))
-    total = 0.0
+def _lines(run: RunData) -> list[tuple[str, str, str]]:
+    """(name, status, text) of every step and timing verdict of a plan run."""
+    out = []
     for st in run.steps:
-        secs = st.duration_ns / 1e9
-        total += secs
+        name = f"step {st.index + 1:02d} {st.label}" if st.index >= 0 else f"step {st.label}"
         where = f"{st.file}:{st.line}" if st.file else f"line {st.line}"
-        name = f"{st.index + 1:02d} {st.label}" if st.index >= 0 else st.label
-        _case(s, cls, name, secs, st.status, st.message, f"{where}: {st.message}")
+        text = f"{st.status} {st.duration_ns / 1e6:.1f} ms ({where})"
+        out.append((name, st.status, text + (f": {st.message}" if st.message else "")))
     for v in run.verdicts:
         name = f"timing {v.get('spec', '?')}: {v.get('constraint', '?')}"
         if v.get("occurrence"):
             name += f" #{v['occurrence']}"
-        detail = (f"measured {v.get('measured_ms')} ms, window {v.get('window_ms')}, "
-                  f"margin {v.get('margin_ms')} ms; source {v.get('source', '')}")
-        _case(s, cls + ".timing", name, 0.0, v.get("status", "error"), v.get("message", ""),
-              detail)
-    cases = s.findall("testcase")
-    s.set("tests", str(len(cases)))
-    s.set("failures", str(sum(1 for c in cases if c.find("failure") is not None)))
-    s.set("errors", str(sum(1 for c in cases if c.find("error") is not None)))
-    s.set("skipped", str(sum(1 for c in cases if c.find("skipped") is not None)))
-    s.set("time", f"{total:.6f}")
-    return s
+        status = v.get("status", "error")
+        out.append((name, status, f"{status}: {v.get('message', '')}"))
+    return out
 
 
-def junit_xml(recordings: list[str | Path]) -> str:
+def case_properties(run: RunData, junit_dir: str | Path | None) -> list[tuple[str, str]]:
+    """The properties of a plan's testcase, the same from `hil run` and from pytest: the
+    recording (relative to the JUnit file), bench, status, and one per step and verdict."""
+    props = [("recording", recording_ref(run.path, junit_dir)), ("bench", run.bench),
+             ("status", run.status), ("truncated", str(run.truncated).lower())]
+    return props + [(name, text) for name, _status, text in _lines(run)]
+
+
+def plan_case(run: RunData, junit_dir: str | Path | None) -> ET.Element:
+    """One testcase per plan run (pytest's shape): its steps and verdicts as properties and in
+    system-out, a failure naming what failed first."""
+    secs = sum(st.duration_ns for st in run.steps) / 1e9
+    tc = ET.Element("testcase", classname=CLASSNAME, name=run.plan, time=f"{secs:.6f}")
+    props = ET.SubElement(tc, "properties")
+    for k, v in case_properties(run, junit_dir):
+        ET.SubElement(props, "property", name=k, value=v)
+    lines = _lines(run)
+    bad = [(n, s, t) for n, s, t in lines if s not in ("pass", "skipped")]
+    status = run.status  # the plan's own verdict (an allowed inconclusive still passes)
+    if status == "skipped":
+        ET.SubElement(tc, "skipped", message="not run")
+    elif status in NOT_PASSED:
+        tag = NOT_PASSED[status]
+        first = f"{bad[0][0]}: {bad[0][2]}" if bad else status
+        el = ET.SubElement(tc, tag, message=first, type=status)
+        el.text = "\n".join(f"{n}: {t}" for n, _s, t in bad) or first
+    out = ET.SubElement(tc, "system-out")
+    out.text = "\n".join(f"{n}: {t}" for n, _s, t in lines)
+    return tc
+
+
+def junit_xml(recordings: list[str | Path], junit_dir: str | Path | None = None) -> str:
+    """One testsuite `hil`, one testcase per recording (plan run)."""
     root = ET.Element("testsuites", name="hil")
+    suite = ET.SubElement(root, "testsuite", name="hil")
+    total = 0.0
     for p in recordings:
-        root.append(suite(load_run(p)))
-    for k in ("tests", "failures", "errors", "skipped"):
-        root.set(k, str(sum(int(s.get(k, "0")) for s in root)))
+        tc = plan_case(load_run(p), junit_dir)
+        total += float(tc.get("time", "0"))
+        suite.append(tc)
+    cases = suite.findall("testcase")
+    for el in (suite, root):
+        el.set("tests", str(len(cases)))
+        el.set("failures", str(sum(c.find("failure") is not None for c in cases)))
+        el.set("errors", str(sum(c.find("error") is not None for c in cases)))
+        el.set("skipped", str(sum(c.find("skipped") is not None for c in cases)))
+        el.set("time", f"{total:.6f}")
     ET.indent(root)
     return ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"
 
@@ -70,5 +95,5 @@ def junit_xml(recordings: list[str | Path]) -> str:
 def write_junit(recordings: list[str | Path], out: str | Path) -> Path:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out, junit_xml(recordings))
+    write_text_atomic(out, junit_xml(recordings, out.parent))
     return out

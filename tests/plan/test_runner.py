@@ -63,9 +63,10 @@ def test_passing_plan_records_steps_and_reports(tmp_path):
     assert safety[-1]["action"] == "safe_state_reached"
     assert safety[-1]["reason"] == "end of plan"
     suite = ET.parse(r.junit).getroot().find("testsuite")
-    assert suite.get("tests") == "7" and suite.get("failures") == "0"
+    assert suite.get("tests") == "1" and suite.get("failures") == "0"  # one testcase per plan
     prop = {p.get("name"): p.get("value") for p in suite.iter("property")}
-    assert prop["recording"] == r.recording
+    assert (Path(r.junit).parent / prop["recording"]).resolve() == Path(r.recording).resolve()
+    assert len([k for k in prop if k.startswith("step ")]) == 7
     html = Path(r.html).read_text(encoding="utf-8")
     assert "brake_ok" in html and "PASS" in html and "<script" not in html
     assert "1/1 plans passed" in summary_table([r])
@@ -87,7 +88,12 @@ def test_failing_plan_goes_safe_and_says_where(tmp_path):
     assert rec.edges(T.dio("drive1", "DI1"))[-1][1] is False
     assert rec.edges(T.dio("drive1", "DO6"))[-1][1] is False
     suite = ET.parse(r.junit).getroot().find("testsuite")
-    assert suite.get("failures") == "1" and suite.get("skipped") == "1"
+    assert suite.get("failures") == "1" and suite.get("tests") == "1"
+    case = suite.find("testcase")
+    assert "expected DO BRKR off, saw BRKR on" in case.find("failure").get("message")
+    prop = {p.get("name"): p.get("value") for p in case.iter("property")}
+    assert [v.split()[0] for k, v in prop.items() if k.startswith("step ")][-2:] == [
+        "fail", "skipped"]
     assert "FAIL" in progress and "driven to its safe state" in progress
     html = Path(r.html).read_text(encoding="utf-8")
     assert "Bus log of failing steps" in html and "DI SON off" in html

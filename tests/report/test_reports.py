@@ -32,17 +32,20 @@ def _recording(path):
 def test_junit_structure(tmp_path):
     p = tmp_path / "demo.mcap"
     _recording(p)
-    root = ET.fromstring(junit_xml([p]))
-    assert root.tag == "testsuites" and root.get("tests") == "3"
+    root = ET.fromstring(junit_xml([p], tmp_path))
+    assert root.tag == "testsuites" and root.get("tests") == "1"  # one testcase per plan
     [suite] = root.findall("testsuite")
-    assert suite.get("name") == "demo" and suite.get("failures") == "2"
-    props = {x.get("name"): x.get("value") for x in suite.iter("property")}
-    assert props["recording"] == str(p) and props["bench"] == "virtual"
-    names = [c.get("name") for c in suite.findall("testcase")]
-    assert names == ["01 di SON=on", "02 expect BRKR on",
-                     "timing servo_on_brake: BRKR rises P1.042 after servo on"]
-    fail = suite.findall("testcase")[1].find("failure")
-    assert fail.get("message") == "expected DO BRKR on, saw BRKR off"
+    assert suite.get("name") == "hil" and suite.get("failures") == "1"
+    [case] = suite.findall("testcase")
+    assert case.get("name") == "demo" and case.get("classname") == "hil.plans"
+    props = {x.get("name"): x.get("value") for x in case.iter("property")}
+    assert props["recording"] == "demo.mcap" and props["bench"] == "virtual"  # relative
+    assert [k for k in props if k.startswith(("step", "timing"))] == [
+        "step 01 di SON=on", "step 02 expect BRKR on",
+        "timing servo_on_brake: BRKR rises P1.042 after servo on"]
+    fail = case.find("failure")
+    assert "expected DO BRKR on, saw BRKR off" in fail.get("message")
+    assert "4.0 ms late" in fail.text and "step 02 expect BRKR on" in case.find("system-out").text
 
 
 def test_html_is_self_contained(tmp_path):
