@@ -41,6 +41,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "(and, or, not, parentheses), e.g. -k 'brake and not sto'")
     parser.add_argument("-m", metavar="EXPR", dest="marker",
                         help="only plans whose tags match EXPR, e.g. -m brake, -m 'pr or homing'")
+    parser.add_argument("--lf", "--last-failed", action="store_true", dest="last_failed",
+                        help="only the plans that failed (or errored) in the previous run into "
+                        "--out (its junit.xml), as pytest's --lf; all selected plans when none "
+                        "failed or there was no previous run")
     parser.add_argument("--list", action="store_true",
                         help="list the selected plans (name, steps, tags, file); run nothing")
     parser.add_argument("-q", "--quiet", action="store_true",
@@ -62,6 +66,32 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="plans directory for plan names and the default set (default: "
                         "plans/ of the hil checkout the current directory is in, else the "
                         "installed plans)")
+
+
+def _last_failed(plans: list, out: Path, *, quiet: bool) -> list:
+    """The plans whose testcase in the previous run's `<out>/junit.xml` failed or errored."""
+    import xml.etree.ElementTree as ET
+
+    junit = out / "junit.xml"
+    try:
+        cases = list(ET.parse(junit).getroot().iter("testcase"))
+    except (OSError, ET.ParseError):
+        if not quiet:
+            print(f"--last-failed: no previous run in {out} (no readable junit.xml): "
+                  "running the selection", file=sys.stderr)
+        return plans
+    failed = {c.get("name") for c in cases
+              if c.find("failure") is not None or c.find("error") is not None}
+    chosen = [p for p in plans if p.name in failed]
+    if not chosen:
+        if not quiet:
+            print(f"--last-failed: no plan failed in the previous run ({junit}): "
+                  "running the selection", file=sys.stderr)
+        return plans
+    if not quiet:
+        print(f"--last-failed: {len(chosen)} of {len(plans)} plan(s) failed last time",
+              file=sys.stderr)
+    return chosen
 
 
 def _logging(args: argparse.Namespace) -> None:
@@ -128,6 +158,8 @@ def main(args: argparse.Namespace) -> int:
     except ExprError as e:
         print(f"hil run: -k/-m: {e}", file=sys.stderr)
         return 2
+    if args.last_failed:
+        plans = _last_failed(plans, Path(args.out), quiet=args.quiet)
     if not plans:
         print("hil run: no plans found" + (" (none selected by -k/-m)"
                                             if args.keyword or args.marker else ""),

@@ -129,3 +129,24 @@ def test_hil_bench_environment_variable_chooses_the_bench(tmp_path):
     assert f"bench: {bench} (from $HIL_BENCH)" in r.stderr
     r = _hil("--check", "servo_on_off_brake", env={"HIL_BENCH": str(tmp_path / "nope.yaml")})
     assert r.returncode == 2 and "nope.yaml" in r.stderr
+
+
+@pytest.mark.integration
+def test_last_failed_reruns_only_what_failed(tmp_path, capsys):
+    """`hil run --lf`: the plans whose testcase failed in `<out>/junit.xml`; all of them when
+    there was no previous run or none failed (as pytest's --lf)."""
+    from hil.cli import main as hil
+
+    plans = tmp_path / "plans"
+    plans.mkdir()
+    (plans / "ok.yaml").write_text("name: ok\nsteps:\n  - expect: {do: {SRDY: on}}\n")
+    (plans / "bad.yaml").write_text("name: bad\nsteps:\n  - expect: {do: {BRKR: on}}\n")
+    out = tmp_path / "out"
+    args = ["run", "-q", "--plans", str(plans), "--out", str(out), "--lf"]
+    assert hil(args) == 1  # no previous run: both ran, bad failed
+    assert "no previous run" not in capsys.readouterr().err  # -q
+    (out / "ok.mcap").unlink()
+    assert hil([*args[:1], *args[2:]]) == 1  # not quiet now: only bad runs again
+    err = capsys.readouterr().err
+    assert "1 of 2 plan(s) failed last time" in err
+    assert not (out / "ok.mcap").exists()
