@@ -172,6 +172,7 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
                                     bench.timeouts["ready"] + 5_000_000_000, cancel)
                 ctx = StepContext(session, rec, plan, specs, cancel, steps)  # type: ignore[arg-type]
                 _idle_inputs(ctx)
+                _record_dut(ctx, bench)
                 if plan.params:
                     _initial_params(ctx, plan)
                 _apply_plan_wiring(ctx, plan)
@@ -216,6 +217,33 @@ def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any
             interrupted.plan_result = res  # type: ignore[attr-defined]  # for `-j N` workers
         raise interrupted
     return res
+
+
+def _record_dut(ctx: StepContext, bench: Bench) -> None:
+    """The drives under test, as OpenHTF records a dut_id: per drive the bench's name, node
+    and station, P0.000 firmware (L7070) and the 1018h identity (vendor, product, revision,
+    serial, L17762-17800) where the bench reaches them; recorded as metadata `hil.dut`.
+    What a drive does not answer is "unavailable", never a failed plan."""
+    meta: dict[str, str] = {}
+    for name, spec in bench.drives.items():
+        meta[f"{name}.node_id"] = str(spec.node_id or "")
+        meta[f"{name}.station"] = str(spec.station or "")
+        try:
+            d = ctx.session.drive(name)
+        except Exception:  # a fake or partial session
+            continue
+        try:
+            meta[f"{name}.firmware"] = str(d.read_param("P0.000"))
+        except Exception:  # no route for parameters on this bench
+            meta[f"{name}.firmware"] = "unavailable"
+        if spec.can:
+            for sub, key in ((1, "vendor_id"), (2, "product_code"), (3, "revision"),
+                             (4, "serial")):
+                try:
+                    meta[f"{name}.{key}"] = f"0x{int(d.cia.read(0x1018, sub)):08X}"
+                except Exception:  # 1018h sub 4 is optional (CiA 301)
+                    meta[f"{name}.{key}"] = "unavailable"
+    ctx.rec.add_metadata("hil.dut", meta)
 
 
 def plan_stem(plan: Plan) -> str:

@@ -65,7 +65,25 @@ def run_info(meta: dict[str, dict[str, str]], bench: str = "") -> dict[str, str]
         date = datetime.datetime.fromtimestamp(int(run["started_ns"]) / 1e9, datetime.UTC
                                                ).strftime("%Y-%m-%d %H:%M:%S UTC")
     return {"date": date, "hil": ver.get("hil", "?"), "host": run.get("host", "?"),
-            "bench": bench or run.get("bench", "?"), "git": ver.get("git_revision", "?")}
+            "bench": bench or run.get("bench", "?"), "git": ver.get("git_revision", "?"),
+            "dut": dut_text(meta.get("hil.dut", {}))}
+
+
+def dut_text(dut: dict[str, str]) -> str:
+    """The drives under test in one line: `drive1 fw 100, 1018h 000001DD/00006000/00000000`."""
+    drives: dict[str, dict[str, str]] = {}
+    for key, value in dut.items():
+        name, _, field = key.rpartition(".")
+        drives.setdefault(name, {})[field] = value
+    parts = []
+    for name, f in drives.items():
+        text = f"{name} fw {f.get('firmware', '?')}"
+        ident = [f.get(k, "") for k in ("vendor_id", "product_code", "revision", "serial")]
+        ident = [x.removeprefix("0x") for x in ident if x and x != "unavailable"]
+        if ident:
+            text += " 1018h " + "/".join(ident)
+        parts.append(text)
+    return ", ".join(parts) or "?"
 
 
 def _is_bus(topic: str) -> bool:

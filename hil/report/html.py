@@ -189,10 +189,10 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
 
 
 def run_info_table(info: dict[str, str]) -> str:
-    """Run date, hil version, host, bench and git revision as a small table."""
+    """Run date, hil version, host, bench, git revision and the drives under test."""
     return ("<table class='runinfo' style='width:auto'><tr>" + "".join(
         f"<td><small>{esc(k)}</small><br><b>{esc(info.get(k, '?'))}</b></td>"
-        for k in ("date", "hil", "host", "bench", "git")) + "</tr></table>")
+        for k in ("date", "hil", "host", "bench", "git", "dut")) + "</tr></table>")
 
 
 def _step_name(run: RunData, index: object) -> str:

@@ -44,3 +44,21 @@ def test_failing_plan_on_the_model_records_the_safe_state(tmp_path):
     # the model confirms: servo off and brake engaged at the end
     last = [m for _, _, _, m in rec.messages(T.drive_state("drive1"))][-1]
     assert last["servo_on"] is False and last["brkr"] is False
+
+
+def test_the_drive_under_test_is_recorded_and_reported(tmp_path):
+    """OpenHTF's dut_id: the bench's name for the drive, P0.000 firmware (the virtual drive
+    reports 100, not 0) and the 1018h identity, in the metadata, the report and the index."""
+    from hil.report.html import write_html
+    from hil.report.index import write_index
+
+    plan = load_plan(find_plans(["servo_on_off_brake"])[0])
+    [r] = run_plans([plan], load_bench(None), tmp_path, stream=io.StringIO())
+    dut = Recording.open(r.recording).metadata()["hil.dut"]
+    assert dut["drive1.firmware"] == "100"
+    assert dut["drive1.vendor_id"] == "0x000001DD"  # Delta (1018h sub 1, L17778-17784)
+    assert dut["drive1.product_code"] == "0x00006000"
+    html = write_html(r.recording, tmp_path / "p.html").read_text()
+    assert "drive1 fw 100 1018h 000001DD/00006000" in html
+    index = write_index([r.recording], tmp_path / "index.html").read_text()
+    assert "drive1 fw 100" in index
