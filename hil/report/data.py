@@ -162,7 +162,7 @@ def _value(key: str, v: object) -> str:
     return json.dumps(v, default=str) if isinstance(v, dict | list) else str(v)
 
 
-def _brief(msg: dict, width: int = 160) -> str:
+def _brief(msg: dict, width: int = 600) -> str:
     """One readable line per bus message: its own text if any, else `key=value` pairs."""
     text = msg.get("text") or msg.get("summary")
     adu = msg.get("adu")

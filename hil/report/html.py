@@ -10,6 +10,7 @@ the safe-state actions, the bus log of each failing step, parameters, bench and 
 from __future__ import annotations
 
 import html
+import os
 from collections.abc import Mapping
 from dataclasses import fields
 from pathlib import Path
@@ -30,6 +31,7 @@ text-align:left;vertical-align:top}th{background:#f3f3f3}
 .pass{color:#176f2c;font-weight:600}.fail,.error,.aborted{color:#b00020;font-weight:600}
 .inconclusive{color:#a06000;font-weight:600}.skipped{color:#777}
 pre{background:#f7f7f7;padding:8px;overflow:auto;font-size:12px}
+pre.bus{white-space:pre-wrap;overflow-wrap:anywhere}.nav{font-size:13px;margin:0 0 .5em}
 .badge{display:inline-block;padding:2px 10px;border-radius:10px;color:#fff}
 .b-pass{background:#176f2c}.b-fail,.b-error,.b-aborted{background:#b00020}
 .b-inconclusive{background:#a06000}.b-unknown{background:#777}
@@ -203,13 +205,31 @@ def _step_name(run: RunData, index: object) -> str:
     return f"<a href='#step-{st.index + 1}'>{st.index + 1}</a>: {esc(st.label)}"
 
 
-def render_html(run: RunData) -> str:
+def _nav(run: RunData, out: Path | None) -> str:
+    """Links from a plan page to the run's index (when beside it) and to its recording."""
+    if out is None:
+        return ""
+    here = out.resolve().parent
+    links = []
+    index = here / "index.html"
+    if index.exists():
+        links.append("<a href='index.html'>&larr; all plans of this run</a>")
+    rec = Path(run.path).resolve()
+    href = Path(os.path.relpath(rec, here)).as_posix()
+    links.append(f"<a href='{esc(href)}' download>recording {esc(rec.name)}</a> (open it in "
+                 "Foxglove)")
+    return "<p class='nav'>" + " · ".join(links) + "</p>"
+
+
+def render_html(run: RunData, out: Path | None = None) -> str:
     """One plan's report: steps, timing verdicts and diagrams, motion, safe state, bus logs
-    around failures, parameters, the plan and bench files and the log."""
+    around failures, parameters, the plan and bench files and the log. `out`: where the page
+    goes (its links to the index and the recording are relative to it)."""
     st = run.status or "unknown"
     h: list[str] = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
         f"<title>hil report: {esc(run.plan)}</title><style>{CSS}</style></head><body>",
+        _nav(run, out),
         f"<h1>{esc(run.plan)} <span class='badge b-{esc(st)}'>{esc(st.upper())}</span></h1>",
         run_info_table(run.info()),
         f"<p>Recording <code>{esc(run.path)}</code>"
@@ -298,7 +318,7 @@ def _bus_html(run: RunData) -> list[str]:
         if not rows:
             h.append("<p>No bus traffic recorded around this check.</p>")
             continue
-        h.append("<pre>" + "\n".join(
+        h.append("<pre class='bus'>" + "\n".join(
             (f"<b>{line}</b>" if inside else line)
             for t, topic, text, inside in rows
             for line in [f"{(t - run.t0) / 1e6:10.3f} ms  {esc(topic):<28} {esc(text)}"])
@@ -314,7 +334,7 @@ def _bus_html(run: RunData) -> list[str]:
         if not rows:
             h.append("<p>No bus traffic during this step.</p>")
             continue
-        h.append("<pre>" + "\n".join(
+        h.append("<pre class='bus'>" + "\n".join(
             f"{(t - run.t0) / 1e6:10.3f} ms  {esc(topic):<28} {esc(text)}"
             for t, topic, text in rows) + "</pre>")
     return h
@@ -340,7 +360,7 @@ def _files_html(run: RunData) -> list[str]:
 def write_html(recording: str | Path, out: str | Path | None = None) -> Path:
     run = load_run(recording)
     out = Path(out) if out is not None else Path(recording).with_suffix(".html")
-    write_text_atomic(out, render_html(run))
+    write_text_atomic(out, render_html(run, out))
     return out
 
 

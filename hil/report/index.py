@@ -8,6 +8,7 @@ relative to the index, so the directory can be archived or served as it is.
 from __future__ import annotations
 
 import html
+import json
 import os
 from collections import Counter
 from pathlib import Path
@@ -41,7 +42,9 @@ def _row(rec: Path, out_dir: Path) -> dict:
                       sum(s.index >= 0 for s in run.steps)),
                verdicts=Counter(str(v.get("status")) for v in run.verdicts),
                reason=res.get("reason", "") if run.status != "pass" else "",
-               description=run.metadata.get("hil.plan", {}).get("description", ""))
+               description=run.metadata.get("hil.plan", {}).get("description", ""),
+               tags=_tags(run.metadata.get("hil.plan", {}).get("tags", "[]")),
+               started=int(run.metadata.get("hil.run", {}).get("started_ns", "0") or 0))
     try:
         row["duration_ms"] = float(res["duration_ms"])
     except (KeyError, ValueError):
@@ -106,8 +109,67 @@ def render_index(recordings: list[str | Path], out: str | Path) -> str:
              f"{sum(r['verdicts']['inconclusive'] for r in rows)}</th>"
              f"<th>{total_ms / 1000:.2f} s</th><th>"
              + _link(out_dir / "junit.xml", out_dir, "junit.xml (all plans)") + "</th></tr>")
-    h.append("</table></body></html>\n")
+    h.append("</table>")
+    h += _by_tag(rows) + _history(rows, out_dir)
+    h.append("</body></html>\n")
     return "\n".join(h)
+
+
+def _tags(text: str) -> list[str]:
+    try:
+        tags = json.loads(text)
+    except ValueError:
+        return []
+    return [str(t) for t in tags] if isinstance(tags, list) else []
+
+
+def _by_tag(rows: list[dict]) -> list[str]:
+    """Statistics by tag, as Robot Framework's log shows them: plans, passed, failed, other."""
+    stats: dict[str, Counter] = {}
+    for r in rows:
+        for tag in r.get("tags") or ["(no tag)"]:
+            c = stats.setdefault(tag, Counter())
+            c["plans"] += 1
+            c[r["status"] if r["status"] in ("pass", "fail") else "other"] += 1
+    if not stats:
+        return []
+    h = ["<h2>Statistics by tag</h2><table id='tags'><tr><th>tag</th><th>plans</th>"
+         "<th>pass</th><th>fail</th><th>other</th></tr>"]
+    for tag in sorted(stats):
+        c = stats[tag]
+        h.append(f"<tr><td>{esc(tag)}</td><td class='num'>{c['plans']}</td>"
+                 f"<td class='num pass'>{c['pass']}</td><td class='num fail'>{c['fail']}</td>"
+                 f"<td class='num'>{c['other']}</td></tr>")
+    h.append("</table>")
+    return h
+
+
+def _history(rows: list[dict], out_dir: Path) -> list[str]:
+    """With recordings of several runs (`hil report --index` over several run folders), each
+    plan's status per run, oldest run first."""
+    def first(d: Path) -> tuple[int, str]:  # when the run started (then its folder's name)
+        return (min((r.get("started", 0) for r in rows
+                     if r["recording"].resolve().parent == d), default=0), str(d))
+
+    runs = sorted({r["recording"].resolve().parent for r in rows}, key=first)
+    if len(runs) < 2:
+        return []
+    status = {(r["plan"], r["recording"].resolve().parent): r for r in rows}
+    plans = sorted({r["plan"] for r in rows})
+    h = ["<h2>History across runs</h2><table id='history'><tr><th>plan</th>"
+         + "".join(f"<th>{esc(os.path.relpath(d, out_dir.resolve()))}</th>" for d in runs)
+         + "</tr>"]
+    for p in plans:
+        cells = []
+        for d in runs:
+            r = status.get((p, d))
+            cells.append("<td>–</td>" if r is None else
+                         f"<td class='{esc(r['status'])}'>"
+                         + (_link(r["recording"].with_suffix(".html"), out_dir,
+                                  r["status"].upper()) or esc(r["status"].upper())) + "</td>")
+        h.append(f"<tr><td>{esc(p)}</td>{''.join(cells)}</tr>")
+    h.append("</table>")
+    return h
 
 
 def write_index(recordings: list[str | Path], out: str | Path) -> Path:
