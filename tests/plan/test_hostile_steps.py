@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from test_hostile_yaml import _paths as _leaves  # every key and index path of a tree
 
 from hil.bench.bench import load_bench
 from hil.bench.yamlio import PlanFileError
@@ -31,17 +32,6 @@ HOSTILE = ["²", "٣", "", "9" * 400, "9" * 400 + "ms", "9" * 20 + ".5s", ".nan"
 @pytest.fixture(scope="module")
 def world():
     return load_bench(None), timing_specs()
-
-
-def _leaves(obj, path=()):
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            yield (*path, k)
-            yield from _leaves(v, (*path, k))
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            yield (*path, i)
-            yield from _leaves(v, (*path, i))
 
 
 def _set(obj, path, value):
