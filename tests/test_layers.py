@@ -158,3 +158,15 @@ def test_the_cycle_finder_finds_a_cycle():
             return {"a": {"b"}, "b": {"a"}, "c": set()}[m]
 
     assert _cycles(G()) == [["a", "b"]]
+
+
+def test_every_package_is_installed():
+    """pyproject's explicit package list names every hil package: a package missing there
+    works in an editable checkout and is absent from `pip install .` (CI's fresh venv)."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+                 ["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts)
+             for p in (ROOT / "hil").rglob("__init__.py")}
+    assert found - listed == set()

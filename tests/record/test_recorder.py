@@ -58,9 +58,9 @@ def record_mix(path, n_can: int = 500) -> list:
             spec="brake.yaml",
             constraint="t_release",
             status="pass",
-            measured=12.0,
-            limit=20.0,
-            margin=8.0,
+            measured_ms=12.0,  # the fields the checker's verdicts carry (hil.TimingVerdict)
+            window_ms=[0.0, 20.0],
+            margin_ms=8.0,
             t=T0 + 10,
         )
         rec.verdict({"spec": "sto.yaml", "constraint": "t_fdbk", "status": "FAIL"}, t=T0 + 11)
@@ -68,12 +68,12 @@ def record_mix(path, n_can: int = 500) -> list:
         rec.drive_state(
             "a3",
             {
-                "state": "OPERATION ENABLED",
+                "state": "OPERATION ENABLED",  # fields of Drive.snapshot() (hil.DriveState)
                 "mode": "pp",
-                "position": 10,
-                "velocity": 1.5,
-                "torque": 0.0,
-                "brake": False,
+                "position_puu": 10,
+                "speed_rpm": 1.5,
+                "torque_pct": 0.0,
+                "brkr": False,
                 "alarms": [],
             },
             t=T0 + 13,
@@ -169,8 +169,8 @@ def test_mix_reads_back_with_our_reader(tmp_path):
     # ground truth, logs, verdicts
     (state,) = [o for *_x, o in rec.messages("/drive/a3/state")]
     assert state["state"] == "OPERATION ENABLED"
-    assert rec.series("/drive/a3/state", "position") == [(T0 + 3, 10)]
-    assert rec.series("/drive/a3/state", "position", time="log") == [(T0 + 13, 10)]
+    assert rec.series("/drive/a3/state", "position_puu") == [(T0 + 3, 10)]
+    assert rec.series("/drive/a3/state", "position_puu", time="log") == [(T0 + 13, 10)]
     (ev,) = [o for *_x, o in rec.messages("/drive/a3/events")]
     assert ev == {"type": "StateChanged", "t": 3, "old": "SWITCHED ON", "new": "OPERATION ENABLED"}
     (log,) = [o for *_x, o in rec.messages(topics.LOG)]
