@@ -10,23 +10,18 @@ needs it, so a real bench never imports the model.
 from __future__ import annotations
 
 import importlib
-from functools import cache
 from types import ModuleType
-
-#: the module that knows the virtual drive's rules (loaded by name: no static import)
-VIRTUAL_RULES = "hil.virtual.rules"
-
-
-@cache
-def virtual_rules() -> ModuleType:
-    """`hil.virtual.rules`: ModelOptions, Mechanics, INERT_DI_FUNCTIONS, inert_mapping."""
-    return importlib.import_module(VIRTUAL_RULES)
 
 
 def virtual_module(name: str) -> ModuleType:
-    """`hil.virtual.<name>` (world, truth, ...), loaded by name: the runner opens a virtual
+    """`hil.virtual.<name>` (world, truth, rules), loaded by name: the runner opens a virtual
     bench's world through it, so importing the runner for a real bench loads no model."""
     return importlib.import_module(f"hil.virtual.{name}")
 
 
-__all__ = ["VIRTUAL_RULES", "virtual_module", "virtual_rules"]
+def virtual_rules() -> ModuleType:
+    """`hil.virtual.rules`: ModelOptions, Mechanics, INERT_DI_FUNCTIONS, inert_mapping."""
+    return virtual_module("rules")
+
+
+__all__ = ["virtual_module", "virtual_rules"]

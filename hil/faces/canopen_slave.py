@@ -35,7 +35,6 @@ from hil.units import MS, US
 
 log = logging.getLogger(__name__)
 
-
 # P3.001 digit Z -> bit rate (L10529-L10533; Z=3 is 800 kbit/s there, 750 kbit/s in L16844).
 BITRATES = {0: 125_000, 1: 250_000, 2: 500_000, 3: 750_000, 4: 1_000_000}
 

@@ -45,7 +45,6 @@ P3_004 = 0x0308  # comm timeout, s, 0 = off, "immediately" (L10571-L10578)
 P3_007 = 0x030E  # response delay (L10610-L10617); unit 0.5 ms (L10612) ⚠ 1 ms (L7020)
 
 
-
 class RegisterStore(Protocol):
     def modbus_read(self, address: int, count: int) -> list[int]: ...
 

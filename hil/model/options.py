@@ -191,25 +191,25 @@ class ModelOptions:
             if data["fdbk_table"] not in tables:
                 raise ValueError(f"{where}.fdbk_table: one of {', '.join(tables)}")
             data["fdbk_table"] = dict(tables[data["fdbk_table"]])
-        if data.get("shutdown_option_scope", "never") not in ("state_machine", "never"):
-            raise ValueError(f"{where}.shutdown_option_scope: 'state_machine' or 'never'")
-        if data.get("negative_p1043", "brake_first") not in ("brake_first", "as_zero"):
-            raise ValueError(f"{where}.negative_p1043: 'brake_first' or 'as_zero'")
-        if data.get("pfqs_clear", "power_cycle") not in ("power_cycle", "reset"):
-            raise ValueError(f"{where}.pfqs_clear: 'power_cycle' or 'reset'")
-        if data.get("pfqs_zero", "command") not in ("command", "zspd"):
-            raise ValueError(f"{where}.pfqs_zero: 'command' or 'zspd'")
-        for key, allowed in (("sync_tolerance", ("p3009", "ratio")),
-                             ("nmt_stop_action", ("servo_off", "none")),
-                             ("al020_rearm", ("reset", "frame")),
-                             ("fault_reset_clears", ("alarm_reset", "listed"))):
+        for key, allowed in _CHOICES.items():
             if key in data and data[key] not in allowed:
-                raise ValueError(f"{where}.{key}: one of {', '.join(map(repr, allowed))}")
+                raise ValueError(f"{where}.{key}: {' or '.join(map(repr, allowed))}")
         if data.get("sto_servo_off", "acknowledged") not in STO_SERVO_OFF:
             raise ValueError(f"{where}.sto_servo_off: one of {', '.join(STO_SERVO_OFF)}")
         return cls(**data)
 
 
+# The text options and the readings each may take (the first is the default)
+_CHOICES: dict[str, tuple[str, ...]] = {
+    "shutdown_option_scope": ("never", "state_machine"),
+    "negative_p1043": ("brake_first", "as_zero"),
+    "pfqs_clear": ("power_cycle", "reset"),
+    "pfqs_zero": ("command", "zspd"),
+    "sync_tolerance": ("ratio", "p3009"),
+    "nmt_stop_action": ("servo_off", "none"),
+    "al020_rearm": ("reset", "frame"),
+    "fault_reset_clears": ("alarm_reset", "listed"),
+}
 # Numeric options that may be negative (volts on V_REF / T_REF); every other is >= 0
 _SIGNED = {"analog_v_ref", "analog_t_ref"}
 # Options that must be strictly positive: a 0 ms motion step would never end
