@@ -14,11 +14,11 @@ as done.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from hil import clock
 from hil.protocol.cia402 import CONTROLWORD
 
 __all__ = ["DriveGone", "SafeDrive", "SafeReport", "SafeStateSpec", "run_safe_state"]
@@ -84,7 +84,7 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
                    record: Record | None = None) -> SafeReport:
     """Drive every drive to `safe`; never raises. Returns what was done and whether it held."""
     rep = SafeReport(reason)
-    t0 = time.monotonic_ns()
+    t0 = clock.monotonic_ns()
 
     def act(drive: str, action: str, fn: Callable[[], Any], **extra: Any) -> None:
         try:
@@ -127,5 +127,5 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
                 act(d.name, "wait BRKR off (brake engaged)",
                     lambda d=d: d.brake_engaged(safe.timeout_ns),
                     timeout_ms=safe.timeout_ns / 1e6)
-    rep.duration_ns = time.monotonic_ns() - t0
+    rep.duration_ns = clock.monotonic_ns() - t0
     return rep

@@ -48,6 +48,7 @@ CIA402_TIMEOUTS = ("sdo", "state", "mode", "setpoint_ack", "target_reached", "ho
                    "fault_reset")
 CONTROLWORDS = ("disable_voltage", "quick_stop", "shutdown", "none")
 PROCESSES = ("inproc", "subprocess")
+CLOCKS = ("virtual", "real")  # docs/clock.md
 PROFILES = ("asda-a3",)
 PARAM_VIAS = ("modbus", "sdo")
 STO_CHANNELS = {"A": "STO_A", "B": "STO_B"}
@@ -55,7 +56,7 @@ _LINE_RE = re.compile(r"^(DI|DO)([0-9]{1,2})(?::([ab]))?$")
 _PARAM_RE = re.compile(r"^P[0-7]\.[0-9]{3}$")
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
 
-_TOP = {"name", "description", "virtual", "process", "can", "rs485", "drives", "timeouts",
+_TOP = {"name", "description", "virtual", "process", "clock", "can", "rs485", "drives", "timeouts",
         "timing", "gateway",
         "safe_state", "motion_allowed", "features", "faults_allowed"}
 _DRIVE = {"node_id", "station", "profile", "can", "rs485", "dio", "dio_map", "wiring", "sto",
@@ -158,6 +159,8 @@ class Bench:
     # `fw_tol`): the same as `hil check --const NAME=VALUE`, in ms.
     timing_constants: dict[str, float] = field(default_factory=dict)
     gateway: GatewaySpec | None = None  # buses reached through a `hil gateway` (a lease)
+    # "virtual": the run on the model's clock (docs/clock.md); "real": the wall clock
+    clock: str = "real"
 
     @property
     def default_drive(self) -> str:
@@ -270,14 +273,49 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
             if not isinstance(f, str):
                 raise v.err(lst.item_lines[i], f"features[{i}]", "must be a name")
             features.add(f)
+    clock = _clock(v, top, virtual, process, can, rs485, drives)
     return Bench(
-        name=name, path=file, text=text, virtual=virtual, drives=drives,
+        name=name, path=file, text=text, virtual=virtual, drives=drives, clock=clock,
         description=str(top.get("description") or ""), process=process, can=can, rs485=rs485,
         timeouts=timeouts, safe_state=safe,
         motion_allowed=v.boolean(top, "motion_allowed", "", True), features=features,
         faults_allowed=v.boolean(top, "faults_allowed", "", virtual),
         timing_constants=_timing(v, top), gateway=gateway,
     )
+
+
+def clock_blocker(virtual: bool, process: str, can: dict[str, str], rs485: dict[str, str],
+                  dio: list[str]) -> str | None:
+    """Why a bench cannot run on the virtual clock (None: it can). Only an in-process
+    virtual bench whose buses are `virtual:`, RS-485 lines `pty:auto` (nobody else's to
+    open) and DI/DO `virtual:` can: zenoh, named ptys, processes and hardware keep wall time."""
+    if not virtual:
+        return "a real bench runs on the wall clock"
+    if process != "inproc":
+        return "process: subprocess runs its drives in other processes (wall clock)"
+    for name, url in can.items():
+        if not url.startswith("virtual:"):
+            return f"CAN bus {name} ({url}) is not an in-process virtual: bus"
+    for name, url in rs485.items():
+        if not (url == "pty:auto" or url.startswith("pty:auto?")):
+            return f"RS-485 line {name} ({url}) is not pty:auto (another program may open it)"
+    for url in dio:
+        if not url.startswith("virtual:"):
+            return f"DI/DO {url} is not in-process virtual:"
+    return None
+
+
+def _clock(v: Checker, top: LDict, virtual: bool, process: str, can: dict[str, str],
+           rs485: dict[str, str], drives: dict[str, DriveSpec]) -> str:
+    why = clock_blocker(virtual, process, can, rs485, [d.dio for d in drives.values() if d.dio])
+    if "clock" not in top:
+        return "real" if why else "virtual"
+    clock = v.text(top, "clock", "")
+    if clock not in CLOCKS:
+        raise v.err(top.kline("clock"), "clock", f"{clock!r}: one of {', '.join(CLOCKS)}")
+    if clock == "virtual" and why:
+        raise v.err(top.kline("clock"), "clock", f"virtual: {why}")
+    return clock
 
 
 def _gateway(v: Checker, top: LDict) -> GatewaySpec | None:

@@ -16,10 +16,10 @@ clock plugs in through `hil.virtual.model_lines.ModelLines`.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from hil import clock
 from hil.units import MS
 
 FRAME_BITS = 80
@@ -46,10 +46,10 @@ class SystemClock:
     """Clock for a real bench: time.time_ns, the clock DioPort.wait_for stamps changes with."""
 
     def now_ns(self) -> int:
-        return time.time_ns()
+        return clock.time_ns()
 
     def sleep(self, seconds: float) -> None:
-        time.sleep(seconds)
+        clock.sleep(seconds)
 
 
 class AbsReadError(Exception):

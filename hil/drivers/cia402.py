@@ -11,7 +11,6 @@ statusword is polled over SDO, so the same code works on a real A3 that ships wi
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,6 +19,7 @@ import canopen
 from canopen.profiles.p402 import State402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
+from hil import clock
 from hil.profile.od import EDS_PATH
 from hil.protocol.canopen import abort_text
 from hil.protocol.cia402 import (
@@ -129,7 +129,7 @@ class Cia402Driver:
         eds: str | Path | None = None,
         timeouts: dict[str, float] | None = None,
         recorder: Any = None,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = clock.monotonic,
     ) -> None:
         unknown = set(timeouts or {}) - set(DEFAULT_TIMEOUTS)
         if unknown:
@@ -227,8 +227,8 @@ class Cia402Driver:
     def _pause(self) -> None:
         """One poll interval; raises Cia402Cancelled once `cancel` is set."""
         if self.cancel is None:
-            time.sleep(self.timeouts["poll"])
-        elif self.cancel.wait(self.timeouts["poll"]):
+            clock.sleep(self.timeouts["poll"])
+        elif clock.wait(self.cancel, self.timeouts["poll"]):
             raise Cia402Cancelled(f"node {self.node_id}: wait cancelled")
 
     def wait_state(self, name: str, timeout: float | None = None) -> int:

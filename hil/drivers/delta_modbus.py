@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import inspect
 import re
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import serial
 
+from hil import clock
 from hil.profile.errors import UnknownParameter
 from hil.profile.params import ParamTable
 from hil.protocol import modbus as mb
@@ -163,7 +163,7 @@ class DeltaModbus:
         self.close()
 
     def _read(self, n: int, deadline: float) -> bytes:
-        remaining = deadline - time.monotonic()
+        remaining = deadline - clock.monotonic()
         if remaining <= 0:
             return b""
         if self._line_style:
@@ -175,14 +175,14 @@ class DeltaModbus:
     def _read_exact(self, n: int, deadline: float, got: bytearray) -> bool:
         while len(got) < n:
             chunk = self._read(n - len(got), deadline)
-            if not chunk and time.monotonic() >= deadline:
+            if not chunk and clock.monotonic() >= deadline:
                 return False
             got += chunk
         return True
 
     def _record(self, data: bytes, direction: str) -> None:
         if self.tap is not None:
-            self.tap.serial(self.port_name, data, direction, time.time_ns(), None)
+            self.tap.serial(self.port_name, data, direction, clock.time_ns(), None)
 
     # ------------------------------------------------------------------ transactions
 
@@ -193,26 +193,26 @@ class DeltaModbus:
         ModbusReplyError on a bad CRC/LRC or a reply that does not match the request."""
         station = self.station if station is None else station
         adu = mb.encode_adu(station, pdu, self.mode)
-        wait = self._last_io + self.silence_s - time.monotonic()
+        wait = self._last_io + self.silence_s - clock.monotonic()
         if wait > 0:
-            time.sleep(wait)
+            clock.sleep(wait)
         if not self._line_style and self.port.timeout != self.timeout_s:
             self.port.timeout = self.timeout_s
         reset = getattr(self.port, "reset_input_buffer", None)
         if reset is not None:
             reset()
-        t0 = time.monotonic()
+        t0 = clock.monotonic()
         self.port.write(adu)
         flush = getattr(self.port, "flush", None)
         if flush is not None and not self._line_style:
             flush()
         self._record(adu, "tx")
         if station == mb.BROADCAST:
-            self._last_io = time.monotonic()
+            self._last_io = clock.monotonic()
             return None
         deadline = t0 + self.timeout_s
         raw = self._read_rtu(deadline) if self.mode == "rtu" else self._read_ascii(deadline)
-        self._last_io = time.monotonic()
+        self._last_io = clock.monotonic()
         self.last_round_trip_s = self._last_io - t0
         if raw is None or isinstance(raw, bytearray):
             got = bytes(raw or b"")
@@ -235,7 +235,7 @@ class DeltaModbus:
         elif got[1] in (mb.WRITE_SINGLE, mb.WRITE_MULTIPLE):
             n = 8
         else:
-            self._read_exact(mb.MAX_RTU_ADU, min(deadline, time.monotonic() + 0.02), got)
+            self._read_exact(mb.MAX_RTU_ADU, min(deadline, clock.monotonic() + 0.02), got)
             return bytes(got)  # unknown function: let the checks name it
         if not self._read_exact(n, deadline, got):
             return got
@@ -246,7 +246,7 @@ class DeltaModbus:
         while True:
             chunk = self._read(1, deadline)
             if not chunk:
-                if time.monotonic() >= deadline:
+                if clock.monotonic() >= deadline:
                     return got
                 continue
             if chunk == b":":

@@ -16,10 +16,10 @@ decoder — before anything is sent: a table the drive would refuse is never hal
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+from hil import clock
 from hil.profile.errors import ParamError
 from hil.profile.pr import PrError, decode, encode, pr_params
 
@@ -58,8 +58,8 @@ class DeltaPr:
     """PR table, trigger and completion through the drive's parameters."""
 
     def __init__(self, access: ParamAccess, *, poll_s: float = 0.01,
-                 sleep: Callable[[float], None] = time.sleep,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 sleep: Callable[[float], None] = clock.sleep,
+                 clock: Callable[[], float] = clock.monotonic) -> None:
         self.access = access
         self.poll_s = poll_s
         self._sleep, self._clock = sleep, clock

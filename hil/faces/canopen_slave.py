@@ -24,6 +24,7 @@ from typing import Any
 
 import can
 
+from hil import clock
 from hil.faces.last_resort import LastResort
 from hil.model import errors
 from hil.model.errors import ObjectError
@@ -50,7 +51,7 @@ def sent_ns(msg: can.Message) -> int:
         return int(t)
     if msg.timestamp:
         return int(msg.timestamp * 1e9)
-    return time.time_ns()
+    return clock.time_ns()
 
 
 # Harness default PDOs (option pdo_defaults="harness"); the manual ships none (L17980-L18024).
@@ -157,11 +158,14 @@ class CanopenSlave:
         self._unsubscribe: Callable[[], None] | None = None
 
     # ------------------------------------------------------------------ lifecycle
-    def start(self) -> CanopenSlave:
-        """Subscribe to drive events, boot (boot-up frame, PRE-OPERATIONAL), start the thread."""
+    def start(self, *, thread: bool = True) -> CanopenSlave:
+        """Subscribe to drive events, boot (boot-up frame, PRE-OPERATIONAL), start the thread
+        (`thread=False`: the owner hands each frame to `feed`, e.g. on a virtual clock)."""
         with self.lock:
             self._unsubscribe = self.drive.subscribe(self._on_event)
             self._reset("power-on")
+        if not thread:
+            return self
         self._stop.clear()
         self._thread = threading.Thread(
             target=self._run, name=f"canopen-{self.node_id}", daemon=True
@@ -184,6 +188,14 @@ class CanopenSlave:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def feed(self, msg: can.Message) -> None:
+        """Handle one received frame (what the receive thread does with each)."""
+        try:
+            with self.lock:
+                self.handle_frame(msg)
+        except Exception as exc:  # last resort: the face keeps serving the bus
+            self.last_resort("receive loop", exc)
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -439,7 +451,7 @@ class CanopenSlave:
                 self._sdo_replied = False
                 self._on_sdo(data, now)
                 if not self._sdo_replied:  # no answer: the buffer is free now
-                    self._sdo_answered = time.time_ns()
+                    self._sdo_answered = clock.time_ns()
             return
         if cid == self._values.get((0x1005, 0), 0x80) & 0x7FF:
             if self.state == "OPERATIONAL":
@@ -456,7 +468,7 @@ class CanopenSlave:
                 sent = sent_ns(msg)
                 self._check_pdo_overflow(cid, sent)
                 self._on_rpdo(n, data)
-                self._pdo_prev[cid] = (sent, time.time_ns())
+                self._pdo_prev[cid] = (sent, clock.time_ns())
             tcob = self._values[(0x1800 + n, 1)]
             if msg.is_remote_frame and not tcob & 0xC0000000 and cid == tcob & 0x7FF:
                 self._send_tpdo(n, now, force=True)
@@ -682,7 +694,7 @@ class CanopenSlave:
     def _sdo_send(self, data: bytes) -> None:
         # stamped before the answer leaves: a master that sends its next request once it has
         # the answer is never "before the answer" (AL111), however late this thread runs on
-        self._sdo_answered = time.time_ns()
+        self._sdo_answered = clock.time_ns()
         self._sdo_replied = True
         self._send(self._values.get((0x1200, 2), cop.SDO_RESPONSE + self.node_id) & 0x7FF, data)
 

@@ -17,9 +17,9 @@ them against the recording's ground truth (hil/timing/latch.py).
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
+from hil import clock
 from hil.bench.yamlio import PARAM_ROUTES, Checker, join
 from hil.plan.context import Inconclusive, StepFailed
 from hil.record import topics
@@ -187,7 +187,7 @@ def x_capture_arm(ctx: Any, s: Any, d: Any) -> str:
     x = 1 | (2 if a["reset"] is not None else 0) | (4 if a["start_compare"] else 0) \
         | (8 if a["run_pr50"] else 0)
     value = a["min_interval"] << 12 | a["nc"] << 8 | a["source"] << 4 | x
-    ctx.store[STORE + d.name] = {"t": time.time_ns(), "start": a["start"],
+    ctx.store[STORE + d.name] = {"t": clock.time_ns(), "start": a["start"],
                                  "count": a["count"], "nc": a["nc"]}
     d.write_param("P5.039", value, via)
     return f"P5.039 = 0x{value:04X}: {a['count']} point(s) into Array[{a['start']}]"

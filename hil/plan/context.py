@@ -12,10 +12,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from hil import clock
+from hil.units import S
+
 if TYPE_CHECKING:
     from hil.plan.plan import Plan
     from hil.plan.session import DriveIO, Session
     from hil.plan.steps import Step
+
+
+# A virtual-time step that has not ended after its timeout plus this much wall time hangs
+# the host (docs/clock.md): the runner gives up on it as on a real-time step timeout.
+WATCHDOG_GRACE_NS = 60 * S
 
 
 class StepFailed(Exception):
@@ -30,8 +38,7 @@ class Inconclusive(StepFailed):
     """The observation cannot decide pass or fail (e.g. a gap in the recording)."""
 
 
-class Cancelled(Exception):
-    """The step was cancelled (step timeout, Ctrl-C) while it waited."""
+Cancelled = clock.Cancelled  # the step was cancelled (step timeout, Ctrl-C) while it waited
 
 
 @dataclass
@@ -52,18 +59,30 @@ class StepThread:
         """`fn()` or, at `timeout_ns`, TimeoutError at once (the step is cancelled and left
         to `join`). A KeyboardInterrupt cancels the step and joins it before propagating."""
         box: dict[str, Any] = {}
+        clk = clock.current()
+        virtual = isinstance(clk, clock.VirtualClock)
 
         def target() -> None:
             try:
-                box["value"] = fn()
+                if virtual:  # the step timeout passes in virtual time
+                    with clk.watch(cancel, clk.time_ns() + timeout_ns):
+                        box["value"] = fn()
+                else:
+                    box["value"] = fn()
+            except clock.VirtualTimeout:
+                box["error"] = TimeoutError(
+                    f"step timeout {timeout_ns / 1e9:g} s of virtual time (bench "
+                    "timeouts.step or the step's timeout)")
             except BaseException as e:
                 box["error"] = e
 
         t = self.thread = threading.Thread(target=target, name="hil-step", daemon=True)
         t0 = time.monotonic_ns()
         t.start()
+        # on a virtual clock, a wall-clock watchdog stops a step that hangs the host
+        wall_ns = timeout_ns + WATCHDOG_GRACE_NS if virtual else timeout_ns
         try:
-            t.join(timeout_ns / 1e9)
+            t.join(wall_ns / 1e9)
         except BaseException:
             cancel.set()
             self.join()
@@ -71,8 +90,11 @@ class StepThread:
         if t.is_alive():
             cancel.set()
             t.join(0.05)  # a step that honours `cancel` ends now; the others are joined later
-            raise TimeoutError(f"step timeout {timeout_ns / 1e9:g} s (bench timeouts.step or "
-                               f"the step's timeout), ended after "
+            what = (f"wall-clock watchdog {wall_ns / 1e9:g} s (the step timeout "
+                    f"{timeout_ns / 1e9:g} s of virtual time + {WATCHDOG_GRACE_NS // S} s)"
+                    if virtual else f"step timeout {timeout_ns / 1e9:g} s (bench "
+                    "timeouts.step or the step's timeout)")
+            raise TimeoutError(f"{what}, ended after "
                                f"{(time.monotonic_ns() - t0) / 1e9:.3f} s")
         if "error" in box:
             raise box["error"]
@@ -117,5 +139,5 @@ class StepContext:
         return self.session.drive(name)
 
     def sleep(self, ns: int) -> None:
-        if self.cancel.wait(ns / 1e9):
+        if clock.wait(self.cancel, ns / 1e9):
             raise Cancelled()

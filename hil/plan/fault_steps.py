@@ -25,11 +25,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import re
-import time
 from typing import Any
 
 import can
 
+from hil import clock
 from hil.bench.param_rules import sdo_parameter
 from hil.bench.yamlio import Checker, join, parse_duration, shorten
 from hil.transport.cyclic import CyclicSender
@@ -279,7 +279,7 @@ def _burst(bus: FaultyCanBus, kind: str, frames: list[can.Message]) -> str:
                      f"{window / 1e6:g} ms the fault needs)" if late else "")
             return f"{kind}: {n} frames back to back on can:{bus.name} in {spread}{again}"
         late.append(spread)
-        time.sleep(0.002)  # apart from the stretched one
+        clock.sleep(0.002)  # apart from the stretched one
     raise RuntimeError(f"{kind}: the host could not send {len(frames)} frames within "
                        f"{window / 1e6:g} ms in {BURST_ATTEMPTS} tries ({', '.join(late)}): "
                        "the fault was not injected (host under load)")

@@ -14,9 +14,9 @@ The parsers reject, at load time (so `hil run --check` too), any path the drive 
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
+from hil import clock
 from hil.bench.yamlio import PARAM_ROUTES, Checker, LDict, join
 from hil.drivers.delta_pr import STATES, DeltaPr, PrTableError, table_words
 from hil.plan.context import StepFailed
@@ -134,13 +134,13 @@ def x_pr_trigger(ctx: Any, s: Any, d: Any) -> str:
 
 def x_pr_wait(ctx: Any, s: Any, d: Any) -> str:
     pr = DeltaPr(_Access(d, s.args["via"]), sleep=lambda t: ctx.sleep(int(t * 1e9)))
-    t0 = time.monotonic()
+    t0 = clock.monotonic()
     try:
         waited = pr.wait(s.args["pr"], s.args["state"], s.args["timeout"] / 1e9)
     except TimeoutError as exc:
         raise StepFailed(str(exc)) from None
     return f"PR#{s.args['pr']} {s.args['state']} after {waited * 1e3:.0f} ms " \
-           f"({(time.monotonic() - t0) * 1e3:.0f} ms)"
+           f"({(clock.monotonic() - t0) * 1e3:.0f} ms)"
 
 
 def describe(kind: str, a: dict[str, Any]) -> str:

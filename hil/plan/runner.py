@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
+from hil import clock
 from hil.bench import virtual_module
 from hil.bench.bench import Bench
 from hil.plan.context import (
@@ -132,12 +133,21 @@ class _Interrupts:
             signal.signal(sig, old)
 
 
-def run_plan(plan: Plan, bench: Bench, out_dir: Path, *, specs: Mapping[str, Any] | None = None,
-             listeners: list[Listener] | None = None,
-             session_factory: Callable[[Bench, Any], Session] = open_session,
-             allow_inconclusive: bool = False, reports: bool = True, index: int = 1,
-             total: int = 1, stop: Callable[[], bool] | None = None,
-             stem: str | None = None) -> PlanResult:
+def run_plan(plan: Plan, bench: Bench, out_dir: Path, **kwargs: Any) -> PlanResult:
+    """`_run_plan` on the bench's clock: a fresh `VirtualClock` per plan for `clock:
+    virtual` (docs/clock.md), the wall clock otherwise."""
+    clk = clock.VirtualClock() if bench.clock == "virtual" else clock.REAL
+    with clock.use(clk):
+        return _run_plan(plan, bench, out_dir, **kwargs)
+
+
+def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
+              specs: Mapping[str, Any] | None = None,
+              listeners: list[Listener] | None = None,
+              session_factory: Callable[[Bench, Any], Session] = open_session,
+              allow_inconclusive: bool = False, reports: bool = True, index: int = 1,
+              total: int = 1, stop: Callable[[], bool] | None = None,
+              stem: str | None = None) -> PlanResult:
     """Run one plan (checked here against the bench first); raises KeyboardInterrupt after
     leaving the bench safe. Listeners hear plan and step events; the recording's step records
     and, with `reports`, the JUnit and HTML reports are listeners too. `stop()` true once the
@@ -301,6 +311,9 @@ def _open_recording(plan: Plan, bench: Bench, out_dir: Path,
     rec.add_metadata("hil.bench", {"name": bench.name, "file": bench.path,
                                    "virtual": bench.virtual, "drives": list(bench.drives),
                                    "motion_allowed": bench.motion_allowed})
+    clk = clock.current()
+    rec.add_metadata("hil.clock", {"clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
+                                   "started_wall_ns": str(time.time_ns())})
     checked = sorted({s.args["spec"] for s in plan.steps if s.kind == "check_timing"})
     if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding
         dspec = plan_spec(plan, bench.drives[plan.drive or bench.default_drive])
@@ -363,9 +376,9 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
     for s, r in zip(plan.steps, res.steps, strict=True):
         d = ctx.drive(s)
         events.emit(StepStarted(plan, s, r, d.name, rec))
-        t0 = time.monotonic_ns()
+        t0 = clock.monotonic_ns()  # steps last in bench time (virtual on a virtual clock)
         if s.name:
-            ctx.started[s.name] = time.time_ns()
+            ctx.started[s.name] = clock.time_ns()
         timeout = s.timeout_ns or ctx.bench.timeouts["step"]
         try:
             ctx.session.check_lease()  # a bench behind a gateway: only while the lease holds
@@ -386,7 +399,7 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
             r.status, r.message = ERROR, str(e)
         except Exception as e:
             r.status, r.message = ERROR, f"{type(e).__name__}: {e}"
-        r.duration_ns = time.monotonic_ns() - t0
+        r.duration_ns = clock.monotonic_ns() - t0
         events.emit(StepEnded(plan, s, r, d.name, rec))
         ok = r.status == PASS or (r.status == INCONCLUSIVE and allow_inconclusive)
         if not ok:

@@ -7,9 +7,9 @@ SAFETY topic and the log.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
+from hil import clock
 from hil.protocol.cia402 import CONTROLWORD
 from hil.safety import DriveGone, SafeReport, run_safe_state
 
@@ -47,11 +47,11 @@ class _SessionDrive:
         return "BRKR" in self.d.spec.do and self.d.dio is not None
 
     def brake_engaged(self, timeout_ns: int) -> str | bool:
-        end = time.monotonic_ns() + timeout_ns
-        while time.monotonic_ns() < end:
+        end = clock.monotonic_ns() + timeout_ns
+        while clock.monotonic_ns() < end:
             if not self.d.do_active("BRKR"):
                 return "BRKR off: brake engaged"
-            time.sleep(0.002)
+            clock.sleep(0.002)
         return False
 
 

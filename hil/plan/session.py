@@ -9,13 +9,13 @@ The same code runs on a real bench; only `world` is None there.
 from __future__ import annotations
 
 import contextlib
-import time
 from collections.abc import Callable
 from typing import Any
 
 import can
 import canopen
 
+from hil import clock
 from hil.bench import virtual_module
 from hil.bench.bench import CIA402_TIMEOUTS, Bench, DriveSpec
 from hil.drivers.cia402 import Cia402Driver, SdoError
@@ -186,14 +186,14 @@ class Session:
         for d in self.drives.values():
             if d.dio is None:
                 continue
-            now = time.time_ns()
+            now = clock.time_ns()
             for line, lv in sorted(d.dio.levels().items()):  # initial levels: known from t0
                 rec.dio(d.name, line, bool(lv), now, None)
             for f in d.spec.di:
                 d.set_function(f, False)
             for line in d.spec.sto.values():
                 d.set_line(line, True)
-        time.sleep(0.02)  # beyond the P2.009 DI filter (L9229-9236) before the first step
+        clock.sleep(0.02)  # beyond the P2.009 DI filter (L9229-9236) before the first step
 
     def on_close(self, fn: Callable[[], None]) -> None:
         """Run `fn` when the session closes, before the transports opened so far close."""
@@ -293,7 +293,11 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
         if faults:
             bus = s.fault_can[bname] = FaultyCanBus(bus, bname, sink=rec)
         net = canopen.Network(bus)
-        net.notifier = can.Notifier(bus, net.listeners, 0.05)
+        if clock.is_virtual():  # frames handed to canopen inside the clock's delivery events
+            from hil.transport.sim import ListenerPump
+            net.notifier = ListenerPump(bus, net.listeners)
+        else:
+            net.notifier = can.Notifier(bus, net.listeners, 0.05)
         nets[bname] = s.nets[bname] = net
         s._closers.append(bus.shutdown)
         s._closers.append(net.notifier.stop)
@@ -323,6 +327,8 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
         if spec.can:
             cia = Cia402Driver(nets[spec.can], spec.node_id or 1,
                                timeouts={k: t[k] / 1e9 for k in CIA402_TIMEOUTS})
+            if clock.is_virtual():  # the SDO client's reply timeout passes in bench time
+                cia.node.sdo.responses = clock.ClockQueue()
         if spec.rs485:
             line = lines[spec.rs485]
             mb = DeltaModbus(line, station=spec.station or 1, mode=spec.modbus_mode,  # type: ignore[arg-type]
@@ -333,11 +339,11 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
 
 def wait_for(pred: Callable[[], Any], timeout_ns: int, poll_s: float = 0.002) -> tuple[bool, Any]:
     """Poll `pred` until truthy or timeout; returns (ok, last value)."""
-    end = time.monotonic_ns() + timeout_ns
+    end = clock.monotonic_ns() + timeout_ns
     while True:
         v = pred()
         if v:
             return True, v
-        if time.monotonic_ns() >= end:
+        if clock.monotonic_ns() >= end:
             return False, v
-        time.sleep(poll_s)
+        clock.sleep(poll_s)

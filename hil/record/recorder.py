@@ -28,6 +28,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import IO, Any
 
+from hil import clock
 from hil.protocol.canopen import is_pdo, is_sdo
 from hil.record import topics
 from hil.record.mcapio import McapWriter
@@ -232,7 +233,7 @@ class Recorder:
         self, bus: str, frame: Any, direction: str, t: int, source_t: int | None = None
     ) -> None:
         """A python-can `Message` seen on `bus` ("rx"/"tx" as seen by the harness)."""
-        if self._open and len(self._q) < self._max_queue:
+        if self._open and self._room():
             self._q.append(CanItem(bus, frame, direction, t, source_t))
         else:
             self._drop()
@@ -247,7 +248,7 @@ class Recorder:
         gaps_us: list[int] | None = None,
     ) -> None:
         """One RS-485 frame (an ADU, as delimited by the line silence) on `port`."""
-        if self._open and len(self._q) < self._max_queue:
+        if self._open and self._room():
             self._q.append(SerialItem(port, bytes(data), direction, t, source_t,
                                       None if gaps_us is None else list(gaps_us)))
         else:
@@ -308,7 +309,7 @@ class Recorder:
         false: `LogHandler` passes false, as the record came from Python logging already.
         """
         lvl = self._level(level)
-        t = time.time_ns() if t is None else t
+        t = clock.time_ns() if t is None else t
         payload = {
             "timestamp": {"sec": t // 1_000_000_000, "nsec": t % 1_000_000_000},
             "level": lvl,
@@ -447,7 +448,7 @@ class Recorder:
         t: int | None = None,
     ) -> None:
         """A file attachment (bench file, plan, EDS ...)."""
-        t = time.time_ns() if t is None else t
+        t = clock.time_ns() if t is None else t
         self._control(AttachItem(name, bytes(data), media_type, t))
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
@@ -507,6 +508,18 @@ class Recorder:
         self.close()
 
     # -- internals (caller side) -------------------------------------------------------------
+    def _room(self) -> bool:
+        """Room in the queue. On a virtual clock the plan outruns the writer thread: there the
+        producer waits (wall time, at most 30 s) for the writer rather than dropping."""
+        if len(self._q) < self._max_queue:
+            return True
+        if not clock.is_virtual():
+            return False
+        end = time.monotonic() + 30.0
+        while len(self._q) >= self._max_queue and self._open and time.monotonic() < end:
+            time.sleep(0.001)
+        return len(self._q) < self._max_queue
+
     def _drop(self) -> None:
         with self._lock:
             self.drops += 1
@@ -521,8 +534,8 @@ class Recorder:
         source_t: int | None,
     ) -> None:
         if t is None:
-            t = time.time_ns()
-        if self._open and len(self._q) < self._max_queue:
+            t = clock.time_ns()
+        if self._open and self._room():
             self._q.append(BytesItem(topic, schema, source, data, t, source_t))
         else:
             self._drop()
@@ -768,7 +781,7 @@ class Recorder:
 
 
 def _now() -> int:
-    return time.time_ns()
+    return clock.time_ns()
 
 
 class LogHandler(logging.Handler):

@@ -17,6 +17,8 @@ from collections.abc import Callable
 
 import can
 
+from hil import clock
+
 REPHASE = 0.25  # of the period: later than this, restart the cycle from the late frame
 
 
@@ -35,9 +37,26 @@ class CyclicSender:
         self.sent = 0
         self.rephased = 0
         self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._event = None
+        clk = clock.current()
+        if isinstance(clk, clock.VirtualClock):  # events of the clock, exactly on period
+            self._clock = clk
+            self._event = clk.after(0, self._tick)
+            return
         self._thread = threading.Thread(target=self._run, daemon=True,
                                         name=f"cyclic-{msg.arbitration_id:03X}")
         self._thread.start()
+
+    def _tick(self) -> None:
+        if self._stop.is_set():
+            return
+        try:
+            self.bus.send(self.msg)
+            self.sent += 1
+        except Exception:  # a closed bus ends the producer, as a stopped master
+            return
+        self._event = self._clock.after(self.period_ns, self._tick)
 
     def _run(self) -> None:
         due = time.perf_counter_ns()
@@ -60,5 +79,7 @@ class CyclicSender:
 
     def stop(self) -> None:
         self._stop.set()
-        if self._thread is not threading.current_thread():
+        if self._event is not None:
+            self._event.cancel()
+        if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=1.0)

@@ -26,13 +26,13 @@ import contextlib
 import re
 import struct
 import threading
-import time
 from collections.abc import Callable, Mapping
 from typing import Literal
 
 import zenoh
 from pymodbus.client import ModbusTcpClient
 
+from hil import clock
 from hil.record.tap import Tap
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 from hil.transport.zenoh_net import (
@@ -92,7 +92,7 @@ class DioPort:
             raise ValueError(f"DI/DO {self.name}: line {line} is driven by the {other} side, "
                              f"not by role {self.role!r}")
         level = bool(level)
-        t = time.time_ns()
+        t = clock.time_ns()
         with self._cond:
             old = self._levels.get(line)
             if old is not None and old[0] == level:
@@ -134,23 +134,27 @@ class DioPort:
 
         Raises TimeoutError naming the line, the expected and the last seen level."""
         is_input(line)
-        deadline = time.monotonic() + timeout_s
+        deadline = clock.monotonic() + timeout_s
         with self._cond:
             while True:
                 entry = self._levels.get(line)
                 if entry is not None and entry[0] == bool(level):
                     return entry[1]
-                left = deadline - time.monotonic()
+                left = deadline - clock.monotonic()
                 if left <= 0 or self._closed:
                     seen = "never seen" if entry is None else f"last seen {int(entry[0])}"
                     raise TimeoutError(f"DI/DO {self.name}: {line} did not become "
                                        f"{int(bool(level))} within {timeout_s:g} s ({seen})")
-                self._cond.wait(left)
+                if clock.is_virtual():  # the events deliver levels to this thread
+                    clock.wait_for(lambda e=entry: self._levels.get(line) != e or self._closed,
+                                   left)
+                else:
+                    self._cond.wait(left)
 
     def _changed(self, line: str, level: bool, t: int | None = None,
                  source_t: int | None = None) -> None:
         """Backends report the other side's line levels here."""
-        t = time.time_ns() if t is None else t
+        t = clock.time_ns() if t is None else t
         with self._cond:
             old = self._levels.get(line)
             if old is not None and old[0] == level:
@@ -223,7 +227,7 @@ class VirtualDio(DioPort):
             b = _boards[self.board]
             b.levels[line] = (level, t)
             others = [p for p in b.ports if p is not self and p.role != self.role]
-        seen = time.time_ns()
+        seen = clock.time_ns()
         for p in others:
             p._changed(line, level, seen, t)  # t: the publisher's (source) time
 
@@ -397,7 +401,7 @@ class ModbusTcpDio(DioPort):
         coils = sorted((a, line) for line, (k, a) in self.map.items() if k == "coil")
         for addr, line in coils:  # start from the module's current coil states
             rr = self._call("read_coils", addr, count=1)
-            self._levels[line] = (bool(rr.bits[0]), time.time_ns())
+            self._levels[line] = (bool(rr.bits[0]), clock.time_ns())
         self._stop = threading.Event()
         self._poller = threading.Thread(target=self._poll_loop, daemon=True,
                                         name=f"dio-poll {u.host}:{u.port}")
@@ -415,7 +419,7 @@ class ModbusTcpDio(DioPort):
     def _poll_once(self) -> None:
         lo, hi = self._dis[0][0], self._dis[-1][0]
         rr = self._call("read_discrete_inputs", lo, count=hi - lo + 1)
-        t = time.time_ns()
+        t = clock.time_ns()
         for addr, line in self._dis:
             self._changed(line, bool(rr.bits[addr - lo]), t, None)
 

@@ -20,13 +20,13 @@ from __future__ import annotations
 import itertools
 import random
 import threading
-import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import can
 
+from hil import clock
 from hil.protocol.canopen import FUNCTION_SPANS, is_function
 
 CAN_ACTIONS = ("drop", "delay", "corrupt", "duplicate")
@@ -114,22 +114,21 @@ class _Faults:
     def __init__(self, transport: str, sink: FaultSink | None, seed: int | None) -> None:
         self.transport = transport
         self.sink = sink
+        if seed is None and clock.is_virtual():  # a virtual-time run repeats itself exactly
+            seed = 0
         self.rng = random.Random(seed)
         self.active: list[Fault] = []
         self._lock = threading.Lock()
-        self._timers: dict[int, threading.Timer] = {}
+        self._timers: dict[int, Any] = {}  # threading.Timer or a clock event
 
     def start(self, fault: Fault, duration_ns: int | None) -> Fault:
         if duration_ns is not None:
-            fault.end_ns = time.monotonic_ns() + duration_ns
+            fault.end_ns = clock.monotonic_ns() + duration_ns
         self._record(fault, True)
         with self._lock:
             self.active = [*self.active, fault]  # copy on write: senders read without a lock
         if duration_ns is not None:
-            timer = threading.Timer(duration_ns / 1e9, self.stop, (fault,))
-            timer.daemon = True
-            self._timers[fault.id] = timer
-            timer.start()
+            self._timers[fault.id] = clock.call_later(duration_ns / 1e9, self.stop, fault)
         return fault
 
     def stop(self, fault: Fault) -> None:
@@ -156,7 +155,7 @@ class _Faults:
         self._record(f, False, t1)
 
     def current(self) -> list[Fault]:
-        now = time.monotonic_ns()
+        now = clock.monotonic_ns()
         out = []
         for f in self.active:
             if f.end_ns is not None and now >= f.end_ns:
@@ -223,12 +222,13 @@ class FaultyCanBus(can.BusABC):
         frames = list(frames)
         if within_ns is None:
             within_ns = BURST_WINDOW_NS.get(kind)
-        t0 = time.time_ns()
+        t0 = clock.time_ns()
         try:
-            for m in frames:
-                self.bus.send(m)
+            with clock.batch():  # back to back, as a flooding master queues them
+                for m in frames:
+                    self.bus.send(m)
         finally:
-            t1 = time.time_ns()
+            t1 = clock.time_ns()
             self.last_spread_ns = t1 - t0
             info: dict[str, Any] = {"frames": len(frames), "spread_us": round((t1 - t0) / 1e3, 1)}
             if within_ns is not None:
@@ -262,9 +262,7 @@ class FaultyCanBus(can.BusABC):
             elif f.kind == "delay":
                 delay = max(delay, int(f.params.get("delay_ms", 0) * 1e6))
         if delay:
-            t = threading.Timer(delay / 1e9, self._send_all, (copies, timeout))
-            t.daemon = True
-            t.start()
+            clock.call_later(delay / 1e9, self._send_all, copies, timeout)
             return
         self._send_all(copies, timeout)
 
@@ -341,10 +339,10 @@ class FaultySerial:
     """
 
     def __init__(self, line: Any, name: str, *, sink: FaultSink | None = None,
-                 seed: int | None = None, sleep: Any = time.sleep) -> None:
+                 seed: int | None = None, sleep: Any = None) -> None:
         self.line = line
         self.faults = _Faults(f"rs485:{name}", sink, seed)
-        self._sleep = sleep
+        self._sleep = sleep or clock.sleep
         self._rx: dict[str, Fault] = {}  # reply faults of the current transaction
         self._rx_count = 0  # reply bytes handed over
         self._rx_hold: float | None = None  # monotonic s: nothing readable before
@@ -398,7 +396,7 @@ class FaultySerial:
         self._rx_count, self._rx_hold, self._rx_split = 0, None, False
         self._rx_noise = b""
         if (f := self._rx.get("reply_late")) is not None:
-            self._rx_hold = time.monotonic() + float(f.params.get("delay_ms", 20)) / 1e3
+            self._rx_hold = clock.monotonic() + float(f.params.get("delay_ms", 20)) / 1e3
         if (f := self._rx.get("reply_noise")) is not None:
             rng = self.faults.rng
             self._rx_noise = bytes(rng.randrange(256) for _ in range(int(f.params.get("bytes",
@@ -407,20 +405,20 @@ class FaultySerial:
     def read(self, n: int = 1, timeout: float | None = None) -> bytes:
         if not self._rx:
             return self.line.read(n, timeout)
-        deadline = None if timeout is None else time.monotonic() + timeout
+        deadline = None if timeout is None else clock.monotonic() + timeout
         if self._rx_noise:
             out, self._rx_noise = self._rx_noise[:n], self._rx_noise[n:]
             return out
         if self._rx_hold is not None:  # late / split: nothing readable before the hold ends
-            wait = self._rx_hold - time.monotonic()
+            wait = self._rx_hold - clock.monotonic()
             if deadline is not None:
-                wait = min(wait, deadline - time.monotonic())
+                wait = min(wait, deadline - clock.monotonic())
             if wait > 0:
-                time.sleep(wait)
-            if time.monotonic() < self._rx_hold:
+                clock.sleep(wait)
+            if clock.monotonic() < self._rx_hold:
                 return b""
             self._rx_hold = None
-        left = None if deadline is None else max(0.0, deadline - time.monotonic())
+        left = None if deadline is None else max(0.0, deadline - clock.monotonic())
         cut_f = self._rx.get("reply_partial") or self._rx.get("reply_split")
         cut = int(cut_f.params.get("bytes", 3)) if cut_f is not None else None
         if cut is not None and "reply_partial" in self._rx and self._rx_count >= cut:
@@ -433,7 +431,7 @@ class FaultySerial:
         split = self._rx.get("reply_split")
         if split is not None and not self._rx_split and cut is not None and self._rx_count >= cut:
             self._rx_split = True
-            self._rx_hold = time.monotonic() + float(split.params.get("gap_ms", 5)) / 1e3
+            self._rx_hold = clock.monotonic() + float(split.params.get("gap_ms", 5)) / 1e3
         return data
 
 
@@ -491,8 +489,8 @@ class FaultyDio:
                 period = float(f.params.get("period_ms", 1)) / 1e3
                 for _ in range(int(f.params.get("bounces", 3))):
                     self.port.set(line, level)
-                    time.sleep(period)
+                    clock.sleep(period)
                     self.port.set(line, not level)
-                    time.sleep(period)
+                    clock.sleep(period)
         self.port.set(line, level, *args, **kw)
 

@@ -37,6 +37,7 @@ from pathlib import Path
 import serial
 import zenoh
 
+from hil import clock
 from hil.record.tap import Tap
 from hil.transport.urls import SerialSettings, TransportUrl, TransportUrlError, parse_url
 from hil.transport.zenoh_net import (
@@ -96,7 +97,15 @@ class SerialLine:
         self._rx_free = 0  # monotonic ns when the emulated rx line is idle again
         self._tx_free = 0
         self._closed = False
-        self._wall_offset = time.time_ns() - time.monotonic_ns()
+        self._wall_offset = time.time_ns() - self._now()
+
+    # -- time (a SimLine runs these on the virtual clock) -------------------------------
+    def _now(self) -> int:
+        return time.monotonic_ns()
+
+    def _block(self, until: int | None, now: int) -> None:
+        """Wait on `_cond` (held) until `until` (monotonic ns, None: a notify)."""
+        self._cond.wait(None if until is None else max(0, until - now) / S)
 
     # -- properties ------------------------------------------------------------------
     @property
@@ -137,7 +146,7 @@ class SerialLine:
             return SerialFrame(b"", (), self.char_time_ns)
         c = self.char_time_ns
         with self._cond:
-            start = max(time.monotonic_ns(), self._tx_free, not_before_ns or 0)
+            start = max(self._now(), self._tx_free, not_before_ns or 0)
             ends = tuple(start + (i + 1) * c for i in range(len(data)))
             self._tx_free = ends[-1]
         frame = SerialFrame(data, ends, c)
@@ -169,11 +178,11 @@ class SerialLine:
         """
         silence = round((self.t35_s if silence_s is None else silence_s) * S)
         c = self.char_time_ns
-        first_deadline = None if timeout is None else time.monotonic_ns() + round(timeout * S)
+        first_deadline = None if timeout is None else self._now() + round(timeout * S)
         out: list[tuple[int, int, int | None]] = []
         with self._cond:
             while True:
-                now = time.monotonic_ns()
+                now = self._now()
                 if out:
                     last = out[-1][1]
                     if self._rx:
@@ -197,7 +206,7 @@ class SerialLine:
                     candidates = [t for t in (self._rx[0][1] if self._rx else None,
                                               first_deadline) if t is not None]
                     until = min(candidates) if candidates else None
-                self._cond.wait(None if until is None else max(0, until - now) / S)
+                self._block(until, now)
         return self._deliver(out)
 
     def reset_input_buffer(self) -> None:
@@ -206,11 +215,11 @@ class SerialLine:
             self._rx.clear()
 
     def _take(self, n: int, timeout: float | None) -> SerialFrame | None:
-        deadline = None if timeout is None else time.monotonic_ns() + round(timeout * S)
+        deadline = None if timeout is None else self._now() + round(timeout * S)
         out: list[tuple[int, int, int | None]] = []
         with self._cond:
             while len(out) < n:
-                now = time.monotonic_ns()
+                now = self._now()
                 if self._rx and self._rx[0][1] <= now:
                     out.append(self._rx.popleft())
                     continue
@@ -219,7 +228,7 @@ class SerialLine:
                 candidates = [t for t in (self._rx[0][1] if self._rx else None, deadline)
                               if t is not None]
                 until = min(candidates) if candidates else None
-                self._cond.wait(None if until is None else max(0, until - now) / S)
+                self._block(until, now)
         return self._deliver(out) if out else None
 
     def _deliver(self, out: list[tuple[int, int, int | None]]) -> SerialFrame:
@@ -541,6 +550,9 @@ def open_serial(url: str, *, tap: Tap | None = None, name: str | None = None,
     u = parse_url(url, "serial")
     settings = u.serial()
     label = name or u.target
+    if clock.is_virtual() and u.scheme in ("pty", "serial"):  # the virtual bench's line
+        from hil.transport.sim import SimLine
+        return SimLine(url, settings, u, tap=tap, name=label)
     if u.scheme == "pty":
         return PtyLine(url, settings, u.target, tap=tap, name=label)
     if u.scheme == "serial":

@@ -142,3 +142,43 @@ class _SyncedLock:
 
     def __exit__(self, *exc: object) -> None:
         self.release()
+
+
+class ClockHost(DriveHost):
+    """`DriveHost` on a `VirtualClock` (docs/clock.md): no thread; a clock event every
+    `period_s` advances the model and runs the faces' ticks, and a face that takes the lock
+    brings the model up to the clock's now, as on the real-time host. Model time 0 is the
+    clock's time when the host is made."""
+
+    def __init__(self, drive: Any, clock: Any, *, period_s: float = 0.001) -> None:
+        self.clock = clock
+        super().__init__(drive, period_s=period_s)
+        self._base = clock.time_ns() - drive.now
+        self._event: Any = None
+
+    def model_now(self) -> int:
+        return self.clock.time_ns() - self._base
+
+    def wall_ns(self, t_model: int) -> int:
+        return self._base + t_model
+
+    def start(self) -> ClockHost:
+        if self._event is None:
+            self._event = self.clock.after(0, self._tick)
+        return self
+
+    def stop(self) -> None:
+        if self._event is not None:
+            self._event.cancel()
+            self._event = None
+
+    def _tick(self) -> None:
+        with self.lock:
+            try:
+                self._advance()
+                now = self.drive.now
+                for fn in list(self._ticks):
+                    fn(now)
+            except Exception as exc:  # a face bug must not stop the drive clock
+                self._note_error("tick", exc)
+        self._event = self.clock.after(int(self.period_s * 1e9), self._tick)

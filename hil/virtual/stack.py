@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hil import clock
 from hil.faces.canopen_slave import CanopenSlave
 from hil.faces.dio_face import DioFace
 from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
@@ -27,7 +28,68 @@ from hil.record.topics import CAN_LATE_NS, can_line
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
 from hil.transport.serial_line import open_serial
-from hil.virtual.host import DriveHost
+from hil.transport.sim import pump
+from hil.virtual.host import ClockHost, DriveHost
+
+
+class ClockModbusPump:
+    """`ModbusSlaveRunner` on a virtual clock: each chunk the line delivers is fed to the
+    slave inside its delivery event, and the slave's next deadline (t3.5, P3.004) is a clock
+    event, so the face answers exactly when a real line lets it."""
+
+    def __init__(self, slave: ModbusSlave, line: Any, clk: clock.VirtualClock) -> None:
+        self.slave, self.line, self._clock = slave, line, clk
+        self.error: BaseException | None = None
+        self._event: Any = None
+        if slave.send is None:
+            slave.send = line.write
+
+    def clock(self) -> int:
+        return self._clock.monotonic_ns()
+
+    def start(self) -> ClockModbusPump:
+        self.line.on_rx = self._rx
+        self._arm()
+        return self
+
+    def stop(self) -> None:
+        self.line.on_rx = None
+        if self._event is not None:
+            self._event.cancel()
+            self._event = None
+
+    def rearm(self, _now: int = 0) -> None:
+        """Follow the slave's next deadline (host tick: P3.004 may change by SDO)."""
+        self._arm()
+
+    def _rx(self) -> None:
+        try:
+            frame = self.line.read_timed(511, 0)
+            if frame is not None and frame.data:
+                self.slave.feed_timed(frame.data, tuple(frame.times_ns))
+        except Exception as exc:  # last resort: log once, keep serving the line
+            self.error = exc
+            self.slave.last_resort("runner", exc)
+        self._arm()
+
+    def _arm(self) -> None:
+        deadline = self.slave.next_deadline()
+        if self._event is not None:
+            if deadline is not None and self._event.t == deadline:
+                return
+            self._event.cancel()
+            self._event = None
+        if deadline is not None and self.line.on_rx is not None:
+            self._event = self._clock.at(deadline, self._deadline)
+
+    def _deadline(self) -> None:
+        self._event = None
+        try:
+            self.slave.tick(self._clock.monotonic_ns())
+        except Exception as exc:
+            self.error = exc
+            self.slave.last_resort("runner", exc)
+        self._arm()
 
 
 @dataclass
@@ -67,7 +129,9 @@ class VirtualDriveStack:
             inputs=spec.inputs,
             params=params,
         )
-        self.host = DriveHost(self.drive)
+        clk = clock.current()
+        self.clock = clk if isinstance(clk, clock.VirtualClock) else None
+        self.host = DriveHost(self.drive) if self.clock is None else ClockHost(self.drive, clk)
         self.can_bus: Any = None
         self.canopen: Any = None
         self.serial: Any = None
@@ -112,7 +176,11 @@ class VirtualDriveStack:
                 pdo_defaults=spec.tpdo_defaults,
                 on_frame=self._frame_applied,
             )
-            self.canopen.start()
+            if self.clock is None:
+                self.canopen.start()
+            else:  # frames handed over inside the clock's delivery events
+                self.canopen.start(thread=False)
+                self._closers.append(pump(self.can_bus, self.canopen.feed))
             self._closers.append(self.canopen.close)
             host.add_tick(self.canopen.tick)
         if spec.rs485:
@@ -129,7 +197,11 @@ class VirtualDriveStack:
                 # AL019 on an incorrect address / value (L19592-19596); the drive decides
                 on_comm_error=lambda code, _m: host.call(drive.modbus_comm_error, code),
             )
-            self.modbus_runner = ModbusSlaveRunner(self.modbus, self.serial)
+            if self.clock is None:
+                self.modbus_runner = ModbusSlaveRunner(self.modbus, self.serial)
+            else:
+                self.modbus_runner = ClockModbusPump(self.modbus, self.serial, self.clock)
+                host.add_tick(self.modbus_runner.rearm)  # P3.004 written by any face
             self.modbus_runner.start()
             self._closers.append(self.modbus_runner.stop)
         self._unsub = drive.subscribe(self._on_event)

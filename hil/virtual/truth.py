@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import contextlib
 import tempfile
-import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from hil import clock
 from hil.bench.bench import Bench
 from hil.model.drive import DEFAULT_SENSORS
 
@@ -43,7 +43,7 @@ class SensorTap:
             lv = bool(di[n - 1])
             if self._last.get((drive, n)) != lv:
                 self._last[(drive, n)] = lv
-                self._rec.dio(drive, f"DI{n}", lv, time.time_ns(), kw.get("source_t"))
+                self._rec.dio(drive, f"DI{n}", lv, clock.time_ns(), kw.get("source_t"))
 
 
 def bench_with_options(bench: Bench, options: dict[str, Any],

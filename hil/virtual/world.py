@@ -23,11 +23,11 @@ import subprocess
 import sys
 import tempfile
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from hil import clock
 from hil.bench.bench import Bench, DriveSpec
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
@@ -288,7 +288,7 @@ class VirtualWorld:
     def power_cycle(self, drive: str, battery: bool = True, off_ns: int = 0) -> None:
         vd = self.drives[drive]
         if off_ns:
-            time.sleep(off_ns / 1e9)
+            clock.sleep(off_ns / 1e9)
         vd.host.call(vd.drive.power_cycle, battery=battery)
 
     def inject(self, drive: str, options: dict | None = None, alarm: str | None = None) -> None:
@@ -399,7 +399,7 @@ class StdioControl:
         if op == "power_cycle":
             off = int(cmd.get("off_ns") or 0)
             if off:
-                time.sleep(off / 1e9)
+                clock.sleep(off / 1e9)
             host.call(drive.power_cycle, battery=bool(cmd.get("battery", True)))
             return None
         if op == "inject":

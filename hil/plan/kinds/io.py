@@ -3,9 +3,9 @@
 
 from __future__ import annotations
 
-import time
 from typing import TYPE_CHECKING, Any
 
+from hil import clock
 from hil.bench.yamlio import Checker
 from hil.plan.context import Outcome
 from hil.plan.kinds import fields
@@ -68,11 +68,11 @@ class Pulse(StepKind):
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         widths = sorted(self.args["widths"].items(), key=lambda x: x[1])
-        t0 = time.monotonic_ns()
+        t0 = clock.monotonic_ns()
         for f, _w in widths:
             d.set_function(f, True)
         for f, w in widths:
-            left = t0 + w - time.monotonic_ns()
+            left = t0 + w - clock.monotonic_ns()
             if left > 0:
                 ctx.sleep(left)
             d.set_function(f, False)
@@ -120,11 +120,11 @@ class StoDropout(StepKind):
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         widths = sorted(self.args["widths"].items(), key=lambda x: x[1])
-        t0 = time.monotonic_ns()
+        t0 = clock.monotonic_ns()
         for ch, _w in widths:
             d.set_line(d.spec.sto[ch], False)
         for ch, w in widths:
-            left = t0 + w - time.monotonic_ns()
+            left = t0 + w - clock.monotonic_ns()
             if left > 0:
                 ctx.sleep(left)
             d.set_line(d.spec.sto[ch], True)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import logging
 import re
-import time
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
+from hil import clock
 from hil.bench.yamlio import Checker, join
 from hil.plan.context import Cancelled, Inconclusive, Outcome, StepFailed
 from hil.plan.kinds import fields
@@ -162,7 +162,7 @@ class CheckTiming(StepKind):
         if read_unrecorded(ctx, spec, source, binding, a["params"], constants):
             ctx.rec.flush()
             source = RecordingSource(ctx.rec.path)  # with the values just read
-        until = time.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
+        until = clock.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
         verdicts = check(spec, source, params=a["params"] or None, binding=binding,
                          constants=constants or None)
         since = a.get("since", "start")
@@ -172,7 +172,7 @@ class CheckTiming(StepKind):
         elif since != "start":
             since_ns = ctx.started.get(since)
         verdicts = occurrences_since(verdicts, since_ns)
-        ctx.checked[spec.id] = time.time_ns()
+        ctx.checked[spec.id] = clock.time_ns()
         counts: dict[str, int] = {}
         out = []
         for v in verdicts:

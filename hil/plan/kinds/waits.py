@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import time
 from typing import TYPE_CHECKING, Any
 
+from hil import clock
 from hil.bench.yamlio import Checker, parse_duration
 from hil.drivers.cia402 import decode_state
 from hil.plan.context import Outcome, StepFailed
@@ -98,12 +98,12 @@ class WaitUntil(_Conditions):
         timeout = self.args["timeout"] or ctx.bench.timeouts["wait_until"]
         polls_bus = any(c.kind in ("param", "alarm", "state") for c in conds)
         poll = 10_000_000 if polls_bus else 1_000_000
-        t0 = time.monotonic_ns()
+        t0 = clock.monotonic_ns()
         while True:
             seen = [evaluate(d, c) for c in conds]
             if all(ok for ok, _ in seen):
-                return Outcome(f"met after {(time.monotonic_ns() - t0) / 1e6:.1f} ms")
-            if time.monotonic_ns() - t0 >= timeout:
+                return Outcome(f"met after {(clock.monotonic_ns() - t0) / 1e6:.1f} ms")
+            if clock.monotonic_ns() - t0 >= timeout:
                 want = " and ".join(c.describe() for c in conds)
                 saw = ", ".join(obs for _, obs in seen)
                 raise StepFailed(f"timeout {timeout / 1e6:g} ms waiting for {want}; saw {saw}")

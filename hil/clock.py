@@ -1,0 +1,330 @@
+"""The harness's clock: the wall clock, or the virtual bench's own (docs/clock.md).
+
+Every wait of the harness goes through here, never through `time.sleep`:
+
+    from hil import clock
+    clock.time_ns(); clock.monotonic_ns(); clock.monotonic()
+    clock.sleep(0.01)                      # a pause of bench time
+    clock.wait(event, 0.5) -> bool         # Event.wait on the bench's clock
+    clock.wait_for(pred, 0.5) -> bool      # until pred() or timeout
+
+`current()` is `REAL` (the `time` module) unless a run installed a `VirtualClock` with
+`use(clock)`. A `VirtualClock` is one discrete-event scheduler: time moves only when the thread
+that runs the plan waits, and then it fires every event due (the model's host ticks, each frame's
+delivery after its wire time, each cyclic producer) in time order, one at a time. So a run on it
+is deterministic and as fast as the host computes it. Only one thread may wait on it at a time
+(the plan's step thread, or the runner's main thread between steps); the events never wait.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import heapq
+import itertools
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any, Protocol
+
+from hil.units import S
+
+# Virtual recordings start here: 2000-01-01T00:00:00Z, so two runs carry the same log times.
+VIRTUAL_EPOCH_NS = 946_684_800 * S
+CLOCKS = ("virtual", "real")
+
+
+class Cancelled(Exception):
+    """A wait ended because its step was cancelled (step timeout, Ctrl-C)."""
+
+
+class VirtualTimeout(BaseException):
+    """A wait would pass the step's deadline in virtual time. A BaseException, so that no
+    step code's `except Exception` takes the runner's step timeout for its own failure."""
+
+
+class Clock(Protocol):
+    name: str
+    virtual: bool
+
+    def time_ns(self) -> int: ...
+    def monotonic_ns(self) -> int: ...
+    def sleep(self, seconds: float) -> None: ...
+    def wait_for(self, pred: Callable[[], Any], timeout_s: float | None) -> bool: ...
+
+
+class RealClock:
+    """The wall clock (`time`): what real benches, zenoh and `hil drive` run on."""
+
+    name = "real"
+    virtual = False
+
+    def time_ns(self) -> int:
+        return time.time_ns()
+
+    def monotonic_ns(self) -> int:
+        return time.monotonic_ns()
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+    def wait_for(self, pred: Callable[[], Any], timeout_s: float | None,
+                 poll_s: float = 0.002) -> bool:
+        end = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            if pred():
+                return True
+            if end is not None and time.monotonic() >= end:
+                return bool(pred())
+            time.sleep(poll_s if end is None else max(0.0, min(poll_s, end - time.monotonic())))
+
+
+class Event:
+    """A scheduled call on a `VirtualClock` (`cancel()` it to drop it)."""
+
+    __slots__ = ("cancelled", "fn", "seq", "t")
+
+    def __init__(self, t: int, seq: int, fn: Callable[[], Any]) -> None:
+        self.t, self.seq, self.fn, self.cancelled = t, seq, fn, False
+
+    def __lt__(self, other: Event) -> bool:
+        return (self.t, self.seq) < (other.t, other.seq)
+
+    def cancel(self) -> None:
+        self.cancelled = True
+
+
+class VirtualClock:
+    """Discrete-event time for the virtual bench (see the module docstring).
+
+    Times are ns on one axis: `time_ns()` == `monotonic_ns()` == `epoch_ns` + elapsed.
+    `at(t, fn)` / `after(dt, fn)` schedule events; waits fire them in (time, order) order.
+    `media` holds the in-process buses and lines of this run by name (hil.transport.sim).
+    """
+
+    name = "virtual"
+    virtual = True
+
+    def __init__(self, epoch_ns: int = VIRTUAL_EPOCH_NS) -> None:
+        self.epoch_ns = epoch_ns
+        self._now = epoch_ns
+        self._heap: list[Event] = []
+        self._seq = itertools.count()
+        self._lock = threading.RLock()
+        self._running = 0  # > 0 while an event runs (events must not wait)
+        self._watch: dict[int, tuple[threading.Event | None, int | None]] = {}
+        self.media: dict[str, Any] = {}
+        self.events_run = 0
+        self.hold = 0  # > 0 inside `batch()`: settling waits for its end
+        self.held: list[Callable[[], bool]] = []
+
+    # -- reading -------------------------------------------------------------------------
+    def time_ns(self) -> int:
+        return self._now
+
+    monotonic_ns = time_ns
+
+    @property
+    def elapsed_ns(self) -> int:
+        return self._now - self.epoch_ns
+
+    @property
+    def in_event(self) -> bool:
+        """True while an event runs (a wait there would reorder time)."""
+        return self._running > 0
+
+    # -- scheduling ----------------------------------------------------------------------
+    def at(self, t: int, fn: Callable[[], Any]) -> Event:
+        """Run `fn()` at clock time `t` (never before now)."""
+        with self._lock:
+            ev = Event(max(int(t), self._now), next(self._seq), fn)
+            heapq.heappush(self._heap, ev)
+            return ev
+
+    def after(self, dt: int, fn: Callable[[], Any]) -> Event:
+        return self.at(self._now + int(dt), fn)
+
+    def next_time(self) -> int | None:
+        with self._lock:
+            heap = self._heap
+            while heap and heap[0].cancelled:
+                heapq.heappop(heap)
+            return heap[0].t if heap else None
+
+    # -- waiting -------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def watch(self, cancel: threading.Event | None, deadline_ns: int | None) -> Iterator[None]:
+        """While in this block, this thread's waits raise `Cancelled` once `cancel` is set and
+        `VirtualTimeout` rather than pass `deadline_ns` (the step timeout, in clock time)."""
+        key = threading.get_ident()
+        old = self._watch.get(key)
+        self._watch[key] = (cancel, deadline_ns)
+        try:
+            yield
+        finally:
+            if old is None:
+                self._watch.pop(key, None)
+            else:
+                self._watch[key] = old
+
+    def run_until(self, t: int, pred: Callable[[], Any] | None = None) -> bool:
+        """Fire the events due up to `t` in order, stopping early once `pred()` holds;
+        returns whether it holds (True without `pred`). Time ends at `t` unless stopped."""
+        if self._running:
+            raise RuntimeError("virtual clock: a wait inside a clock event (it would reorder "
+                               "time); events must only schedule")
+        cancel, deadline = self._watch.get(threading.get_ident(), (None, None))
+        with self._lock:
+            while True:
+                if pred is not None and pred():
+                    return True
+                if cancel is not None and cancel.is_set():
+                    raise Cancelled()
+                heap = self._heap
+                while heap and heap[0].cancelled:
+                    heapq.heappop(heap)
+                nxt = heap[0].t if heap else None
+                if nxt is None or nxt > t:
+                    if deadline is not None and t > deadline:
+                        self._now = max(self._now, deadline)
+                        raise VirtualTimeout(f"step deadline at {self.elapsed_ns / S:.3f} s "
+                                             "of virtual time")
+                    self._now = max(self._now, t)
+                    return True if pred is None else bool(pred())
+                if deadline is not None and nxt > deadline:
+                    self._now = max(self._now, deadline)
+                    raise VirtualTimeout(f"step deadline at {self.elapsed_ns / S:.3f} s of "
+                                         "virtual time")
+                ev = heapq.heappop(heap)
+                self._now = max(self._now, ev.t)
+                self._running += 1
+                try:
+                    ev.fn()
+                finally:
+                    self._running -= 1
+                self.events_run += 1
+
+    def sleep(self, seconds: float) -> None:
+        self.run_until(self._now + max(0, round(seconds * S)))
+
+    def wait_for(self, pred: Callable[[], Any], timeout_s: float | None,
+                 poll_s: float = 0.0) -> bool:
+        if timeout_s is None:
+            end = self._now + 3600 * S  # "forever" is an hour of bench time
+        else:
+            end = self._now + max(0, round(timeout_s * S))
+        return self.run_until(end, pred)
+
+    def settle(self, busy: Callable[[], bool]) -> None:
+        """Fire events while `busy()` (e.g. frames in flight); no-op inside an event."""
+        if self._running:
+            return
+        if self.hold:
+            self.held.append(busy)
+            return
+        with self._lock:
+            while busy():
+                nxt = self.next_time()
+                if nxt is None:
+                    return
+                self.run_until(nxt)
+
+
+REAL = RealClock()
+_current: RealClock | VirtualClock = REAL
+
+
+def current() -> RealClock | VirtualClock:
+    """The clock of the run in progress (REAL outside a virtual-time run)."""
+    return _current
+
+
+@contextlib.contextmanager
+def use(clk: RealClock | VirtualClock) -> Iterator[RealClock | VirtualClock]:
+    """Install `clk` as the current clock for the block (one run at a time per process)."""
+    global _current
+    old, _current = _current, clk
+    try:
+        yield clk
+    finally:
+        _current = old
+
+
+def time_ns() -> int:
+    return _current.time_ns()
+
+
+def monotonic_ns() -> int:
+    return _current.monotonic_ns()
+
+
+def monotonic() -> float:
+    return _current.monotonic_ns() / S
+
+
+def sleep(seconds: float) -> None:
+    _current.sleep(seconds)
+
+
+def wait(event: threading.Event, timeout_s: float | None) -> bool:
+    """`event.wait(timeout_s)` on the current clock."""
+    if not _current.virtual:
+        return event.wait(timeout_s)
+    return _current.wait_for(event.is_set, timeout_s)
+
+
+def wait_for(pred: Callable[[], Any], timeout_s: float | None, poll_s: float = 0.002) -> bool:
+    """Until `pred()` is truthy (True) or `timeout_s` of the current clock passed (False)."""
+    return _current.wait_for(pred, timeout_s, poll_s)
+
+
+def is_virtual() -> bool:
+    return _current.virtual
+
+
+def call_later(seconds: float, fn: Callable[..., Any], *args: Any) -> Any:
+    """Call `fn(*args)` after `seconds` of the current clock; returns a handle with
+    `cancel()` (a daemon `threading.Timer` on the wall clock, an event on a virtual one)."""
+    if isinstance(_current, VirtualClock):
+        return _current.after(max(0, round(seconds * S)), lambda: fn(*args))
+    timer = threading.Timer(seconds, fn, args)
+    timer.daemon = True
+    timer.start()
+    return timer
+
+
+class ClockQueue(queue.Queue):
+    """A `queue.Queue` whose blocking `get` waits on the current clock (for a library's reply
+    queue, e.g. canopen's SDO client: its timeout then passes in bench time)."""
+
+    def get(self, block: bool = True, timeout: float | None = None) -> Any:
+        clk = _current
+        if block and isinstance(clk, VirtualClock) and not clk.in_event:
+            clk.wait_for(lambda: self.qsize() > 0, timeout)
+            return super().get(False)
+        return super().get(block, timeout)
+
+
+@contextlib.contextmanager
+def batch() -> Iterator[None]:
+    """Frames sent in the block are queued back to back, as a master's burst: a virtual
+    bus settles once at the end, not after each frame."""
+    if not isinstance(_current, VirtualClock):
+        yield
+        return
+    clk = _current
+    clk.hold += 1
+    try:
+        yield
+    finally:
+        clk.hold -= 1
+    for busy in clk.held:
+        clk.settle(busy)
+    clk.held.clear()
+
+
+__all__ = ["CLOCKS", "REAL", "VIRTUAL_EPOCH_NS", "Cancelled", "ClockQueue", "RealClock",
+           "VirtualClock",
+           "VirtualTimeout", "batch", "call_later", "current", "is_virtual", "monotonic",
+           "monotonic_ns", "sleep", "time_ns", "use", "wait", "wait_for"]

@@ -1,0 +1,292 @@
+"""In-process buses and lines on a `VirtualClock` (docs/clock.md): the wire's time, no threads.
+
+- `SimCanBus`: a python-can bus on one `CanMedium` per channel. A frame occupies the bus for its
+  bit time at the bench's bitrate (the frame's own stuff bits counted, `frame_bits`); frames
+  waiting for the bus go by arbitration, the lowest identifier first; every other node gets
+  the frame when its last bit has passed (with `receive_own_messages`, the sender too).
+- `SimLine`: an RS-485 line pair (`SerialLine`): each character reaches the far end at its
+  end on the wire, at the line's baud and character format.
+
+Receivers are fed inside the clock's events: `pump(bus, fn)` calls `fn(msg)` for each frame
+delivered to `bus` (through any wrappers above it, so taps and fault layers see it), instead
+of a python-can `Notifier` thread. A sender outside the events (the plan) settles the bus:
+its `send` returns once the medium has no frame in flight, so the answers it caused are
+delivered (an SDO server answers at once).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import can
+from can import BusABC, Message
+
+from hil import clock
+from hil.clock import VirtualClock
+from hil.transport.serial_line import SerialLine
+from hil.transport.urls import SerialSettings, TransportUrl, TransportUrlError
+from hil.units import S
+
+DEFAULT_BITRATE = 1_000_000  # CiA 301 and the A3's default CAN rate (P3.001, L10523)
+
+
+def _crc15(bits: list[int]) -> int:
+    crc = 0
+    for b in bits:
+        nxt = b ^ ((crc >> 14) & 1)
+        crc = (crc << 1) & 0x7FFF
+        if nxt:
+            crc ^= 0x4599
+    return crc
+
+
+def _bits(value: int, n: int) -> list[int]:
+    return [(value >> (n - 1 - i)) & 1 for i in range(n)]
+
+
+def frame_bits(msg: Message) -> int:
+    """Bits a classic CAN frame occupies on the wire, stuff bits and the 3-bit intermission
+    included (ISO 11898-1: stuffing from SOF to the end of the CRC sequence)."""
+    dlc = min(len(msg.data), 8) if not msg.is_remote_frame else min(msg.dlc, 8)
+    data = b"" if msg.is_remote_frame else bytes(msg.data[:8])
+    rtr = 1 if msg.is_remote_frame else 0
+    if msg.is_extended_id:
+        ident = msg.arbitration_id & 0x1FFFFFFF
+        head = [0, *_bits(ident >> 18, 11), 1, 1, *_bits(ident & 0x3FFFF, 18), rtr, 0, 0]
+    else:
+        head = [0, *_bits(msg.arbitration_id & 0x7FF, 11), rtr, 0, 0]
+    bits = head + _bits(dlc, 4) + [b for byte in data for b in _bits(byte, 8)]
+    bits += _bits(_crc15(bits), 15)
+    stuffed, run, last = 0, 0, None
+    for b in bits:
+        if b == last:
+            run += 1
+            if run == 5:
+                stuffed += 1
+                last, run = 1 - b, 1  # the stuff bit starts a new run
+                continue
+        else:
+            last, run = b, 1
+    # CRC delimiter, ACK slot + delimiter, EOF (7), intermission (3)
+    return len(bits) + stuffed + 1 + 2 + 7 + 3
+
+
+class SimMessage(Message):
+    """A delivered frame; `sender_time_ns`: when its sender queued it (clock ns)."""
+
+    __slots__ = ("sender_time_ns",)
+
+    def __init__(self, *args: Any, sender_time_ns: int | None = None, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        self.sender_time_ns = sender_time_ns
+
+
+class CanMedium:
+    """One CAN bus on the clock: arbitration, bit time, delivery; statistics for load."""
+
+    def __init__(self, clock: VirtualClock, channel: str, bitrate: int) -> None:
+        if bitrate <= 0:
+            raise ValueError(f"CAN bitrate {bitrate}: must be > 0")
+        self.clock, self.channel, self.bitrate = clock, channel, bitrate
+        self.nodes: list[SimCanBus] = []
+        self._pending: list[tuple[int, int, SimCanBus, Message]] = []  # (prio, seq, from, msg)
+        self._seq = 0
+        self.busy_until = 0
+        self.in_flight = 0
+        self.frames = 0
+        self.busy_ns = 0
+
+    def bit_ns(self, bits: int) -> int:
+        return bits * S // self.bitrate
+
+    def transmit(self, sender: SimCanBus, msg: Message) -> None:
+        prio = (msg.arbitration_id << 1) | (1 if msg.is_extended_id else 0)
+        self._seq += 1
+        self._pending.append((prio, self._seq, sender, msg))
+        self.in_flight += 1
+        if self.busy_until <= self.clock.time_ns():
+            self._start_next()
+
+    def _start_next(self) -> None:
+        if not self._pending:
+            return
+        self._pending.sort(key=lambda p: (p[0], p[1]))
+        _, _, sender, msg = self._pending.pop(0)
+        dur = self.bit_ns(frame_bits(msg))
+        start = max(self.clock.time_ns(), self.busy_until)
+        self.busy_until = start + dur
+        self.busy_ns += dur
+        self.clock.at(self.busy_until, lambda: self._done(sender, msg))
+
+    def _done(self, sender: SimCanBus, msg: Message) -> None:
+        self.frames += 1
+        self.in_flight -= 1
+        t = self.clock.time_ns()
+        for node in list(self.nodes):
+            if node is not sender or node.receive_own_messages:
+                node._deliver(msg, t)
+        self._start_next()
+
+    def idle(self) -> bool:
+        return self.in_flight == 0
+
+
+class SimCanBus(BusABC):
+    """A python-can bus on a `CanMedium` (`virtual:<channel>` under a virtual clock)."""
+
+    def __init__(self, channel: str, *, clock: VirtualClock, bitrate: int | None = None,
+                 receive_own_messages: bool = False, **_ignored: Any) -> None:
+        key = f"can:{channel}"
+        medium = clock.media.get(key)
+        if medium is None:
+            medium = clock.media[key] = CanMedium(clock, channel, bitrate or DEFAULT_BITRATE)
+        self.medium: CanMedium = medium
+        self.channel = channel
+        self.clock = clock
+        self.receive_own_messages = receive_own_messages
+        self.channel_info = f"virtual-time CAN {channel} at {medium.bitrate} bit/s"
+        self._rx: deque[Message] = deque()
+        self.on_rx: Callable[[], None] | None = None
+        medium.nodes.append(self)
+        super().__init__(channel=channel)
+
+    def send(self, msg: Message, timeout: float | None = None) -> None:
+        self._check_open()
+        out = SimMessage(arbitration_id=msg.arbitration_id, data=bytes(msg.data),
+                         is_extended_id=msg.is_extended_id, is_remote_frame=msg.is_remote_frame,
+                         is_error_frame=msg.is_error_frame, dlc=msg.dlc,
+                         channel=self.channel_info, sender_time_ns=self.clock.time_ns())
+        self.medium.transmit(self, out)
+        self.clock.settle(lambda: not self.medium.idle())
+
+    def _deliver(self, msg: Message, t: int) -> None:
+        if self._is_shutdown:
+            return
+        self._rx.append(SimMessage(timestamp=t / S, arbitration_id=msg.arbitration_id,
+                                   data=bytes(msg.data), is_extended_id=msg.is_extended_id,
+                                   is_remote_frame=msg.is_remote_frame,
+                                   is_error_frame=msg.is_error_frame, dlc=msg.dlc,
+                                   channel=self.channel,
+                                   sender_time_ns=getattr(msg, "sender_time_ns", None)))
+        if self.on_rx is not None:
+            self.on_rx()
+
+    def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
+        if not self._rx and timeout and not self.clock.in_event:
+            self.clock.wait_for(lambda: bool(self._rx) or self._is_shutdown, timeout)
+        return (self._rx.popleft() if self._rx else None), False
+
+    def _check_open(self) -> None:
+        if self._is_shutdown:
+            raise can.CanOperationError(f"{self.channel_info}: bus is shut down")
+
+    def shutdown(self) -> None:
+        if self._is_shutdown:
+            return
+        super().shutdown()
+        if self in self.medium.nodes:
+            self.medium.nodes.remove(self)
+
+
+def raw_bus(bus: Any) -> Any:
+    """The bus under any wrappers (`.bus` attributes: taps, fault layers)."""
+    seen = 0
+    while not isinstance(bus, SimCanBus) and getattr(bus, "bus", None) is not None and seen < 8:
+        bus, seen = bus.bus, seen + 1
+    return bus
+
+
+def pump(bus: BusABC, fn: Callable[[Message], None]) -> Callable[[], None]:
+    """Feed each frame delivered to `bus` (read through `bus`, wrappers and all) to
+    `fn(msg)` inside the delivering clock event. Returns a function that stops it."""
+    raw = raw_bus(bus)
+    if not isinstance(raw, SimCanBus):
+        raise TypeError(f"pump: {bus!r} is not on a virtual-time CAN bus")
+
+    def drain() -> None:
+        while True:
+            msg = bus.recv(0)
+            if msg is None:
+                return
+            fn(msg)
+
+    raw.on_rx = drain
+
+    def stop() -> None:
+        raw.on_rx = None
+
+    return stop
+
+
+class ListenerPump:
+    """python-can listeners (canopen's `MessageListener`) fed by `pump`: a Notifier's stand-in."""
+
+    def __init__(self, bus: BusABC, listeners: list[Any]) -> None:
+        self.listeners = listeners
+        self.exception: BaseException | None = None  # canopen's send_message checks it
+        self._stop = pump(bus, self._dispatch)
+
+    def _dispatch(self, msg: Message) -> None:
+        for listener in list(self.listeners):
+            listener.on_message_received(msg)
+
+    def stop(self, timeout: float = 0) -> None:
+        self._stop()
+
+
+class SimLine(SerialLine):
+    """One end of an in-process RS-485 line on the virtual clock (`pty:` / `serial:` under a
+    virtual clock: the drive opens `pty:<path>`, the harness `serial:<path>`)."""
+
+    def __init__(self, url: str, settings: SerialSettings, u: TransportUrl, *,
+                 tap: Any, name: str) -> None:
+        clk = clock.current()
+        if not isinstance(clk, VirtualClock):
+            raise TransportUrlError(url, "a virtual-time line needs a virtual clock")
+        self.clock = clk
+        super().__init__(url, settings, tap=tap, name=name)
+        self._wall_offset = 0  # the virtual clock is the recording's clock
+        key = f"rs485:{u.target}"
+        ends = clk.media.setdefault(key, [])
+        if len(ends) >= 2:
+            raise TransportUrlError(url, "this virtual-time line already has both ends open")
+        self._ends: list[SimLine] = ends
+        ends.append(self)
+        self.on_rx: Callable[[], None] | None = None
+        self._count = 0  # chunks received (a wait ends when it changes)
+
+    def _now(self) -> int:
+        return self.clock.time_ns()
+
+    def _block(self, until: int | None, now: int) -> None:
+        n0 = self._count
+        end = until if until is not None else now + 3600 * S
+        self.clock.run_until(end, lambda: self._count != n0 or self._closed)
+
+    def _peer(self) -> SimLine | None:
+        return next((e for e in self._ends if e is not self and not e._closed), None)
+
+    def _transmit(self, data: bytes, ends_ns: tuple[int, ...]) -> None:
+        start = ends_ns[0] - self.char_time_ns
+
+        def arrive() -> None:
+            peer = self._peer()
+            if peer is not None:
+                peer._arrive(data, start, [e - start for e in ends_ns])
+
+        self.clock.at(ends_ns[-1], arrive)  # the far UART hands the chunk over at its end
+
+    def _arrive(self, data: bytes, start: int, rel: list[int]) -> None:
+        self._received(data, start, rel_ends_ns=rel)
+        self._count += 1
+        if self.on_rx is not None:
+            self.on_rx()
+
+    def flush(self, timeout: float | None = None) -> bool:
+        return self.clock.wait_for(lambda: self._tx_free <= self.clock.time_ns(), timeout)
+
+    def _close_backend(self) -> None:
+        if self in self._ends:
+            self._ends.remove(self)
