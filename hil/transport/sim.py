@@ -49,6 +49,8 @@ def _bits(value: int, n: int) -> list[int]:
 def frame_bits(msg: Message) -> int:
     """Bits a classic CAN frame occupies on the wire, stuff bits and the 3-bit intermission
     included (ISO 11898-1: stuffing from SOF to the end of the CRC sequence)."""
+    if msg.is_error_frame:  # error flag (6) + error delimiter (8) + intermission (3)
+        return 17
     dlc = min(len(msg.data), 8) if not msg.is_remote_frame else min(msg.dlc, 8)
     data = b"" if msg.is_remote_frame else bytes(msg.data[:8])
     rtr = 1 if msg.is_remote_frame else 0

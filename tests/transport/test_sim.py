@@ -1,0 +1,104 @@
+"""In-process buses on the virtual clock: CAN bit time and arbitration, RS-485 char time.
+
+Frame lengths are written fresh from ISO 11898-1 (classic base frame: SOF 1, identifier 11,
+RTR 1, IDE 1, r0 1, DLC 4, data 8n, CRC 15 - stuffed after five equal bits - then CRC
+delimiter 1, ACK 2, EOF 7 and intermission 3: 47 + 8n bits unstuffed).
+"""
+
+from __future__ import annotations
+
+import can
+import pytest
+
+from hil import clock
+from hil.clock import VirtualClock
+from hil.transport.can_bus import open_can
+from hil.transport.serial_line import open_serial
+from hil.transport.sim import frame_bits, pump
+
+
+def _stuffed_reference(bits: str) -> int:
+    """Stuff bits in a bit string: after five equal bits, one of the other value."""
+    out, run, last = 0, 0, ""
+    for b in bits:
+        if b == last:
+            run += 1
+        else:
+            last, run = b, 1
+        if run == 5:
+            out += 1
+            last, run = ("1" if b == "0" else "0"), 1
+    return out
+
+
+def test_frame_bits_without_and_with_stuffing() -> None:
+    for n in range(9):
+        msg = can.Message(arbitration_id=0x555, data=bytes([0x55] * n), is_extended_id=False)
+        bits = frame_bits(msg)
+        worst = (34 + 8 * n - 1) // 4  # the bound of stuff bits over SOF..CRC
+        assert 47 + 8 * n <= bits <= 47 + 8 * n + worst
+    # identifier 0 and zero data: long runs of dominant bits, so stuffing is certain
+    zero = can.Message(arbitration_id=0, data=bytes(8), is_extended_id=False)
+    assert frame_bits(zero) >= 47 + 64 + 10
+    assert frame_bits(can.Message(is_error_frame=True)) == 17
+
+
+def test_stuffing_matches_a_reference_count() -> None:
+    from hil.transport.sim import _bits, _crc15
+
+    msg = can.Message(arbitration_id=0x181, data=bytes([0x37, 0x02, 0, 0]), is_extended_id=False)
+    head = [0, *_bits(0x181, 11), 0, 0, 0, *_bits(4, 4)]
+    head += [b for byte in msg.data for b in _bits(byte, 8)]
+    body = head + _bits(_crc15(head), 15)
+    expected = len(body) + _stuffed_reference("".join(map(str, body))) + 13
+    assert frame_bits(msg) == expected
+
+
+def test_a_frame_arrives_after_its_bit_time_and_arbitration_orders_waiting_frames() -> None:
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a = open_can("virtual:sim-t?bitrate=500000")
+        b = open_can("virtual:sim-t")
+        got: list[tuple[int, int]] = []
+        stop = pump(b, lambda m: got.append((m.arbitration_id, c.time_ns())))
+        first = can.Message(arbitration_id=0x700, data=b"\x05", is_extended_id=False)
+        low = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
+        high = can.Message(arbitration_id=0x601, data=bytes(8), is_extended_id=False)
+        with clock.batch():  # queued back to back while 0x700 holds the bus
+            a.send(first)
+            a.send(high)
+            a.send(low)
+        bit = 1_000_000_000 // 500_000
+        t1 = frame_bits(first) * bit
+        t2 = t1 + frame_bits(low) * bit
+        t3 = t2 + frame_bits(high) * bit
+        assert got == [(0x700, t1), (0x080, t2), (0x601, t3)]
+        assert c.time_ns() == t3  # the send settled: nothing in flight
+        stop()
+        a.shutdown()
+        b.shutdown()
+
+
+def test_only_a_virtual_can_url_opens_under_a_virtual_clock() -> None:
+    from hil.transport.urls import TransportUrlError
+
+    with clock.use(VirtualClock()), pytest.raises(TransportUrlError, match="--clock real"):
+        open_can("zenoh:lab/x?connect=tcp/127.0.0.1:7447")
+
+
+def test_rs485_characters_arrive_at_their_end_on_the_line(tmp_path) -> None:
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        drive = open_serial(f"pty:{tmp_path}/l1?baud=38400")
+        master = open_serial(f"serial:{tmp_path}/l1?baud=38400")
+        char = round(11 * 1e9 / 38400)  # start + 8 data + 2 stop (8N2, the A3 default)
+        assert master.char_time_ns == char
+        master.write(b"\x01\x03\x00\x00")
+        frame = drive.read_timed(4, timeout=0.1)
+        assert frame is not None and frame.data == b"\x01\x03\x00\x00"
+        assert list(frame.times_ns) == [char * (i + 1) for i in range(4)]
+        assert c.time_ns() == 4 * char  # handed over at the end of the last character
+        assert drive.read(1, timeout=0.05) == b""
+        assert c.time_ns() == 4 * char + 50_000_000
+        master.close()
+        drive.close()
