@@ -168,13 +168,16 @@ class VirtualClock:
             else:
                 self._watch[key] = old
 
-    def run_until(self, t: int, pred: Callable[[], Any] | None = None) -> bool:
+    def run_until(self, t: int, pred: Callable[[], Any] | None = None, *,
+                  watched: bool = True) -> bool:
         """Fire the events due up to `t` in order, stopping early once `pred()` holds;
-        returns whether it holds (True without `pred`). Time ends at `t` unless stopped."""
+        returns whether it holds (True without `pred`). Time ends at `t` unless stopped.
+        `watched=False`: no cancel or deadline (frames already on the wire still arrive)."""
         if self._running:
             raise RuntimeError("virtual clock: a wait inside a clock event (it would reorder "
                                "time); events must only schedule")
-        cancel, deadline = self._watch.get(threading.get_ident(), (None, None))
+        cancel, deadline = (self._watch.get(threading.get_ident(), (None, None)) if watched
+                            else (None, None))
         with self._lock:
             while True:
                 if pred is not None and pred():
@@ -223,12 +226,12 @@ class VirtualClock:
         if self.hold:
             self.held.append(busy)
             return
-        with self._lock:
+        with self._lock:  # not cancellable: what is on the wire arrives (one SDO at a time)
             while busy():
                 nxt = self.next_time()
                 if nxt is None:
                     return
-                self.run_until(nxt)
+                self.run_until(nxt, watched=False)
 
 
 REAL = RealClock()

@@ -48,6 +48,15 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         help="bench file for tests marked `hil` (default: $HIL_BENCH if set, else the "
         "built-in virtual bench)",
     )
+    group.addoption(
+        "--hil-clock",
+        action="store",
+        default=None,
+        choices=("virtual", "real"),
+        help="the bench's clock: virtual (deterministic, faster than real time) or real "
+        "(default: the bench file's clock:, else virtual where the bench can run on it; "
+        "docs/clock.md)",
+    )
     parser.addini("hil_plans", "directories whose *.yaml plan files are collected as tests",
                   type="paths", default=[])
     group.addoption(
@@ -83,6 +92,13 @@ def _bench_option(config: pytest.Config) -> str | None:
     return config.getoption("--hil-bench") or os.environ.get("HIL_BENCH") or None
 
 
+def _load_bench(config: pytest.Config) -> Any:
+    """The run's bench on the run's clock (`--hil-bench`, `--hil-clock`)."""
+    from hil.bench.bench import load_bench, with_clock
+
+    return with_clock(load_bench(_bench_option(config)), config.getoption("--hil-clock"))
+
+
 def _plan_dirs(config: pytest.Config) -> list[Path]:
     return [Path(p).resolve() for p in config.getini("hil_plans")]
 
@@ -102,6 +118,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         except PlanFileError as e:
             where = "--hil-bench" if config.getoption("--hil-bench") else "HIL_BENCH"
             raise pytest.UsageError(f"{where}: {e}") from None
+    if uses_bench and config.getoption("--hil-clock"):
+        try:
+            _load_bench(config)
+        except ValueError as e:
+            raise pytest.UsageError(f"--hil-clock: {e}") from None
     plans = [i for i in items if isinstance(i, PlanItem)]
     if plans:
         from hil.plan.runner import output_stems
@@ -147,10 +168,9 @@ class PlanItem(pytest.Item):
         self.stem: str | None = None  # output name, unique in the session (collection)
 
     def runtest(self) -> None:
-        from hil.bench.bench import load_bench
         from hil.plan.runner import run_plan
 
-        bench = load_bench(_bench_option(self.config))
+        bench = _load_bench(self.config)
         result = run_plan(self.plan, bench, _out_dir(self.config), stem=self.stem)
         from hil.report.data import load_run
         from hil.report.junit import case_properties
@@ -202,10 +222,9 @@ def _safe_name(nodeid: str) -> str:
 
 @pytest.fixture(scope="session")
 def hil_bench(pytestconfig: pytest.Config) -> Any:
-    """The bench of this pytest run (`--hil-bench FILE`, default: the virtual bench)."""
-    from hil.bench.bench import load_bench
-
-    return load_bench(_bench_option(pytestconfig))
+    """The bench of this pytest run (`--hil-bench FILE`, default: the virtual bench), on its
+    clock (`--hil-clock`)."""
+    return _load_bench(pytestconfig)
 
 
 @pytest.fixture
@@ -224,19 +243,24 @@ def hil_recorder(request: pytest.FixtureRequest) -> Iterator[Any]:
 
 @pytest.fixture
 def hil_session(hil_bench: Any, hil_recorder: Any) -> Iterator[Any]:
-    """Bench resources for one test; the bench goes to its safe state afterwards."""
+    """Bench resources for one test, on the bench's clock (virtual time: wait with
+    `hil.clock.sleep` / the drivers' waits, not `time.sleep`); the bench goes to its safe
+    state afterwards."""
+    from hil import clock
     from hil.plan.safety import go_safe
     from hil.plan.session import open_session
 
-    session = open_session(hil_bench, hil_recorder)
-    try:
-        session.idle()
-        yield session
-    finally:
+    clk = clock.VirtualClock() if hil_bench.clock == "virtual" else clock.REAL
+    with clock.use(clk):
+        session = open_session(hil_bench, hil_recorder)
         try:
-            go_safe(session, "end of test", hil_recorder)
+            session.idle()
+            yield session
         finally:
-            session.close()
+            try:
+                go_safe(session, "end of test", hil_recorder)
+            finally:
+                session.close()
 
 
 @pytest.fixture

@@ -30,7 +30,8 @@ def free_port_factory():
 # that is not real-time (CI shares 2 cores): a stall of tens of ms can move one timing verdict
 # past its window. Each such test is rerun once on failure (pytest-rerunfailures); a failure
 # in both runs fails the suite, and every rerun is listed with its traceback (`-raR`).
-# Tests on the injected clock are never rerun: they are deterministic. Nor is anything run
+# Tests on the injected clock or in virtual time (`virtual_time`, docs/clock.md) are never
+# rerun: they are deterministic. Nor is anything run
 # against a bench file (`--hil-bench` / HIL_BENCH): a failed plan is never repeated on
 # hardware without an engineer deciding so.
 INTEGRATION_RERUNS = 1
@@ -45,5 +46,7 @@ def pytest_collection_modifyitems(config, items):
     if config.getoption("--hil-bench", None) or os.environ.get("HIL_BENCH"):
         return
     for item in items:
+        if item.get_closest_marker("virtual_time"):
+            continue  # deterministic: a failure is a failure
         if item.get_closest_marker("integration") and not item.get_closest_marker("flaky"):
             item.add_marker(pytest.mark.flaky(reruns=INTEGRATION_RERUNS, reruns_delay=1))

@@ -1,4 +1,7 @@
-"""`pytest -m hil`: every shipped plan as a test, on the bench given by `--hil-bench`."""
+"""`pytest -m hil`: every shipped plan as a test, on the bench given by `--hil-bench`.
+
+On the built-in virtual bench this runs in virtual time (docs/clock.md), and each plan runs
+twice: the two recordings must carry identical messages (topics, log times, payloads)."""
 
 from __future__ import annotations
 
@@ -7,7 +10,8 @@ import json
 import pytest
 from mcap.reader import make_reader
 
-from hil.plan.plan import find_plans
+from hil.plan.plan import find_plans, load_plan
+from hil.plan.runner import run_plan
 from hil.pytest_plugin import explain
 from hil.record.schemas import message_problems
 
@@ -15,12 +19,26 @@ PLANS = find_plans()
 
 
 @pytest.mark.hil
-@pytest.mark.integration
+@pytest.mark.virtual_time
 @pytest.mark.parametrize("plan", PLANS, ids=[p.stem for p in PLANS])
-def test_shipped_plan(plan, hil_run_plan) -> None:
+def test_shipped_plan(plan, hil_run_plan, hil_bench, tmp_path) -> None:
     result = hil_run_plan(plan)
     assert result.passed, explain(result)
     assert schema_problems(result.recording) == []
+    if hil_bench.clock == "virtual":  # determinism: the same plan again, the same messages
+        again = run_plan(load_plan(plan), hil_bench, tmp_path)
+        first, second = messages(result.recording), messages(again.recording)
+        assert len(first) == len(second)
+        diff = next((i for i, (a, b) in enumerate(zip(first, second, strict=True)) if a != b),
+                    None)
+        assert diff is None, f"message {diff} differs: {first[diff]} vs {second[diff]}"
+
+
+def messages(path: str) -> list[tuple[str, int, bytes]]:
+    """(topic, log time, payload) of every message, in file order."""
+    with open(path, "rb") as f:
+        return [(ch.topic, m.log_time, bytes(m.data))
+                for _, ch, m in make_reader(f).iter_messages(log_time_order=False)]
 
 
 def schema_problems(path: str) -> list[str]:

@@ -6,6 +6,7 @@ Format: docs/benches.md. `load_bench(path)` returns a validated `Bench` or raise
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -303,6 +304,21 @@ def clock_blocker(virtual: bool, process: str, can: dict[str, str], rs485: dict[
         if not url.startswith("virtual:"):
             return f"DI/DO {url} is not in-process virtual:"
     return None
+
+
+def with_clock(bench: Bench, clock: str | None) -> Bench:
+    """`bench` on `clock` ("virtual" / "real"; None: as the bench says), e.g. `--clock`.
+    Raises ValueError naming why a bench cannot run on the virtual clock."""
+    if clock is None or clock == bench.clock:
+        return bench
+    if clock not in CLOCKS:
+        raise ValueError(f"clock {clock!r}: one of {', '.join(CLOCKS)}")
+    if clock == "virtual":
+        why = clock_blocker(bench.virtual, bench.process, bench.can, bench.rs485,
+                            [d.dio for d in bench.drives.values() if d.dio])
+        if why:
+            raise ValueError(f"bench {bench.name} cannot run on the virtual clock: {why}")
+    return dataclasses.replace(bench, clock=clock)
 
 
 def _clock(v: Checker, top: LDict, virtual: bool, process: str, can: dict[str, str],

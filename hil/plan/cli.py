@@ -10,7 +10,7 @@ import os
 import sys
 from pathlib import Path
 
-from hil.bench.bench import Bench, load_bench
+from hil.bench.bench import CLOCKS, Bench, load_bench, with_clock
 from hil.bench.yamlio import PlanFileError
 from hil.plan.events import Listener
 from hil.plan.listeners import StepLines
@@ -58,6 +58,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="run N plans at a time, each in its own process on its own "
                         "virtual bench (0 or auto: one per CPU; default 1). A bench that is "
                         "not virtual, or shares a fixed transport, runs plans one at a time")
+    parser.add_argument("--clock", choices=CLOCKS, default=None,
+                        help="the bench's clock: virtual (the model's, deterministic and much "
+                        "faster than real time) or real (the wall clock). Default: the bench "
+                        "file's clock:, else virtual where the bench can run on it (the "
+                        "built-in virtual bench), else real (docs/clock.md)")
     parser.add_argument("--allow-inconclusive", action="store_true",
                         help="count inconclusive timing verdicts as passed")
     parser.add_argument("--check", action="store_true",
@@ -149,7 +154,7 @@ def main(args: argparse.Namespace) -> int:
         if bench_path and not args.bench:
             print(f"bench: {bench_path} (from ${BENCH_ENV})", file=sys.stderr)
     try:
-        bench = load_bench(bench_path)
+        bench = with_clock(load_bench(bench_path), args.clock)
         plans = select([load_plan(p) for p in find_plans(args.plans, plans_dir)],
                        args.keyword, args.marker)
     except PlanFileError as e:
@@ -157,6 +162,9 @@ def main(args: argparse.Namespace) -> int:
         return 2
     except ExprError as e:
         print(f"hil run: -k/-m: {e}", file=sys.stderr)
+        return 2
+    except ValueError as e:  # --clock virtual on a bench that cannot
+        print(f"hil run: --clock: {e}", file=sys.stderr)
         return 2
     if args.last_failed:
         plans = _last_failed(plans, Path(args.out), quiet=args.quiet)

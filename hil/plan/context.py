@@ -127,6 +127,19 @@ class StepContext:
         self.started: dict[str, int] = {}  # step name -> wall ns it (last) started
         # (drive, parameter) -> value check_timing read from the drive (None: unreadable)
         self.param_reads: dict[tuple[str, str], int | None] = {}
+        self._live: Any = None  # LiveSource of the check_timing steps
+
+    def live_source(self) -> Any:
+        """The recording so far as a timing source (call after `rec.flush()`): decoded once
+        per message over the plan (`LiveSource`), or read whole where the recorder keeps no
+        mirror (a test double)."""
+        from hil.timing.source import LiveSource, RecordingSource
+
+        if not hasattr(self.rec, "keep_messages"):
+            return RecordingSource(self.rec.path)
+        if self._live is None:
+            self._live = LiveSource()
+        return self._live.refresh(self.rec)
 
     def written(self, drive: str, values: dict[str, int]) -> None:
         """Record parameter values the plan wrote; only on a bench that is not virtual (a

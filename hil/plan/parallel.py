@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hil.bench.bench import Bench, load_bench
+from hil.bench.bench import Bench, load_bench, with_clock
 from hil.plan.events import Listener, Note, Notifier, PlanEnded, PlanStarted, StepEnded
 from hil.plan.plan import Plan, check_plan, load_plan
 from hil.plan.runner import PlanResult, output_stems, run_plan, timing_specs
@@ -139,6 +139,7 @@ class _Job:
     index: int
     total: int
     stem: str  # output name, unique within the run (runner.output_stems)
+    clock: str | None = None  # `--clock` (None: the bench file's)
 
 
 def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
@@ -148,7 +149,8 @@ def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
     try:
         if _stop_requested:
             return None, [], True
-        plan, bench = load_plan(job.plan_path), load_bench(job.bench_path)
+        plan = load_plan(job.plan_path)
+        bench = with_clock(load_bench(job.bench_path), job.clock)
         notes = _Notes()
         try:
             res = run_plan(plan, bench, Path(job.out_dir), listeners=[notes],
@@ -196,7 +198,7 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
     events = Notifier(listeners)
     stems = output_stems(plans)
     todo = [_Job(str(p.path), bench.path or None, str(out_dir), allow_inconclusive, i,
-                 len(plans), stems[i - 1]) for i, p in enumerate(plans, 1)]
+                 len(plans), stems[i - 1], bench.clock) for i, p in enumerate(plans, 1)]
     results: dict[int, PlanResult] = {}
     done = 0
     ctx = multiprocessing.get_context("spawn")

@@ -209,6 +209,7 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                             "safe anyway (one SDO transaction at a time)", name="hil.runner")
                 if session is not None:
                     _go_safe(session, reason, rec, res, events, plan)
+                    _tail(session)
         finally:
             intr.shield = True
             if session is not None:
@@ -227,6 +228,22 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
             interrupted.plan_result = res  # type: ignore[attr-defined]  # for `-j N` workers
         raise interrupted
     return res
+
+
+# On a virtual clock nothing passes between the safe state and the end of the recording, so
+# the bench runs on this long (what closing a real-time run takes, and more than the drive
+# needs to cut torque after the brake engaged, P1.043): its reaction is on the record.
+SAFE_TAIL_NS = 200_000_000
+
+
+def _tail(session: Session) -> None:
+    if not clock.is_virtual():
+        return
+    with contextlib.suppress(Exception):
+        clock.sleep(SAFE_TAIL_NS / 1e9)
+        sample = getattr(session.world, "sample_truth", None)
+        if sample is not None:
+            sample()
 
 
 def _record_dut(ctx: StepContext, bench: Bench) -> None:
@@ -315,6 +332,8 @@ def _open_recording(plan: Plan, bench: Bench, out_dir: Path,
     rec.add_metadata("hil.clock", {"clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
                                    "started_wall_ns": str(time.time_ns())})
     checked = sorted({s.args["spec"] for s in plan.steps if s.kind == "check_timing"})
+    if checked:  # the live checks read each message once (LiveSource)
+        rec.keep_messages()
     if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding
         dspec = plan_spec(plan, bench.drives[plan.drive or bench.default_drive])
         rec.add_metadata("timing", {"specs": json.dumps(checked),

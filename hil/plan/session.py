@@ -29,7 +29,7 @@ from hil.gateway.client import LeaseRefused, acquire
 from hil.profile.params import parse_name
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
-from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial, fault_ids
+from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial, next_fault_id
 from hil.transport.serial_line import open_serial
 
 
@@ -271,7 +271,7 @@ def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
 def _link_fault_recorder(rec: Any, transport: str, target: str) -> Callable[..., None]:
     """Lease.on_fault -> the /faults channel: a lost gateway link (or a lease the gateway
     ended) is a fault on the wire like an injected one, with its start and its end."""
-    fault_id = next(fault_ids)
+    fault_id = next_fault_id()
 
     def record(kind: str, active: bool, t_ns: int, reason: str) -> None:
         rec.fault(kind, transport, active, fault_id, t=t_ns, target=target, reason=reason)

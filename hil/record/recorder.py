@@ -198,6 +198,8 @@ class Recorder:
         self._open = True
         self._stopping = False
         self._schema_ids: dict[str, int] = {}
+        self.topic_of: dict[int, str] = {}  # channel id -> topic
+        self.mirror: list[tuple[int, int, int, bytes]] | None = None  # see keep_messages()
         self._channels: dict[str, int] = {}
         self._chan_meta: dict[str, dict[str, str]] = {}
         self._can_ch: dict[str, tuple] = {}
@@ -455,6 +457,23 @@ class Recorder:
         """A metadata record; non-string values are stored as JSON text."""
         self._control(MetadataItem(name, _str_map(data)))
 
+    def keep_messages(self) -> list[tuple[int, int, int, bytes]]:
+        """From now on, also keep every message written (channel id, log time, publish
+        time, bytes) in `mirror`, in file order, for a live checker that reads each message
+        once (`hil.timing.source.LiveSource`) instead of re-reading the file."""
+        if self.mirror is None:
+            self.mirror = []
+            mirror, write = self.mirror, self._w.add_message
+
+            def add_message(cid: int, log_time: int, publish_time: int, data: bytes,
+                            *args: Any, **kw: Any) -> Any:
+                out = write(cid, log_time, publish_time, data, *args, **kw)
+                mirror.append((cid, log_time, publish_time, data))
+                return out
+
+            self._w.add_message = add_message  # type: ignore[method-assign]
+        return self.mirror
+
     def flush(self, timeout: float = 10.0) -> bool:
         """Wait until everything queued so far is written and flushed to the OS."""
         if not self._thread.is_alive():
@@ -614,6 +633,7 @@ class Recorder:
             )
         meta = {"publish_time_source": source, **self._chan_meta.get(topic, {})}
         cid = self._channels[topic] = self._w.add_channel(topic, "json", sid, meta)
+        self.topic_of[cid] = topic
         return cid
 
     def _load_decoders(self) -> None:

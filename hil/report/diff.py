@@ -136,8 +136,9 @@ def _change(side: Side, last: dict, name: str, t: int, value: Any) -> None:
 
 
 def _place(side: Side, t: int) -> tuple[int, int]:
-    """(step index, offset ns) of instant `t`: the step running then."""
-    k = max((i for i, s in side.starts.items() if s <= t), key=lambda i: side.starts[i],
+    """(step index, offset ns) of instant `t`: the step running then (of steps that began at
+    the same instant, as zero-time steps do in virtual time, the last one)."""
+    k = max((i for i, s in side.starts.items() if s <= t), key=lambda i: (side.starts[i], i),
             default=min(side.starts, default=0))
     return k, t - side.starts.get(k, side.t0)
 

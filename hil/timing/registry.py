@@ -51,9 +51,26 @@ def load_specs(extra_dirs: Iterable[Path | str] | None = None) -> SpecRegistry:
     broken: dict[str, str] = {}
     for p in paths:
         try:
-            s = load_spec(p)
+            s = _load_cached(Path(p))
         except SpecError as e:
             broken[p.stem] = str(e)
             continue
         specs[s.id] = s
     return SpecRegistry(specs, broken)
+
+
+_cache: dict[tuple[str, int, int], Spec] = {}
+
+
+def _load_cached(path: Path) -> Spec:
+    """`load_spec`, parsed once per file version (path, mtime, size) in this process: each
+    plan of a run asks for every spec."""
+    try:
+        st = path.stat()
+    except OSError:
+        return load_spec(path)
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    spec = _cache.get(key)
+    if spec is None:
+        spec = _cache[key] = load_spec(path)
+    return spec

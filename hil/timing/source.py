@@ -170,6 +170,50 @@ class RecordingSource(MemorySource):
         self.path = str(path)
 
 
+class LiveSource(MemorySource):
+    """The recording of a running plan, for its `check_timing` steps: each message is decoded
+    once from the recorder's `mirror` (`Recorder.keep_messages`), so a plan's checks cost
+    what its recording holds, not that times the number of checks. `refresh(rec)` (after
+    `rec.flush()`) takes what was written since; the file gives metadata and resolutions, as
+    `RecordingSource` reads them."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._seen = 0
+        self.meta: dict[str, dict[str, str]] = {}
+        self.error: str | None = None
+        self.corrupt = False
+        self.truncated = True
+        self.schemas: set[str] = set()
+        self.path = ""
+
+    def refresh(self, rec: Any) -> LiveSource:
+        head = RecordingSource(rec.path, topics=[])  # metadata and resolutions, no messages
+        self.meta, self._res = head.meta, head._res
+        self.error, self.corrupt, self.truncated = head.error, head.corrupt, head.truncated
+        self.schemas, self.path = head.schemas, head.path
+        mirror = rec.keep_messages()
+        n = len(mirror)
+        names = rec.topic_of
+        touched: set[str] = set()
+        for cid, log_t, pub_t, data in mirror[self._seen:n]:
+            topic = names.get(cid, f"?{cid}")
+            try:
+                obj = json.loads(data)
+            except ValueError as exc:
+                obj = {"error": f"undecodable message: {exc}", "raw": bytes(data).hex()}
+            lst = self._msgs.setdefault(topic, [])
+            t = int(pub_t or log_t)
+            if lst and t < lst[-1][0]:
+                touched.add(topic)
+            lst.append((t, obj if isinstance(obj, dict) else {"value": obj}))
+        for topic in touched:
+            self._msgs[topic].sort(key=lambda m: m[0])
+        self._seen = n
+        self._samples_cache.clear()
+        return self
+
+
 def _metadata(rec: Any) -> dict[str, dict[str, str]]:
     """Normalise `Recording.metadata()` into {name: {key: value}}."""
     try:

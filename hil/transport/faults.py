@@ -37,7 +37,16 @@ REQUEST_FAULTS = ("crc", "partial", "split", "late", "noise", "silence")
 REPLY_FAULTS = ("reply_late", "reply_partial", "reply_split", "reply_noise")
 SERIAL_FAULTS = REQUEST_FAULTS + REPLY_FAULTS
 DIO_FAULTS = ("bounce", "stuck")
-fault_ids = itertools.count(1)  # /faults ids, unique in the process
+_process_fault_ids = itertools.count(1)
+
+
+def next_fault_id() -> int:
+    """A /faults id: unique in the process; on a virtual clock, counted per run from 1 (so
+    the run repeats itself exactly, docs/clock.md)."""
+    clk = clock.current()
+    if isinstance(clk, clock.VirtualClock):
+        return next(clk.media.setdefault("fault_ids", itertools.count(1)))
+    return next(_process_fault_ids)
 # Bursts whose frames must go out within a window: AL111/AL112 "within 1 ms" (L19933, L19941).
 BURST_WINDOW_NS = {"sdo_flood": 1_000_000, "duplicate_pdo": 1_000_000}
 
@@ -97,7 +106,7 @@ class Fault:
     params: dict[str, Any] = field(default_factory=dict)
     match: CanMatch | None = None
     every: int = 1  # hit only every n-th matching frame (1st..n-1th pass): deterministic
-    id: int = field(default_factory=lambda: next(fault_ids))
+    id: int = field(default_factory=next_fault_id)
     seen: int = 0  # matching frames so far
     on_end: Any = None  # called once the end is recorded (a stuck line let go)
 

@@ -31,8 +31,10 @@ import threading
 import time
 import tty
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import serial
 import zenoh
@@ -542,6 +544,64 @@ class ZenohLine(SerialLine):
         close_session(self.session)
 
 
+# -- virtual time ------------------------------------------------------------------------
+
+class SimLine(SerialLine):
+    """One end of an in-process RS-485 line on the virtual clock (`pty:` / `serial:` under a
+    virtual clock: the drive opens `pty:<path>`, the harness `serial:<path>`)."""
+
+    def __init__(self, url: str, settings: SerialSettings, u: TransportUrl, *,
+                 tap: Any, name: str) -> None:
+        clk = clock.current()
+        if not isinstance(clk, clock.VirtualClock):
+            raise TransportUrlError(url, "a virtual-time line needs a virtual clock")
+        self.clock = clk
+        super().__init__(url, settings, tap=tap, name=name)
+        self._wall_offset = 0  # the virtual clock is the recording's clock
+        key = f"rs485:{u.target}"
+        ends = clk.media.setdefault(key, [])
+        if len(ends) >= 2:
+            raise TransportUrlError(url, "this virtual-time line already has both ends open")
+        self._ends: list[SimLine] = ends
+        ends.append(self)
+        self.on_rx: Callable[[], None] | None = None
+        self._count = 0  # chunks received (a wait ends when it changes)
+
+    def _now(self) -> int:
+        return self.clock.time_ns()
+
+    def _block(self, until: int | None, now: int) -> None:
+        n0 = self._count
+        end = until if until is not None else now + 3600 * S
+        self.clock.run_until(end, lambda: self._count != n0 or self._closed)
+
+    def _peer(self) -> SimLine | None:
+        return next((e for e in self._ends if e is not self and not e._closed), None)
+
+    def _transmit(self, data: bytes, ends_ns: tuple[int, ...]) -> None:
+        start = ends_ns[0] - self.char_time_ns
+
+        def arrive() -> None:
+            peer = self._peer()
+            if peer is not None:
+                peer._arrive(data, start, [e - start for e in ends_ns])
+
+        self.clock.at(ends_ns[-1], arrive)  # the far UART hands the chunk over at its end
+
+    def _arrive(self, data: bytes, start: int, rel: list[int]) -> None:
+        self._received(data, start, rel_ends_ns=rel)
+        self._count += 1
+        if self.on_rx is not None:
+            self.on_rx()
+
+    def flush(self, timeout: float | None = None) -> bool:
+        return self.clock.wait_for(lambda: self._tx_free <= self.clock.time_ns(), timeout)
+
+    def _close_backend(self) -> None:
+        if self in self._ends:
+            self._ends.remove(self)
+
+
 def open_serial(url: str, *, tap: Tap | None = None, name: str | None = None,
                 **options) -> SerialLine:
     """Open an RS-485 line from its URL. `name` names the port in recordings (default:
@@ -551,7 +611,6 @@ def open_serial(url: str, *, tap: Tap | None = None, name: str | None = None,
     settings = u.serial()
     label = name or u.target
     if clock.is_virtual() and u.scheme in ("pty", "serial"):  # the virtual bench's line
-        from hil.transport.sim import SimLine
         return SimLine(url, settings, u, tap=tap, name=label)
     if u.scheme == "pty":
         return PtyLine(url, settings, u.target, tap=tap, name=label)

@@ -4,8 +4,7 @@
   bit time at the bench's bitrate (the frame's own stuff bits counted, `frame_bits`); frames
   waiting for the bus go by arbitration, the lowest identifier first; every other node gets
   the frame when its last bit has passed (with `receive_own_messages`, the sender too).
-- `SimLine`: an RS-485 line pair (`SerialLine`): each character reaches the far end at its
-  end on the wire, at the line's baud and character format.
+- RS-485 on the clock is `hil.transport.serial_line.SimLine`, a `SerialLine` backend.
 
 Receivers are fed inside the clock's events: `pump(bus, fn)` calls `fn(msg)` for each frame
 delivered to `bus` (through any wrappers above it, so taps and fault layers see it), instead
@@ -23,10 +22,7 @@ from typing import Any
 import can
 from can import BusABC, Message
 
-from hil import clock
 from hil.clock import VirtualClock
-from hil.transport.serial_line import SerialLine
-from hil.transport.urls import SerialSettings, TransportUrl, TransportUrlError
 from hil.units import S
 
 DEFAULT_BITRATE = 1_000_000  # CiA 301 and the A3's default CAN rate (P3.001, L10523)
@@ -46,11 +42,25 @@ def _bits(value: int, n: int) -> list[int]:
     return [(value >> (n - 1 - i)) & 1 for i in range(n)]
 
 
+_BITS_CACHE: dict[tuple, int] = {}
+
+
 def frame_bits(msg: Message) -> int:
     """Bits a classic CAN frame occupies on the wire, stuff bits and the 3-bit intermission
     included (ISO 11898-1: stuffing from SOF to the end of the CRC sequence)."""
     if msg.is_error_frame:  # error flag (6) + error delimiter (8) + intermission (3)
         return 17
+    key = (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame, msg.dlc,
+           bytes(msg.data))
+    bits = _BITS_CACHE.get(key)
+    if bits is None:  # a bus repeats its frames (polls, SYNC, PDOs): count each once
+        if len(_BITS_CACHE) > 65536:
+            _BITS_CACHE.clear()
+        bits = _BITS_CACHE[key] = _frame_bits(msg)
+    return bits
+
+
+def _frame_bits(msg: Message) -> int:
     dlc = min(len(msg.data), 8) if not msg.is_remote_frame else min(msg.dlc, 8)
     data = b"" if msg.is_remote_frame else bytes(msg.data[:8])
     rtr = 1 if msg.is_remote_frame else 0
@@ -237,58 +247,3 @@ class ListenerPump:
     def stop(self, timeout: float = 0) -> None:
         self._stop()
 
-
-class SimLine(SerialLine):
-    """One end of an in-process RS-485 line on the virtual clock (`pty:` / `serial:` under a
-    virtual clock: the drive opens `pty:<path>`, the harness `serial:<path>`)."""
-
-    def __init__(self, url: str, settings: SerialSettings, u: TransportUrl, *,
-                 tap: Any, name: str) -> None:
-        clk = clock.current()
-        if not isinstance(clk, VirtualClock):
-            raise TransportUrlError(url, "a virtual-time line needs a virtual clock")
-        self.clock = clk
-        super().__init__(url, settings, tap=tap, name=name)
-        self._wall_offset = 0  # the virtual clock is the recording's clock
-        key = f"rs485:{u.target}"
-        ends = clk.media.setdefault(key, [])
-        if len(ends) >= 2:
-            raise TransportUrlError(url, "this virtual-time line already has both ends open")
-        self._ends: list[SimLine] = ends
-        ends.append(self)
-        self.on_rx: Callable[[], None] | None = None
-        self._count = 0  # chunks received (a wait ends when it changes)
-
-    def _now(self) -> int:
-        return self.clock.time_ns()
-
-    def _block(self, until: int | None, now: int) -> None:
-        n0 = self._count
-        end = until if until is not None else now + 3600 * S
-        self.clock.run_until(end, lambda: self._count != n0 or self._closed)
-
-    def _peer(self) -> SimLine | None:
-        return next((e for e in self._ends if e is not self and not e._closed), None)
-
-    def _transmit(self, data: bytes, ends_ns: tuple[int, ...]) -> None:
-        start = ends_ns[0] - self.char_time_ns
-
-        def arrive() -> None:
-            peer = self._peer()
-            if peer is not None:
-                peer._arrive(data, start, [e - start for e in ends_ns])
-
-        self.clock.at(ends_ns[-1], arrive)  # the far UART hands the chunk over at its end
-
-    def _arrive(self, data: bytes, start: int, rel: list[int]) -> None:
-        self._received(data, start, rel_ends_ns=rel)
-        self._count += 1
-        if self.on_rx is not None:
-            self.on_rx()
-
-    def flush(self, timeout: float | None = None) -> bool:
-        return self.clock.wait_for(lambda: self._tx_free <= self.clock.time_ns(), timeout)
-
-    def _close_backend(self) -> None:
-        if self in self._ends:
-            self._ends.remove(self)

@@ -1,11 +1,13 @@
 """A stand-in drive side for runner tests (not the model): DI/DO over a virtual DIO board,
-parameters in a dict. SON (DI1) -> BRKR (DO6) after P1.042 ms, like §2.9 in spirit."""
+parameters in a dict. SON (DI1) -> BRKR (DO6) after P1.042 ms, like §2.9 in spirit. Its
+timer runs on the bench's clock (`hil.clock.call_later`), so the same fake serves a run in
+virtual time and one in real time."""
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
+from hil import clock
 from hil.plan.session import DriveIO, Session
 from hil.transport.dio import open_dio
 from hil.virtual.world import resolve_auto
@@ -30,7 +32,7 @@ class FakeDriveSide:
         self.port.set("DO1", True)  # SRDY
         self.port.set("DO6", False)  # BRKR off: brake engaged
         self.port.set("FDBK", False)
-        self.timers: list[threading.Timer] = []
+        self.timers: list[Any] = []  # threading.Timer or virtual-clock events
         self.port.subscribe(self._on)
 
     def _on(self, line: str, level: bool, t: int) -> None:
@@ -39,9 +41,7 @@ class FakeDriveSide:
         if self.break_brake and not level:
             return  # a broken drive that never engages the brake
         delay = self.params.values.get("P1.042", 0) / 1000 if level else 0
-        tm = threading.Timer(delay, self.port.set, ("DO6", level))
-        self.timers.append(tm)
-        tm.start()
+        self.timers.append(clock.call_later(delay, self.port.set, "DO6", level))
 
     def close(self) -> None:
         for tm in self.timers:

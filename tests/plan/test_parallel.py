@@ -113,7 +113,8 @@ def test_j2_on_a_real_bench_runs_one_plan_at_a_time_and_says_so(tmp_path, capsys
 
 
 def _start_two_holds(tmp_path: Path, **popen: Any) -> tuple[subprocess.Popen, Path]:
-    """`hil run -j 2 -q` of two HOLD plans; returns once both recordings exist (or 60 s)."""
+    """`hil run -j 2 -q --clock real` of two HOLD plans (a 20 s wait of wall time, in which
+    the workers are stopped); returns once both recordings exist (or 60 s)."""
     plans = []
     for name in ("hold_a", "hold_b"):
         p = tmp_path / f"{name}.yaml"
@@ -121,7 +122,7 @@ def _start_two_holds(tmp_path: Path, **popen: Any) -> tuple[subprocess.Popen, Pa
         plans.append(str(p))
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "run", *plans, "--out", str(out),
-                             "-j", "2", "-q"], **popen)
+                             "-j", "2", "-q", "--clock", "real"], **popen)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and not (
             out.is_dir() and len(list(out.glob("*.mcap"))) == 2):

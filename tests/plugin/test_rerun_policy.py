@@ -1,6 +1,7 @@
 """The suite's rerun policy (tests/conftest.py), through pytester: a test marked
 `integration` (real time on a shared host) is rerun once; a unit test never; nothing is
-rerun when a bench file is given (a plan is never repeated on hardware by itself)."""
+rerun in virtual time or when a bench file is given (a plan is never repeated on hardware
+by itself)."""
 
 from __future__ import annotations
 
@@ -25,13 +26,19 @@ def test_fails_always():
 
 def test_unit_fails():
     assert False
+
+@pytest.mark.integration
+@pytest.mark.virtual_time
+def test_virtual_time_fails():
+    assert False
 """
 
 
 @pytest.fixture
 def probe(pytester: pytest.Pytester) -> pytest.Pytester:
     pytester.makeconftest((Path(__file__).parents[1] / "conftest.py").read_text())
-    pytester.makeini("[pytest]\nmarkers =\n    integration: real time\n")
+    pytester.makeini("[pytest]\nmarkers =\n    integration: real time\n"
+                     "    virtual_time: virtual clock\n")
     pytester.makepyfile(test_probe=PROBE)
     return pytester
 
@@ -39,8 +46,12 @@ def probe(pytester: pytest.Pytester) -> pytest.Pytester:
 def test_integration_tests_are_rerun_once_and_unit_tests_never(probe, monkeypatch):
     monkeypatch.delenv("HIL_BENCH", raising=False)
     res = probe.runpytest("-p", "no:cacheprovider", "-ra")
-    assert res.parseoutcomes() == {"passed": 1, "failed": 2, "rerun": 2}  # once each
+    # once each; never a virtual-time test, even one marked integration (docs/clock.md)
+    assert res.parseoutcomes() == {"passed": 1, "failed": 3, "rerun": 2}
     res.stdout.fnmatch_lines(["*FAILED*test_fails_always*", "*FAILED*test_unit_fails*"])
+    res.stdout.fnmatch_lines(["*FAILED*test_virtual_time_fails*"])
+    assert not [ln for ln in res.stdout.lines
+                if ln.startswith("RERUN") and "test_virtual_time_fails" in ln]
     # why each rerun happened is in the log: the first attempt's traceback
     res.stdout.fnmatch_lines(["*rerun test summary info*", "RERUN *test_fails_once",
                               "*assert 1 > 1*", "PASSED *test_fails_once"])
@@ -49,4 +60,4 @@ def test_integration_tests_are_rerun_once_and_unit_tests_never(probe, monkeypatc
 def test_nothing_is_rerun_against_a_bench_file(probe, monkeypatch):
     monkeypatch.setenv("HIL_BENCH", "my-bench.yaml")
     res = probe.runpytest("-p", "no:cacheprovider")
-    assert res.parseoutcomes() == {"failed": 3}
+    assert res.parseoutcomes() == {"failed": 4}

@@ -155,13 +155,13 @@ class CheckTiming(StepKind):
         if sample is not None:  # the model's state as of now, not as of its last sample
             sample()
         ctx.rec.flush()
-        source = RecordingSource(ctx.rec.path)
+        source = ctx.live_source()
         binding = d.spec.binding() | {k: bind_line(x, d.spec)
                                       for k, x in a.get("bind", {}).items()}
         constants = constants_for(spec, ctx.bench.timing_constants) | a.get("constants", {})
         if read_unrecorded(ctx, spec, source, binding, a["params"], constants):
             ctx.rec.flush()
-            source = RecordingSource(ctx.rec.path)  # with the values just read
+            source = ctx.live_source()  # with the values just read
         until = clock.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
         verdicts = check(spec, source, params=a["params"] or None, binding=binding,
                          constants=constants or None)

@@ -1,0 +1,107 @@
+"""Plans in virtual time (docs/clock.md): the same verdicts as in real time, step timeouts in
+virtual time, a wall-clock watchdog, and `--clock` / `clock:` refusals."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from hil import clock
+from hil.bench.bench import load_bench, loads_bench, with_clock
+from hil.bench.yamlio import PlanFileError
+from hil.paths import fixture
+from hil.plan.plan import find_plans, load_plan, loads_plan
+from hil.plan.runner import run_plan
+
+BUILTIN = load_bench(None)
+
+
+def _verdicts(res) -> list[tuple]:
+    return [(s.index, s.status, tuple((v.get("name"), v.get("status")) for v in s.verdicts))
+            for s in res.steps]
+
+
+def test_the_builtin_bench_runs_in_virtual_time_and_names_its_clock(tmp_path) -> None:
+    assert BUILTIN.clock == "virtual"
+    res = run_plan(load_plan(find_plans(["servo_on_off_brake"])[0]), BUILTIN, tmp_path)
+    assert res.passed
+    with open(res.recording, "rb") as f:
+        reader = make_reader(f)
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+        first = next(reader.iter_messages(log_time_order=True))[2].log_time
+    assert meta["hil.clock"]["clock"] == "virtual"
+    assert first >= clock.VIRTUAL_EPOCH_NS
+    assert first - clock.VIRTUAL_EPOCH_NS < 10**9  # stamped on the virtual clock
+    assert clock.current() is clock.REAL  # the run's clock is gone after it
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("name", ["servo_on_off_brake", "sto_single_channel", "pr_delay",
+                                  "fault_heartbeat", "homing_pr"])
+def test_virtual_and_real_time_give_the_same_verdicts(name, tmp_path) -> None:
+    plan = load_plan(find_plans([name])[0])
+    virtual = run_plan(plan, BUILTIN, tmp_path / "v")
+    real = run_plan(plan, with_clock(BUILTIN, "real"), tmp_path / "r")
+    assert virtual.status == real.status == "pass"
+    assert _verdicts(virtual) == _verdicts(real)
+
+
+STUCK = """\
+name: stuck
+steps:
+  - state: OPERATION ENABLED
+  - move: {mode: PP, target: 50000000, velocity: 20000, accel: 200, decel: 200}
+    timeout: 30s
+"""
+
+
+@pytest.mark.virtual_time
+def test_a_step_timeout_passes_in_virtual_time_and_the_bench_goes_safe(tmp_path) -> None:
+    plan = loads_plan(STUCK, str(tmp_path / "stuck.yaml"))
+    t0 = time.monotonic()
+    res = run_plan(plan, BUILTIN, tmp_path)
+    wall = time.monotonic() - t0
+    assert res.status == "error"
+    step = res.steps[1]
+    assert "step timeout 30 s of virtual time" in step.message, step.message
+    assert step.duration_ns == 30 * 10**9  # exactly the timeout, in bench time
+    assert wall < 20, f"30 s of virtual time took {wall:.1f} s of wall time"
+    assert res.safe is not None and res.safe.ok
+
+
+@pytest.mark.virtual_time
+def test_the_wall_clock_watchdog_stops_a_step_that_never_waits(tmp_path, monkeypatch) -> None:
+    from hil.plan import context
+    from hil.plan.context import StepThread
+    from hil.units import MS
+
+    monkeypatch.setattr(context, "WATCHDOG_GRACE_NS", 200 * MS)
+    cancel = __import__("threading").Event()
+    stop = __import__("threading").Event()
+    with clock.use(clock.VirtualClock()):
+        t0 = time.monotonic()
+        with pytest.raises(TimeoutError, match="wall-clock watchdog"):
+            StepThread().run(lambda: stop.wait(5), 100 * MS, cancel)
+        assert time.monotonic() - t0 < 2
+        assert cancel.is_set()
+        stop.set()
+
+
+def test_clock_virtual_is_refused_where_the_bench_cannot(tmp_path) -> None:
+    zenoh = load_bench(fixture("benches", "virtual-zenoh.yaml"))
+    assert zenoh.clock == "real"
+    with pytest.raises(ValueError, match="subprocess"):
+        with_clock(zenoh, "virtual")
+    text = Path(fixture("benches", "virtual.yaml")).read_text()
+    named = text.replace('"pty:auto?baud=38400"', '"pty:/tmp/ttyA3?baud=38400"')
+    assert loads_bench(named).clock == "real"
+    with pytest.raises(PlanFileError, match=r":\d+: clock: virtual: RS-485 line rs485"):
+        loads_bench("clock: virtual\n" + named, "b.yaml")
+    with pytest.raises(PlanFileError, match="clock: 'fast'"):
+        loads_bench("clock: fast\n" + text, "b.yaml")
+    assert loads_bench("clock: real\n" + text).clock == "real"
+    assert dataclasses.replace(BUILTIN).clock == "virtual"
