@@ -118,6 +118,21 @@ class SdoError(Cia402Error):
         super().__init__(f"node {node}: SDO {op} {index:04X}h sub {sub}: {why}")
 
 
+_ODS: dict[tuple[str, int, int, int], canopen.ObjectDictionary] = {}
+
+
+def object_dictionary(eds: str | Path, node_id: int) -> canopen.ObjectDictionary:
+    """The EDS as canopen reads it, parsed once per file version and node id in a process
+    (a session per plan would parse it again each time; nodes only read it)."""
+    path = Path(eds)
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size, node_id)
+    od = _ODS.get(key)
+    if od is None:
+        od = _ODS[key] = canopen.import_od(str(path), node_id)
+    return od
+
+
 class Cia402Driver:
     """Strict CiA 402 master for one node on a `canopen.Network`."""
 
@@ -140,7 +155,7 @@ class Cia402Driver:
         self.node_id = node_id
         self.recorder = recorder
         self.clock = clock
-        self.node = canopen.RemoteNode(node_id, str(eds or EDS_PATH))
+        self.node = canopen.RemoteNode(node_id, object_dictionary(eds or EDS_PATH, node_id))
         network.add_node(self.node)
         self.node.sdo.RESPONSE_TIMEOUT = self.timeouts["sdo"]
         self._controlword = 0

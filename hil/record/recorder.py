@@ -199,6 +199,7 @@ class Recorder:
         self._stopping = False
         self._schema_ids: dict[str, int] = {}
         self.topic_of: dict[int, str] = {}  # channel id -> topic
+        self.metadata_count = 0  # metadata records added (a live reader's cache key)
         self.mirror: list[tuple[int, int, int, bytes]] | None = None  # see keep_messages()
         self._channels: dict[str, int] = {}
         self._chan_meta: dict[str, dict[str, str]] = {}
@@ -455,6 +456,7 @@ class Recorder:
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         """A metadata record; non-string values are stored as JSON text."""
+        self.metadata_count += 1
         self._control(MetadataItem(name, _str_map(data)))
 
     def keep_messages(self) -> list[tuple[int, int, int, bytes]]:

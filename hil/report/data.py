@@ -91,7 +91,29 @@ def _is_bus(topic: str) -> bool:
             or topic.startswith("/dio/") or topic.startswith("/can/"))
 
 
+_RUNS: dict[tuple[str, int, int], RunData] = {}
+
+
 def load_run(path: str | Path) -> RunData:
+    """The report's view of a recording; the last two files read are kept (by path, size and
+    mtime), so a plan's JUnit and HTML report read its recording once."""
+    try:
+        st = Path(path).stat()
+        key: tuple[str, int, int] | None = (str(Path(path).resolve()), st.st_mtime_ns,
+                                            st.st_size)
+    except OSError:
+        key = None
+    if key is not None and key in _RUNS:
+        return _RUNS[key]
+    data = _load_run(path)
+    if key is not None:
+        while len(_RUNS) >= 2:
+            del _RUNS[next(iter(_RUNS))]
+        _RUNS[key] = data
+    return data
+
+
+def _load_run(path: str | Path) -> RunData:
     rec = Recording.open(path)
     meta = rec.metadata()
     run_meta = meta.get("hil.run", {})

@@ -89,7 +89,23 @@ def _window_svg(v: dict) -> str:
 MAX_DIAGRAMS = 6  # per checked spec: failing occurrences first
 
 
-def _spec_by_id() -> Mapping[str, object]:
+def _spec_by_id(ids: set[str] | None = None) -> Mapping[str, object]:
+    """The shipped specs by id; with `ids`, only the files named so (a spec's file is named
+    by its id), all of them when one is not found that way."""
+    if ids:
+        from hil.timing.registry import load_spec_cached
+        from hil.timing.spec import SpecError, shipped_specs
+
+        out: dict[str, object] = {}
+        for path in shipped_specs():
+            if path.stem in ids:
+                try:
+                    spec = load_spec_cached(path)
+                except SpecError:
+                    continue
+                out[spec.id] = spec
+        if ids <= set(out):
+            return out
     return load_specs()
 
 
@@ -107,7 +123,7 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
         return []
     out: list[tuple[str, str]] = []
     try:
-        specs = _spec_by_id()
+        specs = _spec_by_id({sid for sid, _step in groups})
         source = RecordingSource(run.path)
     except Exception as e:  # a truncated or foreign recording: the table still stands
         return [("timing diagrams", f"<p>Diagrams not drawn: {esc(str(e))}</p>")]

@@ -20,7 +20,7 @@ import bisect
 import fnmatch
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -154,6 +154,7 @@ class Context:
         self._traces: dict[str, Trace] = {}
         self._occs: dict[str, list[Occ]] = {}
         self._deliveries: dict[str, list[tuple[int, bool, int]]] | None = None
+        self._topic_sampling: dict[str, tuple[set[int], set[int], list[int]]] = {}
         end = source.end_time()
         self.end = end if end is not None else 0
         starts = [msgs[0][0] for topic in source.topics() if (msgs := source.messages(topic))]
@@ -261,12 +262,16 @@ class Context:
         polled, an SDO upload response (`kind: sdo_tx`; gap since the previous sample of the
         same field: a change first seen there happened after that one, e.g. a statusword
         polled late by a loaded harness)."""
-        msgs = self.source.messages(topic)
-        periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
-        polled = {t for t, m in msgs if isinstance(m, dict) and m.get("kind") == "sdo_tx"}
+        cached = self._topic_sampling.get(topic)
+        if cached is None:  # once per topic: every signal on a topic shares it
+            msgs = self.source.messages(topic)
+            periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
+            polled = {t for t, m in msgs if isinstance(m, dict) and m.get("kind") == "sdo_tx"}
+            times = [t for t, _m in msgs] if periodic or polled else []
+            cached = self._topic_sampling[topic] = (periodic, polled, times)
+        periodic, polled, times = cached
         if not periodic and not polled:
             return {}
-        times = [t for t, _m in msgs]
         out = {}
         for k, (t, _v) in enumerate(raw):
             i = bisect.bisect_left(times, t)
@@ -327,30 +332,36 @@ class Context:
         if not tf:
             return pts
         thresholds = self._thresholds(tf)
+        # the value transforms in their fixed order, looked up once rather than per sample
+        ops: list[Callable[[Any], Any]] = []
+        if "map" in tf:
+            m = tf["map"]
+            ops.append(lambda v, m=m: m.get(v, m.get(str(v), v)))
+        if "bit" in tf:
+            ops.append(lambda v, b=tf["bit"]: bool((int(v) >> b) & 1))
+        if "mask" in tf:
+            ops.append(lambda v, k=tf["mask"]: int(v) & k)
+        if tf.get("abs"):
+            ops.append(abs)
+        if "equals" in tf:
+            ops.append(lambda v, x=tf["equals"]: _eq(v, x))
+        if "in" in tf:
+            ops.append(lambda v, xs=tf["in"]: any(_eq(v, x) for x in xs))
+        if tf.get("nonempty"):
+            ops.append(bool)
+        cmp = "below" if "below" in tf else "above" if "above" in tf else None
         out = []
+        append = out.append
         for t, v in pts:
-            if "map" in tf:
-                m = tf["map"]
-                v = m.get(v, m.get(str(v), v))
-            if "bit" in tf:
-                v = bool((int(v) >> tf["bit"]) & 1)
-            if "mask" in tf:
-                v = int(v) & tf["mask"]
-            if tf.get("abs"):
-                v = abs(v)
-            if "equals" in tf:
-                v = _eq(v, tf["equals"])
-            if "in" in tf:
-                v = any(_eq(v, x) for x in tf["in"])
-            if tf.get("nonempty"):
-                v = bool(v)
+            for op in ops:
+                v = op(v)
             if thresholds:
                 lim = thresholds(t)
-                if "below" in tf:
+                if cmp == "below":
                     v = v < lim["below"]
-                elif "above" in tf:
+                elif cmp == "above":
                     v = v > lim["above"]
-            out.append((t, v))
+            append((t, v))
         return out
 
     def _held(self, s: SignalDef, tr: Trace) -> Trace:

@@ -51,7 +51,7 @@ def load_specs(extra_dirs: Iterable[Path | str] | None = None) -> SpecRegistry:
     broken: dict[str, str] = {}
     for p in paths:
         try:
-            s = _load_cached(Path(p))
+            s = load_spec_cached(Path(p))
         except SpecError as e:
             broken[p.stem] = str(e)
             continue
@@ -62,7 +62,7 @@ def load_specs(extra_dirs: Iterable[Path | str] | None = None) -> SpecRegistry:
 _cache: dict[tuple[str, int, int], Spec] = {}
 
 
-def _load_cached(path: Path) -> Spec:
+def load_spec_cached(path: Path) -> Spec:
     """`load_spec`, parsed once per file version (path, mtime, size) in this process: each
     plan of a run asks for every spec."""
     try:

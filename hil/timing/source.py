@@ -180,6 +180,7 @@ class LiveSource(MemorySource):
     def __init__(self) -> None:
         super().__init__()
         self._seen = 0
+        self._head_key: tuple = ()
         self.meta: dict[str, dict[str, str]] = {}
         self.error: str | None = None
         self.corrupt = False
@@ -188,10 +189,13 @@ class LiveSource(MemorySource):
         self.path = ""
 
     def refresh(self, rec: Any) -> LiveSource:
-        head = RecordingSource(rec.path, topics=[])  # metadata and resolutions, no messages
-        self.meta, self._res = head.meta, head._res
-        self.error, self.corrupt, self.truncated = head.error, head.corrupt, head.truncated
-        self.schemas, self.path = head.schemas, head.path
+        key = (len(rec.topic_of), getattr(rec, "metadata_count", None))
+        if key != self._head_key or key[1] is None:  # a new channel or metadata record
+            head = RecordingSource(rec.path, topics=[])  # metadata, resolutions; no messages
+            self.meta, self._res = head.meta, head._res
+            self.error, self.corrupt, self.truncated = head.error, head.corrupt, head.truncated
+            self.schemas, self.path = head.schemas, head.path
+            self._head_key = key
         mirror = rec.keep_messages()
         n = len(mirror)
         names = rec.topic_of
