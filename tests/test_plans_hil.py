@@ -6,6 +6,7 @@ twice: the two recordings must carry identical messages (topics, log times, payl
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
@@ -25,6 +26,8 @@ def test_shipped_plan(plan, hil_run_plan, hil_bench, tmp_path) -> None:
     result = hil_run_plan(plan)
     assert result.passed, explain(result)
     assert schema_problems(result.recording) == []
+    if result.html:  # a reviewer's page stays small (issue: under 1 MB, homing included)
+        assert Path(result.html).stat().st_size < 1_000_000, result.html
     if hil_bench.clock == "virtual":  # determinism: the same plan again, the same messages
         again = run_plan(load_plan(plan), hil_bench, tmp_path)
         first, second = messages(result.recording), messages(again.recording)

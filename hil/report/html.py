@@ -14,13 +14,14 @@ import os
 from collections.abc import Mapping
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 from hil.fileio import write_text_atomic
 from hil.report.data import RunData, bus_around, bus_log, load_run
 from hil.report.latch_html import LATCH_SPEC, latch_html
-from hil.timing.checker import Verdict
+from hil.timing.checker import Verdict, context
 from hil.timing.registry import load_specs
-from hil.timing.render import svg
+from hil.timing.render import main_lanes, nice_ticks, svg
 from hil.timing.source import RecordingSource
 
 CSS = """
@@ -38,6 +39,17 @@ pre.bus{white-space:pre-wrap;overflow-wrap:anywhere}.nav{font-size:13px;margin:0
 svg{background:#fff;border:1px solid #ddd}
 .diagram{overflow-x:auto}.runinfo td{border:none;padding:1px 12px 1px 0}
 pre b{background:#fde2e4}figure{margin:0.8em 0}figcaption{font-weight:600;margin:0.3em 0}
+details>summary{cursor:pointer;color:#1565c0}.filter{font-size:13px;margin:.4em 0}
+.diagram.zoom svg{width:2400px;height:auto}.diagram svg{max-width:100%;height:auto}
+"""
+
+# Inline and offline (no CDN): filter the verdict table by status, zoom a diagram on click.
+JS = """
+function hilFilter(box){var want=box.value;document.querySelectorAll('tr.v').forEach(
+function(r){r.style.display=(!want||r.dataset.status===want)?'':'none';});
+document.querySelectorAll('details.verdicts').forEach(function(d){d.open=true;});}
+document.addEventListener('click',function(e){var d=e.target.closest('.diagram');
+if(d&&!e.target.closest('details')){d.classList.toggle('zoom');}});
 """
 esc = html.escape
 
@@ -145,11 +157,23 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
                                              for v in verdicts), o))
         binding = vds[0].get("binding") or None
         params = vds[0].get("check_params") or None
+        try:  # one context per spec and step: its traces are built once for every diagram
+            ctx = context(spec, source, params, binding)
+        except Exception as e:
+            out.append((label, f"<p>Diagram not drawn: {esc(type(e).__name__)}: "
+                               f"{esc(str(e))}</p>"))
+            continue
         for occ in occs[:MAX_DIAGRAMS]:
             chosen = [v for v in verdicts if v.occurrence == occ]
             try:
-                pic = svg(spec, source, chosen, params=params, binding=binding,
-                          occurrence=None, width=1100, t0=run.t0)
+                main, helpers = main_lanes(spec, chosen, ctx)
+                pic = svg(spec, source, chosen, occurrence=None, width=1100, t0=run.t0,
+                          lanes=main, ctx=ctx)
+                if helpers:
+                    pic += (f"<details><summary>{len(helpers)} helper signals of the spec"
+                            "</summary>" + svg(spec, source, chosen, occurrence=None,
+                                               width=1100, t0=run.t0, lanes=helpers, ctx=ctx,
+                                               legend=False) + "</details>")
             except Exception as e:
                 pic = f"<p>Diagram not drawn: {esc(type(e).__name__)}: {esc(str(e))}</p>"
             out.append((f"{label}, occurrence {occ + 1}", pic))
@@ -187,9 +211,9 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
         lo = min(v for _, v in pts)
         hi = max(v for _, v in pts)
         rng = (hi - lo) or 1.0
-        coords = " ".join(
-            f"{pad + (W - pad - 10) * (t - t0) / span:.1f},"
-            f"{y0 + PH - 20 - (PH - 30) * (v - lo) / rng:.1f}" for t, v in pts)
+        coords = _decimated(pts, lambda t: pad + (W - pad - 10) * (t - t0) / span,
+                            lambda v, y0=y0, lo=lo, rng=rng:
+                            y0 + PH - 20 - (PH - 30) * (v - lo) / rng)
         out.append(f'<text x="4" y="{y0 + 12}" font-size="11">{esc(label)}</text>'
                    f'<text x="4" y="{y0 + 26}" font-size="9">{hi:.4g}</text>'
                    f'<text x="4" y="{y0 + PH - 20}" font-size="9">{lo:.4g}</text>'
@@ -197,13 +221,36 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
                    'fill="none" stroke="#ddd"/>'
                    f'<polyline points="{coords}" fill="none" stroke="#1f5fbf" '
                    'stroke-width="1.2"/>')
-    for i in range(6):
-        t = t0 + span * i / 5
-        out.append(f'<text x="{pad + (W - pad - 10) * i / 5:.1f}" y="{PH * len(series) + 14}" '
-                   f'font-size="10" text-anchor="middle">{(t - zero) / 1e6:.0f}</text>')
+    for v_ms in nice_ticks((t0 - zero) / 1e6, (t1 - zero) / 1e6, 6):
+        xt = pad + (W - pad - 10) * (zero + v_ms * 1e6 - t0) / span
+        out.append(f'<text x="{xt:.1f}" y="{PH * len(series) + 14}" '
+                   f'font-size="10" text-anchor="middle">{v_ms:.6g}</text>')
     out.append(f'<text x="{W - 10}" y="{PH * len(series) + 28}" font-size="10" '
                'text-anchor="end">ms from the plan start</text></svg>')
     return "".join(out)
+
+
+def _decimated(pts: list[tuple[int, float]], fx: Any, fy: Any) -> str:
+    """Polyline points, at most four per pixel column (first, min, max, last): what the eye
+    sees of thousands of samples, in a page that stays small."""
+    cols: dict[int, list[float]] = {}
+    order: list[int] = []
+    for t, v in pts:
+        c = int(fx(t))
+        col = cols.get(c)
+        if col is None:
+            cols[c] = [v, v, v, v]
+            order.append(c)
+        else:
+            col[1], col[2], col[3] = min(col[1], v), max(col[2], v), v
+    out = []
+    for c in order:
+        first, mn, mx, last = cols[c]
+        out.append(f"{c},{fy(first):.1f}")
+        if mn != mx:
+            out.append(f"{c},{fy(mn):.1f} {c},{fy(mx):.1f}")
+        out.append(f"{c},{fy(last):.1f}")
+    return " ".join(out)
 
 
 def run_info_table(info: dict[str, str]) -> str:
@@ -244,7 +291,8 @@ def render_html(run: RunData, out: Path | None = None) -> str:
     st = run.status or "unknown"
     h: list[str] = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
-        f"<title>hil report: {esc(run.plan)}</title><style>{CSS}</style></head><body>",
+        f"<title>hil report: {esc(run.plan)}</title><style>{CSS}</style>"
+        f"<script>{JS}</script></head><body>",
         _nav(run, out),
         f"<h1>{esc(run.plan)} <span class='badge b-{esc(st)}'>{esc(st.upper())}</span></h1>",
         run_info_table(run.info()),
@@ -276,23 +324,73 @@ def _verdicts_html(run: RunData) -> list[str]:
     h = ["<h2>Timing verdicts: expected vs observed</h2>"]
     if not run.verdicts:
         return [*h, "<p>No timing verdicts in this run.</p>"]
+    counts: dict[str, int] = {}
+    for v in run.verdicts:
+        counts[str(v.get("status", ""))] = counts.get(str(v.get("status", "")), 0) + 1
+    summary = ", ".join(f"{n} {k}" for k, n in sorted(counts.items()))
+    all_pass = set(counts) <= {"pass", "skipped"}
+    options = "".join(f"<option value='{esc(k)}'>{esc(k)} ({n})</option>"
+                      for k, n in sorted(counts.items()))
+    h.append(f"<p class='filter'>Show <select onchange='hilFilter(this)'><option value=''>"
+             f"all ({len(run.verdicts)})</option>{options}</select></p>")
+    # every verdict passed: folded (the count says so); anything else: open
+    h.append(f"<details class='verdicts'{'' if all_pass else ' open'}><summary>"
+             f"{len(run.verdicts)} verdicts: {esc(summary)}</summary>")
     h.append("<table><tr><th>step</th><th>spec</th><th>constraint</th><th>status</th>"
              "<th>measured</th><th>window</th><th>diagram</th><th>message</th></tr>")
-    for v in run.verdicts:
+    for group in _verdict_rows(run.verdicts):
+        v = group[0]
         win = v.get("window_expr") or v.get("window_ms")
-        h.append(f"<tr><td>{_step_name(run, v.get('step'))}</td>"
+        status = str(v.get("status", ""))
+        measured, message = _ms(v.get("measured_ms")), str(v.get("message", ""))
+        if len(group) > 1:  # passing occurrences of one constraint: one row
+            ms = [float(g["measured_ms"]) for g in group
+                  if isinstance(g.get("measured_ms"), int | float)]
+            if ms:
+                measured = f"{min(ms):.3f} … {max(ms):.3f} ms"
+            message = f"{len(group)} occurrences, all {status}; closest to its limit: {message}"
+            status_cell = f"{_status(status)} ×{len(group)}"
+        else:
+            status_cell = _status(status)
+        h.append(f"<tr class='v' data-status='{esc(status)}'>"
+                 f"<td>{_step_name(run, v.get('step'))}</td>"
                  f"<td>{esc(str(v.get('spec', '')))}</td>"
                  f"<td>{esc(str(v.get('constraint', '')))}<br><small>"
                  f"{esc(str(v.get('source', '')))}</small></td>"
-                 f"<td>{_status(str(v.get('status', '')))}</td>"
-                 f"<td>{_ms(v.get('measured_ms'))}</td><td>{esc(str(win))}</td>"
-                 f"<td>{_window_svg(v)}</td><td>{esc(str(v.get('message', '')))}</td></tr>")
-    h.append("</table>")
-    h.append("<h2>Timing diagrams: observed signals and expected windows</h2>")
+                 f"<td>{status_cell}</td>"
+                 f"<td>{measured}</td><td>{esc(str(win))}</td>"
+                 f"<td>{_window_svg(v)}</td><td>{esc(message)}</td></tr>")
+    h.append("</table></details>")
+    h.append("<h2>Timing diagrams: observed signals and expected windows</h2>"
+             "<p class='filter'>The manual's signals; a spec's helper signals are folded "
+             "under each diagram. Click a diagram to zoom it.</p>")
     for title, pic in timing_diagrams(run):
         h.append(f"<figure><figcaption>{esc(title)}</figcaption>"
                  f"<div class='diagram'>{pic}</div></figure>")
     return h
+
+
+def _verdict_rows(verdicts: list[dict]) -> list[list[dict]]:
+    """Table rows: every verdict that did not pass on its own row; the passing occurrences of
+    one constraint at one step in one row, led by the one closest to its limit (smallest
+    margin). Order: as recorded, by each row's first verdict."""
+    rows: list[list[dict]] = []
+    passing: dict[tuple, list[dict]] = {}
+    for v in verdicts:
+        if v.get("status") != "pass":
+            rows.append([v])
+            continue
+        key = (v.get("step"), v.get("spec"), v.get("constraint"))
+        if key not in passing:
+            passing[key] = []
+            rows.append(passing[key])
+        passing[key].append(v)
+
+    def margin(v: dict) -> float:
+        m = v.get("margin_ms")
+        return float(m) if isinstance(m, int | float) else float("inf")
+
+    return [sorted(r, key=margin) if len(r) > 1 else r for r in rows]
 
 
 def _motion_html(run: RunData) -> list[str]:

@@ -22,10 +22,10 @@ CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "goog
                  if shutil.which(n)), None)
 
 
-@pytest.fixture(scope="module")
-def report(tmp_path_factory) -> Path:
+@pytest.fixture(scope="module", params=["servo_on_off_brake", "homing_pr"])
+def report(tmp_path_factory, request) -> Path:
     out = tmp_path_factory.mktemp("report")
-    [r] = run_plans([load_plan(p) for p in find_plans(["servo_on_off_brake"])], load_bench(),
+    [r] = run_plans([load_plan(p) for p in find_plans([request.param])], load_bench(),
                     out, stream=io.StringIO(), allow_inconclusive=True)
     assert r.html, r.error
     return Path(r.html)
@@ -35,9 +35,12 @@ def test_report_draws_expected_vs_observed_diagrams(report: Path):
     html = report.read_text()
     assert "Timing diagrams: observed signals and expected windows" in html
     # hil.timing.render.svg: one diagram per checked spec, titled by the spec
-    assert "<title>servo_on_brake: " in html and "<title>servo_off_brake: " in html
+    titles = {"servo_on_off_brake": ("servo_on_brake", "servo_off_brake"),
+              "homing_pr": ("homing_pr",)}[report.stem]
+    assert all(f"<title>{t}: " in html for t in titles), titles
+    assert report.stat().st_size < 1_000_000  # under 1 MB, a homing report included
     assert "Diagram not drawn" not in html
-    assert "<script" not in html and "<link" not in html  # self-contained
+    assert "<script src" not in html and "<link" not in html  # self-contained, offline
 
 
 def _png_pixels(path: Path) -> tuple[int, int, bytes]:

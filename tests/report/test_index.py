@@ -79,8 +79,8 @@ def test_plan_report_names_run_steps_and_plan_time(run_dir: Path):
     for item in ("date", "UTC", v["hil"], "host", "late", v["git_revision"]):
         assert item in text, item
     # each verdict row names its step: both checks are steps 8 and 9 of the plan
-    rows = re.findall(r"<tr><td><a href='#step-(\d)'>\d</a>: ([^<]*)</td><td>([^<]*)</td>",
-                      html)
+    rows = re.findall(r"<tr class='v' data-status='\w+'><td><a href='#step-(\d)'>\d</a>: "
+                      r"([^<]*)</td><td>([^<]*)</td>", html)
     assert {(n, label, spec) for n, label, spec in rows} == {
         ("8", "check_timing servo_on_brake", "servo_on_brake"),
         ("9", "check_timing servo_off_brake", "servo_off_brake")}

@@ -58,4 +58,5 @@ def test_html_is_self_contained(tmp_path):
     assert "expected DO BRKR on, saw BRKR off" in html
     assert "DI SON off" in html and "P1.042 = 100" in html and "name: virtual" in html
     assert "http://" not in html.replace("http://www.w3.org/2000/svg", "")
-    assert "<script" not in html and "<link" not in html
+    # offline: inline script and style only, nothing fetched (no src=, no <link>)
+    assert "<script src" not in html and "<link" not in html

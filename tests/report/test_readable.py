@@ -1,0 +1,110 @@
+"""Readable diagrams and reports: round ticks, numbers drawn as plots (no value boxes piled
+into black bars), labels only where they fit, the manual's signals first with helpers folded,
+passing verdicts folded and counted, pages that stay small."""
+
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ET
+
+from hil.report.html import _verdict_rows
+from hil.timing.checker import Trace
+from hil.timing.render import _boxes, _plot_lane, main_lanes, nice_ticks
+from hil.timing.spec import loads_spec
+
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+def test_ticks_are_round_and_cover_the_range() -> None:
+    for a, b in [(-657.9, 1234.5), (0, 1), (3.3, 3.7), (-0.02, 0.05), (100, 40100)]:
+        ticks = nice_ticks(a, b)
+        assert 3 <= len(ticks) <= 16
+        step = ticks[1] - ticks[0]
+        mant = step / 10 ** math.floor(math.log10(step))
+        assert any(math.isclose(mant, m, rel_tol=1e-9) for m in (1, 2, 5, 10)), step
+        assert all(math.isclose(t / step, round(t / step), abs_tol=1e-6) for t in ticks)
+        assert ticks[0] >= a - 1e-9 and ticks[-1] <= b + 1e-9
+        assert ticks[0] - a < step and b - ticks[-1] < step
+
+
+def _x(lo: int, hi: int, width: float = 800):
+    return lambda t: 100 + (min(max(t, lo), hi) - lo) / (hi - lo) * width
+
+
+def test_a_number_lane_is_a_bounded_plot_not_boxes() -> None:
+    times = list(range(0, 20_000_000_000, 1_000_000))  # 20 000 samples at 1 kHz
+    values = [1000 * math.sin(t / 1e9) for t in times]
+    tr = Trace("speed", times, values, 0)
+    drawn, scale = _plot_lane(tr, _x(0, times[-1]), 0, times[-1], 10, 40)
+    assert drawn.startswith("<polyline") and "<rect" not in drawn and "<text" not in drawn
+    points = re.search(r'points="([^"]*)"', drawn).group(1).split()
+    assert len(points) <= 4 * 801 + 1  # at most four per pixel column
+    assert "…" in scale  # its range is printed under the lane's name
+    lo, hi = (float(x) for x in scale.split(" … "))
+    assert math.isclose(lo, min(values), rel_tol=1e-5)  # printed to 6 digits
+    assert math.isclose(hi, max(values), rel_tol=1e-5)
+    ys = [float(p.split(",")[1]) for p in points]
+    assert min(ys) >= 10 - 1e-6 and max(ys) <= 40 + 1e-6  # inside its lane
+
+
+def test_box_labels_only_where_they_fit() -> None:
+    times = [0, 1_000_000, 2_000_000, 500_000_000]
+    tr = Trace("phase", times, ["search", "index", "stop", "done"], 0)
+    drawn = _boxes(tr, _x(0, 1_000_000_000), 0, 1_000_000_000, 10, 40)
+    texts = re.findall(r"<text[^>]*>([^<]*)</text>", drawn)
+    assert texts == ["stop", "done"]  # search, index: under a pixel wide, a tooltip only
+    assert drawn.count("<title>") == 4
+
+
+SPEC = loads_spec("""
+id: demo
+title: demo
+source: test
+signals:
+  speed: {topic: "/drive/{drive}/state", field: speed_rpm}
+  BRKR: {function: BRKR}
+  fast: {signal: speed, above: 100}
+  moving: {signal: speed, abs: true, above: 1}
+events:
+  brkr_on: {rise: BRKR}
+  fast_on: {rise: fast, after: brkr_on, within: 1000}
+constraints:
+  - name: fast soon
+    from: brkr_on
+    to: fast_on
+    window: {min: 0, max: 500}
+""")
+
+
+def test_recorded_signals_and_constrained_lanes_lead_helpers_fold() -> None:
+    main, helpers = main_lanes(SPEC, [])
+    assert main == ["speed", "BRKR"] and helpers == ["fast", "moving"]
+
+
+def _v(step: int, constraint: str, status: str, margin: float, measured: float) -> dict:
+    return {"step": step, "spec": "s", "constraint": constraint, "status": status,
+            "margin_ms": margin, "measured_ms": measured, "message": f"m{margin}"}
+
+
+def test_passing_occurrences_share_a_row_failures_keep_theirs() -> None:
+    vs = [_v(3, "a", "pass", 5, 1), _v(3, "a", "pass", 2, 4), _v(3, "a", "fail", -1, 9),
+          _v(3, "b", "pass", 1, 2), _v(4, "a", "pass", 7, 1)]
+    rows = _verdict_rows(vs)
+    assert [len(r) for r in rows] == [2, 1, 1, 1]
+    assert rows[0][0]["margin_ms"] == 2  # led by the one closest to its limit
+    assert rows[1][0]["status"] == "fail"
+
+
+def test_report_page_folds_an_all_pass_table_and_parses(tmp_path) -> None:
+    from test_reports import _recording  # a recorded plan with a failing check
+
+    from hil.report.html import write_html
+
+    p = tmp_path / "demo.mcap"
+    _recording(p)
+    html = write_html(p, tmp_path / "demo.html").read_text()
+    assert "<details class='verdicts' open>" in html  # it has a failure: open
+    assert "onchange='hilFilter(this)'" in html  # filter by status
+    for m in re.finditer(r"<svg.*?</svg>", html, re.S):
+        ET.fromstring(m.group(0))  # every diagram is well-formed XML
