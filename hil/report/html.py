@@ -17,9 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from hil.fileio import write_text_atomic
+from hil.record import topics
 from hil.report.data import RunData, bus_around, bus_log, load_run
 from hil.report.latch_html import LATCH_SPEC, latch_html
-from hil.timing.checker import Verdict, context
+from hil.timing.checker import Verdict, context, spec_topics
 from hil.timing.registry import load_specs
 from hil.timing.render import main_lanes, nice_ticks, svg
 from hil.timing.source import RecordingSource
@@ -136,7 +137,17 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
     out: list[tuple[str, str]] = []
     try:
         specs = _spec_by_id({sid for sid, _step in groups})
-        source = RecordingSource(run.path)
+        wanted: set[str] = set()  # decode only what the diagrams draw from
+        for (sid, _step), vds in groups.items():
+            spec = specs.get(sid)
+            if spec is not None:
+                wanted |= spec_topics(spec, vds[0].get("binding") or None)
+        # the drive state the report already decoded is shared, not decoded twice
+        shared = {topics.drive_state(d): msgs for d, msgs in run.truth.items()}
+        source = RecordingSource(run.path, topics=sorted(wanted - set(shared)))
+        for topic, msgs in shared.items():
+            if topic in wanted:
+                source.put_topic(topic, msgs)
     except Exception as e:  # a truncated or foreign recording: the table still stands
         return [("timing diagrams", f"<p>Diagrams not drawn: {esc(str(e))}</p>")]
     names = {f.name for f in fields(Verdict)}

@@ -26,7 +26,7 @@ from typing import Any
 
 from hil.record import topics
 from hil.timing.expr import ExprError, check_number, is_param
-from hil.timing.source import ParamTimeline, SignalSource, samples
+from hil.timing.source import MemorySource, ParamTimeline, SignalSource, samples
 from hil.timing.spec import ConstraintDef, EventDef, SignalDef, Spec, WindowDef
 from hil.units import MS
 
@@ -262,13 +262,20 @@ class Context:
         polled, an SDO upload response (`kind: sdo_tx`; gap since the previous sample of the
         same field: a change first seen there happened after that one, e.g. a statusword
         polled late by a loaded harness)."""
-        cached = self._topic_sampling.get(topic)
-        if cached is None:  # once per topic: every signal on a topic shares it
+        # once per topic and source: every signal and every check of a source shares it
+        store = getattr(self.source, "_samples_cache", None)
+        key = ("_sampling", topic)
+        cached = store.get(key) if store is not None else self._topic_sampling.get(topic)
+        if cached is None:
             msgs = self.source.messages(topic)
             periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
             polled = {t for t, m in msgs if isinstance(m, dict) and m.get("kind") == "sdo_tx"}
             times = [t for t, _m in msgs] if periodic or polled else []
-            cached = self._topic_sampling[topic] = (periodic, polled, times)
+            cached = (periodic, polled, times)
+            if store is not None:
+                store[key] = cached  # cleared with the source's samples when it grows
+            else:
+                self._topic_sampling[topic] = cached
         periodic, polled, times = cached
         if not periodic and not polled:
             return {}
@@ -573,6 +580,22 @@ class Scope:
 
 
 # --- constraints -----------------------------------------------------------------------
+
+
+def spec_topics(spec: Spec, binding: Mapping[str, str] | None = None) -> set[str]:
+    """The topics judging `spec` reads under `binding`: its recorded signals' topics, the
+    drive's parameters and its input deliveries (for a reader that decodes only those)."""
+    bind = spec.binding(binding)
+    ctx = Context(spec, MemorySource(), ParamTimeline(), bind, None, None)
+    drive = bind.get("drive", "drive1")  # `alarm:ALnnn` events read the drive's state
+    out = {topics.drive_params(drive), topics.drive_inputs(drive), topics.drive_state(drive)}
+    for s in spec.signals.values():
+        if s.kind in ("topic", "function", "line", "alarm"):
+            try:
+                out.add(ctx._where_from(s)[0])
+            except KeyError:
+                continue
+    return out
 
 
 def context(spec: Spec, source: SignalSource,

@@ -103,6 +103,11 @@ class MemorySource:
         else:
             lst.append((t, msg))
 
+    def put_topic(self, topic: str, msgs: list[tuple[int, dict]]) -> None:
+        """All messages of `topic` at once (t_ns, payload), e.g. decoded elsewhere."""
+        self._samples_cache.clear()
+        self._msgs[topic] = sorted(msgs, key=lambda m: m[0])
+
     def messages(self, topic: str) -> list[tuple[int, dict]]:
         return self._msgs.get(topic, [])
 
