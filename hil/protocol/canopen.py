@@ -327,3 +327,118 @@ def describe_frame(can_id: int, data: bytes, *, remote: bool = False) -> dict:
         return out
     except Exception as exc:  # the recorder must never crash on a frame
         return {"kind": "unknown", "node": None, "cob_id": can_id, "error": repr(exc)}
+
+
+# -- PDOs as configured on the bus (CiA 301 7.5.2.35-7.5.2.38; A3 manual L17940-18124) -----
+
+# Objects a reviewer plots, by their CiA 402 names (A3 manual 6xxxh list, L18200 ff.)
+PDO_NAMES: dict[tuple[int, int], str] = {
+    (0x6040, 0): "controlword", (0x6041, 0): "statusword",
+    (0x6060, 0): "modes_of_operation", (0x6061, 0): "modes_of_operation_display",
+    (0x6064, 0): "position_actual", (0x606C, 0): "velocity_actual",
+    (0x6077, 0): "torque_actual", (0x607A, 0): "target_position",
+    (0x60FF, 0): "target_velocity", (0x6071, 0): "target_torque",
+    (0x60C1, 1): "ip_position", (0x60F4, 0): "following_error_actual",
+    (0x603F, 0): "error_code",
+}
+_SIGNED = {(0x6064, 0), (0x606C, 0), (0x6077, 0), (0x607A, 0), (0x60FF, 0), (0x6071, 0),
+           (0x60C1, 1), (0x60F4, 0), (0x6060, 0), (0x6061, 0)}
+
+
+class PdoMaps:
+    """Each node's PDOs as the bus configured them, for decoding PDO payloads.
+
+    Starts from the pre-defined connection set (TPDO n at 180h/280h/380h/480h + node, RPDO n
+    at 200h/... + node) with no mapping, as the A3 ships (L17980-18024), or from `defaults`
+    ((node, "tpdo"|"rpdo", n) -> [(index, sub, bits)], e.g. an EDS). Learns from SDO
+    downloads the bus carries: 1400h-1403h / 1800h-1803h sub 1 (COB-ID, bit 31 = invalid),
+    1600h-1603h / 1A00h-1A03h (sub 0 = count, sub k = index << 16 | sub << 8 | bits). An NMT
+    reset of a node forgets what it learnt for that node."""
+
+    def __init__(self, defaults: dict[tuple[int, str, int], list[tuple[int, int, int]]]
+                 | None = None) -> None:
+        self._defaults = dict(defaults or {})
+        self._cob: dict[tuple[int, str, int], int] = {}
+        self._entries: dict[tuple[int, str, int], dict[int, int]] = {}
+        self._count: dict[tuple[int, str, int], int] = {}
+
+    @staticmethod
+    def _which(index: int) -> tuple[str, int, str] | None:
+        for base, kind, what in ((0x1400, "rpdo", "cob"), (0x1600, "rpdo", "map"),
+                                 (0x1800, "tpdo", "cob"), (0x1A00, "tpdo", "map")):
+            if base <= index < base + 4:
+                return kind, index - base + 1, what
+        return None
+
+    def sdo_download(self, node: int, index: int, sub: int, value: int) -> None:
+        """A download the node accepted (an SDO transaction that ended well)."""
+        which = self._which(index)
+        if which is None:
+            return
+        kind, n, what = which
+        key = (node, kind, n)
+        if what == "cob":
+            if sub == 1:
+                self._cob[key] = value
+        elif sub == 0:
+            self._count[key] = value & 0xFF
+        else:
+            self._entries.setdefault(key, {})[sub] = value & 0xFFFFFFFF
+
+    def nmt_reset(self, node: int) -> None:
+        """Reset node / communication: the communication objects go back to their defaults."""
+        for store in (self._cob, self._entries, self._count):
+            for key in [k for k in store if node in (0, k[0])]:
+                del store[key]
+
+    def _mapping(self, key: tuple[int, str, int]) -> list[tuple[int, int, int]]:
+        if key in self._count or key in self._entries:
+            entries = self._entries.get(key, {})
+            count = self._count.get(key, len(entries))
+            out = []
+            for sub in range(1, count + 1):
+                e = entries.get(sub)
+                if e is None:
+                    return []
+                out.append((e >> 16, (e >> 8) & 0xFF, e & 0xFF))
+            return out
+        return list(self._defaults.get(key, []))
+
+    def _find(self, cob_id: int) -> tuple[int, str, int] | None:
+        for key, cob in self._cob.items():
+            if not cob & 0x80000000 and cob & 0x7FF == cob_id:
+                return key
+        kind, node = classify(cob_id)
+        if kind[:4] in ("tpdo", "rpdo") and node is not None:
+            key = (node, kind[:4], int(kind[4:]))
+            cob = self._cob.get(key)
+            if cob is None or (not cob & 0x80000000 and cob & 0x7FF == cob_id):
+                return key
+        return None
+
+    def decode(self, cob_id: int, data: bytes) -> dict | None:
+        """The mapped objects of a PDO frame (None: not a PDO this map knows), e.g.
+        {"pdo": "TPDO1", "objects": {"6041h:00": 0x1637, ...}, "statusword": 0x1637}."""
+        key = self._find(cob_id)
+        if key is None:
+            return None
+        mapping = self._mapping(key)
+        if not mapping:
+            return None
+        out: dict = {"pdo": f"{key[1].upper()}{key[2]}", "objects": {}}
+        bit = 0
+        raw = int.from_bytes(bytes(data), "little")
+        for index, sub, bits in mapping:
+            if bits == 0 or bit + bits > 8 * len(data):
+                out["error"] = (f"PDO mapping of {bit + bits} bits is longer than the "
+                                f"{len(data)}-byte frame")
+                break
+            v = (raw >> bit) & ((1 << bits) - 1)
+            if (index, sub) in _SIGNED and v >> (bits - 1):
+                v -= 1 << bits
+            bit += bits
+            out["objects"][f"{index:04X}h:{sub:02X}"] = v
+            name = PDO_NAMES.get((index, sub))
+            if name:
+                out[name] = v
+        return out

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from hil import clock
-from hil.protocol.canopen import is_pdo, is_sdo
+from hil.protocol.canopen import PdoMaps, is_pdo, is_sdo
 from hil.record import topics
 from hil.record.mcapio import McapWriter
 from hil.record.modbus_pairing import AduAssembler, ModbusPairing, guess_mode
@@ -499,7 +499,7 @@ class Recorder:
         with self._lock:
             self.drops += len(self._q)  # raced in after the writer stopped
             self._q.clear()
-        for _raw, _dec, sdo_ch, pairing, _cache in self._can_ch.values():
+        for _raw, _dec, sdo_ch, pairing, _cache, _pdos in self._can_ch.values():
             for txn in pairing.pending():
                 self._safe(
                     lambda txn=txn, c=sdo_ch: self._w.add_message(c, _now(), _now(), dumps(txn))
@@ -664,7 +664,7 @@ class Recorder:
         if self._describe_frame is not None:
             dec = self._channel(topics.canopen(bus), "hil.CanOpenFrame", src)
         sdo = self._channel(topics.canopen_sdo(bus), "hil.SdoTransaction", src)
-        ch = self._can_ch[bus] = (raw, dec, sdo, SdoPairing(), {})
+        ch = self._can_ch[bus] = (raw, dec, sdo, SdoPairing(), {}, PdoMaps())
         return ch
 
     def _do_can(self, item: CanItem) -> None:
@@ -672,7 +672,7 @@ class Recorder:
         ch = self._can_ch.get(bus)
         if ch is None:
             ch = self._can_channels(bus, st)
-        raw_cid, dec_cid, sdo_cid, pairing, cache_ = ch
+        raw_cid, dec_cid, sdo_cid, pairing, cache_, pdos = ch
         pt = t if st is None else st
         d = _DIRS.get(direction) or json.dumps(str(direction))[1:-1]
         data = bytes(frame.data or b"")
@@ -687,7 +687,14 @@ class Recorder:
         w.add_message(raw_cid, t, pt, (_CAN_FMT % (cid, flags, frame.dlc, hx, d)).encode())
         if ext or err:
             return  # CANopen uses 11-bit identifiers
-        if dec_cid is not None:
+        if cid == 0 and len(data) >= 2 and data[0] in (0x81, 0x82):
+            pdos.nmt_reset(data[1])  # reset node / communication: PDOs back to defaults
+        pdo = pdos.decode(cid, data) if dec_cid is not None and not rtr and is_pdo(cid) \
+            else None
+        if pdo is not None:  # a PDO whose mapping the bus configured: its objects by name
+            base = json.loads(self._describe_can(cid, data, hx, False))
+            w.add_message(dec_cid, t, pt, dumps({"dir": d, **base, **pdo}))
+        elif dec_cid is not None:
             # PDO payloads change every frame: their decoding is a fixed prefix + the data
             tmpl = None if rtr else cache_.get((cid, len(data)))
             if tmpl is not None:
@@ -719,6 +726,10 @@ class Recorder:
         if is_sdo(cid):
             for txn in pairing.feed(cid, data, pt):
                 w.add_message(sdo_cid, t, pt, dumps(txn))
+                if (txn.get("access") == "download" and txn.get("status") == "ok"
+                        and isinstance(txn.get("value"), int)):
+                    pdos.sdo_download(int(txn["node"]), int(txn["index"]), int(txn["sub"]),
+                                      int(txn["value"]))
 
     def _describe_can(self, cid: int, data: bytes, hx: str, remote: bool) -> bytes:
         try:

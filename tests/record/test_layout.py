@@ -104,3 +104,69 @@ def test_dio_panel_shows_the_bench_wiring():
     assert set(shown) == set(wired) | {"STO_A", "STO_B", "FDBK"}
     for line, func in wired.items():
         assert shown[line] == f"{line} {func}"
+
+
+REAL_LAYOUT = LAYOUT.with_name("hil-real-bench-layout.json")
+
+
+def resolve_filtered(path: str, rec: Recording) -> str | None:
+    """`resolve` with a Foxglove filter `/topic{field=="value"}.path` on the topic."""
+    head, _, field = path.partition(".")
+    topic, _, cond = head.partition("{")
+    if not cond:
+        return resolve(path, rec)
+    key, _, want = cond.rstrip("}").partition("==")
+    want = want.strip('"')
+    if topic not in rec.topics():
+        return f"{path}: topic {topic} not in the recording"
+    for _t, _lt, _pt, msg in rec.messages(topic):
+        if str(msg.get(key)) == want and field in msg:
+            return None
+    return f"{path}: no message of {topic} with {key} == {want} has {field}"
+
+
+def test_the_real_bench_layout_needs_no_ground_truth_and_resolves(recording, tmp_path):
+    """A real bench has no /drive/* topics: its layout plots 6041h, 6064h, 606Ch from PDOs
+    (decoded with the bus's own mapping) or from SDO polls; each path resolves either in a
+    virtual-bench recording (SDO polls) or in one with a configured TPDO."""
+    import struct
+
+    import can
+    from test_pdo_decode import _download
+
+    from hil.record.recorder import Recorder
+
+    doc = json.loads(REAL_LAYOUT.read_text())
+    assert set(_leaves(doc["layout"])) == set(doc["configById"])
+    paths = _paths(doc)
+    assert not [p for _pid, p in paths if p.startswith("/drive/")]
+    pdo_path = tmp_path / "pdo.mcap"
+    t = 10**9
+    with Recorder(pdo_path) as rec:
+        def pair(req: can.Message, resp: can.Message) -> None:
+            nonlocal t
+            rec.can("can0", req, "tx", t, None)
+            rec.can("can0", resp, "rx", t + 1000, None)
+            t += 10**6
+
+        for index, sub, value, size in (
+                (0x1A00, 0, 0, 1), (0x1A00, 1, 0x60410010, 4), (0x1A00, 2, 0x60640020, 4),
+                (0x1A00, 0, 2, 1), (0x1A01, 0, 0, 1), (0x1A01, 1, 0x606C0020, 4),
+                (0x1A01, 0, 1, 1), (0x1600, 0, 0, 1), (0x1600, 1, 0x60400010, 4),
+                (0x1600, 2, 0x60610008, 4), (0x1600, 0, 2, 1), (0x6040, 0, 0x0F, 2)):
+            pair(*_download(index, sub, value, size))
+        for index in (0x6041, 0x6064, 0x606C):  # polled by SDO upload (40h -> 43h)
+            pair(can.Message(arbitration_id=0x601, data=struct.pack("<BHB", 0x40, index, 0)
+                             + bytes(4), is_extended_id=False),
+                 can.Message(arbitration_id=0x581, data=struct.pack("<BHBi", 0x43, index, 0,
+                                                                     1234),
+                             is_extended_id=False))
+        for cob, data, way in ((0x181, struct.pack("<Hi", 0x1637, 500), "rx"),
+                               (0x281, struct.pack("<i", -20), "rx"),
+                               (0x201, b"\x0f\x00\x01", "tx")):
+            rec.can("can0", can.Message(arbitration_id=cob, data=data, is_extended_id=False),
+                    way, t, None)
+    pdo_rec = Recording.open(pdo_path)
+    problems = [why for _pid, p in paths
+                if (why := resolve_filtered(p, recording)) and resolve_filtered(p, pdo_rec)]
+    assert not problems, "\n".join(problems)
