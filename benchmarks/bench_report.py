@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 
 CHILD = r"""
-import json, resource, sys, time
+import json, sys, time
 t = time.perf_counter()
 if sys.argv[1] == "bare":
     from mcap.reader import make_reader
@@ -30,8 +30,9 @@ else:
     from hil.report.html import write_html
     write_html(sys.argv[2], sys.argv[3])
 wall = time.perf_counter() - t
-print(json.dumps({"wall": wall, "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-                  / 1024}))
+# VmHWM: this program's peak (ru_maxrss would include the parent's, inherited over fork)
+hwm = next(int(x.split()[1]) for x in open("/proc/self/status") if x.startswith("VmHWM"))
+print(json.dumps({"wall": wall, "rss_mb": hwm / 1024}))
 """
 
 

@@ -7,6 +7,7 @@ import json
 from bisect import bisect_left, bisect_right
 from dataclasses import dataclass, field
 from pathlib import Path
+from sys import intern
 from typing import Any
 
 from hil.record import topics
@@ -42,7 +43,9 @@ class RunData:
     attachments: dict[str, str] = field(default_factory=dict)
     params: dict[str, dict[str, Any]] = field(default_factory=dict)  # drive -> values
     truth: dict[str, list[tuple[int, dict]]] = field(default_factory=dict)  # drive -> states
-    bus: list[tuple[int, str, dict]] = field(default_factory=list)  # (t, topic, msg)
+    # (t, topic, msg): msg as recorded bytes (decoded when shown, `_decode`) or a dict
+    bus: list[tuple[int, str, bytes | dict]] = field(default_factory=list)
+    bus_pending: bool = False  # the recording has bus messages not read yet (`bus_of`)
     bus_source_t: list[int] = field(default_factory=list)  # publish time of each bus entry
     truncated: bool = False
     t0: int = 0  # the plan start (first plan step event), else the first message: time zero
@@ -129,8 +132,14 @@ def _load_run(path: str | Path) -> RunData:
     steps: dict[int, StepData] = {}
     t_first: int | None = None
     t_plan: int | None = None
-    for topic, lt, pt, msg in rec.messages():
+    for topic, lt, pt, raw in rec.raw_messages():
         t_first = lt if t_first is None else min(t_first, lt)
+        if topic.startswith("/can/"):
+            continue  # raw frames: /canopen/<bus> has them decoded
+        if _is_bus(topic):  # read again when shown: only failing checks and steps show them
+            data.bus_pending = True
+            continue
+        msg = _decode(raw)
         if topic == topics.PLAN_STEPS:
             t_plan = lt if t_plan is None else min(t_plan, lt)
             idx = int(msg.get("index") if msg.get("index") is not None else -1)
@@ -153,17 +162,13 @@ def _load_run(path: str | Path) -> RunData:
         elif topic == topics.LOG:
             data.logs.append({**msg, "_t": lt})
         elif topic.startswith("/drive/") and topic.endswith("/state"):
+            # thousands of samples with the same keys: one key string each, not one per sample
+            msg = {intern(k): v for k, v in msg.items()}
             data.truth.setdefault(topic.split("/")[2], []).append((pt or lt, msg))
         elif topic.startswith("/drive/") and topic.endswith("/params"):
             d = topic.split("/")[2]
             data.params.setdefault(d, {}).update(msg.get("values") or {})
-        elif _is_bus(topic) and not topic.startswith("/can/"):
-            data.bus.append((lt, topic, msg))
-            data.bus_source_t.append(pt or lt)
     data.t0 = t_plan or t_first or 0
-    order = sorted(range(len(data.bus)), key=lambda i: data.bus[i][0])
-    data.bus = [data.bus[i] for i in order]
-    data.bus_source_t = [data.bus_source_t[i] for i in order]
     data.steps = [steps[k] for k in sorted(steps)]
     if not data.status:
         bad = [s for s in data.steps if s.status not in ("pass", "skipped")]
@@ -210,15 +215,41 @@ def _brief(msg: dict, width: int = 600) -> str:
     return text if len(text) <= width else text[: width - 1] + "…"
 
 
+def _decode(raw: bytes | dict) -> dict:
+    """A message's JSON (bus entries are kept as bytes until a report shows them)."""
+    if isinstance(raw, dict):
+        return raw
+    try:
+        obj = json.loads(raw)
+    except ValueError as exc:
+        return {"error": f"undecodable message: {exc}", "raw": bytes(raw).hex()}
+    return obj if isinstance(obj, dict) else {"value": obj}
+
+
+def bus_of(run: RunData) -> list[tuple[int, str, bytes | dict]]:
+    """The run's bus messages (CANopen, Modbus, DI/DO) in time order, read from the
+    recording the first time a report shows them (a passing run never needs them)."""
+    if run.bus_pending:
+        run.bus_pending = False
+        rec = Recording.open(run.path)
+        entries = [(lt, topic, bytes(raw), pt or lt)
+                   for topic, lt, pt, raw in rec.raw_messages()
+                   if _is_bus(topic) and not topic.startswith("/can/")]
+        entries.sort(key=lambda e: e[0])
+        run.bus = [(lt, topic, raw) for lt, topic, raw, _pt in entries]
+        run.bus_source_t = [pt for *_x, pt in entries]
+    return run.bus
+
+
 def bus_log(run: RunData, step: StepData, limit: int = 200) -> list[tuple[int, str, str]]:
     """Decoded bus messages (CANopen, Modbus, DI/DO) seen during one step."""
     if step.t_start is None:
         return []
     end = step.t_end if step.t_end is not None else 2**63
     out = []
-    for t, topic, msg in run.bus:
+    for t, topic, msg in bus_of(run):
         if step.t_start <= t <= end:
-            out.append((t, topic, _brief(msg)))
+            out.append((t, topic, _brief(_decode(msg))))
             if len(out) >= limit:
                 break
     return out
@@ -238,12 +269,12 @@ def bus_around(run: RunData, v: dict, before: int = 12, after: int = 12,
     within the judged interval itself, on the checker's clock (the source's publish time,
     which for model-driven lines precedes the harness's log time)."""
     span = verdict_times(v)
-    if span is None or not run.bus:
+    if span is None or not bus_of(run):
         return []
     lo, hi = span
     times = [t for t, _topic, _msg in run.bus]
     i = min(bisect_left(times, lo - margin_ns), max(0, bisect_left(times, lo) - before))
     j = max(bisect_right(times, hi + margin_ns), bisect_right(times, hi) + after)
     src = run.bus_source_t or times
-    return [(t, topic, _brief(msg), lo <= src[k] <= hi)
+    return [(t, topic, _brief(_decode(msg)), lo <= src[k] <= hi)
             for k, (t, topic, msg) in enumerate(run.bus[i:j][:limit], start=i)]

@@ -49,6 +49,8 @@ JS = """
 function hilFilter(box){var want=box.value;document.querySelectorAll('tr.v').forEach(
 function(r){r.style.display=(!want||r.dataset.status===want)?'':'none';});
 document.querySelectorAll('details.verdicts').forEach(function(d){d.open=true;});}
+function hilFind(box){var q=box.value.toLowerCase();document.querySelectorAll('tr.s').forEach(
+function(r){r.style.display=(!q||r.textContent.toLowerCase().indexOf(q)>=0)?'':'none';});}
 document.addEventListener('click',function(e){var d=e.target.closest('.diagram');
 if(d&&!e.target.closest('details')){d.classList.toggle('zoom');}});
 """
@@ -319,12 +321,13 @@ def render_html(run: RunData, out: Path | None = None) -> str:
 
 
 def _steps_html(run: RunData) -> list[str]:
-    h = ["<h2>Steps</h2><table><tr><th>#</th><th>step</th><th>line</th><th>status</th>"
-         "<th>start</th><th>time</th><th>message</th></tr>"]
+    h = ["<h2>Steps</h2><p class='filter'><input type='search' placeholder='find a step' "
+         "oninput='hilFind(this)'></p><table><tr><th>#</th><th>step</th><th>line</th>"
+         "<th>status</th><th>start</th><th>time</th><th>message</th></tr>"]
     for s in run.steps:
         n = s.index + 1 if s.index >= 0 else "-"
         start = f"{(s.t_start - run.t0) / 1e6:.1f} ms" if s.t_start is not None else ""
-        h.append(f"<tr id='step-{n}'><td>{n}</td><td>{esc(s.label)}</td><td>{s.line or ''}</td>"
+        h.append(f"<tr class='s' id='step-{n}'><td>{n}</td><td>{esc(s.label)}</td><td>{s.line or ''}</td>"
                  f"<td>{_status(s.status)}</td><td>{start}</td>"
                  f"<td>{s.duration_ns / 1e6:.1f} ms</td><td>{esc(s.message)}</td></tr>")
     h.append("</table>")

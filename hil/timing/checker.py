@@ -270,22 +270,30 @@ class Context:
             msgs = self.source.messages(topic)
             periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
             polled = {t for t, m in msgs if isinstance(m, dict) and m.get("kind") == "sdo_tx"}
-            times = [t for t, _m in msgs] if periodic or polled else []
-            cached = (periodic, polled, times)
+            # a periodic sample's gap: since the message before the first one at its time
+            times = [t for t, _m in msgs] if periodic else []
+            gaps = {}
+            for t in periodic:
+                i = bisect.bisect_left(times, t)
+                if i > 0:
+                    gaps[t] = t - times[i - 1]
+            cached = (gaps, polled)
             if store is not None:
                 store[key] = cached  # cleared with the source's samples when it grows
             else:
                 self._topic_sampling[topic] = cached
-        periodic, polled, times = cached
-        if not periodic and not polled:
+        gaps, polled = cached
+        if not gaps and not polled:
             return {}
         out = {}
-        for k, (t, _v) in enumerate(raw):
-            i = bisect.bisect_left(times, t)
-            if t in periodic and i > 0:
-                out[t] = (0, t - times[i - 1])
-            elif t in polled and k > 0:
-                out[t] = (0, t - raw[k - 1][0])
+        prev = None
+        for t, _v in raw:
+            g = gaps.get(t)
+            if g is not None:
+                out[t] = (0, g)
+            elif prev is not None and t in polled:
+                out[t] = (0, t - prev)
+            prev = t
         return out
 
     def trace(self, name: str) -> Trace:
@@ -396,6 +404,9 @@ class Context:
             return None
         times = self.params.change_times() or [0]
         vals = [{k: tf[k].eval(self.env(t)) for k in keys} for t in times]
+        if all(v == vals[0] for v in vals):  # the usual case: one value throughout
+            first = vals[0]
+            return lambda _t: first
 
         def at(t: int) -> dict[str, float]:
             return vals[max(0, bisect.bisect_right(times, t) - 1)]

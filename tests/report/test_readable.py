@@ -106,5 +106,7 @@ def test_report_page_folds_an_all_pass_table_and_parses(tmp_path) -> None:
     html = write_html(p, tmp_path / "demo.html").read_text()
     assert "<details class='verdicts' open>" in html  # it has a failure: open
     assert "onchange='hilFilter(this)'" in html  # filter by status
+    assert "oninput='hilFind(this)'" in html and "<tr class='s' id='step-1'>" in html  # find
+    assert "classList.toggle('zoom')" in html  # click a diagram to zoom it
     for m in re.finditer(r"<svg.*?</svg>", html, re.S):
         ET.fromstring(m.group(0))  # every diagram is well-formed XML
