@@ -327,7 +327,8 @@ def _steps_html(run: RunData) -> list[str]:
     for s in run.steps:
         n = s.index + 1 if s.index >= 0 else "-"
         start = f"{(s.t_start - run.t0) / 1e6:.1f} ms" if s.t_start is not None else ""
-        h.append(f"<tr class='s' id='step-{n}'><td>{n}</td><td>{esc(s.label)}</td><td>{s.line or ''}</td>"
+        h.append(f"<tr class='s' id='step-{n}'><td>{n}</td><td>{esc(s.label)}</td>"
+                 f"<td>{s.line or ''}</td>"
                  f"<td>{_status(s.status)}</td><td>{start}</td>"
                  f"<td>{s.duration_ns / 1e6:.1f} ms</td><td>{esc(s.message)}</td></tr>")
     h.append("</table>")
