@@ -105,3 +105,26 @@ def test_clock_virtual_is_refused_where_the_bench_cannot(tmp_path) -> None:
         loads_bench("clock: fast\n" + text, "b.yaml")
     assert loads_bench("clock: real\n" + text).clock == "real"
     assert dataclasses.replace(BUILTIN).clock == "virtual"
+
+
+def test_cli_clock_flag_refusals(tmp_path, capsys) -> None:
+    from hil.cli import main
+
+    zenoh = str(fixture("benches", "virtual-zenoh.yaml"))
+    assert main(["run", "pp_move", "--bench", zenoh, "--clock", "virtual", "--out",
+                 str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "--clock" in err and "cannot run on the virtual clock" in err and "subprocess" in err
+    with pytest.raises(SystemExit) as e:
+        main(["run", "pp_move", "--clock", "fast"])
+    assert e.value.code == 2
+
+
+@pytest.mark.parametrize("rate", ["0", "abc", "2000000", "-5"])
+def test_a_bad_virtual_bitrate_is_named(rate, tmp_path) -> None:
+    text = Path(fixture("benches", "virtual.yaml")).read_text().replace(
+        '"virtual:auto"\nrs485', f'"virtual:auto?bitrate={rate}"\nrs485')
+    assert f"bitrate={rate}" in text
+    plan = loads_plan("name: p\nsteps:\n  - wait: 1ms\n", str(tmp_path / "p.yaml"))
+    res = run_plan(plan, loads_bench(text, "b.yaml"), tmp_path)
+    assert res.status == "error" and "bitrate" in res.error, res.error

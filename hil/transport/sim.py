@@ -99,8 +99,10 @@ class CanMedium:
     """One CAN bus on the clock: arbitration, bit time, delivery; statistics for load."""
 
     def __init__(self, clock: VirtualClock, channel: str, bitrate: int) -> None:
-        if bitrate <= 0:
-            raise ValueError(f"CAN bitrate {bitrate}: must be > 0")
+        if isinstance(bitrate, bool) or not isinstance(bitrate, int) or not (
+                10_000 <= bitrate <= 1_000_000):
+            raise ValueError(f"CAN bitrate {bitrate!r}: a classic CAN rate in bit/s, "
+                             "10000-1000000 (CiA 301 lists 10k-1M)")
         self.clock, self.channel, self.bitrate = clock, channel, bitrate
         self.nodes: list[SimCanBus] = []
         self._pending: list[tuple[int, int, SimCanBus, Message]] = []  # (prio, seq, from, msg)
@@ -153,7 +155,8 @@ class SimCanBus(BusABC):
         key = f"can:{channel}"
         medium = clock.media.get(key)
         if medium is None:
-            medium = clock.media[key] = CanMedium(clock, channel, bitrate or DEFAULT_BITRATE)
+            medium = clock.media[key] = CanMedium(
+                clock, channel, DEFAULT_BITRATE if bitrate is None else bitrate)
         self.medium: CanMedium = medium
         self.channel = channel
         self.clock = clock
