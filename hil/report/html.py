@@ -14,7 +14,6 @@ import os
 from collections.abc import Mapping
 from dataclasses import fields
 from pathlib import Path
-from typing import Any
 
 from hil.fileio import write_text_atomic
 from hil.record import topics
@@ -22,7 +21,7 @@ from hil.report.data import RunData, bus_around, bus_log, load_run
 from hil.report.latch_html import LATCH_SPEC, latch_html
 from hil.timing.checker import Verdict, context, spec_topics
 from hil.timing.registry import load_specs
-from hil.timing.render import main_lanes, nice_ticks, svg
+from hil.timing.render import decimate, main_lanes, nice_ticks, svg
 from hil.timing.source import RecordingSource
 
 CSS = """
@@ -224,9 +223,9 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
         lo = min(v for _, v in pts)
         hi = max(v for _, v in pts)
         rng = (hi - lo) or 1.0
-        coords = _decimated(pts, lambda t: pad + (W - pad - 10) * (t - t0) / span,
-                            lambda v, y0=y0, lo=lo, rng=rng:
-                            y0 + PH - 20 - (PH - 30) * (v - lo) / rng)
+        coords = " ".join(decimate(pts, lambda t: pad + (W - pad - 10) * (t - t0) / span,
+                                   lambda v, y0=y0, lo=lo, rng=rng:
+                                   y0 + PH - 20 - (PH - 30) * (v - lo) / rng))
         out.append(f'<text x="4" y="{y0 + 12}" font-size="11">{esc(label)}</text>'
                    f'<text x="4" y="{y0 + 26}" font-size="9">{hi:.4g}</text>'
                    f'<text x="4" y="{y0 + PH - 20}" font-size="9">{lo:.4g}</text>'
@@ -241,29 +240,6 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
     out.append(f'<text x="{W - 10}" y="{PH * len(series) + 28}" font-size="10" '
                'text-anchor="end">ms from the plan start</text></svg>')
     return "".join(out)
-
-
-def _decimated(pts: list[tuple[int, float]], fx: Any, fy: Any) -> str:
-    """Polyline points, at most four per pixel column (first, min, max, last): what the eye
-    sees of thousands of samples, in a page that stays small."""
-    cols: dict[int, list[float]] = {}
-    order: list[int] = []
-    for t, v in pts:
-        c = int(fx(t))
-        col = cols.get(c)
-        if col is None:
-            cols[c] = [v, v, v, v]
-            order.append(c)
-        else:
-            col[1], col[2], col[3] = min(col[1], v), max(col[2], v), v
-    out = []
-    for c in order:
-        first, mn, mx, last = cols[c]
-        out.append(f"{c},{fy(first):.1f}")
-        if mn != mx:
-            out.append(f"{c},{fy(mn):.1f} {c},{fy(mx):.1f}")
-        out.append(f"{c},{fy(last):.1f}")
-    return " ".join(out)
 
 
 def run_info_table(info: dict[str, str]) -> str:

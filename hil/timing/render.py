@@ -268,28 +268,39 @@ def _plot_lane(tr: Trace, x, lo: int, hi: int, y_hi: float, y_lo: float
     def y(v: float) -> float:
         return y_lo - (v - vmin) / span * (y_lo - y_hi)
 
+    out = decimate(pts, x, y, held=True)
+    out.append(f"{x(hi):.1f},{y(pts[-1][1]):.1f}")
+    rng = f"{vmin:.6g} … {vmax:.6g}" if vmax != vmin else f"= {vmin:.6g}"
+    return (f'<polyline points="{" ".join(out)}" fill="none" stroke="#1565c0" '
+            'stroke-width="1.2"/>', rng)
+
+
+def decimate(pts: list[tuple[int, float]], fx: Any, fy: Any, held: bool = False
+             ) -> list[str]:
+    """Polyline points of (t, value) samples, at most four per pixel column (first, min,
+    max, last): what the eye sees of thousands of samples, in a page that stays small.
+    `held`: each column starts at the value held from the previous sample (steps)."""
     cols: dict[int, list[float]] = {}
     order: list[int] = []
-    prev = pts[0][1]
-    for t, v in pts:  # held value: the previous level up to t, then the new one
-        c = int(x(t))
+    prev = pts[0][1] if pts else 0.0
+    for t, v in pts:
+        c = int(fx(t))
         if c not in cols:
-            cols[c] = [prev, prev, prev, prev]
+            start = prev if held else v
+            cols[c] = [start, min(start, v), max(start, v), v]
             order.append(c)
-        col = cols[c]
-        col[1], col[2], col[3] = min(col[1], v), max(col[2], v), v
+        else:
+            col = cols[c]
+            col[1], col[2], col[3] = min(col[1], v), max(col[2], v), v
         prev = v
     out: list[str] = []
     for c in order:
         first, mn, mx, last = cols[c]
-        out.append(f"{c},{y(first):.1f}")
+        out.append(f"{c},{fy(first):.1f}")
         if mn != mx:
-            out.append(f"{c},{y(mn):.1f} {c},{y(mx):.1f}")
-        out.append(f"{c},{y(last):.1f}")
-    out.append(f"{x(hi):.1f},{y(prev):.1f}")
-    rng = f"{vmin:.6g} … {vmax:.6g}" if vmax != vmin else f"= {vmin:.6g}"
-    return (f'<polyline points="{" ".join(out)}" fill="none" stroke="#1565c0" '
-            'stroke-width="1.2"/>', rng)
+            out.append(f"{c},{fy(mn):.1f} {c},{fy(mx):.1f}")
+        out.append(f"{c},{fy(last):.1f}")
+    return out
 
 
 def _boxes(tr: Trace, x, lo: int, hi: int, y_hi: float, y_lo: float) -> str:

@@ -89,6 +89,17 @@ class DriveHost:
         if now > self.drive.now:
             self.drive.advance_to(now)
 
+    def tick_once(self) -> None:
+        """One host tick: the model up to now, then every face's tick (under the lock)."""
+        with self.lock:
+            try:
+                self._advance()
+                now = self.drive.now
+                for fn in list(self._ticks):
+                    fn(now)
+            except Exception as exc:  # a face bug must not stop the drive clock
+                self._note_error("tick", exc)
+
     def _note_error(self, where: str, exc: Exception) -> None:
         """Log the first error of each type with its traceback, count the rest."""
         if not any(type(e) is type(exc) for e in self.errors):
@@ -103,14 +114,7 @@ class DriveHost:
         deadline = time.monotonic_ns()
         while not self._stop.is_set():
             deadline += period
-            with self.lock:
-                try:
-                    self._advance()
-                    now = self.drive.now
-                    for fn in list(self._ticks):
-                        fn(now)
-                except Exception as exc:  # a face bug must not stop the drive clock
-                    self._note_error("tick", exc)
+            self.tick_once()
             delay = deadline - time.monotonic_ns()
             if delay > 0:
                 time.sleep(delay / 1e9)
@@ -173,12 +177,5 @@ class ClockHost(DriveHost):
             self._event = None
 
     def _tick(self) -> None:
-        with self.lock:
-            try:
-                self._advance()
-                now = self.drive.now
-                for fn in list(self._ticks):
-                    fn(now)
-            except Exception as exc:  # a face bug must not stop the drive clock
-                self._note_error("tick", exc)
+        self.tick_once()
         self._event = self.clock.after(int(self.period_s * 1e9), self._tick)
