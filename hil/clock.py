@@ -32,6 +32,8 @@ from hil.units import S
 # Virtual recordings start here: 2000-01-01T00:00:00Z, so two runs carry the same log times.
 VIRTUAL_EPOCH_NS = 946_684_800 * S
 CLOCKS = ("virtual", "real")
+# A send settles its bus at most this long (a bus carrying more than its bit rate never idles)
+SETTLE_LIMIT_NS = 100_000_000
 
 
 class Cancelled(Exception):
@@ -226,10 +228,11 @@ class VirtualClock:
         if self.hold:
             self.held.append(busy)
             return
+        end = self._now + SETTLE_LIMIT_NS  # an overloaded bus is never idle: give up then
         with self._lock:  # not cancellable: what is on the wire arrives (one SDO at a time)
             while busy():
                 nxt = self.next_time()
-                if nxt is None:
+                if nxt is None or nxt > end:
                     return
                 self.run_until(nxt, watched=False)
 
@@ -322,9 +325,10 @@ def batch() -> Iterator[None]:
         yield
     finally:
         clk.hold -= 1
-    for busy in clk.held:
-        clk.settle(busy)
-    clk.held.clear()
+        if clk.hold == 0:  # the outermost batch settles what its sends left in flight
+            held, clk.held = clk.held, []
+            for busy in held:
+                clk.settle(busy)
 
 
 __all__ = ["CLOCKS", "REAL", "VIRTUAL_EPOCH_NS", "Cancelled", "ClockQueue", "RealClock",

@@ -110,3 +110,68 @@ def test_module_functions_follow_the_installed_clock() -> None:
         assert clock.time_ns() - t0 == int(2.6 * S)
         handle.cancel()
     assert clock.current() is clock.REAL
+
+
+def test_nested_batches_settle_once_at_the_outer_end() -> None:
+    c = VirtualClock(epoch_ns=0)
+    settled: list[int] = []
+    with clock.use(c):
+        pending = {"n": 2}
+
+        def busy() -> bool:
+            return pending["n"] > 0
+
+        def drain() -> None:
+            pending["n"] -= 1
+            settled.append(c.time_ns())
+
+        c.at(MS, drain)
+        c.at(2 * MS, drain)
+        with clock.batch():
+            with clock.batch():
+                c.settle(busy)
+            assert settled == []  # the inner batch does not settle
+            c.settle(busy)
+        assert settled == [MS, 2 * MS] and c.held == []
+
+
+def test_settle_gives_up_on_a_bus_that_never_idles() -> None:
+    c = VirtualClock(epoch_ns=0)
+
+    def again() -> None:
+        c.after(MS, again)
+
+    c.after(MS, again)
+    c.settle(lambda: True)  # always busy: ends at the settle limit, not never
+    assert clock.SETTLE_LIMIT_NS <= c.time_ns() <= clock.SETTLE_LIMIT_NS + MS
+
+
+def test_a_stale_sdo_reply_does_not_put_the_client_back_on_the_wall_clock() -> None:
+    import time
+
+    import canopen
+    import pytest as _pytest
+    from canopen.sdo.exceptions import SdoCommunicationError
+
+    from hil.plan.session import on_clock
+    from hil.transport.can_bus import open_can
+
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        bus = open_can("virtual:sdo-stale")
+        net = canopen.Network(bus)
+        from hil.transport.sim import ListenerPump
+
+        net.notifier = ListenerPump(bus, net.listeners)
+        node = canopen.RemoteNode(5, canopen.ObjectDictionary())
+        net.add_node(node)
+        on_clock(node.sdo)
+        node.sdo.MAX_RETRIES = 1  # one attempt (0 would retry for ever)
+        node.sdo.responses.put(b"\x43\x00\x10\x00\0\0\0\0")  # a stale reply
+        t0, w0 = c.time_ns(), time.monotonic()
+        with _pytest.raises(SdoCommunicationError):
+            node.sdo.upload(0x1000, 0)  # nobody answers: canopen swaps its reply queue
+        assert isinstance(node.sdo.responses, ClockQueue)
+        assert c.time_ns() - t0 >= 300 * MS  # the 0.3 s reply timeout passed in bench time
+        assert time.monotonic() - w0 < 0.25  # not in wall time
+        bus.shutdown()

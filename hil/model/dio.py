@@ -284,7 +284,7 @@ class DigitalIO:
             state[sym] = state.get(sym, False) or active
         old = self._di_state
         self._di_state = state
-        for sym in set(old) | set(state):
+        for sym in dict.fromkeys([*old, *state]):  # a fixed order (a set's varies by process)
             before, after = old.get(sym, False), state.get(sym, False)
             if before != after:
                 for fn in list(self._subs.get(sym, ())):

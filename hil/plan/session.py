@@ -14,6 +14,7 @@ from typing import Any
 
 import can
 import canopen
+from canopen.sdo import SdoClient
 
 from hil import clock
 from hil.bench import virtual_module
@@ -328,13 +329,41 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
             cia = Cia402Driver(nets[spec.can], spec.node_id or 1,
                                timeouts={k: t[k] / 1e9 for k in CIA402_TIMEOUTS})
             if clock.is_virtual():  # the SDO client's reply timeout passes in bench time
-                cia.node.sdo.responses = clock.ClockQueue()
+                on_clock(cia.node.sdo)
         if spec.rs485:
             line = lines[spec.rs485]
             mb = DeltaModbus(line, station=spec.station or 1, mode=spec.modbus_mode,  # type: ignore[arg-type]
                              timeout_s=t["modbus"] / 1e9, baud=line.baudrate,
                              port_name=spec.rs485)
         s.drives[name] = DriveIO(spec, bench, dio=dio, cia=cia, modbus=mb)
+
+
+class _ClockSdoClient(SdoClient):
+    """canopen's SdoClient whose reply queue stays a `hil.clock.ClockQueue`: canopen replaces
+    `responses` with a fresh `queue.Queue` when it finds a stale reply; here that empties the
+    ClockQueue instead, so every later reply timeout still passes in bench time."""
+
+    @property  # type: ignore[override]
+    def responses(self) -> Any:
+        return self.__dict__["_clock_responses"]
+
+    @responses.setter
+    def responses(self, _fresh: Any) -> None:
+        q = self.__dict__.get("_clock_responses")
+        if q is None:
+            self.__dict__["_clock_responses"] = clock.ClockQueue()
+            return
+        with contextlib.suppress(Exception):
+            while True:
+                q.get_nowait()
+
+
+def on_clock(sdo: SdoClient) -> SdoClient:
+    """Put a canopen SDO client's reply waits on the current clock (a virtual bench)."""
+    sdo.__dict__.pop("responses", None)
+    sdo.__class__ = _ClockSdoClient
+    sdo.__dict__["_clock_responses"] = clock.ClockQueue()
+    return sdo
 
 
 def wait_for(pred: Callable[[], Any], timeout_ns: int, poll_s: float = 0.002) -> tuple[bool, Any]:

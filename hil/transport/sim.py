@@ -138,10 +138,15 @@ class CanMedium:
         self.frames += 1
         self.in_flight -= 1
         t = self.clock.time_ns()
-        for node in list(self.nodes):
-            if node is not sender or node.receive_own_messages:
-                node._deliver(msg, t)
-        self._start_next()
+        try:
+            for node in list(self.nodes):
+                if node is not sender or node.receive_own_messages:
+                    try:
+                        node._deliver(msg, t)
+                    except Exception as exc:  # one receiver's bug: the others get the frame
+                        node.errors.append(exc)
+        finally:
+            self._start_next()  # the next waiting frame goes on the wire whatever happened
 
     def idle(self) -> bool:
         return self.in_flight == 0
@@ -164,6 +169,7 @@ class SimCanBus(BusABC):
         self.channel_info = f"virtual-time CAN {channel} at {medium.bitrate} bit/s"
         self._rx: deque[Message] = deque()
         self.on_rx: Callable[[], None] | None = None
+        self.errors: list[BaseException] = []  # raised by what this node's delivery fed
         medium.nodes.append(self)
         super().__init__(channel=channel)
 
@@ -245,7 +251,10 @@ class ListenerPump:
 
     def _dispatch(self, msg: Message) -> None:
         for listener in list(self.listeners):
-            listener.on_message_received(msg)
+            try:
+                listener.on_message_received(msg)
+            except Exception as exc:  # as python-can's Notifier: canopen raises it later
+                self.exception = exc
 
     def stop(self, timeout: float = 0) -> None:
         self._stop()

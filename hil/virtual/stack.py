@@ -31,6 +31,8 @@ from hil.transport.serial_line import open_serial
 from hil.transport.sim import pump
 from hil.virtual.host import ClockHost, DriveHost
 
+RETRY_NS = 5_000_000  # after a failing tick (ModbusSlaveRunner.poll_s)
+
 
 class ClockModbusPump:
     """`ModbusSlaveRunner` on a virtual clock: each chunk the line delivers is fed to the
@@ -64,8 +66,10 @@ class ClockModbusPump:
 
     def _rx(self) -> None:
         try:
-            frame = self.line.read_timed(511, 0)
-            if frame is not None and frame.data:
+            while True:  # everything the line has handed over by now
+                frame = self.line.read_timed(511, 0)
+                if frame is None or not frame.data:
+                    break
                 self.slave.feed_timed(frame.data, tuple(frame.times_ns))
         except Exception as exc:  # last resort: log once, keep serving the line
             self.error = exc
@@ -86,9 +90,12 @@ class ClockModbusPump:
         self._event = None
         try:
             self.slave.tick(self._clock.monotonic_ns())
-        except Exception as exc:
+        except Exception as exc:  # as the real runner: retry after a pause, never spin
             self.error = exc
             self.slave.last_resort("runner", exc)
+            if self.line.on_rx is not None:
+                self._event = self._clock.after(RETRY_NS, self._deadline)
+            return
         self._arm()
 
 

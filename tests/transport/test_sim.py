@@ -102,3 +102,23 @@ def test_rs485_characters_arrive_at_their_end_on_the_line(tmp_path) -> None:
         assert c.time_ns() == 4 * char + 50_000_000
         master.close()
         drive.close()
+
+
+def test_a_failing_receiver_neither_loses_the_frame_for_others_nor_stalls_the_bus() -> None:
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b, d = (open_can("virtual:sim-f") for _ in range(3))
+        got: list[int] = []
+
+        def boom(_m: can.Message) -> None:
+            raise RuntimeError("receiver bug")
+
+        pump(b, boom)
+        pump(d, lambda m: got.append(m.arbitration_id))
+        with clock.batch():
+            a.send(can.Message(arbitration_id=0x100, data=b"", is_extended_id=False))
+            a.send(can.Message(arbitration_id=0x200, data=b"", is_extended_id=False))
+        assert got == [0x100, 0x200]  # the second frame still went on the wire
+        assert len(b.errors) == 2 and d.errors == []
+        for bus in (a, b, d):
+            bus.shutdown()
