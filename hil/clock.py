@@ -25,7 +25,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import Any, Protocol
+from typing import Any
 
 from hil.units import S
 
@@ -43,16 +43,6 @@ class Cancelled(Exception):
 class VirtualTimeout(BaseException):
     """A wait would pass the step's deadline in virtual time. A BaseException, so that no
     step code's `except Exception` takes the runner's step timeout for its own failure."""
-
-
-class Clock(Protocol):
-    name: str
-    virtual: bool
-
-    def time_ns(self) -> int: ...
-    def monotonic_ns(self) -> int: ...
-    def sleep(self, seconds: float) -> None: ...
-    def wait_for(self, pred: Callable[[], Any], timeout_s: float | None) -> bool: ...
 
 
 class RealClock:
@@ -117,7 +107,6 @@ class VirtualClock:
         self._running = 0  # > 0 while an event runs (events must not wait)
         self._watch: dict[int, tuple[threading.Event | None, int | None]] = {}
         self.media: dict[str, Any] = {}
-        self.events_run = 0
         self.hold = 0  # > 0 inside `batch()`: settling waits for its end
         self.held: list[Callable[[], bool]] = []
 
@@ -190,17 +179,13 @@ class VirtualClock:
                 while heap and heap[0].cancelled:
                     heapq.heappop(heap)
                 nxt = heap[0].t if heap else None
-                if nxt is None or nxt > t:
-                    if deadline is not None and t > deadline:
-                        self._now = max(self._now, deadline)
-                        raise VirtualTimeout(f"step deadline at {self.elapsed_ns / S:.3f} s "
-                                             "of virtual time")
-                    self._now = max(self._now, t)
-                    return True if pred is None else bool(pred())
-                if deadline is not None and nxt > deadline:
-                    self._now = max(self._now, deadline)
+                if deadline is not None and min(t, nxt if nxt is not None else t) > deadline:
+                    self._now = max(self._now, deadline)  # the wait would pass the deadline
                     raise VirtualTimeout(f"step deadline at {self.elapsed_ns / S:.3f} s of "
                                          "virtual time")
+                if nxt is None or nxt > t:
+                    self._now = max(self._now, t)
+                    return True if pred is None else bool(pred())
                 ev = heapq.heappop(heap)
                 self._now = max(self._now, ev.t)
                 self._running += 1
@@ -208,7 +193,6 @@ class VirtualClock:
                     ev.fn()
                 finally:
                     self._running -= 1
-                self.events_run += 1
 
     def sleep(self, seconds: float) -> None:
         self.run_until(self._now + max(0, round(seconds * S)))

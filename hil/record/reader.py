@@ -19,6 +19,14 @@ from hil.record.mcapio import Scan, iter_chunk, scan
 _loads = json.loads
 
 
+def decode(data: bytes) -> Any:
+    """A message's JSON; an undecodable one as {"error": ..., "raw": hex} (never raises)."""
+    try:
+        return _loads(data)
+    except ValueError as exc:
+        return {"error": f"undecodable message: {exc}", "raw": bytes(data).hex()}
+
+
 class RecordingError(Exception):
     """A file that cannot be read as a recording (message names the file and the reason)."""
 
@@ -153,11 +161,7 @@ class Recording:
         """(topic, log_time, publish_time, decoded JSON) in file order."""
         names = {cid: c.topic for cid, c in self.channel_info.items()}
         for cid, lt, pt, data in self._raw(self._cids(topics)):
-            try:
-                obj = _loads(data)
-            except ValueError as exc:
-                obj = {"error": f"undecodable message: {exc}", "raw": data.hex()}
-            yield names.get(cid, f"?{cid}"), lt, pt, obj
+            yield names.get(cid, f"?{cid}"), lt, pt, decode(data)
 
     def counts(self) -> dict[str, int]:
         """Messages per topic (topics without messages count 0)."""

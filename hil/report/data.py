@@ -11,7 +11,7 @@ from sys import intern
 from typing import Any
 
 from hil.record import topics
-from hil.record.reader import Recording
+from hil.record.reader import Recording, decode
 
 
 @dataclass
@@ -219,10 +219,7 @@ def _decode(raw: bytes | dict) -> dict:
     """A message's JSON (bus entries are kept as bytes until a report shows them)."""
     if isinstance(raw, dict):
         return raw
-    try:
-        obj = json.loads(raw)
-    except ValueError as exc:
-        return {"error": f"undecodable message: {exc}", "raw": bytes(raw).hex()}
+    obj = decode(raw)
     return obj if isinstance(obj, dict) else {"value": obj}
 
 

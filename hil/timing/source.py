@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from hil.record import topics
-from hil.record.reader import Recording
+from hil.record.reader import Recording, decode
 
 _MISSING = object()
 
@@ -207,10 +207,7 @@ class LiveSource(MemorySource):
         touched: set[str] = set()
         for cid, log_t, pub_t, data in mirror[self._seen:n]:
             topic = names.get(cid, f"?{cid}")
-            try:
-                obj = json.loads(data)
-            except ValueError as exc:
-                obj = {"error": f"undecodable message: {exc}", "raw": bytes(data).hex()}
+            obj = decode(data)
             lst = self._msgs.setdefault(topic, [])
             t = int(pub_t or log_t)
             if lst and t < lst[-1][0]:

@@ -96,7 +96,7 @@ class SimMessage(Message):
 
 
 class CanMedium:
-    """One CAN bus on the clock: arbitration, bit time, delivery; statistics for load."""
+    """One CAN bus on the clock: arbitration, bit time, delivery."""
 
     def __init__(self, clock: VirtualClock, channel: str, bitrate: int) -> None:
         if isinstance(bitrate, bool) or not isinstance(bitrate, int) or not (
@@ -109,8 +109,6 @@ class CanMedium:
         self._seq = 0
         self.busy_until = 0
         self.in_flight = 0
-        self.frames = 0
-        self.busy_ns = 0
 
     def bit_ns(self, bits: int) -> int:
         return bits * S // self.bitrate
@@ -131,11 +129,9 @@ class CanMedium:
         dur = self.bit_ns(frame_bits(msg))
         start = max(self.clock.time_ns(), self.busy_until)
         self.busy_until = start + dur
-        self.busy_ns += dur
         self.clock.at(self.busy_until, lambda: self._done(sender, msg))
 
     def _done(self, sender: SimCanBus, msg: Message) -> None:
-        self.frames += 1
         self.in_flight -= 1
         t = self.clock.time_ns()
         try:
