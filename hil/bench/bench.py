@@ -60,7 +60,8 @@ _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
 _TOP = {"name", "description", "virtual", "process", "clock", "can", "rs485", "drives", "timeouts",
         "timing", "gateway",
         "safe_state", "motion_allowed", "features", "faults_allowed"}
-_DRIVE = {"node_id", "station", "profile", "can", "rs485", "dio", "dio_map", "wiring", "sto",
+_DRIVE = {"node_id", "station", "profile", "can", "rs485", "dio", "dio_map", "pulse",
+          "pulse_wiring", "wiring", "sto",
           "params", "param_via", "mechanics", "options", "modbus_mode"}
 _VIRTUAL_ONLY = ("mechanics", "options")
 _SAFE = {"controlword", "di", "sto", "wait_brake", "timeout"}
@@ -115,6 +116,8 @@ class DriveSpec:
     rs485: str | None = None  # name of a line in Bench.rs485
     dio: str | None = None  # DI/DO URL (harness side)
     dio_map: dict[str, Any] = field(default_factory=dict)  # modbus-tcp line -> coil/di
+    pulse: str | None = None  # pulse line URL (docs/pulse.md)
+    pulse_wiring: dict[str, str] | None = None  # DOG/NL/PL -> X<n>, Y<n> -> DI<n>
     di: dict[str, Wire] = field(default_factory=dict)  # DI function -> wire
     do: dict[str, Wire] = field(default_factory=dict)  # DO function -> wire
     sto: dict[str, str] = field(default_factory=lambda: dict(STO_CHANNELS))
@@ -179,6 +182,8 @@ class Bench:
             out.update({"rs485", "modbus"})
         if any(d.dio for d in self.drives.values()):
             out.add("dio")
+        if any(d.pulse for d in self.drives.values()):
+            out.add("pulse")
         return out
 
 
@@ -302,8 +307,13 @@ def clock_blocker(virtual: bool, process: str, can: dict[str, str], rs485: dict[
             return f"RS-485 line {name} ({url}) is not pty:auto (another program may open it)"
     for url in dio:
         if not url.startswith("virtual:"):
-            return f"DI/DO {url} is not in-process virtual:"
+            return f"DI/DO or pulse line {url} is not in-process virtual:"
     return None
+
+
+def _lines_of(drives: dict[str, DriveSpec]) -> list[str]:
+    """The DI/DO and pulse-line URLs of the drives (for the clock choice)."""
+    return [u for d in drives.values() for u in (d.dio, d.pulse) if u and u != GATEWAY]
 
 
 def with_clock(bench: Bench, clock: str | None) -> Bench:
@@ -315,7 +325,7 @@ def with_clock(bench: Bench, clock: str | None) -> Bench:
         raise ValueError(f"clock {clock!r}: one of {', '.join(CLOCKS)}")
     if clock == "virtual":
         why = clock_blocker(bench.virtual, bench.process, bench.can, bench.rs485,
-                            [d.dio for d in bench.drives.values() if d.dio])
+                            _lines_of(bench.drives))
         if why:
             raise ValueError(f"bench {bench.name} cannot run on the virtual clock: {why}")
     return dataclasses.replace(bench, clock=clock)
@@ -323,7 +333,7 @@ def with_clock(bench: Bench, clock: str | None) -> Bench:
 
 def _clock(v: Checker, top: LDict, virtual: bool, process: str, can: dict[str, str],
            rs485: dict[str, str], drives: dict[str, DriveSpec]) -> str:
-    why = clock_blocker(virtual, process, can, rs485, [d.dio for d in drives.values() if d.dio])
+    why = clock_blocker(virtual, process, can, rs485, _lines_of(drives))
     if "clock" not in top:
         return "real" if why else "virtual"
     clock = v.text(top, "clock", "")
@@ -428,8 +438,9 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
                             "a virtual: bus is in-process only; process: subprocess needs "
                             "zenoh: or socketcan:")
     _drive_dio(v, spec, d, where, subprocess_virtual=process == "subprocess" and virtual)
-    if not (spec.can or spec.rs485 or spec.dio):
-        raise v.err(d.line, where, "a drive needs at least one of can, rs485, dio")
+    _drive_pulse(v, spec, d, where, subprocess_virtual=process == "subprocess" and virtual)
+    if not (spec.can or spec.rs485 or spec.dio or spec.pulse):
+        raise v.err(d.line, where, "a drive needs at least one of can, rs485, dio, pulse")
     _drive_lines(v, spec, d, where, virtual)
     if "params" in d:
         spec.params = _params(v, d["params"], d.kline("params"), join(where, "params"),
@@ -484,6 +495,42 @@ def _drive_dio(v: Checker, spec: DriveSpec, d: LDict, where: str,
                 raise v.err(d.kline("dio_map"), join(where, "dio_map"), "only for modbus-tcp:")
     elif "dio_map" in d:
         raise v.err(d.kline("dio_map"), join(where, "dio_map"), "needs `dio:`")
+
+
+_PULSE_SOURCES = ("DOG", "NL", "PL")
+_X_RE = re.compile(r"^X[0-9]{1,3}$")
+_Y_RE = re.compile(r"^Y[0-9]{1,3}$")
+
+
+def _drive_pulse(v: Checker, spec: DriveSpec, d: LDict, where: str,
+                 subprocess_virtual: bool) -> None:
+    """`pulse:` (a pulse line URL) and `pulse_wiring:` (docs/pulse.md)."""
+    if "pulse" in d:
+        spec.pulse = v.text(d, "pulse", where)
+        try:
+            u = parse_url(spec.pulse, "pulse")
+        except (TransportUrlError, ValueError) as e:
+            raise v.err(d.kline("pulse"), join(where, "pulse"), str(e)) from None
+        if subprocess_virtual and u.scheme == "virtual":
+            raise v.err(d.kline("pulse"), join(where, "pulse"),
+                        "a virtual: pulse line is in-process only; use zenoh: with subprocess")
+    if "pulse_wiring" in d:
+        fld = join(where, "pulse_wiring")
+        if not spec.pulse:
+            raise v.err(d.kline("pulse_wiring"), fld, "needs `pulse:`")
+        m = v.mapping(d["pulse_wiring"], d.kline("pulse_wiring"), fld)
+        out: dict[str, str] = {}
+        for k, val in m.items():
+            val = str(val)
+            if k in _PULSE_SOURCES and _X_RE.match(val):
+                out[k] = val
+            elif _Y_RE.match(str(k)) and re.match(r"^DI([1-9]|10)$", val):
+                out[str(k)] = val
+            else:
+                raise v.err(m.kline(k), join(fld, str(k)),
+                            f"{k}: {val!r}: DOG/NL/PL take a PLC input X<n>, a PLC output "
+                            "Y<n> takes a drive input DI1-DI10")
+        spec.pulse_wiring = out
 
 
 def _drive_lines(v: Checker, spec: DriveSpec, d: LDict, where: str, virtual: bool) -> None:

@@ -69,6 +69,8 @@ class DiFunctions:
     def control_mode(self) -> str:
         """"PT" "PR" "S" "T" "Sz" "Tz", or "" (CANopen mode without a CiA 402 mode)."""
         yx = self.d.params.get("P1.001") & 0xFF
+        if yx in (0x0D, 0x0E, 0x0F):  # PT-PR: off PT, on PR (L15200)
+            return "PR" if self.d.dio.function_active("PT-PR") else "PT"
         if yx in (0, 0x0C) and self.d.options.di_modes_follow_cia402:
             mode = CIA402_MODES.get(self.d.cia402.mode)
             if mode:
@@ -189,6 +191,7 @@ class DiFunctions:
             self._release("CCLR")
             return
         d._clear_position_error()
+        d.pulse.clear_error()  # PT: the accumulated pulse error (L9749)
         d.cia402.drop_setpoints()  # the pending position command is gone
         if level:
             d.axis.lock("CCLR")
@@ -196,6 +199,7 @@ class DiFunctions:
     def _cclr_step(self) -> None:
         if "CCLR" in self.d.axis.locks:
             self.d._clear_position_error()
+            self.d.pulse.clear_error()
 
     # -- TRQLM / SPDLM / ZCLAMP / GAINUP -------------------------------------------------
     def refresh(self, *_: object) -> None:

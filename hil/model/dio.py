@@ -34,10 +34,10 @@ from hil.profile.dio import (  # tables 8.1 / 8.2 and the mapping parameters (th
 # Table 8.1 functions the virtual drive does not model (docs/manual-choices.md). Mapping one of them
 # by a P2.010-P2.017 / P2.036-P2.040 write, or in a bench, is refused: a mapped function that
 # silently does nothing would make a test pass for the wrong reason. The motion functions
-# PFQS, JOGU/JOGD, TRQLM/SPDLM, ZCLAMP, CCLR and GAINUP are modelled (di_functions.py); what
-# stays here needs an input the virtual drive has not (pulse train, analog position command,
-# linear scale, gantry, E-cam) or a mode switch it does not model (mixed modes).
-_NO_PULSE = "the pulse-train command (PT) is not modelled"
+# PFQS, JOGU/JOGD, TRQLM/SPDLM, ZCLAMP, CCLR and GAINUP are modelled (di_functions.py), and
+# the PT functions GNUM0/GNUM1, INHP and PT-PR (pulse_train.py); what stays here needs an
+# input the virtual drive has not (analog position command, linear scale, gantry, E-cam) or
+# a mode switch it does not model (the S/T mixed modes).
 INERT_DI_FUNCTIONS: dict[str, str] = {
     "CMDINV": "command inversion of the analog S/T command is not modelled (L15094)",
     "CTRY": "the gantry function (P1.074 = 2) is not modelled (L15104)",
@@ -47,12 +47,8 @@ INERT_DI_FUNCTIONS: dict[str, str] = {
     "S-P": "mixed-mode switching (P1.001 = 6/8) is not modelled (L15172)",
     "S-T": "mixed-mode switching (P1.001 = 0x0A) is not modelled (L15176)",
     "T-P": "mixed-mode switching (P1.001 = 7/9) is not modelled (L15180)",
-    "PT-PR": "mixed-mode switching (P1.001 = 0x0D-0x0F) is not modelled (L15200)",
     "ALGN": "E-cam alignment (P2.076) is not modelled (L15203)",
     "CAM": "the E-cam (P5.088) is not modelled (L15206)",
-    "GNUM0": f"e-gear numerator selection P2.060-P2.062: {_NO_PULSE} (L15239)",
-    "GNUM1": f"e-gear numerator selection P2.060-P2.062: {_NO_PULSE} (L15239)",
-    "INHP": f"pulse inhibit: {_NO_PULSE} (L15244)",
 }
 
 

@@ -68,6 +68,7 @@ from hil.model.motion import Axis, counts_to_puu, puu_to_counts
 from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
 from hil.model.pr_engine import PR_MODES, attach_pr
+from hil.model.pulse_train import attach_pulse_train
 from hil.model.sto import Sto
 from hil.model.timebase import MS, Scheduler, ms
 from hil.protocol.cia402 import MODE_NAMES
@@ -120,6 +121,7 @@ class Drive:
         self.capture = attach_capture(self)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
         self.compare = attach_compare(self)  # COMPARE on DO4 (§7.2.3, docs/capture.md)
         self.difunc = attach_di_functions(self)  # PFQS, JOG, TRQLM/SPDLM, ZCLAMP, CCLR, GAINUP
+        self.pulse = attach_pulse_train(self)  # PT input, OA/OB/OZ output (docs/pulse.md)
         self._boot()
 
     # ------------------------------------------------------------------ construction
@@ -424,6 +426,7 @@ class Drive:
             "di": [self.dio.input_level(n) for n in range(1, 11)],
             "homing_phase": self.homing.phase if hasattr(self, "homing") else "",
             "gain_switched": self.difunc.gain_switched if hasattr(self, "difunc") else False,
+            **(self.pulse.snapshot() if hasattr(self, "pulse") else {}),
         }
 
     # ------------------------------------------------------------------ internals
@@ -451,6 +454,7 @@ class Drive:
         self._refresh_speed_outputs()
         self._wire_brake()
         self.cia402.power_on()
+        self.pulse.power_up()
         self._mirror_params()  # after power_on(), which resets 6093h to 1/1
         if canopen_init:
             self.cia402.write(0x607C, 0, HOME_OFFSET_INIT)  # home offset (L10744)
@@ -633,7 +637,9 @@ class Drive:
     def _needs_steps(self) -> bool:
         ax = self.axis
         # a position pushed off its demand at standstill is corrected (and seen by TPOS)
-        return ax.moving or ax.velocity != 0.0 or (ax.power and ax.position != ax.demand)
+        # pulses on the line are counted (or lost) at the motion steps (pulse_train.py)
+        return (ax.moving or ax.velocity != 0.0 or (ax.power and ax.position != ax.demand)
+                or self.pulse.seg is not None)
 
     def _commit_cycle(self) -> None:
         """An input arrives inside a 1 ms cycle: the cycle runs to its end with the command
@@ -715,7 +721,9 @@ class Drive:
         ax = self.axis
         err = ax.following_error
         # PR control mode by P1.001 (a dual mode only while its PR side is the one in effect)
-        if self.params.get("P1.001") & 0xFF in PR_MODES and self.difunc.control_mode() == "PR":
+        if self.pulse.used and self.pulse.in_pt_cached():  # PT: pulse command minus feedback
+            err = self.pulse.error()
+        elif self.params.get("P1.001") & 0xFF in PR_MODES and self.difunc.control_mode() == "PR":
             if self.pr.tpos_off:
                 return False
             if ax.mode == "position":

@@ -569,6 +569,9 @@ class Axis:
         torque limited. Returns the new speed."""
         k, ext, fr = self._k, self._ext, self._fric
         vcmd = vd if mode == _VEL else self.feedforward * vd + self.kpp * (pd - p)
+        if mode == _INTERP:  # a stream of set-points (IP, PT) is capped by P1.055 (L4034)
+            vmax = self.max_speed_rpm * self.cpr / 60.0
+            vcmd = vmax if vcmd > vmax else (-vmax if vcmd < -vmax else vcmd)
         if dt_ns != self._alpha_dt:
             self._alpha_dt = dt_ns
             self._alpha = 1.0 - math.exp(-dt / self._tau_v)

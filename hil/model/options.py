@@ -148,6 +148,17 @@ class ModelOptions:
     # use when TCM0/TCM1 (SPD0/SPD1) select the analog source (00, L4036-4044).
     analog_v_ref: float = 0.0  # V, x P1.040 / 10 V -> speed limit (L8453)
     analog_t_ref: float = 0.0  # V, x P1.041 / 10 V -> torque limit (L3955-3960)
+    # --- PT mode and the encoder output (hil/model/pulse_train.py, docs/pulse.md) ---
+    # The CN1 pulse input wired to the PLC: "line_driver" 4 Mpps or "open_collector"
+    # 200 kpps (L7700-7707); above it AL008 (L19535) and the pulses are not counted.
+    pulse_interface: str = "line_driver"
+    # 1/4 < Nx/M < 262144 (L8547) gives no alarm: "refuse" refuses a write that leaves the
+    # range (SDO abort / Modbus exception); "off" accepts it.
+    pt_gear_check: str = "refuse"
+    # OCZ (C11, L1851): the manual gives no pulse width.
+    ocz_width_us: float = 100.0
+    # OA/OB published as one segment per window of this many ms while the motor turns.
+    output_window_ms: float = 10.0
     # --- deviations (deliberately wrong drive) ---
     dev_brake_on_delay_ms: float = 0.0  # added to P1.042 (e.g. 5: BRKR 5 ms late)
     dev_brake_off_delay_ms: float = 0.0  # added to the P1.043 rule
@@ -209,11 +220,14 @@ _CHOICES: dict[str, tuple[str, ...]] = {
     "nmt_stop_action": ("servo_off", "none"),
     "al020_rearm": ("reset", "frame"),
     "fault_reset_clears": ("alarm_reset", "listed"),
+    "pulse_interface": ("line_driver", "open_collector"),
+    "pt_gear_check": ("refuse", "off"),
 }
 # Numeric options that may be negative (volts on V_REF / T_REF); every other is >= 0
 _SIGNED = {"analog_v_ref", "analog_t_ref"}
 # Options that must be strictly positive: a 0 ms motion step would never end
-_POSITIVE = {"motion_step_ms", "state_publish_ms", "sync_fail_window", "sync_timeout_cycles"}
+_POSITIVE = {"output_window_ms", "motion_step_ms", "state_publish_ms", "sync_fail_window",
+             "sync_timeout_cycles"}
 
 
 def _check_type(key: str, value: Any, default: Any, where: str) -> None:

@@ -638,7 +638,10 @@ def pr_mode(drive: Drive) -> bool:
     """PR triggers act: P1.001.YX selects a mode with PR (or the option says any mode)."""
     if not drive.options.pr_triggers_need_pr_mode:
         return True
-    return drive.params.get("P1.001") & 0xFF in PR_MODES
+    yx = drive.params.get("P1.001") & 0xFF
+    if yx in (0x0D, 0x0E, 0x0F):  # PT-PR: the PR side only while DI.PT-PR is on (L15200)
+        return drive.difunc.control_mode() == "PR"
+    return yx in PR_MODES
 
 
 def _pos_number(dio: Any) -> int:

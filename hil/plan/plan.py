@@ -25,7 +25,7 @@ __all__ = ["Plan", "bind_line", "check_plan", "find_plans", "load_plan", "loads_
            "plan_spec", "step_spec"]
 
 _TOP = {"name", "description", "bench_requires", "drive", "params", "options", "steps", "tags"}
-FEATURES = ("virtual", "real", "motion", "can", "sdo", "rs485", "modbus", "dio")
+FEATURES = ("virtual", "real", "motion", "can", "sdo", "rs485", "modbus", "dio", "pulse")
 
 
 @dataclass

@@ -31,6 +31,7 @@ from hil.profile.params import parse_name
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
 from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial, next_fault_id
+from hil.transport.pulse import open_pulse
 from hil.transport.serial_line import open_serial
 
 
@@ -42,9 +43,26 @@ class DriveIO:
     """Everything the runner does to one drive, whatever carries it."""
 
     def __init__(self, spec: DriveSpec, bench: Bench, *, dio: Any = None, cia: Any = None,
-                 modbus: Any = None) -> None:
+                 modbus: Any = None, pulse: Any = None) -> None:
         self.spec, self.bench = spec, bench
         self.dio, self._cia, self.modbus = dio, cia, modbus
+        self.pulse = pulse  # the PLC's end of the drive's pulse line (docs/pulse.md)
+        self._plc: Any = None
+
+    def plc(self, params: Any, slice_ms: float = 10.0) -> Any:
+        """The drive's PLC axis (`hil.drivers.plc_pulse.PulseMaster`) with FUN141 `params`;
+        its position register and output count persist from step to step."""
+        from hil.drivers.plc_pulse import PulseMaster
+        if self.pulse is None:
+            raise BenchError(f"drive {self.name}: no pulse line on this bench (`pulse:`)")
+        if self._plc is None:
+            self._plc = PulseMaster(self.pulse, params, slice_ms=slice_ms)
+        else:
+            params.check()
+            self._plc.p = params
+            self._plc.init_outputs()
+            self._plc.slice_ns = max(1_000_000, round(slice_ms * 1_000_000))
+        return self._plc
 
     @property
     def name(self) -> str:
@@ -225,6 +243,7 @@ def open_session(bench: Bench, recorder: Any, *, world_factory: Callable | None 
         urls = {f"can:{k}": u for k, u in bench.can.items()}
         urls |= {f"rs485:{k}": u for k, u in bench.rs485.items()}
         urls |= {f"dio:{n}": d.dio for n, d in bench.drives.items() if d.dio}
+        urls |= {f"pulse:{n}": d.pulse for n, d in bench.drives.items() if d.pulse}
     s = Session(bench, recorder, world)
     try:
         if bench.gateway is not None:
@@ -314,7 +333,14 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
             lines[lname] = s.fault_serial[lname] = FaultySerial(lines[lname], lname, sink=rec)
     t = bench.timeouts
     for name, spec in bench.drives.items():
-        dio = cia = mb = None
+        dio = cia = mb = pulse = None
+        if spec.pulse:
+            url = urls[f"pulse:{name}"]
+            try:
+                pulse = open_pulse(url, role="master", tap=rec, name=name)
+            except Exception as e:
+                raise BenchError(f"pulse line of drive {name} ({url}): {e}") from e
+            s._closers.append(pulse.close)
         if spec.dio:
             url = urls[f"dio:{name}"]
             try:
@@ -335,7 +361,7 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
             mb = DeltaModbus(line, station=spec.station or 1, mode=spec.modbus_mode,  # type: ignore[arg-type]
                              timeout_s=t["modbus"] / 1e9, baud=line.baudrate,
                              port_name=spec.rs485)
-        s.drives[name] = DriveIO(spec, bench, dio=dio, cia=cia, modbus=mb)
+        s.drives[name] = DriveIO(spec, bench, dio=dio, cia=cia, modbus=mb, pulse=pulse)
 
 
 class _ClockSdoClient(SdoClient):

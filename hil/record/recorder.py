@@ -268,6 +268,13 @@ class Recorder:
             source_t,
         )
 
+    def pulse(self, name: str, kind: str, body: Mapping[str, Any], t: int,
+              source_t: int | None = None) -> None:
+        """A pulse-line message: a command segment (`seg`), an encoder-output window (`oab`)
+        or a Z pulse (`oz`) (docs/pulse.md)."""
+        self._put(topics.pulse(name, kind), "hil.PulseSegment", None,
+                  dumps(_plain(body)), t, source_t)
+
     # -- harness events --------------------------------------------------------------------------
     def plan_step(
         self,

@@ -151,6 +151,19 @@ SCHEMAS: dict[str, dict] = {
         {"level": {"type": "boolean", "description": "electrical level, True = closed"}},
         ["level"],
     ),
+    "hil.PulseSegment": _obj(
+        "hil.PulseSegment",
+        {
+            "freq": {"type": "number", "description": "pulses per second"},
+            "direction": {"type": "integer", "description": "+1 forward, -1 reverse"},
+            "count": {"type": "integer", "description": "pulses (0: until the next)"},
+            "total": {"type": "integer", "description": "signed pulses before this one"},
+            "form": {"type": "string", "description": "ab, cw_ccw, pulse_sign"},
+            "logic": {"type": "integer"},
+            "width_ns": {"type": "integer", "description": "Z pulse width (oz)"},
+        },
+        [],
+    ),
     "hil.DriveState": _obj(
         "hil.DriveState",
         {  # the fields of hil.model.drive.Drive.snapshot() (ground truth)
@@ -177,6 +190,11 @@ SCHEMAS: dict[str, dict] = {
             "di": {"type": "array", "items": {"type": "boolean"}, "description": "DI1..DI10"},
             "homing_phase": {"type": "string"},
             "gain_switched": {"type": "boolean"},
+            "pt_count": {"type": "integer", "description": "PT pulses counted (signed)"},
+            "pt_freq_kpps": {"type": "number", "description": "PT pulse frequency, kpps"},
+            "pt_command": {"type": "integer", "description": "PT command position, counts"},
+            "pt_pending": {"type": "integer", "description": "pulses still to come"},
+            "pt_error": {"type": "integer", "description": "PT command - feedback, counts"},
         },
         [],
         extra=False,
@@ -364,6 +382,8 @@ def schema_for_topic(topic: str) -> str:
         return "hil.ModbusAdu"
     if topic.startswith("/dio/") and len(parts) == 4:
         return "hil.DioLevel"
+    if topic.startswith("/pulse/") and len(parts) == 4:
+        return "hil.PulseSegment"
     if topic.startswith("/drive/"):
         return {
             "state": "hil.DriveState",

@@ -29,3 +29,6 @@ class Tap(Protocol):
     def dio(self, name: str, line: str, level: bool, t: int, source_t: int | None) -> None:
         """A DI/DO/STO line level (electrical: True = closed/conducting)."""
 
+    def pulse(self, name: str, kind: str, body: dict[str, Any], t: int,
+              source_t: int | None) -> None:
+        """A pulse-line message (`seg`, `oab`, `oz`: docs/pulse.md)."""

@@ -39,6 +39,11 @@ def dio(name: str, line: str) -> str:
     return f"/dio/{name}/{line}"
 
 
+def pulse(name: str, kind: str) -> str:
+    """A pulse line's messages: `seg` (command segments), `oab` (encoder output), `oz`."""
+    return f"/pulse/{name}/{kind}"
+
+
 def drive_state(drive: str) -> str:
     """Virtual-bench ground truth: CiA 402 state, mode, position, velocity, torque, brake."""
     return f"/drive/{drive}/state"

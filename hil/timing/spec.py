@@ -33,7 +33,8 @@ FACTORY_BINDING: dict[str, str] = {
     "BRKR": "DO6",  # P2.041 = 0x0108 on the virtual bench (docs/manual-choices.md#timing)
 }
 DEFAULT_PLACES: dict[str, str] = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
-LINE_RE = re.compile(r"(DI(?:10|[1-9])|DO[1-6]|STO_A|STO_B|FDBK)(?::([ab]))?")  # A3 lines
+# A3 lines, and a PLC's inputs / outputs on a pulse line (X<n>, Y<n>: docs/pulse.md)
+LINE_RE = re.compile(r"(DI(?:10|[1-9])|DO[1-6]|STO_A|STO_B|FDBK|[XY][0-9]{1,3})(?::([ab]))?")
 PLACE_RE = re.compile(r"\{(\w+)\}")
 STATUSES = ("pass", "fail", "inconclusive", "skipped")
 
@@ -403,7 +404,8 @@ def _signals(v: _V, top: LDict, binding: dict[str, str]) -> dict[str, SignalDef]
             ln = v.text(d, "line", where)
             if not LINE_RE.fullmatch(ln):
                 raise v.err(d.key_lines["line"], f"{where}.line",
-                            f"{ln!r} is not a line (DI1..DI10, DO1..DO6, STO_A, STO_B, FDBK)")
+                            f"{ln!r} is not a line (DI1..DI10, DO1..DO6, STO_A, STO_B, FDBK, "
+                            "X<n>, Y<n>)")
             s.io_line = ln
         elif kind == "alarm":
             a = d["alarm"]

@@ -6,7 +6,7 @@
             pty:<link-path>?baud=38400     zenoh:<key>?listen=tcp/127.0.0.1:7447&role=slave
     DI/DO   virtual:<name>   zenoh:<key>?connect=...   modbus-tcp://<host>:<port>?unit=1
 
-`parse_url(url, kind)` checks the scheme against the kind ("can", "serial", "dio") and
+`parse_url(url, kind)` checks the scheme against the kind ("can", "serial", "dio", "pulse") and
 returns a `TransportUrl`; every error is a `TransportUrlError` naming the URL and the rule.
 """
 
@@ -18,13 +18,14 @@ from typing import Literal
 
 from can.interfaces import VALID_INTERFACES
 
-Kind = Literal["can", "serial", "dio"]
+Kind = Literal["can", "serial", "dio", "pulse"]
 
 # Schemes every kind accepts besides python-can interfaces (CAN only).
 SCHEMES: dict[str, tuple[str, ...]] = {
     "can": ("socketcan", "virtual", "zenoh"),
     "serial": ("serial", "pty", "zenoh"),
     "dio": ("virtual", "zenoh", "modbus-tcp"),
+    "pulse": ("virtual", "zenoh"),
 }
 FORBIDDEN_CAN = {"udp_multicast": "multicast is forbidden on this project's networks"}
 ZENOH_PARAMS = {"listen", "connect", "mode"}
@@ -271,7 +272,8 @@ def _check(u: TransportUrl) -> None:
     """Per-scheme parameter checks (unknown parameters are errors except for python-can)."""
     if u.scheme == "zenoh":
         check_zenoh_key(u.url, u.target)
-        extra = {"serial": SERIAL_PARAMS | {"role"}, "can": set(), "dio": set()}[u.kind]
+        extra = {"serial": SERIAL_PARAMS | {"role"}, "can": set(), "dio": set(),
+                 "pulse": set()}[u.kind]
         _only(u, ZENOH_PARAMS | extra)
         u.zenoh()
         if u.kind == "serial":
@@ -288,7 +290,7 @@ def _check(u: TransportUrl) -> None:
         u.int_param("unit", 1, 0, 255)
         u.float_param("poll_ms", 5.0, 0.5, 10_000)
         u.float_param("timeout", 1.0, 0.01, 60)
-    elif u.scheme == "virtual" and u.kind == "dio":
+    elif u.scheme == "virtual" and u.kind in ("dio", "pulse"):
         _only(u, set())
 
 

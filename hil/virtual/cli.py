@@ -37,6 +37,9 @@ def configure(p: argparse.ArgumentParser) -> None:
         "--rs485", metavar="URL", help="RS-485 transport, e.g. pty:/tmp/ttyA3?baud=115200"
     )
     p.add_argument("--dio", metavar="URL", help="DI/DO transport, e.g. zenoh:lab/b1/dio?listen=...")
+    p.add_argument("--pulse", metavar="URL",
+                   help="pulse line (PT input, OA/OB/OZ, the PLC's sensors), e.g. "
+                        "zenoh:lab/b1/pulse?listen=tcp/127.0.0.1:7448 (docs/pulse.md)")
     p.add_argument("--node-id", type=_ranged("node id", 1, 127),
                    help="CANopen node id 1-127 (P3.000; default: parameter)")
     p.add_argument("--station", type=_ranged("station", 1, 247),
@@ -150,6 +153,8 @@ def _from_bench(spec: DriveSpec, args: argparse.Namespace) -> str:
         spec.station = d.station
     if spec.modbus_mode is None and d.rs485:
         spec.modbus_mode = d.modbus_mode
+    if spec.pulse_wiring is None:
+        spec.pulse_wiring = d.pulse_wiring
     return ""
 
 
@@ -165,8 +170,8 @@ def _inputs(values: list[str]) -> dict[int, bool]:
 
 
 def main(args: argparse.Namespace) -> int:
-    if not (args.can or args.rs485 or args.dio):
-        print("hil drive: give at least one of --can, --rs485, --dio", file=sys.stderr)
+    if not (args.can or args.rs485 or args.dio or args.pulse):
+        print("hil drive: give at least one of --can, --rs485, --dio, --pulse", file=sys.stderr)
         return 2
     try:
         params = _load_mapping(args.params) if args.params else {}
@@ -178,6 +183,7 @@ def main(args: argparse.Namespace) -> int:
         can=args.can,
         rs485=args.rs485,
         dio=args.dio,
+        pulse=args.pulse,
         node_id=args.node_id,
         station=args.station,
         params={},
@@ -191,7 +197,8 @@ def main(args: argparse.Namespace) -> int:
             print(f"hil drive: {err}", file=sys.stderr)
             return 2
     try:  # a malformed URL is bad input (2); one that cannot be opened is exit 1
-        for url, kind in ((spec.can, "can"), (spec.rs485, "serial"), (spec.dio, "dio")):
+        for url, kind in ((spec.can, "can"), (spec.rs485, "serial"), (spec.dio, "dio"),
+                          (spec.pulse, "pulse")):
             if url:
                 parse_url(url, kind)
     except TransportUrlError as e:

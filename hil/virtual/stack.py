@@ -20,6 +20,7 @@ from hil import clock
 from hil.faces.canopen_slave import CanopenSlave
 from hil.faces.dio_face import DioFace
 from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
+from hil.faces.pulse_face import PulseFace
 from hil.model.drive import Drive
 from hil.model.events import AlarmChanged, PowerCycled
 from hil.model.mechanics import Mechanics
@@ -27,6 +28,7 @@ from hil.model.options import ModelOptions
 from hil.record.topics import CAN_LATE_NS, can_line
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
+from hil.transport.pulse import open_pulse
 from hil.transport.serial_line import open_serial
 from hil.transport.sim import pump
 from hil.virtual.host import ClockHost, DriveHost
@@ -107,6 +109,8 @@ class DriveSpec:
     can: str | None = None  # e.g. "virtual:can0", "zenoh:lab/bench1/can?connect=..."
     rs485: str | None = None  # e.g. "pty:/tmp/ttyA3?baud=115200"
     dio: str | None = None  # e.g. "virtual:dio0", "zenoh:lab/bench1/dio?listen=..."
+    pulse: str | None = None  # pulse line, e.g. "virtual:p0", "zenoh:lab/b1/pulse?listen=..."
+    pulse_wiring: dict[str, str] | None = None  # PulseFace wiring (None: its defaults)
     node_id: int | None = None  # P3.000 for CANopen (default: the parameter)
     station: int | None = None  # P3.000 for Modbus (default: the parameter)
     params: dict[str, int] = field(default_factory=dict)
@@ -146,6 +150,8 @@ class VirtualDriveStack:
         self.modbus_runner: Any = None
         self.dio_port: Any = None
         self.dio_face: DioFace | None = None
+        self.pulse_port: Any = None
+        self.pulse_face: PulseFace | None = None
         self._closers: list[Any] = []
         self._unsub: Any = None
         # (line, level, sent_ns, model_t) per input edge the DI/DO face applied (GroundTruth)
@@ -169,6 +175,11 @@ class VirtualDriveStack:
             self._closers.append(self.dio_port.close)
             self.dio_face = DioFace(self.dio_port, host, self._input_applied)
             self._closers.append(self.dio_face.close)
+        if spec.pulse:
+            self.pulse_port = open_pulse(spec.pulse, role="drive", name=f"{spec.name}-pulse")
+            self._closers.append(self.pulse_port.close)
+            self.pulse_face = PulseFace(self.pulse_port, host, spec.pulse_wiring)
+            self._closers.append(self.pulse_face.close)
         if spec.can:
 
             self.can_bus = open_can(spec.can, name=f"{spec.name}-can")
@@ -265,4 +276,6 @@ class VirtualDriveStack:
             )
         if self.dio_port is not None:
             parts.append(f"DI/DO on {self.spec.dio}")
+        if self.pulse_port is not None:
+            parts.append(f"pulse line on {self.spec.pulse}")
         return ", ".join(parts)

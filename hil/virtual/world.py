@@ -72,9 +72,9 @@ def _auto_endpoints(query: str, ports: dict[str, int]) -> str:
 
 def resolve_auto(bench: Bench, tmpdir: Path) -> dict[str, str]:
     """URL of each transport with `auto` targets made unique: keys `can:<bus>`,
-    `rs485:<line>`, `dio:<drive>`. `virtual:auto` gets a unique name, `pty:auto` a link in
-    `tmpdir`, `zenoh:auto` a unique key (`hil/<pid>-<n>/<kind>`), and a zenoh endpoint
-    `tcp/127.0.0.1:auto` a free loopback port."""
+    `rs485:<line>`, `dio:<drive>`, `pulse:<drive>`. `virtual:auto` gets a unique name,
+    `pty:auto` a link in `tmpdir`, `zenoh:auto` a unique key (`hil/<pid>-<n>/<kind>`), and a
+    zenoh endpoint `tcp/127.0.0.1:auto` a free loopback port."""
     out: dict[str, str] = {}
 
     def fix(url: str, kind: str) -> str:
@@ -97,6 +97,8 @@ def resolve_auto(bench: Bench, tmpdir: Path) -> dict[str, str]:
     for dn, d in bench.drives.items():
         if d.dio:
             out[f"dio:{dn}"] = fix(d.dio, "dio")
+        if d.pulse:
+            out[f"pulse:{dn}"] = fix(d.pulse, "pulse")
     return out
 
 
@@ -228,6 +230,8 @@ class VirtualDrive:
             can=urls[f"can:{spec.can}"] if spec.can else None,
             rs485=urls[f"rs485:{spec.rs485}"] if spec.rs485 else None,
             dio=urls[f"dio:{spec.name}"] if spec.dio else None,
+            pulse=urls[f"pulse:{spec.name}"] if spec.pulse else None,
+            pulse_wiring=spec.pulse_wiring,
             node_id=spec.node_id,
             station=spec.station,
             params=initial_params(spec),  # applied, then power cycled (L9256, L9339)
@@ -451,6 +455,8 @@ class SubprocessWorld:
                             "--station", str(spec.station)]
                 if spec.dio:
                     cmd += ["--dio", self.urls[f"dio:{name}"]]
+                if spec.pulse:
+                    cmd += ["--pulse", self.urls[f"pulse:{name}"]]
                 # Its own session: a terminal's Ctrl-C reaches the runner only, which drives
                 # the bench safe through this process before stopping it; if the runner dies,
                 # EOF on the control channel stops it.

@@ -4,10 +4,10 @@ Issue 13 item 6: a mapped function that silently does nothing is refused with a 
 naming the function and why: by the P2.010-P2.017 / P2.036-P2.040 write (SDO abort
 0609 0030, Modbus exception 03) and by `hil run --check` (tests/plan/test_malformed.py).
 Refused (table 8.1, L15075-15255): CMDINV L15094, CTRY L15104, VPL L15107, VPRS L15113,
-FEC L15117, S-P L15172, S-T L15176, T-P L15180, PT-PR L15200, ALGN L15203, CAM L15206,
-GNUM0/GNUM1 L15239, INHP L15244. Modelled, so accepted (tests/model/test_di_functions.py):
-GAINUP L15085, CCLR L15088, ZCLAMP L15091, TRQLM L15101, SPDLM L15121, JOGU/JOGD
-L15209-15212, PFQS L15253.
+FEC L15117, S-P L15172, S-T L15176, T-P L15180, ALGN L15203, CAM L15206. Modelled, so
+accepted (tests/model/test_di_functions.py, tests/model/test_pulse_train.py): GAINUP L15085,
+CCLR L15088, ZCLAMP L15091, TRQLM L15101, SPDLM L15121, PT-PR L15200, JOGU/JOGD
+L15209-15212, GNUM0/GNUM1 L15239, INHP L15244, PFQS L15253.
 """
 
 from __future__ import annotations
@@ -22,10 +22,10 @@ from hil.profile.dio import DI_PARAMS
 from hil.protocol import modbus as mb
 
 CODES = {"CMDINV": 0x06, "CTRY": 0x0A, "VPL": 0x0C, "VPRS": 0x0D, "FEC": 0x0E, "S-P": 0x18,
-         "S-T": 0x19, "T-P": 0x20, "PT-PR": 0x2B, "ALGN": 0x35, "CAM": 0x36, "GNUM0": 0x43,
-         "GNUM1": 0x44, "INHP": 0x45}  # table 8.1 set values (L15075-15255)
+         "S-T": 0x19, "T-P": 0x20, "ALGN": 0x35, "CAM": 0x36}  # table 8.1 (L15075-15255)
 MODELLED = {"GAINUP": 0x03, "CCLR": 0x04, "ZCLAMP": 0x05, "TRQLM": 0x09, "SPDLM": 0x10,
-            "JOGU": 0x37, "JOGD": 0x38, "PFQS": 0x47}  # issue 13 item 6
+            "PT-PR": 0x2B, "JOGU": 0x37, "JOGD": 0x38, "GNUM0": 0x43, "GNUM1": 0x44,
+            "INHP": 0x45, "PFQS": 0x47}  # issue 13 item 6, issue 26
 
 
 def test_the_refused_set_is_the_unmodelled_list() -> None:
@@ -61,9 +61,9 @@ def test_every_di_mapping_parameter_refuses(param: str) -> None:
 def test_sdo_write_aborts_0609_0030() -> None:
     drive = Drive(inputs={8: True})
     with pytest.raises(ObjectError) as info:
-        drive.write_object(0x220E, 0, 0x0145)  # P2.014 (DI5) = INHP (L18156: 2aBCh)
+        drive.write_object(0x220E, 0, 0x0136)  # P2.014 (DI5) = CAM (L18156: 2aBCh)
     assert info.value.abort_code == 0x06090030
-    assert "INHP" in str(info.value)
+    assert "CAM" in str(info.value)
 
 
 def test_modbus_write_answers_exception_03() -> None:
@@ -71,7 +71,7 @@ def test_modbus_write_answers_exception_03() -> None:
     out: list[bytes] = []
     slave = ModbusSlave(drive.params, send=out.append, station=1)
     address = drive.params.spec("P2.014").modbus_address  # 021CH
-    slave.feed(mb.rtu_encode(1, mb.write_single_request(address, 0x0143)), 0)  # GNUM0
+    slave.feed(mb.rtu_encode(1, mb.write_single_request(address, 0x0135)), 0)  # ALGN
     slave.tick(100_000_000)
     assert out == [mb.rtu_encode(1, mb.exception_response(0x06, mb.ILLEGAL_DATA_VALUE))]
 

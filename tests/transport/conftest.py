@@ -38,6 +38,7 @@ class RecordingTap:
         self.can_frames: list[tuple] = []
         self.serial_chunks: list[tuple] = []
         self.dio_levels: list[tuple] = []
+        self.pulse_messages: list[tuple] = []
 
     def can(self, bus, frame, direction, t, source_t):
         self.can_frames.append((bus, frame, direction, t, source_t))
@@ -47,6 +48,9 @@ class RecordingTap:
 
     def dio(self, name, line, level, t, source_t):
         self.dio_levels.append((name, line, level, t, source_t))
+
+    def pulse(self, name, kind, body, t, source_t):
+        self.pulse_messages.append((name, kind, dict(body), t, source_t))
 
 
 @pytest.fixture

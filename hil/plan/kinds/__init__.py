@@ -21,6 +21,7 @@ from hil.plan.kinds import (
     comm,
     io,
     params,
+    plc,
     pr,
     timing,
     virtual,
@@ -34,7 +35,8 @@ ENTRY_POINT_GROUP = "hil.steps"
 
 BUILTIN: dict[str, type[StepKind]] = {
     k.name: k
-    for module in (io, params, cia402, waits, virtual, timing, absolute, comm, pr, capture)
+    for module in (io, params, cia402, waits, virtual, timing, absolute, comm, pr, capture,
+                   plc)
     for k in module.KINDS
 }
 

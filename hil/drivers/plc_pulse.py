@@ -1,0 +1,671 @@
+"""A PLC's pulse positioning program: FATEK FBs FUN140 (HSPSO) / FUN141 (MPARA) on a pulse line.
+
+Seed 001 (digest `../shared/spec/others.md` §2) is the source; lines are cited `001:N`.
+`PulseMaster(port, AxisParams)` runs a `Program` as the PLC does: one step after the other,
+each a speed (SPD), a drive command (DRV, DRVC, DRVZ) and a transition (WAIT, ACT, EXT), then
+GOTO; MD ends. It outputs segments on a `PulsePort(role="master")`, reads the PLC's inputs
+(DOG, stroke limit: levels `X<n>`; PG0: the drive's OZ pulses) and sets its CLR output
+(`Y<n>`). Every wait is on `hil.clock`, so it runs in virtual time like the rest of a plan.
+
+Choices where the seed is garbled or silent (docs/pulse.md):
+* speeds and strokes are in pulses (P0 = 1, motor unit, the default, 001:50); P0 = 0
+  (mechanical) converts `value x P1 / P2`; P3 (decimals) is not applied;
+* acceleration is a constant slope (P4 - P5) / P8 from the start speed P5 (001:56), the
+  profile is cut into `slice_ms` slices, one segment each (a cruise is one segment);
+* DRVC: the speed changes at the start of the next segment; the stop ramp lies inside the
+  last one (001:40 gives no figure);
+* a stop at the zero point, EXT and abort are immediate (M1991 OFF, 001:28);
+* the CLR pulse is `clr_ms` = 30 ms (> 20 ms, 001:124);
+* P7 backlash is output on a reversal and not counted in the position; P10/P11 travel
+  compensation is not modelled.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from hil import clock
+from hil.units import MS, S
+
+MAX_STEPS = 250  # 001:26
+MAX_DRVC = 8  # 001:40
+OUTPUT_MAX_HZ = {"single": 200_000, "differential": 920_000}  # 001:14
+AB_MAX_HZ = 460_000  # two-phase (A/B) maximum (001:14)
+MD1_WAIT_NS = 500 * MS  # "wait 0.5 s" (001:112)
+CLR_MIN_MS = 20.0  # "> 20 ms" (001:124)
+DRVZ_MODES = ("MD0", "MD1", "MD2")
+FORMS = {"P/R": "pulse_sign", "U/D": "cw_ccw", "A/B": "ab"}
+
+# Error codes R4060 (001:34, 74); FUN141 parameter k -> code k + 1 (0-9) / k + 1 (12-14)
+ERRORS = {
+    30: "speed variable number", 31: "speed value", 32: "stroke variable number",
+    33: "stroke value", 34: "illegal program", 35: "step length", 36: "too many steps",
+    37: "maximum frequency", 38: "start/stop frequency", 39: "compensation too large",
+    40: "travel out of range", 41: "ABS not allowed inside DRVC",
+    42: "DRVC may not chain into DRVZ", 43: "drive command code", 50: "DRVZ mode",
+    51: "DOG input", 52: "PG0 input", 53: "CLR output", 60: "illegal interpolation command",
+}
+
+
+class PlcError(ValueError):
+    """A program or parameter the PLC refuses, with its R4060 error code (001:74)."""
+
+    def __init__(self, code: int, message: str, *, step: int | None = None,
+                 field: str = "") -> None:
+        self.code, self.step, self.field = code, step, field
+        what = ERRORS.get(code, "FUN141 parameter")
+        super().__init__(f"error {code} ({what}): {message}")
+
+
+@dataclass
+class AxisParams:
+    """FUN141 MPARA, one axis (001:50-60)."""
+
+    unit: int = 1  # P0: 0 mechanical, 1 motor (pulses), 2 compound
+    pulses_per_rev: int = 2000  # P1, 1 ~ 65535
+    travel_per_rev: int = 2000  # P2
+    decimals: int = 2  # P3, 0 ~ 3
+    max_speed: int = 200_000  # P4, Ps/s (default garbled in the seed)
+    start_speed: int = 141  # P5
+    creep_speed: int = 1000  # P6, 1 ~ 65535
+    backlash: int = 0  # P7, 0 ~ 32767
+    accel_ms: int = 5000  # P8, 0 ~ 30000
+    run_direction: int = 0  # P9-0: 0 forward pulses count up
+    home_direction: int = -1  # P9-1 = 1: towards decreasing count, "origin on the left"
+    decel_ms: int = 0  # P12, 0 = P8
+    dog: str = ""  # P15-0, X<n> (with dog_nc for a b contact)
+    dog_nc: bool = False
+    limit: str = ""  # P15-1 stroke limit in the homing direction, X<n>
+    limit_nc: bool = False
+    pg0: str = ""  # P15-2 zero signal: "OZ" (the drive's Z output) or empty
+    pg0_edge: str = "leading"  # b7: 0 count from the DOG leading edge, 1 from the trailing
+    clr: str = ""  # P15-3 CLR output, Y<n>
+    clr_ms: float = 30.0
+    origin: int = 0  # P16 machine origin value
+    zero_count: int = 1  # P17, 0 ~ 255
+    output: str = "P/R"  # U/D, P/R, A/B (001:14, 28)
+    logic: int = 0  # normal ON / normal OFF (001:28)
+    hardware: str = "single"  # single-ended transistor 200 kHz / differential 920 kHz
+
+    def check(self) -> None:
+        """Refuse what FUN141 refuses (codes 1-15, 37-39, 001:34)."""
+        rules: list[tuple[int, str, bool, str]] = [
+            (1, "unit", self.unit in (0, 1, 2), "0, 1 or 2"),
+            (2, "pulses_per_rev", 1 <= self.pulses_per_rev <= 65535, "1 ~ 65535"),
+            (3, "travel_per_rev", 1 <= self.travel_per_rev <= 999_999, "1 ~ 999999"),
+            (4, "decimals", 0 <= self.decimals <= 3, "0 ~ 3"),
+            (5, "max_speed", self.max_speed >= 1, ">= 1 Ps/s"),
+            (7, "creep_speed", 1 <= self.creep_speed <= 65535, "1 ~ 65535 Ps/s"),
+            (9, "accel_ms", 0 <= self.accel_ms <= 30000, "0 ~ 30000 ms"),
+            (10, "home_direction", self.home_direction in (1, -1), "1 or -1"),
+            (13, "decel_ms", 0 <= self.decel_ms <= 30000, "0 ~ 30000 ms"),
+        ]
+        for code, name, ok, want in rules:
+            if not ok:
+                raise PlcError(code, f"{name} = {getattr(self, name)!r}: {want}", field=name)
+        if not 0 <= self.backlash <= 32767:
+            raise PlcError(39, f"backlash = {self.backlash}: 0 ~ 32767 Ps", field="backlash")
+        if self.output not in FORMS:
+            raise PlcError(1, f"output {self.output!r}: one of {', '.join(FORMS)}",
+                           field="output")
+        hw = OUTPUT_MAX_HZ.get(self.hardware)
+        if hw is None:
+            raise PlcError(37, f"hardware {self.hardware!r}: single or differential",
+                           field="hardware")
+        top = min(hw, AB_MAX_HZ) if self.output == "A/B" else hw
+        if self.max_speed_pps > top:
+            raise PlcError(37, f"max_speed {self.max_speed_pps:g} Ps/s above the {self.hardware}"
+                               f" {self.output} output's {top} Hz (001:14)", field="max_speed")
+        if not 1 <= self.start_speed_pps <= self.max_speed_pps:
+            raise PlcError(38, f"start_speed {self.start_speed} not within 1 ~ max_speed",
+                           field="start_speed")
+        if not 0 <= self.zero_count <= 255:
+            raise PlcError(15, f"zero_count {self.zero_count}: 0 ~ 255", field="zero_count")
+        if self.pg0_edge not in ("leading", "trailing"):
+            raise PlcError(52, f"pg0_edge {self.pg0_edge!r}: leading or trailing",
+                           field="pg0_edge")
+        if self.clr and self.clr_ms <= CLR_MIN_MS:
+            raise PlcError(53, f"clr_ms {self.clr_ms:g}: the CLR pulse must be > 20 ms "
+                               "(001:124)", field="clr_ms")
+
+    # -- units -----------------------------------------------------------------------------
+    def pulses(self, value: float, unit: str = "Ps") -> int:
+        """A stroke in pulses: `Ut` through P1/P2 (mechanical unit), `Ps` as is."""
+        if unit == "Ut" and self.unit != 1:
+            return round(value * self.pulses_per_rev / self.travel_per_rev)
+        return round(value)
+
+    def speed(self, value: float) -> float:
+        """An SPD value in Ps/s."""
+        if self.unit == 0:
+            return value * self.pulses_per_rev / self.travel_per_rev
+        return float(value)
+
+    @property
+    def max_speed_pps(self) -> float:
+        return self.speed(self.max_speed)
+
+    @property
+    def start_speed_pps(self) -> float:
+        return self.speed(self.start_speed)
+
+    @property
+    def accel(self) -> float:
+        """Ps/s² of P8 (constant slope from P5 to P4); inf for P8 = 0."""
+        span = max(self.max_speed_pps - self.start_speed_pps, 1.0)
+        return math.inf if self.accel_ms == 0 else span * 1000.0 / self.accel_ms
+
+    @property
+    def decel(self) -> float:
+        ms = self.decel_ms or self.accel_ms
+        span = max(self.max_speed_pps - self.start_speed_pps, 1.0)
+        return math.inf if ms == 0 else span * 1000.0 / ms
+
+
+@dataclass
+class Drv:
+    """DRV / DRVC: ABS or ADR, direction "+", "-" or "" (sign of the value), stroke, unit."""
+
+    mode: str  # "ABS" | "ADR"
+    direction: str
+    value: float
+    unit: str = "Ps"
+    chained: bool = False  # DRVC
+
+
+@dataclass
+class Step:
+    """One program step: SPD, a drive command, a transition, GOTO (001:38-44)."""
+
+    spd: float | None = None
+    drive: Drv | str | None = None  # Drv, "MD0"/"MD1"/"MD2" (DRVZ), None
+    wait_time: float | None = None  # WAIT TIME, s
+    wait_line: str = ""  # WAIT X<n>
+    act: float | None = None  # ACT, s
+    ext: str = ""  # EXT X<n>
+    goto: int | None = None  # None = NEXT; 1-based step number
+    end: bool = False  # MD
+    line: int = 0  # plan-file line, for errors
+
+
+@dataclass
+class Program:
+    steps: list[Step] = field(default_factory=list)
+
+    def check(self, p: AxisParams) -> None:
+        """Refuse what FUN140 would (codes 30-53, 001:34, 40, 108)."""
+        if not self.steps:
+            raise PlcError(34, "the program has no step")
+        if len(self.steps) > MAX_STEPS:
+            raise PlcError(36, f"{len(self.steps)} steps: at most {MAX_STEPS} (001:26)")
+        chain = 0
+        for i, s in enumerate(self.steps, 1):
+            if s.end:
+                if chain:
+                    raise PlcError(34, "a DRVC chain must end with a DRV (001:40)", step=i)
+                continue
+            if s.spd is not None and not 1 <= p.speed(s.spd) <= p.max_speed_pps:
+                raise PlcError(31, f"SPD {s.spd:g}: 1 ~ max_speed {p.max_speed_pps:g} Ps/s",
+                               step=i, field="SPD")
+            if s.goto is not None and not 1 <= s.goto <= len(self.steps):
+                raise PlcError(34, f"GOTO {s.goto}: no such step (1 ~ {len(self.steps)})",
+                               step=i, field="GOTO")
+            d = s.drive
+            if isinstance(d, str):
+                if chain:
+                    raise PlcError(42, "a DRVC chain may not end in DRVZ (001:74)", step=i)
+                self._check_drvz(p, d, i)
+                continue
+            if d is None:
+                if chain:
+                    raise PlcError(34, "a DRVC chain must end with a DRV (001:40)", step=i)
+                continue
+            if s.spd is None:
+                raise PlcError(30, "a DRV/DRVC step needs an SPD", step=i, field="SPD")
+            if abs(p.pulses(d.value, d.unit)) >= 2**31:
+                raise PlcError(33, f"stroke {d.value:g}: beyond 32 bits", step=i, field="DRV")
+            if d.mode not in ("ABS", "ADR"):
+                raise PlcError(43, f"{d.mode!r}: ABS or ADR", step=i, field="DRV")
+            if chain and d.mode == "ABS":
+                raise PlcError(41, "only the first DRVC may be ABS (001:40)", step=i)
+            if chain and (s.wait_time is not None or s.wait_line or s.act is not None
+                          or s.ext):
+                pass  # transitions inside a chain act after the chain's last segment
+            if d.chained:
+                chain += 1
+                if chain >= MAX_DRVC:
+                    raise PlcError(34, f"a DRVC chain has at most {MAX_DRVC} segments "
+                                       "(001:40)", step=i)
+            else:
+                chain = 0
+        if chain:
+            raise PlcError(34, "a DRVC chain must end with a DRV (001:40)",
+                           step=len(self.steps))
+
+    @staticmethod
+    def _check_drvz(p: AxisParams, mode: str, i: int) -> None:
+        if mode not in DRVZ_MODES:
+            raise PlcError(50, f"DRVZ {mode!r}: MD0, MD1 or MD2", step=i, field="DRVZ")
+        if not p.dog:
+            raise PlcError(51, "DRVZ needs the DOG input (P15-0, 001:108)", step=i,
+                           field="DRVZ")
+        if mode == "MD2" and not p.pg0:
+            raise PlcError(52, "DRVZ MD2 needs the PG0 input (P15-2, 001:108)", step=i,
+                           field="DRVZ")
+
+
+# ------------------------------------------------------------------------------ profiles
+
+
+def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: float,
+                 slice_ns: int = 10 * MS) -> list[tuple[int, int]]:
+    """Time slices `(duration_ns, pulses)` of a chained move: `segments` = [(pulses, speed)]
+    (pulses > 0), started and stopped at `v0` with slopes `acc` / `dec` (Ps/s²). The pulses
+    of the slices add up exactly to the total; a constant speed stays one slice."""
+    total = sum(n for n, _ in segments)
+    if total <= 0:
+        return []
+    dt = 1e-3
+    v, x = 0.0, 0.0
+    bounds = list(itertools_accumulate(n for n, _ in segments))
+    xs: list[float] = []  # position at each ms
+    i = 0
+    v = min(v0, segments[0][1])
+    guard = 0
+    while x < total - 1e-9:
+        while i < len(segments) - 1 and x >= bounds[i]:
+            i += 1
+        want = segments[i][1]
+        rem = total - x
+        stop_cap = math.sqrt(v0 * v0 + 2.0 * dec * rem) if math.isfinite(dec) else math.inf
+        target = min(want, stop_cap)
+        if v < target:
+            v = min(target, v + acc * dt) if math.isfinite(acc) else target
+        elif v > target:
+            v = max(target, v - dec * dt) if math.isfinite(dec) else target
+        v = max(v, min(v0, want))
+        x = min(total, x + v * dt)
+        xs.append(x)
+        guard += 1
+        if guard > 10_000_000:
+            raise PlcError(40, "profile does not end (speed too low for the stroke)")
+    per = max(1, slice_ns // MS)
+    out: list[tuple[int, int]] = []
+    done = 0
+    for k in range(0, len(xs), per):
+        chunk = xs[k:k + per]
+        n = (total if k + per >= len(xs) else math.floor(chunk[-1])) - done
+        dur = len(chunk) * MS
+        if n <= 0:
+            if out:
+                out[-1] = (out[-1][0] + dur, out[-1][1])
+            continue
+        done += n
+        if out and out[-1][1] * dur == n * out[-1][0]:  # same speed: one segment
+            out[-1] = (out[-1][0] + dur, out[-1][1] + n)
+        else:
+            out.append((dur, n))
+    return out
+
+
+def itertools_accumulate(values: Any) -> list[float]:
+    total, out = 0.0, []
+    for v in values:
+        total += v
+        out.append(total)
+    return out
+
+
+# ------------------------------------------------------------------------------ executor
+
+
+@dataclass
+class Status:
+    """What the PLC shows (001:28-30): ready/busy, done, position DR4088, frequency
+    DR4080, remaining pulses DR4072, error R4060, step number R4064."""
+
+    ready: bool = True
+    done: bool = False
+    position: int = 0
+    freq: float = 0.0
+    remaining: int = 0
+    error: int = 0
+    step: int = 0
+    feedback: int = 0  # OA/OB quadrature counts seen by the high-speed counter
+    homed: bool = False  # a DRVZ found the zero point and completed (CLR included)
+    drvz: str = ""  # the DRVZ mode of the last / current machine-origin return
+    zero_found_ns: int | None = None
+
+
+class PulseMaster:
+    """One PLC axis (Ps0) on a pulse line."""
+
+    def __init__(self, port: Any, params: AxisParams, *, slice_ms: float = 10.0,
+                 on_status: Callable[[Status, str], None] | None = None) -> None:
+        params.check()
+        self.port, self.p = port, params
+        self.slice_ns = max(MS, round(slice_ms * MS))
+        self.status = Status()
+        self.total = 0  # signed pulses output (backlash included)
+        self._seg: tuple[int, float, int, int] | None = None  # (t0, freq, dir, count)
+        self._last_dir = 0
+        self._oz = 0
+        self._abort = False
+        self._counted = 1
+        self.on_status = on_status
+        self._unsub = port.subscribe(self._on_line)
+        self.init_outputs()
+
+    def init_outputs(self) -> None:
+        """The PLC's outputs at their idle level (CLR off), on the record."""
+        if self.p.clr and self.p.clr not in self.port.levels():
+            self.port.set(self.p.clr, False)
+
+    def close(self) -> None:
+        self._unsub()
+
+    # -- lines -------------------------------------------------------------------------
+    def _on_line(self, kind: str, data: dict[str, Any], t: int, source_t: int | None) -> None:
+        if kind == "oz":
+            self._oz += 1
+        elif kind == "oab":  # the high-speed counter on OA/OB (closed loop, 001:10)
+            self.status.feedback += data["direction"] * data["count"]
+
+    def line(self, name: str, nc: bool = False) -> bool:
+        """The PLC input `name` (X<n>) as its function sees it (b contact inverted)."""
+        return self.port.get(name) != nc
+
+    def dog(self) -> bool:
+        return self.line(self.p.dog, self.p.dog_nc)
+
+    def at_limit(self) -> bool:
+        return bool(self.p.limit) and self.line(self.p.limit, self.p.limit_nc)
+
+    def abort(self) -> None:
+        """ABT: stop at once (001:26)."""
+        self._abort = True
+
+    # -- pulses ------------------------------------------------------------------------
+    def _output_now(self) -> int:
+        """Pulses of the current segment output so far."""
+        if self._seg is None:
+            return 0
+        t0, freq, _d, count = self._seg
+        n = int((clock.monotonic_ns() - t0) * freq // S) if freq > 0 else 0
+        return min(n, count) if count else n
+
+    def _close_segment(self) -> None:
+        if self._seg is not None:
+            n = self._output_now()
+            self.total += self._seg[2] * n
+            self.status.position += self._seg[2] * n * self._counted
+            self._seg = None
+
+    def _send(self, freq: float, direction: int, count: int = 0, *, counted: bool = True
+              ) -> None:
+        self._close_segment()
+        self.port.send("seg", {"freq": freq, "direction": direction, "count": count,
+                               "form": FORMS[self.p.output], "logic": self.p.logic,
+                               "total": self.total})
+        self._counted = 1 if counted else 0
+        self.status.freq = freq
+        if freq > 0:
+            self._seg = (clock.monotonic_ns(), freq, direction, count)
+            self._last_dir = direction
+
+    def stop(self) -> None:
+        """Pulses stop at once (PSOFF, FUN142, 001:62)."""
+        self._send(0.0, 1)
+        self.status.freq = 0.0
+
+    def _run(self, freq: float, direction: int, count: int, until: Callable[[], bool] | None,
+             timeout_ns: int | None, counted: bool = True) -> bool:
+        """Output a segment; True when `until` (or abort) ended it early."""
+        self._send(freq, direction, count, counted=counted)
+        if count:
+            dur = math.ceil(count * S / freq)
+        else:
+            dur = timeout_ns if timeout_ns is not None else 3600 * S
+        if timeout_ns is not None:
+            dur = min(dur, timeout_ns)
+        pred = (lambda: self._abort or until()) if until else (lambda: self._abort)
+        hit = clock.wait_for(pred, dur / S)
+        self._close_segment()
+        return bool(hit)
+
+    # -- moves -------------------------------------------------------------------------
+    def move(self, segments: list[tuple[int, float]], direction: int,
+             until: Callable[[], bool] | None = None) -> bool:
+        """A DRV / DRVC chain of (pulses, Ps/s); True when `until` or abort cut it short.
+        The remaining pulses are then in `status.remaining` (DR4072, 001:44)."""
+        p = self.p
+        if self._last_dir and direction != self._last_dir and p.backlash:
+            self._run(min(p.start_speed_pps * 10, p.max_speed_pps), direction, p.backlash,
+                      None, None, counted=False)  # P7 on a reversal (001:56)
+        total = sum(n for n, _ in segments)
+        slices = plan_profile(segments, p.start_speed_pps, p.accel, p.decel, self.slice_ns)
+        done = 0
+        self.status.remaining = total
+        for dur, n in slices:
+            freq = n * S / dur
+            start = self.status.position
+            cut = self._run(freq, direction, n, until, None)
+            done += abs(self.status.position - start)
+            self.status.remaining = total - done
+            if cut:
+                self.stop()
+                return True
+        self.status.freq = 0.0
+        return False
+
+    def ramp_run(self, v_from: float, v_to: float, direction: int,
+                 until: Callable[[], bool], timeout_s: float) -> bool:
+        """Ramp from `v_from` to `v_to` (P8 slope, `slice_ms` steps), then run at `v_to`
+        until `until()`; False on timeout."""
+        p = self.p
+        slope = p.accel if v_to >= v_from else p.decel
+        end = clock.monotonic_ns() + round(timeout_s * S)
+        if math.isfinite(slope) and v_from != v_to:
+            t_ramp = abs(v_to - v_from) / slope
+            n = max(1, math.ceil(t_ramp * S / self.slice_ns))
+            for k in range(1, n + 1):
+                v = v_from + (v_to - v_from) * k / n
+                if self._run(v, direction, 0, until, round(t_ramp * S / n)):
+                    return True
+        left = end - clock.monotonic_ns()
+        return left > 0 and self._run(v_to, direction, 0, until, left)
+
+    def ramp_stop(self, v: float, direction: int) -> None:
+        """Decelerate from `v` to the start speed with P8/P12 and stop (MD1, 001:112)."""
+        p = self.p
+        v0 = min(p.start_speed_pps, v)
+        if math.isfinite(p.decel) and v > v0:
+            t = (v - v0) / p.decel
+            n = max(1, math.ceil(t * S / self.slice_ns))
+            for k in range(1, n + 1):
+                self._run(v + (v0 - v) * k / n, direction, 0, None, round(t * S / n))
+        self.stop()
+
+    # -- DRVZ ----------------------------------------------------------------------------
+    def home(self, mode: str, speed: float, timeout_s: float) -> None:
+        """DRVZ MD0 / MD1 / MD2 (001:108-124). Raises TimeoutError when no zero is found."""
+        p = self.p
+        hd = p.home_direction
+        v0 = min(p.start_speed_pps, speed)
+        creep = float(p.creep_speed)
+        self.status.homed, self.status.drvz = False, mode
+        self._report("drvz")
+        deadline = clock.monotonic_ns() + round(timeout_s * S)
+
+        def left() -> float:
+            s = (deadline - clock.monotonic_ns()) / S
+            if s <= 0:
+                self.stop()
+                raise TimeoutError(f"DRVZ {mode}: no zero point within {timeout_s:g} s")
+            return s
+
+        # start on or in front of DOG (001:118): to the stroke limit, back through DOG
+        if self.dog() or (p.limit and self.at_limit()):
+            self._front_of_dog(speed, v0, left)
+            self.ramp_run(v0, speed, hd, self.dog, left())
+        else:
+            hit = self.ramp_run(v0, speed, hd, lambda: self.dog() or self.at_limit(), left())
+            if not hit:
+                left()
+            if not self.dog():  # the stroke limit came first: we started in front of DOG
+                self.stop()
+                self._front_of_dog(speed, v0, left)
+                self.ramp_run(v0, speed, hd, self.dog, left())
+        # DOG is on, moving in the homing direction at `speed`
+        if mode == "MD0":
+            self.ramp_run(speed, creep, hd, lambda: not self.dog(), left())
+        elif mode == "MD1":
+            self.ramp_stop(speed, hd)
+            clock.sleep(MD1_WAIT_NS / S)
+            self._run(creep, -hd, 0, lambda: not self.dog(), round(left() * S))
+        else:
+            if p.pg0_edge == "leading":
+                self._oz = 0
+                goal = p.zero_count
+                self.ramp_run(speed, creep, hd, lambda: self._oz >= goal, left())
+            else:
+                self.ramp_run(speed, creep, hd, lambda: not self.dog(), left())
+                self._oz = 0
+                goal = p.zero_count
+                self._run(creep, hd, 0, lambda: self._oz >= goal, round(left() * S))
+        left()
+        self.stop()  # the zero point: pulses stop at once (PSOFF, 001:62)
+        self.status.zero_found_ns = clock.monotonic_ns()
+        self._report("zero")
+        if p.clr:  # CLR > 20 ms, homing completes after it (001:122-124)
+            self.port.set(p.clr, True)
+            clock.sleep(p.clr_ms / 1000.0)
+            self.port.set(p.clr, False)
+        self.status.position = p.origin  # P16 into DR4088 (001:122)
+        self.status.homed = True
+        self._report("homed")
+
+    def _front_of_dog(self, speed: float, v0: float, left: Callable[[], float]) -> None:
+        """To the stroke limit at homing speed, then back until DOG goes 1 -> 0 (001:118)."""
+        p = self.p
+        hd = p.home_direction
+        if p.limit and not self.at_limit():
+            self.ramp_run(v0, speed, hd, self.at_limit, left())
+        self.stop()
+        self.ramp_run(v0, speed, -hd, self.dog, left())
+        self._run(speed, -hd, 0, lambda: not self.dog(), round(left() * S))
+        self.stop()
+
+    # -- the program ---------------------------------------------------------------------
+    def run(self, program: Program, timeout_s: float = 60.0, *,
+            log: Callable[[str], None] | None = None) -> Status:
+        """Run `program` from step 1 until MD or its last step (001:26-44)."""
+        program.check(self.p)
+        st = self.status
+        st.ready, st.done, st.error = False, False, 0
+        deadline = clock.monotonic_ns() + round(timeout_s * S)
+        steps = program.steps
+        i = 0
+        spd: float | None = None
+        try:
+            while 0 <= i < len(steps):
+                s = steps[i]
+                st.step = i + 1
+                self._report("step")
+                if s.end:
+                    break
+                if s.spd is not None:
+                    spd = self.p.speed(s.spd)
+                left = (deadline - clock.monotonic_ns()) / S
+                if left <= 0:
+                    raise TimeoutError(f"program timeout {timeout_s:g} s at step {i + 1}")
+                if isinstance(s.drive, Drv):
+                    chain = [(s, spd)]
+                    while chain[-1][0].drive.chained and i + 1 < len(steps):
+                        i += 1
+                        nxt = steps[i]
+                        spd = self.p.speed(nxt.spd) if nxt.spd is not None else spd
+                        chain.append((nxt, spd))
+                    s = chain[-1][0]
+                    self._drive(chain, s, left)
+                elif isinstance(s.drive, str):
+                    self.home(s.drive, spd or self.p.max_speed_pps, left)
+                    self._transition_after(s, left)
+                else:
+                    self._transition_after(s, left)
+                if self._abort:
+                    break
+                i = (s.goto - 1) if s.goto is not None else i + 1
+                st.done = True  # DN stays on until cleared (001:26)
+                self._report("done")
+        except BaseException:
+            self.stop()
+            st.ready = True
+            self._report("error")
+            raise
+        st.ready = True
+        st.freq = 0.0
+        self._report("end")
+        if log:
+            log(f"PLC program ended at step {st.step}, position {st.position}")
+        return st
+
+    def _drive(self, chain: list[tuple[Step, float | None]], last: Step, left: float) -> None:
+        first = chain[0][0].drive
+        assert isinstance(first, Drv)
+        pos = self.status.position
+        segs: list[tuple[int, float]] = []
+        direction = 0
+        for k, (s, spd) in enumerate(chain):
+            d = s.drive
+            assert isinstance(d, Drv)
+            n = self.p.pulses(d.value, d.unit)
+            if k == 0 and d.mode == "ABS":
+                n = n - pos
+            elif d.direction == "-":
+                n = -abs(n)
+            elif d.direction == "+":
+                n = abs(n)
+            if k == 0:
+                direction = 1 if n >= 0 else -1
+            segs.append((abs(n), spd or self.p.max_speed_pps))
+        if self.p.run_direction:
+            direction = -direction
+        segs = [(n, v) for n, v in segs if n > 0]
+        ext = last.ext
+        act_ns = round(last.act * S) if last.act is not None else None
+        t0 = clock.monotonic_ns()
+        if ext:
+            until = lambda: self.port.get(ext)  # noqa: E731 - EXT (001:42-44)
+        elif act_ns is not None:
+            until = lambda: clock.monotonic_ns() - t0 >= act_ns  # noqa: E731 - ACT
+        else:
+            until = None
+        continuous = any(self.p.pulses(s.drive.value, s.drive.unit) == 0
+                         for s, _ in chain if isinstance(s.drive, Drv)) and len(chain) == 1
+        if continuous:  # stroke 0: run until the transition (001:38)
+            v = chain[0][1] or self.p.max_speed_pps
+            d0 = chain[0][0].drive
+            direction = -1 if (isinstance(d0, Drv) and d0.direction == "-") else 1
+            self.ramp_run(self.p.start_speed_pps, v, direction, until or (lambda: False),
+                          left)
+            self.stop()
+            return
+        cut = self.move(segs, direction, until)
+        if not cut:
+            self._transition_after(last, left)
+
+    def _transition_after(self, s: Step, left: float) -> None:
+        """WAIT time / line, EXT as WAIT once the pulses are done (001:42-44)."""
+        if s.wait_time is not None:
+            clock.sleep(s.wait_time)
+        line = s.wait_line or s.ext
+        if line and not clock.wait_for(lambda: self.port.get(line), left):
+            raise TimeoutError(f"WAIT {line}: not on within the program's time")
+
+    def _report(self, what: str) -> None:
+        if self.on_status is not None:
+            self.on_status(self.status, what)

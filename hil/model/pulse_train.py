@@ -1,0 +1,454 @@
+"""PT mode: the pulse-train command input (CN1 PULSE/SIGN) and the encoder pulse output.
+
+The line between a PLC and the drive carries *segments*: from time `t` on, `count` pulses
+at `freq` Hz in `direction` (+1 forward / -1 reverse), `count = 0` meaning "until the next
+segment". A new segment replaces what is left of the previous one (docs/pulse.md).
+
+Input (A3 manual §6.2, P1.000 L7660-7745):
+* P1.000.X input form: 0 A/B phase (4x: four counts per A period), 1 CW + CCW, 2 pulse +
+  sign; a segment of another form is not decoded (its pulses are lost, `lost_format`).
+  P1.000.Z logic: with pulse + sign, a logic other than the PLC's inverts the sign.
+* Interface limit: line driver 4 Mpps, open collector 200 kpps (L7700-7707, L3503). Above
+  it AL008 "abnormal pulse command" (L19535-19538) unless P2.065 bit 6 = 1 (L9892), and
+  the pulses are not counted (`lost_limit`, a choice: the manual does not say what the
+  counter sees beyond the interface's rating).
+* P1.000.UY input filter: a pulse whose half period is shorter than the filter width is
+  filtered out (L7712-7745); the table's kHz column is the frequency 1 / (2 x width).
+* Electronic gear: counts = pulses x Nx / M, Nx = P1.044 / P2.060 / P2.061 / P2.062 by
+  GNUM0/GNUM1 (L9850), M = P1.045; allowed 1/4 < Nx/M < 262144 (L8547): a write that
+  leaves it is refused (option `pt_gear_check`).
+* INHP (DI 0x45) stops accepting pulses, only on DI8 (L3550, L15244); P2.065 bit 11: at a
+  limit, pulses towards it are not accepted (L9896-9900).
+* CCLR (P2.050, L9742-9753): the accumulated position error is cleared: the command
+  position becomes the feedback position and the pulses still to come count from there.
+* Smoothing: P1.068 moving filter (ms, L8832) then P1.008 low-pass (10 ms, L7921), on the
+  1 ms command grid; the axis follows the smoothed command one cycle later.
+* AL009 when the error exceeds P2.035 (L9556) is the drive's usual check; TPOS in PT is
+  |command - feedback| < P1.054 (L8689).
+* Monitors: pulse command count (accepted pulses, `accepted`) and frequency in kpps
+  (monitor 006, L15446).
+
+Output (P1.046 L8556-8571): OA/OB with P1.046 pulses per revolution and phase (4 x P1.046
+quadrature counts), summed over `output_window_ms` windows into segments; OZ (C11, L1851)
+one pulse per revolution at the encoder's index, `ocz_width_us` wide (a choice: the manual
+gives no width). AL018 when rpm / 60 x P1.046 x 4 > 19.8 MHz (L8569) unless P2.065 bit 13.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from hil.model.errors import OutOfRange
+from hil.model.mechanics import COUNTS_PER_REV
+
+if TYPE_CHECKING:
+    from hil.model.drive import Drive
+
+FORMS = ("ab", "cw_ccw", "pulse_sign")  # P1.000.X = 0, 1, 2 (L7670-7674)
+LIMIT_PPS = {"line_driver": 4_000_000, "open_collector": 200_000}  # L7700-7707
+OUTPUT_MAX_HZ = 19.8e6  # L8569
+GEAR_MIN, GEAR_MAX = 0.25, 262144.0  # 1/4 < Nx/M < 262144 (L8547)
+PT_YX = (0x00, 0x06, 0x07, 0x0D, 0x0E, 0x0F)  # P1.001.YX with a PT side (L7749-7800)
+
+
+@dataclass(frozen=True)
+class _Config:
+    form: str
+    logic: int
+    max_hz: float
+    numerators: tuple[int, int, int, int]
+    m: int
+    inhp_di8: bool
+    p2065: int
+    p1068: int
+    tau_ms: float
+    pt_yx: bool
+
+
+@dataclass(frozen=True)
+class Segment:
+    """`count` pulses (0: until replaced) at `freq` Hz from `t` ns, `direction` +1 / -1."""
+
+    t: int
+    freq: float
+    direction: int
+    count: int = 0
+    form: str = "pulse_sign"
+    logic: int = 0
+
+    def pulses_at(self, t: int) -> int:
+        """Pulses output by time `t` (one per period, the first a full period after `t`)."""
+        if t <= self.t or self.freq <= 0:
+            return 0
+        n = int((t - self.t) * self.freq // 1_000_000_000)
+        return min(n, self.count) if self.count else n
+
+    @property
+    def end(self) -> int | None:
+        """Time of the last pulse, or None for a continuous segment."""
+        if not self.count or self.freq <= 0:
+            return None if not self.count else self.t
+        return self.t + math.ceil(self.count * 1e9 / self.freq)
+
+
+def filter_max_hz(p1_000: int) -> float | None:
+    """Highest frequency P1.000.UY lets through (half period >= width), None without a
+    filter (L7716-7733: Y 0 none; width Y+1 us for U = 0, (Y+1)/10 us for U = 1)."""
+    y = (p1_000 >> 4) & 0xF
+    u = (p1_000 >> 12) & 0xF
+    if y == 0 or y > 0xE:
+        return None
+    width_us = (y + 1) / (10.0 if u == 1 else 1.0)
+    return 1e6 / (2.0 * width_us)
+
+
+class PulseTrain:
+    """The PT input and the OA/OB/OZ output of one drive."""
+
+    def __init__(self, drive: Drive) -> None:
+        self.d = drive
+        self.seg: Segment | None = None
+        self._taken = 0  # pulses of `seg` already taken
+        self.accepted = 0  # signed pulses counted since power-up (monitor: command count)
+        self.line_total = 0  # signed pulses seen on the line (before any filter)
+        self._machine: dict[str, bool] = {}  # DOG / NL / PL as the PLC's inputs see them
+        self.lost_format = self.lost_limit = self.lost_inhibit = self.lost_off = 0
+        self.command = 0.0  # PT command position, physical counts (before smoothing)
+        self._base = 0.0  # the command before the pulses began (the filters start from it)
+        self._frac = 0.0  # gear remainder, counts
+        self._ma: deque[float] = deque()
+        self._lpf: float | None = None
+        self._active = False  # the axis follows the PT command
+        self.used = False  # a segment came since power-up: TPOS judges the PT error
+        self.freq_hz = 0.0  # frequency now being accepted (monitor 006, kpps = /1000)
+        self.listeners: list[Callable[[str, dict[str, Any]], None]] = []
+        self._cfg: _Config | None = None
+        self._pt_now = False  # in PT at the last step with pulses
+        self._in_step = False
+        drive.params.subscribe(self._on_param)
+        # encoder output (OA/OB window, OZ)
+        self._out_t = 0
+        self._out_pos = 0.0
+        self._out_acc = 0.0
+
+    # ------------------------------------------------------------------ configuration
+    def _config(self) -> _Config:
+        """The parameters the input uses, read once per parameter change (a step is 1 ms)."""
+        c = self._cfg
+        if c is None:
+            get = self.d.params.get
+            p1000 = get("P1.000")
+            x = p1000 & 0xF
+            flt = filter_max_hz(p1000)
+            c = self._cfg = _Config(
+                form=FORMS[x] if x < len(FORMS) else "reserved",
+                logic=(p1000 >> 8) & 1,
+                max_hz=min(LIMIT_PPS[self.d.options.pulse_interface],
+                           flt if flt is not None else math.inf),
+                numerators=(get("P1.044"), get("P2.060"), get("P2.061"), get("P2.062")),
+                m=get("P1.045"),
+                inhp_di8=get("P2.017") & 0xFF == 0x45,
+                p2065=get("P2.065"),
+                p1068=get("P1.068"),
+                tau_ms=get("P1.008") * 10.0,
+                pt_yx=(get("P1.001") & 0xFF) in PT_YX,
+            )
+        return c
+
+    def _on_param(self, _name: str, _value: int) -> None:
+        self._cfg = None
+
+    @property
+    def form(self) -> str:
+        return self._config().form
+
+    def gear(self) -> tuple[int, int]:
+        """(Nx, M) with Nx selected by GNUM0/GNUM1 (L9850; P1.044 when neither is wired)."""
+        dio = self.d.dio
+        idx = int(dio.function_active("GNUM0")) | (int(dio.function_active("GNUM1")) << 1)
+        c = self._config()
+        return c.numerators[idx], c.m
+
+    def in_pt_cached(self) -> bool:
+        """`in_pt()` as the last motion step saw it while following, else computed."""
+        return self._pt_now if self._active else self.in_pt()
+
+    def in_pt(self) -> bool:
+        return self._config().pt_yx and self.d.difunc.control_mode() == "PT"
+
+    # ------------------------------------------------------------------ the line
+    def segment(self, freq: float, direction: int, count: int = 0, *,
+                form: str = "pulse_sign", logic: int = 0, total: int | None = None) -> None:
+        """A segment from the line, starting now (replaces the rest of the previous one).
+        `total`: the signed pulses the master output before it; the count is reconciled
+        with it (a segment that came late over a network ran on too long here)."""
+        d = self.d
+        if freq < 0 or count < 0 or direction not in (1, -1) or not math.isfinite(freq):
+            raise ValueError(f"pulse segment: freq {freq!r}, direction {direction!r}, "
+                             f"count {count!r}")
+        if form not in FORMS:
+            raise ValueError(f"pulse segment: form {form!r} not one of {', '.join(FORMS)}")
+        d._commit_cycle()
+        self._take(d.now)
+        if total is not None and total != self.line_total:
+            old = self.seg or Segment(d.now, float(freq), direction, 0, form, int(logic) & 1)
+            diff = total - self.line_total
+            self.line_total = total
+            self._count(abs(diff), Segment(old.t, old.freq, 1 if diff > 0 else -1, 0,
+                                           old.form, old.logic))
+        self.seg = (Segment(d.now, float(freq), direction, int(count), form, int(logic) & 1)
+                    if freq > 0 else None)  # a 0 Hz segment: the line stops pulsing
+        self.freq_hz = 0.0 if self.seg is None else self.freq_hz
+        self._taken = 0
+        self._check_limit()
+        self._kick()
+
+    def stop(self) -> None:
+        """The line stops pulsing (no segment)."""
+        self.segment(0.0, 1, 0)
+
+    def pending(self) -> int:
+        """Pulses of the current segment still to come (0 for a continuous one)."""
+        s = self.seg
+        return 0 if s is None or not s.count else s.count - self._taken
+
+    # ------------------------------------------------------------------ counting
+    def _take(self, t: int) -> None:
+        s = self.seg
+        if s is None:
+            return
+        n = s.pulses_at(t) - self._taken
+        if n <= 0:
+            return
+        self._taken += n
+        self.line_total += s.direction * n
+        if s.count and self._taken >= s.count:
+            self.seg = None
+            self.freq_hz = 0.0
+        self._count(n, s)
+
+    def _count(self, n: int, s: Segment) -> None:
+        d = self.d
+        c = self._config()
+        direction = s.direction
+        if s.form == "pulse_sign" and s.logic != c.logic:
+            direction = -direction  # sign read with the other logic (P1.000.Z, L7676)
+        if s.form != c.form:
+            self.lost_format += n
+            return
+        if not d.servo_on or not (self._pt_now if self._in_step else self.in_pt()):
+            self.lost_off += n
+            return
+        if s.freq > c.max_hz:  # beyond the interface or the P1.000.UY filter
+            self.lost_limit += n
+            return
+        dio = d.dio
+        if c.inhp_di8 and dio.function_active("INHP"):
+            self.lost_inhibit += n
+            return
+        if c.p2065 & (1 << 11) and (  # single-direction inhibit at a limit
+                (direction > 0 and dio.function_active("PL"))
+                or (direction < 0 and dio.function_active("NL"))):
+            self.lost_inhibit += n
+            return
+        counts = n * (4 if s.form == "ab" else 1)
+        self.accepted += direction * counts
+        nx, m = self.gear()
+        exact = direction * counts * nx / m + self._frac
+        whole = math.floor(exact)
+        self._frac = exact - whole
+        self.command += whole
+        self.freq_hz = s.freq
+
+    def _check_limit(self) -> None:
+        """AL008 above the interface's rating (L19535-19538), unless P2.065 bit 6 (L9892)."""
+        s = self.seg
+        d = self.d
+        if s is None or not d.powered or d.params.get("P2.065") & (1 << 6):
+            return
+        if s.freq > LIMIT_PPS[d.options.pulse_interface] and self.in_pt():
+            d.alarms.raise_alarm("AL008")
+
+    # ------------------------------------------------------------------ following
+    def _kick(self) -> None:
+        """Start following: the axis steps while pulses come or the filter settles."""
+        d = self.d
+        if not (d.servo_on and self.in_pt()):
+            return
+        ax = d.axis
+        if not self._active:
+            self._active = self.used = True
+            self.command = self._base = ax.demand
+            self._frac = 0.0
+            self._ma.clear()
+            self._lpf = None
+        ax.interpolate_to(ax.demand, d._step_ns, by="PT")
+
+    def _smoothed(self) -> float:
+        """P1.068 moving average (ms samples) then P1.008 low-pass (10 ms)."""
+        x = self.command
+        c = self._config()
+        n = c.p1068
+        if n > 1:
+            if not self._ma:  # the window starts full of the command before the pulses
+                self._ma.extend([self._base] * (n - 1))
+            self._ma.append(x)
+            while len(self._ma) > n:
+                self._ma.popleft()
+            x = sum(self._ma) / len(self._ma)
+        else:
+            self._ma.clear()
+        tau_ms = c.tau_ms
+        if tau_ms > 0:
+            y = self._base if self._lpf is None else self._lpf
+            y += (x - y) * (1.0 - math.exp(-self.d._step_ns / 1e6 / tau_ms))
+            if abs(x - y) < 0.5:
+                y = x
+            self._lpf = y
+            x = y
+        return x
+
+    def after_step(self) -> None:
+        d = self.d
+        if self.seg is None and not self._active:
+            self._pt_now = False
+            if self.listeners or d.axis.velocity:
+                self._encoder_output()
+            if self.listeners:
+                self._machine_lines()
+            return
+        self._pt_now = pt = self.in_pt()  # once per step (TPOS reads it too)
+        self._in_step = True
+        try:
+            if self.seg is not None:
+                self._take(d.now)
+        finally:
+            self._in_step = False
+        if "CCLR" in d.axis.locks:  # a level CCLR keeps the error at 0 (L9753)
+            self.clear_error()
+        if self._active:
+            if not (d.servo_on and pt):
+                self._active = False
+                self.clear_error()  # servo off: the command follows the feedback
+            else:
+                target = self._smoothed()
+                settled = (self.seg is None and target == self.command
+                           and all(v == self.command for v in self._ma))
+                if not settled or d.axis.demand != target:
+                    d.axis.interpolate_to(target, d._step_ns, by="PT")
+                else:
+                    self._active = False
+        if self.listeners or d.axis.velocity:
+            self._encoder_output()
+        if self.listeners:
+            self._machine_lines()
+
+    def _machine_lines(self) -> None:
+        """The machine's sensors as a PLC sees them: DOG (the home cam), NL, PL switches."""
+        d = self.d
+        pos = d.axis.position
+        nl, pl = d.mech.limit_states(pos)
+        for name, level in (("DOG", d.mech.home_sensor(pos)), ("NL", nl), ("PL", pl)):
+            if self._machine.get(name) != level:
+                self._machine[name] = level
+                self._emit("X", {"name": name, "level": level})
+
+    def machine_lines(self) -> dict[str, bool]:
+        """The sensors now (for a line that connects later)."""
+        pos = self.d.axis.position
+        nl, pl = self.d.mech.limit_states(pos)
+        self._machine = {"DOG": self.d.mech.home_sensor(pos), "NL": nl, "PL": pl}
+        return dict(self._machine)
+
+    def clear_error(self) -> None:
+        """CCLR: the command position becomes the feedback (L9749)."""
+        d = self.d
+        self.command = self._base = d.axis.position
+        self._frac = 0.0
+        self._ma.clear()
+        self._lpf = None
+
+    def error(self) -> float:
+        """PT position error, counts: the command minus the feedback."""
+        return self.command - self.d.axis.position
+
+    # ------------------------------------------------------------------ encoder output
+    def _encoder_output(self) -> None:
+        """OA/OB counts summed per window; OZ at each index crossing; AL018 (L8569)."""
+        d = self.d
+        ax = d.axis
+        per_rev = 4 * d.params.get("P1.046")  # quadrature counts per revolution
+        if (ax.velocity and not self._config().p2065 & (1 << 13)
+                and abs(ax.velocity) / COUNTS_PER_REV * per_rev > OUTPUT_MAX_HZ):
+            d.alarms.raise_alarm("AL018")
+        if not self.listeners:
+            self._out_pos = ax.position
+            self._out_t = d.now
+            return
+        for z in d.mech.index_crossed(ax.last_position, ax.position):
+            span = ax.position - ax.last_position
+            frac = (z - ax.last_position) / span if span else 1.0
+            t = d.now - d._step_ns + int(frac * d._step_ns)
+            self._emit("OZ", {"t": t, "width_ns": int(d.options.ocz_width_us * 1000)})
+        window = int(d.options.output_window_ms * 1_000_000)
+        if ax.position == self._out_pos:  # at rest: the next window starts now
+            self._out_t = d.now
+            return
+        if d.now - self._out_t < window and ax.position != ax.last_position:
+            return  # the window runs on (a motor coming to rest flushes it at once)
+        delta = (ax.position - self._out_pos) * per_rev / COUNTS_PER_REV + self._out_acc
+        whole = math.trunc(delta)
+        self._out_acc = delta - whole
+        dt = d.now - self._out_t
+        if whole:
+            self._emit("OAB", {"t": self._out_t, "freq": abs(whole) * 1e9 / dt,
+                               "direction": 1 if whole > 0 else -1, "count": abs(whole)})
+        self._out_pos = ax.position
+        self._out_t = d.now
+
+    def _emit(self, kind: str, data: dict[str, Any]) -> None:
+        for fn in list(self.listeners):
+            fn(kind, data)
+
+    # ------------------------------------------------------------------ power
+    def power_up(self) -> None:
+        self.seg = None
+        self._taken = 0
+        self.accepted = self.line_total = 0
+        self._active = self.used = False
+        self.freq_hz = 0.0
+
+    def snapshot(self) -> dict[str, Any]:
+        return {"pt_count": self.accepted, "pt_freq_kpps": self.freq_hz / 1000.0,
+                "pt_command": round(self.command), "pt_pending": self.pending(),
+                "pt_error": round(self.error()) if self.used else 0}
+
+
+def _check_gear(d: Drive) -> Callable[[str, int], None]:
+    def validate(name: str, value: int) -> None:
+        # the range is of the command *pulse* input ratio (L8543-8547): PT modes only
+        if d.options.pt_gear_check != "refuse" or (d.params.get("P1.001") & 0xFF) not in PT_YX:
+            return
+        p = d.params
+        m = value if name == "P1.045" else p.get("P1.045")
+        nums = [p.get("P1.044")] if name == "P1.045" else [value]
+        for nx in nums:
+            if not GEAR_MIN < nx / m < GEAR_MAX:
+                other = "numerator" if name == "P1.045" else "denominator P1.045"
+                raise OutOfRange(name, f"{name} = {value}: e-gear ratio {nx}/{m} outside "
+                                 f"1/4 < Nx/M < 262144 (L8547); write the {other} first "
+                                 "if the pair is changing")
+    return validate
+
+
+def attach_pulse_train(drive: Drive) -> PulseTrain:
+    pt = PulseTrain(drive)
+    drive._step_hooks.append(pt.after_step)
+    validate = _check_gear(drive)
+    for name in ("P1.044", "P1.045", "P2.060", "P2.061", "P2.062"):
+        drive.params.on_validate(name, validate)
+    return pt

@@ -1,0 +1,251 @@
+"""A PLC's pulse positioning program on the drive's pulse line: `plc_program` (docs/pulse.md).
+
+    - plc_program:
+        axis: {max_speed: 100000, accel_ms: 200, creep_speed: 2000, dog: X0, clr: Y8}
+        program:
+          - {SPD: 50000, DRV: "ABS,,300000,Ps", WAIT: 100ms}
+          - {SPD: 10000, DRVC: "ADR,+,20000,Ps"}
+          - {SPD: 3000, DRV: "ADR,,5000,Ps"}
+          - {SPD: 20000, DRVZ: MD1}
+          - MD
+        expect: {position: 325000, remaining: 0}
+
+`axis:` is FUN141 (hil.drivers.plc_pulse.AxisParams field names), `program:` FUN140 steps
+(SPD, DRV, DRVC, DRVZ, WAIT, ACT, EXT, GOTO, MD). What the PLC would refuse (its error codes
+30-60 and parameter errors 1-15, seed 001:34, 74) is refused here with file:line.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from typing import TYPE_CHECKING, Any
+
+from hil.bench.yamlio import Checker, join, level, parse_duration
+from hil.drivers.plc_pulse import AxisParams, Drv, PlcError, Program
+from hil.drivers.plc_pulse import Step as PlcStep
+from hil.plan.context import Outcome, StepFailed
+from hil.plan.kinds.base import CheckContext, StepKind
+from hil.units import S
+
+if TYPE_CHECKING:
+    from hil.plan.context import StepContext
+    from hil.plan.session import DriveIO
+    from hil.plan.steps import Step
+
+_STEP_KEYS = {"SPD", "DRV", "DRVC", "DRVZ", "WAIT", "ACT", "EXT", "GOTO"}
+_X = re.compile(r"^[XMY][0-9]{1,4}$")
+_DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?)\s*,\s*(Ut|Ps)\s*$")
+_EXPECT = {"position", "remaining", "error", "done", "freq", "feedback", "feedback_tol"}
+_AXIS = {f.name: f for f in dataclasses.fields(AxisParams)}
+
+
+def _axis(v: Checker, obj: Any, line: int, where: str) -> AxisParams:
+    m = v.mapping(obj, line, where)
+    v.keys(m, set(_AXIS), where)
+    values: dict[str, Any] = {}
+    for k, val in m.items():
+        want = type(getattr(AxisParams(), k))
+        ok = isinstance(val, want) and not (want is int and isinstance(val, bool))
+        if want is float and isinstance(val, int) and not isinstance(val, bool):
+            ok, val = True, float(val)
+        if not ok:
+            raise v.err(m.kline(k), join(where, k), f"{val!r}: {want.__name__} expected")
+        values[k] = val
+    p = AxisParams(**values)
+    try:
+        p.check()
+    except PlcError as e:
+        raise v.err(m.kline(e.field) if e.field in m else line, join(where, e.field),
+                    str(e)) from None
+    return p
+
+
+def _drv(v: Checker, text: Any, line: int, where: str, chained: bool) -> Drv:
+    m = _DRV.match(text) if isinstance(text, str) else None
+    if not m:
+        raise v.err(line, where, f"{text!r}: write it as the PLC does, e.g. \"ABS,,300000,Ps\" "
+                    "or \"ADR,+,200,Ut\" (mode ABS/ADR, direction +/-/blank, stroke, unit "
+                    "Ut/Ps; error 43)")
+    return Drv(m.group(1), m.group(2), float(m.group(3)), m.group(4), chained)
+
+
+def _line_name(v: Checker, val: Any, line: int, where: str) -> str:
+    if not isinstance(val, str) or not _X.match(val):
+        raise v.err(line, where, f"{val!r}: a PLC line like X3 (error 34)")
+    return val
+
+
+def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
+    if obj == "MD":
+        return PlcStep(end=True, line=line)
+    m = v.mapping(obj, line, where)
+    unknown = sorted(set(m) - _STEP_KEYS)
+    if unknown:
+        raise v.err(m.kline(unknown[0]), join(where, unknown[0]),
+                    f"not a FUN140 sub-command (error 34); known: "
+                    f"{', '.join(sorted(_STEP_KEYS))}, MD")
+    s = PlcStep(line=line)
+    if "SPD" in m:
+        val = m["SPD"]
+        if not isinstance(val, int | float) or isinstance(val, bool):
+            raise v.err(m.kline("SPD"), join(where, "SPD"), f"{val!r}: a speed (error 31)")
+        s.spd = float(val)
+    drives = [k for k in ("DRV", "DRVC", "DRVZ") if k in m]
+    if len(drives) > 1:
+        raise v.err(line, where, f"one drive command per step, not {' and '.join(drives)} "
+                    "(error 34)")
+    if "DRV" in m or "DRVC" in m:
+        k = drives[0]
+        s.drive = _drv(v, m[k], m.kline(k), join(where, k), chained=k == "DRVC")
+    elif "DRVZ" in m:
+        s.drive = str(m["DRVZ"])
+    trans = [k for k in ("WAIT", "ACT", "EXT") if k in m]
+    if len(trans) > 1:
+        raise v.err(line, where, f"one transition per step, not {' and '.join(trans)} "
+                    "(error 34)")
+    if "WAIT" in m:
+        val = m["WAIT"]
+        if isinstance(val, str) and _X.match(val):
+            s.wait_line = val
+        else:
+            try:
+                s.wait_time = parse_duration(val) / S
+            except ValueError as e:
+                raise v.err(m.kline("WAIT"), join(where, "WAIT"),
+                            f"a time (e.g. 500ms) or a line (X3): {e}") from None
+    if "ACT" in m:
+        try:
+            s.act = parse_duration(m["ACT"]) / S
+        except ValueError as e:
+            raise v.err(m.kline("ACT"), join(where, "ACT"), str(e)) from None
+    if "EXT" in m:
+        s.ext = _line_name(v, m["EXT"], m.kline("EXT"), join(where, "EXT"))
+    if "GOTO" in m:
+        val = m["GOTO"]
+        if val != "NEXT":
+            if not isinstance(val, int) or isinstance(val, bool):
+                raise v.err(m.kline("GOTO"), join(where, "GOTO"),
+                            f"{val!r}: NEXT or a step number (error 34)")
+            s.goto = val
+    return s
+
+
+class PlcProgram(StepKind):
+    """`plc_program: {axis, program, timeout, expect, slice}`: run a FUN140 program."""
+
+    name = "plc_program"
+    motion = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "program", "timeout", "expect", "slice"}, where)
+        axis = (_axis(v, m["axis"], m.kline("axis"), join(where, "axis")) if "axis" in m
+                else AxisParams())
+        if "program" not in m:
+            raise v.err(line, where, "needs `program:` (FUN140 steps)")
+        items = v.seq(m["program"], m.kline("program"), join(where, "program"))
+        lines = getattr(items, "item_lines", None) or [m.kline("program")] * len(items)
+        steps = [_step(v, it, lines[i], join(where, f"program[{i}]"))
+                 for i, it in enumerate(items)]
+        prog = Program(steps)
+        try:
+            prog.check(axis)
+        except PlcError as e:
+            s = steps[e.step - 1] if e.step else None
+            fld = join(where, f"program[{e.step - 1}]") if e.step else join(where, "program")
+            raise v.err(s.line if s else m.kline("program"),
+                        join(fld, e.field) if e.field else fld, str(e)) from None
+        timeout = v.duration(m, "timeout", where, 60 * S)
+        slice_ns = v.duration(m, "slice", where, 10_000_000)
+        if not 1_000_000 <= slice_ns <= 1_000_000_000:
+            raise v.err(m.kline("slice"), join(where, "slice"), "1ms ~ 1s")
+        expect: dict[str, Any] = {}
+        if "expect" in m:
+            e = v.mapping(m["expect"], m.kline("expect"), join(where, "expect"))
+            v.keys(e, _EXPECT, join(where, "expect"))
+            expect = dict(e)
+        return {"axis": axis, "program": prog, "timeout": timeout, "expect": expect,
+                "slice_ms": slice_ns / 1e6}
+
+    def check(self, cc: CheckContext) -> None:
+        if not cc.drive.pulse:
+            raise cc.err(f"drive {cc.dname} has no pulse line (bench `pulse:`)")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        plc = d.plc(a["axis"], a["slice_ms"])
+        plc._abort = False
+        rec = ctx.rec
+        topic = f"/plc/{d.name}/status"
+
+        def on_status(st: Any, what: str) -> None:
+            if rec is not None:
+                rec.write(topic, {"event": what, "step": st.step, "ready": st.ready,
+                                  "done": st.done, "position": st.position,
+                                  "remaining": st.remaining, "error": st.error,
+                                  "homed": st.homed, "drvz": st.drvz})
+        plc.on_status = on_status
+        cancel = getattr(ctx, "cancel", None)
+        try:
+            st = plc.run(a["program"], a["timeout"] / S)
+        except TimeoutError as e:
+            raise StepFailed(f"PLC program: {e}") from None
+        finally:
+            if cancel is not None and cancel.is_set():
+                plc.stop()
+        seen = {"position": st.position, "remaining": st.remaining, "error": st.error,
+                "done": st.done, "freq": st.freq, "feedback": st.feedback}
+        want = dict(a["expect"])
+        tol = want.pop("feedback_tol", 0)
+        bad = [f"expected {k} {w!r}, PLC shows {seen[k]!r}" for k, w in want.items()
+               if (abs(seen[k] - w) > tol if k == "feedback" else seen[k] != w)]
+        text = (f"PLC at step {st.step}: position {st.position} Ps, remaining "
+                f"{st.remaining}, output {plc.total} pulses, OA/OB counter {st.feedback}")
+        if bad:
+            raise StepFailed("; ".join(bad) + f" ({text})")
+        return Outcome(text)
+
+    def describe(self) -> str:
+        n = len(self.args["program"].steps)
+        return f"plc_program ({n} steps)"
+
+
+class PlcOutput(StepKind):
+    """`plc_output: {Y8: on}`: the PLC's ladder sets its outputs on the pulse line (CLR)."""
+
+    name = "plc_output"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        if not m:
+            raise v.err(line, where, "name at least one PLC output, e.g. Y8: on")
+        out: dict[str, bool] = {}
+        for k, val in m.items():
+            if not re.fullmatch(r"Y[0-9]{1,3}", str(k)):
+                raise v.err(m.kline(k), join(where, str(k)), f"{k!r}: a PLC output like Y8")
+            lv = level(val)
+            if lv is None:
+                raise v.err(m.kline(k), join(where, str(k)), f"{val!r}: on or off")
+            out[str(k)] = lv
+        return {"levels": out}
+
+    def check(self, cc: CheckContext) -> None:
+        if not cc.drive.pulse:
+            raise cc.err(f"drive {cc.dname} has no pulse line (bench `pulse:`)")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        if d.pulse is None:
+            raise StepFailed(f"drive {d.name}: no pulse line")
+        for k, lv in self.args["levels"].items():
+            d.pulse.set(k, lv)
+        return Outcome()
+
+    def describe(self) -> str:
+        return "plc_output " + ", ".join(f"{k}={'on' if v else 'off'}"
+                                         for k, v in self.args["levels"].items())
+
+
+KINDS = (PlcProgram, PlcOutput)

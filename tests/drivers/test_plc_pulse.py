@@ -1,0 +1,271 @@
+"""The PLC's pulse positioning program (seed 001, FATEK FUN140/FUN141), rule by rule from the
+seed, against the virtual drive on its own pulse line in virtual time (hil.clock)."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import pytest
+
+from hil import clock
+from hil.drivers.plc_pulse import (
+    AxisParams,
+    Drv,
+    PlcError,
+    Program,
+    PulseMaster,
+    Step,
+    plan_profile,
+)
+from hil.model.mechanics import COUNTS_PER_REV, Mechanics
+from hil.model.options import ModelOptions
+from hil.transport.pulse import open_pulse
+from hil.units import MS, S
+from hil.virtual.stack import DriveSpec, VirtualDriveStack
+
+GEAR = {"P1.044": 16777216, "P1.045": 10000, "P2.041": 0x0108}  # 10000 pulses / rev
+PER_REV = 10000
+_n = 0
+
+
+class Rig:
+    """A virtual drive with a pulse line, a PLC on the other end, a recording of the line."""
+
+    def __init__(self, stack: VirtualDriveStack, plc: PulseMaster, port) -> None:
+        self.stack, self.plc, self.port = stack, plc, port
+        self.segs: list[tuple[int, dict]] = []
+        self.levels: list[tuple[int, str, bool]] = []  # what crossed the line (the tap)
+
+    @property
+    def drive(self):
+        return self.stack.drive
+
+    def rev(self) -> float:
+        return self.drive.axis.position / COUNTS_PER_REV
+
+
+class _Tap:
+    def __init__(self, rig_segs: list, levels: list) -> None:
+        self.segs = rig_segs
+        self.levels = levels
+
+    def pulse(self, name, kind, body, t, source_t):
+        if kind == "seg":
+            self.segs.append((t, dict(body)))
+
+    def dio(self, name, line, level, t, source_t):
+        self.levels.append((t, line, level))
+
+
+@contextlib.contextmanager
+def rig(params: AxisParams, mech: Mechanics | None = None, **drive: int) -> Iterator[Rig]:
+    global _n
+    _n += 1
+    line = f"virtual:plc-test-{_n}"
+    with clock.use(clock.VirtualClock()):
+        stack = VirtualDriveStack(DriveSpec(
+            name="d", pulse=line, params=GEAR | drive, inputs={8: True},
+            mechanics=mech or Mechanics(), options=ModelOptions())).start()
+        segs: list = []
+        levels: list = []
+        port = open_pulse(line, role="master", tap=_Tap(segs, levels), name="d")
+        try:
+            stack.host.call(stack.drive.set_di, 1, True)  # SON
+            clock.sleep(0.05)
+            plc = PulseMaster(port, params)
+            r = Rig(stack, plc, port)
+            r.segs, r.levels = segs, levels
+            yield r
+        finally:
+            port.close()
+            stack.stop()
+
+
+def prog(*steps: Step) -> Program:
+    return Program(list(steps))
+
+
+FAST = dict(max_speed=100_000, start_speed=500, accel_ms=100)
+
+
+# -- FUN141 / FUN140 refusals (001:34, 74) ------------------------------------------------------
+
+
+@pytest.mark.parametrize("kw, code", [
+    ({"pulses_per_rev": 0}, 2), ({"creep_speed": 70000}, 7), ({"accel_ms": 30001}, 9),
+    ({"max_speed": 250_000}, 37), ({"max_speed": 500_000, "hardware": "differential",
+                                     "output": "A/B"}, 37),
+    ({"start_speed": 300_000}, 38), ({"backlash": 32768}, 39), ({"zero_count": 256}, 15),
+    ({"clr": "Y8", "clr_ms": 20.0}, 53),
+])
+def test_fun141_refuses_with_its_error_code(kw, code):
+    with pytest.raises(PlcError) as e:
+        AxisParams(**kw).check()
+    assert e.value.code == code
+
+
+def test_fun140_refusals():
+    p = AxisParams(dog="X0")
+    cases = [
+        (prog(Step(spd=1000, drive=Drv("ADR", "+", 10, chained=True)),
+              Step(spd=1000, drive=Drv("ABS", "", 10))), 41),
+        (prog(Step(spd=1000, drive=Drv("ADR", "+", 10, chained=True)),
+              Step(spd=1000, drive="MD0")), 42),
+        (prog(*[Step(spd=1000, drive=Drv("ADR", "+", 1, chained=True)) for _ in range(8)],
+              Step(spd=1000, drive=Drv("ADR", "+", 1))), 34),  # at most 8 DRVC (001:40)
+        (prog(Step(wait_time=0.1)) if False else prog(*[Step(wait_time=0.01)] * 251), 36),
+        (prog(Step(spd=1000, drive="MD2")), 52),
+        (prog(Step(spd=1000, drive="MD4")), 50),
+        (prog(Step(drive=Drv("ADR", "+", 10))), 30),
+    ]
+    for program, code in cases:
+        with pytest.raises(PlcError) as e:
+            program.check(p)
+        assert e.value.code == code, (program, e.value)
+    prog(*[Step(spd=1000, drive=Drv("ADR", "+", 1, chained=True)) for _ in range(7)],
+         Step(spd=1000, drive=Drv("ADR", "+", 1))).check(p)  # 7 DRVC + the DRV: allowed
+
+
+# -- profile ---------------------------------------------------------------------------------
+
+
+def test_profile_adds_up_exactly_and_cruises_at_spd():
+    acc = (100_000 - 500) / 0.1  # P8 = 100 ms from P5 to P4 (001:56)
+    slices = plan_profile([(30_000, 50_000.0)], 500.0, acc, acc)
+    assert sum(n for _, n in slices) == 30_000
+    speeds = [n * 1e9 / d for d, n in slices]
+    assert max(speeds) == pytest.approx(50_000, rel=1e-6)
+    cruise = [(d, n) for d, n in slices if n * 1e9 / d == pytest.approx(50_000, rel=1e-6)]
+    assert len(cruise) == 1  # a constant speed stays one segment
+    # a short stroke is a triangle: it never reaches SPD
+    tri = plan_profile([(200, 50_000.0)], 500.0, acc, acc)
+    assert sum(n for _, n in tri) == 200
+    assert max(n * 1e9 / d for d, n in tri) < 50_000
+
+
+def test_accel_time_zero_jumps_to_spd():
+    slices = plan_profile([(5000, 10_000.0)], 500.0, float("inf"), float("inf"))
+    assert slices == [(500 * MS, 5000)]
+
+
+# -- runs against the virtual drive -------------------------------------------------------------
+
+
+def test_drv_abs_and_adr_move_the_motor_through_the_gear():
+    with rig(AxisParams(**FAST)) as r:
+        st = r.plc.run(prog(Step(spd=50_000, drive=Drv("ABS", "", 30_000)),
+                            Step(spd=20_000, drive=Drv("ADR", "-", 10_000), wait_time=0.2),
+                            Step(end=True)))
+        assert st.position == 20_000 and st.remaining == 0 and st.done
+        assert r.rev() == pytest.approx(2.0, abs=2 / PER_REV)
+        assert st.feedback == pytest.approx(4 * 2500 * 2, abs=3)  # OA/OB, P1.046 = 2500
+
+
+def test_abs_is_relative_to_the_position_register():
+    with rig(AxisParams(**FAST)) as r:
+        r.plc.run(prog(Step(spd=20_000, drive=Drv("ABS", "", 5000)),
+                       Step(spd=20_000, drive=Drv("ABS", "", 2000), wait_time=0.2)))
+        assert r.plc.status.position == 2000
+        assert r.rev() == pytest.approx(0.2, abs=2 / PER_REV)
+
+
+def test_goto_loops_and_act_runs_for_its_time():
+    with rig(AxisParams(**FAST)) as r:
+        t0 = clock.monotonic_ns()
+        # ACT 0.3 s of a continuous run (stroke 0, 001:38), then stop
+        r.plc.run(prog(Step(spd=10_000, drive=Drv("ADR", "+", 0), act=0.3), Step(end=True)))
+        took = clock.monotonic_ns() - t0
+        assert 0.3 * S <= took < 0.3 * S + 5 * MS
+        assert r.plc.status.position == pytest.approx(3000 - 30, abs=60)  # ramp from P5
+
+
+def test_ext_abandons_the_remaining_pulses_and_keeps_them_in_dr4072():
+    # EXT on the cam X0 (DOG at -0.5..0.5 rev): from +3 rev towards -2 rev (001:42-44)
+    with rig(AxisParams(**FAST)) as r:
+        r.plc.run(prog(Step(spd=50_000, drive=Drv("ABS", "", 30_000), wait_time=0.1)))
+        r.plc.run(prog(Step(spd=20_000, drive=Drv("ADR", "-", 50_000), ext="X0", goto=3),
+                       Step(spd=20_000, drive=Drv("ADR", "-", 1)),
+                       Step(end=True)))
+        st = r.plc.status
+        assert 24_000 < 30_000 - st.position < 25_200  # stopped at the cam's edge (+0.5 rev)
+        assert st.remaining == 50_000 - (30_000 - st.position)  # DR4072 (001:44)
+        clock.sleep(0.3)
+        assert r.rev() == pytest.approx(st.position / PER_REV, abs=2 / PER_REV)
+
+
+def test_backlash_is_output_on_a_reversal_and_not_counted():
+    # P7 added on reversal (001:56)
+    with rig(AxisParams(**FAST, backlash=100)) as r:
+        r.plc.run(prog(Step(spd=20_000, drive=Drv("ADR", "+", 5000)),
+                       Step(spd=20_000, drive=Drv("ADR", "-", 2000), wait_time=0.2)))
+        assert r.plc.status.position == 3000
+        assert r.plc.total == 5000 - 2000 - 100
+        assert r.rev() == pytest.approx(0.29, abs=2 / PER_REV)
+
+
+def _home(r: Rig, mode: str) -> None:
+    r.plc.run(prog(Step(spd=50_000, drive=Drv("ABS", "", 30_000), wait_time=0.1)))
+    r.plc.run(prog(Step(spd=20_000, drive=mode)))
+
+
+HOME = dict(FAST, creep_speed=2000, dog="X0", limit="X1", pg0="OZ", clr="Y8", origin=100)
+
+
+def test_md0_zero_at_dog_off_at_creep_speed():
+    with rig(AxisParams(**HOME)) as r:
+        _home(r, "MD0")
+        assert r.plc.status.position == 100 and r.plc.status.homed
+        assert r.rev() == pytest.approx(-0.5, abs=10 / PER_REV)  # DOG's far edge
+        before_stop = [s for _, s in r.segs if s["freq"] > 0][-1]
+        assert before_stop["freq"] == pytest.approx(2000)  # creep P6 through DOG
+
+
+def test_md1_stops_waits_half_a_second_and_reverses_at_creep():
+    with rig(AxisParams(**HOME)) as r:
+        _home(r, "MD1")
+        moving = [(t, s) for t, s in r.segs if s["freq"] > 0]
+        rev = next(i for i, (_, s) in enumerate(moving) if s["direction"] == 1 and i > 0
+                   and moving[i - 1][1]["direction"] == -1)
+        stop_t = next(t for t, s in r.segs if t > moving[rev - 1][0] and s["freq"] == 0)
+        assert moving[rev][0] - stop_t >= 500 * MS  # "wait 0.5 s" (001:112)
+        assert moving[rev][1]["freq"] == pytest.approx(2000)  # reverse at P6
+        assert r.rev() == pytest.approx(0.5, abs=10 / PER_REV)  # DOG's near edge
+
+
+@pytest.mark.parametrize("edge, zero_count, at_rev", [("leading", 1, 0.0), ("trailing", 1, -1.0),
+                                                      ("leading", 2, -1.0)])
+def test_md2_counts_pg0_from_the_dog_edge(edge, zero_count, at_rev):
+    with rig(AxisParams(**HOME | {"pg0_edge": edge, "zero_count": zero_count})) as r:
+        _home(r, "MD2")
+        assert r.rev() == pytest.approx(at_rev, abs=10 / PER_REV)
+
+
+def test_clr_pulse_is_longer_than_20_ms_and_clears_the_drive_error():
+    with rig(AxisParams(**HOME)) as r:
+        _home(r, "MD0")
+        clr = [(t, lv) for t, line, lv in r.levels if line == "Y8"]
+        assert [lv for _, lv in clr] == [False, True, False]  # idle off, then the pulse
+        assert clr[2][0] - clr[1][0] > 20 * MS  # 001:124
+        assert abs(r.drive.pulse.error()) < COUNTS_PER_REV / PER_REV  # CCLR on DI2 (L9749)
+
+
+def test_start_on_dog_runs_to_the_stroke_limit_and_back_through_dog():
+    # 001:118: on or in front of DOG -> homing speed to the stroke limit -> reverse until DOG
+    # goes 1 -> 0 -> the selected mode. Limit switch close by: NL at -2 rev.
+    mech = Mechanics(nl_rev=-2.0, hard_stop_neg_rev=-3.0)
+    with rig(AxisParams(**HOME), mech=mech) as r:
+        assert r.plc.dog()  # the axis starts at 0 rev, on the cam
+        r.plc.run(prog(Step(spd=20_000, drive="MD0")))
+        dirs = [s["direction"] for _, s in r.segs if s["freq"] > 0]
+        assert dirs[0] == -1 and 1 in dirs  # towards the limit, then back
+        assert r.plc.status.homed
+        assert r.rev() == pytest.approx(-0.5, abs=10 / PER_REV)
+
+
+def test_drvz_without_a_zero_point_times_out_and_stops():
+    mech = Mechanics(home_lo_rev=50.0, home_hi_rev=51.0)  # no cam on the way
+    with rig(AxisParams(**HOME | {"limit": ""}), mech=mech) as r:
+        with pytest.raises(TimeoutError, match="DRVZ MD0"):
+            r.plc.run(prog(Step(spd=20_000, drive="MD0")), timeout_s=0.5)
+        assert r.segs[-1][1]["freq"] == 0  # the pulses stopped

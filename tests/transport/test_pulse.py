@@ -1,0 +1,156 @@
+"""Pulse lines (issue 26, docs/pulse.md): segments, never one message per pulse; virtual and
+zenoh; hostile messages are refused with the field named and never stop the line."""
+
+from __future__ import annotations
+
+import json
+import random
+import time
+
+import pytest
+
+from hil.transport.pulse import PulseError, check_segment, open_pulse
+from hil.transport.urls import TransportUrlError, parse_url
+from hil.transport.zenoh_net import close_session, config_from, open_session
+
+pytestmark = pytest.mark.timeout(30)
+
+
+def test_virtual_segments_and_levels_both_ways(tap):
+    plc = open_pulse("virtual:tp1", role="master", tap=tap, name="drive1")
+    drv = open_pulse("virtual:tp1", role="drive")
+    try:
+        at_drive, at_plc = [], []
+        drv.subscribe(lambda k, d, t, s: at_drive.append((k, d)))
+        plc.subscribe(lambda k, d, t, s: at_plc.append((k, d)))
+        plc.send("seg", {"freq": 50_000, "direction": -1, "count": 1000, "total": 7})
+        plc.set("Y8", True)
+        drv.send("oab", {"freq": 4000.0, "direction": 1, "count": 40})
+        drv.send("oz", {"width_ns": 1000})
+        drv.set("X0", True)
+        assert at_drive == [
+            ("seg", {"freq": 50_000.0, "direction": -1, "count": 1000, "total": 7,
+                     "form": "pulse_sign", "logic": 0}),
+            ("level", {"line": "Y8", "level": True})]
+        assert [k for k, _ in at_plc] == ["oab", "oz", "level"]
+        assert plc.get("X0") and drv.get("Y8")
+        # the tap (the harness side) records what it sent and what it saw
+        assert [(r[1]) for r in tap.pulse_messages] == ["seg", "oab", "oz"]
+        assert [(r[1], r[2]) for r in tap.dio_levels] == [("Y8", True), ("X0", True)]
+    finally:
+        plc.close()
+        drv.close()
+
+
+def test_each_side_sends_only_its_own():
+    plc = open_pulse("virtual:tp2", role="master")
+    drv = open_pulse("virtual:tp2", role="drive")
+    try:
+        with pytest.raises(PulseError, match="cannot send 'oab'"):
+            plc.send("oab", {"freq": 1, "count": 1})
+        with pytest.raises(PulseError, match="cannot set line 'X0'"):
+            plc.set("X0", True)
+        with pytest.raises(PulseError, match="cannot send 'seg'"):
+            drv.send("seg", {"freq": 1})
+        with pytest.raises(PulseError, match="cannot set line 'Y8'"):
+            drv.set("Y8", True)
+    finally:
+        plc.close()
+        drv.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        plc.send("seg", {"freq": 1})
+
+
+@pytest.mark.parametrize("kind, body, field", [
+    ("seg", {"freq": -1}, "seg.freq"),
+    ("seg", {"freq": float("nan")}, "seg.freq"),
+    ("seg", {"freq": 1e12}, "seg.freq"),
+    ("seg", {"freq": "fast"}, "seg.freq"),
+    ("seg", {"freq": True}, "seg.freq"),
+    ("seg", {"freq": 10, "direction": 0}, "seg.direction"),
+    ("seg", {"freq": 10, "count": -3}, "seg.count"),
+    ("seg", {"freq": 10, "count": 1.5}, "seg.count"),
+    ("seg", {"freq": 10, "form": "quad"}, "seg.form"),
+    ("seg", {"freq": 10, "logic": 2}, "seg.logic"),
+    ("seg", {"freq": 10, "total": 2**70}, "seg.total"),
+    ("oz", {"width_ns": -1}, "oz.width_ns"),
+    ("oz", [], "oz: body"),
+    ("jump", {}, "kind 'jump'"),
+])
+def test_malformed_messages_name_their_field(kind, body, field):
+    with pytest.raises(PulseError, match=field.replace(".", r"\.")):
+        check_segment(kind, body)
+
+
+def test_urls():
+    for bad, why in (("udp:x", "not a pulse transport"), ("pty:auto", "not a pulse"),
+                     ("virtual:", "needs a target"), ("virtual:a?baud=9600", "unknown param")):
+        with pytest.raises(TransportUrlError, match=why):
+            open_pulse(bad, role="master")
+    with pytest.raises(ValueError, match="role"):
+        open_pulse("virtual:x", role="harness")  # type: ignore[arg-type]
+
+
+def test_zenoh_line_between_two_sessions(port, tap):
+    ep = f"tcp/127.0.0.1:{port}"
+    drv = open_pulse(f"zenoh:tzp/drive1/pulse?listen={ep}", role="drive")
+    drv.set("X0", True)  # before the PLC exists: learnt by query
+    plc = open_pulse(f"zenoh:tzp/drive1/pulse?connect={ep}", role="master", tap=tap,
+                     name="drive1")
+    try:
+        assert plc.get("X0") is True
+        got: list = []
+        drv.subscribe(lambda k, d, t, s: got.append((k, d, s)))
+        t0 = time.time_ns()
+        plc.send("seg", {"freq": 1000, "direction": 1, "count": 10, "total": 0})
+        plc.set("Y8", True)
+        deadline = time.monotonic() + 5
+        while len(got) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert [g[0] for g in got] == ["seg", "level"]
+        assert got[0][1]["count"] == 10 and got[0][2] >= t0  # the sender's time attached
+        seen: list = []
+        plc.subscribe(lambda k, d, t, s: seen.append(k))
+        drv.send("oz", {"width_ns": 5})
+        deadline = time.monotonic() + 5
+        while not seen and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert seen == ["oz"]
+    finally:
+        plc.close()
+        drv.close()
+
+
+def test_zenoh_hostile_payloads_never_stop_the_line(port):
+    """Random bytes, broken JSON and wrong fields on every key: each is refused (kept in
+    `errors` where it was a message), and a good segment after them still arrives."""
+    ep = f"tcp/127.0.0.1:{port}"
+    drv = open_pulse(f"zenoh:tzh/pulse?listen={ep}", role="drive")
+    u = parse_url(f"zenoh:tzh/pulse?connect={ep}", "pulse")
+    session = open_session(config_from(u.zenoh()), what="fuzzer")
+    try:
+        got: list = []
+        drv.subscribe(lambda k, d, t, s: got.append((k, d)))
+        rnd = random.Random(26)
+        time.sleep(0.3)
+        for i in range(200):
+            key = rnd.choice(["seg", "Y8", "oab", "oz", "X0", "seg"])
+            raw = rnd.choice([
+                bytes(rnd.getrandbits(8) for _ in range(rnd.randint(0, 40))),
+                b'{"freq":',
+                json.dumps({"freq": rnd.choice([-1, 1e30, "x", None, [1]]), "count": i}).encode(),
+                json.dumps({"freq": 10, "direction": rnd.choice([0, 2, "up"])}).encode(),
+                b"2", b"",
+            ])
+            session.put(f"tzh/pulse/{key}", raw)
+        session.put("tzh/pulse/seg", json.dumps({"freq": 500, "count": 5}).encode())
+        deadline = time.monotonic() + 5
+        while not got and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert got and got[-1] == ("seg", {"freq": 500.0, "direction": 1, "count": 5,
+                                            "form": "pulse_sign", "logic": 0})
+        assert len(got) == 1  # nothing malformed got through
+        assert drv.errors  # and what was refused is on record
+    finally:
+        close_session(session)
+        drv.close()
