@@ -16,6 +16,7 @@ import argparse
 import time
 
 from hil.model.drive import Drive
+from hil.model.mechanics import Mechanics
 from hil.model.timebase import MS
 
 FREQ = 500_000  # pulses/s
@@ -23,7 +24,9 @@ PULSES_PER_REV = 100_000  # P1.044 / P1.045 = 16777216 / 100000
 
 
 def _drive() -> Drive:
-    return Drive(inputs={8: True}, params={"P2.041": 0x0108})
+    # a long axis: 300 rpm for 60 s is 300 revolutions, past the bench's switches at 45
+    mech = Mechanics(nl_rev=-1e6, pl_rev=1e6, hard_stop_neg_rev=None, hard_stop_pos_rev=None)
+    return Drive(inputs={8: True}, params={"P2.041": 0x0108}, mechanics=mech)
 
 
 def run_pt(seconds: int) -> tuple[float, int]:
@@ -63,8 +66,9 @@ def main() -> None:
     pp, pos_pp = run_pp(a.seconds)
     pt, pos_pt = run_pt(a.seconds)
     print(f"model time {a.seconds} s, 500 kHz PT vs PP at the same speed")
-    print(f"  PP (baseline): {pp:7.3f} s wall, end position {pos_pp} counts")
-    print(f"  PT           : {pt:7.3f} s wall, end position {pos_pt} counts")
+    per_rev = 16777216
+    print(f"  PP (baseline): {pp:7.3f} s wall, end position {pos_pp / per_rev:.2f} rev")
+    print(f"  PT           : {pt:7.3f} s wall, end position {pos_pt / per_rev:.2f} rev")
     print(f"  ratio PT / PP: {pt / pp:.2f}x (goal <= 1.2x)")
 
 

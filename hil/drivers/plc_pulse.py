@@ -655,6 +655,8 @@ class PulseMaster:
             self.stop()
             return
         cut = self.move(segs, direction, until)
+        if cut and ext:
+            self._report("ext")  # the remaining pulses are abandoned (001:42-44)
         if not cut:
             self._transition_after(last, left)
 

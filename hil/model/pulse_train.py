@@ -53,6 +53,8 @@ LIMIT_PPS = {"line_driver": 4_000_000, "open_collector": 200_000}  # L7700-7707
 OUTPUT_MAX_HZ = 19.8e6  # L8569
 GEAR_MIN, GEAR_MAX = 0.25, 262144.0  # 1/4 < Nx/M < 262144 (L8547)
 PT_YX = (0x00, 0x06, 0x07, 0x0D, 0x0E, 0x0F)  # P1.001.YX with a PT side (L7749-7800)
+CRUISE_NS = 200_000_000  # the longest cruise before an exact resync
+_INTERP_MODE = 5  # Axis._INTERP
 
 
 @dataclass(frozen=True)
@@ -67,6 +69,7 @@ class _Config:
     p1068: int
     tau_ms: float
     pt_yx: bool
+    p1046: int
 
 
 @dataclass(frozen=True)
@@ -129,6 +132,15 @@ class PulseTrain:
         self._cfg: _Config | None = None
         self._pt_now = False  # in PT at the last step with pulses
         self._in_step = False
+        # Cruise: a constant-frequency segment, settled filters: the axis is handed one linear
+        # set-point to `_cruise_end` instead of one per 1 ms step; any change ends it with an
+        # exact resync (the same positions on the 1 ms grid, far less work per step).
+        self._cruise_end = 0
+        self._cruise_mode = 0
+        self._cruise_gain = 0.0
+        self._steady_since = 0
+        for f in ("INHP", "GNUM0", "GNUM1", "PL", "NL", "PT-PR", "CCLR", "SON"):
+            drive.dio.on_function(f, self._input_changed)
         drive.params.subscribe(self._on_param)
         # encoder output (OA/OB window, OZ)
         self._out_t = 0
@@ -156,11 +168,18 @@ class PulseTrain:
                 p1068=get("P1.068"),
                 tau_ms=get("P1.008") * 10.0,
                 pt_yx=(get("P1.001") & 0xFF) in PT_YX,
+                p1046=get("P1.046"),
             )
         return c
 
     def _on_param(self, _name: str, _value: int) -> None:
         self._cfg = None
+        if self._cruise_end:
+            self._resync()
+
+    def _input_changed(self, _active: bool) -> None:
+        if self._cruise_end:
+            self._resync()
 
     @property
     def form(self) -> str:
@@ -193,6 +212,8 @@ class PulseTrain:
         if form not in FORMS:
             raise ValueError(f"pulse segment: form {form!r} not one of {', '.join(FORMS)}")
         d._commit_cycle()
+        if self._cruise_end:
+            self._resync()
         self._take(d.now)
         if total is not None and total != self.line_total:
             old = self.seg or Segment(d.now, float(freq), direction, 0, form, int(logic) & 1)
@@ -204,6 +225,7 @@ class PulseTrain:
                     if freq > 0 else None)  # a 0 Hz segment: the line stops pulsing
         self.freq_hz = 0.0 if self.seg is None else self.freq_hz
         self._taken = 0
+        self._steady_since = d.now
         self._check_limit()
         self._kick()
 
@@ -214,7 +236,10 @@ class PulseTrain:
     def pending(self) -> int:
         """Pulses of the current segment still to come (0 for a continuous one)."""
         s = self.seg
-        return 0 if s is None or not s.count else s.count - self._taken
+        if s is None or not s.count:
+            return 0
+        taken = s.pulses_at(self.d.now) if self._cruise_end else self._taken
+        return s.count - taken
 
     # ------------------------------------------------------------------ counting
     def _take(self, t: int) -> None:
@@ -231,12 +256,15 @@ class PulseTrain:
             self.freq_hz = 0.0
         self._count(n, s)
 
-    def _count(self, n: int, s: Segment) -> None:
+    def _count(self, n: int, s: Segment, force: bool = False) -> None:
         d = self.d
         c = self._config()
         direction = s.direction
         if s.form == "pulse_sign" and s.logic != c.logic:
             direction = -direction  # sign read with the other logic (P1.000.Z, L7676)
+        if force:  # a cruise's pulses: every condition held, as checked when it began
+            self._add(n, s, direction, c)
+            return
         if s.form != c.form:
             self.lost_format += n
             return
@@ -255,6 +283,9 @@ class PulseTrain:
                 or (direction < 0 and dio.function_active("NL"))):
             self.lost_inhibit += n
             return
+        self._add(n, s, direction, c)
+
+    def _add(self, n: int, s: Segment, direction: int, c: _Config) -> None:
         counts = n * (4 if s.form == "ab" else 1)
         self.accepted += direction * counts
         nx, m = self.gear()
@@ -321,6 +352,16 @@ class PulseTrain:
             if self.listeners:
                 self._machine_lines()
             return
+        if self._cruise_end:
+            ax = d.axis
+            if (d.now < self._cruise_end and d.servo_on and ax._mode == _INTERP_MODE
+                    and not ax._locks and d.cia402.mode == self._cruise_mode):
+                if self.listeners or ax.velocity:
+                    self._encoder_output()
+                if self.listeners:
+                    self._machine_lines()
+                return
+            self._resync()
         self._pt_now = pt = self.in_pt()  # once per step (TPOS reads it too)
         self._in_step = True
         try:
@@ -340,12 +381,86 @@ class PulseTrain:
                            and all(v == self.command for v in self._ma))
                 if not settled or d.axis.demand != target:
                     d.axis.interpolate_to(target, d._step_ns, by="PT")
+                    self._maybe_cruise(pt)
                 else:
                     self._active = False
         if self.listeners or d.axis.velocity:
             self._encoder_output()
         if self.listeners:
             self._machine_lines()
+
+    # -- cruise ----------------------------------------------------------------------------
+    def _gain(self, s: Segment) -> float | None:
+        """Command counts per pulse of `s` (signed), or None when its pulses are not taken
+        as they come (another form, the filter, INHP, a limit: then no cruise)."""
+        c = self._config()
+        d = self.d
+        if s.form != c.form or s.freq > c.max_hz or not d.servo_on:
+            return None
+        dio = d.dio
+        if c.inhp_di8 and dio.function_active("INHP"):
+            return None
+        direction = -s.direction if s.form == "pulse_sign" and s.logic != c.logic else s.direction
+        if c.p2065 & (1 << 11) and (dio.function_active("PL") or dio.function_active("NL")):
+            return None
+        nx, m = self.gear()
+        return direction * (4 if s.form == "ab" else 1) * nx / m
+
+    def _command_at(self, t: int, s: Segment, gain: float) -> float:
+        """The command at time `t` (the segment running from its start to past `t`)."""
+        return self.command + gain * (s.pulses_at(t) - self._taken)
+
+    def _maybe_cruise(self, pt: bool) -> None:
+        d = self.d
+        s = self.seg
+        c = self._config()
+        step = d._step_ns
+        if s is None or not pt or c.tau_ms > 0 or d.axis._locks:
+            return
+        n = max(1, c.p1068)
+        if d.now - max(self._steady_since, s.t) < (n + 2) * step:
+            return  # the window still holds samples from before this segment
+        end = s.end
+        t1 = d.now + CRUISE_NS if end is None else min(d.now + CRUISE_NS,
+                                                        (end - 1) // step * step)
+        if t1 - d.now < 5 * step:
+            return
+        gain = self._gain(s)
+        if gain is None:
+            return
+        target = sum(self._command_at(t1 - k * step, s, gain) for k in range(n)) / n
+        d.axis.interpolate_to(target, t1 + step - d.now, by="PT")
+        self._cruise_end = t1
+        self._cruise_gain = gain
+        self._cruise_mode = d.cia402.mode
+
+    def _resync(self) -> None:
+        """End a cruise: count its pulses, rebuild the filter window, one step set-point."""
+        d = self.d
+        self._cruise_end = 0
+        s = self.seg
+        if s is None:
+            return
+        n_new = s.pulses_at(d.now) - self._taken
+        if n_new > 0:
+            self._taken += n_new
+            self.line_total += s.direction * n_new
+            self._count(n_new, s, force=True)
+            if s.count and self._taken >= s.count:
+                self.seg = None
+        n = self._config().p1068
+        if n > 1:
+            gain = self._gain(s) or 0.0
+            step = d._step_ns
+            self._ma = deque(self._command_at(d.now - k * step, s, gain)
+                             for k in range(n - 1, -1, -1))
+        self._steady_since = d.now
+        if self._active and d.servo_on:
+            d.axis.interpolate_to(self._smoothed_peek(), d._step_ns, by="PT")
+
+    def _smoothed_peek(self) -> float:
+        """The moving average now (the window as it stands)."""
+        return sum(self._ma) / len(self._ma) if self._ma else self.command
 
     def _machine_lines(self) -> None:
         """The machine's sensors as a PLC sees them: DOG (the home cam), NL, PL switches."""
@@ -367,21 +482,33 @@ class PulseTrain:
     def clear_error(self) -> None:
         """CCLR: the command position becomes the feedback (L9749)."""
         d = self.d
+        if self._cruise_end and self.seg is not None:  # the cleared error takes them along
+            self._cruise_end = 0
+            taken = self.seg.pulses_at(d.now)
+            self.line_total += self.seg.direction * (taken - self._taken)
+            self._taken = taken
         self.command = self._base = d.axis.position
         self._frac = 0.0
         self._ma.clear()
         self._lpf = None
 
+    def live_command(self) -> float:
+        """The command now (during a cruise the pulses since it began are not yet taken)."""
+        s = self.seg
+        if not self._cruise_end or s is None:
+            return self.command
+        return self._command_at(self.d.now, s, self._cruise_gain)
+
     def error(self) -> float:
         """PT position error, counts: the command minus the feedback."""
-        return self.command - self.d.axis.position
+        return self.live_command() - self.d.axis.position
 
     # ------------------------------------------------------------------ encoder output
     def _encoder_output(self) -> None:
         """OA/OB counts summed per window; OZ at each index crossing; AL018 (L8569)."""
         d = self.d
         ax = d.axis
-        per_rev = 4 * d.params.get("P1.046")  # quadrature counts per revolution
+        per_rev = 4 * self._config().p1046  # quadrature counts per revolution
         if (ax.velocity and not self._config().p2065 & (1 << 13)
                 and abs(ax.velocity) / COUNTS_PER_REV * per_rev > OUTPUT_MAX_HZ):
             d.alarms.raise_alarm("AL018")
@@ -423,8 +550,15 @@ class PulseTrain:
         self.freq_hz = 0.0
 
     def snapshot(self) -> dict[str, Any]:
-        return {"pt_count": self.accepted, "pt_freq_kpps": self.freq_hz / 1000.0,
-                "pt_command": round(self.command), "pt_pending": self.pending(),
+        s = self.seg
+        accepted = self.accepted
+        if self._cruise_end and s is not None:
+            c = self._config()
+            sign = -s.direction if s.form == "pulse_sign" and s.logic != c.logic else s.direction
+            accepted += sign * (4 if s.form == "ab" else 1) * (s.pulses_at(self.d.now)
+                                                               - self._taken)
+        return {"pt_count": accepted, "pt_freq_kpps": self.freq_hz / 1000.0,
+                "pt_command": round(self.live_command()), "pt_pending": self.pending(),
                 "pt_error": round(self.error()) if self.used else 0}
 
 
@@ -445,8 +579,36 @@ def _check_gear(d: Drive) -> Callable[[str, int], None]:
     return validate
 
 
+def _monitor(d: Drive, select: str, stored: Callable[[], int]) -> Callable[[], int]:
+    """P0.009-P0.013 read the monitor code their P0.017-P0.021 select (L7147-7237): the
+    position codes 000-006 of the monitor table (L15440-15446); other codes keep the stored
+    value (not modelled)."""
+    def read() -> int:
+        code = d.params.get(select)
+        if code > 6:
+            return stored()
+        ax = d.axis
+        n, m = d.params.get("P1.044"), d.params.get("P1.045")
+        pt = d.pulse
+        fb, cmd = ax.user_position, ax.user_demand
+        if pt.used and pt.in_pt():
+            cmd = pt.live_command() - ax.origin
+        if code == 6:  # pulse command frequency, kpps
+            return round(pt.freq_hz / 1000.0)
+        if code == 1 and pt.used and pt.in_pt():  # PT: the pulses received (L15441)
+            return int(pt.snapshot()["pt_count"])
+        values = {0: fb * m / n, 1: cmd * m / n, 2: (cmd - fb) * m / n, 3: fb, 4: cmd,
+                  5: cmd - fb}
+        return round(values[code])
+    return read
+
+
 def attach_pulse_train(drive: Drive) -> PulseTrain:
     pt = PulseTrain(drive)
+    for i in range(5):
+        reg, select = f"P0.{9 + i:03d}", f"P0.{17 + i:03d}"
+        drive.params.on_read(reg, _monitor(drive, select,
+                                           lambda r=reg: drive.params.stored(r)))
     drive._step_hooks.append(pt.after_step)
     validate = _check_gear(drive)
     for name in ("P1.044", "P1.045", "P2.060", "P2.061", "P2.062"):

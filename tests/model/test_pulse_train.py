@@ -282,6 +282,23 @@ def test_al018_when_the_output_frequency_passes_19_8_mhz() -> None:
     assert "AL018" not in d2.alarms.active
 
 
+# -- monitors ---------------------------------------------------------------------------------
+
+
+def test_monitor_registers_show_the_pt_codes() -> None:
+    # P0.009-P0.013 show the code P0.017-P0.021 selects (L7147-7237): 001 in PT = pulses
+    # received, 004 the command after the gear (pulse), 006 the pulse frequency in kpps
+    # (L15440-15446)
+    d = make(**{"P0.017": 1, "P0.018": 4, "P0.019": 6, "P0.020": 3, "P1.045": 10000})
+    d.pulse.segment(50_000, 1, 0)
+    d.advance(100 * MS)
+    received = d.params.read("P0.009")
+    assert received == pytest.approx(5000, abs=50)
+    assert d.params.read("P0.010") == pytest.approx(received * COUNTS_PER_REV / 10000, rel=0.01)
+    assert d.params.read("P0.011") == 50  # kpps
+    assert 0 < d.params.read("P0.012") <= d.params.read("P0.010")  # feedback behind
+
+
 # -- PT-PR, line reconciliation ----------------------------------------------------------------
 
 

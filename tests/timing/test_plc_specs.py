@@ -114,6 +114,7 @@ def ext_case(stop_ms: float, again_ms: float | None = None) -> dict:
     return {
         "/dio/drive1/X0": [level(0, False), level(100, True)],
         SEG: segs,
+        STATUS: [status(stop_ms, "ext")],
         STATE: [(round(t * MS), {"pt_pending": p}) for t, p in
                 ((0, 50_000), (100, 48_000), (stop_ms, 0), (stop_ms + 1, 0))],
     }
@@ -147,9 +148,10 @@ def test_tpos_after_the_last_pulse_inside_p1054():
 
 
 def al009_case(raised_ms: float) -> dict:
-    return {STATE: [(round(t * MS), {"following_error_counts": e, "alarms": a}) for t, e, a in
-                    ((0, 0, []), (10, 2_000_000, []), (20, 3_100_000, []),
-                     (raised_ms, 3_200_000, ["AL009"]))]}
+    return {STATE: [(round(t * MS), {"following_error_counts": e, "alarms": a, "pt_count": c})
+                    for t, e, a, c in ((0, 0, [], 0), (10, 2_000_000, [], 900),
+                                       (20, 3_100_000, [], 1800),
+                                       (raised_ms, 3_200_000, ["AL009"], 2000))]}
 
 
 def test_al009_when_the_error_passes_p2035():
