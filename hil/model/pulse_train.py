@@ -54,6 +54,9 @@ OUTPUT_MAX_HZ = 19.8e6  # L8569
 GEAR_MIN, GEAR_MAX = 0.25, 262144.0  # 1/4 < Nx/M < 262144 (L8547)
 PT_YX = (0x00, 0x06, 0x07, 0x0D, 0x0E, 0x0F)  # P1.001.YX with a PT side (L7749-7800)
 CRUISE_NS = 200_000_000  # the longest cruise before an exact resync
+# the parameters `_Config` reads: a write of one ends a cruise (P0.046, P4.009 ... do not)
+_CONFIG_PARAMS = frozenset({"P1.000", "P1.001", "P1.008", "P1.044", "P1.045", "P1.046",
+                            "P1.068", "P2.017", "P2.060", "P2.061", "P2.062", "P2.065"})
 _INTERP_MODE = 5  # Axis._INTERP
 
 
@@ -134,10 +137,13 @@ class PulseTrain:
         self._in_step = False
         # Cruise: a constant-frequency segment, settled filters: the axis is handed one linear
         # set-point to `_cruise_end` instead of one per 1 ms step; any change ends it with an
-        # exact resync (the same positions on the 1 ms grid, far less work per step).
+        # exact resync of the count, the filter window and the set-point. In between the
+        # command is the straight line through the pulses (within one pulse of the per-step
+        # staircase; tests/model/test_pulse_train.py compares both).
         self._cruise_end = 0
         self._cruise_mode = 0
         self._cruise_gain = 0.0
+        self._rebuild: tuple[Segment, int, int, float, float] | None = None
         self._steady_since = 0
         for f in ("INHP", "GNUM0", "GNUM1", "PL", "NL", "PT-PR", "CCLR", "SON"):
             drive.dio.on_function(f, self._input_changed)
@@ -172,14 +178,17 @@ class PulseTrain:
             )
         return c
 
-    def _on_param(self, _name: str, _value: int) -> None:
-        self._cfg = None
-        if self._cruise_end:
-            self._resync()
+    def _on_param(self, name: str, _value: int) -> None:
+        if name in _CONFIG_PARAMS:
+            self._cfg = None
+            self._input_changed(False)
 
     def _input_changed(self, _active: bool) -> None:
+        """Something that decides how pulses count changed: end a cruise, and wait for the
+        filter window to hold only samples from after the change before the next one."""
         if self._cruise_end:
             self._resync()
+        self._steady_since = self.d.now
 
     @property
     def form(self) -> str:
@@ -371,6 +380,8 @@ class PulseTrain:
             self._in_step = False
         if "CCLR" in d.axis.locks:  # a level CCLR keeps the error at 0 (L9753)
             self.clear_error()
+        if self._rebuild is not None:
+            self._rebuild_window()
         if self._active:
             if not (d.servo_on and pt):
                 self._active = False
@@ -435,32 +446,33 @@ class PulseTrain:
         self._cruise_mode = d.cia402.mode
 
     def _resync(self) -> None:
-        """End a cruise: count its pulses, rebuild the filter window, one step set-point."""
+        """End a cruise: count its pulses up to the last 1 ms grid point (the per-step path
+        takes the rest, under the conditions of then); the next step rebuilds the filter
+        window from the grid samples, as the per-step path would have them."""
         d = self.d
         self._cruise_end = 0
         s = self.seg
         if s is None:
             return
-        n_new = s.pulses_at(d.now) - self._taken
+        grid = d.now - d.now % d._step_ns
+        n_new = s.pulses_at(grid) - self._taken
         if n_new > 0:
             self._taken += n_new
             self.line_total += s.direction * n_new
             self._count(n_new, s, force=True)
-            if s.count and self._taken >= s.count:
-                self.seg = None
-        n = self._config().p1068
-        if n > 1:
-            gain = self._gain(s) or 0.0
-            step = d._step_ns
-            self._ma = deque(self._command_at(d.now - k * step, s, gain)
-                             for k in range(n - 1, -1, -1))
+        self._rebuild = (s, grid, s.pulses_at(grid), self.command, self._cruise_gain)
         self._steady_since = d.now
-        if self._active and d.servo_on:
-            d.axis.interpolate_to(self._smoothed_peek(), d._step_ns, by="PT")
 
-    def _smoothed_peek(self) -> float:
-        """The moving average now (the window as it stands)."""
-        return sum(self._ma) / len(self._ma) if self._ma else self.command
+    def _rebuild_window(self) -> None:
+        """The filter window of the per-step path at the first step after a cruise."""
+        s, grid, pulses, command, gain = self._rebuild
+        self._rebuild = None
+        n = self._config().p1068
+        if n <= 1:
+            return
+        step = self.d._step_ns
+        self._ma = deque(command + gain * (s.pulses_at(min(t, grid)) - pulses)
+                         for t in (self.d.now - k * step for k in range(n - 1, 0, -1)))
 
     def _machine_lines(self) -> None:
         """The machine's sensors as a PLC sees them: DOG (the home cam), NL, PL switches."""

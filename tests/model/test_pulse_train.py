@@ -299,6 +299,39 @@ def test_monitor_registers_show_the_pt_codes() -> None:
     assert 0 < d.params.read("P0.012") <= d.params.read("P0.010")  # feedback behind
 
 
+# -- cruise -------------------------------------------------------------------------------------
+
+
+def _trace(monkeypatch: pytest.MonkeyPatch, cruise: bool) -> tuple[list[float], int]:
+    from hil.model import pulse_train
+    monkeypatch.setattr(pulse_train, "CRUISE_NS", 200 * MS if cruise else 0)
+    d = make(**{"P2.017": 0x0045, "P1.045": 10000})  # DI8 = INHP, b contact (closed: off)
+    out = []
+    cruising = 0
+    d.pulse.segment(37_000, 1, 30_000)
+    for k in range(900):
+        if k == 300:
+            d.set_di(8, False)  # INHP on for 200 ms (b contact opened)
+        if k == 500:
+            d.set_di(8, True)
+        if k == 600:
+            d.pulse.segment(11_000, -1, 0)
+        d.advance(MS)
+        out.append(d.axis.position)
+        cruising += bool(d.pulse._cruise_end)
+    out.append(d.snapshot()["pt_count"])  # live: a cruise takes its pulses at its end
+    return out, cruising
+
+
+def test_cruise_follows_the_per_step_path_within_a_pulse(monkeypatch) -> None:
+    exact, none = _trace(monkeypatch, cruise=False)
+    fast, cruising = _trace(monkeypatch, cruise=True)
+    assert none == 0 and cruising > 500  # the fast run did cruise, most of the time
+    assert fast[-1] == exact[-1]  # the same pulses counted
+    per_pulse = COUNTS_PER_REV / 10000
+    assert max(abs(a - b) for a, b in zip(fast[:-1], exact[:-1], strict=True)) < per_pulse
+
+
 # -- PT-PR, line reconciliation ----------------------------------------------------------------
 
 
