@@ -558,6 +558,9 @@ class PulseTrain:
         self.seg = None
         self._taken = 0
         self.accepted = self.line_total = 0
+        self.lost_format = self.lost_limit = self.lost_inhibit = self.lost_off = 0
+        self._cruise_end = 0
+        self._rebuild = None
         self._active = self.used = False
         self.freq_hz = 0.0
 

@@ -332,6 +332,25 @@ def test_cruise_follows_the_per_step_path_within_a_pulse(monkeypatch) -> None:
     assert max(abs(a - b) for a, b in zip(fast[:-1], exact[:-1], strict=True)) < per_pulse
 
 
+def test_p1001_mode_change_acts_after_a_power_cycle() -> None:
+    # servo off, set P1.001, power cycle (L3495-3497; P1.001 "●", L7749)
+    d = make()
+    d.set_di(1, False)
+    d.advance(10 * MS)
+    d.params.write("P1.001", 0x0001)  # PR
+    run(d, 10_000, 100)
+    assert d.pulse.lost_off == 100  # servo off: nothing taken
+    d.set_di(1, True)
+    d.advance(10 * MS)
+    run(d, 10_000, 100)
+    assert d.pulse.accepted == 100  # still PT until the power cycle
+    d.power_cycle()
+    d.advance(10 * MS)
+    assert d.difunc.control_mode() == "PR"
+    run(d, 10_000, 100)
+    assert d.pulse.accepted == 0 and d.pulse.lost_off == 100  # PR takes no pulses
+
+
 # -- PT-PR, line reconciliation ----------------------------------------------------------------
 
 
