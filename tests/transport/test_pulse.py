@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from hil.transport.pulse import PulseError, check_segment, open_pulse
+from hil.transport.pulse import PulseAdapter, PulseError, check_segment, open_pulse
 from hil.transport.urls import TransportUrlError, parse_url
 from hil.transport.zenoh_net import close_session, config_from, open_session
 
@@ -154,3 +154,56 @@ def test_zenoh_hostile_payloads_never_stop_the_line(port):
     finally:
         close_session(session)
         drv.close()
+
+
+class _BenchGenerator(PulseAdapter):
+    """A stand-in for a real pulse generator + counter behind `PulseAdapter`: its "hardware"
+    is a virtual line's PLC end (the virtual drive on the other side)."""
+
+    def __init__(self, wire: str) -> None:
+        super().__init__(f"bench-generator:{wire}", "master", name="d")
+        self.hw = open_pulse(wire, role="master")
+        self.hw.subscribe(self._from_hardware)
+        for line, level in self.hw.levels().items():  # read the inputs once at start
+            self._received_level(line, level, None)
+
+    def _from_hardware(self, kind, data, t, source_t):
+        if kind == "level":
+            self._received_level(data["line"], data["level"], source_t)
+        else:
+            self._received(kind, data, source_t)
+
+    def _publish(self, kind, body, t):  # load a segment into the generator
+        self.hw.send(kind, body)
+
+    def _publish_level(self, line, level, t):  # set an output (CLR)
+        self.hw.set(line, level)
+
+    def _close_backend(self):
+        self.hw.close()
+
+
+def test_an_adapter_behind_the_interface_drives_the_virtual_drive():
+    from hil import clock
+    from hil.drivers.plc_pulse import AxisParams, Drv, Program, PulseMaster, Step
+    from hil.model.mechanics import COUNTS_PER_REV
+    from hil.virtual.stack import DriveSpec, VirtualDriveStack
+
+    with clock.use(clock.VirtualClock()):
+        stack = VirtualDriveStack(DriveSpec(
+            name="d", pulse="virtual:adapter-wire", inputs={8: True},
+            params={"P2.041": 0x0108, "P1.045": 10000, "P1.044": 16777216})).start()
+        gen = _BenchGenerator("virtual:adapter-wire")
+        try:
+            stack.host.call(stack.drive.set_di, 1, True)
+            clock.sleep(0.05)
+            assert gen.get("X0")  # the DOG level came through the adapter
+            plc = PulseMaster(gen, AxisParams(max_speed=100_000, start_speed=500,
+                                              accel_ms=100))
+            st = plc.run(Program([Step(spd=20_000, drive=Drv("ADR", "+", 10_000),
+                                       wait_time=0.2)]))
+            assert st.feedback == pytest.approx(10_000, abs=3)  # the counter, via _received
+            assert stack.drive.axis.position == pytest.approx(COUNTS_PER_REV, abs=2)
+        finally:
+            gen.close()
+            stack.stop()
