@@ -43,6 +43,7 @@ class RunData:
     attachments: dict[str, str] = field(default_factory=dict)
     params: dict[str, dict[str, Any]] = field(default_factory=dict)  # drive -> values
     truth: dict[str, list[tuple[int, dict]]] = field(default_factory=dict)  # drive -> states
+    truth_fields: frozenset[str] | None = None  # the state fields kept (None: all)
     # (t, topic, msg): msg as recorded bytes (decoded when shown, `_decode`) or a dict
     bus: list[tuple[int, str, bytes | dict]] = field(default_factory=list)
     bus_pending: bool = False  # the recording has bus messages not read yet (`bus_of`)
@@ -132,6 +133,7 @@ def _load_run(path: str | Path) -> RunData:
     steps: dict[int, StepData] = {}
     t_first: int | None = None
     t_plan: int | None = None
+    keep = data.truth_fields = truth_fields(_spec_ids(meta))
     for topic, lt, pt, raw in rec.raw_messages():
         t_first = lt if t_first is None else min(t_first, lt)
         if topic.startswith("/can/"):
@@ -162,8 +164,9 @@ def _load_run(path: str | Path) -> RunData:
         elif topic == topics.LOG:
             data.logs.append({**msg, "_t": lt})
         elif topic.startswith("/drive/") and topic.endswith("/state"):
-            # thousands of samples with the same keys: one key string each, not one per sample
-            msg = {intern(k): v for k, v in msg.items()}
+            # thousands of samples: keep the fields the report draws and the recording's specs
+            # read (truth_fields), each key string once
+            msg = {intern(k): v for k, v in msg.items() if keep is None or k in keep}
             data.truth.setdefault(topic.split("/")[2], []).append((pt or lt, msg))
         elif topic.startswith("/drive/") and topic.endswith("/params"):
             d = topic.split("/")[2]
@@ -176,6 +179,41 @@ def _load_run(path: str | Path) -> RunData:
         if data.truncated:
             data.status = "aborted"
     return data
+
+
+# the ground-truth fields the motion plot draws (html._plot)
+PLOT_FIELDS = frozenset({"position_counts", "position", "pos", "speed_rpm", "velocity", "vel",
+                         "torque_pct", "torque"})
+_BASE_FIELDS = frozenset({"t", "periodic", "alarms", *PLOT_FIELDS})
+
+
+def truth_fields(spec_ids: list[str] | None) -> frozenset[str] | None:
+    """What a report keeps of each ground-truth sample: the plot's fields, `t`, `periodic`,
+    `alarms`, and the state fields the recording's timing specs read (the ids its `timing`
+    metadata lists). None (keep every field) when they are not known or not shipped."""
+    if not spec_ids:
+        return None
+    from hil.paths import fixture
+    from hil.timing.checker import state_fields
+    from hil.timing.registry import load_spec_cached
+    out = set(_BASE_FIELDS)
+    for sid in spec_ids:
+        path = fixture("timing", f"{sid}.yaml")
+        if not path.is_file():
+            return None
+        try:
+            out |= state_fields(load_spec_cached(path))
+        except Exception:
+            return None
+    return frozenset(out)
+
+
+def _spec_ids(meta: dict[str, Any]) -> list[str] | None:
+    try:
+        ids = json.loads(meta.get("timing", {}).get("specs", "null"))
+    except (TypeError, ValueError):
+        return None
+    return [str(i) for i in ids] if isinstance(ids, list) else None
 
 
 _NOISE = {"raw", "adu", "mode", "role", "data_hex", "frame"}

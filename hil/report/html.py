@@ -19,7 +19,7 @@ from hil.fileio import write_text_atomic
 from hil.record import topics
 from hil.report.data import RunData, bus_around, bus_log, load_run
 from hil.report.latch_html import LATCH_SPEC, latch_html
-from hil.timing.checker import Verdict, context, spec_topics
+from hil.timing.checker import Verdict, context, spec_topics, state_fields
 from hil.timing.registry import load_specs
 from hil.timing.render import decimate, main_lanes, nice_ticks, svg
 from hil.timing.source import RecordingSource
@@ -143,8 +143,11 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
             spec = specs.get(sid)
             if spec is not None:
                 wanted |= spec_topics(spec, vds[0].get("binding") or None)
-        # the drive state the report already decoded is shared, not decoded twice
-        shared = {topics.drive_state(d): msgs for d, msgs in run.truth.items()}
+        # the drive state the report already decoded is shared, not decoded twice, unless a
+        # spec reads a state field the report did not keep (truth_fields)
+        kept = run.truth_fields
+        full = kept is not None and any(not state_fields(s) <= kept for s in specs.values())
+        shared = {} if full else {topics.drive_state(d): msgs for d, msgs in run.truth.items()}
         source = RecordingSource(run.path, topics=sorted(wanted - set(shared)))
         for topic, msgs in shared.items():
             if topic in wanted:

@@ -609,6 +609,21 @@ def spec_topics(spec: Spec, binding: Mapping[str, str] | None = None) -> set[str
     return out
 
 
+def state_fields(spec: Spec) -> set[str]:
+    """The fields of the ground-truth state (`/drive/<drive>/state`) judging `spec` reads:
+    its topic signals' fields and `where` keys on that topic, `alarms` for its alarm
+    signals (a report keeps only these of each sample)."""
+    out: set[str] = set()
+    for s in spec.signals.values():
+        if s.kind == "alarm":
+            out.add("alarms")
+        elif s.kind == "topic" and s.topic and s.topic.startswith("/drive/") \
+                and s.topic.endswith("/state"):
+            out.add((s.field or "").split(".")[0])
+            out.update(k.split(".")[0] for k in s.where)
+    return out
+
+
 def context(spec: Spec, source: SignalSource,
             params: Mapping[str, Any] | ParamTimeline | None = None,
             binding: Mapping[str, str] | None = None, constants: Mapping[str, Any] | None = None,

@@ -110,3 +110,29 @@ def test_report_page_folds_an_all_pass_table_and_parses(tmp_path) -> None:
     assert "classList.toggle('zoom')" in html  # click a diagram to zoom it
     for m in re.finditer(r"<svg.*?</svg>", html, re.S):
         ET.fromstring(m.group(0))  # every diagram is well-formed XML
+
+
+def test_the_report_keeps_only_the_ground_truth_it_draws(tmp_path) -> None:
+    """A report keeps of each state sample the plot's fields and what the recording's specs
+    read (issue 28: a homing report under 100 MB), and still draws their diagrams; with specs
+    it does not know it keeps every field."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, load_plan
+    from hil.plan.runner import run_plan
+    from hil.report import data as report_data
+    from hil.report.html import write_html
+
+    res = run_plan(load_plan(find_plans(["plc_drv_gear"])[0]), load_bench(None), tmp_path)
+    assert res.passed
+    report_data._RUNS.clear()
+    run = report_data.load_run(res.recording)
+    kept = run.truth_fields
+    assert kept is not None and {"pt_error", "speed_rpm", "position_counts"} <= kept
+    assert "di" not in kept and "abs_turns" not in kept  # nothing plc_tpos reads
+    sample = run.truth["drive1"][-1][1]
+    assert set(sample) <= kept and "pt_error" in sample
+    page = write_html(res.recording, tmp_path / "r.html").read_text()
+    assert "plc_tpos" in page and "<svg" in page
+    # a recording whose specs are unknown keeps every field
+    assert report_data.truth_fields(["no_such_spec"]) is None
+    assert report_data.truth_fields(None) is None
