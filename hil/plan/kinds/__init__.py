@@ -19,6 +19,7 @@ from hil.plan.kinds import (
     capture,
     cia402,
     comm,
+    group,
     io,
     params,
     plc,
@@ -36,7 +37,7 @@ ENTRY_POINT_GROUP = "hil.steps"
 BUILTIN: dict[str, type[StepKind]] = {
     k.name: k
     for module in (io, params, cia402, waits, virtual, timing, absolute, comm, pr, capture,
-                   plc)
+                   plc, group)
     for k in module.KINDS
 }
 

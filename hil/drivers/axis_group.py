@@ -1,0 +1,432 @@
+"""A motion controller's axis group: cyclic interpolated position (CiA 402 IP mode) to many
+drives on one CAN bus, with a profile generator (PG) and an electronic gear (GEA) per axis.
+
+Seed 004 (TG Motion v4 "Servo" group, digest `../shared/spec/others.md` §4) gives the
+semantics, cited `004:N`; the A3 manual the drive's side (IP mode, L17211-17244). Each
+CycleTime the group computes every axis's `WritePosition` (004:214-218), sends it by RPDO1
+(60C1h sub 1 and the controlword 6040h, synchronous: applied at the next SYNC, L17051), then
+the SYNC; each drive answers with TPDO1 (6041h, 6064h) sampled at that SYNC (L17055). A
+feedback that has not come when the next cycle starts is a **missed cycle**, counted per
+axis and recorded on `/group/<name>/cycle` with the cycle's bus load.
+
+Per axis (`ServoAxis`, 004:254-256): `mode` 1 PG, 3 GEA, 4 PG+GEA; `write_position` = PG.APos
+(+ GEA.Position) + Offset + Correction; `position`, `position_error`, `speed`; `control` bits
+(0 fault reset, held >= 1 cycle; 1 axis not under torque); `status` -1 lost after
+communicating, 0 never, 1 fault, 2 ready without torque, 3 with torque.
+
+Choices where the seed is silent (docs/group.md): the ramp shapes 0 and 1 (only type 2's
+157 % peak and "the same duration for all shapes" are given): 3 linear, a = Acc; 2 harmonic,
+v = V (1 - cos(pi t / T)) / 2; 1 "short both", v = V (1 - (1 - t/T)^2) on both ramps; 0 "short
+accel, long decel": the type-1 acceleration and the harmonic deceleration.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+
+from hil import clock
+
+RAMP_TYPES = (0, 1, 2, 3)
+PEAK = {3: 1.0, 2: math.pi / 2, 1: 2.0}  # peak acceleration / Acc of each shape (004:226)
+SYNC_ID = 0x80
+STATUS_LOST, STATUS_NEVER, STATUS_FAULT, STATUS_READY, STATUS_TORQUE = -1, 0, 1, 2, 3
+
+
+# ------------------------------------------------------------------------------ ramp shapes
+
+
+def _shape(kind: int, x: float) -> float:
+    """Fraction of the speed change done at fraction `x` of a ramp (0..1)."""
+    x = min(max(x, 0.0), 1.0)
+    if kind == 3:
+        return x
+    if kind == 2:
+        return (1.0 - math.cos(math.pi * x)) / 2.0
+    return 1.0 - (1.0 - x) ** 2  # "short": the steepest at the start
+
+
+def _area(kind: int) -> float:
+    """Mean of `_shape` over a ramp: distance = V x T x area."""
+    return {3: 0.5, 2: 0.5}.get(kind, 2.0 / 3.0)
+
+
+def _shapes(ramp_type: int) -> tuple[int, int]:
+    """(acceleration shape, deceleration shape) of a PG.Type (0-3)."""
+    return {0: (1, 2), 1: (1, 1), 2: (2, 2), 3: (3, 3)}[ramp_type]
+
+
+# ------------------------------------------------------------------------------ PG
+
+
+@dataclass
+class Pg:
+    """The profile generator of one axis (004:220-226): position moves and speed runs with
+    four ramp types, the same ramp duration for every shape (T = speed / Acc)."""
+
+    acc: float = 100_000.0  # inc/s²
+    dec: float = 100_000.0
+    pos_speed: float = 50_000.0  # inc/s
+    type: int = 3
+    apos: float = 0.0  # actual (generated) position
+    aspeed: float = 0.0
+    dpos: float = 0.0
+    rdy: bool = True
+    mode: int = 0  # 0 speed / abort, 1 position, 3 braking
+    _plan: tuple | None = None
+    _t: float = 0.0
+
+    def start_position(self, target: float) -> None:
+        """Absolute positioning to `target` (PG.Mode = 1); from rest or on the fly."""
+        self.dpos = float(target)
+        self.mode = 1
+        self.rdy = False
+        self._plan = self._position_plan(self.apos, self.aspeed, self.dpos)
+        self._t = 0.0
+
+    def start_speed(self, speed: float) -> None:
+        """Speed control (PG.Mode = 0): ramp to `speed` with Acc (004:226)."""
+        self.mode = 0
+        self.rdy = False
+        v0 = self.aspeed
+        t = abs(speed - v0) / self.acc if self.acc > 0 else 0.0
+        self._plan = ("speed", v0, float(speed), t, _shapes(self.type)[0])
+        self._t = 0.0
+
+    def abort(self) -> None:
+        """PG.Mode = 0, PG.Speed = 0: brake to rest (004:226)."""
+        self.start_speed(0.0)
+        self.mode = 3
+
+    def _position_plan(self, p0: float, v0: float, p1: float) -> tuple:
+        sa, sd = _shapes(self.type)
+        dist = p1 - p0
+        sign = 1.0 if dist >= 0 else -1.0
+        d = abs(dist)
+        v0s = max(0.0, v0 * sign)  # an on-the-fly start keeps its speed towards the target
+        vmax = self.pos_speed
+        ka, kd = _area(sa), _area(sd)
+
+        def dist_at(v: float) -> float:
+            ta = (v - v0s) / self.acc if self.acc > 0 else 0.0
+            td = v / self.dec if self.dec > 0 else 0.0
+            return v0s * ta + (v - v0s) * ta * ka + v * td * (1.0 - kd)
+
+        v = vmax
+        if dist_at(v) > d:  # a triangle: the highest speed that still stops on the target
+            lo, hi = v0s, vmax
+            for _ in range(60):
+                mid = (lo + hi) / 2
+                lo, hi = (mid, hi) if dist_at(mid) <= d else (lo, mid)
+            v = lo
+        ta = (v - v0s) / self.acc if self.acc > 0 else 0.0
+        td = v / self.dec if self.dec > 0 else 0.0
+        cruise = (d - dist_at(v)) / v if v > 0 else 0.0
+        return ("pos", p0, sign, v0s, v, ta, max(cruise, 0.0), td, sa, sd, p1)
+
+    def tick(self, dt: float) -> None:
+        """Advance by one cycle of `dt` s."""
+        plan = self._plan
+        if plan is None:
+            return
+        self._t += dt
+        t = self._t
+        if plan[0] == "speed":
+            _, v0, v1, tr, shape = plan
+            v = v1 if tr <= 0 or t >= tr else v0 + (v1 - v0) * _shape(shape, t / tr)
+            self.apos += (self.aspeed + v) / 2 * dt
+            self.aspeed = v
+            if t >= tr:
+                self._plan = None
+                if v1 == 0.0:
+                    self.mode = 0
+                self.rdy = True
+            return
+        _, p0, sign, v0, v, ta, tc, td, sa, sd, p1 = plan
+        if t < ta:
+            s = v0 * t + (v - v0) * ta * _integral(sa, t / ta)
+            speed = v0 + (v - v0) * _shape(sa, t / ta)
+        elif t < ta + tc:
+            s = v0 * ta + (v - v0) * ta * _area(sa) + v * (t - ta)
+            speed = v
+        elif t < ta + tc + td:
+            u = t - ta - tc
+            s0 = v0 * ta + (v - v0) * ta * _area(sa) + v * tc
+            s = s0 + v * u - v * td * _integral(sd, u / td)
+            speed = v * (1.0 - _shape(sd, u / td))
+        else:
+            self.apos, self.aspeed, self.rdy, self._plan = p1, 0.0, True, None
+            return
+        self.apos = p0 + sign * s
+        self.aspeed = sign * speed
+
+
+def _integral(kind: int, x: float) -> float:
+    """Integral of `_shape` from 0 to x (x in 0..1)."""
+    if kind == 3:
+        return x * x / 2
+    if kind == 2:
+        return (x - math.sin(math.pi * x) / math.pi) / 2
+    return x * x - x ** 3 / 3
+
+
+# ------------------------------------------------------------------------------ GEA
+
+
+@dataclass
+class Gea:
+    """Linear gear from a master axis (004:228-238): Position += d(master) x ActualIn / Out;
+    ActualIn ramps towards In by IncIn per tick (the clutch), ActualShift towards Shift by
+    IncShift. Cams are not modelled yet."""
+
+    master: str = ""
+    source: int = 1  # 1 master WritePosition, 2 master Position, 3 ServoTick (time)
+    gin: float = 1.0
+    gout: float = 1.0
+    inc_in: float = 0.0  # 0: the ratio at once
+    shift: float = 0.0
+    inc_shift: float = 0.0
+    actual_in: float = 0.0
+    actual_shift: float = 0.0
+    position: float = 0.0
+    mode: int = 0  # 0 idle, 1 linear gear
+    _last: float | None = None
+
+    def tick(self, master_value: float) -> None:
+        if self.mode == 0:
+            self._last = None
+            return
+        if self.inc_in <= 0:
+            self.actual_in = self.gin
+        else:
+            step = math.copysign(min(self.inc_in, abs(self.gin - self.actual_in)),
+                                 self.gin - self.actual_in)
+            self.actual_in += step
+        if self.inc_shift <= 0:
+            ds = self.shift - self.actual_shift
+        else:
+            ds = math.copysign(min(self.inc_shift, abs(self.shift - self.actual_shift)),
+                               self.shift - self.actual_shift)
+        self.actual_shift += ds
+        delta = 0.0 if self._last is None else master_value - self._last
+        self._last = master_value
+        self.position += delta * self.actual_in / self.gout + ds
+
+
+# ------------------------------------------------------------------------------ the axes
+
+
+@dataclass
+class ServoAxis:
+    """One axis of the group (004:254-256)."""
+
+    name: str
+    node: int
+    mode: int = 1  # 1 PG, 3 GEA, 4 PG + GEA
+    control: int = 0  # bit 0 fault reset (held >= 1 cycle), bit 1 axis not under torque
+    offset: float = 0.0
+    correction: float = 0.0
+    write_position: float = 0.0
+    position: float = 0.0
+    speed: float = 0.0
+    status: int = STATUS_NEVER
+    statusword: int = 0
+    missed: int = 0
+    rdy_cycle: int = 0  # the cycle in which the PG last reached its target
+    pg: Pg = field(default_factory=Pg)
+    gea: Gea = field(default_factory=Gea)
+    _seen: bool = False  # feedback of the current cycle arrived
+    _ever: bool = False
+    _last_pos: float | None = None
+
+    @property
+    def position_error(self) -> float:
+        return self.write_position - self.position
+
+    def compute(self) -> None:
+        """WritePosition from the PG and/or GEA (004:216)."""
+        base = 0.0
+        if self.mode in (1, 4):
+            base += self.pg.apos
+        if self.mode in (3, 4):
+            base += self.gea.position
+        self.write_position = base + self.offset + self.correction
+
+    def controlword(self) -> int:
+        """Enable operation unless bit 1; bit 0 fault reset (CiA 402 0x80)."""
+        if self.control & 0x1:
+            return 0x80
+        return 0x06 if self.control & 0x2 else 0x0F
+
+    def on_feedback(self, statusword: int, position: int, dt: float) -> None:
+        if self._last_pos is not None and dt > 0:
+            self.speed = (position - self._last_pos) / dt
+        self._last_pos = position
+        self.position = float(position)
+        self.statusword = statusword
+        self._seen = self._ever = True
+        if statusword & 0x08:
+            self.status = STATUS_FAULT
+        elif statusword & 0x6F == 0x27:
+            self.status = STATUS_TORQUE
+        else:
+            self.status = STATUS_READY
+
+
+_RX = struct.Struct("<iH")  # RPDO1: 60C1h sub 1 (I32), 6040h (U16)
+_TX = struct.Struct("<Hi")  # TPDO1: 6041h (U16), 6064h (I32)
+
+
+class AxisGroup:
+    """N axes in IP mode on one canopen `Network`, one cycle every `cycle_s`."""
+
+    def __init__(self, network: Any, axes: list[ServoAxis], cycle_s: float, *,
+                 sdo_write: Callable[[str, int, int, int], None],
+                 on_cycle: Callable[[dict[str, Any]], None] | None = None,
+                 frame_bits: Callable[[int, int], int] | None = None,
+                 bitrate: int = 1_000_000) -> None:
+        if not axes:
+            raise ValueError("an axis group needs at least one axis")
+        if not 0.0005 <= cycle_s <= 0.010:
+            raise ValueError(f"cycle {cycle_s * 1e3:g} ms: SYNC 1-10 ms (L17211-17244)")
+        self.net, self.axes, self.cycle_s = network, axes, cycle_s
+        self.by_name = {a.name: a for a in axes}
+        self._sdo_write = sdo_write
+        self.on_cycle = on_cycle
+        self.cycles = 0
+        self.missed_cycles = 0
+        self.bitrate = bitrate
+        self._frame_bits = frame_bits or (lambda cob, dlc: 47 + 8 * dlc)
+        self._stop = threading.Event()
+        self._event: Any = None
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    # -- setup ---------------------------------------------------------------------------
+    def configure(self) -> None:
+        """Per axis over SDO: RPDO1 = 60C1h:01 + 6040h and TPDO1 = 6041h + 6064h, both on
+        every SYNC; 60C2h = the cycle (L19089-19113); 1006h; 6060h = 7 (IP)."""
+        us = round(self.cycle_s * 1e6)
+        for a in self.axes:
+            w = lambda i, s, v, a=a: self._sdo_write(a.name, i, s, v)  # noqa: E731
+            w(0x1400, 1, 0x80000200 + a.node)  # disable while mapping
+            w(0x1600, 0, 0)
+            w(0x1600, 1, 0x60C10120)
+            w(0x1600, 2, 0x60400010)
+            w(0x1600, 0, 2)
+            w(0x1400, 2, 1)
+            w(0x1400, 1, 0x200 + a.node)
+            w(0x1800, 1, 0x80000180 + a.node)
+            w(0x1A00, 0, 0)
+            w(0x1A00, 1, 0x60410010)
+            w(0x1A00, 2, 0x60640020)
+            w(0x1A00, 0, 2)
+            w(0x1800, 2, 1)
+            w(0x1800, 1, 0x180 + a.node)
+            w(0x60C2, 1, round(self.cycle_s * 1000))
+            w(0x60C2, 2, -3)
+            w(0x1006, 0, us)
+            w(0x6060, 0, 7)
+            self.net.subscribe(0x180 + a.node, self._tpdo(a))
+            self.net.send_message(0x000, bytes([0x01, a.node]))  # NMT start: PDOs run
+
+    def _tpdo(self, a: ServoAxis) -> Callable[[int, bytearray, float], None]:
+        def cb(_cob: int, data: bytearray, _ts: float) -> None:
+            if len(data) >= _TX.size:
+                sw, pos = _TX.unpack_from(bytes(data))
+                with self._lock:
+                    a.on_feedback(sw, pos, self.cycle_s)
+        return cb
+
+    def connect(self, a: ServoAxis) -> None:
+        """PG follows from where the axis stands: PG.APos = WritePosition - Offset -
+        Correction (004:224)."""
+        a.pg.apos = a.position - a.offset - a.correction
+        a.pg.aspeed = 0.0
+        a.write_position = a.position
+
+    # -- the cycle -----------------------------------------------------------------------
+    def start(self) -> None:
+        clk = clock.current()
+        if isinstance(clk, clock.VirtualClock):
+            self._clock = clk
+            self._event = clk.after(0, self._tick)
+        else:
+            self._thread = threading.Thread(target=self._run, daemon=True, name="axis-group")
+            self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._event is not None:
+            self._event.cancel()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=1.0)
+
+    def _tick(self) -> None:
+        if self._stop.is_set():
+            return
+        self.cycle()
+        self._event = self._clock.after(round(self.cycle_s * 1e9), self._tick)
+
+    def _run(self) -> None:
+        period = round(self.cycle_s * 1e9)
+        due = time.perf_counter_ns()
+        while not self._stop.is_set():
+            self.cycle()
+            due += period
+            wait = due - time.perf_counter_ns()
+            if wait < -period:
+                due = time.perf_counter_ns()  # a stall: a new phase, no burst
+            elif wait > 0 and self._stop.wait(wait / 1e9):
+                return
+
+    def cycle(self) -> None:
+        """One CycleTime: judge the last cycle's feedback, compute and send the set-points,
+        then the SYNC."""
+        dt = self.cycle_s
+        with self._lock:
+            missed = [a.name for a in self.axes if self.cycles and not a._seen]
+            for a in self.axes:
+                if self.cycles and not a._seen:
+                    a.missed += 1
+                    if a._ever:
+                        a.status = STATUS_LOST  # communicated before, now silent (004:254)
+                a._seen = False
+            if missed:
+                self.missed_cycles += 1
+            masters = {a.name: a for a in self.axes}
+            for a in self.axes:
+                was = a.pg.rdy
+                a.pg.tick(dt)
+                if a.pg.rdy and not was:
+                    a.rdy_cycle = self.cycles + 1
+            for a in self.axes:
+                g = a.gea
+                if g.mode and g.master in masters:
+                    m = masters[g.master]
+                    src = {1: m.write_position, 2: m.position}.get(g.source, self.cycles)
+                    g.tick(src)
+                a.compute()
+        bits = 0
+        bus = self.net.bus  # the bus itself: canopen's send lock may be held by an SDO
+        for a in self.axes:
+            bus.send(can.Message(arbitration_id=0x200 + a.node, is_extended_id=False,
+                                 data=_RX.pack(round(a.write_position), a.controlword())))
+            bits += self._frame_bits(0x200 + a.node, _RX.size) + self._frame_bits(
+                0x180 + a.node, _TX.size)
+        bus.send(can.Message(arbitration_id=SYNC_ID, is_extended_id=False, data=b""))
+        bits += self._frame_bits(SYNC_ID, 0)
+        self.cycles += 1
+        if self.on_cycle is not None:
+            self.on_cycle({"cycle": self.cycles, "missed": missed,
+                           "bus_load_pct": round(100.0 * bits / (self.bitrate * dt), 2),
+                           "write_position": {a.name: round(a.write_position)
+                                              for a in self.axes},
+                           "position": {a.name: round(a.position) for a in self.axes}})

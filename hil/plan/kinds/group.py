@@ -1,0 +1,394 @@
+"""A motion controller's axis group (docs/group.md): `group`, `group_move`, `group_gear`,
+`group_wait`, `group_stop`.
+
+    - group: {axes: [drive1, drive2], cycle: 2ms}      # IP mode, PDOs, SYNC every cycle
+    - group_move: {axis: drive1, to: 100000, speed: 50000, acc: 200000, dec: 200000, ramp: 2}
+    - group_gear: {axis: drive2, master: drive1, in: 1, out: 2, inc_in: 0.01}
+    - group_wait: {rdy: [drive1], timeout: 5s}
+    - group_stop: {}
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from hil import clock
+from hil.bench.yamlio import Checker, join
+from hil.drivers.axis_group import RAMP_TYPES, AxisGroup, ServoAxis
+from hil.plan.context import Outcome, StepFailed
+from hil.plan.kinds.base import CheckContext, StepKind
+from hil.units import MS, S
+
+if TYPE_CHECKING:
+    from hil.plan.context import StepContext
+    from hil.plan.session import DriveIO
+    from hil.plan.steps import Step
+
+_KEY = "axis_group"
+
+
+def _group(ctx: StepContext) -> AxisGroup:
+    g = ctx.store.get(_KEY)
+    if g is None:
+        raise StepFailed("no axis group: a `group:` step must come first")
+    return g
+
+
+def _num(v: Checker, m: Any, key: str, where: str, lo: float, hi: float,
+         default: float | None = None) -> float:
+    if key not in m:
+        if default is None:
+            raise v.err(m.line, where, f"needs `{key}:`")
+        return default
+    val = m[key]
+    if isinstance(val, bool) or not isinstance(val, int | float) or not lo <= val <= hi:
+        raise v.err(m.kline(key), join(where, key), f"{val!r}: a number {lo:g} ~ {hi:g}")
+    return float(val)
+
+
+def _axis_name(v: Checker, m: Any, key: str, where: str) -> str:
+    val = m.get(key)
+    if not isinstance(val, str) or not val:
+        raise v.err(m.kline(key) if key in m else m.line, join(where, key),
+                    "a drive name of the bench")
+    return val
+
+
+def _axes(v: Checker, m: Any, where: str) -> list[str]:
+    """`axis: name` or `axes: [names]`."""
+    if ("axis" in m) == ("axes" in m):
+        raise v.err(m.line, where, "one of `axis:` or `axes:`")
+    if "axis" in m:
+        return [_axis_name(v, m, "axis", where)]
+    seq = v.seq(m["axes"], m.kline("axes"), join(where, "axes"))
+    if not seq or not all(isinstance(x, str) for x in seq):
+        raise v.err(m.kline("axes"), join(where, "axes"), "a list of drive names")
+    return [str(x) for x in seq]
+
+
+def _members(g: AxisGroup, names: list[str]) -> list[ServoAxis]:
+    missing = [n for n in names if n not in g.by_name]
+    if missing:
+        raise StepFailed(f"not in the axis group: {', '.join(missing)}")
+    return [g.by_name[n] for n in names]
+
+
+def _check_axes(cc: CheckContext, names: list[str], field: str) -> None:
+    for n in names:
+        d = cc.bench.drives.get(n)
+        if d is None:
+            raise cc.err(f"unknown axis {n!r}: the bench's drives are "
+                         f"{', '.join(cc.bench.drives)}", field)
+        if not d.can:
+            raise cc.err(f"axis {n!r} has no CAN bus (an axis group streams set-points "
+                         "over CANopen)", field)
+
+
+class Group(StepKind):
+    """`group: {axes: [...], cycle: 2ms}`: the axes in IP mode, the SYNC and PDOs running."""
+
+    name = "group"
+    motion = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axes", "cycle"}, where)
+        if "axes" not in m:
+            raise v.err(line, where, "needs `axes:` (drive names)")
+        axes = v.seq(m["axes"], m.kline("axes"), join(where, "axes"))
+        names = []
+        for i, a in enumerate(axes):
+            if not isinstance(a, str):
+                raise v.err(axes.item_lines[i], join(where, f"axes[{i}]"), "a drive name")
+            names.append(a)
+        if not names or len(set(names)) != len(names):
+            raise v.err(m.kline("axes"), join(where, "axes"), "one or more distinct drives")
+        cycle = v.duration(m, "cycle", where, 2 * MS)
+        if not MS <= cycle <= 10 * MS:
+            raise v.err(m.kline("cycle"), join(where, "cycle"),
+                        "SYNC 1-10 ms (A3 IP mode, L17211-17244)")
+        return {"axes": names, "cycle": cycle, "line": m.kline("cycle") if "cycle" in m
+                else line}
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, self.args["axes"], "axes")
+        # the wire: each cycle carries an RPDO and a TPDO per axis (6 bytes: at most 115 bits
+        # with worst-case stuffing) and the SYNC (50)
+        names = self.args["axes"]
+        buses = {cc.bench.drives[n].can for n in names}
+        if len(buses) != 1:
+            raise cc.err(f"the axes are on different CAN buses ({', '.join(sorted(buses))}): "
+                         "an axis group is one bus", "axes")
+        url = cc.bench.can[buses.pop()]
+        bitrate = _bitrate(url)
+        bits = len(names) * (115 + 115) + 50
+        if bits / bitrate > self.args["cycle"] / S:
+            raise cc.err(f"{len(names)} axes need up to {bits} bits a cycle: "
+                         f"{bits / bitrate * 1e3:.2f} ms at {bitrate / 1e3:g} kbit/s, more than "
+                         f"the {self.args['cycle'] / MS:g} ms cycle", "cycle",
+                         self.args["line"])
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        old = ctx.store.pop(_KEY, None)
+        if old is not None:
+            old.stop()
+        drives = {n: ctx.session.drive(n) for n in self.args["axes"]}
+        net = next(iter(drives.values())).cia.node.network
+        axes = [ServoAxis(n, dio.spec.node_id or 1) for n, dio in drives.items()]
+        rec = ctx.rec
+
+        def on_cycle(c: dict[str, Any]) -> None:
+            if rec is not None:
+                rec.write("/group/axes/cycle", c)
+
+        group = AxisGroup(net, axes, self.args["cycle"] / S,
+                          sdo_write=lambda name, i, s, val: drives[name].cia.write(i, s, val),
+                          on_cycle=on_cycle, frame_bits=_frame_bits(),
+                          bitrate=_bitrate(ctx.bench.can[drives[axes[0].name].spec.can]))
+        group.configure()
+        for a in axes:
+            cia = drives[a.name].cia
+            a.position = float(cia.read(0x6064, 0))
+            group.connect(a)
+            cia.write(0x60C1, 1, round(a.position))  # the set-point where it stands
+        group.start()
+        ctx.store[_KEY] = group
+        ctx.session.on_close(group.stop)
+        for a in axes:
+            drives[a.name].cia.write(0x6040, 0, 0x06)
+        clock.sleep(3 * group.cycle_s)
+        deadline = clock.monotonic_ns() + S
+        while not all(a.status == 3 for a in axes):
+            if clock.monotonic_ns() > deadline:
+                raise StepFailed("axes not enabled: " + ", ".join(
+                    f"{a.name} status {a.status} (6041h {a.statusword:04X}h)" for a in axes))
+            clock.sleep(group.cycle_s)
+        return Outcome(f"{len(axes)} axes in IP mode, cycle {self.args['cycle'] / MS:g} ms")
+
+    def describe(self) -> str:
+        return f"group {', '.join(self.args['axes'])} every {self.args['cycle'] / MS:g} ms"
+
+
+def _bitrate(url: str) -> int:
+    """The bus's bit rate from its URL (`?bitrate=`), else 1 Mbit/s (the A3's CANopen)."""
+    _, _, query = url.partition("?")
+    for item in query.split("&"):
+        k, _, val = item.partition("=")
+        if k == "bitrate" and val.isdigit():
+            return int(val)
+    return 1_000_000
+
+
+def _frame_bits() -> Any:
+    from can import Message
+
+    from hil.transport.sim import frame_bits
+
+    return lambda cob, dlc: frame_bits(Message(arbitration_id=cob, data=bytes(dlc),
+                                               is_extended_id=False))
+
+
+class GroupMove(StepKind):
+    """`group_move: {axis, to | by | speed, acc, dec, speed, ramp}`: a PG command (004:226)."""
+
+    name = "group_move"
+    motion = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "axes", "to", "by", "run", "acc", "dec", "speed", "ramp"}, where)
+        targets = [k for k in ("to", "by", "run") if k in m]
+        if len(targets) != 1:
+            raise v.err(line, where, "one of to (absolute), by (relative), run (speed)")
+        big = 2.0**31
+        out = {"axes": _axes(v, m, where), "what": targets[0],
+               "value": _num(v, m, targets[0], where, -big, big),
+               "acc": _num(v, m, "acc", where, 1, 1e12, 100_000),
+               "dec": _num(v, m, "dec", where, 1, 1e12, 100_000),
+               "speed": _num(v, m, "speed", where, 1, 1e10, 50_000)}
+        ramp = m.get("ramp", 3)
+        if ramp not in RAMP_TYPES or isinstance(ramp, bool):
+            raise v.err(m.kline("ramp") if "ramp" in m else line, join(where, "ramp"),
+                        "0 short accel / long decel, 1 short both, 2 harmonic, 3 linear")
+        out["ramp"] = ramp
+        return out
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, self.args["axes"], "axes")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        g = _group(ctx)
+        axes = _members(g, a["axes"])
+        with g._lock:  # every axis starts in the same cycle
+            for ax in axes:
+                pg = ax.pg
+                pg.acc, pg.dec, pg.pos_speed, pg.type = (a["acc"], a["dec"], a["speed"],
+                                                         a["ramp"])
+                if ax.mode == 3:
+                    ax.mode = 4
+                if a["what"] == "to":
+                    pg.start_position(a["value"])
+                elif a["what"] == "by":
+                    pg.start_position(pg.apos + a["value"])
+                else:
+                    pg.start_speed(a["value"])
+        return Outcome(f"PG {a['what']} {a['value']:g} (ramp type {a['ramp']})")
+
+    def describe(self) -> str:
+        a = self.args
+        return f"group_move {', '.join(a['axes'])} {a['what']} {a['value']:g}"
+
+
+class GroupGear(StepKind):
+    """`group_gear: {axis, master, in, out, inc_in, source}`: couple a linear gear (004:230)."""
+
+    name = "group_gear"
+    motion = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "master", "in", "out", "inc_in", "source"}, where)
+        out = {"axis": _axis_name(v, m, "axis", where),
+               "master": _axis_name(v, m, "master", where),
+               "in": _num(v, m, "in", where, -1e9, 1e9, 1),
+               "out": _num(v, m, "out", where, -1e9, 1e9, 1),
+               "inc_in": _num(v, m, "inc_in", where, 0, 1e9, 0)}
+        if out["out"] == 0:
+            raise v.err(m.kline("out"), join(where, "out"), "0: a gear ratio In/Out needs Out")
+        if out["in"] == 0 and out["inc_in"] == 0:
+            raise v.err(m.kline("in") if "in" in m else line, join(where, "in"),
+                        "ratio 0: nothing would move (use group_stop or a desync ramp)")
+        if out["axis"] == out["master"]:
+            raise v.err(line, where, "an axis cannot be its own master")
+        src = m.get("source", "write")
+        if src not in ("write", "actual"):
+            raise v.err(m.kline("source"), join(where, "source"),
+                        "write (master WritePosition) or actual (master Position)")
+        out["source"] = 1 if src == "write" else 2
+        return out
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [self.args["axis"], self.args["master"]], "axis")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        g = _group(ctx)
+        ax, master = g.by_name.get(a["axis"]), g.by_name.get(a["master"])
+        if ax is None or master is None:
+            raise StepFailed("axis or master not in the group")
+        with g._lock:
+            gea = ax.gea
+            gea.master, gea.source = a["master"], a["source"]
+            gea.gin, gea.gout, gea.inc_in = a["in"], a["out"], a["inc_in"]
+            if gea.mode == 0:
+                gea.actual_in = 0.0 if a["inc_in"] else a["in"]
+            gea.mode = 1
+            ax.mode = 4 if ax.mode in (1, 4) else 3
+        return Outcome(f"{a['axis']} geared to {a['master']} {a['in']:g}/{a['out']:g}")
+
+    def describe(self) -> str:
+        a = self.args
+        return f"group_gear {a['axis']} <- {a['master']} {a['in']:g}/{a['out']:g}"
+
+
+class GroupWait(StepKind):
+    """`group_wait: {rdy: [axes], timeout}`: until each PG reached its target (PG.Rdy)."""
+
+    name = "group_wait"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"rdy", "timeout"}, where)
+        rdy = v.seq(m.get("rdy"), m.kline("rdy") if "rdy" in m else line, join(where, "rdy"))
+        return {"rdy": [str(x) for x in rdy], "timeout": v.duration(m, "timeout", where, 5 * S)}
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, self.args["rdy"], "rdy")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        g = _group(ctx)
+        axes = [g.by_name[n] for n in self.args["rdy"] if n in g.by_name]
+        if not clock.wait_for(lambda: all(a.pg.rdy for a in axes), self.args["timeout"] / S):
+            raise StepFailed("PG not ready: " + ", ".join(a.name for a in axes
+                                                          if not a.pg.rdy))
+        return Outcome(", ".join(f"{a.name} at {a.write_position:.0f}" for a in axes))
+
+    def describe(self) -> str:
+        return f"group_wait {', '.join(self.args['rdy'])}"
+
+
+class GroupExpect(StepKind):
+    """`group_expect: {axis | axes, position: [lo, hi], write_position: [lo, hi], missed: n,
+    rdy_same_cycle: true}`: the group's view of its axes now."""
+
+    name = "group_expect"
+    judge_only = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "axes", "position", "write_position", "missed",
+                   "rdy_same_cycle"}, where)
+        out: dict[str, Any] = {"axes": _axes(v, m, where)}
+        for k in ("position", "write_position"):
+            if k in m:
+                r = m[k]
+                if (not isinstance(r, list) or len(r) != 2
+                        or not all(isinstance(x, int | float) for x in r) or r[0] > r[1]):
+                    raise v.err(m.kline(k), join(where, k), "[low, high]")
+                out[k] = (float(r[0]), float(r[1]))
+        if "missed" in m:
+            out["missed"] = int(_num(v, m, "missed", where, 0, 1e9))
+        if "rdy_same_cycle" in m:
+            out["rdy_same_cycle"] = bool(m["rdy_same_cycle"])
+        return out
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        g = _group(ctx)
+        axes = _members(g, a["axes"])
+        bad: list[str] = []
+        with g._lock:
+            for ax in axes:
+                for k in ("position", "write_position"):
+                    if k in a:
+                        lo, hi = a[k]
+                        val = getattr(ax, k)
+                        if not lo <= val <= hi:
+                            bad.append(f"{ax.name} {k} {val:.0f} not in [{lo:g}, {hi:g}]")
+                if "missed" in a and ax.missed > a["missed"]:
+                    bad.append(f"{ax.name} missed {ax.missed} cycles")
+            if a.get("rdy_same_cycle") and len({ax.rdy_cycle for ax in axes}) != 1:
+                bad.append("targets reached in cycles " + ", ".join(
+                    f"{ax.name} {ax.rdy_cycle}" for ax in axes))
+        text = ", ".join(f"{ax.name} at {ax.position:.0f} (missed {ax.missed})" for ax in axes)
+        if bad:
+            raise StepFailed("; ".join(bad) + f" ({text})")
+        return Outcome(text)
+
+    def describe(self) -> str:
+        return f"group_expect {', '.join(self.args['axes'])}"
+
+
+class GroupStop(StepKind):
+    """`group_stop: {}`: the SYNC and set-points stop (the drives keep their last one)."""
+
+    name = "group_stop"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        return {}
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        g = _group(ctx)
+        g.stop()
+        ctx.store.pop(_KEY, None)
+        return Outcome(f"{g.cycles} cycles, {g.missed_cycles} missed")
+
+
+KINDS = (Group, GroupMove, GroupGear, GroupWait, GroupExpect, GroupStop)

@@ -1,0 +1,92 @@
+"""A motion controller's axis group (issue 27, partial): the PG and GEA rules of seed 004
+written from the seed, and the group on a virtual CAN bus in virtual time."""
+
+from __future__ import annotations
+
+from itertools import pairwise
+
+import pytest
+
+from hil.drivers.axis_group import PEAK, Gea, Pg
+
+DT = 0.001
+
+
+def _run(pg: Pg, limit_s: float = 10.0) -> list[tuple[float, float, float]]:
+    """(t, position, speed) every cycle until PG.Rdy."""
+    out, t = [], 0.0
+    while not pg.rdy and t < limit_s:
+        pg.tick(DT)
+        t += DT
+        out.append((t, pg.apos, pg.aspeed))
+    return out
+
+
+@pytest.mark.parametrize("ramp", [0, 1, 2, 3])
+def test_every_ramp_type_lands_on_the_target_and_ramps_for_speed_over_acc(ramp: int) -> None:
+    # "Ramp duration identical for all shapes" (004:226): T = PosSpeed / Acc
+    pg = Pg(acc=500_000, dec=500_000, pos_speed=100_000, type=ramp)
+    pg.start_position(200_000)
+    trace = _run(pg)
+    assert pg.rdy and pg.apos == 200_000 and pg.aspeed == 0
+    t_full = next(t for t, _, v in trace if v >= 100_000 - 1e-6)
+    assert t_full == pytest.approx(100_000 / 500_000, abs=2 * DT)
+
+
+def test_harmonic_ramp_peaks_at_157_percent_of_acc_linear_at_acc() -> None:
+    # type 2: "real peak accel/decel = 157 % of PG.Acc/PG.Dec"; type 3: Acc exactly (004:226)
+    for ramp, want in ((2, 1.57), (3, 1.0)):
+        pg = Pg(acc=500_000, dec=500_000, pos_speed=100_000, type=ramp)
+        pg.start_position(200_000)
+        trace = _run(pg)
+        acc = max(abs(b[2] - a[2]) / DT for a, b in pairwise(trace))
+        assert acc / 500_000 == pytest.approx(want, rel=0.02)
+    assert PEAK[2] == pytest.approx(1.5708, abs=1e-4)
+
+
+def test_a_short_move_is_a_triangle_that_still_lands() -> None:
+    pg = Pg(acc=100_000, dec=100_000, pos_speed=1_000_000, type=2)
+    pg.start_position(5_000)
+    trace = _run(pg)
+    assert pg.apos == 5_000 and max(v for _, _, v in trace) < 1_000_000
+
+
+def test_speed_mode_abort_and_on_the_fly_target() -> None:
+    # speed control with Acc only; abort: Speed 0; a new DPos while moving (004:226)
+    pg = Pg(acc=100_000, type=3)
+    pg.start_speed(20_000)
+    _run(pg)
+    assert pg.aspeed == pytest.approx(20_000)
+    pg.abort()
+    _run(pg)
+    assert pg.aspeed == 0 and pg.mode == 0
+    pg2 = Pg(acc=200_000, dec=200_000, pos_speed=50_000, type=3)
+    pg2.start_position(100_000)
+    for _ in range(300):
+        pg2.tick(DT)
+    pg2.start_position(20_000)  # behind it now: brakes, comes back, lands
+    _run(pg2)
+    assert pg2.apos == 20_000
+
+
+def test_gear_ratio_and_clutch_ramp() -> None:
+    # Position += d(master) x ActualIn / Out; ActualIn ramps by IncIn per tick (004:230)
+    g = Gea(gin=1.0, gout=2.0, inc_in=0.1, mode=1)
+    master = 0.0
+    g.tick(master)
+    for _ in range(10):
+        master += 100
+        g.tick(master)
+    assert g.actual_in == pytest.approx(1.0)
+    # the first tick engages 0.1 (no master motion yet), each next adds 0.1 then moves
+    assert g.position == pytest.approx(sum(100 * min(1.0, 0.1 * (k + 1)) / 2
+                                           for k in range(1, 11)))
+    before = g.position
+    for _ in range(10):
+        master += 100
+        g.tick(master)
+    assert g.position - before == pytest.approx(500)  # full ratio: 1000 x 1/2
+    g.shift, g.inc_shift = 50, 10  # a phase shift at IncShift per tick
+    for _ in range(10):
+        g.tick(master)
+    assert g.actual_shift == 50 and g.position - before == pytest.approx(550)

@@ -1,0 +1,66 @@
+"""The axis group (issue 27, partial) on a virtual CAN bus in virtual time: the shipped group
+plans, their cycle records, a cycle the bus cannot carry, and missed cycles on the record."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from mcap.reader import make_reader
+
+from hil.bench.bench import load_bench, loads_bench
+from hil.bench.yamlio import PlanFileError
+from hil.paths import fixture, plans_dir
+from hil.plan.plan import check_plan, load_plan, loads_plan
+from hil.plan.runner import run_plan
+
+pytestmark = pytest.mark.virtual_time
+GROUP_BENCH = fixture("benches", "virtual-group.yaml")
+PLANS = sorted((plans_dir() / "group").glob("*.yaml"))
+
+
+def _cycles(path) -> list[dict]:
+    with open(path, "rb") as f:
+        return [json.loads(m.data) for _, _, m in
+                make_reader(f).iter_messages(topics=["/group/axes/cycle"])]
+
+
+@pytest.mark.parametrize("path", PLANS, ids=[p.stem for p in PLANS])
+def test_group_plans_pass_with_every_cycle_on_the_record(path, tmp_path) -> None:
+    res = run_plan(load_plan(path), load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.name, s.message) for s in res.steps if s.status != "pass"]
+    cycles = _cycles(res.recording)
+    assert cycles and all(not c["missed"] for c in cycles)
+    n = len(cycles[0]["position"])
+    # per cycle n x (RPDO + TPDO, 6 bytes) + SYNC on 1 Mbit/s: the load the wire carries
+    assert 0 < cycles[0]["bus_load_pct"] < 100 and len({c["bus_load_pct"] for c in cycles}) == 1
+    assert [c["cycle"] for c in cycles] == list(range(1, len(cycles) + 1))
+    assert n >= 1
+
+
+def test_a_cycle_the_bus_cannot_carry_is_refused() -> None:
+    text = GROUP_BENCH.read_text().replace('can0: "virtual:auto"',
+                                           'can0: "virtual:auto?bitrate=125000"', 1)
+    assert "bitrate=125000" in text
+    bench = loads_bench(text, "slow-group.yaml")
+    plan = loads_plan("name: p\nsteps:\n  - group: {axes: [axis1, axis2, axis3, axis4], "
+                      "cycle: 2ms}\n", "p.yaml")
+    with pytest.raises(PlanFileError, match=r"4 axes need up to 970 bits a cycle: 7.76 ms "
+                                            r"at 125 kbit/s, more than the 2 ms cycle"):
+        check_plan(plan, bench)
+
+
+def test_lost_feedback_is_a_missed_cycle_and_status_lost(tmp_path) -> None:
+    # the group's SYNC dropped on the wire for 20 ms: no drive samples its TPDO1, so those
+    # cycles are missed on the record, for both axes
+    plan = loads_plan("""name: lost
+steps:
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - fault: {can: drop, match: {function: sync}, for: 20ms}
+  - wait: 30ms
+  - group_stop: {}
+""", "lost.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.name, s.message) for s in res.steps if s.status != "pass"]
+    missed = [c for c in _cycles(res.recording) if c["missed"]]
+    assert 8 <= len(missed) <= 11 and all(c["missed"] == ["axis1", "axis2"] for c in missed)
