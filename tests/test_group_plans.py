@@ -58,9 +58,12 @@ steps:
   - group: {axes: [axis1, axis2], cycle: 2ms}
   - fault: {can: drop, match: {function: sync}, for: 20ms}
   - wait: 30ms
+  - check_timing: {spec: group_cycles}
   - group_stop: {}
 """, "lost.yaml")
     res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
-    assert res.passed, [(s.name, s.message) for s in res.steps if s.status != "pass"]
+    # the spec catches it: the one failing step is the check
+    bad = [s for s in res.steps if s.status != "pass"]
+    assert [s.index for s in bad] == [3] and bad[0].verdicts[0]["status"] == "fail"
     missed = [c for c in _cycles(res.recording) if c["missed"]]
     assert 8 <= len(missed) <= 11 and all(c["missed"] == ["axis1", "axis2"] for c in missed)

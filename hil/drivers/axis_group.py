@@ -180,11 +180,17 @@ def _integral(kind: int, x: float) -> float:
 # ------------------------------------------------------------------------------ GEA
 
 
+CAM_STEP = 1024  # the pointer is 1024 x finer than the table (004:232)
+
+
 @dataclass
 class Gea:
-    """Linear gear from a master axis (004:228-238): Position += d(master) x ActualIn / Out;
-    ActualIn ramps towards In by IncIn per tick (the clutch), ActualShift towards Shift by
-    IncShift. Cams are not modelled yet."""
+    """Gear and cam from a master axis (004:228-238). Linear gear (mode 1): Position +=
+    d(master) x ActualIn / Out; ActualIn ramps towards In by IncIn per tick (the clutch),
+    ActualShift towards Shift by IncShift. Cam (mode 2): the same Position is the table
+    pointer, 1024 increments per table step, linearly interpolated; a return cam (type 0)
+    runs from the last entry back to the first and repeats, an incremental cam (type 1) adds
+    the last entry as a stroke on every pass; CamPosition = table value x CamScale."""
 
     master: str = ""
     source: int = 1  # 1 master WritePosition, 2 master Position, 3 ServoTick (time)
@@ -196,8 +202,30 @@ class Gea:
     actual_in: float = 0.0
     actual_shift: float = 0.0
     position: float = 0.0
-    mode: int = 0  # 0 idle, 1 linear gear
+    mode: int = 0  # 0 idle, 1 linear gear, 2 cam
+    cam: list[float] = field(default_factory=list)
+    cam_type: int = 0  # 0 return, 1 incremental
+    cam_scale: float = 1.0
+    cam_position: float = 0.0
     _last: float | None = None
+
+    def cam_value(self, pointer: float) -> float:
+        """The cam at `pointer` (GEA.Position, in master increments x ratio)."""
+        table = self.cam
+        n = len(table)
+        step = pointer / CAM_STEP
+        if self.cam_type == 0:  # return: n segments, the last one back to the first
+            k = math.floor(step)
+            frac = step - k
+            i = k % n
+            a, b = table[i], table[(i + 1) % n]
+            return (a + (b - a) * frac) * self.cam_scale
+        span = n - 1  # incremental: n - 1 segments, the last value added each pass
+        k = math.floor(step)
+        passes, i = divmod(k, span)
+        frac = step - k
+        a, b = table[i], table[i + 1]
+        return (passes * table[-1] + a + (b - a) * frac) * self.cam_scale
 
     def tick(self, master_value: float) -> None:
         if self.mode == 0:
@@ -218,6 +246,8 @@ class Gea:
         delta = 0.0 if self._last is None else master_value - self._last
         self._last = master_value
         self.position += delta * self.actual_in / self.gout + ds
+        if self.mode == 2 and self.cam:
+            self.cam_position = self.cam_value(self.position)
 
 
 # ------------------------------------------------------------------------------ the axes
@@ -256,7 +286,7 @@ class ServoAxis:
         if self.mode in (1, 4):
             base += self.pg.apos
         if self.mode in (3, 4):
-            base += self.gea.position
+            base += self.gea.cam_position if self.gea.mode == 2 else self.gea.position
         self.write_position = base + self.offset + self.correction
 
     def controlword(self) -> int:

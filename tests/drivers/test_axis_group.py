@@ -90,3 +90,35 @@ def test_gear_ratio_and_clutch_ramp() -> None:
     for _ in range(10):
         g.tick(master)
     assert g.actual_shift == 50 and g.position - before == pytest.approx(550)
+
+
+def test_cam_pointer_is_1024_times_finer_and_interpolates() -> None:
+    # 1024 increments of GEA.Position are one table step, linear in between (004:232)
+    g = Gea(mode=2, cam=[0.0, 100.0, 300.0, 200.0], cam_type=0)
+    assert g.cam_value(0) == 0 and g.cam_value(1024) == 100 and g.cam_value(2048) == 300
+    assert g.cam_value(512) == pytest.approx(50)
+    assert g.cam_value(1024 + 256) == pytest.approx(150)
+
+
+def test_return_cam_runs_back_to_the_first_point_and_repeats() -> None:
+    # return cam: last -> first interpolated, then again (004:234)
+    g = Gea(mode=2, cam=[0.0, 100.0, 300.0, 200.0], cam_type=0)
+    assert g.cam_value(3 * 1024 + 512) == pytest.approx(100)  # halfway 200 -> 0
+    assert g.cam_value(4 * 1024) == pytest.approx(0)
+    assert g.cam_value(5 * 1024) == pytest.approx(100)
+
+
+def test_incremental_cam_adds_the_last_value_each_pass() -> None:
+    # incremental cam: the last value is a stroke added on every pass (004:234)
+    g = Gea(mode=2, cam=[0.0, 50.0, 120.0], cam_type=1, cam_scale=2.0)
+    assert g.cam_value(2 * 1024) == pytest.approx(240)  # end of pass 1 = start of pass 2
+    assert g.cam_value(3 * 1024) == pytest.approx((120 + 50) * 2)
+    assert g.cam_value(4 * 1024 + 512) == pytest.approx((2 * 120 + 0) * 2 + 25 * 2)
+
+
+def test_a_cam_follows_its_master_through_the_ratio() -> None:
+    g = Gea(mode=2, gin=1.0, gout=2.0, cam=[0.0, 1000.0], cam_type=1)
+    g.tick(0.0)
+    for k in range(1, 11):
+        g.tick(k * 512.0)  # the master moves 512 a tick: the pointer 256
+    assert g.position == pytest.approx(2560) and g.cam_position == pytest.approx(2500)

@@ -295,6 +295,75 @@ class GroupGear(StepKind):
         return f"group_gear {a['axis']} <- {a['master']} {a['in']:g}/{a['out']:g}"
 
 
+class GroupCam(StepKind):
+    """`group_cam: {axis, master, in, out, table: [...], type: return | incremental,
+    scale}`: the axis follows a cam table driven by its master (004:232-236)."""
+
+    name = "group_cam"
+    motion = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "master", "in", "out", "table", "type", "scale", "source"}, where)
+        out = {"axis": _axis_name(v, m, "axis", where),
+               "master": _axis_name(v, m, "master", where),
+               "in": _num(v, m, "in", where, -1e9, 1e9, 1),
+               "out": _num(v, m, "out", where, -1e9, 1e9, 1),
+               "scale": _num(v, m, "scale", where, -1e6, 1e6, 1)}
+        if out["out"] == 0 or out["in"] == 0:
+            raise v.err(m.kline("in") if "in" in m else line, join(where, "in"),
+                        "ratio In/Out: neither may be 0")
+        if out["axis"] == out["master"]:
+            raise v.err(line, where, "an axis cannot be its own master")
+        if "table" not in m:
+            raise v.err(line, where, "needs `table:` (cam positions, one per 1024 pointer "
+                        "increments)")
+        table = v.seq(m["table"], m.kline("table"), join(where, "table"))
+        if len(table) < 2:
+            raise v.err(m.kline("table"), join(where, "table"),
+                        f"cam table too short: {len(table)} point(s), at least 2")
+        if not all(isinstance(x, int | float) and not isinstance(x, bool) for x in table):
+            raise v.err(m.kline("table"), join(where, "table"), "numbers only")
+        out["table"] = [float(x) for x in table]
+        kind = m.get("type", "return")
+        if kind not in ("return", "incremental"):
+            raise v.err(m.kline("type"), join(where, "type"), "return or incremental")
+        out["type"] = 0 if kind == "return" else 1
+        src = m.get("source", "write")
+        if src not in ("write", "actual"):
+            raise v.err(m.kline("source"), join(where, "source"), "write or actual")
+        out["source"] = 1 if src == "write" else 2
+        return out
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [self.args["axis"], self.args["master"]], "axis")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        g = _group(ctx)
+        ax, _master = _members(g, [a["axis"], a["master"]])
+        with g._lock:
+            gea = ax.gea
+            gea.master, gea.source = a["master"], a["source"]
+            gea.gin = gea.actual_in = a["in"]
+            gea.gout, gea.inc_in = a["out"], 0.0
+            gea.cam, gea.cam_type, gea.cam_scale = a["table"], a["type"], a["scale"]
+            gea.position = 0.0
+            gea.cam_position = gea.cam_value(0.0)
+            # the cam starts where the axis stands: WritePosition = CamPosition + Offset +
+            # Correction (004:216) holds with the current WritePosition
+            ax.offset = ax.write_position - gea.cam_position - ax.correction
+            gea.mode = 2
+            ax.mode = 3
+        return Outcome(f"{a['axis']} on a {'return' if a['type'] == 0 else 'incremental'} cam "
+                       f"of {len(a['table'])} points from {a['master']}")
+
+    def describe(self) -> str:
+        a = self.args
+        return f"group_cam {a['axis']} <- {a['master']} ({len(a['table'])} points)"
+
+
 class GroupWait(StepKind):
     """`group_wait: {rdy: [axes], timeout}`: until each PG reached its target (PG.Rdy)."""
 
@@ -391,4 +460,4 @@ class GroupStop(StepKind):
         return Outcome(f"{g.cycles} cycles, {g.missed_cycles} missed")
 
 
-KINDS = (Group, GroupMove, GroupGear, GroupWait, GroupExpect, GroupStop)
+KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupWait, GroupExpect, GroupStop)
