@@ -270,11 +270,71 @@ class ServoAxis:
     statusword: int = 0
     missed: int = 0
     rdy_cycle: int = 0  # the cycle in which the PG last reached its target
+    command: int = 0  # COMMAND.Control (004:240): the function number, 0 once accepted
+    par: list[float] = field(default_factory=lambda: [0.0] * 15)  # COMMAND.Par[0..14]
     pg: Pg = field(default_factory=Pg)
     gea: Gea = field(default_factory=Gea)
     _seen: bool = False  # feedback of the current cycle arrived
     _ever: bool = False
     _last_pos: float | None = None
+
+    def accept_command(self, axes: dict[str, ServoAxis]) -> None:
+        """COMMAND (004:240-246): the function in `command` with `par`, taken at the start
+        of a cycle; `command` returns to 0 on acceptance, 7 (sync off) only once the ratio
+        ramp has run out."""
+        code, p = self.command, self.par
+        if code == 0:
+            return
+        pg = self.pg
+        if code in (1, 2, 3, 5):
+            pg.type = int(p[5]) if int(p[5]) in RAMP_TYPES else pg.type
+        if code == 1:  # run speed: Par0 Acc, Par2 Speed, Par4 0 cancel GEA / 1 superimpose
+            pg.acc = p[0] or pg.acc
+            if not p[4]:
+                self._connect_pg()
+                self.gea.mode = 0
+                self.mode = 1
+            else:
+                self.mode = 4 if self.gea.mode else 1
+            pg.start_speed(p[2])
+        elif code in (2, 3):  # absolute / relative: Par0 Acc, Par1 Dec, Par2 Speed, Par3
+            pg.acc, pg.dec, pg.pos_speed = p[0] or pg.acc, p[1] or pg.dec, p[2] or pg.pos_speed
+            if self.mode == 3:
+                self.mode = 4
+            pg.start_position(p[3] if code == 2 else pg.apos + p[3])
+        elif code == 4:  # set reference: the PG's position is declared Par3; Offset takes
+            # the difference, so the set-point (and the motor) stays where it is (004:226)
+            gear = self.gea.position if self.mode in (3, 4) and self.gea.mode == 1 else 0.0
+            self.offset = self.write_position - self.correction - gear - p[3]
+            pg.apos = p[3]
+        elif code == 5:  # abort: Par1 Dec
+            pg.acc = p[1] or pg.acc
+            pg.abort()
+        elif code == 6:  # sync on: Par0 master, Par1 source, Par2 1 gear, Par3/4 In/Out,
+            g = self.gea  # Par5 IncIn (004:244)
+            names = list(axes)
+            idx = int(p[0])
+            g.master = names[idx] if 0 <= idx < len(names) else g.master
+            g.source = int(p[1]) or 1
+            g.gin, g.gout, g.inc_in = p[3], p[4] or 1.0, p[5]
+            g.actual_in = 0.0 if p[5] else p[3]
+            g.mode = 1
+            self.mode = 4 if self.mode in (1, 4) else 3
+        elif code == 7:  # sync off: the ratio ramps to 0 by Par5 a cycle, then GEA idles
+            g = self.gea
+            g.gin, g.inc_in = 0.0, p[5]
+            if g.actual_in != 0.0:
+                return  # still ramping: Control stays 7 (004:240)
+            self._connect_pg()
+            g.mode = 0
+            self.mode = 1
+        self.command = 0
+
+    def _connect_pg(self) -> None:
+        """The PG takes over where the axis stands: PG.APos = WritePosition - Offset -
+        Correction (004:224), so leaving the gear moves nothing."""
+        self.pg.apos = self.write_position - self.offset - self.correction
+        self.pg.aspeed = 0.0
 
     @property
     def position_error(self) -> float:
@@ -432,6 +492,8 @@ class AxisGroup:
             if missed:
                 self.missed_cycles += 1
             masters = {a.name: a for a in self.axes}
+            for a in self.axes:
+                a.accept_command(masters)
             for a in self.axes:
                 was = a.pg.rdy
                 a.pg.tick(dt)

@@ -122,3 +122,41 @@ def test_a_cam_follows_its_master_through_the_ratio() -> None:
     for k in range(1, 11):
         g.tick(k * 512.0)  # the master moves 512 a tick: the pointer 256
     assert g.position == pytest.approx(2560) and g.cam_position == pytest.approx(2500)
+
+
+def test_command_control_returns_to_0_on_acceptance_and_7_after_its_ramp() -> None:
+    # 004:240: Control = 0 at the start of execution, not at completion; except 7 (sync off),
+    # zeroed only once the ratio ramp has run out
+    from hil.drivers.axis_group import ServoAxis
+
+    master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
+    axes = {"m": master, "s": slave}
+    master.par = [1e6, 2e6, 3e5, 2e5] + [0.0] * 11
+    master.command = 2
+    master.accept_command(axes)
+    assert master.command == 0 and not master.pg.rdy  # accepted, still moving
+    slave.par = [0, 1, 1, 1, 2, 0.25] + [0.0] * 9  # sync on: master 0, In/Out 1/2, IncIn
+    slave.command = 6
+    slave.accept_command(axes)
+    assert slave.command == 0 and slave.gea.mode == 1 and slave.mode == 4
+    for _ in range(4):
+        slave.gea.tick(0.0)
+    assert slave.gea.actual_in == 1.0
+    slave.gea.position = 500.0  # where the gear has taken the axis
+    slave.compute()
+    slave.par = [0.0] * 5 + [0.25] + [0.0] * 9
+    slave.command = 7
+    cycles = 0
+    while slave.command:
+        slave.accept_command(axes)
+        slave.gea.tick(0.0)
+        cycles += 1
+    assert cycles == 5 and slave.gea.mode == 0  # 4 ramp cycles of 0.25, then accepted
+    slave.compute()
+    assert slave.write_position == 500.0  # the PG took over where the gear left it
+    slave.write_position = 1234.0
+    slave.par = [0.0, 0.0, 0.0, 100.0] + [0.0] * 11
+    slave.command = 4  # set reference: the current position is declared 100
+    slave.accept_command(axes)
+    slave.compute()
+    assert slave.pg.apos == 100.0 and slave.write_position == pytest.approx(1234.0)

@@ -364,6 +364,59 @@ class GroupCam(StepKind):
         return f"group_cam {a['axis']} <- {a['master']} ({len(a['table'])} points)"
 
 
+class GroupCommand(StepKind):
+    """`group_command: {axis, code: 1-7, par: {0: 1000000, 3: 200000}, timeout}`: the COMMAND
+    interface (004:240-246): write Par and Control, wait until Control is back to 0 (on
+    acceptance; for 7, sync off, once the ratio ramp has run out)."""
+
+    name = "group_command"
+    motion = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "code", "par", "timeout"}, where)
+        code = m.get("code")
+        if code not in range(1, 8) or isinstance(code, bool):
+            raise v.err(m.kline("code") if "code" in m else line, join(where, "code"),
+                        "1 speed, 2 absolute, 3 relative, 4 set reference, 5 abort, "
+                        "6 sync on, 7 sync off (004:244)")
+        par = [0.0] * 15
+        if "par" in m:
+            pm = v.mapping(m["par"], m.kline("par"), join(where, "par"))
+            for k, val in pm.items():
+                try:
+                    i = int(k)
+                except ValueError:
+                    i = -1
+                if not 0 <= i <= 14:
+                    raise v.err(pm.kline(k), join(where, f"par.{k}"), "Par index 0-14")
+                if isinstance(val, bool) or not isinstance(val, int | float):
+                    raise v.err(pm.kline(k), join(where, f"par.{k}"), f"{val!r}: a number")
+                par[i] = float(val)
+        return {"axis": _axis_name(v, m, "axis", where), "code": code, "par": par,
+                "timeout": v.duration(m, "timeout", where, 5 * S)}
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [self.args["axis"]], "axis")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        g = _group(ctx)
+        (ax,) = _members(g, [a["axis"]])
+        with g._lock:
+            ax.par = list(a["par"])
+            ax.command = a["code"]
+            c0 = g.cycles
+        if not clock.wait_for(lambda: ax.command == 0, a["timeout"] / S):
+            raise StepFailed(f"COMMAND {a['code']} not accepted within the timeout "
+                             f"(Control still {ax.command})")
+        return Outcome(f"COMMAND {a['code']} accepted after {g.cycles - c0} cycle(s)")
+
+    def describe(self) -> str:
+        return f"group_command {self.args['axis']} {self.args['code']}"
+
+
 class GroupWait(StepKind):
     """`group_wait: {rdy: [axes], timeout}`: until each PG reached its target (PG.Rdy)."""
 
@@ -392,8 +445,8 @@ class GroupWait(StepKind):
 
 
 class GroupExpect(StepKind):
-    """`group_expect: {axis | axes, position: [lo, hi], write_position: [lo, hi], missed: n,
-    rdy_same_cycle: true}`: the group's view of its axes now."""
+    """`group_expect: {axis | axes, position: [lo, hi], write_position: [lo, hi],
+    pg_position: [lo, hi], missed: n, rdy_same_cycle: true}`: the group's view of its axes."""
 
     name = "group_expect"
     judge_only = True
@@ -401,10 +454,10 @@ class GroupExpect(StepKind):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
-        v.keys(m, {"axis", "axes", "position", "write_position", "missed",
+        v.keys(m, {"axis", "axes", "position", "write_position", "pg_position", "missed",
                    "rdy_same_cycle"}, where)
         out: dict[str, Any] = {"axes": _axes(v, m, where)}
-        for k in ("position", "write_position"):
+        for k in ("position", "write_position", "pg_position"):
             if k in m:
                 r = m[k]
                 if (not isinstance(r, list) or len(r) != 2
@@ -424,10 +477,10 @@ class GroupExpect(StepKind):
         bad: list[str] = []
         with g._lock:
             for ax in axes:
-                for k in ("position", "write_position"):
+                for k in ("position", "write_position", "pg_position"):
                     if k in a:
                         lo, hi = a[k]
-                        val = getattr(ax, k)
+                        val = ax.pg.apos if k == "pg_position" else getattr(ax, k)
                         if not lo <= val <= hi:
                             bad.append(f"{ax.name} {k} {val:.0f} not in [{lo:g}, {hi:g}]")
                 if "missed" in a and ax.missed > a["missed"]:
@@ -460,4 +513,5 @@ class GroupStop(StepKind):
         return Outcome(f"{g.cycles} cycles, {g.missed_cycles} missed")
 
 
-KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupWait, GroupExpect, GroupStop)
+KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupCommand, GroupWait, GroupExpect,
+         GroupStop)
