@@ -25,14 +25,13 @@ from __future__ import annotations
 import math
 import struct
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import can
 
-from hil import clock
+from hil.transport.cyclic import Cyclic
 
 RAMP_TYPES = (0, 1, 2, 3)
 PEAK = {3: 1.0, 2: math.pi / 2, 1: 2.0}  # peak acceleration / Acc of each shape (004:226)
@@ -394,9 +393,7 @@ class AxisGroup:
         self.missed_cycles = 0
         self.bitrate = bitrate
         self._frame_bits = frame_bits or (lambda cob, dlc: 47 + 8 * dlc)
-        self._stop = threading.Event()
-        self._event: Any = None
-        self._thread: threading.Thread | None = None
+        self._cyclic: Cyclic | None = None
         self._lock = threading.Lock()
 
     # -- setup ---------------------------------------------------------------------------
@@ -444,38 +441,12 @@ class AxisGroup:
 
     # -- the cycle -----------------------------------------------------------------------
     def start(self) -> None:
-        clk = clock.current()
-        if isinstance(clk, clock.VirtualClock):
-            self._clock = clk
-            self._event = clk.after(0, self._tick)
-        else:
-            self._thread = threading.Thread(target=self._run, daemon=True, name="axis-group")
-            self._thread.start()
+        """Cycles on the bench's clock (hil.transport.cyclic: exact in virtual time)."""
+        self._cyclic = Cyclic(self.cycle, self.cycle_s, name="axis-group")
 
     def stop(self) -> None:
-        self._stop.set()
-        if self._event is not None:
-            self._event.cancel()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=1.0)
-
-    def _tick(self) -> None:
-        if self._stop.is_set():
-            return
-        self.cycle()
-        self._event = self._clock.after(round(self.cycle_s * 1e9), self._tick)
-
-    def _run(self) -> None:
-        period = round(self.cycle_s * 1e9)
-        due = time.perf_counter_ns()
-        while not self._stop.is_set():
-            self.cycle()
-            due += period
-            wait = due - time.perf_counter_ns()
-            if wait < -period:
-                due = time.perf_counter_ns()  # a stall: a new phase, no burst
-            elif wait > 0 and self._stop.wait(wait / 1e9):
-                return
+        if self._cyclic is not None:
+            self._cyclic.stop()
 
     def cycle(self) -> None:
         """One CycleTime: judge the last cycle's feedback, compute and send the set-points,

@@ -22,19 +22,20 @@ from hil import clock
 REPHASE = 0.25  # of the period: later than this, restart the cycle from the late frame
 
 
-class CyclicSender:
-    """Sends `msg` on `bus` every `period_s` from a daemon thread until `stop()`."""
+class Cyclic:
+    """Calls `fn()` every `period_s` on the current clock until `stop()` or `fn()` returns
+    False: clock events in virtual time (exactly on period), else a daemon thread that
+    re-phases after a stall instead of catching up in a burst."""
 
-    def __init__(self, bus: can.BusABC, msg: can.Message, period_s: float, *,
-                 rephase: float = REPHASE,
-                 on_late: Callable[[int], None] | None = None) -> None:
+    def __init__(self, fn: Callable[[], bool | None], period_s: float, *,
+                 rephase: float = REPHASE, on_late: Callable[[int], None] | None = None,
+                 name: str = "cyclic") -> None:
         if period_s <= 0:
             raise ValueError(f"period {period_s} s: must be > 0")
-        self.bus, self.msg = bus, msg
+        self.fn = fn
         self.period_ns = round(period_s * 1e9)
         self.rephase_ns = round(self.period_ns * rephase)
         self.on_late = on_late
-        self.sent = 0
         self.rephased = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -44,17 +45,11 @@ class CyclicSender:
             self._clock = clk
             self._event = clk.after(0, self._tick)
             return
-        self._thread = threading.Thread(target=self._run, daemon=True,
-                                        name=f"cyclic-{msg.arbitration_id:03X}")
+        self._thread = threading.Thread(target=self._run, daemon=True, name=name)
         self._thread.start()
 
     def _tick(self) -> None:
-        if self._stop.is_set():
-            return
-        try:
-            self.bus.send(self.msg)
-            self.sent += 1
-        except Exception:  # a closed bus ends the producer, as a stopped master
+        if self._stop.is_set() or self.fn() is False:
             return
         self._event = self._clock.after(self.period_ns, self._tick)
 
@@ -67,10 +62,7 @@ class CyclicSender:
                 if self.on_late is not None:
                     self.on_late(now - due)
                 due = now
-            try:
-                self.bus.send(self.msg)
-                self.sent += 1
-            except Exception:  # a closed bus ends the producer, as a stopped master
+            if self.fn() is False:
                 return
             due += self.period_ns
             wait = due - time.perf_counter_ns()
@@ -83,3 +75,24 @@ class CyclicSender:
             self._event.cancel()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=1.0)
+
+
+class CyclicSender(Cyclic):
+    """Sends `msg` on `bus` every `period_s` until `stop()` (a closed bus ends it, as a
+    stopped master)."""
+
+    def __init__(self, bus: can.BusABC, msg: can.Message, period_s: float, *,
+                 rephase: float = REPHASE,
+                 on_late: Callable[[int], None] | None = None) -> None:
+        self.bus, self.msg = bus, msg
+        self.sent = 0
+        super().__init__(self._send, period_s, rephase=rephase, on_late=on_late,
+                         name=f"cyclic-{msg.arbitration_id:03X}")
+
+    def _send(self) -> bool:
+        try:
+            self.bus.send(self.msg)
+        except Exception:  # a closed bus ends the producer, as a stopped master
+            return False
+        self.sent += 1
+        return True

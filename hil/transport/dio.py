@@ -40,6 +40,7 @@ from hil.transport.zenoh_net import (
     config_from,
     lease_token,
     open_session,
+    undeclare,
     wait_connected,
 )
 
@@ -330,10 +331,7 @@ class ZenohDio(DioPort):
         pub.put(b"1" if level else b"0", attachment=_T.pack(t) + (lease_token(key) or b""))
 
     def _close_backend(self) -> None:
-        for entity in (self._sub, self._queryable, *self._pubs.values()):
-            if entity is not None:
-                with contextlib.suppress(zenoh.ZError):
-                    entity.undeclare()
+        undeclare(self._sub, self._queryable, *self._pubs.values())
         self._sub = self._queryable = None
         self._pubs.clear()
         close_session(self.session)

@@ -24,7 +24,6 @@ A real pulse generator / high-speed counter implements `PulsePort` (see `PulseAd
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import re
@@ -37,7 +36,13 @@ import zenoh
 
 from hil import clock
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
-from hil.transport.zenoh_net import close_session, config_from, open_session, wait_connected
+from hil.transport.zenoh_net import (
+    close_session,
+    config_from,
+    open_session,
+    undeclare,
+    wait_connected,
+)
 
 Role = Literal["master", "drive"]
 ROLES = ("master", "drive")
@@ -353,10 +358,7 @@ class ZenohPulse(PulsePort):
         self._pub(line).put(b"1" if level else b"0", attachment=_T.pack(t))
 
     def _close_backend(self) -> None:
-        for entity in (self._sub, self._queryable, *self._pubs.values()):
-            if entity is not None:
-                with contextlib.suppress(zenoh.ZError):
-                    entity.undeclare()
+        undeclare(self._sub, self._queryable, *self._pubs.values())
         self._sub = self._queryable = None
         self._pubs.clear()
         close_session(self.session)

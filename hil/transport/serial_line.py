@@ -47,6 +47,7 @@ from hil.transport.zenoh_net import (
     config_from,
     lease_token,
     open_session,
+    undeclare,
     wait_connected,
     wait_matching,
 )
@@ -536,10 +537,7 @@ class ZenohLine(SerialLine):
         self._pub.put(payload, attachment=lease_token(self._out_key))
 
     def _close_backend(self) -> None:
-        for entity in (self._sub, self._pub):
-            if entity is not None:
-                with contextlib.suppress(zenoh.ZError):
-                    entity.undeclare()
+        undeclare(self._sub, self._pub)
         self._sub = self._pub = None
         close_session(self.session)
 

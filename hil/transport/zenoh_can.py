@@ -37,6 +37,7 @@ from hil.transport.zenoh_net import (
     lease_token,
     make_config,
     open_session,
+    undeclare,
     wait_connected,
     wait_matching,
 )
@@ -195,12 +196,7 @@ class ZenohBus(BusABC):
             self._queue.put(own)
 
     def _close_zenoh(self) -> None:
-        for entity in (self._sub, self._sync, self._pub):
-            if entity is not None:
-                try:
-                    entity.undeclare()
-                except zenoh.ZError:
-                    pass
+        undeclare(self._sub, self._sync, self._pub)
         self._sub = self._pub = self._sync = None
         if self._own_session and self._session is not None:
             close_session(self._session)

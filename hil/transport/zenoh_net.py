@@ -32,6 +32,7 @@ import threading
 import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import zenoh
 
@@ -164,6 +165,15 @@ def open_session(config: zenoh.Config, *, what: str = "zenoh session") -> zenoh.
         _install_hook()
         _sessions.add(session)
     return session
+
+
+def undeclare(*entities: Any) -> None:
+    """Undeclare subscribers, publishers and queryables (None skipped; a session already
+    gone is no error): the first half of closing a zenoh transport."""
+    for entity in entities:
+        if entity is not None:
+            with contextlib.suppress(zenoh.ZError):
+                entity.undeclare()
 
 
 def close_session(session: zenoh.Session) -> None:

@@ -66,6 +66,27 @@ def _axes(v: Checker, m: Any, where: str) -> list[str]:
     return [str(x) for x in seq]
 
 
+def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
+    """What a gear and a cam share: axis, master, In/Out (neither 0), the master's source."""
+    out = {"axis": _axis_name(v, m, "axis", where),
+           "master": _axis_name(v, m, "master", where),
+           "in": _num(v, m, "in", where, -1e9, 1e9, 1),
+           "out": _num(v, m, "out", where, -1e9, 1e9, 1)}
+    if out["out"] == 0:
+        raise v.err(m.kline("out"), join(where, "out"), "0: a gear ratio In/Out needs Out")
+    if out["in"] == 0:
+        raise v.err(m.kline("in"), join(where, "in"),
+                    "ratio 0: nothing would move (group_command 7 ramps a gear out)")
+    if out["axis"] == out["master"]:
+        raise v.err(line, where, "an axis cannot be its own master")
+    src = m.get("source", "write")
+    if src not in ("write", "actual"):
+        raise v.err(m.kline("source"), join(where, "source"),
+                    "write (master WritePosition) or actual (master Position)")
+    out["source"] = 1 if src == "write" else 2
+    return out
+
+
 def _members(g: AxisGroup, names: list[str]) -> list[ServoAxis]:
     missing = [n for n in names if n not in g.by_name]
     if missing:
@@ -252,23 +273,8 @@ class GroupGear(StepKind):
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "master", "in", "out", "inc_in", "source"}, where)
-        out = {"axis": _axis_name(v, m, "axis", where),
-               "master": _axis_name(v, m, "master", where),
-               "in": _num(v, m, "in", where, -1e9, 1e9, 1),
-               "out": _num(v, m, "out", where, -1e9, 1e9, 1),
-               "inc_in": _num(v, m, "inc_in", where, 0, 1e9, 0)}
-        if out["out"] == 0:
-            raise v.err(m.kline("out"), join(where, "out"), "0: a gear ratio In/Out needs Out")
-        if out["in"] == 0 and out["inc_in"] == 0:
-            raise v.err(m.kline("in") if "in" in m else line, join(where, "in"),
-                        "ratio 0: nothing would move (use group_stop or a desync ramp)")
-        if out["axis"] == out["master"]:
-            raise v.err(line, where, "an axis cannot be its own master")
-        src = m.get("source", "write")
-        if src not in ("write", "actual"):
-            raise v.err(m.kline("source"), join(where, "source"),
-                        "write (master WritePosition) or actual (master Position)")
-        out["source"] = 1 if src == "write" else 2
+        out = _coupling(v, m, line, where)
+        out["inc_in"] = _num(v, m, "inc_in", where, 0, 1e9, 0)
         return out
 
     def check(self, cc: CheckContext) -> None:
@@ -306,16 +312,8 @@ class GroupCam(StepKind):
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "master", "in", "out", "table", "type", "scale", "source"}, where)
-        out = {"axis": _axis_name(v, m, "axis", where),
-               "master": _axis_name(v, m, "master", where),
-               "in": _num(v, m, "in", where, -1e9, 1e9, 1),
-               "out": _num(v, m, "out", where, -1e9, 1e9, 1),
-               "scale": _num(v, m, "scale", where, -1e6, 1e6, 1)}
-        if out["out"] == 0 or out["in"] == 0:
-            raise v.err(m.kline("in") if "in" in m else line, join(where, "in"),
-                        "ratio In/Out: neither may be 0")
-        if out["axis"] == out["master"]:
-            raise v.err(line, where, "an axis cannot be its own master")
+        out = _coupling(v, m, line, where)
+        out["scale"] = _num(v, m, "scale", where, -1e6, 1e6, 1)
         if "table" not in m:
             raise v.err(line, where, "needs `table:` (cam positions, one per 1024 pointer "
                         "increments)")
@@ -330,10 +328,6 @@ class GroupCam(StepKind):
         if kind not in ("return", "incremental"):
             raise v.err(m.kline("type"), join(where, "type"), "return or incremental")
         out["type"] = 0 if kind == "return" else 1
-        src = m.get("source", "write")
-        if src not in ("write", "actual"):
-            raise v.err(m.kline("source"), join(where, "source"), "write or actual")
-        out["source"] = 1 if src == "write" else 2
         return out
 
     def check(self, cc: CheckContext) -> None:

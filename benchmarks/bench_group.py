@@ -1,0 +1,104 @@
+"""Scale of the axis group (issue 27): the largest number of axes one virtual 1 Mbit/s CAN
+bus carries at SYNC 1, 2 and 4 ms with 0 missed cycles, beside the limit the wire's bit time
+allows, and the CPU cost per axis-cycle. Prints, asserts nothing.
+
+    .venv/bin/python benchmarks/bench_group.py [--seconds 600] [--cycles 1,2,4]
+
+Each run is a plan on a generated bench of N virtual A3 on one in-process bus, in virtual
+time: `group` (IP mode, RPDO + SYNC + TPDO per axis per cycle), a harmonic PG move on every
+axis, then `--seconds` of bench time; missed cycles are read from the recording. N grows to
+the plan checker's limit (worst-case stuffing, 115 bits a 6-byte PDO frame); the wire's
+exact limit is printed beside it (the frames' own stuff bits, hil.transport.sim.frame_bits).
+The baseline is that exact limit; the CPU cost is wall time over axis-cycles.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import can
+from mcap.reader import make_reader
+
+from hil.bench.bench import loads_bench
+from hil.plan.plan import loads_plan
+from hil.plan.runner import run_plan
+from hil.transport.sim import frame_bits
+
+
+def _bench(n: int) -> str:
+    drives = "\n".join(
+        f"  axis{i}: {{profile: asda-a3, can: can0, node_id: {i}, param_via: sdo,\n"
+        f"           mechanics: {{nl_rev: -1000, pl_rev: 1000, hard_stop_neg_rev: null,\n"
+        f"                       hard_stop_pos_rev: null}}}}"
+        for i in range(1, n + 1))
+    return (f"name: group{n}\nvirtual: true\nprocess: inproc\ncan:\n  can0: \"virtual:auto\"\n"
+            f"drives:\n{drives}\nsafe_state: {{controlword: disable_voltage, timeout: 3s}}\n"
+            "motion_allowed: true\n")
+
+
+def _plan(n: int, cycle_ms: int, seconds: float) -> str:
+    axes = ", ".join(f"axis{i}" for i in range(1, n + 1))
+    return (f"name: scale\nsteps:\n  - group: {{axes: [{axes}], cycle: {cycle_ms}ms}}\n"
+            f"  - group_move: {{axes: [{axes}], to: 1000000, speed: 200000, acc: 400000, "
+            f"dec: 400000, ramp: 2}}\n  - wait: {seconds:g}s\n  - group_stop: {{}}\n")
+
+
+def exact_limit(cycle_ms: int, bitrate: int = 1_000_000) -> int:
+    """Axes whose RPDO + TPDO (with their real stuff bits, zero data: the worst is higher)
+    and the SYNC fit a cycle."""
+    def bits(cob: int, dlc: int) -> int:
+        return frame_bits(can.Message(arbitration_id=cob, data=bytes(dlc), is_extended_id=False))
+    budget = bitrate * cycle_ms / 1000 - bits(0x80, 0)
+    n = 0
+    while budget >= bits(0x201 + n, 6) + bits(0x181 + n, 6):
+        budget -= bits(0x201 + n, 6) + bits(0x181 + n, 6)
+        n += 1
+    return n
+
+
+def checker_limit(cycle_ms: int) -> int:
+    return int((1_000_000 * cycle_ms / 1000 - 50) // 230)
+
+
+def run(n: int, cycle_ms: int, seconds: float) -> tuple[int, int, float]:
+    with tempfile.TemporaryDirectory() as tmp:
+        bench = loads_bench(_bench(n), str(Path(tmp) / "bench.yaml"))
+        t0 = time.process_time()
+        res = run_plan(loads_plan(_plan(n, cycle_ms, seconds), "scale.yaml"), bench, tmp)
+        cpu = time.process_time() - t0
+        with open(res.recording, "rb") as f:
+            cycles = [json.loads(m.data) for _, _, m in
+                      make_reader(f).iter_messages(topics=["/group/axes/cycle"])]
+    missed = sum(1 for c in cycles if c["missed"])
+    if not res.passed:
+        missed = max(missed, 1)
+    return len(cycles), missed, cpu
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=600.0, help="bench time per run")
+    ap.add_argument("--cycles", default="1,2,4", help="SYNC cycles in ms")
+    a = ap.parse_args()
+    print(f"bench time per run: {a.seconds:g} s")
+    print(f"{'SYNC':>6} {'wire limit':>10} {'checker':>8} {'carried':>8} {'missed':>7} "
+          f"{'cycles':>8} {'µs CPU / axis-cycle':>20}")
+    for cyc in (int(x) for x in a.cycles.split(",")):
+        best, row = 0, (0, 0, 0.0)
+        for n in range(1, checker_limit(cyc) + 1):
+            cycles, missed, cpu = run(n, cyc, a.seconds)
+            if missed:
+                break
+            best, row = n, (cycles, missed, cpu)
+        cycles, missed, cpu = row
+        per = cpu / max(1, cycles * best) * 1e6
+        print(f"{cyc:>4}ms {exact_limit(cyc):>10} {checker_limit(cyc):>8} {best:>8} "
+              f"{missed:>7} {cycles:>8} {per:>20.1f}")
+
+
+if __name__ == "__main__":
+    main()
