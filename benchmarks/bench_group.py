@@ -32,11 +32,13 @@ from hil.transport.sim import frame_bits
 def _bench(n: int) -> str:
     drives = "\n".join(
         f"  axis{i}: {{profile: asda-a3, can: can0, node_id: {i}, param_via: sdo,\n"
+        f"           dio: \"virtual:auto\", wiring: {{SON: DI1, EMGS: \"DI8:b\"}},\n"
         f"           mechanics: {{nl_rev: -1000, pl_rev: 1000, hard_stop_neg_rev: null,\n"
         f"                       hard_stop_pos_rev: null}}}}"
         for i in range(1, n + 1))
     return (f"name: group{n}\nvirtual: true\nprocess: inproc\ncan:\n  can0: \"virtual:auto\"\n"
-            f"drives:\n{drives}\nsafe_state: {{controlword: disable_voltage, timeout: 3s}}\n"
+            f"drives:\n{drives}\nsafe_state: {{controlword: disable_voltage, wait_brake: false,"
+            " timeout: 3s}\n"
             "motion_allowed: true\n")
 
 
@@ -68,7 +70,8 @@ def run(n: int, cycle_ms: int, seconds: float) -> tuple[int, int, float]:
     with tempfile.TemporaryDirectory() as tmp:
         bench = loads_bench(_bench(n), str(Path(tmp) / "bench.yaml"))
         t0 = time.process_time()
-        res = run_plan(loads_plan(_plan(n, cycle_ms, seconds), "scale.yaml"), bench, tmp)
+        res = run_plan(loads_plan(_plan(n, cycle_ms, seconds), "scale.yaml"), bench,
+                       Path(tmp))
         cpu = time.process_time() - t0
         with open(res.recording, "rb") as f:
             cycles = [json.loads(m.data) for _, _, m in
