@@ -67,3 +67,28 @@ steps:
     assert [s.index for s in bad] == [3] and bad[0].verdicts[0]["status"] == "fail"
     missed = [c for c in _cycles(res.recording) if c["missed"]]
     assert 8 <= len(missed) <= 11 and all(c["missed"] == ["axis1", "axis2"] for c in missed)
+
+
+def test_a_failing_group_plan_stops_its_stream_before_the_safe_state(tmp_path) -> None:
+    # the group's RPDOs carry "enable operation" every cycle: on a failure they stop first,
+    # then the safe state disables the drives, and it stays so (recorded, in that order)
+    plan = loads_plan("""name: fails
+steps:
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_move: {axes: [axis1, axis2], run: 50000, acc: 500000}
+  - wait: 100ms
+  - group_expect: {axis: axis1, position: [0, 1]}
+""", "fails.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.status == "fail" and res.safe is not None and res.safe.ok
+    with open(res.recording, "rb") as f:
+        reader = make_reader(f)
+        actions = [json.loads(m.data)["action"] for _, _, m in
+                   reader.iter_messages(topics=["/safety"])]
+    with open(res.recording, "rb") as f:
+        last = {}
+        for _, ch, m in make_reader(f).iter_messages(topics=["/drive/axis1/state",
+                                                             "/drive/axis2/state"]):
+            last[ch.topic] = json.loads(m.data)
+    assert actions[0] == "setpoint_streams_stopped" and actions[-1] == "safe_state_reached"
+    assert all(not s["servo_on"] for s in last.values())

@@ -61,6 +61,10 @@ def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:
         # injected faults end before the safe state needs the wire; a stuck DI stays at
         # its stuck level (not back to what the plan last asked) until the safe state sets it
         session.stop_faults(restore=False)
+    stopped = session.stop_streams() if hasattr(session, "stop_streams") else 0
+    if stopped and recorder is not None:  # set-point streams end before anything is disabled
+        recorder.safety("setpoint_streams_stopped", reason, ok=True,
+                        detail=f"{stopped} cyclic set-point stream(s) stopped")
     dead_drives = getattr(session, "dead_drives", None)
     dead = dead_drives() if callable(dead_drives) else {}
     drives = [_SessionDrive(n, d, dead.get(n)) for n, d in session.drives.items()]

@@ -159,6 +159,7 @@ class Session:
         self.bench, self.recorder, self.world = bench, recorder, world
         self.drives: dict[str, DriveIO] = {}
         self._closers: list[Callable[[], None]] = []
+        self._safe_hooks: list[Callable[[], None]] = []
         self.lease: Any = None  # hil.gateway.client.Lease when the bench is behind a gateway
         # fault layers (bench faults_allowed) and CANopen networks, by bus / line / drive name
         self.nets: dict[str, Any] = {}
@@ -213,6 +214,19 @@ class Session:
             for line in d.spec.sto.values():
                 d.set_line(line, True)
         clock.sleep(0.02)  # beyond the P2.009 DI filter (L9229-9236) before the first step
+
+    def before_safe(self, fn: Callable[[], None]) -> None:
+        """Run `fn` before the safe state (an axis group's set-point stream stops first, so
+        that its enabling controlwords cannot undo the safe state)."""
+        self._safe_hooks.append(fn)
+
+    def stop_streams(self) -> int:
+        """Run the `before_safe` hooks (never raises); returns how many ran."""
+        hooks, self._safe_hooks = self._safe_hooks, []
+        for fn in hooks:
+            with contextlib.suppress(Exception):
+                fn()
+        return len(hooks)
 
     def on_close(self, fn: Callable[[], None]) -> None:
         """Run `fn` when the session closes, before the transports opened so far close."""

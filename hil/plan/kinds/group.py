@@ -176,6 +176,7 @@ class Group(StepKind):
         group.start()
         ctx.store[_KEY] = group
         ctx.session.on_close(group.stop)
+        ctx.session.before_safe(group.stop)  # its controlwords must not undo the safe state
         for a in axes:
             drives[a.name].cia.write(0x6040, 0, 0x06)
         clock.sleep(3 * group.cycle_s)
