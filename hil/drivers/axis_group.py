@@ -9,6 +9,10 @@ the SYNC; each drive answers with TPDO1 (6041h, 6064h) sampled at that SYNC (L17
 feedback that has not come when the next cycle starts is a **missed cycle**, counted per
 axis and recorded on `/group/<name>/cycle` with the cycle's bus load.
 
+When an axis is lost (status -1) or faulted (1), the group's policy is that every axis geared
+or cammed to it holds its gear input where that master was last seen (`held` on the cycle
+record), so no follower jumps or chases; the other axes go on.
+
 Per axis (`ServoAxis`, 004:254-256): `mode` 1 PG, 3 GEA, 4 PG+GEA; `write_position` = PG.APos
 (+ GEA.Position) + Offset + Correction; `position`, `position_error`, `speed`; `control` bits
 (0 fault reset, held >= 1 cycle; 1 axis not under torque); `status` -1 lost after
@@ -249,6 +253,43 @@ class Gea:
             self.cam_position = self.cam_value(self.position)
 
 
+# ------------------------------------------------------------------------------ SDO interface
+
+
+@dataclass
+class SdoInterface:
+    """The SDO interface of one axis (004:248-250): Control 1 write / 2 read (0 when done),
+    Status 0 OK / 1 in progress / 2 error, NumberByte 1-4, Index, SubIndex, Data (the value,
+    or the abort code when Status = 2)."""
+
+    control: int = 0
+    status: int = 0
+    number_byte: int = 4
+    index: int = 0
+    sub: int = 0
+    data: int = 0
+
+    def execute(self, upload: Callable[[int, int], bytes],
+                download: Callable[[int, int, bytes], None]) -> None:
+        """Carry out the request in `control` through an SDO client's upload/download."""
+        if self.control not in (1, 2):
+            return
+        self.status = 1
+        try:
+            if self.control == 1:
+                raw = (self.data & ((1 << (8 * self.number_byte)) - 1)).to_bytes(
+                    self.number_byte, "little")
+                download(self.index, self.sub, raw)
+            else:
+                raw = upload(self.index, self.sub)
+                self.data = int.from_bytes(raw[:self.number_byte], "little")
+            self.status = 0
+        except Exception as e:
+            self.status = 2
+            self.data = int(getattr(e, "code", 0x05040000))  # SDO protocol timed out
+        self.control = 0
+
+
 # ------------------------------------------------------------------------------ the axes
 
 
@@ -269,6 +310,7 @@ class ServoAxis:
     statusword: int = 0
     missed: int = 0
     rdy_cycle: int = 0  # the cycle in which the PG last reached its target
+    sdo: SdoInterface = field(default_factory=SdoInterface)
     command: int = 0  # COMMAND.Control (004:240): the function number, 0 once accepted
     par: list[float] = field(default_factory=lambda: [0.0] * 15)  # COMMAND.Par[0..14]
     pg: Pg = field(default_factory=Pg)
@@ -394,6 +436,7 @@ class AxisGroup:
         self.bitrate = bitrate
         self._frame_bits = frame_bits or (lambda cob, dlc: 47 + 8 * dlc)
         self._cyclic: Cyclic | None = None
+        self.held: list[str] = []  # followers holding: their master is lost or faulted
         self._lock = threading.Lock()
 
     # -- setup ---------------------------------------------------------------------------
@@ -474,7 +517,16 @@ class AxisGroup:
                 g = a.gea
                 if g.mode and g.master in masters:
                     m = masters[g.master]
-                    src = {1: m.write_position, 2: m.position}.get(g.source, self.cycles)
+                    if m.status in (STATUS_LOST, STATUS_FAULT) and g._last is not None:
+                        # the group's policy: a follower of a lost or faulted master holds
+                        # its gear input where the master was last seen (no jump, no chase)
+                        src = g._last
+                        if a.name not in self.held:
+                            self.held.append(a.name)
+                    else:
+                        src = {1: m.write_position, 2: m.position}.get(g.source, self.cycles)
+                        if a.name in self.held:
+                            self.held.remove(a.name)
                     g.tick(src)
                 a.compute()
         bits = 0
@@ -488,7 +540,8 @@ class AxisGroup:
         bits += self._frame_bits(SYNC_ID, 0)
         self.cycles += 1
         if self.on_cycle is not None:
-            self.on_cycle({"cycle": self.cycles, "missed": missed,
+            self.on_cycle({"cycle": self.cycles, "missed": missed, "held": list(self.held),
+                           "status": {a.name: a.status for a in self.axes},
                            "bus_load_pct": round(100.0 * bits / (self.bitrate * dt), 2),
                            "write_position": {a.name: round(a.write_position)
                                               for a in self.axes},

@@ -160,3 +160,28 @@ def test_command_control_returns_to_0_on_acceptance_and_7_after_its_ramp() -> No
     slave.accept_command(axes)
     slave.compute()
     assert slave.pg.apos == 100.0 and slave.write_position == pytest.approx(1234.0)
+
+
+def test_sdo_interface_handshake_and_abort_code() -> None:
+    # Control 1 write / 2 read -> 0 when done; Status 0 OK, 2 error with the code in Data
+    from hil.drivers.axis_group import SdoInterface
+
+    store: dict[tuple[int, int], bytes] = {}
+
+    class Abort(Exception):
+        code = 0x06010002
+
+    def download(i: int, s: int, raw: bytes) -> None:
+        if i == 0x6041:
+            raise Abort()
+        store[(i, s)] = raw
+
+    sdo = SdoInterface(control=1, number_byte=2, index=0x6060, sub=0, data=0x1234)
+    sdo.execute(lambda i, s: store[(i, s)], download)
+    assert (sdo.control, sdo.status) == (0, 0) and store[(0x6060, 0)] == b"\x34\x12"
+    sdo = SdoInterface(control=2, number_byte=2, index=0x6060, sub=0)
+    sdo.execute(lambda i, s: store[(i, s)], download)
+    assert (sdo.control, sdo.status, sdo.data) == (0, 0, 0x1234)
+    sdo = SdoInterface(control=1, number_byte=2, index=0x6041, sub=0, data=1)
+    sdo.execute(lambda i, s: b"", download)
+    assert (sdo.control, sdo.status, sdo.data) == (0, 2, 0x06010002)

@@ -412,6 +412,63 @@ class GroupCommand(StepKind):
         return f"group_command {self.args['axis']} {self.args['code']}"
 
 
+class GroupSdo(StepKind):
+    """`group_sdo: {axis, write | read: {index, sub, bytes, data}, expect: {status, data}}`:
+    the SDO interface's handshake (004:248-250): Control 1 / 2, wait Control = 0, Status 0 OK
+    or 2 with the abort code in Data."""
+
+    name = "group_sdo"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "write", "read", "expect"}, where)
+        ops = [k for k in ("write", "read") if k in m]
+        if len(ops) != 1:
+            raise v.err(line, where, "one of write: or read:")
+        op = ops[0]
+        r = v.mapping(m[op], m.kline(op), join(where, op))
+        v.keys(r, {"index", "sub", "bytes", "data"}, join(where, op))
+        w = join(where, op)
+        out = {"axis": _axis_name(v, m, "axis", where), "control": 1 if op == "write" else 2,
+               "index": int(_num(v, r, "index", w, 0, 0xFFFF)),
+               "sub": int(_num(v, r, "sub", w, 0, 0xFF, 0)),
+               "bytes": int(_num(v, r, "bytes", w, 1, 4, 4)),
+               "data": int(_num(v, r, "data", w, -(2**31), 2**32 - 1, 0)) if op == "write"
+               else 0}
+        out["expect"] = {}
+        if "expect" in m:
+            e = v.mapping(m["expect"], m.kline("expect"), join(where, "expect"))
+            v.keys(e, {"status", "data"}, join(where, "expect"))
+            out["expect"] = {k: int(e[k]) for k in e}
+        return out
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [self.args["axis"]], "axis")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        g = _group(ctx)
+        (ax,) = _members(g, [a["axis"]])
+        s = ax.sdo
+        s.number_byte, s.index, s.sub, s.data = a["bytes"], a["index"], a["sub"], a["data"]
+        s.control = a["control"]
+        sdo = ctx.session.drive(ax.name).cia.node.sdo
+        s.execute(sdo.upload, sdo.download)
+        seen = {"status": s.status, "data": s.data}
+        text = (f"{'write' if a['control'] == 1 else 'read'} {a['index']:04X}h:{a['sub']:02X}: "
+                f"Status {s.status}, Data 0x{s.data:X}")
+        bad = [f"{k} {seen[k]:#x}, expected {v:#x}" for k, v in a["expect"].items()
+               if seen[k] != v]
+        if bad:
+            raise StepFailed("; ".join(bad) + f" ({text})")
+        return Outcome(text)
+
+    def describe(self) -> str:
+        a = self.args
+        return f"group_sdo {a['axis']} {a['index']:04X}h:{a['sub']}"
+
+
 class GroupWait(StepKind):
     """`group_wait: {rdy: [axes], timeout}`: until each PG reached its target (PG.Rdy)."""
 
@@ -441,7 +498,8 @@ class GroupWait(StepKind):
 
 class GroupExpect(StepKind):
     """`group_expect: {axis | axes, position: [lo, hi], write_position: [lo, hi],
-    pg_position: [lo, hi], missed: n, rdy_same_cycle: true}`: the group's view of its axes."""
+    pg_position: [lo, hi], missed: n, rdy_same_cycle: true, status: -1..3, held: bool}`: the
+    group's view of its axes."""
 
     name = "group_expect"
     judge_only = True
@@ -450,7 +508,7 @@ class GroupExpect(StepKind):
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "axes", "position", "write_position", "pg_position", "missed",
-                   "rdy_same_cycle"}, where)
+                   "rdy_same_cycle", "status", "held"}, where)
         out: dict[str, Any] = {"axes": _axes(v, m, where)}
         for k in ("position", "write_position", "pg_position"):
             if k in m:
@@ -463,6 +521,13 @@ class GroupExpect(StepKind):
             out["missed"] = int(_num(v, m, "missed", where, 0, 1e9))
         if "rdy_same_cycle" in m:
             out["rdy_same_cycle"] = bool(m["rdy_same_cycle"])
+        if "status" in m:
+            if m["status"] not in (-1, 0, 1, 2, 3) or isinstance(m["status"], bool):
+                raise v.err(m.kline("status"), join(where, "status"),
+                            "-1 lost, 0 never, 1 fault, 2 ready, 3 with torque (004:254)")
+            out["status"] = m["status"]
+        if "held" in m:
+            out["held"] = bool(m["held"])
         return out
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
@@ -480,6 +545,10 @@ class GroupExpect(StepKind):
                             bad.append(f"{ax.name} {k} {val:.0f} not in [{lo:g}, {hi:g}]")
                 if "missed" in a and ax.missed > a["missed"]:
                     bad.append(f"{ax.name} missed {ax.missed} cycles")
+                if "status" in a and ax.status != a["status"]:
+                    bad.append(f"{ax.name} status {ax.status}, not {a['status']}")
+                if "held" in a and (ax.name in g.held) != a["held"]:
+                    bad.append(f"{ax.name} {'not ' if a['held'] else ''}held")
             if a.get("rdy_same_cycle") and len({ax.rdy_cycle for ax in axes}) != 1:
                 bad.append("targets reached in cycles " + ", ".join(
                     f"{ax.name} {ax.rdy_cycle}" for ax in axes))
@@ -508,5 +577,5 @@ class GroupStop(StepKind):
         return Outcome(f"{g.cycles} cycles, {g.missed_cycles} missed")
 
 
-KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupCommand, GroupWait, GroupExpect,
-         GroupStop)
+KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupCommand, GroupSdo, GroupWait,
+         GroupExpect, GroupStop)
