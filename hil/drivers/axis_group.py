@@ -138,6 +138,7 @@ class Pg:
         """Advance by one cycle of `dt` s."""
         plan = self._plan
         if plan is None:
+            self.apos += self.aspeed * dt  # speed control at its speed (0 at rest)
             return
         self._t += dt
         t = self._t

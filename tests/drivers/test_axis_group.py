@@ -185,3 +185,13 @@ def test_sdo_interface_handshake_and_abort_code() -> None:
     sdo = SdoInterface(control=1, number_byte=2, index=0x6041, sub=0, data=1)
     sdo.execute(lambda i, s: b"", download)
     assert (sdo.control, sdo.status, sdo.data) == (0, 2, 0x06010002)
+
+
+def test_speed_mode_keeps_running_at_its_speed() -> None:
+    pg = Pg(acc=100_000, type=3)
+    pg.start_speed(20_000)
+    _run(pg)
+    p0 = pg.apos
+    for _ in range(1000):
+        pg.tick(DT)
+    assert pg.apos - p0 == pytest.approx(20_000, rel=1e-9)  # one second at 20000 inc/s
