@@ -111,3 +111,21 @@ def test_a_lost_master_s_follower_holds_without_a_jump(tmp_path) -> None:
     assert len(held) > 10 and len(set(held)) == 1
     before = [c["write_position"]["axis2"] for c in cycles[first - 20:first]]
     assert len(set(before)) > 1  # it was moving until then
+
+
+def test_group_follow_fails_when_a_drive_cannot_keep_up(tmp_path) -> None:
+    # axis1 limited to 60 rpm by P1.055 (L4034) is asked for 120 rpm (200000 PUU/s with the
+    # default gear): its feedback falls behind the set-points and group_follow fails
+    plan = loads_plan("""name: slow
+params: {P1.055: 60}
+steps:
+  - power_cycle: {battery: true}                # P1.055 mirrored into the axis at boot
+  - group: {axes: [axis1], cycle: 2ms}
+  - group_move: {axis: axis1, to: 400000, speed: 200000, acc: 800000, dec: 800000, ramp: 3}
+  - group_wait: {rdy: [axis1], timeout: 5s}
+  - check_timing: {spec: group_follow}
+  - group_stop: {}
+""", "slow.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    bad = [s for s in res.steps if s.status != "pass"]
+    assert [s.index for s in bad] == [4] and bad[0].verdicts[0]["status"] == "fail"

@@ -319,7 +319,14 @@ class ServoAxis:
     _seen: bool = False  # feedback of the current cycle arrived
     _ever: bool = False
     _last_pos: float | None = None
+    _sent: list[float] = field(default_factory=list)  # the last set-points sent, newest last
 
+    @property
+    def follow_error(self) -> float:
+        """The set-point the feedback answers minus the feedback: the set-point of cycle k
+        reaches the drive at SYNC k and is interpolated to by SYNC k + 1, whose TPDO the
+        group reads in cycle k + 2 (L17051-17057)."""
+        return self._sent[0] - self.position if len(self._sent) == 3 else 0.0
     def accept_command(self, axes: dict[str, ServoAxis]) -> None:
         """COMMAND (004:240-246): the function in `command` with `par`, taken at the start
         of a cycle; `command` returns to 0 on acceptance, 7 (sync off) only once the ratio
@@ -530,6 +537,8 @@ class AxisGroup:
                             self.held.remove(a.name)
                     g.tick(src)
                 a.compute()
+        for a in self.axes:
+            a._sent = [*a._sent[-2:], a.write_position]
         bits = 0
         bus = self.net.bus  # the bus itself: canopen's send lock may be held by an SDO
         for a in self.axes:
@@ -546,4 +555,7 @@ class AxisGroup:
                            "bus_load_pct": round(100.0 * bits / (self.bitrate * dt), 2),
                            "write_position": {a.name: round(a.write_position)
                                               for a in self.axes},
-                           "position": {a.name: round(a.position) for a in self.axes}})
+                           "position": {a.name: round(a.position) for a in self.axes},
+                           "follow_error": {a.name: round(a.follow_error) for a in self.axes},
+                           "max_follow_error": round(max(abs(a.follow_error)
+                                                         for a in self.axes))})
