@@ -129,3 +129,21 @@ steps:
     res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
     bad = [s for s in res.steps if s.status != "pass"]
     assert [s.index for s in bad] == [4] and bad[0].verdicts[0]["status"] == "fail"
+
+
+def test_a_gear_on_servo_tick_runs_at_in_per_cycle(tmp_path) -> None:
+    # GEA.SourcePosition 3 = ServoTick, one per CycleTime (004:230): In/Out = 1000/1 moves
+    # the follower 1000 increments a cycle, 500000 inc/s at 2 ms
+    plan = loads_plan("""name: tick
+steps:
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_gear: {axis: axis2, master: axis1, in: 1000, out: 1, source: time}
+  - wait: 100ms
+  - group_stop: {}
+""", "tick.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed
+    cycles = _cycles(res.recording)
+    geared = [c["write_position"]["axis2"] for c in cycles]
+    steps = {b - a for a, b in zip(geared[-20:], geared[-19:], strict=False)}
+    assert steps == {1000} and geared[-1] > 40_000

@@ -197,7 +197,8 @@ class Gea:
     the last entry as a stroke on every pass; CamPosition = table value x CamScale."""
 
     master: str = ""
-    source: int = 1  # 1 master WritePosition, 2 master Position, 3 ServoTick (time)
+    source: int = 1  # 1 master WritePosition, 2 master Position, 3 ServoTick (time: the
+    # master's name is then only the group's reference; the tick counts cycles)
     gin: float = 1.0
     gout: float = 1.0
     inc_in: float = 0.0  # 0: the ratio at once
@@ -531,7 +532,7 @@ class AxisGroup:
                         src = g._last
                         if a.name not in self.held:
                             self.held.append(a.name)
-                    else:
+                    else:  # 1 WritePosition, 2 Position, 3 ServoTick (one per cycle)
                         src = {1: m.write_position, 2: m.position}.get(g.source, self.cycles)
                         if a.name in self.held:
                             self.held.remove(a.name)

@@ -80,11 +80,15 @@ def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
     if out["axis"] == out["master"]:
         raise v.err(line, where, "an axis cannot be its own master")
     src = m.get("source", "write")
-    if src not in ("write", "actual"):
+    if src not in _SOURCES:
         raise v.err(m.kline("source"), join(where, "source"),
-                    "write (master WritePosition) or actual (master Position)")
-    out["source"] = 1 if src == "write" else 2
+                    "write (master WritePosition), actual (master Position) or time "
+                    "(ServoTick: one per cycle, 004:230)")
+    out["source"] = _SOURCES[src]
     return out
+
+
+_SOURCES = {"write": 1, "actual": 2, "time": 3}  # GEA.SourcePosition (004:230)
 
 
 def _members(g: AxisGroup, names: list[str]) -> list[ServoAxis]:
