@@ -36,6 +36,7 @@ from typing import Any
 import can
 
 from hil.transport.cyclic import Cyclic
+from hil.transport.sim import frame_bits
 
 RAMP_TYPES = (0, 1, 2, 3)
 PEAK = {3: 1.0, 2: math.pi / 2, 1: 2.0}  # peak acceleration / Acc of each shape (004:226)
@@ -420,8 +421,25 @@ class ServoAxis:
             self.status = STATUS_READY
 
 
+def _bits(cob: int, dlc: int) -> int:
+    return frame_bits(can.Message(arbitration_id=cob, data=bytes(dlc), is_extended_id=False))
+
+
 _RX = struct.Struct("<iH")  # RPDO1: 60C1h sub 1 (I32), 6040h (U16)
 _TX = struct.Struct("<Hi")  # TPDO1: 6041h (U16), 6064h (I32)
+
+
+def _map_pdo(w: Callable[[int, int, int], None], comm: int, mapping: int, cob: int,
+             entries: tuple[int, ...]) -> None:
+    """Map one PDO (CiA 301): invalid while mapping, the entries, then valid again on
+    `cob`, transmission type 1 (every SYNC)."""
+    w(comm, 1, 0x80000000 + cob)
+    w(mapping, 0, 0)
+    for k, entry in enumerate(entries, 1):
+        w(mapping, k, entry)
+    w(mapping, 0, len(entries))
+    w(comm, 2, 1)
+    w(comm, 1, cob)
 
 
 class AxisGroup:
@@ -430,7 +448,6 @@ class AxisGroup:
     def __init__(self, network: Any, axes: list[ServoAxis], cycle_s: float, *,
                  sdo_write: Callable[[str, int, int, int], None],
                  on_cycle: Callable[[dict[str, Any]], None] | None = None,
-                 frame_bits: Callable[[int, int], int] | None = None,
                  bitrate: int = 1_000_000) -> None:
         if not axes:
             raise ValueError("an axis group needs at least one axis")
@@ -443,7 +460,10 @@ class AxisGroup:
         self.cycles = 0
         self.missed_cycles = 0
         self.bitrate = bitrate
-        self._frame_bits = frame_bits or (lambda cob, dlc: 47 + 8 * dlc)
+        # the wire per cycle (the same frames every cycle): RPDO1 + TPDO1 per axis and the
+        # SYNC, stuff bits of zero data counted (hil.transport.sim.frame_bits)
+        self.cycle_bits = _bits(SYNC_ID, 0) + sum(
+            _bits(0x200 + a.node, _RX.size) + _bits(0x180 + a.node, _TX.size) for a in axes)
         self._cyclic: Cyclic | None = None
         self.held: list[str] = []  # followers holding: their master is lost or faulted
         self._lock = threading.Lock()
@@ -455,20 +475,8 @@ class AxisGroup:
         us = round(self.cycle_s * 1e6)
         for a in self.axes:
             w = lambda i, s, v, a=a: self._sdo_write(a.name, i, s, v)  # noqa: E731
-            w(0x1400, 1, 0x80000200 + a.node)  # disable while mapping
-            w(0x1600, 0, 0)
-            w(0x1600, 1, 0x60C10120)
-            w(0x1600, 2, 0x60400010)
-            w(0x1600, 0, 2)
-            w(0x1400, 2, 1)
-            w(0x1400, 1, 0x200 + a.node)
-            w(0x1800, 1, 0x80000180 + a.node)
-            w(0x1A00, 0, 0)
-            w(0x1A00, 1, 0x60410010)
-            w(0x1A00, 2, 0x60640020)
-            w(0x1A00, 0, 2)
-            w(0x1800, 2, 1)
-            w(0x1800, 1, 0x180 + a.node)
+            _map_pdo(w, 0x1400, 0x1600, 0x200 + a.node, (0x60C10120, 0x60400010))  # RPDO1
+            _map_pdo(w, 0x1800, 0x1A00, 0x180 + a.node, (0x60410010, 0x60640020))  # TPDO1
             w(0x60C2, 1, round(self.cycle_s * 1000))
             w(0x60C2, 2, -3)
             w(0x1006, 0, us)
@@ -540,20 +548,17 @@ class AxisGroup:
                 a.compute()
         for a in self.axes:
             a._sent = [*a._sent[-2:], a.write_position]
-        bits = 0
         bus = self.net.bus  # the bus itself: canopen's send lock may be held by an SDO
         for a in self.axes:
             bus.send(can.Message(arbitration_id=0x200 + a.node, is_extended_id=False,
                                  data=_RX.pack(round(a.write_position), a.controlword())))
-            bits += self._frame_bits(0x200 + a.node, _RX.size) + self._frame_bits(
-                0x180 + a.node, _TX.size)
         bus.send(can.Message(arbitration_id=SYNC_ID, is_extended_id=False, data=b""))
-        bits += self._frame_bits(SYNC_ID, 0)
         self.cycles += 1
         if self.on_cycle is not None:
             self.on_cycle({"cycle": self.cycles, "missed": missed, "held": list(self.held),
                            "status": {a.name: a.status for a in self.axes},
-                           "bus_load_pct": round(100.0 * bits / (self.bitrate * dt), 2),
+                           "bus_load_pct": round(100.0 * self.cycle_bits / (self.bitrate * dt),
+                                                 2),
                            "write_position": {a.name: round(a.write_position)
                                               for a in self.axes},
                            "position": {a.name: round(a.position) for a in self.axes},

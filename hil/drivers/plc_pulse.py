@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from itertools import accumulate
 from typing import Any
 
 from hil import clock
@@ -231,9 +232,6 @@ class Program:
                 raise PlcError(43, f"{d.mode!r}: ABS or ADR", step=i, field="DRV")
             if chain and d.mode == "ABS":
                 raise PlcError(41, "only the first DRVC may be ABS (001:40)", step=i)
-            if chain and (s.wait_time is not None or s.wait_line or s.act is not None
-                          or s.ext):
-                pass  # transitions inside a chain act after the chain's last segment
             if d.chained:
                 chain += 1
                 if chain >= MAX_DRVC:
@@ -270,7 +268,7 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
         return []
     dt = 1e-3
     v, x = 0.0, 0.0
-    bounds = list(itertools_accumulate(n for n, _ in segments))
+    bounds = list(accumulate(n for n, _ in segments))
     xs: list[float] = []  # position at each ms
     i = 0
     v = min(v0, segments[0][1])
@@ -308,14 +306,6 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
             out[-1] = (out[-1][0] + dur, out[-1][1] + n)
         else:
             out.append((dur, n))
-    return out
-
-
-def itertools_accumulate(values: Any) -> list[float]:
-    total, out = 0.0, []
-    for v in values:
-        total += v
-        out.append(total)
     return out
 
 
@@ -644,12 +634,10 @@ class PulseMaster:
             until = lambda: clock.monotonic_ns() - t0 >= act_ns  # noqa: E731 - ACT
         else:
             until = None
-        continuous = any(self.p.pulses(s.drive.value, s.drive.unit) == 0
-                         for s, _ in chain if isinstance(s.drive, Drv)) and len(chain) == 1
-        if continuous:  # stroke 0: run until the transition (001:38)
+        if len(chain) == 1 and self.p.pulses(first.value, first.unit) == 0:
+            # stroke 0: run until the transition (001:38)
             v = chain[0][1] or self.p.max_speed_pps
-            d0 = chain[0][0].drive
-            direction = -1 if (isinstance(d0, Drv) and d0.direction == "-") else 1
+            direction = -1 if first.direction == "-" else 1
             self.ramp_run(self.p.start_speed_pps, v, direction, until or (lambda: False),
                           left)
             self.stop()

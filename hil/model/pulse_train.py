@@ -95,10 +95,16 @@ class Segment:
 
     @property
     def end(self) -> int | None:
-        """Time of the last pulse, or None for a continuous segment."""
-        if not self.count or self.freq <= 0:
-            return None if not self.count else self.t
-        return self.t + math.ceil(self.count * 1e9 / self.freq)
+        """Time of the last pulse, or None for a continuous segment (a kept segment always
+        has freq > 0: `PulseTrain.segment` drops a 0 Hz one)."""
+        return self.t + math.ceil(self.count * 1e9 / self.freq) if self.count else None
+
+    def counts(self, logic: int) -> int:
+        """Signed decoder counts per pulse: A/B counts 4 (L7670); pulse + sign read with the
+        other logic runs the other way (P1.000.Z, L7676)."""
+        sign = -self.direction if self.form == "pulse_sign" and self.logic != logic \
+            else self.direction
+        return sign * (4 if self.form == "ab" else 1)
 
 
 def filter_max_hz(p1_000: int) -> float | None:
@@ -134,7 +140,6 @@ class PulseTrain:
         self.listeners: list[Callable[[str, dict[str, Any]], None]] = []
         self._cfg: _Config | None = None
         self._pt_now = False  # in PT at the last step with pulses
-        self._in_step = False
         # Cruise: a constant-frequency segment, settled filters: the axis is handed one linear
         # set-point to `_cruise_end` instead of one per 1 ms step; any change ends it with an
         # exact resync of the count, the filter window and the set-point. In between the
@@ -251,7 +256,8 @@ class PulseTrain:
         return s.count - taken
 
     # ------------------------------------------------------------------ counting
-    def _take(self, t: int) -> None:
+    def _take(self, t: int, pt: bool | None = None) -> None:
+        """Count the pulses of the segment up to `t`; `pt`: in PT now (None: look it up)."""
         s = self.seg
         if s is None:
             return
@@ -263,21 +269,19 @@ class PulseTrain:
         if s.count and self._taken >= s.count:
             self.seg = None
             self.freq_hz = 0.0
-        self._count(n, s)
+        self._count(n, s, pt)
 
-    def _count(self, n: int, s: Segment, force: bool = False) -> None:
+    def _count(self, n: int, s: Segment, pt: bool | None = None, force: bool = False) -> None:
         d = self.d
         c = self._config()
-        direction = s.direction
-        if s.form == "pulse_sign" and s.logic != c.logic:
-            direction = -direction  # sign read with the other logic (P1.000.Z, L7676)
+        counts = s.counts(c.logic)
         if force:  # a cruise's pulses: every condition held, as checked when it began
-            self._add(n, s, direction, c)
+            self._add(n, s, counts)
             return
         if s.form != c.form:
             self.lost_format += n
             return
-        if not d.servo_on or not (self._pt_now if self._in_step else self.in_pt()):
+        if not d.servo_on or not (self.in_pt() if pt is None else pt):
             self.lost_off += n
             return
         if s.freq > c.max_hz:  # beyond the interface or the P1.000.UY filter
@@ -288,17 +292,16 @@ class PulseTrain:
             self.lost_inhibit += n
             return
         if c.p2065 & (1 << 11) and (  # single-direction inhibit at a limit
-                (direction > 0 and dio.function_active("PL"))
-                or (direction < 0 and dio.function_active("NL"))):
+                (counts > 0 and dio.function_active("PL"))
+                or (counts < 0 and dio.function_active("NL"))):
             self.lost_inhibit += n
             return
-        self._add(n, s, direction, c)
+        self._add(n, s, counts)
 
-    def _add(self, n: int, s: Segment, direction: int, c: _Config) -> None:
-        counts = n * (4 if s.form == "ab" else 1)
-        self.accepted += direction * counts
+    def _add(self, n: int, s: Segment, counts: int) -> None:
+        self.accepted += n * counts
         nx, m = self.gear()
-        exact = direction * counts * nx / m + self._frac
+        exact = n * counts * nx / m + self._frac
         whole = math.floor(exact)
         self._frac = exact - whole
         self.command += whole
@@ -372,12 +375,8 @@ class PulseTrain:
                 return
             self._resync()
         self._pt_now = pt = self.in_pt()  # once per step (TPOS reads it too)
-        self._in_step = True
-        try:
-            if self.seg is not None:
-                self._take(d.now)
-        finally:
-            self._in_step = False
+        if self.seg is not None:
+            self._take(d.now, pt)
         if "CCLR" in d.axis.locks:  # a level CCLR keeps the error at 0 (L9753)
             self.clear_error()
         if self._rebuild is not None:
@@ -411,11 +410,10 @@ class PulseTrain:
         dio = d.dio
         if c.inhp_di8 and dio.function_active("INHP"):
             return None
-        direction = -s.direction if s.form == "pulse_sign" and s.logic != c.logic else s.direction
         if c.p2065 & (1 << 11) and (dio.function_active("PL") or dio.function_active("NL")):
             return None
         nx, m = self.gear()
-        return direction * (4 if s.form == "ab" else 1) * nx / m
+        return s.counts(c.logic) * nx / m
 
     def _command_at(self, t: int, s: Segment, gain: float) -> float:
         """The command at time `t` (the segment running from its start to past `t`)."""
@@ -567,11 +565,8 @@ class PulseTrain:
     def snapshot(self) -> dict[str, Any]:
         s = self.seg
         accepted = self.accepted
-        if self._cruise_end and s is not None:
-            c = self._config()
-            sign = -s.direction if s.form == "pulse_sign" and s.logic != c.logic else s.direction
-            accepted += sign * (4 if s.form == "ab" else 1) * (s.pulses_at(self.d.now)
-                                                               - self._taken)
+        if self._cruise_end and s is not None:  # a cruise takes its pulses at its end
+            accepted += s.counts(self._config().logic) * (s.pulses_at(self.d.now) - self._taken)
         return {"pt_count": accepted, "pt_freq_kpps": self.freq_hz / 1000.0,
                 "pt_command": round(self.live_command()), "pt_pending": self.pending(),
                 "pt_error": round(self.error()) if self.used else 0}

@@ -139,14 +139,20 @@ class PulsePort:
         if not _owns(self.role, line):
             raise PulseError(f"pulse {self.role} port cannot set line {line!r}")
         level = bool(level)
-        with self._lock:
-            if self._levels.get(line) == level:
-                return
-            self._levels[line] = level
+        if not self._store_level(line, level):
+            return
         t = clock.time_ns()
         if self.tap is not None:
             self.tap.dio(self.name, line, level, t, source_t)
         self._publish_level(line, level, t if source_t is None else source_t)
+
+    def _store_level(self, line: str, level: bool) -> bool:
+        """Keep `level` of `line`; False when it was that already (nothing to publish)."""
+        with self._lock:
+            if self._levels.get(line) == level:
+                return False
+            self._levels[line] = level
+            return True
 
     def get(self, line: str) -> bool:
         with self._lock:
@@ -180,10 +186,8 @@ class PulsePort:
     def _received_level(self, line: str, level: bool, source_t: int | None) -> None:
         if self.closed or _owns(self.role, line) or not (_X.match(line) or _Y.match(line)):
             return
-        with self._lock:
-            if self._levels.get(line) == level:
-                return
-            self._levels[line] = level
+        if not self._store_level(line, level):
+            return
         t = clock.time_ns()
         if self.tap is not None:
             self.tap.dio(self.name, line, level, t, source_t)

@@ -17,6 +17,7 @@ from hil.bench.yamlio import Checker, join
 from hil.drivers.axis_group import RAMP_TYPES, AxisGroup, ServoAxis
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds.base import CheckContext, StepKind
+from hil.transport.urls import parse_url
 from hil.units import MS, S
 
 if TYPE_CHECKING:
@@ -169,7 +170,7 @@ class Group(StepKind):
 
         group = AxisGroup(net, axes, self.args["cycle"] / S,
                           sdo_write=lambda name, i, s, val: drives[name].cia.write(i, s, val),
-                          on_cycle=on_cycle, frame_bits=_frame_bits(),
+                          on_cycle=on_cycle,
                           bitrate=_bitrate(ctx.bench.can[drives[axes[0].name].spec.can]))
         group.configure()
         for a in axes:
@@ -198,21 +199,7 @@ class Group(StepKind):
 
 def _bitrate(url: str) -> int:
     """The bus's bit rate from its URL (`?bitrate=`), else 1 Mbit/s (the A3's CANopen)."""
-    _, _, query = url.partition("?")
-    for item in query.split("&"):
-        k, _, val = item.partition("=")
-        if k == "bitrate" and val.isdigit():
-            return int(val)
-    return 1_000_000
-
-
-def _frame_bits() -> Any:
-    from can import Message
-
-    from hil.transport.sim import frame_bits
-
-    return lambda cob, dlc: frame_bits(Message(arbitration_id=cob, data=bytes(dlc),
-                                               is_extended_id=False))
+    return parse_url(url, "can").int_param("bitrate", 1_000_000, 10_000, 1_000_000)
 
 
 class GroupMove(StepKind):
