@@ -15,6 +15,7 @@ delivered (an SDO server answers at once).
 
 from __future__ import annotations
 
+import re
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -28,18 +29,52 @@ from hil.units import S
 DEFAULT_BITRATE = 1_000_000  # CiA 301 and the A3's default CAN rate (P3.001, L10523)
 
 
-def _crc15(bits: list[int]) -> int:
+def _crc15_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte << 7
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x4599) if crc & 0x4000 else crc << 1
+            crc &= 0x7FFF
+        table.append(crc)
+    return tuple(table)
+
+
+_CRC15 = _crc15_table()
+
+
+def _crc15(value: int, nbits: int) -> int:
+    """CAN's CRC-15 (polynomial 4599h) over the `nbits` low bits of `value`, MSB first: the
+    bits that do not fill a byte one at a time, then a byte at a time by table."""
     crc = 0
-    for b in bits:
-        nxt = b ^ ((crc >> 14) & 1)
+    head = nbits % 8
+    for k in range(nbits - 1, nbits - 1 - head, -1):
+        nxt = ((value >> k) & 1) ^ ((crc >> 14) & 1)
         crc = (crc << 1) & 0x7FFF
         if nxt:
             crc ^= 0x4599
+    for shift in range(nbits - head - 8, -1, -8):
+        crc = ((crc << 8) & 0x7FFF) ^ _CRC15[((crc >> 7) ^ (value >> shift)) & 0xFF]
     return crc
 
 
-def _bits(value: int, n: int) -> list[int]:
-    return [(value >> (n - 1 - i)) & 1 for i in range(n)]
+_RUNS = re.compile(r"0{4,}|1{4,}")
+
+
+def _stuff_bits(bits: str) -> int:
+    """Stuff bits ISO 11898-1 inserts into `bits`: one after every 5 equal bits, stuff bits
+    counted in the runs. Counted run by run: a stuff bit that ends a run has the next run's
+    value, so it carries one into that run; only runs of 4 or more can reach 5."""
+    stuffed = carry = 0
+    prev_end = -1
+    for m in _RUNS.finditer(bits):
+        start, end = m.span()
+        n = (carry if start == prev_end else 0) + end - start
+        k = n // 5
+        stuffed += k
+        carry = 1 if k and n % 5 == 0 else 0
+        prev_end = end
+    return stuffed
 
 
 _BITS_CACHE: dict[tuple, int] = {}
@@ -64,25 +99,18 @@ def _frame_bits(msg: Message) -> int:
     dlc = min(len(msg.data), 8) if not msg.is_remote_frame else min(msg.dlc, 8)
     data = b"" if msg.is_remote_frame else bytes(msg.data[:8])
     rtr = 1 if msg.is_remote_frame else 0
-    if msg.is_extended_id:
+    if msg.is_extended_id:  # SOF, base id, SRR, IDE, extension, RTR, r1, r0
         ident = msg.arbitration_id & 0x1FFFFFFF
-        head = [0, *_bits(ident >> 18, 11), 1, 1, *_bits(ident & 0x3FFFF, 18), rtr, 0, 0]
-    else:
-        head = [0, *_bits(msg.arbitration_id & 0x7FF, 11), rtr, 0, 0]
-    bits = head + _bits(dlc, 4) + [b for byte in data for b in _bits(byte, 8)]
-    bits += _bits(_crc15(bits), 15)
-    stuffed, run, last = 0, 0, None
-    for b in bits:
-        if b == last:
-            run += 1
-            if run == 5:
-                stuffed += 1
-                last, run = 1 - b, 1  # the stuff bit starts a new run
-                continue
-        else:
-            last, run = b, 1
+        value, nbits = ((((ident >> 18) << 2 | 3) << 18 | ident & 0x3FFFF) << 1 | rtr) << 2, 35
+    else:  # SOF, id, RTR, IDE, r0
+        value, nbits = ((msg.arbitration_id & 0x7FF) << 1 | rtr) << 2, 15
+    value = (value << 4 | dlc) << 8 * len(data) | int.from_bytes(data, "big")
+    nbits += 4 + 8 * len(data)
+    value = value << 15 | _crc15(value, nbits)
+    nbits += 15
+    bits = format(value, f"0{nbits}b")
     # CRC delimiter, ACK slot + delimiter, EOF (7), intermission (3)
-    return len(bits) + stuffed + 1 + 2 + 7 + 3
+    return nbits + _stuff_bits(bits) + 1 + 2 + 7 + 3
 
 
 class SimMessage(Message):
@@ -134,11 +162,17 @@ class CanMedium:
     def _done(self, sender: SimCanBus, msg: Message) -> None:
         self.in_flight -= 1
         t = self.clock.time_ns()
+        # one received copy for every node, as all see the same bits at the same instant
+        rx = SimMessage(timestamp=t / S, arbitration_id=msg.arbitration_id,
+                        data=bytes(msg.data), is_extended_id=msg.is_extended_id,
+                        is_remote_frame=msg.is_remote_frame, is_error_frame=msg.is_error_frame,
+                        dlc=msg.dlc, channel=self.channel,
+                        sender_time_ns=getattr(msg, "sender_time_ns", None))
         try:
             for node in list(self.nodes):
                 if node is not sender or node.receive_own_messages:
                     try:
-                        node._deliver(msg, t)
+                        node._deliver(rx)
                     except Exception as exc:  # one receiver's bug: the others get the frame
                         node.errors.append(exc)
         finally:
@@ -178,17 +212,20 @@ class SimCanBus(BusABC):
         self.medium.transmit(self, out)
         self.clock.settle(lambda: not self.medium.idle())
 
-    def _deliver(self, msg: Message, t: int) -> None:
+    def _deliver(self, msg: Message) -> None:
+        """Queue a received frame (shared by every node: receivers must not mutate it)."""
         if self._is_shutdown:
             return
-        self._rx.append(SimMessage(timestamp=t / S, arbitration_id=msg.arbitration_id,
-                                   data=bytes(msg.data), is_extended_id=msg.is_extended_id,
-                                   is_remote_frame=msg.is_remote_frame,
-                                   is_error_frame=msg.is_error_frame, dlc=msg.dlc,
-                                   channel=self.channel,
-                                   sender_time_ns=getattr(msg, "sender_time_ns", None)))
+        self._rx.append(msg)
         if self.on_rx is not None:
             self.on_rx()
+
+    def recv(self, timeout: float | None = None) -> Message | None:
+        """python-can's `recv`, with a short way for a waiting frame and no filters set (the
+        pump's `recv(0)` for every frame on every node)."""
+        if self._rx and self._filters is None:
+            return self._rx.popleft()
+        return super().recv(timeout)
 
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
         if not self._rx and timeout and not self.clock.in_event:

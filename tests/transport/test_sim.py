@@ -7,6 +7,8 @@ delimiter 1, ACK 2, EOF 7 and intermission 3: 47 + 8n bits unstuffed).
 
 from __future__ import annotations
 
+import random
+
 import can
 import pytest
 
@@ -43,15 +45,42 @@ def test_frame_bits_without_and_with_stuffing() -> None:
     assert frame_bits(can.Message(is_error_frame=True)) == 17
 
 
-def test_stuffing_matches_a_reference_count() -> None:
-    from hil.transport.sim import _bits, _crc15
+def _reference_bits(msg: can.Message) -> int:
+    """ISO 11898-1 bit by bit: SOF..data, CRC-15 (x^15+x^14+x^10+x^8+x^7+x^4+x^3+1) shifted
+    one bit at a time, stuffing over SOF..CRC, then 13 fixed bits (delimiter, ACK, EOF,
+    intermission)."""
+    def field(v: int, n: int) -> str:
+        return "".join(str((v >> (n - 1 - i)) & 1) for i in range(n))
 
-    msg = can.Message(arbitration_id=0x181, data=bytes([0x37, 0x02, 0, 0]), is_extended_id=False)
-    head = [0, *_bits(0x181, 11), 0, 0, 0, *_bits(4, 4)]
-    head += [b for byte in msg.data for b in _bits(byte, 8)]
-    body = head + _bits(_crc15(head), 15)
-    expected = len(body) + _stuffed_reference("".join(map(str, body))) + 13
-    assert frame_bits(msg) == expected
+    rtr = "1" if msg.is_remote_frame else "0"
+    data = b"" if msg.is_remote_frame else bytes(msg.data)
+    dlc = msg.dlc if msg.is_remote_frame else len(data)
+    if msg.is_extended_id:
+        head = ("0" + field(msg.arbitration_id >> 18, 11) + "11"
+                + field(msg.arbitration_id & 0x3FFFF, 18) + rtr + "00")
+    else:
+        head = "0" + field(msg.arbitration_id, 11) + rtr + "00"
+    body = head + field(dlc, 4) + "".join(field(b, 8) for b in data)
+    crc = 0
+    for b in body:
+        top = (crc >> 14) & 1
+        crc = (crc << 1) & 0x7FFF
+        if top ^ int(b):
+            crc ^= 0x4599
+    body += field(crc, 15)
+    return len(body) + _stuffed_reference(body) + 13
+
+
+def test_frame_bits_match_a_bit_by_bit_reference_on_random_frames() -> None:
+    rng = random.Random(7)
+    for _ in range(3000):
+        ext, rtr, n = rng.random() < 0.3, rng.random() < 0.1, rng.randint(0, 8)
+        data = bytes(rng.choice([0, 0xFF, 0xF0, 0x0F, 0x1F, 0xF8, rng.randrange(256)])
+                     for _ in range(n))
+        msg = can.Message(arbitration_id=rng.randrange(1 << (29 if ext else 11)),
+                          data=None if rtr else data, dlc=n, is_extended_id=ext,
+                          is_remote_frame=rtr)
+        assert frame_bits(msg) == _reference_bits(msg), msg
 
 
 def test_a_frame_arrives_after_its_bit_time_and_arbitration_orders_waiting_frames() -> None:
