@@ -52,7 +52,8 @@ def _plan(n: int, cycle_ms: int, seconds: float) -> str:
     axes = ", ".join(f"axis{i}" for i in range(1, n + 1))
     return (f"name: scale\nsteps:\n  - group: {{axes: [{axes}], cycle: {cycle_ms}ms}}\n"
             f"  - group_move: {{axes: [{axes}], to: 1000000, speed: 200000, acc: 400000, "
-            f"dec: 400000, ramp: 2}}\n  - wait: {seconds:g}s\n  - group_stop: {{}}\n")
+            f"dec: 400000, ramp: 2}}\n  - {{wait: {seconds:g}s, timeout: {seconds + 60:g}s}}\n"
+            "  - group_stop: {}\n")
 
 
 def exact_limit(cycle_ms: int, bitrate: int = 1_000_000) -> int:

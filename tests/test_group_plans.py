@@ -40,6 +40,9 @@ def test_group_plans_pass_with_every_cycle_on_the_record(path, tmp_path) -> None
     assert 0 < cycles[0]["bus_load_pct"] < 100 and len({c["bus_load_pct"] for c in cycles}) == 1
     assert [c["cycle"] for c in cycles] == list(range(1, len(cycles) + 1))
     assert n >= 1
+    for c in cycles:  # position_error = WritePosition - Position (004:254), per axis
+        for a, err in c["position_error"].items():
+            assert abs(err - (c["write_position"][a] - c["position"][a])) <= 1
 
 
 def test_a_cycle_the_bus_cannot_carry_is_refused() -> None:
@@ -147,3 +150,12 @@ steps:
     geared = [c["write_position"]["axis2"] for c in cycles]
     steps = {b - a for a, b in zip(geared[-20:], geared[-19:], strict=False)}
     assert steps == {1000} and geared[-1] > 40_000
+    # the axis's speed is its feedback's change per cycle: 1000 inc / 2 ms once it follows.
+    # The model moves on its 1 ms grid, so a TPDO sampled at a SYNC shows the last grid
+    # point's position: one cycle's figure may be off by a grid step, never the mean
+    last = cycles[-11:]
+    speeds = [c["speed"]["axis2"] for c in last[1:]]
+    moved = last[-1]["position"]["axis2"] - last[0]["position"]["axis2"]
+    assert abs(moved - 10 * 1000) <= 500  # one 1 ms grid step at 500000 inc/s
+    assert sum(speeds) / len(speeds) == pytest.approx(moved / 10 / 0.002, abs=1)
+    assert all(abs(v - 500_000) <= 252_000 for v in speeds), speeds  # ± a grid step

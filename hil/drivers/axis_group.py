@@ -562,6 +562,9 @@ class AxisGroup:
                            "write_position": {a.name: round(a.write_position)
                                               for a in self.axes},
                            "position": {a.name: round(a.position) for a in self.axes},
+                           "position_error": {a.name: round(a.position_error)
+                                              for a in self.axes},
+                           "speed": {a.name: round(a.speed) for a in self.axes},
                            "follow_error": {a.name: round(a.follow_error) for a in self.axes},
                            "max_follow_error": round(max(abs(a.follow_error)
                                                          for a in self.axes))})

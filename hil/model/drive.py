@@ -230,6 +230,9 @@ class Drive:
         # P1.039, TPOS P1.054, MC_OK hold / AL380 P1.048: L8608-8632, L15269-15275)
         for name_ in ("P1.038", "P1.039", "P1.048", "P1.054"):
             self.params.on_write(name_, lambda *_: self.refresh_outputs())
+        for name_ in ("P1.068", "P1.036"):  # IP smoothing (L17236-17238)
+            self.params.on_write(name_, lambda *_: self._ip_filters())
+        self._ip_filters()
 
     # ------------------------------------------------------------------ public API
     @property
@@ -480,6 +483,14 @@ class Drive:
         self.cia402.set_gear(self.params.get("P1.044"), self.params.get("P1.045"))
         self.cia402.set_max_speed(self.params.get("P1.055"))
         self.cia402.limit_decel_ms = min(self._p5003_decel(0), self._p5003_decel(1))
+
+    def _ip_filters(self) -> None:
+        """P1.068 (moving filter, ms, L8826-8840) then P1.036 (S-curve, ms, L8358-8365) on IP
+        set-points, as the IP section recommends (L17236-17238; option `ip_smoothing`)."""
+        step_ms = self._step_ns / MS  # one sample per model step
+        self.axis.ip_windows = tuple(
+            max(1, round(self.params.get(name) / step_ms)) for name in ("P1.068", "P1.036")
+        ) if self.options.ip_smoothing == "manual" else ()
 
     def _on_object_written(self, index: int, sub: int, value: int) -> None:
         if index == 0x6060:  # the mode decides which DI functions act (di_functions.py)

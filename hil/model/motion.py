@@ -136,6 +136,29 @@ def _approach(v: float, vdes: float, acc: float, dec: float, dt: float) -> float
     return vdes if nv > vdes else nv
 
 
+class _MovingAverage:
+    """Mean of the last `n` samples (a running sum), primed with `value`."""
+
+    __slots__ = ("_buf", "_i", "_sum", "n")
+
+    def __init__(self, n: int, value: float) -> None:
+        self.n = n
+        self._buf = [value] * n
+        self._i = 0
+        self._sum = value * n
+
+    def push(self, x: float) -> float:
+        i = self._i
+        self._sum += x - self._buf[i]
+        self._buf[i] = x
+        self._i = (i + 1) % self.n
+        return self._sum / self.n
+
+    def fill(self, value: float) -> None:
+        self._buf = [value] * self.n
+        self._sum = value * self.n
+
+
 class Axis:
     """One motor axis on its mechanics. See the module docstring for the API."""
 
@@ -188,6 +211,13 @@ class Axis:
         self._ip_target = 0.0
         self._ip_rate = 0.0
         self._ip_rem = 0
+        # IP set-point smoothing (P1.068 moving filter, P1.036 S-curve; L17236-17238): moving
+        # averages over the interpolated command, windows in samples (one per model step)
+        self.ip_windows: tuple[int, ...] = ()
+        self._ip_raw = 0.0
+        self._ip_ma: list[_MovingAverage] = []
+        self._ip_still = 0
+        self._ip_settled = False
         # drive-side controls
         self.power = False
         self.brake_clamped = False
@@ -353,10 +383,20 @@ class Axis:
             return
         if self._mode in (_TORQUE, _VEL):
             self.demand = self.position
+        smooth = by != "PT" and any(w > 1 for w in self.ip_windows)
+        if smooth and (self._mode != _INTERP or not self._ip_ma):
+            # the filters start full of the command they take over from
+            self._ip_raw = self.demand
+            self._ip_ma = [_MovingAverage(w, self.demand) for w in self.ip_windows if w > 1]
+        elif not smooth:
+            self._ip_ma = []
         self._mode = _INTERP
         self._ip_target = float(target_counts)
-        self._ip_rate = (self._ip_target - self.demand) * 1e9 / period_ns
+        start = self._ip_raw if self._ip_ma else self.demand
+        self._ip_rate = (self._ip_target - start) * 1e9 / period_ns
         self._ip_rem = int(period_ns)
+        self._ip_still = 0
+        self._ip_settled = False
         self.moving = True
 
     def set_user_position(self, user_counts: float) -> None:
@@ -421,7 +461,7 @@ class Axis:
         if m == _TORQUE:
             return self._tq_dem == self._tq_target
         if m == _INTERP:
-            return self._ip_rem <= 0
+            return self._ip_rem <= 0 and (not self._ip_ma or self._ip_settled)
         return m == _HOLD
 
     # ---- the integrator ------------------------------------------------------------
@@ -491,6 +531,9 @@ class Axis:
                 self._mode = mode = _HOLD
             else:
                 done = False
+        elif mode == _INTERP and self._ip_ma:
+            pd, done = self._ip_smoothed(dt_ns)
+            vd = (pd - self.demand) / dt
         elif mode == _INTERP:
             rem = self._ip_rem
             if rem > 0:
@@ -505,6 +548,28 @@ class Axis:
             else:
                 vd = 0.0
         return mode, pd, vd, done
+
+    def _ip_smoothed(self, dt_ns: int) -> tuple[float, bool]:
+        """The interpolated command through the moving averages (P1.068, then P1.036).
+        Once the command has been still for a whole window, the output is the command."""
+        raw, rem = self._ip_raw, self._ip_rem
+        if rem > 0:
+            use = dt_ns if dt_ns < rem else rem
+            self._ip_rem = rem = rem - use
+            raw = self._ip_target if rem <= 0 else raw + self._ip_rate * use * 1e-9
+            self._ip_raw = raw
+            self._ip_still = 0
+        else:
+            self._ip_still += 1
+        x = raw
+        for ma in self._ip_ma:
+            x = ma.push(x)
+        if rem <= 0 and self._ip_still >= sum(ma.n for ma in self._ip_ma):
+            for ma in self._ip_ma:
+                ma.fill(raw)
+            self._ip_settled = True
+            return raw, True
+        return x, False
 
     def _clamping(self, vd: float, p: float) -> bool:
         """ZCLAMP: the (ramped) speed command is below `zero_clamp_rpm`; the lock position is

@@ -159,6 +159,12 @@ class ModelOptions:
     ocz_width_us: float = 100.0
     # OA/OB published as one segment per window of this many ms while the motor turns.
     output_window_ms: float = 10.0
+    # --- IP mode (issue 27, docs/group.md) ---
+    # The IP section recommends P1.036 (S-curve) and P1.068 (moving filter) to smooth the
+    # set-points (L17236-17238), while P1.068's own mode column lists PT/PR only (L8832):
+    # "manual" applies both to IP set-points (P1.068 ms moving average, then a P1.036 ms one,
+    # the S-curve of a ramp); "off" leaves IP set-points unfiltered.
+    ip_smoothing: str = "manual"
     # --- deviations (deliberately wrong drive) ---
     dev_brake_on_delay_ms: float = 0.0  # added to P1.042 (e.g. 5: BRKR 5 ms late)
     dev_brake_off_delay_ms: float = 0.0  # added to the P1.043 rule
@@ -222,6 +228,7 @@ _CHOICES: dict[str, tuple[str, ...]] = {
     "fault_reset_clears": ("alarm_reset", "listed"),
     "pulse_interface": ("line_driver", "open_collector"),
     "pt_gear_check": ("refuse", "off"),
+    "ip_smoothing": ("manual", "off"),
 }
 # Numeric options that may be negative (volts on V_REF / T_REF); every other is >= 0
 _SIGNED = {"analog_v_ref", "analog_t_ref"}

@@ -1,0 +1,91 @@
+"""IP set-point smoothing, written from the manual: the IP section recommends P1.036 (S-curve)
+and P1.068 (position command moving filter) to smooth the position deltas of the set-points
+(A3 L17236-17238). P1.068 is a moving average in ms, default 4 (L8826-8840); P1.036 the
+S-curve smoothing time in ms, default 0 = off (L8358-8365). Option `ip_smoothing`."""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.model.drive import Drive
+from hil.model.options import ModelOptions
+from hil.model.timebase import MS
+
+BENCH = {"P2.041": 0x0108}  # EMGS on DI8 (b contact) closed
+STEP_PUU = 1200  # one set-point jump; a multiple of every window below
+
+
+def ip_drive(options: ModelOptions | None = None, **params: int) -> Drive:
+    d = Drive(options=options, inputs={8: True}, params=BENCH | params)
+    d.write_object(0x6060, 0, 7)  # IP (L17211)
+    for cw in (0x06, 0x07, 0x0F):  # L17223-17226
+        d.write_object(0x6040, 0, cw)
+    d.advance(5 * MS)
+    return d
+
+
+def demand_after_step(d: Drive, steps: int) -> list[float]:
+    """One set-point STEP_PUU away (60C2h default: 1 ms), then the same set-point held: the
+    position demand (PUU, model origin) at the end of each 1 ms."""
+    gear = d.axis.cpr / 100_000  # counts per PUU at the default E-gear (16777216/100000)
+    base = d.axis.demand
+    out = []
+    for _k in range(steps):
+        d.write_object(0x60C1, 1, STEP_PUU)  # the controller sends a set-point every cycle
+        d.advance(MS)
+        out.append((d.axis.demand - base) / gear)
+    return out
+
+
+def test_default_p1068_is_a_4_ms_moving_average_of_the_set_points() -> None:
+    d = ip_drive()
+    assert d.params.get("P1.068") == 4 and d.params.get("P1.036") == 0  # defaults
+    got = demand_after_step(d, 6)
+    # the interpolated command reaches the set-point within 1 ms; its 4 ms mean ramps
+    assert got == pytest.approx([300, 600, 900, 1200, 1200, 1200], abs=1e-6)
+
+
+def test_p1068_zero_follows_the_interpolation_directly() -> None:
+    d = ip_drive(**{"P1.068": 0})
+    assert demand_after_step(d, 3) == pytest.approx([1200, 1200, 1200], abs=1e-6)
+
+
+def test_p1036_adds_an_s_curve_after_the_moving_filter() -> None:
+    d = ip_drive(**{"P1.068": 4, "P1.036": 6})
+    got = demand_after_step(d, 12)
+    # 4 ms mean of a step is a ramp; a 6 ms mean of that ramp is an S: slow, fast, slow
+    ramp = [300, 600, 900, 1200] + [1200] * 8
+    window = [0.0] * 6
+    want = []
+    for x in ramp:
+        window = [*window[1:], x]
+        want.append(sum(window) / 6)
+    assert got == pytest.approx(want, abs=1e-6)
+    steps = [b - a for a, b in zip([0.0, *got], got, strict=False)]
+    assert steps[0] < steps[3] and steps[-4] < steps[3]  # S-shaped: slow, fast, slow
+    assert got[-1] == pytest.approx(1200, abs=1e-6)
+
+
+def test_a_p1068_write_takes_effect_on_the_next_set_points() -> None:
+    d = ip_drive(**{"P1.068": 0})
+    d.params.write("P1.068", 2)
+    d.write_object(0x6040, 0, 0x06)  # leave and re-enter IP: the filter starts anew
+    for cw in (0x07, 0x0F):
+        d.write_object(0x6040, 0, cw)
+    d.advance(5 * MS)
+    assert demand_after_step(d, 3) == pytest.approx([600, 1200, 1200], abs=1e-6)
+
+
+def test_option_off_leaves_ip_set_points_unfiltered() -> None:
+    d = ip_drive(ModelOptions(ip_smoothing="off"))
+    assert demand_after_step(d, 2) == pytest.approx([1200, 1200], abs=1e-6)
+
+
+def test_target_reached_waits_for_the_filtered_command() -> None:
+    d = ip_drive(**{"P1.068": 20})
+    d.write_object(0x60C1, 1, STEP_PUU)
+    d.advance(MS)
+    assert not d.read_object(0x6041, 0) & 0x0400  # the 20 ms mean is still ramping
+    d.advance(200 * MS)
+    assert d.read_object(0x6041, 0) & 0x0400  # bit 10 in IP (L18469, L18486)
+    assert not d.axis.moving
