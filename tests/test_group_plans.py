@@ -3,6 +3,7 @@ plans, their cycle records, a cycle the bus cannot carry, and missed cycles on t
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import pytest
@@ -159,3 +160,35 @@ steps:
     assert abs(moved - 10 * 1000) <= 500  # one 1 ms grid step at 500000 inc/s
     assert sum(speeds) / len(speeds) == pytest.approx(moved / 10 / 0.002, abs=1)
     assert all(abs(v - 500_000) <= 252_000 for v in speeds), speeds  # ± a grid step
+
+
+def test_a_lost_heartbeat_is_judged_from_the_wire(tmp_path) -> None:
+    # group_heartbeat_lost: axis1 produces its heartbeat (701h) every 20 ms; the group's
+    # consumer time is 50 ms (CiA 301). The first cycle that marks it lost comes more than
+    # 50 ms after the last 701h on the wire, and within one cycle (2 ms) of that; its PDOs
+    # never stopped (no missed cycle), and axis2 holds from that very cycle
+    res = run_plan(load_plan(plans_dir() / "group" / "group_heartbeat_lost.yaml"),
+                   load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.name, s.message) for s in res.steps if s.status != "pass"]
+    hb: list[int] = []
+    cycles: list[tuple[int, dict]] = []
+    with open(res.recording, "rb") as f:
+        for _, ch, m in make_reader(f).iter_messages(topics=["/can/can0/raw",
+                                                             "/group/axes/cycle"]):
+            msg = json.loads(m.data)
+            if ch.topic == "/group/axes/cycle":
+                cycles.append((m.log_time, msg))
+            elif msg["id"] == 0x701 and msg["dir"] == "rx":
+                hb.append(m.log_time)
+    first = next(i for i, (_, c) in enumerate(cycles) if c["heartbeat_lost"] == ["axis1"])
+    t_lost = cycles[first][0]
+    last_hb = max(t for t in hb if t < t_lost)
+    assert 50_000_000 < t_lost - last_hb <= 52_000_000
+    assert cycles[first][1]["status"]["axis1"] == -1 and cycles[first][1]["held"] == ["axis2"]
+    assert cycles[first - 1][1]["heartbeat_lost"] == []
+    gaps = [b - a for a, b in itertools.pairwise(hb) if b < last_hb]
+    assert gaps and all(abs(g - 20_000_000) < 1_000_000 for g in gaps)  # 1017h = 20 ms
+    assert not any(c["missed"] for _, c in cycles)
+    back = next(i for i in range(first, len(cycles)) if not cycles[i][1]["heartbeat_lost"])
+    # the status comes from the next feedback after the heartbeat (its TPDO of that cycle)
+    assert [c["status"]["axis1"] for _, c in cycles[back:back + 3]][-2:] == [3, 3]

@@ -35,6 +35,7 @@ from typing import Any
 
 import can
 
+from hil import clock
 from hil.transport.cyclic import Cyclic
 from hil.transport.sim import frame_bits
 
@@ -318,6 +319,8 @@ class ServoAxis:
     par: list[float] = field(default_factory=lambda: [0.0] * 15)  # COMMAND.Par[0..14]
     pg: Pg = field(default_factory=Pg)
     gea: Gea = field(default_factory=Gea)
+    heartbeat_lost: bool = False  # its heartbeat is older than the consumer time
+    _hb_ns: int | None = None  # when its last heartbeat came (None: none yet, not watched)
     _seen: bool = False  # feedback of the current cycle arrived
     _ever: bool = False
     _last_pos: float | None = None
@@ -413,7 +416,9 @@ class ServoAxis:
         self.position = float(position)
         self.statusword = statusword
         self._seen = self._ever = True
-        if statusword & 0x08:
+        if self.heartbeat_lost:
+            self.status = STATUS_LOST  # until its heartbeat comes back, whatever its PDOs say
+        elif statusword & 0x08:
             self.status = STATUS_FAULT
         elif statusword & 0x6F == 0x27:
             self.status = STATUS_TORQUE
@@ -448,7 +453,8 @@ class AxisGroup:
     def __init__(self, network: Any, axes: list[ServoAxis], cycle_s: float, *,
                  sdo_write: Callable[[str, int, int, int], None],
                  on_cycle: Callable[[dict[str, Any]], None] | None = None,
-                 bitrate: int = 1_000_000) -> None:
+                 bitrate: int = 1_000_000, heartbeat_s: float | None = None,
+                 heartbeat_timeout_s: float | None = None) -> None:
         if not axes:
             raise ValueError("an axis group needs at least one axis")
         if not 0.0005 <= cycle_s <= 0.010:
@@ -464,6 +470,11 @@ class AxisGroup:
         # SYNC, stuff bits of zero data counted (hil.transport.sim.frame_bits)
         self.cycle_bits = _bits(SYNC_ID, 0) + sum(
             _bits(0x200 + a.node, _RX.size) + _bits(0x180 + a.node, _TX.size) for a in axes)
+        # heartbeat: each axis produces it (1017h), the group consumes it (CiA 301); the
+        # consumer time defaults to twice the producer time
+        self.heartbeat_s = heartbeat_s
+        self.heartbeat_timeout_s = heartbeat_timeout_s or (2 * heartbeat_s if heartbeat_s
+                                                            else None)
         self._cyclic: Cyclic | None = None
         self.held: list[str] = []  # followers holding: their master is lost or faulted
         self._lock = threading.Lock()
@@ -481,6 +492,9 @@ class AxisGroup:
             w(0x60C2, 2, -3)
             w(0x1006, 0, us)
             w(0x6060, 0, 7)
+            if self.heartbeat_s:
+                w(0x1017, 0, round(self.heartbeat_s * 1000))  # producer time, ms
+                self.net.subscribe(0x700 + a.node, self._heartbeat(a))
             self.net.subscribe(0x180 + a.node, self._tpdo(a))
             self.net.send_message(0x000, bytes([0x01, a.node]))  # NMT start: PDOs run
 
@@ -490,6 +504,14 @@ class AxisGroup:
                 sw, pos = _TX.unpack_from(bytes(data))
                 with self._lock:
                     a.on_feedback(sw, pos, self.cycle_s)
+        return cb
+
+    def _heartbeat(self, a: ServoAxis) -> Callable[[int, bytearray, float], None]:
+        def cb(_cob: int, data: bytearray, _ts: float) -> None:
+            if data:  # monitoring starts with the first heartbeat (CiA 301)
+                with self._lock:
+                    a._hb_ns = clock.monotonic_ns()
+                    a.heartbeat_lost = False
         return cb
 
     def connect(self, a: ServoAxis) -> None:
@@ -522,6 +544,13 @@ class AxisGroup:
                 a._seen = False
             if missed:
                 self.missed_cycles += 1
+            if self.heartbeat_timeout_s:
+                now, limit = clock.monotonic_ns(), round(self.heartbeat_timeout_s * 1e9)
+                for a in self.axes:
+                    if a._hb_ns is not None and now - a._hb_ns > limit:
+                        a.heartbeat_lost = True
+                    if a.heartbeat_lost:
+                        a.status = STATUS_LOST  # its PDOs may still come: lost all the same
             masters = {a.name: a for a in self.axes}
             for a in self.axes:
                 a.accept_command(masters)
@@ -556,6 +585,7 @@ class AxisGroup:
         self.cycles += 1
         if self.on_cycle is not None:
             self.on_cycle({"cycle": self.cycles, "missed": missed, "held": list(self.held),
+                           "heartbeat_lost": [a.name for a in self.axes if a.heartbeat_lost],
                            "status": {a.name: a.status for a in self.axes},
                            "bus_load_pct": round(100.0 * self.cycle_bits / (self.bitrate * dt),
                                                  2),

@@ -2,6 +2,7 @@
 `group_wait`, `group_stop`.
 
     - group: {axes: [drive1, drive2], cycle: 2ms}      # IP mode, PDOs, SYNC every cycle
+    - group: {axes: [drive1], cycle: 2ms, heartbeat: 20ms, heartbeat_timeout: 50ms}
     - group_move: {axis: drive1, to: 100000, speed: 50000, acc: 200000, dec: 200000, ramp: 2}
     - group_gear: {axis: drive2, master: drive1, in: 1, out: 2, inc_in: 0.01}
     - group_wait: {rdy: [drive1], timeout: 5s}
@@ -119,7 +120,7 @@ class Group(StepKind):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
-        v.keys(m, {"axes", "cycle"}, where)
+        v.keys(m, {"axes", "cycle", "heartbeat", "heartbeat_timeout"}, where)
         if "axes" not in m:
             raise v.err(line, where, "needs `axes:` (drive names)")
         axes = v.seq(m["axes"], m.kline("axes"), join(where, "axes"))
@@ -134,8 +135,22 @@ class Group(StepKind):
         if not MS <= cycle <= 10 * MS:
             raise v.err(m.kline("cycle"), join(where, "cycle"),
                         "SYNC 1-10 ms (A3 IP mode, L17211-17244)")
-        return {"axes": names, "cycle": cycle, "line": m.kline("cycle") if "cycle" in m
-                else line}
+        hb = v.duration(m, "heartbeat", where, 0) if "heartbeat" in m else 0
+        if "heartbeat" in m and not MS <= hb <= 65535 * MS:
+            raise v.err(m.kline("heartbeat"), join(where, "heartbeat"),
+                        "1 ms ~ 65535 ms (1017h, the producer time of each axis)")
+        hb_to = 0
+        if "heartbeat_timeout" in m:
+            if not hb:
+                raise v.err(m.kline("heartbeat_timeout"), join(where, "heartbeat_timeout"),
+                            "needs `heartbeat:` (the axes' producer time)")
+            hb_to = v.duration(m, "heartbeat_timeout", where, 0)
+            if not hb < hb_to <= 65535 * MS:
+                raise v.err(m.kline("heartbeat_timeout"), join(where, "heartbeat_timeout"),
+                            "longer than `heartbeat:` (a consumer time shorter than the "
+                            "producer time trips on every heartbeat), at most 65535 ms")
+        return {"axes": names, "cycle": cycle, "heartbeat": hb, "heartbeat_timeout": hb_to,
+                "line": m.kline("cycle") if "cycle" in m else line}
 
     def check(self, cc: CheckContext) -> None:
         _check_axes(cc, self.args["axes"], "axes")
@@ -171,7 +186,9 @@ class Group(StepKind):
         group = AxisGroup(net, axes, self.args["cycle"] / S,
                           sdo_write=lambda name, i, s, val: drives[name].cia.write(i, s, val),
                           on_cycle=on_cycle,
-                          bitrate=_bitrate(ctx.bench.can[drives[axes[0].name].spec.can]))
+                          bitrate=_bitrate(ctx.bench.can[drives[axes[0].name].spec.can]),
+                          heartbeat_s=self.args["heartbeat"] / S or None,
+                          heartbeat_timeout_s=self.args["heartbeat_timeout"] / S or None)
         group.configure()
         for a in axes:
             cia = drives[a.name].cia
@@ -489,8 +506,8 @@ class GroupWait(StepKind):
 
 class GroupExpect(StepKind):
     """`group_expect: {axis | axes, position: [lo, hi], write_position: [lo, hi],
-    pg_position: [lo, hi], missed: n, rdy_same_cycle: true, status: -1..3, held: bool}`: the
-    group's view of its axes."""
+    pg_position: [lo, hi], missed: n, rdy_same_cycle: true, status: -1..3, held: bool,
+    heartbeat_lost: bool}`: the group's view of its axes."""
 
     name = "group_expect"
     judge_only = True
@@ -499,7 +516,7 @@ class GroupExpect(StepKind):
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "axes", "position", "write_position", "pg_position", "missed",
-                   "rdy_same_cycle", "status", "held"}, where)
+                   "rdy_same_cycle", "status", "held", "heartbeat_lost"}, where)
         out: dict[str, Any] = {"axes": _axes(v, m, where)}
         for k in ("position", "write_position", "pg_position"):
             if k in m:
@@ -517,8 +534,11 @@ class GroupExpect(StepKind):
                 raise v.err(m.kline("status"), join(where, "status"),
                             "-1 lost, 0 never, 1 fault, 2 ready, 3 with torque (004:254)")
             out["status"] = m["status"]
-        if "held" in m:
-            out["held"] = bool(m["held"])
+        for k in ("held", "heartbeat_lost"):
+            if k in m:
+                if not isinstance(m[k], bool):
+                    raise v.err(m.kline(k), join(where, k), f"{m[k]!r}: true or false")
+                out[k] = m[k]
         return out
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
@@ -540,6 +560,8 @@ class GroupExpect(StepKind):
                     bad.append(f"{ax.name} status {ax.status}, not {a['status']}")
                 if "held" in a and (ax.name in g.held) != a["held"]:
                     bad.append(f"{ax.name} {'not ' if a['held'] else ''}held")
+                if "heartbeat_lost" in a and ax.heartbeat_lost != a["heartbeat_lost"]:
+                    bad.append(f"{ax.name} heartbeat {'' if ax.heartbeat_lost else 'not '}lost")
             if a.get("rdy_same_cycle") and len({ax.rdy_cycle for ax in axes}) != 1:
                 bad.append("targets reached in cycles " + ", ".join(
                     f"{ax.name} {ax.rdy_cycle}" for ax in axes))
