@@ -192,3 +192,34 @@ def test_a_lost_heartbeat_is_judged_from_the_wire(tmp_path) -> None:
     back = next(i for i in range(first, len(cycles)) if not cycles[i][1]["heartbeat_lost"])
     # the status comes from the next feedback after the heartbeat (its TPDO of that cycle)
     assert [c["status"]["axis1"] for _, c in cycles[back:back + 3]][-2:] == [3, 3]
+
+
+def test_gear_phase_and_ratio_specs_fail_when_the_follower_cannot_keep_up(tmp_path) -> None:
+    # axis2 geared 1/1 to axis1, but limited to 60 rpm by P1.055 (L4034) while axis1 runs at
+    # 120 rpm (200000 PUU/s, default gear): axis2's feedback falls behind In/Out x the
+    # master's travel, so both gear specs fail; the same plan without the limit passes them
+    def plan(limit: bool) -> str:
+        pre = ("  - write: {P1.055: 60}\n    drive: axis2\n"
+               "  - power_cycle: {battery: true}\n    drive: axis2\n") if limit else ""
+        return ("name: slowgear\nsteps:\n" + pre +
+                "  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
+                "  - group_gear: {axis: axis2, master: axis1, in: 1, out: 1}\n"
+                "  - wait: 150ms\n"
+                "  - group_move: {axis: axis1, to: 300000, speed: 200000, acc: 800000, "
+                "dec: 800000, ramp: 3}\n"
+                "  - group_wait: {rdy: [axis1], timeout: 5s}\n"
+                "  - check_timing: {spec: group_gear_phase}\n"
+                "  - check_timing: {spec: group_gear_ratio}\n"
+                "  - group_stop: {}\n")
+
+    slow = run_plan(loads_plan(plan(True), "slow.yaml"), load_bench(GROUP_BENCH),
+                    tmp_path / "slow")
+    verdicts = [(s.verdicts[0].get("spec"), s.verdicts[0]["status"]) for s in slow.steps
+                if s.kind == "check_timing"]
+    assert verdicts == [("group_gear_phase", "fail"), ("group_gear_ratio", "fail")], verdicts
+    fine = run_plan(loads_plan(plan(False), "fine.yaml"), load_bench(GROUP_BENCH),
+                    tmp_path / "fine")
+    assert fine.passed, [(s.name, s.message) for s in fine.steps if s.status != "pass"]
+    cycles = _cycles(fine.recording)
+    assert max(c["max_gear_phase_error"] for c in cycles) <= 5
+    assert any(c["gear_phase_error"] == {"axis2": 0} for c in cycles)

@@ -42,6 +42,8 @@ from hil.transport.sim import frame_bits
 RAMP_TYPES = (0, 1, 2, 3)
 PEAK = {3: 1.0, 2: math.pi / 2, 1: 2.0}  # peak acceleration / Acc of each shape (004:226)
 SYNC_ID = 0x80
+GEAR_SETTLE_S = 0.1  # engaged time before the gear judge takes its reference
+MIN_TRAVEL = 1000  # increments of master travel before a ratio is measured
 STATUS_LOST, STATUS_NEVER, STATUS_FAULT, STATUS_READY, STATUS_TORQUE = -1, 0, 1, 2, 3
 
 
@@ -320,6 +322,10 @@ class ServoAxis:
     pg: Pg = field(default_factory=Pg)
     gea: Gea = field(default_factory=Gea)
     heartbeat_lost: bool = False  # its heartbeat is older than the consumer time
+    gear_phase_error: float = 0.0  # a geared follower's drift from its master (increments)
+    gear_ratio_error: float = 0.0  # |measured ratio - In/Out| / |In/Out| since engagement
+    _gear_ref: tuple[float, float] | None = None  # (follower, master) when judging began
+    _gear_settle: int = 0  # cycles engaged so far
     _hb_ns: int | None = None  # when its last heartbeat came (None: none yet, not watched)
     _seen: bool = False  # feedback of the current cycle arrived
     _ever: bool = False
@@ -521,6 +527,34 @@ class AxisGroup:
         a.pg.aspeed = 0.0
         a.write_position = a.position
 
+    def _judge_gears(self, masters: dict[str, ServoAxis]) -> None:
+        """Gear ratio and phase error of each linear-geared follower, from the feedback
+        (docs/group.md): once the clutch and the shift ramps are done and the set-points
+        have had GEAR_SETTLE_CYCLES to reach the drives, the follower's and its master's
+        positions are the reference; then the phase error is how far the follower drifted
+        from In/Out x the master's travel, the ratio error the measured ratio's relative
+        error once the master moved MIN_TRAVEL. Source 3 (ServoTick) counts cycles."""
+        for a in self.axes:
+            g = a.gea
+            m = masters.get(g.master)
+            engaged = (g.mode == 1 and m is not None and a.name not in self.held
+                       and g.actual_in == g.gin and g.actual_shift == g.shift)
+            if not engaged:
+                a._gear_ref, a._gear_settle = None, 0
+                a.gear_phase_error = a.gear_ratio_error = 0.0
+                continue
+            mv = float(self.cycles) if g.source == 3 else m.position
+            a._gear_settle += 1
+            if a._gear_ref is None:
+                if a._gear_settle * self.cycle_s >= GEAR_SETTLE_S:
+                    a._gear_ref = (a.position, mv)
+                continue
+            ratio = g.gin / g.gout
+            df, dm = a.position - a._gear_ref[0], mv - a._gear_ref[1]
+            a.gear_phase_error = df - ratio * dm
+            if abs(dm) >= (1 if g.source == 3 else MIN_TRAVEL):
+                a.gear_ratio_error = abs(df / dm - ratio) / abs(ratio)
+
     # -- the cycle -----------------------------------------------------------------------
     def start(self) -> None:
         """Cycles on the bench's clock (hil.transport.cyclic: exact in virtual time)."""
@@ -575,6 +609,7 @@ class AxisGroup:
                             self.held.remove(a.name)
                     g.tick(src)
                 a.compute()
+            self._judge_gears(masters)
         for a in self.axes:
             a._sent = [*a._sent[-2:], a.write_position]
         bus = self.net.bus  # the bus itself: canopen's send lock may be held by an SDO
@@ -597,4 +632,13 @@ class AxisGroup:
                            "speed": {a.name: round(a.speed) for a in self.axes},
                            "follow_error": {a.name: round(a.follow_error) for a in self.axes},
                            "max_follow_error": round(max(abs(a.follow_error)
-                                                         for a in self.axes))})
+                                                         for a in self.axes)),
+                           "cam_follow_error": round(max(
+                               (abs(a.follow_error) for a in self.axes if a.gea.mode == 2),
+                               default=0.0)),
+                           "gear_phase_error": {a.name: round(a.gear_phase_error)
+                                                for a in self.axes if a.gea.mode == 1},
+                           "max_gear_phase_error": round(max(
+                               (abs(a.gear_phase_error) for a in self.axes), default=0.0)),
+                           "max_gear_ratio_error": round(max(
+                               (a.gear_ratio_error for a in self.axes), default=0.0), 6)})

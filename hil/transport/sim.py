@@ -150,10 +150,18 @@ class CanMedium:
             self._start_next()
 
     def _start_next(self) -> None:
-        if not self._pending:
+        """The next frame on the wire: each node's transmit queue is first in, first out (as
+        a PC's SocketCAN queue, or a controller with one transmit buffer), and the heads of
+        the nodes' queues go by arbitration, the lowest identifier first."""
+        pending = self._pending
+        if not pending:
             return
-        self._pending.sort(key=lambda p: (p[0], p[1]))
-        _, _, sender, msg = self._pending.pop(0)
+        heads: dict[int, tuple[int, int, SimCanBus, Message]] = {}
+        for p in pending:  # in queueing order: the first of each sender is its head
+            heads.setdefault(id(p[2]), p)
+        best = min(heads.values(), key=lambda p: (p[0], p[1]))
+        pending.remove(best)
+        _, _, sender, msg = best
         dur = self.bit_ns(frame_bits(msg))
         start = max(self.clock.time_ns(), self.busy_until)
         self.busy_until = start + dur

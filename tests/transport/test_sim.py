@@ -88,24 +88,28 @@ def test_a_frame_arrives_after_its_bit_time_and_arbitration_orders_waiting_frame
     with clock.use(c):
         a = open_can("virtual:sim-t?bitrate=500000")
         b = open_can("virtual:sim-t")
+        d = open_can("virtual:sim-t")
         got: list[tuple[int, int]] = []
         stop = pump(b, lambda m: got.append((m.arbitration_id, c.time_ns())))
         first = can.Message(arbitration_id=0x700, data=b"\x05", is_extended_id=False)
-        low = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
         high = can.Message(arbitration_id=0x601, data=bytes(8), is_extended_id=False)
+        low = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
+        other = can.Message(arbitration_id=0x181, data=b"\x01", is_extended_id=False)
         with clock.batch():  # queued back to back while 0x700 holds the bus
             a.send(first)
             a.send(high)
-            a.send(low)
+            a.send(low)  # a's queue is first in, first out: 601h leaves before 080h
+            d.send(other)  # another node: its head 181h wins against a's head 601h
         bit = 1_000_000_000 // 500_000
         t1 = frame_bits(first) * bit
-        t2 = t1 + frame_bits(low) * bit
+        t2 = t1 + frame_bits(other) * bit
         t3 = t2 + frame_bits(high) * bit
-        assert got == [(0x700, t1), (0x080, t2), (0x601, t3)]
-        assert c.time_ns() == t3  # the send settled: nothing in flight
+        t4 = t3 + frame_bits(low) * bit
+        assert got == [(0x700, t1), (0x181, t2), (0x601, t3), (0x080, t4)]
+        assert c.time_ns() == t4  # the send settled: nothing in flight
         stop()
-        a.shutdown()
-        b.shutdown()
+        for bus in (a, b, d):
+            bus.shutdown()
 
 
 def test_only_a_virtual_can_url_opens_under_a_virtual_clock() -> None:
