@@ -223,3 +223,39 @@ def test_gear_phase_and_ratio_specs_fail_when_the_follower_cannot_keep_up(tmp_pa
     cycles = _cycles(fine.recording)
     assert max(c["max_gear_phase_error"] for c in cycles) <= 5
     assert any(c["gear_phase_error"] == {"axis2": 0} for c in cycles)
+
+
+def test_capture_interface_fills_the_register_of_its_type(tmp_path) -> None:
+    # group_capture_di: Control 1 with Typ_ExtCapture bit 1 (falling) fills NPosition with
+    # the drive's captured value, judged by `latch` against the ground truth (< 100 µs);
+    # Control 2 then takes the group's registers at one cycle: PPosition (its actual
+    # position) and Write_Position
+    res = run_plan(load_plan(plans_dir() / "group" / "group_capture_di.yaml"),
+                   load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.name, s.message) for s in res.steps if s.status != "pass"]
+    latch = [v for s in res.steps for v in s.verdicts if v.get("spec") == "latch"]
+    assert [v["status"] for v in latch] == ["pass"]
+    with open(res.recording, "rb") as f:
+        caps = [json.loads(m.data) for _, _, m in
+                make_reader(f).iter_messages(topics=["/group/axes/capture"])]
+    assert [c["typ_ext_capture"] for c in caps] == [0x02, 0]
+    first, second = caps
+    assert first["n_position"] != 0 and first["p_position"] == 0
+    assert abs(first["n_position"] - latch[0]["latch"]["captured"]) <= 1
+    assert second["p_position"] > first["n_position"] == second["n_position"]
+    assert second["write_position"] > second["p_position"]  # the set-point leads
+    assert second["captures"] == 2
+
+
+def test_group_capture_refuses_what_the_a3_cannot_capture() -> None:
+    bench = load_bench(GROUP_BENCH)
+    for body, want in (
+            ("{axis: axis1, control: 3}", "1 (the drive's input) or 2"),
+            ("{axis: axis1, on: both}", "rising, falling"),
+            ("{axis: axis1, control: 2, on: rising}", "Control 2 captures the registers"),
+            ("{axis: axis9}", "unknown axis 'axis9'")):
+        plan = ("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms}\n"
+                f"  - group_capture: {body}\n")
+        with pytest.raises(PlanFileError, match=r"p\.yaml:4: steps\[1\]\.group_capture") as ei:
+            check_plan(loads_plan(plan, "p.yaml"), bench)
+        assert want in str(ei.value)

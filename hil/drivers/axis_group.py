@@ -296,6 +296,56 @@ class SdoInterface:
         self.control = 0
 
 
+# ------------------------------------------------------------------------------ CAPTURE
+
+CAPTURE_RISING, CAPTURE_FALLING, CAPTURE_ZERO = 0x01, 0x02, 0x10  # Typ_ExtCapture (004:252)
+
+
+@dataclass
+class CaptureInterface:
+    """The CAPTURE interface of one axis (004:252, offsets 004:260): Control 0 disabled, 1
+    capture on the drive's input (the A3's own capture on DI7 or the looped Z pulse, armed
+    and read over SDO by the group's steps), 2 a one-shot capture of the registers by the
+    group at its next cycle; Control returns to 0 once captured. Typ_ExtCapture bit 0 rising
+    DI1, bit 1 falling DI1, bit 4 encoder zero pulse (the A3 captures on DI7 only, L5150:
+    the seed's DI1 is its DI7). Results: PPosition / NPosition (actual at the rising /
+    falling edge), Write_Position (set-point), Zero_Position (at the zero pulse)."""
+
+    control: int = 0
+    typ_ext_capture: int = 0
+    start: int = 0  # the A3 data array entry the drive stores the value in (P5.036)
+    p_position: float = 0.0
+    n_position: float = 0.0
+    write_position: float = 0.0
+    zero_position: float = 0.0
+    captures: int = 0  # completed captures
+
+    def store(self, value: float, write_position: float) -> None:
+        """A captured actual position: into the register its type names; Control to 0."""
+        if self.typ_ext_capture & CAPTURE_ZERO:
+            self.zero_position = value
+        elif self.typ_ext_capture & CAPTURE_FALLING:
+            self.n_position = value
+        else:
+            self.p_position = value
+        self.write_position = write_position
+        self.control = 0
+        self.captures += 1
+
+    @property
+    def position(self) -> float:
+        """The register this capture type fills."""
+        if self.typ_ext_capture & CAPTURE_ZERO:
+            return self.zero_position
+        return self.n_position if self.typ_ext_capture & CAPTURE_FALLING else self.p_position
+
+    def record(self, name: str, cycle: int) -> dict[str, Any]:
+        return {"axis": name, "cycle": cycle, "typ_ext_capture": self.typ_ext_capture,
+                "p_position": round(self.p_position), "n_position": round(self.n_position),
+                "zero_position": round(self.zero_position),
+                "write_position": round(self.write_position), "captures": self.captures}
+
+
 # ------------------------------------------------------------------------------ the axes
 
 
@@ -317,6 +367,7 @@ class ServoAxis:
     missed: int = 0
     rdy_cycle: int = 0  # the cycle in which the PG last reached its target
     sdo: SdoInterface = field(default_factory=SdoInterface)
+    capture: CaptureInterface = field(default_factory=CaptureInterface)
     command: int = 0  # COMMAND.Control (004:240): the function number, 0 once accepted
     par: list[float] = field(default_factory=lambda: [0.0] * 15)  # COMMAND.Par[0..14]
     pg: Pg = field(default_factory=Pg)
@@ -460,7 +511,8 @@ class AxisGroup:
                  sdo_write: Callable[[str, int, int, int], None],
                  on_cycle: Callable[[dict[str, Any]], None] | None = None,
                  bitrate: int = 1_000_000, heartbeat_s: float | None = None,
-                 heartbeat_timeout_s: float | None = None) -> None:
+                 heartbeat_timeout_s: float | None = None,
+                 on_capture: Callable[[dict[str, Any]], None] | None = None) -> None:
         if not axes:
             raise ValueError("an axis group needs at least one axis")
         if not 0.0005 <= cycle_s <= 0.010:
@@ -469,6 +521,7 @@ class AxisGroup:
         self.by_name = {a.name: a for a in axes}
         self._sdo_write = sdo_write
         self.on_cycle = on_cycle
+        self.on_capture = on_capture
         self.cycles = 0
         self.missed_cycles = 0
         self.bitrate = bitrate
@@ -610,6 +663,11 @@ class AxisGroup:
                     g.tick(src)
                 a.compute()
             self._judge_gears(masters)
+            captured = []
+            for a in self.axes:  # CAPTURE Control 2: the registers, once, at this cycle
+                if a.capture.control == 2:
+                    a.capture.store(a.position, a.write_position)
+                    captured.append(a.capture.record(a.name, self.cycles + 1))
         for a in self.axes:
             a._sent = [*a._sent[-2:], a.write_position]
         bus = self.net.bus  # the bus itself: canopen's send lock may be held by an SDO
@@ -618,6 +676,9 @@ class AxisGroup:
                                  data=_RX.pack(round(a.write_position), a.controlword())))
         bus.send(can.Message(arbitration_id=SYNC_ID, is_extended_id=False, data=b""))
         self.cycles += 1
+        if self.on_capture is not None:
+            for c in captured:
+                self.on_capture(c)
         if self.on_cycle is not None:
             self.on_cycle({"cycle": self.cycles, "missed": missed, "held": list(self.held),
                            "heartbeat_lost": [a.name for a in self.axes if a.heartbeat_lost],

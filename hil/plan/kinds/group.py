@@ -6,6 +6,8 @@
     - group_move: {axis: drive1, to: 100000, speed: 50000, acc: 200000, dec: 200000, ramp: 2}
     - group_gear: {axis: drive2, master: drive1, in: 1, out: 2, inc_in: 0.01}
     - group_wait: {rdy: [drive1], timeout: 5s}
+    - group_capture: {axis: drive1, control: 1, on: rising, start: 20}
+    - group_wait: {captured: [drive1], timeout: 1s}
     - group_stop: {}
 """
 
@@ -15,7 +17,16 @@ from typing import TYPE_CHECKING, Any
 
 from hil import clock
 from hil.bench.yamlio import Checker, join
-from hil.drivers.axis_group import RAMP_TYPES, AxisGroup, ServoAxis
+from hil.drivers.axis_group import (
+    CAPTURE_FALLING,
+    CAPTURE_RISING,
+    CAPTURE_ZERO,
+    RAMP_TYPES,
+    AxisGroup,
+    ServoAxis,
+)
+from hil.plan.capture_steps import STORE as CAPTURE_STORE
+from hil.plan.capture_steps import read_array
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.transport.urls import parse_url
@@ -183,12 +194,17 @@ class Group(StepKind):
             if rec is not None:
                 rec.write("/group/axes/cycle", c)
 
+        def on_capture(c: dict[str, Any]) -> None:
+            if rec is not None:
+                rec.write("/group/axes/capture", c)
+
         group = AxisGroup(net, axes, self.args["cycle"] / S,
                           sdo_write=lambda name, i, s, val: drives[name].cia.write(i, s, val),
                           on_cycle=on_cycle,
                           bitrate=_bitrate(ctx.bench.can[drives[axes[0].name].spec.can]),
                           heartbeat_s=self.args["heartbeat"] / S or None,
-                          heartbeat_timeout_s=self.args["heartbeat_timeout"] / S or None)
+                          heartbeat_timeout_s=self.args["heartbeat_timeout"] / S or None,
+                          on_capture=on_capture)
         group.configure()
         for a in axes:
             cia = drives[a.name].cia
@@ -485,29 +501,130 @@ class GroupWait(StepKind):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
-        v.keys(m, {"rdy", "timeout"}, where)
-        rdy = v.seq(m.get("rdy"), m.kline("rdy") if "rdy" in m else line, join(where, "rdy"))
-        return {"rdy": [str(x) for x in rdy], "timeout": v.duration(m, "timeout", where, 5 * S)}
+        v.keys(m, {"rdy", "captured", "timeout"}, where)
+        if "rdy" not in m and "captured" not in m:
+            raise v.err(line, where, "needs `rdy:` (PG.Rdy) or `captured:` (CAPTURE done)")
+        out: dict[str, Any] = {"timeout": v.duration(m, "timeout", where, 5 * S)}
+        for k in ("rdy", "captured"):
+            seq = v.seq(m[k], m.kline(k), join(where, k)) if k in m else []
+            out[k] = [str(x) for x in seq]
+        return out
 
     def check(self, cc: CheckContext) -> None:
         _check_axes(cc, self.args["rdy"], "rdy")
+        _check_axes(cc, self.args["captured"], "captured")
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         g = _group(ctx)
+        timeout = self.args["timeout"] / S
         axes = [g.by_name[n] for n in self.args["rdy"] if n in g.by_name]
-        if not clock.wait_for(lambda: all(a.pg.rdy for a in axes), self.args["timeout"] / S):
+        if not clock.wait_for(lambda: all(a.pg.rdy for a in axes), timeout):
             raise StepFailed("PG not ready: " + ", ".join(a.name for a in axes
                                                           if not a.pg.rdy))
-        return Outcome(", ".join(f"{a.name} at {a.write_position:.0f}" for a in axes))
+        text = [f"{a.name} at {a.write_position:.0f}" for a in axes]
+        for a in _members(g, self.args["captured"]):
+            text.append(_await_capture(ctx, g, a, timeout))
+        return Outcome(", ".join(text))
 
     def describe(self) -> str:
-        return f"group_wait {', '.join(self.args['rdy'])}"
+        return f"group_wait {', '.join(self.args['rdy'] + self.args['captured'])}"
+
+
+def _await_capture(ctx: StepContext, g: AxisGroup, a: ServoAxis, timeout: float) -> str:
+    """CAPTURE Control 1 (004:252): the drive's capture (P5.038 counts down to 0 once the
+    point is stored, L5155) polled over SDO once a cycle, then its value read from the data
+    array into the register of its type; Control back to 0. Control 2 is the group's own."""
+    cap = a.capture
+    if cap.control == 2:
+        if not clock.wait_for(lambda: cap.control == 0, timeout):
+            raise StepFailed(f"{a.name}: CAPTURE Control 2 not taken in {timeout:g} s")
+        return f"{a.name} registers captured at {cap.position:.0f}"
+    if cap.control != 1:
+        raise StepFailed(f"{a.name}: no CAPTURE armed (group_capture first)")
+    dio = ctx.session.drive(a.name)
+    deadline = clock.monotonic_ns() + round(timeout * S)
+    while dio.read_param("P5.038", "sdo") != 0:
+        if clock.monotonic_ns() > deadline:
+            raise StepFailed(f"{a.name}: nothing captured in {timeout:g} s (P5.038 still "
+                             f"{dio.read_param('P5.038', 'sdo')})")
+        clock.sleep(g.cycle_s)
+    value = read_array(dio, cap.start, 1, "sdo")[0]
+    with g._lock:
+        cap.store(float(value), a.write_position)
+        record = cap.record(a.name, g.cycles)
+    if ctx.rec is not None:
+        ctx.rec.write("/group/axes/capture", record)
+    return f"{a.name} captured {value} (Typ_ExtCapture 0x{cap.typ_ext_capture:02X})"
+
+
+_CAPTURE_TYPES = {"rising": CAPTURE_RISING, "falling": CAPTURE_FALLING, "zero": CAPTURE_ZERO}
+
+
+class GroupCapture(StepKind):
+    """`group_capture: {axis, control: 1|2, on: rising|falling|zero, start: 20}`: the CAPTURE
+    interface (004:252). Control 1 arms the drive's own capture over SDO (P5.036 = start,
+    P5.038 = 1, P5.039: CN2, NO for a rising edge or the zero pulse, NC for a falling one;
+    L11471-11542): `group_wait: {captured: [axis]}` then reads it. Control 2 captures the
+    group's registers at its next cycle."""
+
+    name = "group_capture"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "control", "on", "start"}, where)
+        control = m.get("control", 1)
+        if control not in (1, 2) or isinstance(control, bool):
+            raise v.err(m.kline("control") if "control" in m else line,
+                        join(where, "control"),
+                        f"{control!r}: 1 (the drive's input) or 2 (one-shot, 004:252)")
+        on = m.get("on", "rising")
+        if on not in _CAPTURE_TYPES:
+            raise v.err(m.kline("on") if "on" in m else line, join(where, "on"),
+                        f"{on!r}: rising, falling (the A3's DI7, L5150) or zero (the encoder "
+                        "zero pulse looped into it: options.extra.capture.trigger Z)")
+        if control == 2 and "on" in m:
+            raise v.err(m.kline("on"), join(where, "on"),
+                        "Control 2 captures the registers at a cycle, not on an edge")
+        start = int(_num(v, m, "start", where, 0, 799, 0))
+        return {"axis": _axis_name(v, m, "axis", where), "control": control,
+                "typ": _CAPTURE_TYPES[on] if control == 1 else 0, "start": start}
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [self.args["axis"]], "axis")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        g = _group(ctx)
+        a = _members(g, [self.args["axis"]])[0]
+        cap = a.capture
+        if self.args["control"] == 2:
+            with g._lock:
+                cap.typ_ext_capture, cap.control = 0, 2
+            return Outcome(f"{a.name}: CAPTURE Control 2 (the registers at the next cycle)")
+        dio = ctx.session.drive(a.name)
+        typ, start = self.args["typ"], self.args["start"]
+        nc = 1 if typ == CAPTURE_FALLING else 0
+        old = dio.read_param("P5.039", "sdo")
+        dio.write_param("P5.039", old & ~1, "sdo")  # stopped: P5.036/P5.038 need it (L11476)
+        dio.write_param("P5.036", start, "sdo")
+        dio.write_param("P5.038", 1, "sdo")
+        ctx.store[CAPTURE_STORE + a.name] = {"t": clock.time_ns(), "start": start, "count": 1,
+                                             "nc": nc}
+        dio.write_param("P5.039", nc << 8 | 3 << 4 | 1, "sdo")  # CN2, NO/NC, start
+        with g._lock:
+            cap.typ_ext_capture, cap.start, cap.control = typ, start, 1
+        return Outcome(f"{a.name}: CAPTURE Control 1, Typ_ExtCapture 0x{typ:02X} into "
+                       f"Array[{start}]")
+
+    def describe(self) -> str:
+        return f"group_capture {self.args['axis']} control {self.args['control']}"
 
 
 class GroupExpect(StepKind):
     """`group_expect: {axis | axes, position: [lo, hi], write_position: [lo, hi],
     pg_position: [lo, hi], missed: n, rdy_same_cycle: true, status: -1..3, held: bool,
-    heartbeat_lost: bool}`: the group's view of its axes."""
+    heartbeat_lost: bool, capture_position: [lo, hi]}`: the group's view of its axes
+    (capture_position: the CAPTURE register of the last capture's type)."""
 
     name = "group_expect"
     judge_only = True
@@ -516,9 +633,10 @@ class GroupExpect(StepKind):
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "axes", "position", "write_position", "pg_position", "missed",
-                   "rdy_same_cycle", "status", "held", "heartbeat_lost"}, where)
+                   "rdy_same_cycle", "status", "held", "heartbeat_lost", "capture_position"},
+               where)
         out: dict[str, Any] = {"axes": _axes(v, m, where)}
-        for k in ("position", "write_position", "pg_position"):
+        for k in ("position", "write_position", "pg_position", "capture_position"):
             if k in m:
                 r = m[k]
                 if (not isinstance(r, list) or len(r) != 2
@@ -548,10 +666,12 @@ class GroupExpect(StepKind):
         bad: list[str] = []
         with g._lock:
             for ax in axes:
-                for k in ("position", "write_position", "pg_position"):
+                for k in ("position", "write_position", "pg_position", "capture_position"):
                     if k in a:
                         lo, hi = a[k]
-                        val = ax.pg.apos if k == "pg_position" else getattr(ax, k)
+                        val = {"pg_position": ax.pg.apos,
+                               "capture_position": ax.capture.position}.get(k)
+                        val = getattr(ax, k) if val is None else val
                         if not lo <= val <= hi:
                             bad.append(f"{ax.name} {k} {val:.0f} not in [{lo:g}, {hi:g}]")
                 if "missed" in a and ax.missed > a["missed"]:
@@ -590,5 +710,5 @@ class GroupStop(StepKind):
         return Outcome(f"{g.cycles} cycles, {g.missed_cycles} missed")
 
 
-KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupCommand, GroupSdo, GroupWait,
+KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupCommand, GroupSdo, GroupCapture, GroupWait,
          GroupExpect, GroupStop)
