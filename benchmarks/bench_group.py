@@ -49,11 +49,14 @@ def _bench(n: int) -> str:
 
 
 def _plan(n: int, cycle_ms: int, seconds: float) -> str:
+    """The move, then `seconds` of bench time in 10 s waits: each step stays well inside its
+    step timeout and the runner's wall-clock watchdog (timeout + 60 s)."""
     axes = ", ".join(f"axis{i}" for i in range(1, n + 1))
+    chunks, rest = divmod(seconds, 10.0)
+    waits = "  - wait: 10s\n" * int(chunks) + (f"  - wait: {rest:g}s\n" if rest else "")
     return (f"name: scale\nsteps:\n  - group: {{axes: [{axes}], cycle: {cycle_ms}ms}}\n"
             f"  - group_move: {{axes: [{axes}], to: 1000000, speed: 200000, acc: 400000, "
-            f"dec: 400000, ramp: 2}}\n  - {{wait: {seconds:g}s, timeout: {seconds + 60:g}s}}\n"
-            "  - group_stop: {}\n")
+            f"dec: 400000, ramp: 2}}\n{waits}  - group_stop: {{}}\n")
 
 
 def exact_limit(cycle_ms: int, bitrate: int = 1_000_000) -> int:
