@@ -259,3 +259,21 @@ def test_group_capture_refuses_what_the_a3_cannot_capture() -> None:
         with pytest.raises(PlanFileError, match=r"p\.yaml:4: steps\[1\]\.group_capture") as ei:
             check_plan(loads_plan(plan, "p.yaml"), bench)
         assert want in str(ei.value)
+
+
+def test_a_command_6_past_the_written_cam_is_refused_with_why(tmp_path) -> None:
+    plan = loads_plan("""name: badcam
+steps:
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_cam_table: {tab: 0, line: 0, values: [0, 100, 400]}
+  - group_command: {axis: axis2, code: 6, par: {0: 0, 1: 1, 2: 2, 3: 1, 4: 1, 6: 1, 7: 5}}
+  - group_stop: {}
+""", "badcam.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    bad = [s for s in res.steps if s.status != "pass"]
+    assert bad[0].index == 2 and "COMMAND 6 refused: CamLine 1 + CamLen 5 past the 3 values " \
+        "written to CamTab 0" in bad[0].message
+    with pytest.raises(PlanFileError, match=r"p\.yaml:4: steps\[1\]\.group_cam_table\.tab: 2"):
+        check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms}\n"
+                              "  - group_cam_table: {tab: 2, values: [0, 1]}\n", "p.yaml"),
+                   load_bench(GROUP_BENCH))

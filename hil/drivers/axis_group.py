@@ -189,6 +189,13 @@ def _integral(kind: int, x: float) -> float:
 
 
 CAM_STEP = 1024  # the pointer is 1024 x finer than the table (004:232)
+# the cam tables' shared memory, in doubles (004:232): CamTab 0 TGM_Cam_Profile 1048576 B,
+# CamTab 1 TGM_Data 524288 B
+CAM_MEMORY = {0: 1048576 // 8, 1: 524288 // 8}
+
+
+class CommandError(ValueError):
+    """A COMMAND the group cannot accept (Control stays set; the step names why)."""
 
 
 @dataclass
@@ -216,6 +223,7 @@ class Gea:
     cam_type: int = 0  # 0 return, 1 incremental
     cam_scale: float = 1.0
     cam_position: float = 0.0
+    cam_inc_position: float = 0.0  # CamIncPosition: added to the cam (004:258, COMMAND Par13)
     _last: float | None = None
 
     def cam_value(self, pointer: float) -> float:
@@ -256,7 +264,7 @@ class Gea:
         self._last = master_value
         self.position += delta * self.actual_in / self.gout + ds
         if self.mode == 2 and self.cam:
-            self.cam_position = self.cam_value(self.position)
+            self.cam_position = self.cam_value(self.position) + self.cam_inc_position
 
 
 # ------------------------------------------------------------------------------ SDO interface
@@ -389,7 +397,8 @@ class ServoAxis:
         reaches the drive at SYNC k and is interpolated to by SYNC k + 1, whose TPDO the
         group reads in cycle k + 2 (L17051-17057)."""
         return self._sent[0] - self.position if len(self._sent) == 3 else 0.0
-    def accept_command(self, axes: dict[str, ServoAxis]) -> None:
+    def accept_command(self, axes: dict[str, ServoAxis],
+                       cams: dict[int, list[float]] | None = None) -> None:
         """COMMAND (004:240-246): the function in `command` with `par`, taken at the start
         of a cycle; `command` returns to 0 on acceptance, 7 (sync off) only once the ratio
         ramp has run out."""
@@ -421,16 +430,27 @@ class ServoAxis:
         elif code == 5:  # abort: Par1 Dec
             pg.acc = p[1] or pg.acc
             pg.abort()
-        elif code == 6:  # sync on: Par0 master, Par1 source, Par2 1 gear, Par3/4 In/Out,
-            g = self.gea  # Par5 IncIn (004:244)
-            names = list(axes)
-            idx = int(p[0])
+        elif code == 6:  # sync on: Par0 master, Par1 source, Par2 1 gear / 2 + CamType cam,
+            g = self.gea  # Par3/4 In/Out, Par5 IncIn; cams: Par6 CamLine, Par7 CamLen, Par8
+            names = list(axes)  # CamScale, Par9 IniPosition, Par10 CamTab, Par12 ServoMode,
+            idx = int(p[0])  # Par13 CamIncPosition (004:244)
+            kind = int(p[2]) or 1
+            table = self._cam_table(cams or {}, p) if kind >= 2 else None
             g.master = names[idx] if 0 <= idx < len(names) else g.master
             g.source = int(p[1]) or 1
             g.gin, g.gout, g.inc_in = p[3], p[4] or 1.0, p[5]
             g.actual_in = 0.0 if p[5] else p[3]
-            g.mode = 1
-            self.mode = 4 if self.mode in (1, 4) else 3
+            if table is None:
+                g.mode = 1
+                self.mode = 4 if self.mode in (1, 4) else 3
+            else:
+                g.cam, g.cam_type, g.cam_scale = table, kind - 2, p[8] or 1.0
+                g.position, g.cam_inc_position = p[9], p[13]
+                g.cam_position = g.cam_value(g.position) + g.cam_inc_position
+                # the cam starts where the axis stands (004:216 holds at the switch)
+                self.offset = self.write_position - g.cam_position - self.correction
+                g.mode = 2
+                self.mode = int(p[12]) if int(p[12]) in (3, 4) else 3
         elif code == 7:  # sync off: the ratio ramps to 0 by Par5 a cycle, then GEA idles
             g = self.gea
             g.gin, g.inc_in = 0.0, p[5]
@@ -440,6 +460,22 @@ class ServoAxis:
             g.mode = 0
             self.mode = 1
         self.command = 0
+
+    @staticmethod
+    def _cam_table(cams: dict[int, list[float]], p: list[float]) -> list[float]:
+        """The cam of COMMAND 6: CamLen doubles from CamLine of table CamTab (004:232)."""
+        tab, line, length = int(p[10]), int(p[6]), int(p[7])
+        if tab not in CAM_MEMORY:
+            raise CommandError(f"CamTab {tab}: 0 (TGM_Cam_Profile) or 1 (TGM_Data)")
+        if int(p[2]) not in (2, 3):
+            raise CommandError(f"Par2 {p[2]:g}: 1 gear, 2 return cam, 3 incremental cam")
+        if length < 2 or line < 0:
+            raise CommandError(f"CamLine {line}, CamLen {length}: a cam needs 2 points or more")
+        mem = cams.get(tab, [])
+        if line + length > len(mem):
+            raise CommandError(f"CamLine {line} + CamLen {length} past the {len(mem)} values "
+                               f"written to CamTab {tab}")
+        return list(mem[line:line + length])
 
     def _connect_pg(self) -> None:
         """The PG takes over where the axis stands: PG.APos = WritePosition - Offset -
@@ -536,6 +572,8 @@ class AxisGroup:
                                                             else None)
         self._cyclic: Cyclic | None = None
         self.held: list[str] = []  # followers holding: their master is lost or faulted
+        self.cams: dict[int, list[float]] = {0: [], 1: []}  # CamTab 0/1 (004:232)
+        self.command_errors: dict[str, str] = {}  # axis -> why its COMMAND is refused
         self._lock = threading.Lock()
 
     # -- setup ---------------------------------------------------------------------------
@@ -640,7 +678,10 @@ class AxisGroup:
                         a.status = STATUS_LOST  # its PDOs may still come: lost all the same
             masters = {a.name: a for a in self.axes}
             for a in self.axes:
-                a.accept_command(masters)
+                try:
+                    a.accept_command(masters, self.cams)
+                except CommandError as e:  # refused: Control stays, the step reports it
+                    self.command_errors[a.name] = str(e)
             for a in self.axes:
                 was = a.pg.rdy
                 a.pg.tick(dt)

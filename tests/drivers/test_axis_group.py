@@ -162,6 +162,39 @@ def test_command_control_returns_to_0_on_acceptance_and_7_after_its_ramp() -> No
     assert slave.pg.apos == 100.0 and slave.write_position == pytest.approx(1234.0)
 
 
+def test_command_6_takes_its_cam_from_the_cam_memory() -> None:
+    # 004:244: Par2 2 + CamType (3: incremental), Par6 CamLine, Par7 CamLen, Par8 CamScale,
+    # Par9 IniPosition, Par10 CamTab, Par12 ServoMode, Par13 CamIncPosition; 004:232: the
+    # pointer is 1024x finer, linearly interpolated, the last value added on every pass
+    from hil.drivers.axis_group import CommandError, ServoAxis
+
+    master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
+    axes = {"m": master, "s": slave}
+    cams = {0: [], 1: [7.0, 7.0, 0.0, 10.0, 40.0, 90.0]}  # the cam at lines 2-5 of CamTab 1
+    slave.write_position = 500.0
+    slave.par = [0, 1, 3, 1, 1, 0, 2, 4, 2.0, 1024, 1, 0, 4, 5.0, 0]
+    slave.command = 6
+    slave.accept_command(axes, cams)
+    g = slave.gea
+    assert slave.command == 0 and g.mode == 2 and g.cam_type == 1 and slave.mode == 4
+    assert g.cam == [0.0, 10.0, 40.0, 90.0] and g.cam_scale == 2.0
+    assert g.cam_position == 10.0 * 2.0 + 5.0  # IniPosition 1024: one table step in
+    slave.compute()
+    assert slave.write_position == pytest.approx(500.0)  # no jump at the switch
+    g.tick(0.0)
+    g.tick(512.0)  # half a step on: between 10 and 40
+    assert g.cam_position == pytest.approx((25.0 * 2.0) + 5.0)
+    g.tick(512.0 + 3 * 1024)  # one whole pass (3 segments) later: + the last value, 90
+    assert g.cam_position == pytest.approx((25.0 + 90.0) * 2.0 + 5.0)
+    for par, why in (([0, 1, 3, 1, 1, 0, 4, 4, 1, 0, 1, 0, 0, 0, 0], "past the 6 values"),
+                     ([0, 1, 2, 1, 1, 0, 0, 1, 1, 0, 1, 0, 0, 0, 0], "2 points or more"),
+                     ([0, 1, 2, 1, 1, 0, 0, 2, 1, 0, 5, 0, 0, 0, 0], "CamTab 5"),
+                     ([0, 1, 9, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "Par2 9")):
+        slave.par, slave.command = [float(x) for x in par], 6
+        with pytest.raises(CommandError, match=why):
+            slave.accept_command(axes, cams)
+
+
 def test_sdo_interface_handshake_and_abort_code() -> None:
     # Control 1 write / 2 read -> 0 when done; Status 0 OK, 2 error with the code in Data
     from hil.drivers.axis_group import SdoInterface

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from hil import clock
 from hil.bench.yamlio import Checker, join
 from hil.drivers.axis_group import (
+    CAM_MEMORY,
     CAPTURE_FALLING,
     CAPTURE_RISING,
     CAPTURE_ZERO,
@@ -383,6 +384,48 @@ class GroupCam(StepKind):
         return f"group_cam {a['axis']} <- {a['master']} ({len(a['table'])} points)"
 
 
+class GroupCamTable(StepKind):
+    """`group_cam_table: {tab: 0, line: 0, values: [...]}`: doubles into the group's cam
+    memory (CamTab 0 TGM_Cam_Profile, 1 TGM_Data; 004:232), for COMMAND 6 with a cam."""
+
+    name = "group_cam_table"
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"tab", "line", "values"}, where)
+        tab = m.get("tab", 0)
+        if tab not in CAM_MEMORY or isinstance(tab, bool):
+            raise v.err(m.kline("tab") if "tab" in m else line, join(where, "tab"),
+                        f"{tab!r}: 0 (TGM_Cam_Profile) or 1 (TGM_Data), 004:232")
+        start = int(_num(v, m, "line", where, 0, CAM_MEMORY[tab] - 1, 0))
+        if "values" not in m:
+            raise v.err(line, where, "needs `values:` (the cam's points)")
+        vals = v.seq(m["values"], m.kline("values"), join(where, "values"))
+        if not vals or not all(isinstance(x, int | float) and not isinstance(x, bool)
+                               for x in vals):
+            raise v.err(m.kline("values"), join(where, "values"), "a list of numbers")
+        if start + len(vals) > CAM_MEMORY[tab]:
+            raise v.err(m.kline("values"), join(where, "values"),
+                        f"line {start} + {len(vals)} values past CamTab {tab}'s "
+                        f"{CAM_MEMORY[tab]} doubles")
+        return {"tab": tab, "line": start, "values": [float(x) for x in vals]}
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        g = _group(ctx)
+        with g._lock:
+            mem = g.cams[a["tab"]]
+            end = a["line"] + len(a["values"])
+            if len(mem) < end:
+                mem.extend([0.0] * (end - len(mem)))
+            mem[a["line"]:end] = a["values"]
+        return Outcome(f"CamTab {a['tab']} lines {a['line']}-{end - 1}")
+
+    def describe(self) -> str:
+        return f"group_cam_table {self.args['tab']}:{self.args['line']}"
+
+
 class GroupCommand(StepKind):
     """`group_command: {axis, code: 1-7, par: {0: 1000000, 3: 200000}, timeout}`: the COMMAND
     interface (004:240-246): write Par and Control, wait until Control is back to 0 (on
@@ -426,10 +469,18 @@ class GroupCommand(StepKind):
         with g._lock:
             ax.par = list(a["par"])
             ax.command = a["code"]
+            g.command_errors.pop(ax.name, None)
             c0 = g.cycles
-        if not clock.wait_for(lambda: ax.command == 0, a["timeout"] / S):
+        if not clock.wait_for(lambda: ax.command == 0 or ax.name in g.command_errors,
+                              a["timeout"] / S):
             raise StepFailed(f"COMMAND {a['code']} not accepted within the timeout "
                              f"(Control still {ax.command})")
+        with g._lock:
+            why = g.command_errors.pop(ax.name, None)
+            if why is not None:
+                ax.command = 0  # refused: withdrawn, so the group does not retry it
+        if why is not None:
+            raise StepFailed(f"COMMAND {a['code']} refused: {why}")
         return Outcome(f"COMMAND {a['code']} accepted after {g.cycles - c0} cycle(s)")
 
     def describe(self) -> str:
@@ -710,5 +761,5 @@ class GroupStop(StepKind):
         return Outcome(f"{g.cycles} cycles, {g.missed_cycles} missed")
 
 
-KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupCommand, GroupSdo, GroupCapture, GroupWait,
-         GroupExpect, GroupStop)
+KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupCamTable, GroupCommand, GroupSdo,
+         GroupCapture, GroupWait, GroupExpect, GroupStop)
