@@ -374,6 +374,7 @@ class ServoAxis:
     statusword: int = 0
     missed: int = 0
     rdy_cycle: int = 0  # the cycle in which the PG last reached its target
+    arrived_cycle: int = 0  # the cycle whose feedback first showed the PG's target (0: not)
     sdo: SdoInterface = field(default_factory=SdoInterface)
     capture: CaptureInterface = field(default_factory=CaptureInterface)
     command: int = 0  # COMMAND.Control (004:240): the function number, 0 once accepted
@@ -684,6 +685,11 @@ class AxisGroup:
                     self.command_errors[a.name] = str(e)
             for a in self.axes:
                 was = a.pg.rdy
+                # the feedback judged this cycle: the first that shows the target reached
+                if not was:
+                    a.arrived_cycle = 0
+                elif not a.arrived_cycle and round(a.position) == round(a.write_position):
+                    a.arrived_cycle = self.cycles
                 a.pg.tick(dt)
                 if a.pg.rdy and not was:
                     a.rdy_cycle = self.cycles + 1

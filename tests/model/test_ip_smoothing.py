@@ -89,3 +89,21 @@ def test_target_reached_waits_for_the_filtered_command() -> None:
     d.advance(200 * MS)
     assert d.read_object(0x6041, 0) & 0x0400  # bit 10 in IP (L18469, L18486)
     assert not d.axis.moving
+
+
+def test_ip_following_error_past_6065h_raises_al009() -> None:
+    # following error window 6065h (L18438-18452) applies in IP mode as in PP (the model's
+    # following_error_exceeded covers PP, IP and HM): set-points that run away from a motor
+    # held back by P1.055 (L4034) make 60F4h grow past it, and AL009 follows (L19539-19542)
+    d = ip_drive(**{"P1.055": 60, "P1.068": 0})
+    d.write_object(0x6065, 0, 20000)
+    target, fe = 0, []
+    for _ in range(200):
+        target += 500  # 500 PUU a ms = 300 rpm at the default gear: 5x the cap
+        d.write_object(0x60C1, 1, target)
+        d.advance(MS)
+        if d.alarms.active:
+            break
+        fe.append(abs(d.read_object(0x60F4, 0)))
+    assert "AL009" in d.alarms.active and not d.servo_on
+    assert fe[-1] <= 20000 < fe[-1] + 500 * 1.2  # tripped as 60F4h passed 6065h

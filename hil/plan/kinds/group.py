@@ -674,8 +674,10 @@ class GroupCapture(StepKind):
 class GroupExpect(StepKind):
     """`group_expect: {axis | axes, position: [lo, hi], write_position: [lo, hi],
     pg_position: [lo, hi], missed: n, rdy_same_cycle: true, status: -1..3, held: bool,
-    heartbeat_lost: bool, capture_position: [lo, hi]}`: the group's view of its axes
-    (capture_position: the CAPTURE register of the last capture's type)."""
+    heartbeat_lost: bool, capture_position: [lo, hi], arrived_same_cycle: true}`: the
+    group's view of its axes (capture_position: the CAPTURE register of the last capture's
+    type; arrived_same_cycle: every axis's feedback first showed its PG target in the same
+    cycle)."""
 
     name = "group_expect"
     judge_only = True
@@ -684,7 +686,8 @@ class GroupExpect(StepKind):
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "axes", "position", "write_position", "pg_position", "missed",
-                   "rdy_same_cycle", "status", "held", "heartbeat_lost", "capture_position"},
+                   "rdy_same_cycle", "arrived_same_cycle", "status", "held", "heartbeat_lost",
+                   "capture_position"},
                where)
         out: dict[str, Any] = {"axes": _axes(v, m, where)}
         for k in ("position", "write_position", "pg_position", "capture_position"):
@@ -696,8 +699,9 @@ class GroupExpect(StepKind):
                 out[k] = (float(r[0]), float(r[1]))
         if "missed" in m:
             out["missed"] = int(_num(v, m, "missed", where, 0, 1e9))
-        if "rdy_same_cycle" in m:
-            out["rdy_same_cycle"] = bool(m["rdy_same_cycle"])
+        for k in ("rdy_same_cycle", "arrived_same_cycle"):
+            if k in m:
+                out[k] = bool(m[k])
         if "status" in m:
             if m["status"] not in (-1, 0, 1, 2, 3) or isinstance(m["status"], bool):
                 raise v.err(m.kline("status"), join(where, "status"),
@@ -736,6 +740,10 @@ class GroupExpect(StepKind):
             if a.get("rdy_same_cycle") and len({ax.rdy_cycle for ax in axes}) != 1:
                 bad.append("targets reached in cycles " + ", ".join(
                     f"{ax.name} {ax.rdy_cycle}" for ax in axes))
+            if a.get("arrived_same_cycle") and (
+                    len({ax.arrived_cycle for ax in axes}) != 1 or not axes[0].arrived_cycle):
+                bad.append("feedback at the target in cycles " + ", ".join(
+                    f"{ax.name} {ax.arrived_cycle or 'never'}" for ax in axes))
         text = ", ".join(f"{ax.name} at {ax.position:.0f} (missed {ax.missed})" for ax in axes)
         if bad:
             raise StepFailed("; ".join(bad) + f" ({text})")
