@@ -78,12 +78,18 @@ def limit(name: str, default: int) -> int:
         return default
 
 
-def _prescan(text: str, file: str, error: type[FileError]) -> None:
+# libyaml's loader when PyYAML has it (about 10x faster: the 40-odd timing specs a plan loads);
+# any problem is parsed again by the pure-Python loader, so errors read the same either way
+_FAST: type[yaml.SafeLoader] | None = getattr(yaml, "CSafeLoader", None)
+
+
+def _prescan(text: str, file: str, error: type[FileError],
+             loader: Any = yaml.SafeLoader) -> None:
     """Depth and alias limits on the event stream (PyYAML's parser does not recurse)."""
     max_depth = limit("HIL_YAML_MAX_DEPTH", 64)
     max_aliases = limit("HIL_YAML_MAX_ALIASES", 100)
     depth = aliases = 0
-    for ev in yaml.parse(text, Loader=yaml.SafeLoader):
+    for ev in yaml.parse(text, Loader=loader):
         if isinstance(ev, yaml.MappingStartEvent | yaml.SequenceStartEvent):
             depth += 1
             if depth > max_depth:
@@ -107,13 +113,19 @@ class _Budget:
 
 
 def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
-           error: type[FileError], budget: _Budget | None = None) -> Any:
+           error: type[FileError], budget: _Budget | None = None,
+           within: frozenset[int] = frozenset()) -> Any:
     line = node.start_mark.line + 1
     budget = budget or _Budget()
     budget.left -= 1
     if budget.left < 0:
         raise error(file, line, where or "(top)", f"more than {budget.max} values once aliases "
                     "are expanded (an alias bomb?; HIL_YAML_MAX_NODES)")
+    if isinstance(node, yaml.MappingNode | yaml.SequenceNode):
+        if id(node) in within:  # `&x [*x]`: an alias inside its own anchor
+            raise error(file, line, where or "(top)", "an alias inside its own anchor "
+                        "(a value that contains itself)")
+        within = within | {id(node)}
     if isinstance(node, yaml.MappingNode):
         out = LDict()
         out.line, out.key_lines = line, {}
@@ -126,14 +138,14 @@ def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
             if key in out:
                 raise error(file, kline, join(where, key), "duplicate key")
             out.key_lines[key] = kline
-            out[key] = _build(vnode, loader, file, join(where, key), error, budget)
+            out[key] = _build(vnode, loader, file, join(where, key), error, budget, within)
         return out
     if isinstance(node, yaml.SequenceNode):
         lst = LList()
         lst.line, lst.item_lines = line, []
         for i, item in enumerate(node.value):
             lst.item_lines.append(item.start_mark.line + 1)
-            lst.append(_build(item, loader, file, join(where, i), error, budget))
+            lst.append(_build(item, loader, file, join(where, i), error, budget, within))
         return lst
     return loader.construct_object(node, deep=True)
 
@@ -147,15 +159,24 @@ def load_yaml_text(text: str, file: str, error: type[FileError] = FileError) -> 
     if "\0" in text:
         raise error(file, text.count("\n", 0, text.index("\0")) + 1, "(file)",
                     "NUL byte: not a text file")
+    if _FAST is not None:
+        try:
+            return _load(text, file, error, _FAST)
+        except Exception:  # the Python loader below reports it precisely
+            pass
+    return _load(text, file, error, yaml.SafeLoader)
+
+
+def _load(text: str, file: str, error: type[FileError], loader_cls: Any) -> Any:
     try:
-        _prescan(text, file, error)
+        _prescan(text, file, error, loader_cls)
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark
         raise error(file, (mark.line + 1) if mark else 1, "(yaml)", str(e.problem or e)) from None
     except yaml.YAMLError as e:  # reader errors: characters YAML does not allow
         pos = getattr(e, "position", 0) or 0
         raise error(file, text.count("\n", 0, pos) + 1, "(yaml)", str(e)) from None
-    loader = yaml.SafeLoader(text)
+    loader = loader_cls(text)
     try:
         node = loader.get_single_node()
         if node is None:

@@ -172,3 +172,37 @@ def test_mutated_shipped_plans_are_refused_with_file_line_field():
             assert e.line > 0 and e.field.startswith("steps["), (str(e), text)
             refused += 1
     assert refused > 60
+
+
+def _shape(x):
+    if isinstance(x, dict):
+        return (x.line, x.key_lines, {k: _shape(v) for k, v in x.items()})
+    if isinstance(x, list):
+        return (x.line, x.item_lines, [_shape(v) for v in x])
+    return (type(x).__name__, x)
+
+
+def test_libyaml_and_the_python_loader_agree_on_every_shipped_file_and_error() -> None:
+    # the fast path (libyaml) must give the same values and the same line numbers as the
+    # pure-Python loader, and a broken file the Python loader's own error
+    import yaml
+
+    from hil.paths import fixture, plans_dir
+    from hil.yamlio import FileError, _load, load_yaml_text
+
+    if getattr(yaml, "CSafeLoader", None) is None:
+        pytest.skip("PyYAML built without libyaml: only the Python loader runs")
+    files = [*sorted(plans_dir().rglob("*.yaml")), *sorted(fixture("timing").glob("*.yaml")),
+             *sorted(fixture("benches").glob("*.yaml"))]
+    assert len(files) > 80
+    for f in files:
+        text = f.read_text()
+        fast = _load(text, str(f), FileError, yaml.CSafeLoader)
+        slow = _load(text, str(f), FileError, yaml.SafeLoader)
+        assert _shape(fast) == _shape(slow), f
+    for bad in ("a: [1, 2\nb: 3\n", "a: 1\n  b: 2\n", "a: 1\na: 2\n", "- &x [*x]\n"):
+        with pytest.raises(FileError) as fast_err:
+            load_yaml_text(bad, "bad.yaml")
+        with pytest.raises(FileError) as slow_err:
+            _load(bad, "bad.yaml", FileError, yaml.SafeLoader)
+        assert str(fast_err.value) == str(slow_err.value)
