@@ -87,11 +87,13 @@ class Pg:
     dpos: float = 0.0
     rdy: bool = True
     mode: int = 0  # 0 speed / abort, 1 position, 3 braking
+    peak_acc: float = 0.0  # the largest |speed change| / cycle since the last start
     _plan: tuple | None = None
     _t: float = 0.0
 
     def start_position(self, target: float) -> None:
         """Absolute positioning to `target` (PG.Mode = 1); from rest or on the fly."""
+        self.peak_acc = 0.0
         self.dpos = float(target)
         self.mode = 1
         self.rdy = False
@@ -100,6 +102,7 @@ class Pg:
 
     def start_speed(self, speed: float) -> None:
         """Speed control (PG.Mode = 0): ramp to `speed` with Acc (004:226)."""
+        self.peak_acc = 0.0
         self.mode = 0
         self.rdy = False
         v0 = self.aspeed
@@ -139,7 +142,13 @@ class Pg:
         return ("pos", p0, sign, v0s, v, ta, max(cruise, 0.0), td, sa, sd, p1)
 
     def tick(self, dt: float) -> None:
-        """Advance by one cycle of `dt` s."""
+        """Advance by one cycle of `dt` s (and note the peak acceleration)."""
+        v0 = self.aspeed
+        self._tick(dt)
+        if dt > 0:
+            self.peak_acc = max(self.peak_acc, abs(self.aspeed - v0) / dt)
+
+    def _tick(self, dt: float) -> None:
         plan = self._plan
         if plan is None:
             self.apos += self.aspeed * dt  # speed control at its speed (0 at rest)

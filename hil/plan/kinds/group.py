@@ -674,10 +674,11 @@ class GroupCapture(StepKind):
 class GroupExpect(StepKind):
     """`group_expect: {axis | axes, position: [lo, hi], write_position: [lo, hi],
     pg_position: [lo, hi], missed: n, rdy_same_cycle: true, status: -1..3, held: bool,
-    heartbeat_lost: bool, capture_position: [lo, hi], arrived_same_cycle: true}`: the
+    heartbeat_lost: bool, capture_position: [lo, hi], arrived_same_cycle: true,
+    peak_acc: [lo, hi]}`: the
     group's view of its axes (capture_position: the CAPTURE register of the last capture's
     type; arrived_same_cycle: every axis's feedback first showed its PG target in the same
-    cycle)."""
+    cycle; peak_acc: the PG's largest speed change per second since its last move)."""
 
     name = "group_expect"
     judge_only = True
@@ -687,10 +688,10 @@ class GroupExpect(StepKind):
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "axes", "position", "write_position", "pg_position", "missed",
                    "rdy_same_cycle", "arrived_same_cycle", "status", "held", "heartbeat_lost",
-                   "capture_position"},
+                   "capture_position", "peak_acc"},
                where)
         out: dict[str, Any] = {"axes": _axes(v, m, where)}
-        for k in ("position", "write_position", "pg_position", "capture_position"):
+        for k in ("position", "write_position", "pg_position", "capture_position", "peak_acc"):
             if k in m:
                 r = m[k]
                 if (not isinstance(r, list) or len(r) != 2
@@ -721,10 +722,11 @@ class GroupExpect(StepKind):
         bad: list[str] = []
         with g._lock:
             for ax in axes:
-                for k in ("position", "write_position", "pg_position", "capture_position"):
+                for k in ("position", "write_position", "pg_position", "capture_position",
+                          "peak_acc"):
                     if k in a:
                         lo, hi = a[k]
-                        val = {"pg_position": ax.pg.apos,
+                        val = {"pg_position": ax.pg.apos, "peak_acc": ax.pg.peak_acc,
                                "capture_position": ax.capture.position}.get(k)
                         val = getattr(ax, k) if val is None else val
                         if not lo <= val <= hi:
