@@ -30,7 +30,7 @@ def _cycles(path) -> list[dict]:
 def test_group_plans_pass_with_every_cycle_on_the_record(path, tmp_path) -> None:
     plan = load_plan(path)
     res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
-    assert res.passed, [(s.name, s.message) for s in res.steps if s.status != "pass"]
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
     cycles = _cycles(res.recording)
     if "fault" in plan.tags:  # an axis lost on purpose: its cycles are missed, the others not
         assert all(c["missed"] in ([], ["axis1"]) for c in cycles)
@@ -169,7 +169,7 @@ def test_a_lost_heartbeat_is_judged_from_the_wire(tmp_path) -> None:
     # never stopped (no missed cycle), and axis2 holds from that very cycle
     res = run_plan(load_plan(plans_dir() / "group" / "group_heartbeat_lost.yaml"),
                    load_bench(GROUP_BENCH), tmp_path)
-    assert res.passed, [(s.name, s.message) for s in res.steps if s.status != "pass"]
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
     hb: list[int] = []
     cycles: list[tuple[int, dict]] = []
     with open(res.recording, "rb") as f:
@@ -232,7 +232,7 @@ def test_capture_interface_fills_the_register_of_its_type(tmp_path) -> None:
     # position) and Write_Position
     res = run_plan(load_plan(plans_dir() / "group" / "group_capture_di.yaml"),
                    load_bench(GROUP_BENCH), tmp_path)
-    assert res.passed, [(s.name, s.message) for s in res.steps if s.status != "pass"]
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
     latch = [v for s in res.steps for v in s.verdicts if v.get("spec") == "latch"]
     assert [v["status"] for v in latch] == ["pass"]
     with open(res.recording, "rb") as f:

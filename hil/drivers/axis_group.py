@@ -507,10 +507,21 @@ class ServoAxis:
         self.write_position = base + self.offset + self.correction
 
     def controlword(self) -> int:
-        """Enable operation unless bit 1; bit 0 fault reset (CiA 402 0x80)."""
+        """The RPDO's controlword: bit 0 of Control a fault reset (0x80), bit 1 no torque
+        (shutdown, 0x06); otherwise the next step towards operation enabled from the state
+        the last statusword showed (CiA 402: 0x06 from switch on disabled, 0x07 from ready
+        to switch on, 0x0F from switched on and after), so the group enables its axes by
+        PDO, without SDO traffic on a bus the cycles may fill."""
         if self.control & 0x1:
             return 0x80
-        return 0x06 if self.control & 0x2 else 0x0F
+        if self.control & 0x2:
+            return 0x06
+        sw = self.statusword
+        if sw & 0x4F in (0x00, 0x40):  # not ready / switch on disabled (or no feedback yet)
+            return 0x06
+        if sw & 0x6F == 0x21:  # ready to switch on
+            return 0x07
+        return 0x0F
 
     def on_feedback(self, statusword: int, position: int, dt: float) -> None:
         if self._last_pos is not None and dt > 0:

@@ -216,8 +216,7 @@ class Group(StepKind):
         ctx.store[_KEY] = group
         ctx.session.on_close(group.stop)
         ctx.session.before_safe(group.stop)  # its controlwords must not undo the safe state
-        for a in axes:
-            drives[a.name].cia.write(0x6040, 0, 0x06)
+        # the RPDO controlwords enable the axes, a CiA 402 step a cycle (no SDO on the bus)
         clock.sleep(3 * group.cycle_s)
         deadline = clock.monotonic_ns() + S
         while not all(a.status == 3 for a in axes):
