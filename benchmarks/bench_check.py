@@ -107,7 +107,7 @@ def main() -> None:
         verdicts = check_all(specs, src)
         t_check = time.perf_counter() - t0
     print(f"bare mcap read+json : {n / t_bare:12,.0f} msg/s ({t_bare:.2f} s)")
-    print(f"hil check (7 specs) : {n / t_check:12,.0f} msg/s ({t_check:.2f} s; "
+    print(f"hil check ({len(specs)} specs): {n / t_check:12,.0f} msg/s ({t_check:.2f} s; "
           f"of which reading {t_load:.2f} s)")
     print(f"ratio check/bare    : {t_check / t_bare:.2f}x the time")
     print(f"verdicts: {summary(verdicts)}")
