@@ -15,6 +15,7 @@ with the line they are on.
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import Any
@@ -83,6 +84,24 @@ def limit(name: str, default: int) -> int:
 _FAST: type[yaml.SafeLoader] | None = getattr(yaml, "CSafeLoader", None)
 
 
+def _shipped(file: str) -> bool:
+    """A file the project ships (plans, specs, benches): the libyaml fast path is tested
+    to read each the same as the Python loader. Other files are read by the Python loader
+    only, as libyaml reads some broken text differently (a tab after a value, a bare `!`)."""
+    try:
+        p = Path(file).resolve()
+    except (OSError, ValueError):
+        return False
+    return any(p.is_relative_to(d) for d in _shipped_roots())
+
+
+@functools.cache
+def _shipped_roots() -> tuple[Path, ...]:
+    from hil.paths import fixtures_dir, plans_dir  # a leaf: imports nothing of hil
+
+    return (fixtures_dir().resolve(), plans_dir().resolve())
+
+
 def _prescan(text: str, file: str, error: type[FileError],
              loader: Any = yaml.SafeLoader) -> None:
     """Depth and alias limits on the event stream (PyYAML's parser does not recurse)."""
@@ -110,6 +129,7 @@ class _Budget:
     def __init__(self) -> None:
         self.max = limit("HIL_YAML_MAX_NODES", 100_000)
         self.left = self.max
+        self.max_depth = limit("HIL_YAML_MAX_DEPTH", 64)
 
 
 def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
@@ -126,6 +146,10 @@ def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
             raise error(file, line, where or "(top)", "an alias inside its own anchor "
                         "(a value that contains itself)")
         within = within | {id(node)}
+        if len(within) > budget.max_depth:  # aliases nest what the text does not
+            raise error(file, line, where or "(top)", f"nested deeper than "
+                        f"{budget.max_depth} levels once aliases are expanded "
+                        "(HIL_YAML_MAX_DEPTH)")
     if isinstance(node, yaml.MappingNode):
         out = LDict()
         out.line, out.key_lines = line, {}
@@ -159,7 +183,7 @@ def load_yaml_text(text: str, file: str, error: type[FileError] = FileError) -> 
     if "\0" in text:
         raise error(file, text.count("\n", 0, text.index("\0")) + 1, "(file)",
                     "NUL byte: not a text file")
-    if _FAST is not None:
+    if _FAST is not None and _shipped(file):
         try:
             return _load(text, file, error, _FAST)
         except Exception:  # the Python loader below reports it precisely

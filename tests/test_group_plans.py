@@ -277,3 +277,34 @@ steps:
         check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms}\n"
                               "  - group_cam_table: {tab: 2, values: [0, 1]}\n", "p.yaml"),
                    load_bench(GROUP_BENCH))
+
+
+def test_group_steps_refuse_hostile_values_with_file_line() -> None:
+    # values that once stopped the group's cycle or crashed the parser: NaN, inf, huge,
+    # floats for indexes, unhashable keys, strings for flags, sub-ms heartbeats
+    bench = load_bench(GROUP_BENCH)
+    for step, field in (
+            ("group_command: {axis: axis1, code: 2, par: {3: .nan}}", "group_command.par.3"),
+            ("group_command: {axis: axis1, code: 2, par: {3: 1.0e400}}", "group_command.par.3"),
+            ("group_command: {axis: axis1, code: 2, par: {3: " + "9" * 400 + "}}",
+             "group_command.par.3"),
+            ("group_command: {axis: axis2, code: 6, par: {2: -3}}", "group_command.par.2"),
+            ("group_command: {axis: axis2, code: 6, par: {0: 0.5}}", "group_command.par.0"),
+            ("group_cam_table: {tab: [0], values: [0, 1]}", "group_cam_table.tab"),
+            ("group_cam_table: {tab: 1, line: 2.5, values: [0, 1]}", "group_cam_table.line"),
+            ("group_cam_table: {values: [0, .inf]}", "group_cam_table.values"),
+            ("group_capture: {axis: axis1, on: [rising]}", "group_capture.on"),
+            ("group_capture: {axis: axis1, start: 20.9}", "group_capture.start"),
+            ("group_expect: {axis: axis1, arrived_same_cycle: 'false'}",
+             "group_expect.arrived_same_cycle"),
+            ("group_expect: {axis: axis1, peak_acc: [true, 5]}", "group_expect.peak_acc"),
+            ("group_expect: {axis: axis1, position: [0, " + "9" * 400 + "]}",
+             "group_expect.position")):
+        plan = ("name: p\nsteps:\n  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
+                f"  - {step}\n")
+        with pytest.raises(PlanFileError) as ei:
+            check_plan(loads_plan(plan, "p.yaml"), bench)
+        assert str(ei.value).startswith(f"p.yaml:4: steps[1].{field}: "), (step, str(ei.value))
+    with pytest.raises(PlanFileError, match=r"p\.yaml:3: steps\[0\]\.group\.heartbeat: "):
+        check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms, "
+                              "heartbeat: 1.6ms}\n", "p.yaml"), bench)

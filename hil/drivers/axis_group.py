@@ -44,6 +44,7 @@ PEAK = {3: 1.0, 2: math.pi / 2, 1: 2.0}  # peak acceleration / Acc of each shape
 SYNC_ID = 0x80
 GEAR_SETTLE_S = 0.1  # engaged time before the gear judge takes its reference
 MIN_TRAVEL = 1000  # increments of master travel before a ratio is measured
+I32_MIN, I32_MAX = -(1 << 31), (1 << 31) - 1  # 60C1h sub 1 (L19059-19070)
 STATUS_LOST, STATUS_NEVER, STATUS_FAULT, STATUS_READY, STATUS_TORQUE = -1, 0, 1, 2, 3
 
 
@@ -336,6 +337,8 @@ class CaptureInterface:
     write_position: float = 0.0
     zero_position: float = 0.0
     captures: int = 0  # completed captures
+    armed_at: int = 0  # `captures` when it was last armed: done once it has grown
+    armed: int = 0  # the Control it was last armed with (1, 2; 0 never)
 
     def store(self, value: float, write_position: float) -> None:
         """A captured actual position: into the register its type names; Control to 0."""
@@ -395,6 +398,7 @@ class ServoAxis:
     gear_ratio_error: float = 0.0  # |measured ratio - In/Out| / |In/Out| since engagement
     _gear_ref: tuple[float, float] | None = None  # (follower, master) when judging began
     _gear_settle: int = 0  # cycles engaged so far
+    _gear_key: tuple = ()  # the gear the reference was taken for
     _hb_ns: int | None = None  # when its last heartbeat came (None: none yet, not watched)
     _seen: bool = False  # feedback of the current cycle arrived
     _ever: bool = False
@@ -445,6 +449,8 @@ class ServoAxis:
             names = list(axes)  # CamScale, Par9 IniPosition, Par10 CamTab, Par12 ServoMode,
             idx = int(p[0])  # Par13 CamIncPosition (004:244)
             kind = int(p[2]) or 1
+            if kind not in (1, 2, 3):
+                raise CommandError(f"Par2 {p[2]:g}: 1 gear, 2 return cam, 3 incremental cam")
             table = self._cam_table(cams or {}, p) if kind >= 2 else None
             g.master = names[idx] if 0 <= idx < len(names) else g.master
             g.source = int(p[1]) or 1
@@ -457,10 +463,12 @@ class ServoAxis:
                 g.cam, g.cam_type, g.cam_scale = table, kind - 2, p[8] or 1.0
                 g.position, g.cam_inc_position = p[9], p[13]
                 g.cam_position = g.cam_value(g.position) + g.cam_inc_position
-                # the cam starts where the axis stands (004:216 holds at the switch)
-                self.offset = self.write_position - g.cam_position - self.correction
                 g.mode = 2
                 self.mode = int(p[12]) if int(p[12]) in (3, 4) else 3
+                # the cam starts where the axis stands: 004:216 holds at the switch, with the
+                # PG's position in it for ServoMode 4
+                pg_part = self.pg.apos if self.mode == 4 else 0.0
+                self.offset = self.write_position - g.cam_position - pg_part - self.correction
         elif code == 7:  # sync off: the ratio ramps to 0 by Par5 a cycle, then GEA idles
             g = self.gea
             g.gin, g.inc_in = 0.0, p[5]
@@ -650,11 +658,14 @@ class AxisGroup:
             g = a.gea
             m = masters.get(g.master)
             engaged = (g.mode == 1 and m is not None and a.name not in self.held
+                       and g.gin != 0 and g.gout != 0
                        and g.actual_in == g.gin and g.actual_shift == g.shift)
-            if not engaged:
-                a._gear_ref, a._gear_settle = None, 0
+            key = (g.gin, g.gout, g.source, g.master, g.shift)
+            if not engaged or key != a._gear_key:  # a new ratio, source or shift: anew
+                a._gear_ref, a._gear_settle, a._gear_key = None, 0, key
                 a.gear_phase_error = a.gear_ratio_error = 0.0
-                continue
+                if not engaged:
+                    continue
             mv = float(self.cycles) if g.source == 3 else m.position
             a._gear_settle += 1
             if a._gear_ref is None:
@@ -737,6 +748,13 @@ class AxisGroup:
                     captured.append(a.capture.record(a.name, self.cycles + 1))
         for a in self.axes:
             a._sent = [*a._sent[-2:], a.write_position]
+            if not (math.isfinite(a.write_position) and I32_MIN <= a.write_position <= I32_MAX):
+                # 60C1h is an I32 (L19059-19070): such a set-point cannot be sent; the axis
+                # holds the last one and its COMMAND (or step) is told why
+                self.command_errors.setdefault(
+                    a.name, f"set-point {a.write_position!r} outside 60C1h's I32 range")
+                a.write_position = a._sent[-2] if len(a._sent) > 1 else a.position
+                a._sent[-1] = a.write_position
         bus = self.net.bus  # the bus itself: canopen's send lock may be held by an SDO
         for a in self.axes:
             bus.send(can.Message(arbitration_id=0x200 + a.node, is_extended_id=False,

@@ -384,6 +384,9 @@ class Axis:
         if self._mode in (_TORQUE, _VEL):
             self.demand = self.position
         smooth = by != "PT" and any(w > 1 for w in self.ip_windows)
+        if (smooth and self._mode == _INTERP and self._ip_ma and self._ip_rem <= 0
+                and float(target_counts) == self._ip_target):
+            return  # the same set-point again: nothing to interpolate, the filters settle on
         if smooth and (self._mode != _INTERP or not self._ip_ma):
             # the filters start full of the command they take over from
             self._ip_raw = self.demand

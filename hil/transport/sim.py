@@ -113,6 +113,17 @@ def _frame_bits(msg: Message) -> int:
     return nbits + _stuff_bits(bits) + 1 + 2 + 7 + 3
 
 
+def _arbitration_key(msg: Message) -> int:
+    """The arbitration field in wire order (a lower value wins): the 11-bit base id, then
+    RTR (standard) or SRR = 1 (extended), IDE, the 18-bit extension and RTR (extended). A
+    standard data frame beats an extended frame of the same base id, a data frame its RTR."""
+    rtr = 1 if msg.is_remote_frame else 0
+    if msg.is_extended_id:
+        ident = msg.arbitration_id & 0x1FFFFFFF
+        return ((ident >> 18) << 21) | (1 << 20) | (1 << 19) | ((ident & 0x3FFFF) << 1) | rtr
+    return ((msg.arbitration_id & 0x7FF) << 21) | (rtr << 20)
+
+
 class SimMessage(Message):
     """A delivered frame; `sender_time_ns`: when its sender queued it (clock ns)."""
 
@@ -142,7 +153,7 @@ class CanMedium:
         return bits * S // self.bitrate
 
     def transmit(self, sender: SimCanBus, msg: Message) -> None:
-        prio = (msg.arbitration_id << 1) | (1 if msg.is_extended_id else 0)
+        prio = _arbitration_key(msg)
         self._seq += 1
         self._pending.append((prio, self._seq, sender, msg))
         self.in_flight += 1
@@ -170,17 +181,17 @@ class CanMedium:
     def _done(self, sender: SimCanBus, msg: Message) -> None:
         self.in_flight -= 1
         t = self.clock.time_ns()
-        # one received copy for every node, as all see the same bits at the same instant
-        rx = SimMessage(timestamp=t / S, arbitration_id=msg.arbitration_id,
-                        data=bytes(msg.data), is_extended_id=msg.is_extended_id,
-                        is_remote_frame=msg.is_remote_frame, is_error_frame=msg.is_error_frame,
-                        dlc=msg.dlc, channel=self.channel,
-                        sender_time_ns=getattr(msg, "sender_time_ns", None))
+        data, sent = bytes(msg.data), getattr(msg, "sender_time_ns", None)
         try:
             for node in list(self.nodes):
                 if node is not sender or node.receive_own_messages:
-                    try:
-                        node._deliver(rx)
+                    try:  # a copy each: canopen keeps a PDO's buffer and writes into it
+                        node._deliver(SimMessage(
+                            timestamp=t / S, arbitration_id=msg.arbitration_id, data=data,
+                            is_extended_id=msg.is_extended_id,
+                            is_remote_frame=msg.is_remote_frame,
+                            is_error_frame=msg.is_error_frame, dlc=msg.dlc,
+                            channel=self.channel, sender_time_ns=sent))
                     except Exception as exc:  # one receiver's bug: the others get the frame
                         node.errors.append(exc)
         finally:
@@ -221,7 +232,7 @@ class SimCanBus(BusABC):
         self.clock.settle(lambda: not self.medium.idle())
 
     def _deliver(self, msg: Message) -> None:
-        """Queue a received frame (shared by every node: receivers must not mutate it)."""
+        """Queue a received frame (this node's own copy)."""
         if self._is_shutdown:
             return
         self._rx.append(msg)

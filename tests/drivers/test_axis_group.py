@@ -228,3 +228,44 @@ def test_speed_mode_keeps_running_at_its_speed() -> None:
     for _ in range(1000):
         pg.tick(DT)
     assert pg.apos - p0 == pytest.approx(20_000, rel=1e-9)  # one second at 20000 inc/s
+
+
+def test_cam_with_servomode_4_starts_where_the_axis_stands() -> None:
+    # 004:216 WritePosition = PG.APos + GEA + Offset + Correction: with ServoMode 4 the PG's
+    # position stays in the sum, so the Offset must take it out at the switch
+    from hil.drivers.axis_group import ServoAxis
+
+    master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
+    slave.pg.apos = slave.write_position = 50000.0
+    slave.par = [0, 1, 2, 1, 1, 0, 0, 3, 1.0, 0, 0, 0, 4, 0, 0]
+    slave.command = 6
+    slave.accept_command({"m": master, "s": slave}, {0: [100.0, 200.0, 300.0], 1: []})
+    slave.compute()
+    assert slave.mode == 4 and slave.write_position == pytest.approx(50000.0)
+
+
+def test_gear_judge_survives_a_ratio_of_0_and_restarts_on_a_new_ratio() -> None:
+    from hil.drivers.axis_group import AxisGroup, ServoAxis
+
+    class Bus:
+        def send(self, msg) -> None:
+            pass
+
+    class Net:
+        bus = Bus()
+
+    master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
+    g = AxisGroup(Net(), [master, slave], 0.002, sdo_write=lambda *a: None)
+    gea = slave.gea
+    gea.master, gea.source, gea.gin, gea.gout, gea.actual_in, gea.mode = "m", 2, 1.0, 1.0, 1.0, 1
+    for k in range(100):  # 200 ms engaged: the reference is taken, the follower follows 1/1
+        master.position = slave.position = 10.0 * k
+        g._judge_gears({"m": master, "s": slave})
+    assert slave._gear_ref is not None and slave.gear_phase_error == 0.0
+    gea.gin = gea.actual_in = 2.0  # a new ratio at once (IncIn 0): the reference restarts
+    g._judge_gears({"m": master, "s": slave})
+    assert slave._gear_ref is None and slave.gear_phase_error == 0.0
+    gea.gin = gea.actual_in = 0.0  # desync at once: In 0 is not a gear to judge
+    for _ in range(100):
+        g._judge_gears({"m": master, "s": slave})
+    assert slave.gear_ratio_error == 0.0

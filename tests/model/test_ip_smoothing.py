@@ -107,3 +107,20 @@ def test_ip_following_error_past_6065h_raises_al009() -> None:
         fe.append(abs(d.read_object(0x60F4, 0)))
     assert "AL009" in d.alarms.active and not d.servo_on
     assert fe[-1] <= 20000 < fe[-1] + 500 * 1.2  # tripped as 60F4h passed 6065h
+
+
+def test_the_same_set_point_every_cycle_lets_the_axis_settle() -> None:
+    # a controller at rest sends its last set-point every cycle: the filtered command settles
+    # and the axis stops moving (and may then stop stepping)
+    settled = []
+    for p1068 in (4, 0):  # with the filter as without it
+        d = ip_drive(**{"P1.068": p1068})
+        demand_after_step(d, 4)
+        steps = 0
+        while d.axis.moving and steps < 300:
+            d.write_object(0x60C1, 1, STEP_PUU)
+            d.advance(MS)
+            steps += 1
+        assert not d.axis.moving and d.axis.at_target
+        settled.append(steps)
+    assert abs(settled[0] - settled[1]) <= 5  # the motor's own settling, not the filter's

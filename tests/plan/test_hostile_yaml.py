@@ -200,9 +200,27 @@ def test_libyaml_and_the_python_loader_agree_on_every_shipped_file_and_error() -
         fast = _load(text, str(f), FileError, yaml.CSafeLoader)
         slow = _load(text, str(f), FileError, yaml.SafeLoader)
         assert _shape(fast) == _shape(slow), f
+    # a file the project does not ship is read by the Python loader only: libyaml reads
+    # some broken text differently (a tab after a value is an error only for PyYAML)
+    with pytest.raises(FileError, match=r"user\.yaml:1"):
+        load_yaml_text("timeout: 5s\t\n", "user.yaml")
     for bad in ("a: [1, 2\nb: 3\n", "a: 1\n  b: 2\n", "a: 1\na: 2\n", "- &x [*x]\n"):
+        shipped = str(plans_dir() / "not_a_plan.yaml")  # the fast path, then the fallback
         with pytest.raises(FileError) as fast_err:
-            load_yaml_text(bad, "bad.yaml")
+            load_yaml_text(bad, shipped)
         with pytest.raises(FileError) as slow_err:
-            _load(bad, "bad.yaml", FileError, yaml.SafeLoader)
+            _load(bad, shipped, FileError, yaml.SafeLoader)
         assert str(fast_err.value) == str(slow_err.value)
+
+
+def test_an_alias_chain_deeper_than_the_limit_is_an_error_not_a_crash() -> None:
+    # each anchor 60 levels deep holding the previous alias: within the text's depth and
+    # alias limits, 1500 levels once expanded
+    from hil.yamlio import FileError, load_yaml_text
+
+    lines = []
+    for k in range(25):
+        inner = f"*a{k - 1}" if k else "0"
+        lines.append(f"a{k}: &a{k} " + "[" * 60 + inner + "]" * 60)
+    with pytest.raises(FileError, match="nested deeper than 64 levels once aliases"):
+        load_yaml_text("\n".join(lines) + "\n", "chain.yaml")

@@ -155,3 +155,18 @@ def test_a_failing_receiver_neither_loses_the_frame_for_others_nor_stalls_the_bu
         assert len(b.errors) == 2 and d.errors == []
         for bus in (a, b, d):
             bus.shutdown()
+
+
+def test_arbitration_compares_the_bits_in_wire_order() -> None:
+    # ISO 11898-1: the base id first; a standard data frame (RTR 0) beats the extended frame
+    # of the same base id (SRR 1), and beats its own RTR; an extended base id 1 beats a
+    # standard id 2
+    from hil.transport.sim import _arbitration_key as key
+
+    def m(i: int, ext: bool = False, rtr: bool = False) -> can.Message:
+        return can.Message(arbitration_id=i, is_extended_id=ext, is_remote_frame=rtr)
+
+    assert key(m(0x001 << 18, ext=True)) < key(m(0x002))
+    assert key(m(0x005)) < key(m(0x005 << 18, ext=True))
+    assert key(m(0x005)) < key(m(0x005, rtr=True)) < key(m(0x005 << 18, ext=True))
+    assert key(m(0x005 << 18 | 7, ext=True)) < key(m(0x005 << 18 | 7, ext=True, rtr=True))

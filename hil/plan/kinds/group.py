@@ -60,6 +60,32 @@ def _num(v: Checker, m: Any, key: str, where: str, lo: float, hi: float,
     return float(val)
 
 
+_BIG = 1e15  # no position, speed or cam value on an I32 drive comes near it
+
+
+def _finite(x: Any) -> bool:
+    """A plain number a set-point can be made of: not a bool, not NaN/inf, not huge."""
+    return (isinstance(x, int | float) and not isinstance(x, bool)
+            and -_BIG <= x <= _BIG)  # NaN fails both comparisons
+
+
+def _int(v: Checker, m: Any, key: str, where: str, lo: int, hi: int, default: int) -> int:
+    """A whole number lo..hi (an array index, a table line): 2.5 or true is an error."""
+    if key not in m:
+        return default
+    val = m[key]
+    if isinstance(val, bool) or not isinstance(val, int) or not lo <= val <= hi:
+        raise v.err(m.kline(key), join(where, key), f"{val!r}: a whole number {lo} ~ {hi}")
+    return val
+
+
+def _flag(v: Checker, m: Any, key: str, where: str) -> bool:
+    val = m[key]
+    if not isinstance(val, bool):
+        raise v.err(m.kline(key), join(where, key), f"{val!r}: true or false")
+    return val
+
+
 def _axis_name(v: Checker, m: Any, key: str, where: str) -> str:
     val = m.get(key)
     if not isinstance(val, str) or not val:
@@ -148,19 +174,19 @@ class Group(StepKind):
             raise v.err(m.kline("cycle"), join(where, "cycle"),
                         "SYNC 1-10 ms (A3 IP mode, L17211-17244)")
         hb = v.duration(m, "heartbeat", where, 0) if "heartbeat" in m else 0
-        if "heartbeat" in m and not MS <= hb <= 65535 * MS:
+        if "heartbeat" in m and (not MS <= hb <= 65535 * MS or hb % MS):
             raise v.err(m.kline("heartbeat"), join(where, "heartbeat"),
-                        "1 ms ~ 65535 ms (1017h, the producer time of each axis)")
+                        "whole ms, 1 ~ 65535 (1017h, the producer time of each axis)")
         hb_to = 0
         if "heartbeat_timeout" in m:
             if not hb:
                 raise v.err(m.kline("heartbeat_timeout"), join(where, "heartbeat_timeout"),
                             "needs `heartbeat:` (the axes' producer time)")
             hb_to = v.duration(m, "heartbeat_timeout", where, 0)
-            if not hb < hb_to <= 65535 * MS:
+            if not hb < hb_to <= 65535 * MS or hb_to % MS:
                 raise v.err(m.kline("heartbeat_timeout"), join(where, "heartbeat_timeout"),
                             "longer than `heartbeat:` (a consumer time shorter than the "
-                            "producer time trips on every heartbeat), at most 65535 ms")
+                            "producer time trips on every heartbeat), whole ms, at most 65535")
         return {"axes": names, "cycle": cycle, "heartbeat": hb, "heartbeat_timeout": hb_to,
                 "line": m.kline("cycle") if "cycle" in m else line}
 
@@ -394,16 +420,16 @@ class GroupCamTable(StepKind):
         m = v.mapping(obj, line, where)
         v.keys(m, {"tab", "line", "values"}, where)
         tab = m.get("tab", 0)
-        if tab not in CAM_MEMORY or isinstance(tab, bool):
+        if isinstance(tab, bool) or not isinstance(tab, int) or tab not in CAM_MEMORY:
             raise v.err(m.kline("tab") if "tab" in m else line, join(where, "tab"),
                         f"{tab!r}: 0 (TGM_Cam_Profile) or 1 (TGM_Data), 004:232")
-        start = int(_num(v, m, "line", where, 0, CAM_MEMORY[tab] - 1, 0))
+        start = _int(v, m, "line", where, 0, CAM_MEMORY[tab] - 1, 0)
         if "values" not in m:
             raise v.err(line, where, "needs `values:` (the cam's points)")
         vals = v.seq(m["values"], m.kline("values"), join(where, "values"))
-        if not vals or not all(isinstance(x, int | float) and not isinstance(x, bool)
-                               for x in vals):
-            raise v.err(m.kline("values"), join(where, "values"), "a list of numbers")
+        if not vals or not all(_finite(x) for x in vals):
+            raise v.err(m.kline("values"), join(where, "values"),
+                        f"a list of finite numbers within ±{_BIG:g}")
         if start + len(vals) > CAM_MEMORY[tab]:
             raise v.err(m.kline("values"), join(where, "values"),
                         f"line {start} + {len(vals)} values past CamTab {tab}'s "
@@ -452,9 +478,16 @@ class GroupCommand(StepKind):
                     i = -1
                 if not 0 <= i <= 14:
                     raise v.err(pm.kline(k), join(where, f"par.{k}"), "Par index 0-14")
-                if isinstance(val, bool) or not isinstance(val, int | float):
-                    raise v.err(pm.kline(k), join(where, f"par.{k}"), f"{val!r}: a number")
+                if not _finite(val):
+                    raise v.err(pm.kline(k), join(where, f"par.{k}"),
+                                f"{val!r}: a finite number within ±{_BIG:g}")
+                if code == 6 and i in (0, 1, 2, 6, 7, 10, 12) and val != int(val):
+                    raise v.err(pm.kline(k), join(where, f"par.{k}"),
+                                f"{val!r}: a whole number (an index or a code, 004:244)")
                 par[i] = float(val)
+        if code == 6 and par[2] not in (0.0, 1.0, 2.0, 3.0):
+            raise v.err(m.kline("par"), join(where, "par.2"),
+                        f"{par[2]:g}: 1 gear, 2 return cam, 3 incremental cam (004:244)")
         return {"axis": _axis_name(v, m, "axis", where), "code": code, "par": par,
                 "timeout": v.duration(m, "timeout", where, 5 * S)}
 
@@ -585,11 +618,13 @@ def _await_capture(ctx: StepContext, g: AxisGroup, a: ServoAxis, timeout: float)
     point is stored, L5155) polled over SDO once a cycle, then its value read from the data
     array into the register of its type; Control back to 0. Control 2 is the group's own."""
     cap = a.capture
-    if cap.control == 2:
-        if not clock.wait_for(lambda: cap.control == 0, timeout):
+    if cap.armed == 2:  # the group takes it at a cycle: perhaps already before this step
+        if not clock.wait_for(lambda: cap.captures > cap.armed_at, timeout):
             raise StepFailed(f"{a.name}: CAPTURE Control 2 not taken in {timeout:g} s")
         return f"{a.name} registers captured at {cap.position:.0f}"
-    if cap.control != 1:
+    if cap.armed == 1 and cap.control == 0 and cap.captures > cap.armed_at:
+        return f"{a.name} captured {cap.position:.0f} (already read)"
+    if cap.armed != 1 or cap.control != 1:
         raise StepFailed(f"{a.name}: no CAPTURE armed (group_capture first)")
     dio = ctx.session.drive(a.name)
     deadline = clock.monotonic_ns() + round(timeout * S)
@@ -629,14 +664,14 @@ class GroupCapture(StepKind):
                         join(where, "control"),
                         f"{control!r}: 1 (the drive's input) or 2 (one-shot, 004:252)")
         on = m.get("on", "rising")
-        if on not in _CAPTURE_TYPES:
+        if not isinstance(on, str) or on not in _CAPTURE_TYPES:
             raise v.err(m.kline("on") if "on" in m else line, join(where, "on"),
                         f"{on!r}: rising, falling (the A3's DI7, L5150) or zero (the encoder "
                         "zero pulse looped into it: options.extra.capture.trigger Z)")
         if control == 2 and "on" in m:
             raise v.err(m.kline("on"), join(where, "on"),
                         "Control 2 captures the registers at a cycle, not on an edge")
-        start = int(_num(v, m, "start", where, 0, 799, 0))
+        start = _int(v, m, "start", where, 0, 799, 0)
         return {"axis": _axis_name(v, m, "axis", where), "control": control,
                 "typ": _CAPTURE_TYPES[on] if control == 1 else 0, "start": start}
 
@@ -649,6 +684,7 @@ class GroupCapture(StepKind):
         cap = a.capture
         if self.args["control"] == 2:
             with g._lock:
+                cap.armed, cap.armed_at = 2, cap.captures
                 cap.typ_ext_capture, cap.control = 0, 2
             return Outcome(f"{a.name}: CAPTURE Control 2 (the registers at the next cycle)")
         dio = ctx.session.drive(a.name)
@@ -662,6 +698,7 @@ class GroupCapture(StepKind):
                                              "nc": nc}
         dio.write_param("P5.039", nc << 8 | 3 << 4 | 1, "sdo")  # CN2, NO/NC, start
         with g._lock:
+            cap.armed, cap.armed_at = 1, cap.captures
             cap.typ_ext_capture, cap.start, cap.control = typ, start, 1
         return Outcome(f"{a.name}: CAPTURE Control 1, Typ_ExtCapture 0x{typ:02X} into "
                        f"Array[{start}]")
@@ -694,14 +731,14 @@ class GroupExpect(StepKind):
             if k in m:
                 r = m[k]
                 if (not isinstance(r, list) or len(r) != 2
-                        or not all(isinstance(x, int | float) for x in r) or r[0] > r[1]):
+                        or not all(_finite(x) for x in r) or r[0] > r[1]):
                     raise v.err(m.kline(k), join(where, k), "[low, high]")
                 out[k] = (float(r[0]), float(r[1]))
         if "missed" in m:
             out["missed"] = int(_num(v, m, "missed", where, 0, 1e9))
         for k in ("rdy_same_cycle", "arrived_same_cycle"):
             if k in m:
-                out[k] = bool(m[k])
+                out[k] = _flag(v, m, k, where)
         if "status" in m:
             if m["status"] not in (-1, 0, 1, 2, 3) or isinstance(m["status"], bool):
                 raise v.err(m.kline("status"), join(where, "status"),
