@@ -308,3 +308,42 @@ def test_group_steps_refuse_hostile_values_with_file_line() -> None:
     with pytest.raises(PlanFileError, match=r"p\.yaml:3: steps\[0\]\.group\.heartbeat: "):
         check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms, "
                               "heartbeat: 1.6ms}\n", "p.yaml"), bench)
+
+
+def test_the_group_never_re_enables_what_was_switched_off_and_resumes_without_a_jump(
+        tmp_path) -> None:
+    # Control bit 1 (no torque, 004:254): the axis is shut down and its set-point follows
+    # the motor; cleared, the group enables it again from where it stands (no AL009, no
+    # jump). A disable written by somebody else (6040h = 0: switch on disabled) stays: the
+    # group keeps states, it walks an axis up only when it starts or its Control asks
+    plan = loads_plan("""name: ctl
+steps:
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_move: {axis: axis1, run: 50000, acc: 500000}
+  - wait: 200ms
+  - group_control: {axis: axis1, torque: false}
+  - wait: 300ms
+  - group_expect: {axis: axis1, status: 2}
+  - group_control: {axis: axis1, torque: true}
+  - wait: 100ms
+  - group_expect: {axis: axis1, status: 3}
+  - expect: {alarm: none}
+    drive: axis1
+  - sdo: {"6040": 0}
+    drive: axis2
+  - wait: 100ms
+  - expect: {state: SWITCH ON DISABLED}
+    drive: axis2
+  - group_expect: {axis: axis2, status: 2}
+  - group_stop: {}
+""", "ctl.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
+    cycles = _cycles(res.recording)
+    # under torque, the set-point never moves more than a cycle at speed: no jump on resume
+    steps = [abs(b["write_position"]["axis1"] - a["write_position"]["axis1"])
+             for a, b in itertools.pairwise(cycles)
+             if a["status"]["axis1"] == b["status"]["axis1"] == 3]
+    assert len(steps) > 100 and max(steps) <= 50000 * 0.002 + 1
+    off = [c for c in cycles if c["status"]["axis1"] == 2 and c["cycle"] > 50]
+    assert off and all(c["write_position"]["axis1"] == c["position"]["axis1"] for c in off[2:])

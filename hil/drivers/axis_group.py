@@ -43,7 +43,7 @@ RAMP_TYPES = (0, 1, 2, 3)
 PEAK = {3: 1.0, 2: math.pi / 2, 1: 2.0}  # peak acceleration / Acc of each shape (004:226)
 SYNC_ID = 0x80
 GEAR_SETTLE_S = 0.1  # engaged time before the gear judge takes its reference
-MIN_TRAVEL = 1000  # increments of master travel before a ratio is measured
+MIN_TRAVEL = 1000  # increments of follower travel before a ratio is measured
 I32_MIN, I32_MAX = -(1 << 31), (1 << 31) - 1  # 60C1h sub 1 (L19059-19070)
 STATUS_LOST, STATUS_NEVER, STATUS_FAULT, STATUS_READY, STATUS_TORQUE = -1, 0, 1, 2, 3
 
@@ -394,6 +394,10 @@ class ServoAxis:
     pg: Pg = field(default_factory=Pg)
     gea: Gea = field(default_factory=Gea)
     heartbeat_lost: bool = False  # its heartbeat is older than the consumer time
+    rebooted: bool = False  # its boot-up heartbeat came: mapping and IP mode are gone
+    enabling: bool = True  # walk it up to operation enabled (see controlword)
+    setpoint_error: str = ""  # why its last set-point could not be sent
+    _last_control: int = 0
     gear_phase_error: float = 0.0  # a geared follower's drift from its master (increments)
     gear_ratio_error: float = 0.0  # |measured ratio - In/Out| / |In/Out| since engagement
     _gear_ref: tuple[float, float] | None = None  # (follower, master) when judging began
@@ -506,30 +510,42 @@ class ServoAxis:
         return self.write_position - self.position
 
     def compute(self) -> None:
-        """WritePosition from the PG and/or GEA (004:216)."""
+        """WritePosition from the PG and/or GEA (004:216). An axis without torque (never
+        enabled, faulted, ready without torque) follows itself: its Offset takes up what the
+        PG or GEA moved, so the set-point is where the motor is when torque comes on."""
         base = 0.0
         if self.mode in (1, 4):
             base += self.pg.apos
         if self.mode in (3, 4):
             base += self.gea.cam_position if self.gea.mode == 2 else self.gea.position
+        if self.status in (STATUS_NEVER, STATUS_FAULT, STATUS_READY) and self._ever:
+            self.offset = self.position - base - self.correction
         self.write_position = base + self.offset + self.correction
 
     def controlword(self) -> int:
-        """The RPDO's controlword: bit 0 of Control a fault reset (0x80), bit 1 no torque
-        (shutdown, 0x06); otherwise the next step towards operation enabled from the state
-        the last statusword showed (CiA 402: 0x06 from switch on disabled, 0x07 from ready
-        to switch on, 0x0F from switched on and after), so the group enables its axes by
-        PDO, without SDO traffic on a bus the cycles may fill."""
+        """The RPDO's controlword. Control bit 0 a fault reset (0x80), bit 1 no torque
+        (shutdown, 0x06). Otherwise the group keeps the state it has, and walks an axis up
+        to operation enabled only while `enabling` (set when the group starts and when
+        Control bit 0 or 1 falls; cleared once enabled): 0x06 from switch on disabled, 0x07
+        from ready to switch on, 0x0F from switched on (CiA 402). It never re-enables what
+        something else switched off (the safe state, a plan step, the drive), and never
+        leaves a quick stop the drive is in (0x0B keeps it)."""
         if self.control & 0x1:
             return 0x80
         if self.control & 0x2:
             return 0x06
         sw = self.statusword
         if sw & 0x4F in (0x00, 0x40):  # not ready / switch on disabled (or no feedback yet)
-            return 0x06
+            return 0x06 if self.enabling else 0x00
         if sw & 0x6F == 0x21:  # ready to switch on
-            return 0x07
-        return 0x0F
+            return 0x07 if self.enabling else 0x06
+        if sw & 0x6F == 0x23:  # switched on
+            return 0x0F if self.enabling else 0x07
+        if sw & 0x6F == 0x07:  # quick stop active: stay (transition 16 is not the group's)
+            return 0x0B
+        if sw & 0x4F in (0x08, 0x0F):  # fault / fault reaction active
+            return 0x00
+        return 0x0F  # operation enabled
 
     def on_feedback(self, statusword: int, position: int, dt: float) -> None:
         if self._last_pos is not None and dt > 0:
@@ -538,6 +554,8 @@ class ServoAxis:
         self.position = float(position)
         self.statusword = statusword
         self._seen = self._ever = True
+        if statusword & 0x6F == 0x27:
+            self.enabling = False  # there: from now on the group only keeps it
         if self.heartbeat_lost:
             self.status = STATUS_LOST  # until its heartbeat comes back, whatever its PDOs say
         elif statusword & 0x08:
@@ -595,10 +613,10 @@ class AxisGroup:
         self.cycle_bits = _bits(SYNC_ID, 0) + sum(
             _bits(0x200 + a.node, _RX.size) + _bits(0x180 + a.node, _TX.size) for a in axes)
         # heartbeat: each axis produces it (1017h), the group consumes it (CiA 301); the
-        # consumer time defaults to twice the producer time
+        # consumer time defaults to twice the producer time, at least it + 2 cycles
         self.heartbeat_s = heartbeat_s
-        self.heartbeat_timeout_s = heartbeat_timeout_s or (2 * heartbeat_s if heartbeat_s
-                                                            else None)
+        self.heartbeat_timeout_s = heartbeat_timeout_s or (
+            max(2 * heartbeat_s, heartbeat_s + 2 * cycle_s) if heartbeat_s else None)
         self._cyclic: Cyclic | None = None
         self.held: list[str] = []  # followers holding: their master is lost or faulted
         self.cams: dict[int, list[float]] = {0: [], 1: []}  # CamTab 0/1 (004:232)
@@ -634,8 +652,14 @@ class AxisGroup:
 
     def _heartbeat(self, a: ServoAxis) -> Callable[[int, bytearray, float], None]:
         def cb(_cob: int, data: bytearray, _ts: float) -> None:
-            if data:  # monitoring starts with the first heartbeat (CiA 301)
-                with self._lock:
+            if not data:
+                return
+            with self._lock:
+                if data[0] == 0:  # boot-up: the node restarted, its PDO mapping and IP
+                    a.rebooted = a.heartbeat_lost = True  # mode are gone (CiA 301): lost
+                    a._hb_ns = None  # until the group is set up again
+                    a.status, a.statusword = STATUS_LOST, 0
+                elif not a.rebooted:  # monitoring starts with the first heartbeat
                     a._hb_ns = clock.monotonic_ns()
                     a.heartbeat_lost = False
         return cb
@@ -675,7 +699,7 @@ class AxisGroup:
             ratio = g.gin / g.gout
             df, dm = a.position - a._gear_ref[0], mv - a._gear_ref[1]
             a.gear_phase_error = df - ratio * dm
-            if abs(dm) >= (1 if g.source == 3 else MIN_TRAVEL):
+            if abs(ratio * dm) >= MIN_TRAVEL:  # the follower's travel: whole increments
                 a.gear_ratio_error = abs(df / dm - ratio) / abs(ratio)
 
     # -- the cycle -----------------------------------------------------------------------
@@ -710,6 +734,9 @@ class AxisGroup:
                         a.status = STATUS_LOST  # its PDOs may still come: lost all the same
             masters = {a.name: a for a in self.axes}
             for a in self.axes:
+                if a._last_control & 0x3 and not a.control & 0x3:
+                    a.enabling = True  # fault reset done / torque wanted again
+                a._last_control = a.control
                 try:
                     a.accept_command(masters, self.cams)
                 except CommandError as e:  # refused: Control stays, the step reports it
@@ -746,15 +773,15 @@ class AxisGroup:
                 if a.capture.control == 2:
                     a.capture.store(a.position, a.write_position)
                     captured.append(a.capture.record(a.name, self.cycles + 1))
-        for a in self.axes:
-            a._sent = [*a._sent[-2:], a.write_position]
-            if not (math.isfinite(a.write_position) and I32_MIN <= a.write_position <= I32_MAX):
-                # 60C1h is an I32 (L19059-19070): such a set-point cannot be sent; the axis
-                # holds the last one and its COMMAND (or step) is told why
-                self.command_errors.setdefault(
-                    a.name, f"set-point {a.write_position!r} outside 60C1h's I32 range")
-                a.write_position = a._sent[-2] if len(a._sent) > 1 else a.position
-                a._sent[-1] = a.write_position
+            for a in self.axes:
+                if not (math.isfinite(a.write_position)
+                        and I32_MIN <= a.write_position <= I32_MAX):
+                    # 60C1h is an I32 (L19059-19070): such a set-point cannot be sent; the
+                    # axis holds its last one, and group_wait / group_expect say why
+                    a.setpoint_error = (f"set-point {a.write_position!r} outside 60C1h's I32 "
+                                        "range: the last one is held")
+                    a.write_position = a._sent[-1] if a._sent else a.position
+                a._sent = [*a._sent[-2:], a.write_position]
         bus = self.net.bus  # the bus itself: canopen's send lock may be held by an SDO
         for a in self.axes:
             bus.send(can.Message(arbitration_id=0x200 + a.node, is_extended_id=False,

@@ -266,6 +266,7 @@ def test_gear_judge_survives_a_ratio_of_0_and_restarts_on_a_new_ratio() -> None:
     g._judge_gears({"m": master, "s": slave})
     assert slave._gear_ref is None and slave.gear_phase_error == 0.0
     gea.gin = gea.actual_in = 0.0  # desync at once: In 0 is not a gear to judge
-    for _ in range(100):
+    for k in range(100):  # the master travels far: a ratio of 0 would divide by zero
+        master.position = 1000.0 + 100.0 * k
         g._judge_gears({"m": master, "s": slave})
-    assert slave.gear_ratio_error == 0.0
+    assert slave.gear_ratio_error == 0.0 and slave.gear_phase_error == 0.0

@@ -120,7 +120,7 @@ def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
     if out["axis"] == out["master"]:
         raise v.err(line, where, "an axis cannot be its own master")
     src = m.get("source", "write")
-    if src not in _SOURCES:
+    if not isinstance(src, str) or src not in _SOURCES:
         raise v.err(m.kline("source"), join(where, "source"),
                     "write (master WritePosition), actual (master Position) or time "
                     "(ServoTick: one per cycle, 004:230)")
@@ -183,10 +183,10 @@ class Group(StepKind):
                 raise v.err(m.kline("heartbeat_timeout"), join(where, "heartbeat_timeout"),
                             "needs `heartbeat:` (the axes' producer time)")
             hb_to = v.duration(m, "heartbeat_timeout", where, 0)
-            if not hb < hb_to <= 65535 * MS or hb_to % MS:
+            if not hb + 2 * cycle <= hb_to <= 65535 * MS or hb_to % MS:
                 raise v.err(m.kline("heartbeat_timeout"), join(where, "heartbeat_timeout"),
-                            "longer than `heartbeat:` (a consumer time shorter than the "
-                            "producer time trips on every heartbeat), whole ms, at most 65535")
+                            "at least `heartbeat:` + 2 cycles (a consumer time at the producer "
+                            "time trips on a heartbeat one cycle late), whole ms, at most 65535")
         return {"axes": names, "cycle": cycle, "heartbeat": hb, "heartbeat_timeout": hb_to,
                 "line": m.kline("cycle") if "cycle" in m else line}
 
@@ -202,6 +202,8 @@ class Group(StepKind):
         url = cc.bench.can[buses.pop()]
         bitrate = _bitrate(url)
         bits = len(names) * (115 + 115) + 50
+        if self.args["heartbeat"]:  # every axis's heartbeat (1 byte) may fall in one cycle
+            bits += len(names) * 65
         if bits / bitrate > self.args["cycle"] / S:
             raise cc.err(f"{len(names)} axes need up to {bits} bits a cycle: "
                          f"{bits / bitrate * 1e3:.2f} ms at {bitrate / 1e3:g} kbit/s, more than "
@@ -274,7 +276,7 @@ class GroupMove(StepKind):
         targets = [k for k in ("to", "by", "run") if k in m]
         if len(targets) != 1:
             raise v.err(line, where, "one of to (absolute), by (relative), run (speed)")
-        big = 2.0**31
+        big = 2**31 - 1  # 60C1h is an I32 (L19059-19070)
         out = {"axes": _axes(v, m, where), "what": targets[0],
                "value": _num(v, m, targets[0], where, -big, big),
                "acc": _num(v, m, "acc", where, 1, 1e12, 100_000),
@@ -372,8 +374,9 @@ class GroupCam(StepKind):
         if len(table) < 2:
             raise v.err(m.kline("table"), join(where, "table"),
                         f"cam table too short: {len(table)} point(s), at least 2")
-        if not all(isinstance(x, int | float) and not isinstance(x, bool) for x in table):
-            raise v.err(m.kline("table"), join(where, "table"), "numbers only")
+        if not all(_finite(x) for x in table):
+            raise v.err(m.kline("table"), join(where, "table"),
+                        f"finite numbers within ±{_BIG:g} only")
         out["table"] = [float(x) for x in table]
         kind = m.get("type", "return")
         if kind not in ("return", "incremental"):
@@ -538,16 +541,21 @@ class GroupSdo(StepKind):
         v.keys(r, {"index", "sub", "bytes", "data"}, join(where, op))
         w = join(where, op)
         out = {"axis": _axis_name(v, m, "axis", where), "control": 1 if op == "write" else 2,
-               "index": int(_num(v, r, "index", w, 0, 0xFFFF)),
-               "sub": int(_num(v, r, "sub", w, 0, 0xFF, 0)),
-               "bytes": int(_num(v, r, "bytes", w, 1, 4, 4)),
-               "data": int(_num(v, r, "data", w, -(2**31), 2**32 - 1, 0)) if op == "write"
+               "index": _int(v, r, "index", w, 0, 0xFFFF, -1),
+               "sub": _int(v, r, "sub", w, 0, 0xFF, 0),
+               "bytes": _int(v, r, "bytes", w, 1, 4, 4),
+               "data": _int(v, r, "data", w, -(2**31), 2**32 - 1, 0) if op == "write"
                else 0}
+        if out["index"] < 0:
+            raise v.err(r.line, w, "needs `index:`")
         out["expect"] = {}
         if "expect" in m:
             e = v.mapping(m["expect"], m.kline("expect"), join(where, "expect"))
             v.keys(e, {"status", "data"}, join(where, "expect"))
-            out["expect"] = {k: int(e[k]) for k in e}
+            we = join(where, "expect")
+            out["expect"] = {k: _int(v, e, k, we, *((0, 2) if k == "status"
+                                                     else (-(2**31), 2**32 - 1)), 0)
+                             for k in e}
         return out
 
     def check(self, cc: CheckContext) -> None:
@@ -604,6 +612,9 @@ class GroupWait(StepKind):
         if not clock.wait_for(lambda: all(a.pg.rdy for a in axes), timeout):
             raise StepFailed("PG not ready: " + ", ".join(a.name for a in axes
                                                           if not a.pg.rdy))
+        bad = [f"{a.name}: {a.setpoint_error}" for a in axes if a.setpoint_error]
+        if bad:
+            raise StepFailed("; ".join(bad))
         text = [f"{a.name} at {a.write_position:.0f}" for a in axes]
         for a in _members(g, self.args["captured"]):
             text.append(_await_capture(ctx, g, a, timeout))
@@ -740,7 +751,8 @@ class GroupExpect(StepKind):
             if k in m:
                 out[k] = _flag(v, m, k, where)
         if "status" in m:
-            if m["status"] not in (-1, 0, 1, 2, 3) or isinstance(m["status"], bool):
+            if (not isinstance(m["status"], int) or isinstance(m["status"], bool)
+                    or m["status"] not in (-1, 0, 1, 2, 3)):
                 raise v.err(m.kline("status"), join(where, "status"),
                             "-1 lost, 0 never, 1 fault, 2 ready, 3 with torque (004:254)")
             out["status"] = m["status"]
@@ -767,6 +779,8 @@ class GroupExpect(StepKind):
                         val = getattr(ax, k) if val is None else val
                         if not lo <= val <= hi:
                             bad.append(f"{ax.name} {k} {val:.0f} not in [{lo:g}, {hi:g}]")
+                if ax.setpoint_error:
+                    bad.append(f"{ax.name}: {ax.setpoint_error}")
                 if "missed" in a and ax.missed > a["missed"]:
                     bad.append(f"{ax.name} missed {ax.missed} cycles")
                 if "status" in a and ax.status != a["status"]:
@@ -791,6 +805,51 @@ class GroupExpect(StepKind):
         return f"group_expect {', '.join(self.args['axes'])}"
 
 
+class GroupControl(StepKind):
+    """`group_control: {axis, fault_reset: true, torque: false}`: Servo.Control (004:254).
+    `fault_reset` sets bit 0 (controlword 0x80) for two cycles, then clears it: held at
+    least one cycle, as the seed asks; `torque: false` sets bit 1 (no torque: shutdown, the
+    set-point follows the motor), `torque: true` clears it and the group enables the axis
+    again from where it stands."""
+
+    name = "group_control"
+    motion = True
+
+    @classmethod
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        m = v.mapping(obj, line, where)
+        v.keys(m, {"axis", "fault_reset", "torque"}, where)
+        if "fault_reset" not in m and "torque" not in m:
+            raise v.err(line, where, "needs `fault_reset: true` or `torque: true|false`")
+        out: dict[str, Any] = {"axis": _axis_name(v, m, "axis", where)}
+        for k in ("fault_reset", "torque"):
+            if k in m:
+                out[k] = _flag(v, m, k, where)
+        return out
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [self.args["axis"]], "axis")
+
+    def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
+        a = self.args
+        g = _group(ctx)
+        (ax,) = _members(g, [a["axis"]])
+        if "torque" in a:
+            with g._lock:
+                ax.control = (ax.control & ~0x2) | (0 if a["torque"] else 0x2)
+        if a.get("fault_reset"):
+            with g._lock:
+                ax.control |= 0x1
+            c0 = g.cycles
+            clock.wait_for(lambda: g.cycles >= c0 + 2, 10 * g.cycle_s)
+            with g._lock:
+                ax.control &= ~0x1
+        return Outcome(f"{ax.name}: Control 0x{ax.control:X}")
+
+    def describe(self) -> str:
+        return f"group_control {self.args['axis']}"
+
+
 class GroupStop(StepKind):
     """`group_stop: {}`: the SYNC and set-points stop (the drives keep their last one)."""
 
@@ -798,6 +857,8 @@ class GroupStop(StepKind):
 
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+        if obj not in (None, {}):
+            raise v.err(line, where, f"{obj!r}: takes nothing (`group_stop: {{}}`)")
         return {}
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
@@ -808,4 +869,4 @@ class GroupStop(StepKind):
 
 
 KINDS = (Group, GroupMove, GroupGear, GroupCam, GroupCamTable, GroupCommand, GroupSdo,
-         GroupCapture, GroupWait, GroupExpect, GroupStop)
+         GroupCapture, GroupControl, GroupWait, GroupExpect, GroupStop)
