@@ -347,3 +347,4 @@ steps:
     assert len(steps) > 100 and max(steps) <= 50000 * 0.002 + 1
     off = [c for c in cycles if c["status"]["axis1"] == 2 and c["cycle"] > 50]
     assert off and all(c["write_position"]["axis1"] == c["position"]["axis1"] for c in off[2:])
+

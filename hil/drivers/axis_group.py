@@ -763,8 +763,9 @@ class AxisGroup:
                             self.held.append(a.name)
                     else:  # 1 WritePosition, 2 Position, 3 ServoTick (one per cycle)
                         src = {1: m.write_position, 2: m.position}.get(g.source, self.cycles)
-                        if a.name in self.held:
-                            self.held.remove(a.name)
+                        if a.name in self.held:  # the master is back: the gear goes on
+                            self.held.remove(a.name)  # from where it is now, without
+                            g._last = src  # taking the travel it missed in one cycle
                     g.tick(src)
                 a.compute()
             self._judge_gears(masters)

@@ -270,3 +270,34 @@ def test_gear_judge_survives_a_ratio_of_0_and_restarts_on_a_new_ratio() -> None:
         master.position = 1000.0 + 100.0 * k
         g._judge_gears({"m": master, "s": slave})
     assert slave.gear_ratio_error == 0.0 and slave.gear_phase_error == 0.0
+
+
+def test_a_held_follower_resumes_without_taking_the_missed_travel_at_once() -> None:
+    # the group's policy: a follower of a lost master holds its gear input; when the master
+    # is back the gear goes on from where the master is now (no step of the missed travel)
+    from hil.drivers.axis_group import AxisGroup, ServoAxis
+
+    class Bus:
+        def send(self, msg) -> None:
+            pass
+
+    class Net:
+        bus = Bus()
+
+    master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
+    g = AxisGroup(Net(), [master, slave], 0.002, sdo_write=lambda *a: None)
+    gea = slave.gea
+    gea.master, gea.source, gea.gin, gea.gout, gea.actual_in, gea.mode = "m", 1, 1.0, 1.0, 1.0, 1
+    slave.mode = 3
+    master.pg.start_speed(100_000.0)  # 200 increments a cycle once at speed
+    master.pg.acc = 1e12
+    written = []
+    for k in range(60):
+        if not 20 <= k < 40:  # the master's feedback missing for 20 cycles: lost
+            master.on_feedback(0x27, round(master.write_position), 0.002)
+        slave.on_feedback(0x27, round(slave.write_position), 0.002)
+        g.cycle()
+        written.append(slave.write_position)
+    steps = [b - a for a, b in pairwise(written)]
+    assert g.held == [] and max(steps) <= 200 + 1e-6  # never more than one cycle's travel
+    assert steps[25] == 0.0  # held while the master was lost
