@@ -348,3 +348,21 @@ steps:
     off = [c for c in cycles if c["status"]["axis1"] == 2 and c["cycle"] > 50]
     assert off and all(c["write_position"]["axis1"] == c["position"]["axis1"] for c in off[2:])
 
+
+
+def test_correction_and_mode_reach_write_position(tmp_path) -> None:
+    # 004:216 WritePosition = PG.APos + GEA.Position + Offset + Correction, per Servo.Mode
+    plan = loads_plan("""name: corr
+steps:
+  - group: {axes: [axis1], cycle: 2ms}
+  - group_control: {axis: axis1, correction: 1500}
+  - wait: 100ms
+  - group_expect: {axis: axis1, write_position: [1500, 1500], position: [1499, 1501]}
+  - group_control: {axis: axis1, mode: 4}
+  - wait: 10ms
+  - group_stop: {}
+""", "corr.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
+    last = _cycles(res.recording)[-1]
+    assert last["correction"] == {"axis1": 1500} and last["mode"] == {"axis1": 4}

@@ -804,6 +804,9 @@ class AxisGroup:
                            "position_error": {a.name: round(a.position_error)
                                               for a in self.axes},
                            "speed": {a.name: round(a.speed) for a in self.axes},
+                           "mode": {a.name: a.mode for a in self.axes},
+                           "offset": {a.name: round(a.offset) for a in self.axes},
+                           "correction": {a.name: round(a.correction) for a in self.axes},
                            "follow_error": {a.name: round(a.follow_error) for a in self.axes},
                            "max_follow_error": round(max(abs(a.follow_error)
                                                          for a in self.axes)),

@@ -806,11 +806,13 @@ class GroupExpect(StepKind):
 
 
 class GroupControl(StepKind):
-    """`group_control: {axis, fault_reset: true, torque: false}`: Servo.Control (004:254).
+    """`group_control: {axis, fault_reset: true, torque: false, correction: 100, mode: 4}`:
+    Servo.Control, Servo.Correction and Servo.Mode (004:216, 004:254).
     `fault_reset` sets bit 0 (controlword 0x80) for two cycles, then clears it: held at
     least one cycle, as the seed asks; `torque: false` sets bit 1 (no torque: shutdown, the
     set-point follows the motor), `torque: true` clears it and the group enables the axis
-    again from where it stands."""
+    again from where it stands. `correction` is added to WritePosition as it is (a step);
+    `mode` chooses what makes WritePosition: 1 PG, 3 GEA, 4 PG + GEA."""
 
     name = "group_control"
     motion = True
@@ -818,13 +820,21 @@ class GroupControl(StepKind):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
         m = v.mapping(obj, line, where)
-        v.keys(m, {"axis", "fault_reset", "torque"}, where)
-        if "fault_reset" not in m and "torque" not in m:
-            raise v.err(line, where, "needs `fault_reset: true` or `torque: true|false`")
+        v.keys(m, {"axis", "fault_reset", "torque", "correction", "mode"}, where)
+        if not {"fault_reset", "torque", "correction", "mode"} & set(m):
+            raise v.err(line, where, "needs one of fault_reset, torque, correction, mode")
         out: dict[str, Any] = {"axis": _axis_name(v, m, "axis", where)}
         for k in ("fault_reset", "torque"):
             if k in m:
                 out[k] = _flag(v, m, k, where)
+        if "correction" in m:
+            out["correction"] = _num(v, m, "correction", where, -(2**31 - 1), 2**31 - 1)
+        if "mode" in m:
+            mode = m["mode"]
+            if isinstance(mode, bool) or mode not in (1, 3, 4) or not isinstance(mode, int):
+                raise v.err(m.kline("mode"), join(where, "mode"),
+                            f"{mode!r}: 1 PG, 3 GEA, 4 PG + GEA (Servo.Mode, 004:254)")
+            out["mode"] = mode
         return out
 
     def check(self, cc: CheckContext) -> None:
@@ -834,9 +844,13 @@ class GroupControl(StepKind):
         a = self.args
         g = _group(ctx)
         (ax,) = _members(g, [a["axis"]])
-        if "torque" in a:
-            with g._lock:
+        with g._lock:
+            if "torque" in a:
                 ax.control = (ax.control & ~0x2) | (0 if a["torque"] else 0x2)
+            if "correction" in a:  # added to WritePosition as it is (004:216)
+                ax.correction = a["correction"]
+            if "mode" in a:
+                ax.mode = a["mode"]
         if a.get("fault_reset"):
             with g._lock:
                 ax.control |= 0x1
