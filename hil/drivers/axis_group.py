@@ -405,6 +405,7 @@ class ServoAxis:
     _gear_key: tuple = ()  # the gear the reference was taken for
     _hb_ns: int | None = None  # when its last heartbeat came (None: none yet, not watched)
     _seen: bool = False  # feedback of the current cycle arrived
+    _silent: int = 0  # cycles in a row without its feedback
     _ever: bool = False
     _last_pos: float | None = None
     _sent: list[float] = field(default_factory=list)  # the last set-points sent, newest last
@@ -595,7 +596,8 @@ class AxisGroup:
                  on_cycle: Callable[[dict[str, Any]], None] | None = None,
                  bitrate: int = 1_000_000, heartbeat_s: float | None = None,
                  heartbeat_timeout_s: float | None = None,
-                 on_capture: Callable[[dict[str, Any]], None] | None = None) -> None:
+                 on_capture: Callable[[dict[str, Any]], None] | None = None,
+                 lost_after: int = 3) -> None:
         if not axes:
             raise ValueError("an axis group needs at least one axis")
         if not 0.0005 <= cycle_s <= 0.010:
@@ -605,6 +607,9 @@ class AxisGroup:
         self._sdo_write = sdo_write
         self.on_cycle = on_cycle
         self.on_capture = on_capture
+        # cycles in a row without feedback before an axis that communicated is lost (-1):
+        # one late TPDO is a missed cycle, not a lost axis (the seed gives no count, 004:254)
+        self.lost_after = lost_after
         self.cycles = 0
         self.missed_cycles = 0
         self.bitrate = bitrate
@@ -720,8 +725,11 @@ class AxisGroup:
             for a in self.axes:
                 if self.cycles and not a._seen:
                     a.missed += 1
-                    if a._ever:
+                    a._silent += 1
+                    if a._ever and a._silent >= self.lost_after:
                         a.status = STATUS_LOST  # communicated before, now silent (004:254)
+                else:
+                    a._silent = 0
                 a._seen = False
             if missed:
                 self.missed_cycles += 1
