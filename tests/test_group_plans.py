@@ -103,8 +103,9 @@ steps:
 
 
 def test_a_lost_master_s_follower_holds_without_a_jump(tmp_path) -> None:
-    # group_lost_master: axis1 NMT-stopped mid-cam; from the first cycle the group marks it
-    # lost (3 cycles without feedback), axis2's set-point stays exactly where it was (the group's policy, docs/group.md)
+    # group_lost_master: axis1 NMT-stopped mid-cam; from the cycle the group marks it lost
+    # (3 cycles without feedback), axis2's set-point stays exactly where it was (the group's
+    # policy, docs/group.md)
     res = run_plan(load_plan(plans_dir() / "group" / "group_lost_master.yaml"),
                    load_bench(GROUP_BENCH), tmp_path)
     assert res.passed
