@@ -247,15 +247,8 @@ def test_cam_with_servomode_4_starts_where_the_axis_stands() -> None:
 def test_gear_judge_survives_a_ratio_of_0_and_restarts_on_a_new_ratio() -> None:
     from hil.drivers.axis_group import AxisGroup, ServoAxis
 
-    class Bus:
-        def send(self, msg) -> None:
-            pass
-
-    class Net:
-        bus = Bus()
-
     master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
-    g = AxisGroup(Net(), [master, slave], 0.002, sdo_write=lambda *a: None)
+    g = AxisGroup(_NullNet(), [master, slave], 0.002, sdo_write=lambda *a: None)
     gea = slave.gea
     gea.master, gea.source, gea.gin, gea.gout, gea.actual_in, gea.mode = "m", 2, 1.0, 1.0, 1.0, 1
     for k in range(100):  # 200 ms engaged: the reference is taken, the follower follows 1/1
@@ -277,15 +270,8 @@ def test_a_held_follower_resumes_without_taking_the_missed_travel_at_once() -> N
     # is back the gear goes on from where the master is now (no step of the missed travel)
     from hil.drivers.axis_group import AxisGroup, ServoAxis
 
-    class Bus:
-        def send(self, msg) -> None:
-            pass
-
-    class Net:
-        bus = Bus()
-
     master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
-    g = AxisGroup(Net(), [master, slave], 0.002, sdo_write=lambda *a: None)
+    g = AxisGroup(_NullNet(), [master, slave], 0.002, sdo_write=lambda *a: None)
     gea = slave.gea
     gea.master, gea.source, gea.gin, gea.gout, gea.actual_in, gea.mode = "m", 1, 1.0, 1.0, 1.0, 1
     slave.mode = 3
@@ -301,3 +287,12 @@ def test_a_held_follower_resumes_without_taking_the_missed_travel_at_once() -> N
     steps = [b - a for a, b in pairwise(written)]
     assert g.held == [] and max(steps) <= 200 + 1e-6  # never more than one cycle's travel
     assert steps[25] == 0.0  # held while the master was lost
+
+
+class _NullNet:
+    """A canopen network stand-in whose bus takes every frame and does nothing."""
+
+    class bus:  # the attribute AxisGroup reads
+        @staticmethod
+        def send(msg) -> None:
+            pass

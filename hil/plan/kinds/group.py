@@ -412,6 +412,17 @@ class GroupCam(StepKind):
         return f"group_cam {a['axis']} <- {a['master']} ({len(a['table'])} points)"
 
 
+class _OneAxis(StepKind):
+    """A step on one axis of the group (`axis:`): the bench check and the lookup."""
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [self.args["axis"]], "axis")
+
+    def _axis(self, ctx: StepContext) -> tuple[AxisGroup, ServoAxis]:
+        g = _group(ctx)
+        return g, _members(g, [self.args["axis"]])[0]
+
+
 class GroupCamTable(StepKind):
     """`group_cam_table: {tab: 0, line: 0, values: [...]}`: doubles into the group's cam
     memory (CamTab 0 TGM_Cam_Profile, 1 TGM_Data; 004:232), for COMMAND 6 with a cam."""
@@ -454,7 +465,7 @@ class GroupCamTable(StepKind):
         return f"group_cam_table {self.args['tab']}:{self.args['line']}"
 
 
-class GroupCommand(StepKind):
+class GroupCommand(_OneAxis):
     """`group_command: {axis, code: 1-7, par: {0: 1000000, 3: 200000}, timeout}`: the COMMAND
     interface (004:240-246): write Par and Control, wait until Control is back to 0 (on
     acceptance; for 7, sync off, once the ratio ramp has run out)."""
@@ -494,13 +505,9 @@ class GroupCommand(StepKind):
         return {"axis": _axis_name(v, m, "axis", where), "code": code, "par": par,
                 "timeout": v.duration(m, "timeout", where, 5 * S)}
 
-    def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, [self.args["axis"]], "axis")
-
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
-        g = _group(ctx)
-        (ax,) = _members(g, [a["axis"]])
+        g, ax = self._axis(ctx)
         with g._lock:
             ax.par = list(a["par"])
             ax.command = a["code"]
@@ -522,7 +529,7 @@ class GroupCommand(StepKind):
         return f"group_command {self.args['axis']} {self.args['code']}"
 
 
-class GroupSdo(StepKind):
+class GroupSdo(_OneAxis):
     """`group_sdo: {axis, write | read: {index, sub, bytes, data}, expect: {status, data}}`:
     the SDO interface's handshake (004:248-250): Control 1 / 2, wait Control = 0, Status 0 OK
     or 2 with the abort code in Data."""
@@ -558,13 +565,9 @@ class GroupSdo(StepKind):
                              for k in e}
         return out
 
-    def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, [self.args["axis"]], "axis")
-
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
-        g = _group(ctx)
-        (ax,) = _members(g, [a["axis"]])
+        _g, ax = self._axis(ctx)
         s = ax.sdo
         s.number_byte, s.index, s.sub, s.data = a["bytes"], a["index"], a["sub"], a["data"]
         s.control = a["control"]
@@ -656,7 +659,7 @@ def _await_capture(ctx: StepContext, g: AxisGroup, a: ServoAxis, timeout: float)
 _CAPTURE_TYPES = {"rising": CAPTURE_RISING, "falling": CAPTURE_FALLING, "zero": CAPTURE_ZERO}
 
 
-class GroupCapture(StepKind):
+class GroupCapture(_OneAxis):
     """`group_capture: {axis, control: 1|2, on: rising|falling|zero, start: 20}`: the CAPTURE
     interface (004:252). Control 1 arms the drive's own capture over SDO (P5.036 = start,
     P5.038 = 1, P5.039: CN2, NO for a rising edge or the zero pulse, NC for a falling one;
@@ -686,12 +689,8 @@ class GroupCapture(StepKind):
         return {"axis": _axis_name(v, m, "axis", where), "control": control,
                 "typ": _CAPTURE_TYPES[on] if control == 1 else 0, "start": start}
 
-    def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, [self.args["axis"]], "axis")
-
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        g = _group(ctx)
-        a = _members(g, [self.args["axis"]])[0]
+        g, a = self._axis(ctx)
         cap = a.capture
         if self.args["control"] == 2:
             with g._lock:
@@ -805,7 +804,7 @@ class GroupExpect(StepKind):
         return f"group_expect {', '.join(self.args['axes'])}"
 
 
-class GroupControl(StepKind):
+class GroupControl(_OneAxis):
     """`group_control: {axis, fault_reset: true, torque: false, correction: 100, mode: 4}`:
     Servo.Control, Servo.Correction and Servo.Mode (004:216, 004:254).
     `fault_reset` sets bit 0 (controlword 0x80) for two cycles, then clears it: held at
@@ -837,13 +836,9 @@ class GroupControl(StepKind):
             out["mode"] = mode
         return out
 
-    def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, [self.args["axis"]], "axis")
-
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
-        g = _group(ctx)
-        (ax,) = _members(g, [a["axis"]])
+        g, ax = self._axis(ctx)
         with g._lock:
             if "torque" in a:
                 ax.control = (ax.control & ~0x2) | (0 if a["torque"] else 0x2)
