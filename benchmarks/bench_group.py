@@ -30,6 +30,7 @@ import can
 from mcap.reader import make_reader
 
 from hil.bench.bench import loads_bench
+from hil.drivers.axis_group import worst_case_bits
 from hil.plan.plan import loads_plan
 from hil.plan.runner import run_plan
 from hil.transport.sim import frame_bits
@@ -72,8 +73,12 @@ def exact_limit(cycle_ms: int, bitrate: int = 1_000_000) -> int:
     return n
 
 
-def checker_limit(cycle_ms: int) -> int:
-    return int((1_000_000 * cycle_ms / 1000 - 50) // 230)
+def checker_limit(cycle_ms: int, bitrate: int = 1_000_000) -> int:
+    """The most axes the plan checker admits (worst_case_bits within the cycle)."""
+    n = 0
+    while worst_case_bits(n + 1) <= bitrate * cycle_ms / 1000:
+        n += 1
+    return n
 
 
 def run(n: int, cycle_ms: int, seconds: float) -> tuple[int, int, float]:

@@ -567,6 +567,13 @@ class ServoAxis:
             self.status = STATUS_READY
 
 
+def worst_case_bits(axes: int, *, heartbeat: bool = False) -> int:
+    """The bits a cycle of `axes` axes may need on the wire, worst-case stuffing: an RPDO
+    and a TPDO of 6 bytes each (115 bits) per axis and the SYNC (50), and with heartbeats
+    one 1-byte heartbeat (65) per axis, as they may all fall in one cycle."""
+    return axes * (115 + 115 + (65 if heartbeat else 0)) + 50
+
+
 def _bits(cob: int, dlc: int) -> int:
     return frame_bits(can.Message(arbitration_id=cob, data=bytes(dlc), is_extended_id=False))
 

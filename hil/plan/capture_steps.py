@@ -174,23 +174,36 @@ def x_mark(ctx: Any, s: Any, d: Any) -> str:
 
 
 def x_capture_arm(ctx: Any, s: Any, d: Any) -> str:
-    a, via = s.args, s.args["via"]
-    old = d.read_param("P5.039", via)
-    d.write_param("P5.039", old & ~1, via)  # stop first: P5.036/P5.038 need it (L11476)
-    d.write_param("P5.036", a["start"], via)
-    d.write_param("P5.038", a["count"], via)
-    if a["reset"] is not None:
-        d.write_param("P5.076", a["reset"], via)
-    p1019 = d.read_param("P1.019", via)
-    d.write_param("P1.019", (p1019 & ~1) | int(a["cyclic"]), via)
-    d.write_param("P1.020", a["mask"], via)
-    x = 1 | (2 if a["reset"] is not None else 0) | (4 if a["start_compare"] else 0) \
-        | (8 if a["run_pr50"] else 0)
-    value = a["min_interval"] << 12 | a["nc"] << 8 | a["source"] << 4 | x
-    ctx.store[STORE + d.name] = {"t": clock.time_ns(), "start": a["start"],
-                                 "count": a["count"], "nc": a["nc"]}
-    d.write_param("P5.039", value, via)
+    a = s.args
+    value = arm_capture(ctx, d, start=a["start"], count=a["count"], nc=a["nc"],
+                        source=a["source"], via=a["via"], reset=a["reset"], cyclic=a["cyclic"],
+                        mask=a["mask"], min_interval=a["min_interval"],
+                        start_compare=a["start_compare"], run_pr50=a["run_pr50"])
     return f"P5.039 = 0x{value:04X}: {a['count']} point(s) into Array[{a['start']}]"
+
+
+def arm_capture(ctx: Any, d: Any, *, start: int, count: int, nc: int, source: int,
+                via: str | None, reset: int | None = None, cyclic: bool = False,
+                mask: int = 0, min_interval: int = 0, start_compare: bool = False,
+                run_pr50: bool = False) -> int:
+    """Arm the drive's CAPTURE (P5.036-P5.039, P1.019/P1.020, L11471-11542) and note it for
+    `latch`; returns the P5.039 written. Stopped first: P5.036/P5.038 need it (L11476)."""
+    old = d.read_param("P5.039", via)
+    d.write_param("P5.039", old & ~1, via)
+    d.write_param("P5.036", start, via)
+    d.write_param("P5.038", count, via)
+    if reset is not None:
+        d.write_param("P5.076", reset, via)
+    p1019 = d.read_param("P1.019", via)
+    d.write_param("P1.019", (p1019 & ~1) | int(cyclic), via)
+    d.write_param("P1.020", mask, via)
+    x = 1 | (2 if reset is not None else 0) | (4 if start_compare else 0) \
+        | (8 if run_pr50 else 0)
+    value = min_interval << 12 | nc << 8 | source << 4 | x
+    ctx.store[STORE + d.name] = {"t": clock.time_ns(), "start": start, "count": count,
+                                 "nc": nc}
+    d.write_param("P5.039", value, via)
+    return value
 
 
 def x_compare_table(ctx: Any, s: Any, d: Any) -> str:

@@ -25,9 +25,9 @@ from hil.drivers.axis_group import (
     RAMP_TYPES,
     AxisGroup,
     ServoAxis,
+    worst_case_bits,
 )
-from hil.plan.capture_steps import STORE as CAPTURE_STORE
-from hil.plan.capture_steps import read_array
+from hil.plan.capture_steps import arm_capture, read_array
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.transport.urls import parse_url
@@ -201,9 +201,7 @@ class Group(StepKind):
                          "an axis group is one bus", "axes")
         url = cc.bench.can[buses.pop()]
         bitrate = _bitrate(url)
-        bits = len(names) * (115 + 115) + 50
-        if self.args["heartbeat"]:  # every axis's heartbeat (1 byte) may fall in one cycle
-            bits += len(names) * 65
+        bits = worst_case_bits(len(names), heartbeat=bool(self.args["heartbeat"]))
         if bits / bitrate > self.args["cycle"] / S:
             raise cc.err(f"{len(names)} axes need up to {bits} bits a cycle: "
                          f"{bits / bitrate * 1e3:.2f} ms at {bitrate / 1e3:g} kbit/s, more than "
@@ -699,14 +697,9 @@ class GroupCapture(_OneAxis):
             return Outcome(f"{a.name}: CAPTURE Control 2 (the registers at the next cycle)")
         dio = ctx.session.drive(a.name)
         typ, start = self.args["typ"], self.args["start"]
-        nc = 1 if typ == CAPTURE_FALLING else 0
-        old = dio.read_param("P5.039", "sdo")
-        dio.write_param("P5.039", old & ~1, "sdo")  # stopped: P5.036/P5.038 need it (L11476)
-        dio.write_param("P5.036", start, "sdo")
-        dio.write_param("P5.038", 1, "sdo")
-        ctx.store[CAPTURE_STORE + a.name] = {"t": clock.time_ns(), "start": start, "count": 1,
-                                             "nc": nc}
-        dio.write_param("P5.039", nc << 8 | 3 << 4 | 1, "sdo")  # CN2, NO/NC, start
+        # one point on CN2 (source 3), NC for a falling edge, NO for a rising one or Z
+        arm_capture(ctx, dio, start=start, count=1, nc=1 if typ == CAPTURE_FALLING else 0,
+                    source=3, via="sdo")
         with g._lock:
             cap.armed, cap.armed_at = 1, cap.captures
             cap.typ_ext_capture, cap.start, cap.control = typ, start, 1
@@ -757,9 +750,7 @@ class GroupExpect(StepKind):
             out["status"] = m["status"]
         for k in ("held", "heartbeat_lost"):
             if k in m:
-                if not isinstance(m[k], bool):
-                    raise v.err(m.kline(k), join(where, k), f"{m[k]!r}: true or false")
-                out[k] = m[k]
+                out[k] = _flag(v, m, k, where)
         return out
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
