@@ -1,6 +1,6 @@
 """High-speed position CAPTURE (A3 manual §7.2.2, L5148-5176; P5.036-P5.039 L11471-11542).
 
-`attach_capture(drive)` wires a `Capture` into a `Drive`. The rules, each from the manual
+`attach_capture(core, pr)` wires a `Capture` into a drive (core.py). The rules, each from the manual
 (choices: docs/manual-choices.md#capture, `CaptureOptions` under `ModelOptions.extra["capture"]`):
 
 * DI7 triggers, in hardware, in 5 µs (L5150): the terminal edge before the P2.009 filter; the
@@ -39,7 +39,9 @@ from hil.model.timebase import MS
 from hil.profile.pr import ARRAY_SIZE
 
 if TYPE_CHECKING:
-    from hil.model.drive import Drive
+    from hil.model.compare import Compare
+    from hil.model.core import DriveCore
+    from hil.model.pr_engine import PrEngine
 
 CAPTURE_DI = 7  # L5150
 SOURCES = {0: "off", 1: "CN5", 2: "CN1", 3: "CN2"}  # P5.039.Y (L11524-11528)
@@ -84,8 +86,10 @@ class CaptureOptions:
 class Capture:
     """The CAPTURE function of one drive."""
 
-    def __init__(self, drive: Drive, options: CaptureOptions) -> None:
+    def __init__(self, drive: DriveCore, options: CaptureOptions, pr: PrEngine) -> None:
         self.drive = drive
+        self.pr = pr  # CAP commands' base, PR#50 (L4471, L5158)
+        self.compare: Compare | None = None  # set by attach_compare
         self.options = options
         self.offset = 0.0  # capture axis = source position + offset
         self.running = False
@@ -144,7 +148,7 @@ class Capture:
         if self.running and value & 1:
             raise OutOfRange("P5.039", "CAPTURE runs (bit0 = 1): only 0 may be written to "
                              "stop it (L5155)")
-        compare = getattr(self.drive, "compare", None)
+        compare = self.compare
         if ((value >> 4) & 0xF) != ((old >> 4) & 0xF) and compare is not None \
                 and compare.source == 0 \
                 and (compare.running or self.options.y_lock == "always"):
@@ -216,7 +220,7 @@ class Capture:
         span = ax.position - ax.last_position
         for z in d.mech.index_crossed(ax.last_position, ax.position):
             t = t0 + round((d.now - t0) * (z - ax.last_position) / span) if span else d.now
-            d._emit(ZPulse(t, self._truth_puu(z)))
+            d.emit(ZPulse(t, self._truth_puu(z)))
             self.latch(self.position(z) + self.source_velocity() * delay, t + round(delay * 1e9))
 
     def _truth_puu(self, counts: float) -> float:
@@ -241,15 +245,15 @@ class Capture:
             value = reset
         v = round(value)
         addr = p.get("P5.036") + self.index
-        d.pr.array[addr] = v
+        d.array[addr] = v
         self.index += 1
         self.last_value, self.last_t = v, t
         self.values.append((t, addr, v))
-        d.pr.capture_puu = v  # base of CAP commands (L4471)
+        self.pr.capture_puu = v  # base of CAP commands (L4471)
         remaining = self.count_set - self.index
         p.set_internal("P5.038", remaining)
-        d._emit(CaptureLatched(d.now, addr, v))
-        compare = getattr(d, "compare", None)
+        d.emit(CaptureLatched(d.now, addr, v))
+        compare = self.compare
         if first and ctrl & 4 and compare is not None and not compare.running:
             compare.start(reload=True)  # bit2 (L5157)
         if first and self.cycle > 0:
@@ -259,7 +263,7 @@ class Capture:
         d.dio.set_do_function("CAP_OK", True)
         self.cycle += 1
         if ctrl & 8:
-            d.pr.trigger(50, "CAPTURE")  # bit3: PR#50 (L5158)
+            self.pr.trigger(50, "CAPTURE")  # bit3: PR#50 (L5158)
         if p.get("P1.019") & 1:  # cyclic: reload, restart at P5.036 (L8139, L5176)
             self.index = 0
             p.set_internal("P5.038", self.count_set)
@@ -267,9 +271,11 @@ class Capture:
             self.stop()  # P5.038 stays 0: "為零時抓取結束" (L5155)
 
 
-def attach_capture(drive: Drive, options: CaptureOptions | None = None) -> Capture:
+def attach_capture(drive: DriveCore, pr: PrEngine, options: CaptureOptions | None = None
+                   ) -> Capture:
     """Create the CAPTURE function of `drive` and wire its parameters and DI7."""
-    cap = Capture(drive, options or CaptureOptions.from_dict(drive.options.extra.get("capture")))
+    cap = Capture(drive, options or CaptureOptions.from_dict(drive.options.extra.get("capture")),
+                  pr)
     params = drive.params
     params.on_validate("P5.039", cap.validate_p5039)
     params.on_write("P5.039", cap.on_p5039)
@@ -278,8 +284,8 @@ def attach_capture(drive: Drive, options: CaptureOptions | None = None) -> Captu
     params.on_write("P5.037", lambda _n, _o, new: cap.set_position(new))
     params.on_read("P5.037", lambda: round(cap.position()))
     drive.dio.on_raw(cap.on_di)
-    drive._step_hooks.append(cap.on_step)
-    drive._boot_hooks.append(lambda: cap.running and cap.stop())
+    drive.hooks.step.append(cap.on_step)
+    drive.hooks.boot.append(lambda: cap.running and cap.stop())
     return cap
 
 

@@ -1,6 +1,6 @@
 """High-speed position COMPARE (A3 manual §7.2.3, L5186-5215; P5.056-P5.059 L11692-11781).
 
-`attach_compare(drive)` wires a `Compare` into a `Drive` (after `attach_capture`). Rules
+`attach_compare(core, capture, pr)` wires a `Compare` into a drive (after `attach_capture`). Rules
 (choices: docs/manual-choices.md#capture, `CaptureOptions`):
 
 * The compare axis (P5.059.Y, L11751-11756): 0 the capture axis (then P5.039.Y is locked),
@@ -34,7 +34,9 @@ from hil.model.timebase import MS, Timer
 from hil.profile.pr import ARRAY_SIZE
 
 if TYPE_CHECKING:
-    from hil.model.drive import Drive
+    from hil.model.capture import Capture
+    from hil.model.core import DriveCore
+    from hil.model.pr_engine import PrEngine
 
 COMPARE_DO = 4  # L5188
 
@@ -42,8 +44,11 @@ COMPARE_DO = 4  # L5188
 class Compare:
     """The COMPARE function of one drive."""
 
-    def __init__(self, drive: Drive, options: CaptureOptions) -> None:
+    def __init__(self, drive: DriveCore, options: CaptureOptions, capture: Capture,
+                 pr: PrEngine) -> None:
         self.drive = drive
+        self.capture = capture  # the capture axis as source (P5.059.Y = 0), bit2 (L11744)
+        self.pr = pr  # PR#45 (L11762)
         self.options = options
         self.offset = 0.0
         self.running = False
@@ -72,7 +77,7 @@ class Compare:
         if src == 1:
             return puu_per_count * self.options.cn5_per_puu
         if src == 0:
-            cap = d.capture
+            cap = self.capture
             return puu_per_count * ({3: 1.0, 1: self.options.cn5_per_puu}.get(cap.source, 0.0))
         return 0.0
 
@@ -80,7 +85,7 @@ class Compare:
         """Compare axis position (P5.057)."""
         d = self.drive
         if self.source == 0:
-            return d.capture.position() + self.offset
+            return self.capture.position() + self.offset
         return (d.feedback_counts() - d.axis.origin) * self._scale() + self.offset  # hardware
 
     def velocity(self) -> float:
@@ -90,7 +95,7 @@ class Compare:
         """CMP_DATA of the next point (L8217-8240; monitor 037)."""
         p = self.drive.params
         addr = p.get("P5.056") + self.index
-        base = self.drive.pr.array[addr] if addr < ARRAY_SIZE else 0
+        base = self.drive.array[addr] if addr < ARRAY_SIZE else 0
         return base + p.get("P1.023") + p.get("P1.024")
 
     # ------------------------------------------------------------------ parameters
@@ -188,7 +193,7 @@ class Compare:
         p = self.position()
         goal = self.target() + self.options.dev_compare_late * (1 if v > 0 else -1)
         dt = (goal - p) / v
-        if 0 < dt * 1e9 <= 2 * d._step_ns:
+        if 0 < dt * 1e9 <= 2 * d.step_ns:
             self._wake = d.sched.at(d.now + max(1, round(dt * 1e9)), self._on_wake)
 
     def _on_wake(self) -> None:
@@ -204,7 +209,7 @@ class Compare:
 
     def _fire(self, tgt: int) -> None:
         d, p = self.drive, self.drive.params
-        d._emit(CompareFired(d.now, self.index, tgt))
+        d.emit(CompareFired(d.now, self.index, tgt))
         delay = max(0, round(self.options.compare_delay_us * 1e3))
         self.fired.append((d.now + delay, self.index, tgt))
         d.sched.after(delay, self._pulse_on) if delay else self._pulse_on()
@@ -219,11 +224,11 @@ class Compare:
         if ctrl & 8:  # bit3: compare axis to 0 (L11746)
             self.set_position(0)
             self._last = 0.0
-        cap = d.capture
+        cap = self.capture
         if ctrl & 4 and not cap.running:  # bit2: start CAPTURE (L11744)
             cap.start(reload=True)
         if (ctrl >> 12) & 1:  # U bit0: PR#45 (L11762)
-            d.pr.trigger(45, "COMPARE")
+            self.pr.trigger(45, "COMPARE")
         if ctrl & 2:  # cyclic: reload (L11742)
             self.index = 0
             p.set_internal("P5.058", self.count_set)
@@ -251,9 +256,11 @@ class Compare:
         d.dio.force_do(COMPARE_DO, self._idle_level() if self.running else None)
 
 
-def attach_compare(drive: Drive, options: CaptureOptions | None = None) -> Compare:
+def attach_compare(drive: DriveCore, capture: Capture, pr: PrEngine,
+                   options: CaptureOptions | None = None) -> Compare:
     """Create the COMPARE function of `drive` and wire its parameters."""
-    cmp_ = Compare(drive, options or drive.capture.options)
+    cmp_ = Compare(drive, options or capture.options, capture, pr)
+    capture.compare = cmp_
     params = drive.params
     params.on_validate("P5.059", cmp_.validate_p5059)
     params.on_write("P5.059", cmp_.on_p5059)
@@ -261,8 +268,8 @@ def attach_compare(drive: Drive, options: CaptureOptions | None = None) -> Compa
         params.on_validate(name, cmp_.refuse_while_running)
     params.on_write("P5.057", lambda _n, _o, new: cmp_.set_position(new))
     params.on_read("P5.057", lambda: round(cmp_.position()))
-    drive._step_hooks.append(cmp_.on_step)
-    drive._boot_hooks.append(lambda: cmp_.running and cmp_.stop())
+    drive.hooks.step.append(cmp_.on_step)
+    drive.hooks.boot.append(lambda: cmp_.running and cmp_.stop())
     return cmp_
 
 

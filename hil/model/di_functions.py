@@ -31,7 +31,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from hil.model.drive import Drive
+    from hil.model.absolute import AbsoluteEncoder
+    from hil.model.core import DriveCore
+    from hil.model.pulse_train import PulseTrain
 
 # P1.001.YX -> table 8.1 mode; mixed modes take the first (S-P/S-T/T-P/PT-PR are not
 # modelled), CANopen 0x0C has none of its own (L7749-7800).
@@ -55,8 +57,10 @@ _PARAMS = ("P1.001", "P1.002", "P1.009", "P1.010", "P1.011", "P1.012", "P1.013",
 class DiFunctions:
     """PFQS, JOGU/JOGD, TRQLM/SPDLM, ZCLAMP, CCLR and GAINUP of one drive."""
 
-    def __init__(self, drive: Drive) -> None:
+    def __init__(self, drive: DriveCore, absolute: AbsoluteEncoder) -> None:
         self.d = drive
+        self.absolute = absolute  # P4.005 jog direction follows P1.001.Z (L10865)
+        self.pulse: PulseTrain | None = None  # CCLR clears the PT error (set by the drive)
         self.pfqs_stopping = False  # AL35F ramp running
         self.jog = 0  # +1 JOGU, -1 JOGD, 0 none
         self.comm_jog = 0  # P4.005 = 4998 / 4999: +1 / -1 (axis direction), 0 none
@@ -90,7 +94,7 @@ class DiFunctions:
         self._end_jog()
         d.alarms.raise_alarm("AL35F")  # WARN, servo stays on (L19413)
         dev = d.options.dev_pfqs_ramp_ms  # deviation knob: a wrong ramp
-        d.axis.ramp_stop(d._p5003_decel(6) if dev is None else dev)  # digit C = PFQS
+        d.axis.ramp_stop(d.p5003_decel(6) if dev is None else dev)  # digit C = PFQS
         d.axis.lock("PFQS")  # nothing starts the motor during the quick stop
         d.cia402.drop_setpoints()
         self._end_pr()  # an emergency stop ends the PR program: no next path, no Cmd_OK
@@ -122,7 +126,7 @@ class DiFunctions:
         """P4.005 written: a jog command (4998 CCW, 4999 CW, 0 stop) or the speed (L10865)."""
         if new in (4998, 4999):
             ccw = new == 4998
-            self.comm_jog = 1 if ccw != self.d.absolute.cw_positive else -1
+            self.comm_jog = 1 if ccw != self.absolute.cw_positive else -1
         elif new == 0:
             self.comm_jog = 0
         self.jog_rpm = self._speed_of(new, self.jog_rpm)
@@ -190,16 +194,20 @@ class DiFunctions:
         if not active or self.control_mode() not in POSITION_MODES:
             self._release("CCLR")
             return
-        d._clear_position_error()
-        d.pulse.clear_error()  # PT: the accumulated pulse error (L9749)
+        d.clear_position_error()
+        self._clear_pt_error()  # PT: the accumulated pulse error (L9749)
         d.cia402.drop_setpoints()  # the pending position command is gone
         if level:
             d.axis.lock("CCLR")
 
     def _cclr_step(self) -> None:
         if "CCLR" in self.d.axis.locks:
-            self.d._clear_position_error()
-            self.d.pulse.clear_error()
+            self.d.clear_position_error()
+            self._clear_pt_error()
+
+    def _clear_pt_error(self) -> None:
+        if self.pulse is not None:
+            self.pulse.clear_error()
 
     # -- TRQLM / SPDLM / ZCLAMP / GAINUP -------------------------------------------------
     def refresh(self, *_: object) -> None:
@@ -249,9 +257,9 @@ class DiFunctions:
             self._cclr_step()
 
 
-def attach_di_functions(drive: Drive) -> DiFunctions:
+def attach_di_functions(drive: DriveCore, absolute: AbsoluteEncoder) -> DiFunctions:
     """Create the DI functions of `drive` and wire their triggers and parameters."""
-    fns = DiFunctions(drive)
+    fns = DiFunctions(drive, absolute)
     dio = drive.dio
     dio.on_function("PFQS", fns.on_pfqs)
     dio.on_function("JOGU", fns.update_jog)
@@ -262,10 +270,10 @@ def attach_di_functions(drive: Drive) -> DiFunctions:
     for name in _PARAMS:
         drive.params.on_write(name, fns.refresh)
     drive.params.on_write("P4.005", fns.on_p4005)
-    drive._step_hooks.append(fns.after_step)
-    drive._servo_on_hooks.append(fns.on_servo_on)
-    drive._servo_off_hooks.append(fns.on_servo_off)
-    drive._boot_hooks.append(fns.refresh)
+    drive.hooks.step.append(fns.after_step)
+    drive.hooks.servo_on.append(fns.on_servo_on)
+    drive.hooks.servo_off.append(fns.on_servo_off)
+    drive.hooks.boot.append(fns.refresh)
     fns.refresh()
     return fns
 

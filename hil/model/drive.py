@@ -32,6 +32,7 @@ from hil.model.canopen_init import HOME_OFFSET_INIT, load_canopen_init
 from hil.model.capture import attach_capture
 from hil.model.cia402 import Cia402, Cia402Options
 from hil.model.compare import attach_compare
+from hil.model.core import Hooks, new_data_array
 from hil.model.di_functions import attach_di_functions
 from hil.model.dio import DigitalIO
 from hil.model.errors import (
@@ -102,7 +103,7 @@ class Drive:
             self.state_path.mkdir(parents=True, exist_ok=True)
         self._subs: list[Callable[[DriveEvent], None]] = []
         self.brake_line: int | None = None  # DO line of the brake coil, resolved at power-up
-        self._step_ns = max(1, ms(options.motion_step_ms))
+        self.step_ns = max(1, ms(options.motion_step_ms))
         self._axis_t = t0  # model time of the axis state (the last motion step)
         self._ahead = False  # the axis state is that of the end of the cycle in progress
         self.servo_on = False
@@ -116,12 +117,15 @@ class Drive:
         for n, closed in (inputs or {}).items():
             self.dio.set_input(n, closed, settled=True)  # present before power-up
         self._update_sensors(force=True)
-        self.homing = attach_homing(self)  # homing methods (docs/homing.md)
-        self.pr = attach_pr(self)  # PR#1-#99 (chapter 7, docs/pr.md)
-        self.capture = attach_capture(self)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
-        self.compare = attach_compare(self)  # COMPARE on DO4 (§7.2.3, docs/capture.md)
-        self.difunc = attach_di_functions(self)  # PFQS, JOG, TRQLM/SPDLM, ZCLAMP, CCLR, GAINUP
+        self.homing = attach_homing(self, self.absolute)  # homing methods (docs/homing.md)
+        self.pr = attach_pr(self, self.homing)  # PR#1-#99 (chapter 7, docs/pr.md)
+        self.capture = attach_capture(self, self.pr)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
+        # COMPARE on DO4 (§7.2.3, docs/capture.md)
+        self.compare = attach_compare(self, self.capture, self.pr)
+        # PFQS, JOG, TRQLM/SPDLM, ZCLAMP, CCLR, GAINUP
+        self.difunc = attach_di_functions(self, self.absolute)
         self.pulse = attach_pulse_train(self)  # PT input, OA/OB/OZ output (docs/pulse.md)
+        self.difunc.pulse = self.pulse  # CCLR clears the PT error too (L9749)
         self._boot()
 
     # ------------------------------------------------------------------ construction
@@ -131,7 +135,7 @@ class Drive:
             retained_path=self.state_path / "params.json" if self.state_path else None
         )
         self.params.servo_on = lambda: self.servo_on
-        self.params.subscribe(lambda n, v: self._emit(ParamChanged(self.sched.now, n, v)))
+        self.params.subscribe(lambda n, v: self.emit(ParamChanged(self.sched.now, n, v)))
         for name_, value in (params or {}).items():
             self.params.write(name_, value)
         if params:
@@ -172,22 +176,20 @@ class Drive:
             self.sched,
             self.alarms.set_cause,
             self._on_torque_cut,
-            lambda c: self._emit(FdbkChanged(self.sched.now, c)),
+            lambda c: self.emit(FdbkChanged(self.sched.now, c)),
             options,
         )
         self.cia402 = Cia402(
             self.axis,
             clock=lambda: self.sched.now,
-            emit=self._emit,
+            emit=self.emit,
             options=Cia402Options(**options.extra.get("cia402", {})),
             fault_reset=self._fault_reset,
             on_servo_request=lambda _on, _cause: self._update_servo(source="cia402"),
             on_write=self._on_object_written,
         )
-        self._step_hooks: list[Callable[[], None]] = []  # after each motion substep
-        self._servo_on_hooks: list[Callable[[], None]] = []  # after the servo turned on
-        self._servo_off_hooks: list[Callable[[], None]] = []  # after the servo turned off
-        self._boot_hooks: list[Callable[[], None]] = []  # at power-up, before outputs settle
+        self.hooks = Hooks()  # where the parts hook into the cycle (core.py)
+        self.array = new_data_array()  # shared by PR, CAPTURE and COMPARE (L5097)
         self._hold_timer = None
         self._dout_cache: dict[str, bool] = {}
         self._sensor_state: dict[str, bool] = {}
@@ -205,7 +207,7 @@ class Drive:
             read_absq=lambda: self.dio.function_active("ABSQ"),
             speed_rpm=lambda: self.axis.velocity_rpm,
             motor_counts=lambda: round(self.axis.position),
-            clear_position_error=self._clear_position_error,
+            clear_position_error=self.clear_position_error,
             options=AbsoluteOptions.from_dict(options.extra.get("absolute")),
         )
         self._abs_file = self.state_path / "absolute.json" if self.state_path else None
@@ -213,7 +215,7 @@ class Drive:
             self.absolute.restore(json.loads(self._abs_file.read_text()))
         self.absolute.on_origin = self._follow_absolute
         self._follow_absolute()  # a restart keeps the absolute coordinate (L16391-16397)
-        self._step_hooks.append(self.absolute.refresh)
+        self.hooks.step.append(self.absolute.refresh)
         for fn in ("ABSE", "ABSC", "ABSQ"):
             self.dio.on_function(fn, getattr(self.absolute, f"on_{fn.lower()}"))
 
@@ -257,21 +259,21 @@ class Drive:
             self._integrate_to(stop)
             if sched.now >= t and (nxt is None or nxt > t):
                 break
-            self._commit_cycle()  # a timer inside a cycle may command the axis
+            self.commit_cycle()  # a timer inside a cycle may command the axis
             sched.run_due()
         sched.now = max(sched.now, t)
 
     def set_di(self, n: int, closed: bool) -> None:
         """Physical DI n (1..10): True = contact closed (24 V)."""
-        self._commit_cycle()
+        self.commit_cycle()
         changed = self.dio.input_level(n) != bool(closed)
         self.dio.set_input(n, closed)
         if changed:  # the terminal edge, for the ground truth (a latch is judged against it)
-            self._emit(InputChanged(self.sched.now, n, bool(closed)))
+            self.emit(InputChanged(self.sched.now, n, bool(closed)))
 
     def set_sto(self, channel: str, on: bool) -> None:
         """STO channel "A"/"B" (or "STO_A"/"STO_B"): True = 24 V present."""
-        self._commit_cycle()
+        self.commit_cycle()
         self.sto.set_channel(channel, on)
         self._update_servo()
 
@@ -301,7 +303,7 @@ class Drive:
 
     def write_object(self, index: int, sub: int, value: int) -> None:
         """Write a 2000h-2FFFh or 6000h-6FFFh object; refusals carry the SDO abort code."""
-        self._commit_cycle()
+        self.commit_cycle()
         if 0x2000 <= index <= 0x2FFF:
             name = self._param_of(index, sub)
             try:
@@ -324,7 +326,7 @@ class Drive:
 
     def raise_alarm(self, code: str) -> None:
         """An alarm a face detected (AL020 RS-485 timeout, AL180 heartbeat, ...)."""
-        self._commit_cycle()
+        self.commit_cycle()
         extra = self.options.dev_comm_timeout_extra_ms
         if code == "AL020" and extra > 0:  # deviation: AL020 late by `extra` ms
             self.sched.after(round(extra * 1e6), lambda: self._raise_face_alarm(code))
@@ -340,7 +342,7 @@ class Drive:
     def _raise_face_alarm(self, code: str) -> None:
         self.alarms.raise_alarm(code)
         if code == "AL020" and self.params.get("P3.003") == 1 and self.servo_on:
-            self.axis.ramp_stop(self._p5003_decel(5))  # P3.003 = 1: P5.003.B ramp (L10559)
+            self.axis.ramp_stop(self.p5003_decel(5))  # P3.003 = 1: P5.003.B ramp (L10559)
 
     def nmt_reset(self, kind: str) -> None:
         """A CANopen NMT reset ("reset node" / "reset communication"): AL401 if the servo is
@@ -348,7 +350,7 @@ class Drive:
         re-initialises the CiA 402 state machine: FAULT if a servo-off alarm remains, else
         SWITCH ON DISABLED (transition 15 "Alarm 清除", L18265). Reset node also returns the
         6xxxh objects to their power-up values (CiA 301). Choice: docs/manual-choices.md."""
-        self._commit_cycle()
+        self.commit_cycle()
         if self.servo_on:
             self.alarms.raise_alarm("AL401")
         self.alarms.reset("nmt")
@@ -370,7 +372,7 @@ class Drive:
         The manual names no motion reaction; `nmt_stop_action` "servo_off" (default)
         disables the CiA 402 drive (P1.032.Y stop, BRKR engages) rather than leave an
         axis turning that only NMT can reach (docs/manual-choices.md)."""
-        self._commit_cycle()
+        self.commit_cycle()
         if self.options.nmt_stop_action == "servo_off" and self.servo_on:
             self.cia402.comm_disable()
             self._update_servo(source="cia402")
@@ -390,7 +392,7 @@ class Drive:
         self.brake.reset()
         self.sto.reset()
         self.axis.set_power(False)
-        self._emit(PowerCycled(self.sched.now, battery))
+        self.emit(PowerCycled(self.sched.now, battery))
         self._boot()
 
     def close(self) -> None:
@@ -427,19 +429,19 @@ class Drive:
             "do": [self.dio.do_level(n) for n in range(1, 7)],
             # terminal levels DI1..DI10 (the bench's sensors drive some: ORGP, NL, PL)
             "di": [self.dio.input_level(n) for n in range(1, 11)],
-            "homing_phase": self.homing.phase if hasattr(self, "homing") else "",
-            "gain_switched": self.difunc.gain_switched if hasattr(self, "difunc") else False,
-            **(self.pulse.snapshot() if hasattr(self, "pulse") else {}),
+            "homing_phase": self.homing.phase,
+            "gain_switched": self.difunc.gain_switched,
+            **self.pulse.snapshot(),
         }
 
     # ------------------------------------------------------------------ internals
-    def _emit(self, event: DriveEvent) -> None:
+    def emit(self, event: DriveEvent) -> None:
         for fn in list(self._subs):
             fn(event)
 
     def _boot(self) -> None:
         """After power on: SRDY, outputs, and the CiA 402 automatic transitions 0/1."""
-        for hook in self._boot_hooks:
+        for hook in self.hooks.boot:
             hook()
         canopen_init = load_canopen_init(self.params)  # P3.012.Z = 0 (L10731-10745)
         # Level-triggered DI functions act from power-up (EMGS/NL/PL -> AL013-AL015,
@@ -476,18 +478,18 @@ class Drive:
     def _on_dio_event(self, event: DriveEvent) -> None:
         if isinstance(event, DoChanged) and event.n == self.brake_line:
             self.holding_brake.coil(event.level)  # the bench's wiring, not the function
-        self._emit(event)
+        self.emit(event)
 
     def _mirror_params(self) -> None:
         """Parameters the CiA 402 objects mirror: gear 6093h, max speed, limit ramps."""
         self.cia402.set_gear(self.params.get("P1.044"), self.params.get("P1.045"))
         self.cia402.set_max_speed(self.params.get("P1.055"))
-        self.cia402.limit_decel_ms = min(self._p5003_decel(0), self._p5003_decel(1))
+        self.cia402.limit_decel_ms = min(self.p5003_decel(0), self.p5003_decel(1))
 
     def _ip_filters(self) -> None:
         """P1.068 (moving filter, ms, L8826-8840) then P1.036 (S-curve, ms, L8358-8365) on IP
         set-points, as the IP section recommends (L17236-17238; option `ip_smoothing`)."""
-        step_ms = self._step_ns / MS  # one sample per model step
+        step_ms = self.step_ns / MS  # one sample per model step
         self.axis.ip_windows = tuple(
             max(1, round(self.params.get(name) / step_ms)) for name in ("P1.068", "P1.036")
         ) if self.options.ip_smoothing == "manual" else ()
@@ -558,7 +560,7 @@ class Drive:
         self.axis.hold()
         self._set_do("SON", True)
         self.brake.servo_on()
-        for hook in self._servo_on_hooks:
+        for hook in self.hooks.servo_on:
             hook()
 
     def _servo_off(
@@ -574,7 +576,7 @@ class Drive:
             self.axis.set_power(not self.sto.torque_cut)
             self._hold_timer = self.sched.after(hold, lambda: self.axis.set_power(False))
         self._set_do("SON", False)
-        for hook in self._servo_off_hooks:
+        for hook in self.hooks.servo_off:
             hook()
 
     def _follow_absolute(self) -> None:
@@ -584,7 +586,7 @@ class Drive:
             counts = puu_to_counts(enc.puu, self.params.get("P1.044"), self.params.get("P1.045"))
             self.axis.set_user_position(counts)
 
-    def _clear_position_error(self) -> None:
+    def clear_position_error(self) -> None:
         """P0.049 = 2: the motor position becomes the command end point (L7477-7491)."""
         self.axis.demand = self.axis.position
         self.axis.hold()
@@ -596,7 +598,7 @@ class Drive:
         # Brake calls this on every mechanical change: subscribers (the ground truth) see
         # the instant exactly, not at the next periodic state sample
         self.axis.brake_clamped = clamped
-        self._emit(BrakeChanged(self.sched.now, clamped))
+        self.emit(BrakeChanged(self.sched.now, clamped))
 
     def _fault_reset(self) -> bool:
         """CiA 402 fault reset (6040h bit 7 edge, L18231): True if no servo-off alarm stays."""
@@ -613,7 +615,7 @@ class Drive:
         """React to an alarm change (outputs, CiA 402, servo), then tell subscribers."""
         self._react_to_alarms()
         if event is not None:
-            self._emit(event)
+            self.emit(event)
 
     def _react_to_alarms(self) -> None:
         al = self.alarms
@@ -637,9 +639,9 @@ class Drive:
         if active and self.servo_on:
             v = self.axis.velocity
             if (which == "PL" and v > 0) or (which == "NL" and v < 0) or self.axis.moving:
-                self.axis.ramp_stop(self._p5003_decel(0 if which == "PL" else 1))
+                self.axis.ramp_stop(self.p5003_decel(0 if which == "PL" else 1))
 
-    def _p5003_decel(self, digit: int) -> float:
+    def p5003_decel(self, digit: int) -> float:
         """Deceleration time (ms per 3000 rpm) of P5.003 digit `digit` (L11084-11100)."""
         idx = (self.params.get("P5.003") >> (4 * digit)) & 0xF
         return float(self.params.get(f"P5.{20 + idx:03d}"))
@@ -652,11 +654,11 @@ class Drive:
         return (ax.moving or ax.velocity != 0.0 or (ax.power and ax.position != ax.demand)
                 or self.pulse.seg is not None)
 
-    def _commit_cycle(self) -> None:
+    def commit_cycle(self) -> None:
         """An input arrives inside a 1 ms cycle: the cycle runs to its end with the command
         it began with (computed now, its outputs still due at its end), and the input acts
         from the next cycle, as a drive samples its commands at the cycle start (causal)."""
-        step = self._step_ns
+        step = self.step_ns
         now = self.sched.now
         if self._ahead or now % step == 0:
             return
@@ -672,7 +674,7 @@ class Drive:
         the next one (`_commit_cycle`). So every slicing of the same scenario gives the same
         positions at every grid point (tests/model/test_manual_rules_wave3.py)."""
         sched = self.sched
-        step = self._step_ns
+        step = self.step_ns
         while True:
             if self._ahead:  # a cycle computed at an input inside it: its outputs are due now
                 if self._axis_t > stop:
@@ -699,7 +701,7 @@ class Drive:
     def _after_step(self) -> None:
         self.brake.after_step()
         self.cia402.after_step()
-        for hook in self._step_hooks:
+        for hook in self.hooks.step:
             hook()
         self._refresh_speed_outputs()
         self._update_sensors()
@@ -724,6 +726,10 @@ class Drive:
         self._set_do("TPOS", self.tpos())
         # TQL: torque at a limit, not in T/Tz (L15278)
         self._set_do("TQL", ax.torque_limited and self.difunc.control_mode() not in ("T", "Tz"))
+
+    def control_mode(self) -> str:
+        """The table 8.1 control mode (di_functions.py)."""
+        return self.difunc.control_mode()
 
     def tpos(self) -> bool:
         """TPOS (P1.054, L8689-8693): in PT mode the following error is inside P1.054; in PR
@@ -755,7 +761,7 @@ class Drive:
                 level = act if kind == "no" else not act
                 self.dio.set_input(n, level, settled=force)
                 if not force:
-                    self._emit(InputChanged(self.sched.now, n, level))
+                    self.emit(InputChanged(self.sched.now, n, level))
 
 
 def _abort_for(exc: ModelError, value: int) -> int:

@@ -1,6 +1,6 @@
 """Homing that moves the axis: CANopen (6098h, L18838-18869) and PR mode (P5.004, manual chapter 7).
 
-`attach_homing(drive)` wires a `Homing` into a `Drive` through its public pieces only:
+`attach_homing(core)` wires a `Homing` into a drive through its public pieces only (core.py):
 
 * CANopen: `drive.cia402.start_homing` / `stop_homing` (6040h bit 4 edges in HM, halt,
   leaving OPERATION ENABLED); result through `cia402.set_homing_status(attained, error)`
@@ -14,7 +14,7 @@
 * DO.HOME off at once on a trigger, on at completion (L15290); P0.046 bit 8 follows.
 * After the reference is found the coordinate is set (CANopen: 6064h = 607Ch at the home
   point; PR: P6.001 at the reference, L12641) and an absolute encoder, if the drive has one
-  (`drive.absolute`), gets its origin (L16458).
+  (`absolute`, given to `attach_homing`), gets its origin (L16458).
 
 Method tables: `hil.profile.homing_methods`. Choices and deviation knobs (ModelOptions
 .extra["homing"]): `HomingOptions`, docs/manual-choices.md#homing.
@@ -43,7 +43,8 @@ from hil.profile.homing_methods import (
 )
 
 if TYPE_CHECKING:
-    from hil.model.drive import Drive
+    from hil.model.absolute import AbsoluteEncoder
+    from hil.model.core import DriveCore
 
 POS_FUNCTIONS = ("POS0", "POS1", "POS2", "POS3", "POS4", "POS5", "POS6")  # L15123-15133
 
@@ -89,8 +90,10 @@ class HomingOptions:
 class Homing:
     """One homing engine per drive (both routes share it; one run at a time)."""
 
-    def __init__(self, drive: Drive, options: HomingOptions | None = None) -> None:
+    def __init__(self, drive: DriveCore, options: HomingOptions | None = None,
+                 absolute: AbsoluteEncoder | None = None) -> None:
         self.drive = drive
+        self.absolute = absolute  # gets its origin at the reference (L16458)
         self.options = options or HomingOptions.from_dict(drive.options.extra.get("homing"))
         self.route = ""  # "canopen" | "pr" while a run is active
         self._phase = ""  # "" idle | search | exit | cross | index | torque | stop | return
@@ -201,7 +204,7 @@ class Homing:
     def phase(self, value: str) -> None:
         if value != self._phase:
             self._phase = value
-            self.drive._emit(HomingPhase(self.drive.now, value))  # ground truth, exact time
+            self.drive.emit(HomingPhase(self.drive.now, value))  # ground truth, exact time
 
     def on_power_up(self) -> None:
         """Power-up: HOME off (L15290), coordinate not homed, BOOT armed again."""
@@ -417,12 +420,8 @@ class Homing:
         self._reported = True
         d = self.drive
         self.trace.append((d.now, "homed"))
-        absolute = getattr(d, "absolute", None)
-        if absolute is not None and hasattr(absolute, "establish_origin"):
-            try:
-                absolute.establish_origin(at_counts=round(self.home_counts or 0.0))
-            except TypeError:
-                absolute.establish_origin()
+        if self.absolute is not None:
+            self.absolute.establish_origin(at_counts=round(self.home_counts or 0.0))
         self._set_home(True)
         if self.route == "canopen":
             d.cia402.set_homing_status(True, False)
@@ -465,9 +464,10 @@ def _accel_ms(get: Any, index: int) -> float:
     return float(get(f"P5.{20 + index:03d}"))
 
 
-def attach_homing(drive: Drive, options: HomingOptions | None = None) -> Homing:
+def attach_homing(drive: DriveCore, absolute: AbsoluteEncoder | None = None,
+                  options: HomingOptions | None = None) -> Homing:
     """Create the homing engine of `drive` and wire it through the drive's public pieces."""
-    homing = Homing(drive, options)
+    homing = Homing(drive, options, absolute)
     cia = drive.cia402
     cia.start_homing = homing.start_canopen
     cia.stop_homing = homing.stop
@@ -484,10 +484,10 @@ def attach_homing(drive: Drive, options: HomingOptions | None = None) -> Homing:
     params = drive.params
     params.on_validate("P5.004", check_p5004)
     params.on_write("P5.007", lambda _n, _o, new: new == 0 and homing.trigger_pr("P5.007"))
-    drive._step_hooks.append(homing.after_step)
+    drive.hooks.step.append(homing.after_step)
 
-    drive._servo_on_hooks.append(homing.on_servo_on)
-    drive._boot_hooks.append(homing.on_power_up)  # first: the boot may switch the servo on
+    drive.hooks.servo_on.append(homing.on_servo_on)
+    drive.hooks.boot.append(homing.on_power_up)  # first: the boot may switch the servo on
     if drive.servo_on:
         homing._boot_armed = False
     homing._set_home(False)

@@ -1,6 +1,6 @@
 """The PR executor (A3 manual §7.1.5-7.1.6): triggers, scheduler, executor, motion generator.
 
-`attach_pr(drive)` wires a `PrEngine` into a `Drive` through its public pieces, like
+`attach_pr(core, homing)` wires a `PrEngine` into a drive through its public pieces (core.py), like
 `homing.attach_homing`. PR#0 stays in `homing.py`; its PATH (P6.000.YX) continues here.
 
 Rules, each from the manual (choices: docs/manual-choices.md#pr, `PrOptions`):
@@ -67,7 +67,8 @@ from hil.profile.pr import (
 )
 
 if TYPE_CHECKING:
-    from hil.model.drive import Drive
+    from hil.model.core import DriveCore
+    from hil.model.homing import Homing
 
 POS_BITS = ("POS0", "POS1", "POS2", "POS3", "POS4", "POS5", "POS6")  # L15123-15133
 PRIORITY = {"CTRG": 0, "P5.007": 1, "EV_RISE": 2, "EV_FALL": 3}  # L4916
@@ -133,10 +134,12 @@ class _Cmd:
 class PrEngine:
     """One PR executor per drive."""
 
-    def __init__(self, drive: Drive, options: PrOptions | None = None) -> None:
+    def __init__(self, drive: DriveCore, options: PrOptions | None = None,
+                 homing: Homing | None = None) -> None:
         self.drive = drive
         self.options = options or PrOptions.from_dict(drive.options.extra.get("pr"))
-        self.array = [0] * ARRAY_SIZE  # data array (L5097)
+        self.homing = homing  # PR#0 (homing.py)
+        self.array = drive.array  # the data array (L5097), shared with CAPTURE/COMPARE
         self.capture_puu = 0  # last CAPTURE value, base of CAP commands (L4471)
         self.lead: int | None = None  # PR number of the last trigger (P5.007 read-back)
         self.cursor: int | None = None  # next PR to read
@@ -196,7 +199,7 @@ class PrEngine:
         if n > 99:
             d.alarms.raise_alarm("AL249")  # PR path number > 99 (L20099)
             return
-        homing = getattr(d, "homing", None)
+        homing = self.homing
         if homing is not None and homing.route == "pr":
             homing.stop()  # the new group replaces PR#0 (L4920)
         self.trace.append((d.now, f"dispatch:{n}"))
@@ -220,7 +223,7 @@ class PrEngine:
         self.cursor = None
         self._cancel_wake()
         if d.axis.power and (d.axis.moving or d.axis.velocity != 0.0):
-            d.axis.ramp_stop(d._p5003_decel(7))  # P5.003.D: STP decel (L11091-11100)
+            d.axis.ramp_stop(d.p5003_decel(7))  # P5.003.D: STP decel (L11091-11100)
             self.cmd = _Cmd(None, d.now, 0)
         self._service()
 
@@ -375,14 +378,14 @@ class PrEngine:
         d = self.drive
         fn = "PL" if direction > 0 else "NL"
         if direction and d.dio.function_active(fn):
-            d.axis.ramp_stop(d._p5003_decel(0 if fn == "PL" else 1))
+            d.axis.ramp_stop(d.p5003_decel(0 if fn == "PL" else 1))
             self.trace.append((d.now, f"inhibit:{fn}"))
 
     def _target(self, path: PrPath, external: bool, g44: int, g45: int) -> int | None:
         d = self.drive
         v = path.data
         if path.type == INDEX:
-            homing = getattr(d, "homing", None)
+            homing = self.homing
             if homing is None or not homing.homed:
                 self._fail("AL237", f"PR#{path.number}: index coordinate undefined (L4593)")
                 return None
@@ -525,7 +528,7 @@ class PrEngine:
                 self.cursor = None
                 decel = self.options.dev_soft_limit_decel_ms
                 if decel is None:
-                    decel = d._p5003_decel(digit)  # P5.003 Z SPL / U SNL (L11091-11100)
+                    decel = d.p5003_decel(digit)  # P5.003 Z SPL / U SNL (L11091-11100)
                 ax.ramp_stop(decel)
                 self.cmd = _Cmd(None, d.now, 0)
 
@@ -634,13 +637,13 @@ class PrEngine:
 PR_MODES = (0x01, 0x08, 0x09, 0x0D, 0x0E, 0x0F)  # P1.001.YX with PR (L7749-7800)
 
 
-def pr_mode(drive: Drive) -> bool:
+def pr_mode(drive: DriveCore) -> bool:
     """PR triggers act: P1.001.YX selects a mode with PR (or the option says any mode)."""
     if not drive.options.pr_triggers_need_pr_mode:
         return True
     yx = drive.params.get("P1.001") & 0xFF
     if yx in (0x0D, 0x0E, 0x0F):  # PT-PR: the PR side only while DI.PT-PR is on (L15200)
-        return drive.difunc.control_mode() == "PR"
+        return drive.control_mode() == "PR"
     return yx in PR_MODES
 
 
@@ -648,9 +651,10 @@ def _pos_number(dio: Any) -> int:
     return sum(1 << i for i, f in enumerate(POS_BITS) if dio.function_active(f))
 
 
-def attach_pr(drive: Drive, options: PrOptions | None = None) -> PrEngine:
+def attach_pr(drive: DriveCore, homing: Homing | None = None,
+              options: PrOptions | None = None) -> PrEngine:
     """Create the PR engine of `drive` and wire triggers, hooks and parameters."""
-    pr = PrEngine(drive, options)
+    pr = PrEngine(drive, options, homing)
     dio = drive.dio
     params = drive.params
 
@@ -707,12 +711,11 @@ def attach_pr(drive: Drive, options: PrOptions | None = None) -> PrEngine:
         params.on_write(f"P5.{100 + k:03d}", write)
     params.on_read("P5.010", lambda: ARRAY_SIZE)
 
-    homing = getattr(drive, "homing", None)
     if homing is not None:
         homing.on_pr_done = pr.after_homing
         homing.on_pr_start = pr.abort
-    drive._step_hooks.append(pr.after_step)
-    drive._boot_hooks.append(pr.abort)
+    drive.hooks.step.append(pr.after_step)
+    drive.hooks.boot.append(pr.abort)
     return pr
 
 

@@ -46,7 +46,7 @@ from hil.model.errors import OutOfRange
 from hil.model.mechanics import COUNTS_PER_REV
 
 if TYPE_CHECKING:
-    from hil.model.drive import Drive
+    from hil.model.core import DriveCore
 
 FORMS = ("ab", "cw_ccw", "pulse_sign")  # P1.000.X = 0, 1, 2 (L7670-7674)
 LIMIT_PPS = {"line_driver": 4_000_000, "open_collector": 200_000}  # L7700-7707
@@ -121,7 +121,7 @@ def filter_max_hz(p1_000: int) -> float | None:
 class PulseTrain:
     """The PT input and the OA/OB/OZ output of one drive."""
 
-    def __init__(self, drive: Drive) -> None:
+    def __init__(self, drive: DriveCore) -> None:
         self.d = drive
         self.seg: Segment | None = None
         self._taken = 0  # pulses of `seg` already taken
@@ -211,7 +211,7 @@ class PulseTrain:
         return self._pt_now if self._active else self.in_pt()
 
     def in_pt(self) -> bool:
-        return self._config().pt_yx and self.d.difunc.control_mode() == "PT"
+        return self._config().pt_yx and self.d.control_mode() == "PT"
 
     # ------------------------------------------------------------------ the line
     def segment(self, freq: float, direction: int, count: int = 0, *,
@@ -225,7 +225,7 @@ class PulseTrain:
                              f"count {count!r}")
         if form not in FORMS:
             raise ValueError(f"pulse segment: form {form!r} not one of {', '.join(FORMS)}")
-        d._commit_cycle()
+        d.commit_cycle()
         if self._cruise_end:
             self._resync()
         self._take(d.now)
@@ -329,7 +329,7 @@ class PulseTrain:
             self._frac = 0.0
             self._ma.clear()
             self._lpf = None
-        ax.interpolate_to(ax.demand, d._step_ns, by="PT")
+        ax.interpolate_to(ax.demand, d.step_ns, by="PT")
 
     def _smoothed(self) -> float:
         """P1.068 moving average (ms samples) then P1.008 low-pass (10 ms)."""
@@ -348,7 +348,7 @@ class PulseTrain:
         tau_ms = c.tau_ms
         if tau_ms > 0:
             y = self._base if self._lpf is None else self._lpf
-            y += (x - y) * (1.0 - math.exp(-self.d._step_ns / 1e6 / tau_ms))
+            y += (x - y) * (1.0 - math.exp(-self.d.step_ns / 1e6 / tau_ms))
             if abs(x - y) < 0.5:
                 y = x
             self._lpf = y
@@ -390,7 +390,7 @@ class PulseTrain:
                 settled = (self.seg is None and target == self.command
                            and all(v == self.command for v in self._ma))
                 if not settled or d.axis.demand != target:
-                    d.axis.interpolate_to(target, d._step_ns, by="PT")
+                    d.axis.interpolate_to(target, d.step_ns, by="PT")
                     self._maybe_cruise(pt)
                 else:
                     self._active = False
@@ -423,7 +423,7 @@ class PulseTrain:
         d = self.d
         s = self.seg
         c = self._config()
-        step = d._step_ns
+        step = d.step_ns
         if s is None or not pt or c.tau_ms > 0 or d.axis._locks:
             return
         n = max(1, c.p1068)
@@ -452,7 +452,7 @@ class PulseTrain:
         s = self.seg
         if s is None:
             return
-        grid = d.now - d.now % d._step_ns
+        grid = d.now - d.now % d.step_ns
         n_new = s.pulses_at(grid) - self._taken
         if n_new > 0:
             self._taken += n_new
@@ -468,7 +468,7 @@ class PulseTrain:
         n = self._config().p1068
         if n <= 1:
             return
-        step = self.d._step_ns
+        step = self.d.step_ns
         self._ma = deque(command + gain * (s.pulses_at(min(t, grid)) - pulses)
                          for t in (self.d.now - k * step for k in range(n - 1, 0, -1)))
 
@@ -480,7 +480,7 @@ class PulseTrain:
         for name, level in (("DOG", d.mech.home_sensor(pos)), ("NL", nl), ("PL", pl)):
             if self._machine.get(name) != level:
                 self._machine[name] = level
-                self._emit("X", {"name": name, "level": level})
+                self.emit("X", {"name": name, "level": level})
 
     def machine_lines(self) -> dict[str, bool]:
         """The sensors now (for a line that connects later)."""
@@ -529,8 +529,8 @@ class PulseTrain:
         for z in d.mech.index_crossed(ax.last_position, ax.position):
             span = ax.position - ax.last_position
             frac = (z - ax.last_position) / span if span else 1.0
-            t = d.now - d._step_ns + int(frac * d._step_ns)
-            self._emit("OZ", {"t": t, "width_ns": int(d.options.ocz_width_us * 1000)})
+            t = d.now - d.step_ns + int(frac * d.step_ns)
+            self.emit("OZ", {"t": t, "width_ns": int(d.options.ocz_width_us * 1000)})
         window = int(d.options.output_window_ms * 1_000_000)
         if ax.position == self._out_pos:  # at rest: the next window starts now
             self._out_t = d.now
@@ -542,12 +542,12 @@ class PulseTrain:
         self._out_acc = delta - whole
         dt = d.now - self._out_t
         if whole:
-            self._emit("OAB", {"t": self._out_t, "freq": abs(whole) * 1e9 / dt,
+            self.emit("OAB", {"t": self._out_t, "freq": abs(whole) * 1e9 / dt,
                                "direction": 1 if whole > 0 else -1, "count": abs(whole)})
         self._out_pos = ax.position
         self._out_t = d.now
 
-    def _emit(self, kind: str, data: dict[str, Any]) -> None:
+    def emit(self, kind: str, data: dict[str, Any]) -> None:
         for fn in list(self.listeners):
             fn(kind, data)
 
@@ -572,7 +572,7 @@ class PulseTrain:
                 "pt_error": round(self.error()) if self.used else 0}
 
 
-def _check_gear(d: Drive) -> Callable[[str, int], None]:
+def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
     def validate(name: str, value: int) -> None:
         # the range is of the command *pulse* input ratio (L8543-8547): PT modes only
         if d.options.pt_gear_check != "refuse" or (d.params.get("P1.001") & 0xFF) not in PT_YX:
@@ -589,7 +589,8 @@ def _check_gear(d: Drive) -> Callable[[str, int], None]:
     return validate
 
 
-def _monitor(d: Drive, select: str, stored: Callable[[], int]) -> Callable[[], int]:
+def _monitor(d: DriveCore, pt: PulseTrain, select: str, stored: Callable[[], int]
+             ) -> Callable[[], int]:
     """P0.009-P0.013 read the monitor code their P0.017-P0.021 select (L7147-7237): the
     position codes 000-006 of the monitor table (L15440-15446); other codes keep the stored
     value (not modelled)."""
@@ -599,7 +600,6 @@ def _monitor(d: Drive, select: str, stored: Callable[[], int]) -> Callable[[], i
             return stored()
         ax = d.axis
         n, m = d.params.get("P1.044"), d.params.get("P1.045")
-        pt = d.pulse
         fb, cmd = ax.user_position, ax.user_demand
         if pt.used and pt.in_pt():
             cmd = pt.live_command() - ax.origin
@@ -613,13 +613,13 @@ def _monitor(d: Drive, select: str, stored: Callable[[], int]) -> Callable[[], i
     return read
 
 
-def attach_pulse_train(drive: Drive) -> PulseTrain:
+def attach_pulse_train(drive: DriveCore) -> PulseTrain:
     pt = PulseTrain(drive)
     for i in range(5):
         reg, select = f"P0.{9 + i:03d}", f"P0.{17 + i:03d}"
-        drive.params.on_read(reg, _monitor(drive, select,
+        drive.params.on_read(reg, _monitor(drive, pt, select,
                                            lambda r=reg: drive.params.stored(r)))
-    drive._step_hooks.append(pt.after_step)
+    drive.hooks.step.append(pt.after_step)
     validate = _check_gear(drive)
     for name in ("P1.044", "P1.045", "P2.060", "P2.061", "P2.062"):
         drive.params.on_validate(name, validate)
