@@ -50,7 +50,7 @@ stage itself belongs to the drive (STO, brake, alarms) and is switched through
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from hil.model.errors import (
     ABORT_DATA_STATE,
@@ -65,6 +65,7 @@ from hil.model.errors import (
 from hil.model.events import StateChanged
 from hil.model.motion import Axis, counts_to_puu, puu_per_s_to_rpm, puu_to_counts
 from hil.model.timebase import MS, S
+from hil.profile.od import load_objects
 from hil.protocol.cia402 import MODES
 
 # ---- states (names as canopen.BaseNode402 uses them) ------------------------------------
@@ -173,72 +174,43 @@ class _Obj:
     hi: int | None = None
 
 
+# the object list's data types (hil.profile.od) -> the model's value ranges (_TYPES)
+_DTYPES = {"UNSIGNED8": "U8", "INTEGER8": "I8", "UNSIGNED16": "U16", "INTEGER16": "I16",
+           "UNSIGNED32": "U32", "INTEGER32": "I32"}
+
+
+def _od_objects() -> dict[tuple[int, int], _Obj]:
+    """The 6xxx rows of the A3 object list (hil.profile.od, fixtures/drive/a3_objects.csv:
+    L18202-L19278), read once."""
+    global _OD_CACHE
+    if _OD_CACHE is None:
+        _OD_CACHE = {
+            (e.index, e.sub): _Obj(e.name, _DTYPES[e.type], e.writable, e.default or 0, e.min,
+                                   e.max)
+            for e in load_objects() if 0x6000 <= e.index <= 0x6FFF
+        }
+    return _OD_CACHE
+
+
+_OD_CACHE: dict[tuple[int, int], _Obj] | None = None
+
+
 def _objects(max_speed_rpm: int) -> dict[tuple[int, int], _Obj]:
-    """6xxx objects of the A3 object list (L18202-L19278); stored ones get defaults, RO ones
-    are computed."""
+    """6xxx objects: the object list's, stored ones with their defaults, RO ones computed;
+    plus what the list leaves to the drive."""
+    objs = dict(_od_objects())
+    for key, default in (((0x607F, 0), max_speed_rpm * 10), ((0x6080, 0), max_speed_rpm)):
+        objs[key] = replace(objs[key], default=default)  # the motor's speed (L18703-18735)
+    for sub in (1, 2):  # written to P1.044 / P1.045, whose ranges start at 1 (L8525-8540)
+        objs[(0x6093, sub)] = replace(objs[(0x6093, sub)], lo=1)
     o = _Obj
-    return {
-        (0x603F, 0): o("Error code", "U16", False, 0),
-        (0x6040, 0): o("Controlword", "U16", True, 0x0004),  # L18212
-        (0x6041, 0): o("Statusword", "U16", False, 0),
-        (0x605B, 0): o("Shutdown option code", "I16", True, 0, 0, 1),  # L18342-18358
-        (0x6060, 0): o("Modes of operation", "I8", True, 0),
-        (0x6061, 0): o("Modes of operation display", "I8", False, 0),  # RO per L17434
-        (0x6062, 0): o("Position demand value", "I32", False, 0),
-        (0x6063, 0): o("Position actual internal value", "I32", False, 0),
-        (0x6064, 0): o("Position actual value", "I32", False, 0),
-        (0x6065, 0): o("Following error window", "U32", True, 3840000),  # L18438-18452
-        (0x6067, 0): o("Position window", "U32", True, 100),  # L18455-18469
-        (0x6068, 0): o("Position window time", "U16", True, 0),  # L18472-18486
-        (0x606B, 0): o("Velocity demand value", "I32", False, 0),
-        (0x606C, 0): o("Velocity actual value", "I32", False, 0),
-        (0x606D, 0): o("Velocity window", "U16", True, 100, 0, 3000),  # L18522-18536
-        (0x606E, 0): o("Velocity window time", "U16", True, 0),
-        (0x606F, 0): o("Velocity threshold", "U16", True, 100, 0, 2000),  # L18556-18566
-        (0x6071, 0): o("Target torque", "I16", True, 0, -3000, 3000),  # L18568-18582
-        (0x6074, 0): o("Torque demand value", "I16", False, 0),
-        (0x6075, 0): o("Motor rated current", "U32", False, 0),
-        (0x6076, 0): o("Motor rated torque", "U32", False, 0),
-        (0x6077, 0): o("Torque actual value", "I16", False, 0),
-        (0x6078, 0): o("Current actual value", "I16", False, 0),
-        (0x607A, 0): o("Target position", "I32", True, 0),
-        (0x607C, 0): o("Home offset", "I32", True, 0),
-        (0x607F, 0): o("Max profile velocity", "U32", True, max_speed_rpm * 10),  # L18703
-        (0x6080, 0): o("Max motor speed", "U32", True, max_speed_rpm),  # L18720-18735
-        (0x6081, 0): o("Profile velocity", "U32", True, 10000),  # L18737-18753
-        (0x6083, 0): o("Profile acceleration", "U32", True, 200, 1, 65500),
-        (0x6084, 0): o("Profile deceleration", "U32", True, 200, 1, 65500),
-        (0x6085, 0): o("Quick stop deceleration", "U32", True, 200, 1, 65500),
-        (0x6087, 0): o("Torque slope", "U32", True, 200, 0, 65500),
-        (0x6093, 0): o("Position factor: entries", "U8", False, 2),
-        (0x6093, 1): o("Numerator (P1.044)", "U32", True, 1, 1, None),
-        (0x6093, 2): o("Feed constant (P1.045)", "U32", True, 1, 1, None),
-        (0x6098, 0): o("Homing method", "I8", True, 0, 0, 35),  # L18856-18869
-        (0x6099, 0): o("Homing speeds: entries", "U8", False, 2),
-        (0x6099, 1): o("Speed during search for switch", "U32", True, 100, 1, 2000),
-        (0x6099, 2): o("Speed during search for zero", "U32", True, 20, 1, 500),
-        (0x609A, 0): o("Homing acceleration", "U32", True, 100),  # L19009-19023
-        (0x60C0, 0): o("Interpolation sub mode select", "I16", True, 0),
-        (0x60C1, 0): o("Interpolation data record: entries", "U8", False, 2),
-        (0x60C1, 1): o("Pos_Cmd", "I32", True, 0),
-        (0x60C1, 2): o("Interpolation data sub 2 (undocumented)", "I32", True, 0),
-        (0x60C2, 0): o("Interpolation time period: entries", "U8", False, 2),
-        (0x60C2, 1): o("Interpolation time units", "U8", True, 1),
-        (0x60C2, 2): o("Interpolation time index", "I8", True, -3, -128, 63),
-        (0x60C5, 0): o("Max acceleration", "U32", True, 200, 1, 65500),
-        (0x60C6, 0): o("Max deceleration", "U32", True, 200, 1, 65500),
-        (0x60E0, 0): o("Positive torque limit", "U16", True, 3000, 0, 3000),  # L19147
-        (0x60E1, 0): o("Negative torque limit", "U16", True, 3000, 0, 3000),  # L19163
-        (0x60F4, 0): o("Following error actual value", "I32", False, 0),
-        (0x60FC, 0): o("Position demand value (pulse)", "I32", False, 0),
-        (0x60FD, 0): o("Digital inputs", "U32", False, 0),
-        (0x60FF, 0): o("Target velocity", "I32", True, 0),
-        (0x6502, 0): o("Supported drive modes", "U32", False, SUPPORTED_DRIVE_MODES),
+    objs.update({  # model-only option-code objects (_OPTION_CODES; option_objects)
         (0x605A, 0): o("Quick stop option code", "I16", True, 2),
         (0x605C, 0): o("Disable operation option code", "I16", True, 0),
         (0x605D, 0): o("Halt option code", "I16", True, 1),
         (0x605E, 0): o("Fault reaction option code", "I16", True, 0),
-    }
+    })
+    return objs
 
 
 def _clip(value: int, dtype: str) -> int:

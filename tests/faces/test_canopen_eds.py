@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import canopen
 
-from hil.profile.od import EDS_PATH, TYPE_CODES, ObjectDictionary, generate_eds, parameter_index
+from hil.profile.eds import generate_eds
+from hil.profile.od import EDS_PATH, TYPE_CODES, ObjectDictionary, parameter_index
 
 
 def test_checked_in_eds_is_fresh():
     assert EDS_PATH.read_text(encoding="utf-8") == generate_eds(), (
-        "fixtures/drive/a3.eds is stale: run `python -m hil.profile.od`"
+        "fixtures/drive/a3.eds is stale: run `python -m hil.profile.eds`"
     )
 
 
