@@ -31,6 +31,7 @@ from hil.model.brake import Brake, HoldingBrake
 from hil.model.canopen_init import HOME_OFFSET_INIT, load_canopen_init
 from hil.model.capture import attach_capture
 from hil.model.cia402 import Cia402, Cia402Options
+from hil.model.comm_supervision import CommSupervision
 from hil.model.compare import attach_compare
 from hil.model.core import Hooks, new_data_array
 from hil.model.di_functions import attach_di_functions
@@ -188,6 +189,8 @@ class Drive:
             on_servo_request=lambda _on, _cause: self._update_servo(source="cia402"),
             on_write=self._on_object_written,
         )
+        # CANopen supervision (AL111, AL112, AL180, AL185, AL301, AL3E2, AL3E3), fed by the face
+        self.comm = CommSupervision(options, self.raise_alarm, lambda: self.params.get("P3.009"))
         self.hooks = Hooks()  # where the parts hook into the cycle (core.py)
         self.array = new_data_array()  # shared by PR, CAPTURE and COMPARE (L5097)
         self._hold_timer = None

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from hil.model.comm_supervision import CommSupervision
 from hil.model.errors import ABORT_NO_OBJECT, ABORT_READ_ONLY, ObjectError
 from hil.model.events import AlarmChanged, PowerCycled, StateChanged
+from hil.model.options import ModelOptions
 from hil.profile.od import ObjectDictionary
 
 SW = {
@@ -42,6 +44,7 @@ class FakeDrive:
         self.objects[(0x2301, 0)] = 0x0203
         self.readonly.discard((0x2300, 0))
         self.alarms = FakeAlarms()
+        self.comm = CommSupervision(ModelOptions(), self.raise_alarm, lambda: 0x5055)
         self.state = "SWITCH ON DISABLED"
         self.t = 0
         self.writes: list[tuple[int, int, int]] = []

@@ -298,7 +298,7 @@ def test_servo_on_comm_alarms_clear_by_6040h_or_nmt(rig, alarm, clear):
     the servo on (these alarms keep it on, so CiA 402 is not in FAULT) the bit 7 edge on top
     of controlword 0Fh clears them and the servo stays on; an NMT reset clears them too."""
     rig.enable()
-    rig.slave._comm_alarm(alarm)
+    rig.drive.raise_alarm(alarm)
     assert alarm in rig.alarms and rig.drive.servo_on
     if clear == "6040h":
         rig.drive.write_object(0x6040, 0, 0x8F)

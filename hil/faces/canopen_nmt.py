@@ -1,0 +1,99 @@
+"""NMT state and error control of the CANopen face: NMT commands, heartbeat producer,
+node guarding answers, the heartbeat it watches, EMCY and the error fields (L17061-L17069,
+L17806-L17838). A part of `CanopenSlave` (canopen_slave.py); what the drive does about a
+lost heartbeat is `hil.model.comm_supervision`."""
+
+from __future__ import annotations
+
+from hil.model.events import AlarmChanged
+from hil.protocol import canopen as cop
+from hil.units import MS
+
+
+class NmtErrorControl:
+    """NMT and error control, mixed into `CanopenSlave` (its `_values`, `_send`, `drive`)."""
+
+    def _set_state(self, state: str) -> None:
+        if state == "OPERATIONAL" and self.state != "OPERATIONAL":
+            for run in self._pdo.values():
+                run.last_data = None
+                run.last_sent = None
+                run.pending = None
+        self.state = state
+
+    def _on_nmt(self, data: bytes) -> None:
+        if len(data) != 2 or data[1] not in (0, self.node_id):
+            return
+        cs = data[0]
+        if cs == cop.NMT_START:
+            self._set_state("OPERATIONAL")
+        elif cs == cop.NMT_STOP:
+            self._set_state("STOPPED")
+            if self.on_nmt_stop is not None:  # the drive decides (nmt_stop_action)
+                self._callback("on_nmt_stop", self.on_nmt_stop)
+        elif cs == cop.NMT_PRE_OPERATIONAL:
+            self._set_state("PRE-OPERATIONAL")
+        elif cs in (cop.NMT_RESET_NODE, cop.NMT_RESET_COMMUNICATION):
+            kind = "reset node" if cs == cop.NMT_RESET_NODE else "reset communication"
+            if self.on_nmt_reset is not None:
+                self._callback("on_nmt_reset", self.on_nmt_reset, kind)  # AL401, alarm clearing
+            self._reset(kind)
+
+    def _restart_heartbeat(self, now: int) -> None:
+        period = self._values.get((0x1017, 0), 0)
+        self._hb_next = now + period * MS if period else None
+
+    def _comm_error(self) -> None:
+        """AL180 (raised by the drive's supervision): the NMT state 1029h asks for
+        (L17806-L17838)."""
+        behaviour = self.comm.error_behaviour(self._values.get((0x1029, 1), 0))
+        if behaviour == 0 and self.state == "OPERATIONAL":
+            self._set_state("PRE-OPERATIONAL")
+        elif behaviour == 2:
+            self._set_state("STOPPED")
+
+    def _on_guard(self, now: int) -> None:
+        state = {"STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}.get(self.state, 0)
+        self._send(cop.HEARTBEAT + self.node_id, bytes([self._guard_toggle << 7 | state]))
+        self._guard_toggle ^= 1
+        self.comm.guarded(now, self._values.get((0x100C, 0), 0), self._values.get((0x100D, 0), 0))
+
+    def _on_heartbeat_in(self, cid: int, data: bytes, now: int, remote: bool) -> bool:
+        if remote or not (0x701 <= cid <= 0x77F):
+            return False
+        watch = self._values.get((0x1016, 1), 0)
+        node, t_ms = (watch >> 16) & 0x7F, watch & 0xFFFF
+        if node and t_ms and cid == cop.HEARTBEAT + node and data:
+            # A boot-up restarts monitoring; it starts with the first heartbeat (CiA 301).
+            self.comm.heartbeat(now, t_ms, bootup=data[0] == 0)
+        return True
+
+    # ------------------------------------------------------------------ EMCY
+    def _error_register(self) -> int:
+        return int(self.drive.alarms.error_register) & 0xFF
+
+    def _emcy(self, ev: AlarmChanged) -> None:
+        """EMCY (L17061-L17069): code, 1001h, Delta alarm code in bytes 3-4 (little-endian)."""
+        cob = self._values.get((0x1014, 0), 0x80 + self.node_id)
+        if cob & 0x80000000 or self.state not in ("PRE-OPERATIONAL", "OPERATIONAL"):
+            return
+        code = ev.emcy_code if ev.active else 0
+        alarm = 0
+        if ev.active and ev.code.upper().startswith("AL"):
+            try:
+                alarm = int(ev.code[2:], 16)
+            except ValueError:
+                alarm = 0
+        data = bytes([code & 0xFF, code >> 8 & 0xFF, self._error_register()])
+        data += alarm.to_bytes(2, "little") + bytes(3)
+        self._send(cob & 0x7FF, data)
+
+    def _history(self) -> list[int]:
+        hist = [int(h) for h in self.drive.alarms.error_history][:5]
+        if self._history_cleared is not None:
+            if tuple(hist) == self._history_cleared:
+                return []
+            if self._history_cleared and self._history_cleared[0] in hist:
+                return hist[: hist.index(self._history_cleared[0])]
+            self._history_cleared = None
+        return hist
