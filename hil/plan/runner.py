@@ -331,7 +331,7 @@ def _open_recording(plan: Plan, bench: Bench, out_dir: Path,
     clk = clock.current()
     rec.add_metadata("hil.clock", {"clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
                                    "started_wall_ns": str(time.time_ns())})
-    checked = sorted({s.args["spec"] for s in plan.steps if s.kind == "check_timing"})
+    checked = sorted({s.args.spec for s in plan.steps if s.kind == "check_timing"})
     if checked:  # the live checks read each message once (LiveSource)
         rec.keep_messages()
     if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding

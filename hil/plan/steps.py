@@ -23,7 +23,7 @@ COMMON = {"name", "drive", "note", "timeout", "imposed"}
 @dataclass
 class Step:
     kind: str
-    args: dict[str, Any]
+    args: Any  # the kind's typed arguments (StepKind.Args)
     index: int
     line: int
     file: str
@@ -100,7 +100,7 @@ def parse_steps(v: Checker, obj: Any, line: int) -> list[Step]:
     stored: set[str] = set()
     names: set[str] = set()
     for st in steps:
-        since = st.args.get("since") if st.kind == "check_timing" else None
+        since = st.args.since if st.kind == "check_timing" else None
         if since is not None and since not in SINCE and since not in names:
             raise v.err(st.raw[st.kind].kline("since"), join(st.where, "check_timing.since"),
                         f"{since!r}: start, last_check or the name of an earlier step "
@@ -109,11 +109,11 @@ def parse_steps(v: Checker, obj: Any, line: int) -> list[Step]:
             names.add(st.name)
         if st.kind != "abs_read":  # `same_as` names a reading an earlier `abs_read` stored
             continue
-        same = st.args["same_as"]
+        same = st.args.same_as
         if same is not None and same not in stored:
             raise v.err(st.raw[st.kind].kline("same_as"), join(st.where, "abs_read.same_as"),
                         f"no earlier abs_read stored {same!r} (stored so far: "
                         f"{', '.join(sorted(stored)) or 'none'})")
-        if st.args["store"]:
-            stored.add(st.args["store"])
+        if st.args.store:
+            stored.add(st.args.store)
     return steps

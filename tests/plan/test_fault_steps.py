@@ -90,14 +90,14 @@ def test_every_rs485_fault_kind_parses():
 
     steps = "".join(f"  - fault: {{rs485: {k}, for: 1s}}\n" for k in SERIAL_FAULTS)
     plan = loads_plan(f"name: p\nsteps:\n{steps}")
-    assert [s.args["kind"] for s in plan.steps] == list(SERIAL_FAULTS)
+    assert [s.args.kind for s in plan.steps] == list(SERIAL_FAULTS)
 
 
 def test_a_burst_the_host_stretched_past_1ms_is_sent_again():
     """duplicate_pdo / sdo_flood need their frames within 1 ms (L19933, L19941): a burst
     a loaded host stretched is recorded `tight: false` and sent again; the message says so.
     A host that never manages it fails the step instead of claiming a fault it did not make."""
-    from hil.plan.fault_steps import BURST_ATTEMPTS, _burst
+    from hil.plan.kinds.comm import BURST_ATTEMPTS, _burst
     from hil.transport.faults import FaultyCanBus
     from tests.transport.test_faults import Sink, SlowBus, frame
 

@@ -37,8 +37,8 @@ steps:
 def test_check_timing_takes_bind_constants_and_since():
     plan = loads_plan(HOMING)
     a = plan.steps[1].args
-    assert a["bind"] == {"REF": "ORGP"} and a["constants"] == {"v1": 120, "d0": 1}
-    assert a["since"] == "go" and plan.steps[2].args["since"] == "last_check"
+    assert a.bind == {"REF": "ORGP"} and a.constants == {"v1": 120, "d0": 1}
+    assert a.since == "go" and plan.steps[2].args.since == "last_check"
     assert describe(plan.steps[1]) == "check_timing homing_canopen (REF=ORGP)"
     assert plan.options == {"state_publish_ms": 1}
     check_plan(plan, load_bench(), timing_specs())  # spec constants and binds known

@@ -136,7 +136,7 @@ def test_an_sdo_key_is_read_as_written(world) -> None:
     bench, specs = world
     plan = loads_plan(PLAN.format(step="sdo: {0x1017: 20, 1006: 5}"), "p.yaml")
     check_plan(plan, bench, specs)
-    assert plan.steps[0].args["values"] == [(0x1017, 0, 20), (0x1006, 0, 5)]
+    assert plan.steps[0].args.values == [(0x1017, 0, 20), (0x1006, 0, 5)]
 
 
 @pytest.mark.parametrize(("step", "named"), [

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil.bench.yamlio import Checker, join
@@ -34,6 +35,20 @@ def abs_reader(d: DriveIO) -> AbsPositionReader:
     return AbsPositionReader(d.dio, p2009_ms=p2009, **kw)
 
 
+@dataclass(frozen=True)
+class AbsReadArgs:
+    expect: dict[str, int]  # status / turns / position to expect
+    store: str | None  # keep the reading under this name
+    same_as: str | None  # expect a reading stored earlier
+    tolerance: int  # position tolerance (pulses)
+    retries: int  # reads after a checksum error
+
+
+@dataclass(frozen=True)
+class AbsOriginArgs:
+    hold: int | None = None  # ns ABSC is held (None: P2.009 + 250 ms)
+
+
 class _Handshake(StepKind):
     need: tuple[str, ...] = ("ABSE",)
 
@@ -56,9 +71,10 @@ class AbsRead(_Handshake):
     handshake (L16460-16521), checksum verified by the reader."""
 
     name = "abs_read"
+    args: AbsReadArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> AbsReadArgs:
         m = fields.mapping_or_empty(v, obj, line, where)
         v.keys(m, {"expect", "tolerance", "store", "same_as", "retries"}, where)
         out: dict[str, Any] = {"expect": {}, "store": None, "same_as": None,
@@ -77,12 +93,12 @@ class AbsRead(_Handshake):
                     raise v.err(m.kline(k), join(where, k),
                                 f"{name!r}: a name like before_cycle")
                 out[k] = name
-        return out
+        return AbsReadArgs(**out)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         reader = abs_reader(d)
-        reader.retries = a["retries"]
+        reader.retries = a.retries
         try:
             r = reader.read()
         except AbsReadError as e:
@@ -91,26 +107,26 @@ class AbsRead(_Handshake):
         text = (f"status 0x{r.status:02X}, turns {r.turns}, position {r.position} "
                 f"(attempts {r.attempts})")
         ctx.rec.log("info", f"absolute read {d.name}: {text}", name="hil.abs_read")
-        want = dict(a["expect"])
-        if a["same_as"]:
-            want = ctx.store[a["same_as"]] | want
-        tol = a["tolerance"]
+        want = dict(a.expect)
+        if a.same_as:
+            want = ctx.store[a.same_as] | want
+        tol = a.tolerance
         bad = [f"{k} {got[k]}, expected {x}" + (f" ± {tol}" if k == "position" and tol else "")
                for k, x in want.items()
                if (abs(got[k] - x) > tol if k == "position" else got[k] != x)]
         if r.violations:
             text += "; reader timing: " + "; ".join(r.violations[:3])
-        if a["store"]:
-            ctx.store[a["store"]] = got
+        if a.store:
+            ctx.store[a.store] = got
         if bad:
-            same = f" (as {a['same_as']})" if a["same_as"] else ""
+            same = f" (as {a.same_as})" if a.same_as else ""
             raise StepFailed(f"{'; '.join(bad)}{same}: read {text}")
         return Outcome(text)
 
     def describe(self) -> str:
         a = self.args
-        want = ", ".join(f"{x}={y}" for x, y in a["expect"].items())
-        same = f" same as {a['same_as']}" if a.get("same_as") else ""
+        want = ", ".join(f"{x}={y}" for x, y in a.expect.items())
+        same = f" same as {a.same_as}" if a.same_as else ""
         return f"absolute read (DI/DO){': ' + want if want else ''}{same}"
 
 
@@ -119,22 +135,23 @@ class AbsOrigin(_Handshake):
     both off (L16436-16450)."""
 
     name = "abs_origin"
+    args: AbsOriginArgs
     need = ("ABSE", "ABSC")
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> AbsOriginArgs:
         m = fields.mapping_or_empty(v, obj, line, where)
         v.keys(m, {"hold"}, where)
-        out: dict[str, Any] = {"hold": None}
-        if "hold" in m:
-            out["hold"] = v.duration(m, "hold", where)
-            if out["hold"] <= 0:
-                raise v.err(m.kline("hold"), join(where, "hold"), "must be > 0")
-        return out
+        if "hold" not in m:
+            return AbsOriginArgs()
+        hold = v.duration(m, "hold", where)
+        if hold <= 0:
+            raise v.err(m.kline("hold"), join(where, "hold"), "must be > 0")
+        return AbsOriginArgs(hold)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         reader = abs_reader(d)
-        hold = self.args["hold"]
+        hold = self.args.hold
         reader.set_origin(None if hold is None else hold / 1e6)
         return Outcome(f"ABSC held {(hold / 1e6 if hold else reader.p2009_ms + 250):g} ms")
 

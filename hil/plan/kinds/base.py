@@ -1,8 +1,9 @@
 """A step kind: one class per YAML key (`di`, `write`, `check_timing`, ...).
 
-Each kind parses its YAML value (`parse`, file:line:field errors), checks itself against the
-bench before anything moves (`check`), runs (`run` -> `Outcome`) and describes itself for
-reports (`describe`). The runner, the plan checker and the reports call these and nothing
+Each kind parses its YAML value once into its own typed arguments (`parse` -> a frozen
+dataclass `Args`, every field error as file:line:field through the `Checker`), checks itself
+against the bench before anything moves (`check`), runs (`run` -> `Outcome`) and describes
+itself for reports (`describe`). The runner, the plan checker and the reports call these and nothing
 else; a new kind is a new class (hil/plan/kinds/__init__.py finds them, and entry points in
 the group `hil.steps` add more, the way python-can finds interfaces).
 """
@@ -20,6 +21,11 @@ if TYPE_CHECKING:
     from hil.plan.plan import Plan
     from hil.plan.session import DriveIO
     from hil.plan.steps import Step
+
+
+@dataclass(frozen=True)
+class NoArgs:
+    """The arguments of a kind that takes none (`fault_reset: true`, `group_stop: {}`)."""
 
 
 @dataclass
@@ -45,7 +51,8 @@ class CheckContext:
 
 
 class StepKind:
-    """Base class of every step kind. Instances hold one step's parsed `args`."""
+    """Base class of every step kind. Instances hold one step's parsed `args`: an instance of
+    the kind's `Args` dataclass (a kind an entry point adds may keep any value)."""
 
     name: ClassVar[str] = ""
     #: only on a virtual bench (the model's own knobs: power, injections)
@@ -55,11 +62,11 @@ class StepKind:
     #: only judges what already happened: its failure does not end the plan
     judge_only: ClassVar[bool] = False
 
-    def __init__(self, args: dict[str, Any]) -> None:
+    def __init__(self, args: Any) -> None:
         self.args = args
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> Any:
         """The step's `args` from its YAML value; raises PlanFileError (file, line, field)."""
         raise NotImplementedError
 

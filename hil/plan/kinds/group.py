@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from hil import clock
@@ -27,9 +28,9 @@ from hil.drivers.axis_group import (
     ServoAxis,
     worst_case_bits,
 )
-from hil.plan.capture_steps import arm_capture, read_array
 from hil.plan.context import Outcome, StepFailed
-from hil.plan.kinds.base import CheckContext, StepKind
+from hil.plan.kinds.base import CheckContext, NoArgs, StepKind
+from hil.plan.kinds.capture import arm_capture, read_array
 from hil.transport.urls import parse_url
 from hil.units import MS, S
 
@@ -110,11 +111,11 @@ def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
     """What a gear and a cam share: axis, master, In/Out (neither 0), the master's source."""
     out = {"axis": _axis_name(v, m, "axis", where),
            "master": _axis_name(v, m, "master", where),
-           "in": _num(v, m, "in", where, -1e9, 1e9, 1),
-           "out": _num(v, m, "out", where, -1e9, 1e9, 1)}
-    if out["out"] == 0:
+           "gin": _num(v, m, "in", where, -1e9, 1e9, 1),
+           "gout": _num(v, m, "out", where, -1e9, 1e9, 1)}
+    if out["gout"] == 0:
         raise v.err(m.kline("out"), join(where, "out"), "0: a gear ratio In/Out needs Out")
-    if out["in"] == 0:
+    if out["gin"] == 0:
         raise v.err(m.kline("in"), join(where, "in"),
                     "ratio 0: nothing would move (group_command 7 ramps a gear out)")
     if out["axis"] == out["master"]:
@@ -149,14 +150,122 @@ def _check_axes(cc: CheckContext, names: list[str], field: str) -> None:
                          "over CANopen)", field)
 
 
+@dataclass(frozen=True)
+class GroupArgs:
+    axes: list[str]  # drive names
+    cycle: int  # SYNC period, ns
+    heartbeat: int  # the axes' producer time (1017h), ns; 0 = none
+    heartbeat_timeout: int  # the group's consumer time, ns; 0 = none
+    line: int  # the plan line of `cycle:` (the wire check's error)
+
+
+@dataclass(frozen=True)
+class GroupMoveArgs:
+    axes: list[str]
+    what: str  # to | by | run
+    value: float
+    acc: float
+    dec: float
+    speed: float
+    ramp: int  # PG.Type (004:226)
+
+
+@dataclass(frozen=True)
+class _Coupling:
+    axis: str
+    master: str
+    gin: float  # GEA.In (YAML `in:`)
+    gout: float  # GEA.Out (YAML `out:`)
+    source: int  # GEA.SourcePosition (004:230)
+
+
+@dataclass(frozen=True)
+class GroupGearArgs(_Coupling):
+    inc_in: float = 0.0
+
+
+@dataclass(frozen=True)
+class GroupCamArgs(_Coupling):
+    scale: float = 1.0
+    table: list[float] = field(default_factory=list)
+    type: int = 0  # 0 return, 1 incremental
+
+
+@dataclass(frozen=True)
+class GroupCamTableArgs:
+    tab: int  # CamTab 0 / 1
+    line: int
+    values: list[float]
+
+
+@dataclass(frozen=True)
+class GroupCommandArgs:
+    axis: str
+    code: int  # COMMAND 1-7 (004:244)
+    par: list[float]  # Par0-Par14
+    timeout: int  # ns
+
+
+@dataclass(frozen=True)
+class GroupSdoArgs:
+    axis: str
+    control: int  # 1 write, 2 read
+    index: int
+    sub: int
+    bytes: int
+    data: int
+    expect: dict[str, int] = field(default_factory=dict)  # status / data
+
+
+@dataclass(frozen=True)
+class GroupWaitArgs:
+    timeout: int  # ns
+    rdy: list[str] = field(default_factory=list)
+    captured: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class GroupCaptureArgs:
+    axis: str
+    control: int  # 1 the drive's input, 2 the registers at a cycle
+    typ: int  # Typ_ExtCapture
+    start: int  # data-array entry (Control 1)
+
+
+@dataclass(frozen=True)
+class GroupExpectArgs:
+    axes: list[str]
+    position: tuple[float, float] | None = None
+    write_position: tuple[float, float] | None = None
+    pg_position: tuple[float, float] | None = None
+    capture_position: tuple[float, float] | None = None
+    peak_acc: tuple[float, float] | None = None
+    missed: int | None = None
+    rdy_same_cycle: bool | None = None
+    arrived_same_cycle: bool | None = None
+    status: int | None = None
+    held: bool | None = None
+    heartbeat_lost: bool | None = None
+
+
+@dataclass(frozen=True)
+class GroupControlArgs:
+    axis: str
+    fault_reset: bool | None = None
+    torque: bool | None = None
+    correction: float | None = None
+    mode: int | None = None
+
+
 class Group(StepKind):
     """`group: {axes: [...], cycle: 2ms}`: the axes in IP mode, the SYNC and PDOs running."""
 
     name = "group"
+    args: GroupArgs
     motion = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axes", "cycle", "heartbeat", "heartbeat_timeout"}, where)
         if "axes" not in m:
@@ -187,32 +296,31 @@ class Group(StepKind):
                 raise v.err(m.kline("heartbeat_timeout"), join(where, "heartbeat_timeout"),
                             "at least `heartbeat:` + 2 cycles (a consumer time at the producer "
                             "time trips on a heartbeat one cycle late), whole ms, at most 65535")
-        return {"axes": names, "cycle": cycle, "heartbeat": hb, "heartbeat_timeout": hb_to,
-                "line": m.kline("cycle") if "cycle" in m else line}
+        return GroupArgs(names, cycle, hb, hb_to, m.kline("cycle") if "cycle" in m else line)
 
     def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, self.args["axes"], "axes")
+        _check_axes(cc, self.args.axes, "axes")
         # the wire: each cycle carries an RPDO and a TPDO per axis (6 bytes: at most 115 bits
         # with worst-case stuffing) and the SYNC (50)
-        names = self.args["axes"]
+        names = self.args.axes
         buses = {cc.bench.drives[n].can for n in names}
         if len(buses) != 1:
             raise cc.err(f"the axes are on different CAN buses ({', '.join(sorted(buses))}): "
                          "an axis group is one bus", "axes")
         url = cc.bench.can[buses.pop()]
         bitrate = _bitrate(url)
-        bits = worst_case_bits(len(names), heartbeat=bool(self.args["heartbeat"]))
-        if bits / bitrate > self.args["cycle"] / S:
+        bits = worst_case_bits(len(names), heartbeat=bool(self.args.heartbeat))
+        if bits / bitrate > self.args.cycle / S:
             raise cc.err(f"{len(names)} axes need up to {bits} bits a cycle: "
                          f"{bits / bitrate * 1e3:.2f} ms at {bitrate / 1e3:g} kbit/s, more than "
-                         f"the {self.args['cycle'] / MS:g} ms cycle", "cycle",
-                         self.args["line"])
+                         f"the {self.args.cycle / MS:g} ms cycle", "cycle",
+                         self.args.line)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         old = ctx.store.pop(_KEY, None)
         if old is not None:
             old.stop()
-        drives = {n: ctx.session.drive(n) for n in self.args["axes"]}
+        drives = {n: ctx.session.drive(n) for n in self.args.axes}
         net = next(iter(drives.values())).cia.node.network
         axes = [ServoAxis(n, dio.spec.node_id or 1) for n, dio in drives.items()]
         rec = ctx.rec
@@ -225,12 +333,12 @@ class Group(StepKind):
             if rec is not None:
                 rec.write("/group/axes/capture", c)
 
-        group = AxisGroup(net, axes, self.args["cycle"] / S,
+        group = AxisGroup(net, axes, self.args.cycle / S,
                           sdo_write=lambda name, i, s, val: drives[name].cia.write(i, s, val),
                           on_cycle=on_cycle,
                           bitrate=_bitrate(ctx.bench.can[drives[axes[0].name].spec.can]),
-                          heartbeat_s=self.args["heartbeat"] / S or None,
-                          heartbeat_timeout_s=self.args["heartbeat_timeout"] / S or None,
+                          heartbeat_s=self.args.heartbeat / S or None,
+                          heartbeat_timeout_s=self.args.heartbeat_timeout / S or None,
                           on_capture=on_capture)
         group.configure()
         for a in axes:
@@ -250,10 +358,10 @@ class Group(StepKind):
                 raise StepFailed("axes not enabled: " + ", ".join(
                     f"{a.name} status {a.status} (6041h {a.statusword:04X}h)" for a in axes))
             clock.sleep(group.cycle_s)
-        return Outcome(f"{len(axes)} axes in IP mode, cycle {self.args['cycle'] / MS:g} ms")
+        return Outcome(f"{len(axes)} axes in IP mode, cycle {self.args.cycle / MS:g} ms")
 
     def describe(self) -> str:
-        return f"group {', '.join(self.args['axes'])} every {self.args['cycle'] / MS:g} ms"
+        return f"group {', '.join(self.args.axes)} every {self.args.cycle / MS:g} ms"
 
 
 def _bitrate(url: str) -> int:
@@ -265,10 +373,11 @@ class GroupMove(StepKind):
     """`group_move: {axis, to | by | speed, acc, dec, speed, ramp}`: a PG command (004:226)."""
 
     name = "group_move"
+    args: GroupMoveArgs
     motion = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupMoveArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "axes", "to", "by", "run", "acc", "dec", "speed", "ramp"}, where)
         targets = [k for k in ("to", "by", "run") if k in m]
@@ -285,71 +394,72 @@ class GroupMove(StepKind):
             raise v.err(m.kline("ramp") if "ramp" in m else line, join(where, "ramp"),
                         "0 short accel / long decel, 1 short both, 2 harmonic, 3 linear")
         out["ramp"] = ramp
-        return out
+        return GroupMoveArgs(**out)
 
     def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, self.args["axes"], "axes")
+        _check_axes(cc, self.args.axes, "axes")
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g = _group(ctx)
-        axes = _members(g, a["axes"])
+        axes = _members(g, a.axes)
         with g._lock:  # every axis starts in the same cycle
             for ax in axes:
                 pg = ax.pg
-                pg.acc, pg.dec, pg.pos_speed, pg.type = (a["acc"], a["dec"], a["speed"],
-                                                         a["ramp"])
+                pg.acc, pg.dec, pg.pos_speed, pg.type = (a.acc, a.dec, a.speed,
+                                                         a.ramp)
                 if ax.mode == 3:
                     ax.mode = 4
-                if a["what"] == "to":
-                    pg.start_position(a["value"])
-                elif a["what"] == "by":
-                    pg.start_position(pg.apos + a["value"])
+                if a.what == "to":
+                    pg.start_position(a.value)
+                elif a.what == "by":
+                    pg.start_position(pg.apos + a.value)
                 else:
-                    pg.start_speed(a["value"])
-        return Outcome(f"PG {a['what']} {a['value']:g} (ramp type {a['ramp']})")
+                    pg.start_speed(a.value)
+        return Outcome(f"PG {a.what} {a.value:g} (ramp type {a.ramp})")
 
     def describe(self) -> str:
         a = self.args
-        return f"group_move {', '.join(a['axes'])} {a['what']} {a['value']:g}"
+        return f"group_move {', '.join(a.axes)} {a.what} {a.value:g}"
 
 
 class GroupGear(StepKind):
     """`group_gear: {axis, master, in, out, inc_in, source}`: couple a linear gear (004:230)."""
 
     name = "group_gear"
+    args: GroupGearArgs
     motion = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupGearArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "master", "in", "out", "inc_in", "source"}, where)
         out = _coupling(v, m, line, where)
         out["inc_in"] = _num(v, m, "inc_in", where, 0, 1e9, 0)
-        return out
+        return GroupGearArgs(**out)
 
     def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, [self.args["axis"], self.args["master"]], "axis")
+        _check_axes(cc, [self.args.axis, self.args.master], "axis")
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g = _group(ctx)
-        ax, master = g.by_name.get(a["axis"]), g.by_name.get(a["master"])
+        ax, master = g.by_name.get(a.axis), g.by_name.get(a.master)
         if ax is None or master is None:
             raise StepFailed("axis or master not in the group")
         with g._lock:
             gea = ax.gea
-            gea.master, gea.source = a["master"], a["source"]
-            gea.gin, gea.gout, gea.inc_in = a["in"], a["out"], a["inc_in"]
+            gea.master, gea.source = a.master, a.source
+            gea.gin, gea.gout, gea.inc_in = a.gin, a.gout, a.inc_in
             if gea.mode == 0:
-                gea.actual_in = 0.0 if a["inc_in"] else a["in"]
+                gea.actual_in = 0.0 if a.inc_in else a.gin
             gea.mode = 1
             ax.mode = 4 if ax.mode in (1, 4) else 3
-        return Outcome(f"{a['axis']} geared to {a['master']} {a['in']:g}/{a['out']:g}")
+        return Outcome(f"{a.axis} geared to {a.master} {a.gin:g}/{a.gout:g}")
 
     def describe(self) -> str:
         a = self.args
-        return f"group_gear {a['axis']} <- {a['master']} {a['in']:g}/{a['out']:g}"
+        return f"group_gear {a.axis} <- {a.master} {a.gin:g}/{a.gout:g}"
 
 
 class GroupCam(StepKind):
@@ -357,10 +467,11 @@ class GroupCam(StepKind):
     scale}`: the axis follows a cam table driven by its master (004:232-236)."""
 
     name = "group_cam"
+    args: GroupCamArgs
     motion = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupCamArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "master", "in", "out", "table", "type", "scale", "source"}, where)
         out = _coupling(v, m, line, where)
@@ -380,21 +491,21 @@ class GroupCam(StepKind):
         if kind not in ("return", "incremental"):
             raise v.err(m.kline("type"), join(where, "type"), "return or incremental")
         out["type"] = 0 if kind == "return" else 1
-        return out
+        return GroupCamArgs(**out)
 
     def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, [self.args["axis"], self.args["master"]], "axis")
+        _check_axes(cc, [self.args.axis, self.args.master], "axis")
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g = _group(ctx)
-        ax, _master = _members(g, [a["axis"], a["master"]])
+        ax, _master = _members(g, [a.axis, a.master])
         with g._lock:
             gea = ax.gea
-            gea.master, gea.source = a["master"], a["source"]
-            gea.gin = gea.actual_in = a["in"]
-            gea.gout, gea.inc_in = a["out"], 0.0
-            gea.cam, gea.cam_type, gea.cam_scale = a["table"], a["type"], a["scale"]
+            gea.master, gea.source = a.master, a.source
+            gea.gin = gea.actual_in = a.gin
+            gea.gout, gea.inc_in = a.gout, 0.0
+            gea.cam, gea.cam_type, gea.cam_scale = a.table, a.type, a.scale
             gea.position = 0.0
             gea.cam_position = gea.cam_value(0.0)
             # the cam starts where the axis stands: WritePosition = CamPosition + Offset +
@@ -402,23 +513,23 @@ class GroupCam(StepKind):
             ax.offset = ax.write_position - gea.cam_position - ax.correction
             gea.mode = 2
             ax.mode = 3
-        return Outcome(f"{a['axis']} on a {'return' if a['type'] == 0 else 'incremental'} cam "
-                       f"of {len(a['table'])} points from {a['master']}")
+        return Outcome(f"{a.axis} on a {'return' if a.type == 0 else 'incremental'} cam "
+                       f"of {len(a.table)} points from {a.master}")
 
     def describe(self) -> str:
         a = self.args
-        return f"group_cam {a['axis']} <- {a['master']} ({len(a['table'])} points)"
+        return f"group_cam {a.axis} <- {a.master} ({len(a.table)} points)"
 
 
 class _OneAxis(StepKind):
     """A step on one axis of the group (`axis:`): the bench check and the lookup."""
 
     def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, [self.args["axis"]], "axis")
+        _check_axes(cc, [self.args.axis], "axis")
 
     def _axis(self, ctx: StepContext) -> tuple[AxisGroup, ServoAxis]:
         g = _group(ctx)
-        return g, _members(g, [self.args["axis"]])[0]
+        return g, _members(g, [self.args.axis])[0]
 
 
 class GroupCamTable(StepKind):
@@ -426,9 +537,10 @@ class GroupCamTable(StepKind):
     memory (CamTab 0 TGM_Cam_Profile, 1 TGM_Data; 004:232), for COMMAND 6 with a cam."""
 
     name = "group_cam_table"
+    args: GroupCamTableArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupCamTableArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"tab", "line", "values"}, where)
         tab = m.get("tab", 0)
@@ -446,21 +558,21 @@ class GroupCamTable(StepKind):
             raise v.err(m.kline("values"), join(where, "values"),
                         f"line {start} + {len(vals)} values past CamTab {tab}'s "
                         f"{CAM_MEMORY[tab]} doubles")
-        return {"tab": tab, "line": start, "values": [float(x) for x in vals]}
+        return GroupCamTableArgs(tab, start, [float(x) for x in vals])
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g = _group(ctx)
         with g._lock:
-            mem = g.cams[a["tab"]]
-            end = a["line"] + len(a["values"])
+            mem = g.cams[a.tab]
+            end = a.line + len(a.values)
             if len(mem) < end:
                 mem.extend([0.0] * (end - len(mem)))
-            mem[a["line"]:end] = a["values"]
-        return Outcome(f"CamTab {a['tab']} lines {a['line']}-{end - 1}")
+            mem[a.line:end] = a.values
+        return Outcome(f"CamTab {a.tab} lines {a.line}-{end - 1}")
 
     def describe(self) -> str:
-        return f"group_cam_table {self.args['tab']}:{self.args['line']}"
+        return f"group_cam_table {self.args.tab}:{self.args.line}"
 
 
 class GroupCommand(_OneAxis):
@@ -469,10 +581,11 @@ class GroupCommand(_OneAxis):
     acceptance; for 7, sync off, once the ratio ramp has run out)."""
 
     name = "group_command"
+    args: GroupCommandArgs
     motion = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupCommandArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "code", "par", "timeout"}, where)
         code = m.get("code")
@@ -500,31 +613,31 @@ class GroupCommand(_OneAxis):
         if code == 6 and par[2] not in (0.0, 1.0, 2.0, 3.0):
             raise v.err(m.kline("par"), join(where, "par.2"),
                         f"{par[2]:g}: 1 gear, 2 return cam, 3 incremental cam (004:244)")
-        return {"axis": _axis_name(v, m, "axis", where), "code": code, "par": par,
-                "timeout": v.duration(m, "timeout", where, 5 * S)}
+        return GroupCommandArgs(_axis_name(v, m, "axis", where), code, par,
+                                v.duration(m, "timeout", where, 5 * S))
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g, ax = self._axis(ctx)
         with g._lock:
-            ax.par = list(a["par"])
-            ax.command = a["code"]
+            ax.par = list(a.par)
+            ax.command = a.code
             g.command_errors.pop(ax.name, None)
             c0 = g.cycles
         if not clock.wait_for(lambda: ax.command == 0 or ax.name in g.command_errors,
-                              a["timeout"] / S):
-            raise StepFailed(f"COMMAND {a['code']} not accepted within the timeout "
+                              a.timeout / S):
+            raise StepFailed(f"COMMAND {a.code} not accepted within the timeout "
                              f"(Control still {ax.command})")
         with g._lock:
             why = g.command_errors.pop(ax.name, None)
             if why is not None:
                 ax.command = 0  # refused: withdrawn, so the group does not retry it
         if why is not None:
-            raise StepFailed(f"COMMAND {a['code']} refused: {why}")
-        return Outcome(f"COMMAND {a['code']} accepted after {g.cycles - c0} cycle(s)")
+            raise StepFailed(f"COMMAND {a.code} refused: {why}")
+        return Outcome(f"COMMAND {a.code} accepted after {g.cycles - c0} cycle(s)")
 
     def describe(self) -> str:
-        return f"group_command {self.args['axis']} {self.args['code']}"
+        return f"group_command {self.args.axis} {self.args.code}"
 
 
 class GroupSdo(_OneAxis):
@@ -533,9 +646,10 @@ class GroupSdo(_OneAxis):
     or 2 with the abort code in Data."""
 
     name = "group_sdo"
+    args: GroupSdoArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupSdoArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "write", "read", "expect"}, where)
         ops = [k for k in ("write", "read") if k in m]
@@ -561,20 +675,20 @@ class GroupSdo(_OneAxis):
             out["expect"] = {k: _int(v, e, k, we, *((0, 2) if k == "status"
                                                      else (-(2**31), 2**32 - 1)), 0)
                              for k in e}
-        return out
+        return GroupSdoArgs(**out)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         _g, ax = self._axis(ctx)
         s = ax.sdo
-        s.number_byte, s.index, s.sub, s.data = a["bytes"], a["index"], a["sub"], a["data"]
-        s.control = a["control"]
+        s.number_byte, s.index, s.sub, s.data = a.bytes, a.index, a.sub, a.data
+        s.control = a.control
         sdo = ctx.session.drive(ax.name).cia.node.sdo
         s.execute(sdo.upload, sdo.download)
         seen = {"status": s.status, "data": s.data}
-        text = (f"{'write' if a['control'] == 1 else 'read'} {a['index']:04X}h:{a['sub']:02X}: "
+        text = (f"{'write' if a.control == 1 else 'read'} {a.index:04X}h:{a.sub:02X}: "
                 f"Status {s.status}, Data 0x{s.data:X}")
-        bad = [f"{k} {seen[k]:#x}, expected {v:#x}" for k, v in a["expect"].items()
+        bad = [f"{k} {seen[k]:#x}, expected {v:#x}" for k, v in a.expect.items()
                if seen[k] != v]
         if bad:
             raise StepFailed("; ".join(bad) + f" ({text})")
@@ -582,16 +696,17 @@ class GroupSdo(_OneAxis):
 
     def describe(self) -> str:
         a = self.args
-        return f"group_sdo {a['axis']} {a['index']:04X}h:{a['sub']}"
+        return f"group_sdo {a.axis} {a.index:04X}h:{a.sub}"
 
 
 class GroupWait(StepKind):
     """`group_wait: {rdy: [axes], timeout}`: until each PG reached its target (PG.Rdy)."""
 
     name = "group_wait"
+    args: GroupWaitArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupWaitArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"rdy", "captured", "timeout"}, where)
         if "rdy" not in m and "captured" not in m:
@@ -600,16 +715,16 @@ class GroupWait(StepKind):
         for k in ("rdy", "captured"):
             seq = v.seq(m[k], m.kline(k), join(where, k)) if k in m else []
             out[k] = [str(x) for x in seq]
-        return out
+        return GroupWaitArgs(**out)
 
     def check(self, cc: CheckContext) -> None:
-        _check_axes(cc, self.args["rdy"], "rdy")
-        _check_axes(cc, self.args["captured"], "captured")
+        _check_axes(cc, self.args.rdy, "rdy")
+        _check_axes(cc, self.args.captured, "captured")
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         g = _group(ctx)
-        timeout = self.args["timeout"] / S
-        axes = [g.by_name[n] for n in self.args["rdy"] if n in g.by_name]
+        timeout = self.args.timeout / S
+        axes = [g.by_name[n] for n in self.args.rdy if n in g.by_name]
         if not clock.wait_for(lambda: all(a.pg.rdy for a in axes), timeout):
             raise StepFailed("PG not ready: " + ", ".join(a.name for a in axes
                                                           if not a.pg.rdy))
@@ -617,12 +732,12 @@ class GroupWait(StepKind):
         if bad:
             raise StepFailed("; ".join(bad))
         text = [f"{a.name} at {a.write_position:.0f}" for a in axes]
-        for a in _members(g, self.args["captured"]):
+        for a in _members(g, self.args.captured):
             text.append(_await_capture(ctx, g, a, timeout))
         return Outcome(", ".join(text))
 
     def describe(self) -> str:
-        return f"group_wait {', '.join(self.args['rdy'] + self.args['captured'])}"
+        return f"group_wait {', '.join(self.args.rdy + self.args.captured)}"
 
 
 def _await_capture(ctx: StepContext, g: AxisGroup, a: ServoAxis, timeout: float) -> str:
@@ -665,9 +780,10 @@ class GroupCapture(_OneAxis):
     group's registers at its next cycle."""
 
     name = "group_capture"
+    args: GroupCaptureArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupCaptureArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "control", "on", "start"}, where)
         control = m.get("control", 1)
@@ -684,19 +800,19 @@ class GroupCapture(_OneAxis):
             raise v.err(m.kline("on"), join(where, "on"),
                         "Control 2 captures the registers at a cycle, not on an edge")
         start = _int(v, m, "start", where, 0, 799, 0)
-        return {"axis": _axis_name(v, m, "axis", where), "control": control,
-                "typ": _CAPTURE_TYPES[on] if control == 1 else 0, "start": start}
+        return GroupCaptureArgs(_axis_name(v, m, "axis", where), control,
+                                _CAPTURE_TYPES[on] if control == 1 else 0, start)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         g, a = self._axis(ctx)
         cap = a.capture
-        if self.args["control"] == 2:
+        if self.args.control == 2:
             with g._lock:
                 cap.armed, cap.armed_at = 2, cap.captures
                 cap.typ_ext_capture, cap.control = 0, 2
             return Outcome(f"{a.name}: CAPTURE Control 2 (the registers at the next cycle)")
         dio = ctx.session.drive(a.name)
-        typ, start = self.args["typ"], self.args["start"]
+        typ, start = self.args.typ, self.args.start
         # one point on CN2 (source 3), NC for a falling edge, NO for a rising one or Z
         arm_capture(ctx, dio, start=start, count=1, nc=1 if typ == CAPTURE_FALLING else 0,
                     source=3, via="sdo")
@@ -707,7 +823,7 @@ class GroupCapture(_OneAxis):
                        f"Array[{start}]")
 
     def describe(self) -> str:
-        return f"group_capture {self.args['axis']} control {self.args['control']}"
+        return f"group_capture {self.args.axis} control {self.args.control}"
 
 
 class GroupExpect(StepKind):
@@ -720,10 +836,11 @@ class GroupExpect(StepKind):
     cycle; peak_acc: the PG's largest speed change per second since its last move)."""
 
     name = "group_expect"
+    args: GroupExpectArgs
     judge_only = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupExpectArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "axes", "position", "write_position", "pg_position", "missed",
                    "rdy_same_cycle", "arrived_same_cycle", "status", "held", "heartbeat_lost",
@@ -751,19 +868,19 @@ class GroupExpect(StepKind):
         for k in ("held", "heartbeat_lost"):
             if k in m:
                 out[k] = _flag(v, m, k, where)
-        return out
+        return GroupExpectArgs(**out)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g = _group(ctx)
-        axes = _members(g, a["axes"])
+        axes = _members(g, a.axes)
         bad: list[str] = []
         with g._lock:
             for ax in axes:
                 for k in ("position", "write_position", "pg_position", "capture_position",
                           "peak_acc"):
-                    if k in a:
-                        lo, hi = a[k]
+                    if getattr(a, k) is not None:
+                        lo, hi = getattr(a, k)
                         val = {"pg_position": ax.pg.apos, "peak_acc": ax.pg.peak_acc,
                                "capture_position": ax.capture.position}.get(k)
                         val = getattr(ax, k) if val is None else val
@@ -771,18 +888,18 @@ class GroupExpect(StepKind):
                             bad.append(f"{ax.name} {k} {val:.0f} not in [{lo:g}, {hi:g}]")
                 if ax.setpoint_error:
                     bad.append(f"{ax.name}: {ax.setpoint_error}")
-                if "missed" in a and ax.missed > a["missed"]:
+                if a.missed is not None and ax.missed > a.missed:
                     bad.append(f"{ax.name} missed {ax.missed} cycles")
-                if "status" in a and ax.status != a["status"]:
-                    bad.append(f"{ax.name} status {ax.status}, not {a['status']}")
-                if "held" in a and (ax.name in g.held) != a["held"]:
-                    bad.append(f"{ax.name} {'not ' if a['held'] else ''}held")
-                if "heartbeat_lost" in a and ax.heartbeat_lost != a["heartbeat_lost"]:
+                if a.status is not None and ax.status != a.status:
+                    bad.append(f"{ax.name} status {ax.status}, not {a.status}")
+                if a.held is not None and (ax.name in g.held) != a.held:
+                    bad.append(f"{ax.name} {'not ' if a.held else ''}held")
+                if a.heartbeat_lost is not None and ax.heartbeat_lost != a.heartbeat_lost:
                     bad.append(f"{ax.name} heartbeat {'' if ax.heartbeat_lost else 'not '}lost")
-            if a.get("rdy_same_cycle") and len({ax.rdy_cycle for ax in axes}) != 1:
+            if a.rdy_same_cycle and len({ax.rdy_cycle for ax in axes}) != 1:
                 bad.append("targets reached in cycles " + ", ".join(
                     f"{ax.name} {ax.rdy_cycle}" for ax in axes))
-            if a.get("arrived_same_cycle") and (
+            if a.arrived_same_cycle and (
                     len({ax.arrived_cycle for ax in axes}) != 1 or not axes[0].arrived_cycle):
                 bad.append("feedback at the target in cycles " + ", ".join(
                     f"{ax.name} {ax.arrived_cycle or 'never'}" for ax in axes))
@@ -792,7 +909,7 @@ class GroupExpect(StepKind):
         return Outcome(text)
 
     def describe(self) -> str:
-        return f"group_expect {', '.join(self.args['axes'])}"
+        return f"group_expect {', '.join(self.args.axes)}"
 
 
 class GroupControl(_OneAxis):
@@ -805,10 +922,11 @@ class GroupControl(_OneAxis):
     `mode` chooses what makes WritePosition: 1 PG, 3 GEA, 4 PG + GEA."""
 
     name = "group_control"
+    args: GroupControlArgs
     motion = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> GroupControlArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "fault_reset", "torque", "correction", "mode"}, where)
         if not {"fault_reset", "torque", "correction", "mode"} & set(m):
@@ -825,19 +943,19 @@ class GroupControl(_OneAxis):
                 raise v.err(m.kline("mode"), join(where, "mode"),
                             f"{mode!r}: 1 PG, 3 GEA, 4 PG + GEA (Servo.Mode, 004:254)")
             out["mode"] = mode
-        return out
+        return GroupControlArgs(**out)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g, ax = self._axis(ctx)
         with g._lock:
-            if "torque" in a:
-                ax.control = (ax.control & ~0x2) | (0 if a["torque"] else 0x2)
-            if "correction" in a:  # added to WritePosition as it is (004:216)
-                ax.correction = a["correction"]
-            if "mode" in a:
-                ax.mode = a["mode"]
-        if a.get("fault_reset"):
+            if a.torque is not None:
+                ax.control = (ax.control & ~0x2) | (0 if a.torque else 0x2)
+            if a.correction is not None:  # added to WritePosition as it is (004:216)
+                ax.correction = a.correction
+            if a.mode is not None:
+                ax.mode = a.mode
+        if a.fault_reset:
             with g._lock:
                 ax.control |= 0x1
             c0 = g.cycles
@@ -847,7 +965,7 @@ class GroupControl(_OneAxis):
         return Outcome(f"{ax.name}: Control 0x{ax.control:X}")
 
     def describe(self) -> str:
-        return f"group_control {self.args['axis']}"
+        return f"group_control {self.args.axis}"
 
 
 class GroupStop(StepKind):
@@ -856,10 +974,10 @@ class GroupStop(StepKind):
     name = "group_stop"
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> NoArgs:
         if obj not in (None, {}):
             raise v.err(line, where, f"{obj!r}: takes nothing (`group_stop: {{}}`)")
-        return {}
+        return NoArgs()
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         g = _group(ctx)

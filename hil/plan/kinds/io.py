@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil import clock
@@ -16,6 +17,20 @@ if TYPE_CHECKING:
     from hil.plan.context import StepContext
     from hil.plan.session import DriveIO
     from hil.plan.steps import Step
+
+
+@dataclass(frozen=True)
+class Levels:
+    """Each named input (DI function or STO channel) to a level (True = on)."""
+
+    levels: dict[str, bool]
+
+
+@dataclass(frozen=True)
+class Widths:
+    """Each named input to a pulse width (ns)."""
+
+    widths: dict[str, int]
 
 
 def _on_off(levels: dict[str, bool]) -> str:
@@ -37,37 +52,39 @@ class Di(StepKind):
     """`di: {SON: on}`: set DI functions to levels."""
 
     name = "di"
+    args: Levels
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return {"levels": fields.levels(v, obj, line, where, DI_SYMBOLS, "DI function")}
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> Levels:
+        return Levels(fields.levels(v, obj, line, where, DI_SYMBOLS, "DI function"))
 
     def check(self, cc: CheckContext) -> None:
-        _check_wired(cc, self.args["levels"])
+        _check_wired(cc, self.args.levels)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        for f, lv in self.args["levels"].items():
+        for f, lv in self.args.levels.items():
             d.set_function(f, lv)
         return Outcome()
 
     def describe(self) -> str:
-        return f"di {_on_off(self.args['levels'])}"
+        return f"di {_on_off(self.args.levels)}"
 
 
 class Pulse(StepKind):
     """`pulse: {CTRG: 5ms}`: DI functions on together, each off after its width."""
 
     name = "pulse"
+    args: Widths
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return {"widths": fields.widths(v, obj, line, where, DI_SYMBOLS, "DI function")}
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> Widths:
+        return Widths(fields.widths(v, obj, line, where, DI_SYMBOLS, "DI function"))
 
     def check(self, cc: CheckContext) -> None:
-        _check_wired(cc, self.args["widths"])
+        _check_wired(cc, self.args.widths)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        widths = sorted(self.args["widths"].items(), key=lambda x: x[1])
+        widths = sorted(self.args.widths.items(), key=lambda x: x[1])
         t0 = clock.monotonic_ns()
         for f, _w in widths:
             d.set_function(f, True)
@@ -79,47 +96,49 @@ class Pulse(StepKind):
         return Outcome()
 
     def describe(self) -> str:
-        return f"pulse {_ms(self.args['widths'])}"
+        return f"pulse {_ms(self.args.widths)}"
 
     def imposed_ns(self) -> int:
-        return max(self.args["widths"].values())
+        return max(self.args.widths.values())
 
 
 class Sto(StepKind):
     """`sto: {A: off, B: off}`: the STO channels' levels (on = 24 V, servo may run)."""
 
     name = "sto"
+    args: Levels
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return {"levels": fields.levels(v, obj, line, where, fields.STO, "STO channel")}
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> Levels:
+        return Levels(fields.levels(v, obj, line, where, fields.STO, "STO channel"))
 
     def check(self, cc: CheckContext) -> None:
         fields.check_dio(cc)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        for ch, lv in self.args["levels"].items():
+        for ch, lv in self.args.levels.items():
             d.set_line(d.spec.sto[ch], lv)
         return Outcome()
 
     def describe(self) -> str:
-        return f"sto {_on_off(self.args['levels'])}"
+        return f"sto {_on_off(self.args.levels)}"
 
 
 class StoDropout(StepKind):
     """`sto_dropout: {A: 5ms}`: STO channels off together, each back on after its width."""
 
     name = "sto_dropout"
+    args: Widths
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
-        return {"widths": fields.widths(v, obj, line, where, fields.STO, "STO channel")}
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> Widths:
+        return Widths(fields.widths(v, obj, line, where, fields.STO, "STO channel"))
 
     def check(self, cc: CheckContext) -> None:
         fields.check_dio(cc)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        widths = sorted(self.args["widths"].items(), key=lambda x: x[1])
+        widths = sorted(self.args.widths.items(), key=lambda x: x[1])
         t0 = clock.monotonic_ns()
         for ch, _w in widths:
             d.set_line(d.spec.sto[ch], False)
@@ -131,10 +150,10 @@ class StoDropout(StepKind):
         return Outcome()
 
     def describe(self) -> str:
-        return f"sto_dropout {_ms(self.args['widths'])}"
+        return f"sto_dropout {_ms(self.args.widths)}"
 
     def imposed_ns(self) -> int:
-        return max(self.args["widths"].values())
+        return max(self.args.widths.values())
 
 
 KINDS = (Di, Pulse, Sto, StoDropout)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil.bench import virtual_rules
@@ -18,13 +19,28 @@ if TYPE_CHECKING:
     from hil.plan.steps import Step
 
 
+@dataclass(frozen=True)
+class WriteArgs:
+    values: dict[str, int]  # parameter -> value
+    via: str | None  # sdo | modbus | None (the bench's route)
+    expect_error: int | None = None  # the refusal code the drive must answer
+
+
+@dataclass(frozen=True)
+class ReadArgs:
+    values: dict[str, int | None]  # parameter -> expected value (None: only record)
+    via: str | None
+    expect_error: str | None = None  # a line error (timeout, bad_reply, comm_error)
+
+
 class Write(StepKind):
     """`write: {P1.042: 150, via: sdo}`; with `expect_error:` the write must be refused."""
 
     name = "write"
+    args: WriteArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> WriteArgs:
         m = v.mapping(obj, line, where)
         via = fields.parse_via(v, m, where)
         plain = {k: x for k, x in m.items() if k != "expect_error"}
@@ -32,51 +48,50 @@ class Write(StepKind):
         fm.line, fm.key_lines = m.line, m.key_lines
         if "expect_error" in m:
             fm["expect_error"] = m["expect_error"]  # seen by param_values: no range rule
-        out = {"values": fields.param_values(v, fm, where, False, write=True), "via": via,
-               "expect_error": None}
-        if "expect_error" in m:
-            fw = join(where, "expect_error")
-            code = m["expect_error"]
-            if isinstance(code, bool) or not isinstance(code, int) or code <= 0:
-                raise v.err(m.kline("expect_error"), fw, f"{code!r}: the refusal code, a "
-                            "Modbus exception code (e.g. 3) or an SDO abort code (e.g. "
-                            "0x06090031)")
-            if len(out["values"]) != 1:
-                raise v.err(m.kline("expect_error"), fw, "one parameter per refused write "
-                            f"(got {', '.join(out['values'])})")
-            fields.check_expect_error(v, m.kline("expect_error"), fw, code, via)
-            out["expect_error"] = code
-        return out
+        values = fields.param_values(v, fm, where, False, write=True)
+        if "expect_error" not in m:
+            return WriteArgs(values, via)
+        fw = join(where, "expect_error")
+        code = m["expect_error"]
+        if isinstance(code, bool) or not isinstance(code, int) or code <= 0:
+            raise v.err(m.kline("expect_error"), fw, f"{code!r}: the refusal code, a "
+                        "Modbus exception code (e.g. 3) or an SDO abort code (e.g. "
+                        "0x06090031)")
+        if len(values) != 1:
+            raise v.err(m.kline("expect_error"), fw, "one parameter per refused write "
+                        f"(got {', '.join(values)})")
+        fields.check_expect_error(v, m.kline("expect_error"), fw, code, via)
+        return WriteArgs(values, via, code)
 
     def check(self, cc: CheckContext) -> None:
-        fields.check_via(cc, "", self.args["via"])
+        fields.check_via(cc, "", self.args.via)
         raw = cc.step.raw.get(self.name)
-        if cc.bench.virtual and self.args.get("expect_error") is None:
-            for k, val in self.args["values"].items():
+        if cc.bench.virtual and self.args.expect_error is None:
+            for k, val in self.args.values.items():
                 if why := virtual_rules().inert_mapping(k, val):  # the virtual drive refuses
                     line = raw.kline(k) if hasattr(raw, "kline") else cc.step.line
                     raise cc.err(f"0x{val:04X} maps {why}; on a virtual bench a write that "
                                  "expects the refusal needs expect_error (0x06090030 / 3)", k,
                                  line=line)
-        if self.args.get("expect_error") is not None:
-            via = self.args["via"] or cc.drive.param_via
+        if self.args.expect_error is not None:
+            via = self.args.via or cc.drive.param_via
             line = raw.kline("expect_error") if hasattr(raw, "kline") else cc.step.line
             fields.check_expect_error(cc.v, line, join(cc.field, "expect_error"),
-                                 self.args["expect_error"], via)
+                                 self.args.expect_error, via)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        want = self.args.get("expect_error")
+        want = self.args.expect_error
         if want is not None:
             return Outcome(self._refused(d, want))
-        for p, val in self.args["values"].items():
-            d.write_param(p, val, self.args["via"])
+        for p, val in self.args.values.items():
+            d.write_param(p, val, self.args.via)
             ctx.written(d.name, {p: val})
         return Outcome()
 
     def _refused(self, d: DriveIO, want: int) -> str:
         """A write the drive must refuse with `want` (Modbus exception / SDO abort code)."""
-        [(p, val)] = self.args["values"].items()
-        via = self.args["via"] or d.spec.param_via
+        [(p, val)] = self.args.values.items()
+        via = self.args.via or d.spec.param_via
         what = "exception" if via == "modbus" else "abort"
         try:
             d.write_param(p, val, via)
@@ -93,9 +108,9 @@ class Write(StepKind):
 
     def describe(self) -> str:
         a = self.args
-        vals = ", ".join(f"{p}={v}" for p, v in a["values"].items())
-        refused = f" refused 0x{a['expect_error']:X}" if a.get("expect_error") else ""
-        return f"write {vals} via {a['via'] or '-'}{refused}"
+        vals = ", ".join(f"{p}={v}" for p, v in a.values.items())
+        refused = f" refused 0x{a.expect_error:X}" if a.expect_error else ""
+        return f"write {vals} via {a.via or '-'}{refused}"
 
 
 class Read(StepKind):
@@ -104,37 +119,37 @@ class Read(StepKind):
     line as the harness master sees it, with no value (RS-485 faults, docs/faults.md)."""
 
     name = "read"
+    args: ReadArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> ReadArgs:
         if isinstance(obj, str):
             if not fields.PARAM_RE.match(obj):
                 raise v.err(line, where, f"{obj!r}: a parameter name like P1.042")
             check_param(v, line, where, obj, None, write=False)
-            return {"values": {obj: None}, "via": None, "expect_error": None}
+            return ReadArgs({obj: None}, None)
         m = v.mapping(obj, line, where)
-        out = {"values": fields.param_values(v, m, where, True),
-               "via": fields.parse_via(v, m, where), "expect_error": None}
-        if "expect_error" in m:
-            fw = join(where, "expect_error")
-            if m["expect_error"] not in LINE_ERRORS:
-                raise v.err(m.kline("expect_error"), fw, f"{m['expect_error']!r}: one of "
-                            f"{', '.join(LINE_ERRORS)} (the harness master's line errors)")
-            if out["via"] != "modbus":
-                raise v.err(m.kline("expect_error"), fw, "line errors need via: modbus")
-            out["expect_error"] = m["expect_error"]
-        return out
+        values, via = fields.param_values(v, m, where, True), fields.parse_via(v, m, where)
+        if "expect_error" not in m:
+            return ReadArgs(values, via)
+        fw = join(where, "expect_error")
+        if m["expect_error"] not in LINE_ERRORS:
+            raise v.err(m.kline("expect_error"), fw, f"{m['expect_error']!r}: one of "
+                        f"{', '.join(LINE_ERRORS)} (the harness master's line errors)")
+        if via != "modbus":
+            raise v.err(m.kline("expect_error"), fw, "line errors need via: modbus")
+        return ReadArgs(values, via, m["expect_error"])
 
     def check(self, cc: CheckContext) -> None:
-        fields.check_via(cc, "", self.args["via"])
+        fields.check_via(cc, "", self.args.via)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        want = self.args.get("expect_error")
+        want = self.args.expect_error
         if want is not None:
             return Outcome(self._line_error(d, want))
         got, bad = [], []
-        for p, want in self.args["values"].items():
-            val = d.read_param(p, self.args["via"])
+        for p, want in self.args.values.items():
+            val = d.read_param(p, self.args.via)
             got.append(f"{p} = {val}")
             if want is not None and val != want:
                 bad.append(f"{p} = {val}, expected {want}")
@@ -144,9 +159,9 @@ class Read(StepKind):
 
     def _line_error(self, d: DriveIO, want: str) -> str:
         """A read that must fail on the line with `want` (never return a value)."""
-        names = ", ".join(self.args["values"])
+        names = ", ".join(self.args.values)
         try:
-            vals = [d.read_param(p, self.args["via"]) for p in self.args["values"]]
+            vals = [d.read_param(p, self.args.via) for p in self.args.values]
         except Exception as e:
             got = line_error(e)
             if got is None:
@@ -158,8 +173,8 @@ class Read(StepKind):
                          "that lets a value through)")
 
     def describe(self) -> str:
-        err = f" expecting {self.args['expect_error']}" if self.args.get("expect_error") else ""
-        return f"read {', '.join(self.args['values'])} via {self.args['via'] or '-'}{err}"
+        err = f" expecting {self.args.expect_error}" if self.args.expect_error else ""
+        return f"read {', '.join(self.args.values)} via {self.args.via or '-'}{err}"
 
 
 KINDS = (Write, Read)

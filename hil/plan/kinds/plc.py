@@ -131,14 +131,29 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
     return s
 
 
+@dataclasses.dataclass(frozen=True)
+class PlcProgramArgs:
+    axis: AxisParams
+    program: Program
+    timeout: int  # ns
+    expect: dict[str, Any]  # status fields to expect at the end
+    slice_ms: float  # the PLC's scan slice
+
+
+@dataclasses.dataclass(frozen=True)
+class PlcOutputArgs:
+    levels: dict[str, bool]  # PLC output -> level
+
+
 class PlcProgram(StepKind):
     """`plc_program: {axis, program, timeout, expect, slice}`: run a FUN140 program."""
 
     name = "plc_program"
+    args: PlcProgramArgs
     motion = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> PlcProgramArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "program", "timeout", "expect", "slice"}, where)
         axis = (_axis(v, m["axis"], m.kline("axis"), join(where, "axis")) if "axis" in m
@@ -166,8 +181,7 @@ class PlcProgram(StepKind):
             e = v.mapping(m["expect"], m.kline("expect"), join(where, "expect"))
             v.keys(e, _EXPECT, join(where, "expect"))
             expect = dict(e)
-        return {"axis": axis, "program": prog, "timeout": timeout, "expect": expect,
-                "slice_ms": slice_ns / 1e6}
+        return PlcProgramArgs(axis, prog, timeout, expect, slice_ns / 1e6)
 
     def check(self, cc: CheckContext) -> None:
         if not cc.drive.pulse:
@@ -175,7 +189,7 @@ class PlcProgram(StepKind):
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
-        plc = d.plc(a["axis"], a["slice_ms"])
+        plc = d.plc(a.axis, a.slice_ms)
         plc._abort = False
         rec = ctx.rec
         topic = f"/plc/{d.name}/status"
@@ -189,7 +203,7 @@ class PlcProgram(StepKind):
         plc.on_status = on_status
         cancel = getattr(ctx, "cancel", None)
         try:
-            st = plc.run(a["program"], a["timeout"] / S)
+            st = plc.run(a.program, a.timeout / S)
         except TimeoutError as e:
             raise StepFailed(f"PLC program: {e}") from None
         finally:
@@ -197,7 +211,7 @@ class PlcProgram(StepKind):
                 plc.stop()
         seen = {"position": st.position, "remaining": st.remaining, "error": st.error,
                 "done": st.done, "freq": st.freq, "feedback": st.feedback}
-        want = dict(a["expect"])
+        want = dict(a.expect)
         tol = want.pop("feedback_tol", 0)
         bad = [f"expected {k} {w!r}, PLC shows {seen[k]!r}" for k, w in want.items()
                if (abs(seen[k] - w) > tol if k == "feedback" else seen[k] != w)]
@@ -208,7 +222,7 @@ class PlcProgram(StepKind):
         return Outcome(text)
 
     def describe(self) -> str:
-        n = len(self.args["program"].steps)
+        n = len(self.args.program.steps)
         return f"plc_program ({n} steps)"
 
 
@@ -216,9 +230,10 @@ class PlcOutput(StepKind):
     """`plc_output: {Y8: on}`: the PLC's ladder sets its outputs on the pulse line (CLR)."""
 
     name = "plc_output"
+    args: PlcOutputArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> PlcOutputArgs:
         m = v.mapping(obj, line, where)
         if not m:
             raise v.err(line, where, "name at least one PLC output, e.g. Y8: on")
@@ -230,7 +245,7 @@ class PlcOutput(StepKind):
             if lv is None:
                 raise v.err(m.kline(k), join(where, str(k)), f"{val!r}: on or off")
             out[str(k)] = lv
-        return {"levels": out}
+        return PlcOutputArgs(out)
 
     def check(self, cc: CheckContext) -> None:
         if not cc.drive.pulse:
@@ -239,13 +254,13 @@ class PlcOutput(StepKind):
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         if d.pulse is None:
             raise StepFailed(f"drive {d.name}: no pulse line")
-        for k, lv in self.args["levels"].items():
+        for k, lv in self.args.levels.items():
             d.pulse.set(k, lv)
         return Outcome()
 
     def describe(self) -> str:
         return "plc_output " + ", ".join(f"{k}={'on' if v else 'off'}"
-                                         for k, v in self.args["levels"].items())
+                                         for k, v in self.args.levels.items())
 
 
 KINDS = (PlcProgram, PlcOutput)

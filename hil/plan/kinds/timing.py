@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from hil import clock
@@ -75,16 +76,26 @@ def read_unrecorded(ctx: StepContext, spec: Spec, source: RecordingSource,
     return got
 
 
+@dataclass(frozen=True)
+class CheckTimingArgs:
+    spec: str  # a timing spec's id
+    params: dict[str, int] = field(default_factory=dict)  # parameter values to judge with
+    bind: dict[str, str] = field(default_factory=dict)  # placeholder -> line or function
+    constants: dict[str, float] = field(default_factory=dict)
+    since: str = "start"  # start | last_check | the name of an earlier step
+
+
 class CheckTiming(StepKind):
     """`check_timing: {spec: brake_servo_off, bind: {...}, constants: {...}, since: ...}`."""
 
     name = "check_timing"
+    args: CheckTimingArgs
     judge_only = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> CheckTimingArgs:
         if isinstance(obj, str):
-            return {"spec": obj, "params": {}, "bind": {}, "constants": {}, "since": "start"}
+            return CheckTimingArgs(obj)
         m = v.mapping(obj, line, where)
         v.keys(m, {"spec", "params", "bind", "constants", "since"}, where, required=("spec",))
         since = m.get("since", "start")
@@ -117,55 +128,54 @@ class CheckTiming(StepKind):
                     raise v.err(cm.kline(k), join(fw, str(k)),
                                 f"{x!r}: a number (ms, rpm, ...)")
                 constants[str(k)] = x
-        return {"spec": v.text(m, "spec", where), "params": params, "bind": bind,
-                "constants": constants, "since": since}
+        return CheckTimingArgs(v.text(m, "spec", where), params, bind, constants, since)
 
     def check(self, cc: CheckContext) -> None:
         """`bind:` functions must be wired; `constants:` / `bind:` names must be the spec's;
         the spec must exist and load."""
         a, d = self.args, cc.drive
         wired = d.di | d.do
-        for name, x in a.get("bind", {}).items():
+        for name, x in a.bind.items():
             if not BIND_LINE_RE.match(x) and x not in wired:
                 raise cc.err(f"drive {cc.dname} has no line wired to {x} (wired: "
                              f"{', '.join(wired) or 'none'})", f"bind.{name}")
         specs = cc.specs
-        spec = specs.get(a["spec"]) if isinstance(specs, Mapping) else None
+        spec = specs.get(a.spec) if isinstance(specs, Mapping) else None
         if spec is not None:
             known = set(spec.binding()) | set(spec.bind)
-            for name in a.get("bind", {}):
+            for name in a.bind:
                 if name not in known:
                     raise cc.err(f"spec {spec.id!r} binds no {name!r}; it binds: "
                                  f"{', '.join(sorted(spec.bind)) or 'none'} (and the factory "
                                  "functions)", f"bind.{name}")
-            for name in a.get("constants", {}):
+            for name in a.constants:
                 if name not in spec.constants:
                     raise cc.err(f"spec {spec.id!r} has no constant {name!r}; it has: "
                                  f"{', '.join(sorted(spec.constants)) or 'none'}",
                                  f"constants.{name}")
-        if specs is not None and a["spec"] not in specs:
+        if specs is not None and a.spec not in specs:
             if isinstance(specs, SpecRegistry):
-                raise cc.err(specs.why_missing(a["spec"]))
-            raise cc.err(f"no timing spec {a['spec']!r}; known: {', '.join(sorted(specs))}")
+                raise cc.err(specs.why_missing(a.spec))
+            raise cc.err(f"no timing spec {a.spec!r}; known: {', '.join(sorted(specs))}")
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
-        spec = ctx.specs[a["spec"]]
+        spec = ctx.specs[a.spec]
         sample = getattr(ctx.session.world, "sample_truth", None)
         if sample is not None:  # the model's state as of now, not as of its last sample
             sample()
         ctx.rec.flush()
         source = ctx.live_source()
         binding = d.spec.binding() | {k: bind_line(x, d.spec)
-                                      for k, x in a.get("bind", {}).items()}
-        constants = constants_for(spec, ctx.bench.timing_constants) | a.get("constants", {})
-        if read_unrecorded(ctx, spec, source, binding, a["params"], constants):
+                                      for k, x in a.bind.items()}
+        constants = constants_for(spec, ctx.bench.timing_constants) | a.constants
+        if read_unrecorded(ctx, spec, source, binding, a.params, constants):
             ctx.rec.flush()
             source = ctx.live_source()  # with the values just read
         until = clock.time_ns()  # the recording as it stands now (`hil check` re-checks alike)
-        verdicts = check(spec, source, params=a["params"] or None, binding=binding,
+        verdicts = check(spec, source, params=a.params or None, binding=binding,
                          constants=constants or None)
-        since = a.get("since", "start")
+        since = a.since
         since_ns = None
         if since == "last_check":
             since_ns = ctx.checked.get(spec.id)
@@ -181,7 +191,7 @@ class CheckTiming(StepKind):
             if v.status in ("pass", "fail", "inconclusive"):
                 # binding + check_params: what `hil report` needs to redraw the diagram
                 ctx.rec.verdict(vd, plan=ctx.plan.name, step=step.index, binding=binding,
-                                check_params=a["params"] or {},
+                                check_params=a.params or {},
                                 check_constants=constants or {},
                                 check_since_ns=since_ns, check_until_ns=until)
             out.append(vd)
@@ -203,8 +213,8 @@ class CheckTiming(StepKind):
 
     def describe(self) -> str:
         a = self.args
-        extra = ", ".join(f"{x}={y}" for x, y in (a.get("bind") or {}).items())
-        return f"check_timing {a['spec']}" + (f" ({extra})" if extra else "")
+        extra = ", ".join(f"{x}={y}" for x, y in (a.bind or {}).items())
+        return f"check_timing {a.spec}" + (f" ({extra})" if extra else "")
 
 
 KINDS = (CheckTiming,)

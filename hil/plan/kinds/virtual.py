@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil.bench import virtual_rules
@@ -17,24 +18,41 @@ if TYPE_CHECKING:
     from hil.plan.steps import Step
 
 
+@dataclass(frozen=True)
+class PowerCycleArgs:
+    battery: bool = True  # the absolute encoder's battery stays connected
+    off: int = 0  # ns without power
+
+
+@dataclass(frozen=True)
+class InjectArgs:
+    options: dict[str, Any] | None = None  # ModelOptions fields to change
+    alarm: str | None = None  # an alarm to raise
+
+    def given(self) -> dict[str, Any]:
+        return {k: x for k, x in (("options", self.options), ("alarm", self.alarm))
+                if x is not None}
+
+
 class PowerCycle(StepKind):
     """`power_cycle: {battery: true, off: 100ms}`."""
 
     name = "power_cycle"
+    args: PowerCycleArgs
     virtual_only = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> PowerCycleArgs:
         if obj is None or obj is True:
-            return {"battery": True}
+            return PowerCycleArgs()
         m = v.mapping(obj, line, where)
         v.keys(m, {"battery", "off"}, where)
-        return {"battery": v.boolean(m, "battery", where, True),
-                "off": v.duration(m, "off", where, 0)}
+        return PowerCycleArgs(v.boolean(m, "battery", where, True),
+                              v.duration(m, "off", where, 0))
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        ctx.session.world.power_cycle(d.name, battery=self.args["battery"],
-                                      off_ns=self.args.get("off", 0))
+        ctx.session.world.power_cycle(d.name, battery=self.args.battery,
+                                      off_ns=self.args.off)
         return Outcome()
 
     def describe(self) -> str:
@@ -45,10 +63,11 @@ class Inject(StepKind):
     """`inject: {options: {...}, alarm: AL009}`: change model options or raise an alarm."""
 
     name = "inject"
+    args: InjectArgs
     virtual_only = True
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> InjectArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, {"options", "alarm"}, where)
         out: dict[str, Any] = {}
@@ -69,16 +88,16 @@ class Inject(StepKind):
             out["alarm"] = a.upper()
         if not out:
             raise v.err(line, where, "inject options: {...} and/or alarm: ALnnn")
-        return out
+        return InjectArgs(**out)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        ctx.session.world.inject(d.name, options=self.args.get("options"),
-                                 alarm=self.args.get("alarm"))
-        ctx.rec.log("warning", f"injected into {d.name}: {self.args}", name="hil.inject")
+        ctx.session.world.inject(d.name, options=self.args.options,
+                                 alarm=self.args.alarm)
+        ctx.rec.log("warning", f"injected into {d.name}: {self.args.given()}", name="hil.inject")
         return Outcome()
 
     def describe(self) -> str:
-        return "inject " + ", ".join(f"{x}={y}" for x, y in self.args.items())
+        return "inject " + ", ".join(f"{x}={y}" for x, y in self.args.given().items())
 
 
 KINDS = (PowerCycle, Inject)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil import clock
@@ -37,34 +38,48 @@ def evaluate(d: DriveIO, c: Condition) -> tuple[bool, str]:
     return a == c.value, f"alarm {a or 'none'}"
 
 
+@dataclass(frozen=True)
+class WaitArgs:
+    duration: int  # ns
+
+
+@dataclass(frozen=True)
+class ConditionArgs:
+    conditions: list[Condition]
+    timeout: int | None = None  # ns (wait_until; None: the bench's timeout)
+
+
 class Wait(StepKind):
     """`wait: 200ms`."""
 
     name = "wait"
+    args: WaitArgs
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> WaitArgs:
         try:
             d = parse_duration(obj)
         except ValueError as e:
             raise v.err(line, where, str(e)) from None
-        return {"duration": d}
+        return WaitArgs(d)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        ctx.sleep(self.args["duration"])
+        ctx.sleep(self.args.duration)
         return Outcome()
 
     def describe(self) -> str:
-        return f"wait {self.args['duration'] / 1e6:g}ms"
+        return f"wait {self.args.duration / 1e6:g}ms"
 
     def imposed_ns(self) -> int:
-        return self.args["duration"]
+        return self.args.duration
 
 
 class _Conditions(StepKind):
+    args: ConditionArgs
+
     def check(self, cc: CheckContext) -> None:
         d, dname = cc.drive, cc.dname
-        for c in self.args["conditions"]:
+        for c in self.args.conditions:
             if c.kind == "do" and c.key not in d.do:
                 raise cc.err(f"drive {dname} has no DO wired to {c.key} (wired: "
                              f"{', '.join(d.do) or 'none'})", f"do.{c.key}")
@@ -76,7 +91,7 @@ class _Conditions(StepKind):
                 fields.check_via(cc, c.kind, c.via)
 
     def describe(self) -> str:
-        return f"{self.name} " + " and ".join(c.describe() for c in self.args["conditions"])
+        return f"{self.name} " + " and ".join(c.describe() for c in self.args.conditions)
 
 
 class WaitUntil(_Conditions):
@@ -85,17 +100,16 @@ class WaitUntil(_Conditions):
     name = "wait_until"
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> ConditionArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, fields.COND_KEYS | {"timeout"}, where)
-        out = {"conditions": fields.conditions(v, m, where), "timeout": None}
-        if "timeout" in m:
-            out["timeout"] = v.duration(m, "timeout", where)
-        return out
+        conditions = fields.conditions(v, m, where)
+        return ConditionArgs(conditions, v.duration(m, "timeout", where) if "timeout" in m
+                             else None)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        conds = self.args["conditions"]
-        timeout = self.args["timeout"] or ctx.bench.timeouts["wait_until"]
+        conds = self.args.conditions
+        timeout = self.args.timeout or ctx.bench.timeouts["wait_until"]
         polls_bus = any(c.kind in ("param", "alarm", "state") for c in conds)
         poll = 10_000_000 if polls_bus else 1_000_000
         t0 = clock.monotonic_ns()
@@ -116,13 +130,13 @@ class Expect(_Conditions):
     name = "expect"
 
     @classmethod
-    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> dict[str, Any]:
+    def parse(cls, v: Checker, obj: Any, line: int, where: str) -> ConditionArgs:
         m = v.mapping(obj, line, where)
         v.keys(m, fields.COND_KEYS, where)
-        return {"conditions": fields.conditions(v, m, where)}
+        return ConditionArgs(fields.conditions(v, m, where))
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
-        seen = [(c, *evaluate(d, c)) for c in self.args["conditions"]]
+        seen = [(c, *evaluate(d, c)) for c in self.args.conditions]
         bad = [f"expected {c.describe()}, saw {obs}" for c, ok, obs in seen if not ok]
         if bad:
             raise StepFailed("; ".join(bad))
