@@ -14,7 +14,7 @@ import time
 from hil.model.cia402 import Cia402
 from hil.model.mechanics import COUNTS_PER_REV
 from hil.model.motion import Axis
-from hil.model.timebase import MS
+from hil.units import MS
 
 SIM_S = 60
 STEPS = SIM_S * 1000

@@ -16,8 +16,8 @@ from __future__ import annotations
 import time
 
 from hil.model.drive import Drive
-from hil.model.timebase import MS
 from hil.profile.pr import encode, pr_params
+from hil.units import MS
 
 PARAMS = {"P1.001": 0x0001, "P2.010": 0x0101}
 # b-contacts closed: NL (DI6), PL (DI7), EMGS (DI8); open NL/PL would raise AL014/AL015

@@ -17,7 +17,7 @@ import time
 
 from hil.model.drive import Drive
 from hil.model.mechanics import Mechanics
-from hil.model.timebase import MS
+from hil.units import MS
 
 FREQ = 500_000  # pulses/s
 PULSES_PER_REV = 100_000  # P1.044 / P1.045 = 16777216 / 100000

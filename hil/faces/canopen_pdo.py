@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 from hil.model import errors
 from hil.model.errors import ObjectError
+from hil.protocol import canopen as cop
 from hil.units import MS, US
 
 # Harness default PDOs (option pdo_defaults="harness"); the manual ships none (L17980-L18024).
@@ -157,38 +158,38 @@ class PdoEngine:
         if sub == 1:
             if value & 0x20000000 or value & 0x1FFFF800:
                 raise ObjectError(
-                    index, sub, errors.ABORT_VALUE_RANGE, "29-bit COB-IDs unsupported"
+                    index, sub, cop.ABORT_VALUE_RANGE, "29-bit COB-IDs unsupported"
                 )
             if valid and not value & 0x80000000 and (value & 0x7FF) != (old & 0x7FF):
                 raise ObjectError(
-                    index, sub, errors.ABORT_VALUE_RANGE, "COB-ID change while the PDO is valid"
+                    index, sub, cop.ABORT_VALUE_RANGE, "COB-ID change while the PDO is valid"
                 )
             n = index & 3
             self._pdo[n if rx else 4 + n] = PdoRun()
         elif sub == 2:
             if 241 <= value <= 251 or (rx and value in (252, 253)):
                 raise ObjectError(
-                    index, sub, errors.ABORT_VALUE_RANGE, f"transmission type {value}"
+                    index, sub, cop.ABORT_VALUE_RANGE, f"transmission type {value}"
                 )
         elif sub == 3 and valid and not rx:
-            raise ObjectError(index, sub, errors.ABORT_DATA_STATE, "inhibit time while PDO valid")
+            raise ObjectError(index, sub, cop.ABORT_DATA_STATE, "inhibit time while PDO valid")
 
     def _write_pdo_map(self, index: int, sub: int, value: int) -> None:
         rx = index < 0x1A00
         comm = (0x1400 if rx else 0x1800) + (index & 3)
         if not self._values[(comm, 1)] & 0x80000000:
-            raise ObjectError(index, sub, errors.ABORT_DATA_STATE, "mapping change while PDO valid")
+            raise ObjectError(index, sub, cop.ABORT_DATA_STATE, "mapping change while PDO valid")
         if sub == 0:
             total = 0
             for s in range(1, value + 1):
                 total += self._check_map_entry(index, s, self._values[(index, s)], rx)
             if total > 64:
                 raise ObjectError(
-                    index, sub, errors.ABORT_PDO_LENGTH, f"{total} bits > 64 (L18024)"
+                    index, sub, cop.ABORT_PDO_LENGTH, f"{total} bits > 64 (L18024)"
                 )
             return
         if self._values[(index, 0)] != 0:
-            raise ObjectError(index, sub, errors.ABORT_DATA_STATE, "mapping change while sub0 != 0")
+            raise ObjectError(index, sub, cop.ABORT_DATA_STATE, "mapping change while sub0 != 0")
         if value:
             self._check_map_entry(index, sub, value, rx)
 
@@ -197,11 +198,11 @@ class PdoEngine:
         try:
             target = self.od.get(t_index, t_sub)
         except ObjectError as exc:
-            raise ObjectError(index, sub, errors.ABORT_NO_OBJECT, f"maps {exc}") from None
+            raise ObjectError(index, sub, cop.ABORT_NO_OBJECT, f"maps {exc}") from None
         ok = target.pdo and target.bits == bits and (target.writable if rx else target.readable)
         if not ok:
             raise ObjectError(
-                index, sub, errors.ABORT_NOT_MAPPABLE,
+                index, sub, cop.ABORT_NOT_MAPPABLE,
                 f"{t_index:04X}h sub {t_sub} cannot be mapped"
             )
         return bits

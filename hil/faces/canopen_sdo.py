@@ -45,9 +45,9 @@ class SdoServer:
         if isinstance(exc, ObjectError):
             return exc.abort_code
         if isinstance(exc, errors.ModelError):  # a refusal that names no abort code itself
-            return errors.ABORT_VALUE_RANGE if download else errors.ABORT_GENERAL
+            return cop.ABORT_VALUE_RANGE if download else cop.ABORT_GENERAL
         self.last_resort("SDO", exc)  # a bug: still answered, with the general abort
-        return errors.ABORT_GENERAL
+        return cop.ABORT_GENERAL
 
     def _on_sdo(self, data: bytes, now: int) -> None:
         """Serve one SDO request: every request but an abort gets an answer."""
@@ -62,7 +62,7 @@ class SdoServer:
         if len(data) != 8:  # CiA 301: SDO frames are 8 bytes
             padded = data.ljust(4, b"\0")
             self._transfer = None
-            self._sdo_abort(padded[1] | padded[2] << 8, padded[3], errors.ABORT_COMMAND)
+            self._sdo_abort(padded[1] | padded[2] << 8, padded[3], cop.ABORT_COMMAND)
             return
         cs = data[0] >> 5
         index, sub = data[1] | data[2] << 8, data[3]
@@ -80,7 +80,7 @@ class SdoServer:
                 self._initiate_download(index, sub, data, now)
             else:  # block transfers (5, 6) and 7: the A3 does expedited only (L16942)
                 raise ObjectError(
-                    index, sub, errors.ABORT_COMMAND, "command specifier not supported"
+                    index, sub, cop.ABORT_COMMAND, "command specifier not supported"
                 )
         except Exception as exc:  # every refusal becomes an abort (CiA 301 §7.2.4.3.17)
             self._transfer = None
@@ -90,7 +90,7 @@ class SdoServer:
     def _initiate_upload(self, index: int, sub: int, now: int) -> None:
         e = self.od.get(index, sub)
         if not e.readable:
-            raise ObjectError(index, sub, errors.ABORT_WRITE_ONLY, "write-only object")
+            raise ObjectError(index, sub, cop.ABORT_WRITE_ONLY, "write-only object")
         raw = self._read_bytes(e)
         if len(raw) <= 4 and raw:
             self._sdo_send(cop.sdo_expedited_upload_response(index, sub, raw))
@@ -102,7 +102,7 @@ class SdoServer:
     def _initiate_download(self, index: int, sub: int, data: bytes, now: int) -> None:
         e = self.od.get(index, sub)
         if not e.writable:
-            raise ObjectError(index, sub, errors.ABORT_READ_ONLY, "read-only object")
+            raise ObjectError(index, sub, cop.ABORT_READ_ONLY, "read-only object")
         expedited, sized = bool(data[0] & 2), bool(data[0] & 1)
         if expedited:
             n = 4 - ((data[0] >> 2) & 3) if sized else (e.size or 4)
@@ -111,7 +111,7 @@ class SdoServer:
             return
         size = int.from_bytes(data[4:8], "little") if sized else None
         if size is not None and e.size is not None and size != e.size:
-            code = errors.ABORT_LENGTH_HIGH if size > e.size else errors.ABORT_LENGTH_LOW
+            code = cop.ABORT_LENGTH_HIGH if size > e.size else cop.ABORT_LENGTH_LOW
             raise ObjectError(index, sub, code, f"{size} bytes for a {e.size}-byte object")
         self._transfer = Transfer(upload=False, entry=e, size=size, started=now)
         self._sdo_send(cop.sdo_download_response(index, sub))
@@ -121,12 +121,12 @@ class SdoServer:
         toggle = (data[0] >> 4) & 1
         if t is None or t.upload != (cs == cop.CCS_UPLOAD_SEGMENT):
             self._transfer = None
-            self._sdo_abort(0, 0, errors.ABORT_COMMAND)
+            self._sdo_abort(0, 0, cop.ABORT_COMMAND)
             return
         e = t.entry
         if toggle != t.toggle:
             self._transfer = None
-            self._sdo_abort(e.index, e.sub, errors.ABORT_TOGGLE)
+            self._sdo_abort(e.index, e.sub, cop.ABORT_TOGGLE)
             return
         t.started = now
         t.toggle ^= 1
@@ -147,7 +147,7 @@ class SdoServer:
         try:
             if t.size is not None and len(t.data) != t.size:
                 raise ObjectError(
-                    e.index, e.sub, errors.ABORT_LENGTH, "size indicated != size sent"
+                    e.index, e.sub, cop.ABORT_LENGTH, "size indicated != size sent"
                 )
             self._write_bytes(e, bytes(t.data))
         except Exception as exc:
@@ -184,15 +184,15 @@ class SdoServer:
             self._values[(index, sub)] = bytes(raw)
             return
         if len(raw) != e.size:
-            code = errors.ABORT_LENGTH_HIGH if len(raw) > e.size else errors.ABORT_LENGTH_LOW
+            code = cop.ABORT_LENGTH_HIGH if len(raw) > e.size else cop.ABORT_LENGTH_LOW
             raise ObjectError(index, sub, code, f"{len(raw)} bytes for a {e.size}-byte object")
         value = e.decode(raw)
         if value < 0 and e.min is not None and e.min >= 0:
             value += 1 << (8 * e.size)  # hex parameters are carried unsigned
         if e.max is not None and value > e.max:
-            raise ObjectError(index, sub, errors.ABORT_VALUE_HIGH, f"{value} > max {e.max}")
+            raise ObjectError(index, sub, cop.ABORT_VALUE_HIGH, f"{value} > max {e.max}")
         if e.min is not None and value < e.min:
-            raise ObjectError(index, sub, errors.ABORT_VALUE_LOW, f"{value} < min {e.min}")
+            raise ObjectError(index, sub, cop.ABORT_VALUE_LOW, f"{value} < min {e.min}")
         if 0x2000 <= index <= 0x2FFF or 0x6000 <= index <= 0x6FFF:
             self.drive.write_object(index, sub, value)
             return
@@ -202,7 +202,7 @@ class SdoServer:
         index, sub = e.index, e.sub
         if index == 0x1003:
             if value != 0:
-                raise ObjectError(index, sub, errors.ABORT_VALUE_RANGE, "only 0 clears 1003h")
+                raise ObjectError(index, sub, cop.ABORT_VALUE_RANGE, "only 0 clears 1003h")
             self._history_cleared = tuple(self._history())  # the drive keeps its P4.000 list
             return
         if 0x1400 <= index <= 0x1403 or 0x1800 <= index <= 0x1803:

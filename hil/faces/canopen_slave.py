@@ -33,7 +33,6 @@ from hil.faces.canopen_nmt import NmtErrorControl
 from hil.faces.canopen_pdo import HARNESS_PDOS, PdoEngine, PdoRun
 from hil.faces.canopen_sdo import SdoServer, Transfer
 from hil.faces.last_resort import LastResort
-from hil.model import errors
 from hil.model.events import AlarmChanged, PowerCycled
 from hil.profile.od import ObjectDictionary
 from hil.protocol import canopen as cop
@@ -358,7 +357,7 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
         if self._transfer is not None and now - self._transfer.started > self.sdo_timeout_ns:
             e = self._transfer.entry
             self._transfer = None
-            self._sdo_abort(e.index, e.sub, errors.ABORT_TIMEOUT)
+            self._sdo_abort(e.index, e.sub, cop.ABORT_TIMEOUT)
         if self.state != "OPERATIONAL":
             return
         if self.comm.sync_deadline is not None and now > self.comm.sync_deadline:

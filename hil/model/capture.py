@@ -35,8 +35,8 @@ from typing import TYPE_CHECKING, Any
 from hil.model.errors import OutOfRange, ReadOnly
 from hil.model.events import CaptureLatched, ZPulse
 from hil.model.motion import counts_to_puu, puu_to_counts
-from hil.model.timebase import MS
 from hil.profile.pr import ARRAY_SIZE
+from hil.units import MS
 
 if TYPE_CHECKING:
     from hil.model.compare import Compare

@@ -52,7 +52,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-from hil.model.errors import (
+from hil.model.errors import ObjectError
+from hil.model.events import StateChanged
+from hil.model.motion import Axis, counts_to_puu, puu_per_s_to_rpm, puu_to_counts
+from hil.profile.od import load_objects
+from hil.protocol.canopen import (
     ABORT_DATA_STATE,
     ABORT_NO_OBJECT,
     ABORT_NO_SUBINDEX,
@@ -60,13 +64,9 @@ from hil.model.errors import (
     ABORT_VALUE_HIGH,
     ABORT_VALUE_LOW,
     ABORT_VALUE_RANGE,
-    ObjectError,
 )
-from hil.model.events import StateChanged
-from hil.model.motion import Axis, counts_to_puu, puu_per_s_to_rpm, puu_to_counts
-from hil.model.timebase import MS, S
-from hil.profile.od import load_objects
 from hil.protocol.cia402 import MODES
+from hil.units import MS, S
 
 # ---- states (names as canopen.BaseNode402 uses them) ------------------------------------
 NOT_READY = "NOT READY TO SWITCH ON"

@@ -30,8 +30,9 @@ from hil.model.capture import CaptureOptions
 from hil.model.errors import OutOfRange, ReadOnly
 from hil.model.events import CompareFired
 from hil.model.motion import counts_to_puu
-from hil.model.timebase import MS, Timer
+from hil.model.timebase import Timer
 from hil.profile.pr import ARRAY_SIZE
+from hil.units import MS
 
 if TYPE_CHECKING:
     from hil.model.capture import Capture

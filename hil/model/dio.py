@@ -17,7 +17,7 @@ from collections.abc import Callable
 from hil.model.errors import InertFunction, UnknownFunction
 from hil.model.events import DoChanged
 from hil.model.params import ParameterStore
-from hil.model.timebase import MS, Scheduler, Timer
+from hil.model.timebase import Scheduler, Timer
 from hil.profile.dio import (  # tables 8.1 / 8.2 and the mapping parameters (the A3 as data)
     DI_FUNCTIONS,
     DI_PARAMS,
@@ -30,6 +30,7 @@ from hil.profile.dio import (  # tables 8.1 / 8.2 and the mapping parameters (th
     N_PHYSICAL_DI,
     decode_mapping,
 )
+from hil.units import MS
 
 # Table 8.1 functions the virtual drive does not model (docs/manual-choices.md). Mapping one of them
 # by a P2.010-P2.017 / P2.036-P2.040 write, or in a bench, is refused: a mapped function that

@@ -37,13 +37,6 @@ from hil.model.core import Hooks, new_data_array
 from hil.model.di_functions import attach_di_functions
 from hil.model.dio import DigitalIO
 from hil.model.errors import (
-    ABORT_DATA_STATE,
-    ABORT_DATA_STORE,
-    ABORT_NO_OBJECT,
-    ABORT_READ_ONLY,
-    ABORT_VALUE_HIGH,
-    ABORT_VALUE_LOW,
-    ABORT_VALUE_RANGE,
     ModelError,
     ObjectError,
     OutOfRange,
@@ -72,8 +65,18 @@ from hil.model.params import ParameterStore
 from hil.model.pr_engine import PR_MODES, attach_pr
 from hil.model.pulse_train import attach_pulse_train
 from hil.model.sto import Sto
-from hil.model.timebase import MS, Scheduler, ms
+from hil.model.timebase import Scheduler, ms
+from hil.protocol.canopen import (
+    ABORT_DATA_STATE,
+    ABORT_DATA_STORE,
+    ABORT_NO_OBJECT,
+    ABORT_READ_ONLY,
+    ABORT_VALUE_HIGH,
+    ABORT_VALUE_LOW,
+    ABORT_VALUE_RANGE,
+)
 from hil.protocol.cia402 import MODE_NAMES
+from hil.units import MS
 
 # Physical wiring of the virtual bench's sensors: function -> (DI number, contact type).
 # Limit switches are normally closed (open at the limit), the home sensor normally open.

@@ -11,27 +11,6 @@ from hil.profile.errors import (
     UnknownFunction,
     UnknownParameter,
 )
-from hil.protocol.canopen import (  # noqa: F401  (re-exported for the model and faces)
-    ABORT_COMMAND,
-    ABORT_DATA_STATE,
-    ABORT_DATA_STORE,
-    ABORT_GENERAL,
-    ABORT_LENGTH,
-    ABORT_LENGTH_HIGH,
-    ABORT_LENGTH_LOW,
-    ABORT_NO_OBJECT,
-    ABORT_NO_SUBINDEX,
-    ABORT_NOT_MAPPABLE,
-    ABORT_PDO_LENGTH,
-    ABORT_READ_ONLY,
-    ABORT_TIMEOUT,
-    ABORT_TOGGLE,
-    ABORT_UNSUPPORTED_ACCESS,
-    ABORT_VALUE_HIGH,
-    ABORT_VALUE_LOW,
-    ABORT_VALUE_RANGE,
-    ABORT_WRITE_ONLY,
-)
 
 __all__ = ["ModelError", "ObjectError", "OutOfRange", "ParamError", "UnknownFunction",
            "UnknownParameter"]

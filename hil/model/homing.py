@@ -30,7 +30,7 @@ from hil.model.errors import ModelError
 from hil.model.events import HomingPhase
 from hil.model.motion import puu_to_counts
 from hil.model.pr_engine import pr_mode
-from hil.model.timebase import MS, Timer, ms
+from hil.model.timebase import Timer, ms
 from hil.profile.homing_methods import (
     EDGE,
     HERE,
@@ -41,6 +41,7 @@ from hil.profile.homing_methods import (
     check_p5004,
     pr_plan,
 )
+from hil.units import MS
 
 if TYPE_CHECKING:
     from hil.model.absolute import AbsoluteEncoder

@@ -19,12 +19,7 @@ import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from hil.model.errors import (
-    OutOfRange,
-    ProtectedParameter,
-    ReadOnly,
-    ServoOnLocked,
-)
+from hil.model.errors import OutOfRange, ProtectedParameter, ReadOnly, ServoOnLocked
 from hil.profile.params import ParamSpec, ParamTable
 
 WriteHook = Callable[[str, int, int], None]

@@ -53,7 +53,7 @@ from hil.model.errors import (
     ServoOnLocked,
 )
 from hil.model.motion import counts_to_puu, puu_per_s_to_rpm, puu_to_counts
-from hil.model.timebase import MS, Timer, ms
+from hil.model.timebase import Timer, ms
 from hil.profile.pr import (
     ARRAY_SIZE,
     INDEX,
@@ -65,6 +65,7 @@ from hil.profile.pr import (
     read_path,
     source_error,
 )
+from hil.units import MS
 
 if TYPE_CHECKING:
     from hil.model.core import DriveCore

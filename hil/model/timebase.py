@@ -12,7 +12,7 @@ import itertools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from hil.units import MS, NS, US, S  # the one definition, re-exported for the model
+from hil.units import MS
 
 
 def ms(value: float) -> int:
@@ -81,4 +81,4 @@ class Scheduler:
         self.now = max(self.now, t)
 
 
-__all__ = ["MS", "NS", "US", "S", "Scheduler", "Timer", "ms"]
+__all__ = ["Scheduler", "Timer", "ms"]

@@ -15,8 +15,8 @@ from __future__ import annotations
 from typing import Any
 
 from hil.model.events import AlarmChanged, DoChanged, FdbkChanged, ParamChanged, StateChanged
-from hil.model.timebase import MS
 from hil.record import topics
+from hil.units import MS
 
 EPOCH_NS = 1_700_000_000_000_000_000  # a fixed, plausible wall time for model t = 0
 # 0.2 ms, like an expedited SDO on a virtual bus (docs/dev/feasibility.md §3)

@@ -12,7 +12,8 @@ from hil.drivers.abs_reader import (
     checksum,
 )
 from hil.model.absolute import COUNTS_PER_REV, AbsoluteEncoder, AbsoluteOptions, build_frame
-from hil.model.timebase import MS, Scheduler, ms
+from hil.model.timebase import Scheduler, ms
+from hil.units import MS
 from hil.virtual.model_lines import ModelLines
 
 REV = COUNTS_PER_REV

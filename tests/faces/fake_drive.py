@@ -5,10 +5,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from hil.model.comm_supervision import CommSupervision
-from hil.model.errors import ABORT_NO_OBJECT, ABORT_READ_ONLY, ObjectError
+from hil.model.errors import ObjectError
 from hil.model.events import AlarmChanged, PowerCycled, StateChanged
 from hil.model.options import ModelOptions
 from hil.profile.od import ObjectDictionary
+from hil.protocol.canopen import ABORT_NO_OBJECT, ABORT_READ_ONLY
 
 SW = {
     "NOT READY TO SWITCH ON": 0x0000,

@@ -274,7 +274,7 @@ def test_sdo_fuzz_pr_surfaces_with_the_model_running(caplog):
     and capture / compare (P5.010-P5.013, P5.036-P5.039, P5.056-P5.059), DI mapping codes
     0x00-0xFF with the contact digit. Every request gets one answer paired by index/sub (60h,
     43h-4Fh, 41h + segments, or an abort that is never the last-resort 0800 0000)."""
-    from hil.model.timebase import MS as MS_
+    from hil.units import MS as MS_
 
     bench = {"P1.001": 0x0001, "P2.010": 0x0101, "P2.011": 0x0108, "P2.012": 0x0111,
              "P2.013": 0x0112, "P2.014": 0x0146, "P2.015": 0x0139, "P2.016": 0, "P2.036": 0}

@@ -11,8 +11,8 @@ import canopen
 import pytest
 from fake_drive import Bench
 
-from hil.model import errors as E
 from hil.profile.od import Entry, ObjectDictionary
+from hil.protocol import canopen as cop
 
 NODE = 5
 canopen.Network.NOTIFIER_CYCLE = 0.05  # feasibility §3: 1.0 s adds a second per teardown
@@ -85,50 +85,50 @@ def test_segmented_both_directions():
 def test_abort_codes(bench):
     b = bench
     sdo = b.sdo
-    assert abort_code(sdo(struct.pack("<BHBI", 0x40, 0x3000, 0, 0))) == E.ABORT_NO_OBJECT
-    assert abort_code(sdo(struct.pack("<BHBI", 0x40, 0x1018, 9, 0))) == E.ABORT_NO_SUBINDEX
-    assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x1000, 0, 1))) == E.ABORT_READ_ONLY
-    assert abort_code(sdo(struct.pack("<BHBI", 0x2B, 0x6041, 0, 1))) == E.ABORT_READ_ONLY
+    assert abort_code(sdo(struct.pack("<BHBI", 0x40, 0x3000, 0, 0))) == cop.ABORT_NO_OBJECT
+    assert abort_code(sdo(struct.pack("<BHBI", 0x40, 0x1018, 9, 0))) == cop.ABORT_NO_SUBINDEX
+    assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x1000, 0, 1))) == cop.ABORT_READ_ONLY
+    assert abort_code(sdo(struct.pack("<BHBI", 0x2B, 0x6041, 0, 1))) == cop.ABORT_READ_ONLY
     # length: 2 bytes into U32 6081h, 4 bytes into U16 6040h
-    assert abort_code(sdo(struct.pack("<BHBI", 0x2B, 0x6081, 0, 1))) == E.ABORT_LENGTH_LOW
-    assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x6040, 0, 6))) == E.ABORT_LENGTH_HIGH
+    assert abort_code(sdo(struct.pack("<BHBI", 0x2B, 0x6081, 0, 1))) == cop.ABORT_LENGTH_LOW
+    assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x6040, 0, 6))) == cop.ABORT_LENGTH_HIGH
     # value range: 6083h 1..65500 (L18755-L18769); 1003h sub0 only 0
-    assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x6083, 0, 70000))) == E.ABORT_VALUE_HIGH
-    assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x6083, 0, 0))) == E.ABORT_VALUE_LOW
-    assert abort_code(sdo(struct.pack("<BHBI", 0x2F, 0x1003, 0, 3))) == E.ABORT_VALUE_RANGE
+    assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x6083, 0, 70000))) == cop.ABORT_VALUE_HIGH
+    assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x6083, 0, 0))) == cop.ABORT_VALUE_LOW
+    assert abort_code(sdo(struct.pack("<BHBI", 0x2F, 0x1003, 0, 3))) == cop.ABORT_VALUE_RANGE
     # unknown command specifier, block transfer (not on A3, L16942), stray segment, short DLC
-    assert abort_code(sdo(bytes([0xE0, 0, 0x10, 0, 0, 0, 0, 0]))) == E.ABORT_COMMAND
-    assert abort_code(sdo(bytes([0xA4, 0x00, 0x10, 0, 0x7F, 0, 0, 0]))) == E.ABORT_COMMAND
-    assert abort_code(sdo(bytes([0xC6, 0x81, 0x60, 0, 4, 0, 0, 0]))) == E.ABORT_COMMAND
-    assert abort_code(sdo(bytes([0x60, 0, 0, 0, 0, 0, 0, 0]))) == E.ABORT_COMMAND
-    assert abort_code(sdo(bytes([0x40, 0x00]))) == E.ABORT_COMMAND
+    assert abort_code(sdo(bytes([0xE0, 0, 0x10, 0, 0, 0, 0, 0]))) == cop.ABORT_COMMAND
+    assert abort_code(sdo(bytes([0xA4, 0x00, 0x10, 0, 0x7F, 0, 0, 0]))) == cop.ABORT_COMMAND
+    assert abort_code(sdo(bytes([0xC6, 0x81, 0x60, 0, 4, 0, 0, 0]))) == cop.ABORT_COMMAND
+    assert abort_code(sdo(bytes([0x60, 0, 0, 0, 0, 0, 0, 0]))) == cop.ABORT_COMMAND
+    assert abort_code(sdo(bytes([0x40, 0x00]))) == cop.ABORT_COMMAND
     # toggle: first download segment must have t = 0
     assert sdo(struct.pack("<BHBI", 0x21, 0x6081, 0, 4))[0] == 0x60
-    assert abort_code(sdo(bytes([0x10 | 0x07, 1, 2, 3, 4, 0, 0, 0]))) == E.ABORT_TOGGLE
+    assert abort_code(sdo(bytes([0x10 | 0x07, 1, 2, 3, 4, 0, 0, 0]))) == cop.ABORT_TOGGLE
     # size indicated 4, 3 sent
     assert sdo(struct.pack("<BHBI", 0x21, 0x6081, 0, 4))[0] == 0x60
-    assert abort_code(sdo(bytes([0x09, 1, 2, 3, 0, 0, 0, 0]))) == E.ABORT_LENGTH
+    assert abort_code(sdo(bytes([0x09, 1, 2, 3, 0, 0, 0, 0]))) == cop.ABORT_LENGTH
     # mapping change while TPDO1 is valid (harness default) -> 08000022 (CiA 301)
-    assert abort_code(sdo(struct.pack("<BHBI", 0x2F, 0x1A00, 0, 0))) == E.ABORT_DATA_STATE
+    assert abort_code(sdo(struct.pack("<BHBI", 0x2F, 0x1A00, 0, 0))) == cop.ABORT_DATA_STATE
     # invalidate TPDO2, then map a non-mappable object, then too many bits
     assert sdo(struct.pack("<BHBI", 0x23, 0x1801, 1, 0x80000285))[0] == 0x60
     assert sdo(struct.pack("<BHBI", 0x2F, 0x1A01, 0, 0))[0] == 0x60
     assert abort_code(sdo(struct.pack("<BHBI", 0x23, 0x1A01, 1, 0x10000020))) == (
-        E.ABORT_NOT_MAPPABLE
+        cop.ABORT_NOT_MAPPABLE
     )
     for s in (1, 2, 3):
         assert sdo(struct.pack("<BHBI", 0x23, 0x1A01, s, 0x60640020))[0] == 0x60
-    assert abort_code(sdo(struct.pack("<BHBI", 0x2F, 0x1A01, 0, 3))) == E.ABORT_PDO_LENGTH
+    assert abort_code(sdo(struct.pack("<BHBI", 0x2F, 0x1A01, 0, 3))) == cop.ABORT_PDO_LENGTH
 
 
 def test_write_only_and_timeout():
     extra = [Entry(0x2FFF, 0, "wo probe", "VAR", "UNSIGNED16", "wo", False, 0, None, None)]
     b = Bench(NODE, od=ObjectDictionary.a3(extra=extra), sdo_timeout_ms=50)
     try:
-        assert abort_code(b.sdo(struct.pack("<BHBI", 0x40, 0x2FFF, 0, 0))) == E.ABORT_WRITE_ONLY
+        assert abort_code(b.sdo(struct.pack("<BHBI", 0x40, 0x2FFF, 0, 0))) == cop.ABORT_WRITE_ONLY
         assert b.sdo(struct.pack("<BHBI", 0x21, 0x6081, 0, 4))[0] == 0x60
         resp = b.expect(0x585, timeout=2.0)  # no segment follows: 05040000 after 50 ms
-        assert abort_code(bytes(resp.data)) == E.ABORT_TIMEOUT
+        assert abort_code(bytes(resp.data)) == cop.ABORT_TIMEOUT
     finally:
         b.close()
 

@@ -20,7 +20,7 @@ import pytest
 from hil.faces.canopen_slave import CanopenSlave
 from hil.model.drive import Drive
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
+from hil.units import MS
 
 NODE = 5
 MASTER = 0x7F

@@ -17,6 +17,7 @@ from hil.faces.canopen_slave import CanopenSlave
 from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
 from hil.model import errors as E
 from hil.model.drive import Drive
+from hil.protocol import canopen as cop
 from hil.protocol import modbus as mb
 from hil.virtual.host import DriveHost
 
@@ -220,7 +221,7 @@ def test_sdo_download_of_undefined_di_function_is_aborted_0609_0030(caplog):
     try:
         with caplog.at_level(logging.ERROR):
             resp = pair.sdo(bytes.fromhex("2B0A220007000000"))
-            assert abort_code(resp) == E.ABORT_VALUE_RANGE
+            assert abort_code(resp) == cop.ABORT_VALUE_RANGE
             assert resp[1:4] == bytes.fromhex("0A2200")
             # the face still serves: a valid DI function (0x0101 SON, L6974) is accepted
             assert pair.sdo(bytes.fromhex("2B0A220001010000"))[0] == 0x60
@@ -235,7 +236,7 @@ def test_drive_write_object_turns_every_refusal_into_an_object_error():
     drive = Drive()
     with pytest.raises(E.ObjectError) as info:
         drive.write_object(P2_010_INDEX, 0, 0x0007)
-    assert info.value.abort_code == E.ABORT_VALUE_RANGE
+    assert info.value.abort_code == cop.ABORT_VALUE_RANGE
     assert isinstance(info.value.__cause__, E.UnknownFunction)
 
 
@@ -257,7 +258,7 @@ def test_sdo_model_bug_answers_general_abort_logs_once_and_keeps_serving(caplog)
     try:
         with caplog.at_level(logging.ERROR, logger="hil.faces.canopen_slave"):
             for _ in range(3):  # 6040h controlword = 6 (shutdown)
-                assert abort_code(pair.sdo(bytes.fromhex("2B40600006000000"))) == E.ABORT_GENERAL
+                assert abort_code(pair.sdo(bytes.fromhex("2B40600006000000"))) == cop.ABORT_GENERAL
             upload = pair.sdo(bytes.fromhex("4000100000000000"))  # 1000h still readable
         assert upload is not None and upload[0] == 0x43
         assert pair.slave._thread.is_alive()
@@ -276,7 +277,7 @@ def test_sdo_model_refusal_that_is_no_object_error_is_still_an_abort():
 
     pair = CanPair(Refusing(), "hostile-refusal")
     try:
-        assert abort_code(pair.sdo(bytes.fromhex("2B40600006000000"))) == E.ABORT_VALUE_RANGE
+        assert abort_code(pair.sdo(bytes.fromhex("2B40600006000000"))) == cop.ABORT_VALUE_RANGE
         assert pair.slave.last_resort.count == 0
     finally:
         pair.close()

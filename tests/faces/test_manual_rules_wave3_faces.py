@@ -16,8 +16,8 @@ from test_comm_faults import NODE, Rig
 
 from hil.faces.modbus_slave import ModbusSlave
 from hil.model.drive import Drive
-from hil.model.timebase import MS
 from hil.paths import fixture
+from hil.units import MS
 
 S = 1_000_000_000
 

@@ -30,7 +30,8 @@ from hil.model.absolute import (
     split_frame,
 )
 from hil.model.errors import ProtectedParameter
-from hil.model.timebase import MS, Scheduler
+from hil.model.timebase import Scheduler
+from hil.units import MS
 
 REV = COUNTS_PER_REV
 

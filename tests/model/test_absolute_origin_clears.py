@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from hil.model.drive import Drive
-from hil.model.timebase import MS
+from hil.units import MS
 
 ABS = {"P2.069": 1, "P2.011": 0x011D, "P2.012": 0x011F}  # absolute; DI2 ABSE, DI3 ABSC
 

@@ -7,7 +7,8 @@ import pytest
 from hil.model.brake import Brake, HoldingBrake
 from hil.model.options import FDBK_AS_PRINTED, ModelOptions
 from hil.model.sto import Sto
-from hil.model.timebase import MS, Scheduler
+from hil.model.timebase import Scheduler
+from hil.units import MS
 
 
 class Rig:

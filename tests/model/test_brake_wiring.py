@@ -11,7 +11,7 @@ import pytest
 
 from hil.model.drive import Drive
 from hil.model.mechanics import Mechanics
-from hil.model.timebase import MS
+from hil.units import MS
 
 
 def cycle_son(drive: Drive) -> list[bool]:

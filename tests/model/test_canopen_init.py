@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 
 from hil.model.drive import Drive
-from hil.model.timebase import MS
+from hil.units import MS
 
 TABLE = {
     "P1.032": 0x0010,

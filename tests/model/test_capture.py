@@ -10,8 +10,8 @@ import pytest
 from hil.model.drive import Drive
 from hil.model.errors import ParamError
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
 from hil.profile.pr import encode
+from hil.units import MS
 
 PUU_PER_REV = 100000  # factory gear (L6879-6880)
 

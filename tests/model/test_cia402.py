@@ -16,7 +16,10 @@ from hil.model.cia402 import (
     Cia402,
     Cia402Options,
 )
-from hil.model.errors import (
+from hil.model.errors import ObjectError
+from hil.model.events import StateChanged
+from hil.model.motion import Axis
+from hil.protocol.canopen import (
     ABORT_DATA_STATE,
     ABORT_NO_OBJECT,
     ABORT_NO_SUBINDEX,
@@ -24,11 +27,8 @@ from hil.model.errors import (
     ABORT_VALUE_HIGH,
     ABORT_VALUE_LOW,
     ABORT_VALUE_RANGE,
-    ObjectError,
 )
-from hil.model.events import StateChanged
-from hil.model.motion import Axis
-from hil.model.timebase import MS
+from hil.units import MS
 
 GEAR_100K = (16777216, 100000)  # factory e-gear: 100000 PUU per rev (L6879-6880)
 

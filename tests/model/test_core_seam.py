@@ -20,7 +20,8 @@ from hil.model.mechanics import Mechanics
 from hil.model.motion import Axis
 from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
-from hil.model.timebase import MS, Scheduler
+from hil.model.timebase import Scheduler
+from hil.units import MS
 
 MODEL = Path(__file__).resolve().parents[2] / "hil" / "model"
 

@@ -13,7 +13,7 @@ import pytest
 from hil.model.drive import Drive
 from hil.model.events import AlarmChanged
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS, S
+from hil.units import MS, S
 
 PV, PT, PP = 3, 4, 1  # 6060h modes
 # EMGS wired closed (DI8), BRKR on DO6; DI5 and DI10 carry the function under test.

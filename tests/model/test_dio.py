@@ -8,8 +8,9 @@ from hil.model.dio import DigitalIO
 from hil.model.errors import UnknownFunction
 from hil.model.events import DoChanged
 from hil.model.params import ParameterStore
-from hil.model.timebase import MS, Scheduler
+from hil.model.timebase import Scheduler
 from hil.profile.params import ParamTable
+from hil.units import MS
 
 
 @pytest.fixture(scope="module")

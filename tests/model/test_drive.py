@@ -8,7 +8,7 @@ from hil.model.drive import Drive
 from hil.model.errors import ObjectError, OutOfRange, ReadOnly, UnknownFunction, UnknownParameter
 from hil.model.events import AlarmChanged, DoChanged
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS, S
+from hil.units import MS, S
 
 # Virtual bench wiring: EMGS (DI8, b-contact) closed = no emergency; BRKR on DO6.
 BENCH = {"P2.041": 0x0108}

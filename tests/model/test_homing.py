@@ -18,7 +18,7 @@ from hil.model.homing import attach_homing
 from hil.model.mechanics import Mechanics
 from hil.model.motion import counts_to_puu
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
+from hil.units import MS
 
 NL, PL, LO, HI, Z0 = -4.0, 4.0, -0.5, 0.5, 0.25
 STARTS = {"neg": -2.0, "on": 0.0, "pos": 2.0, "on_NL": -4.2, "on_PL": 4.2}

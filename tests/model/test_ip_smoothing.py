@@ -9,7 +9,7 @@ import pytest
 
 from hil.model.drive import Drive
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
+from hil.units import MS
 
 BENCH = {"P2.041": 0x0108}  # EMGS on DI8 (b contact) closed
 STEP_PUU = 1200  # one set-point jump; a multiple of every window below

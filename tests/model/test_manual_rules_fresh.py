@@ -15,8 +15,8 @@ from hil.model.drive import Drive
 from hil.model.errors import ModelError
 from hil.model.events import AlarmChanged
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
 from hil.profile.pr import encode, pr_params
+from hil.units import MS
 from tests.model.test_di_functions import enable
 
 PV, PT, PP = 3, 4, 1  # 6060h modes

@@ -15,7 +15,7 @@ import pytest
 
 from hil.model.drive import Drive
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
+from hil.units import MS
 from tests.model.test_pr import make, put, run
 
 REV_PUU = 100_000  # test_pr's bench: 100000 PUU per motor revolution

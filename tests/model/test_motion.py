@@ -15,7 +15,7 @@ from hil.model.motion import (
     rpm_to_counts_per_s,
     rpm_to_puu_per_s,
 )
-from hil.model.timebase import MS
+from hil.units import MS
 
 CPR = COUNTS_PER_REV
 

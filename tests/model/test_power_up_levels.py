@@ -12,7 +12,7 @@ import pytest
 from hil.model.cia402 import OPERATION_ENABLED, SWITCH_ON_DISABLED, SWITCHED_ON
 from hil.model.drive import Drive
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
+from hil.units import MS
 
 BENCH = {"P2.041": 0x0108}  # BRKR on DO6
 SHUTDOWN, SWITCH_ON, ENABLE = 0x06, 0x07, 0x0F  # controlword commands (L18272-18281)

@@ -11,8 +11,8 @@ import pytest
 from hil.model.drive import Drive
 from hil.model.errors import ModelError
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
 from hil.profile.pr import PrError, check_table, decode, encode, pr_params
+from hil.units import MS
 
 BENCH = {
     "P1.001": 0x0001,  # PR mode

@@ -17,7 +17,7 @@ from hil.model.errors import OutOfRange
 from hil.model.mechanics import COUNTS_PER_REV
 from hil.model.options import ModelOptions
 from hil.model.pulse_train import filter_max_hz
-from hil.model.timebase import MS, S
+from hil.units import MS, S
 
 BENCH = {"P2.041": 0x0108}  # BRKR on DO6; SON is DI1 (factory P2.010), EMGS DI8 b-contact
 

@@ -11,7 +11,7 @@ import pytest
 
 from hil.model.drive import Drive
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
+from hil.units import MS
 
 SHUTDOWN, SWITCH_ON, ENABLE = 0x06, 0x07, 0x0F  # L18272-18281
 

@@ -14,7 +14,7 @@ import pytest
 from hil.model.drive import Drive
 from hil.model.events import DoChanged
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
+from hil.units import MS
 
 # BRKR on DO6 (released 50 ms after servo on), DO.SON on DO2
 BENCH = {"P2.041": 0x0108, "P2.019": 0x0102, "P1.042": 50}

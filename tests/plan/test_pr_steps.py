@@ -7,8 +7,8 @@ import pytest
 from hil.bench.yamlio import Checker, PlanFileError, load_yaml_text
 from hil.drivers.delta_pr import DeltaPr, PrTableError
 from hil.model.drive import Drive
-from hil.model.timebase import MS
 from hil.plan.steps import parse_steps
+from hil.units import MS
 
 TEXT = """steps:
   - pr_table:

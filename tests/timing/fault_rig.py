@@ -25,7 +25,6 @@ from hil.faces.modbus_slave import ModbusSlave
 from hil.model.drive import Drive
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
 from hil.paths import fixture
 from hil.protocol import modbus as mb
 from hil.record.recorder import Recorder
@@ -33,6 +32,7 @@ from hil.timing.checker import check
 from hil.timing.source import RecordingSource
 from hil.timing.spec import load_spec
 from hil.transport.faults import CanMatch, FaultyCanBus, FaultyDio, FaultySerial
+from hil.units import MS
 from hil.virtual.model_tap import EPOCH_NS, ModelTap
 
 NODE = 1

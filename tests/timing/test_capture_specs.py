@@ -7,11 +7,11 @@ from __future__ import annotations
 import pytest
 
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
 from hil.paths import fixture
 from hil.timing.checker import check
 from hil.timing.source import RecordingSource
 from hil.timing.spec import load_spec
+from hil.units import MS
 from tests.timing.test_specs_on_model import assert_all_pass, assert_fails, run
 
 PARAMS = {"P2.020": 0x0116, "P2.021": 0x0000}  # DO3 CAP_OK (L15323); DO4 free for COMPARE

@@ -19,12 +19,12 @@ import pytest
 from hil.model.drive import Drive
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
 from hil.paths import fixture
 from hil.record.recorder import Recorder
 from hil.timing.checker import check
 from hil.timing.source import RecordingSource
 from hil.timing.spec import load_spec
+from hil.units import MS
 from hil.virtual.model_tap import ModelTap
 
 NL, PL, LO, HI, Z0 = -4.0, 4.0, -0.5, 0.5, 0.25

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
+from hil.units import MS
 from hil.virtual.model_tap import ModelTap
 from tests.timing.test_specs_on_model import assert_all_pass, assert_fails, run, verdicts
 

@@ -10,8 +10,8 @@ from pathlib import Path
 
 from hil.model.drive import Drive
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
 from hil.record.recorder import Recorder
+from hil.units import MS
 from hil.virtual.model_tap import ModelTap
 
 from .test_specs_on_model import BENCH, assert_all_pass, verdicts

@@ -8,12 +8,12 @@ from __future__ import annotations
 import pytest
 
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS
 from hil.paths import fixture
 from hil.profile.pr import encode
 from hil.timing.checker import check
 from hil.timing.source import RecordingSource
 from hil.timing.spec import load_spec
+from hil.units import MS
 from tests.timing.test_specs_on_model import assert_all_pass, assert_fails, run
 
 PARAMS = {

@@ -13,12 +13,12 @@ import pytest
 
 from hil.model.drive import Drive
 from hil.model.options import ModelOptions
-from hil.model.timebase import MS, S
 from hil.paths import fixture
 from hil.record.recorder import Recorder
 from hil.timing.checker import check
 from hil.timing.source import RecordingSource
 from hil.timing.spec import load_spec
+from hil.units import MS, S
 from hil.virtual.model_tap import ModelTap
 
 BENCH = {"P2.041": 0x0108}  # BRKR on DO6, as the default binding of the specs
