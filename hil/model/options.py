@@ -159,7 +159,7 @@ class ModelOptions:
     ocz_width_us: float = 100.0
     # OA/OB published as one segment per window of this many ms while the motor turns.
     output_window_ms: float = 10.0
-    # --- IP mode (issue 27, docs/group.md) ---
+    # --- IP mode (docs/group.md) ---
     # The IP section recommends P1.036 (S-curve) and P1.068 (moving filter) to smooth the
     # set-points (L17236-17238), while P1.068's own mode column lists PT/PR only (L8832):
     # "manual" applies both to IP set-points (P1.068 ms moving average, then a P1.036 ms one,
