@@ -1,14 +1,22 @@
 """Runs a model drive in real time and shares it safely between faces.
 
 `DriveHost` owns the lock every face holds while it touches the drive, and a ticker thread
-that advances the model clock to the monotonic clock every `period_s` (1 ms by default,
-absolute deadlines: docs/dev/feasibility.md §7) and then calls each face's `tick(now_ns)`.
-Model time starts at 0 when the host starts; `wall_ns(t)` maps it to epoch ns for records.
+that advances the model clock to the monotonic clock and then calls each face's
+`tick(now_ns)`. It wakes at every grid point of the model (`period_s`, 1 ms by default: the
+model's motion grid, so a motion step's outputs leave at their model time) and, between two,
+at the model's next timer (a brake delay, a DI filter, a capture latch): an edge a timer
+makes reaches the faces as late as the host's wake-up, not up to a period later
+(`timer_wakeups=False` is the plain ticker, kept as the benchmark's baseline:
+benchmarks/bench_edges.py). With `rt_priority` (or the environment variable
+`HIL_RT_PRIORITY`, 1-99) the ticker thread asks for `SCHED_FIFO` at that priority where the
+host allows it, and says so in the log either way. Model time starts at 0 when the host
+starts; `wall_ns(t)` maps it to epoch ns for records.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -20,10 +28,14 @@ log = logging.getLogger(__name__)
 class DriveHost:
     """Real-time owner of one `Drive`: lock, ticker thread, tick callbacks."""
 
-    def __init__(self, drive: Any, *, period_s: float = 0.001) -> None:
+    def __init__(self, drive: Any, *, period_s: float = 0.001,
+                 timer_wakeups: bool = True, rt_priority: int | None = None) -> None:
         self.drive = drive
         self.lock = threading.RLock()
         self.period_s = period_s
+        self.timer_wakeups = timer_wakeups
+        self.rt_priority = rt_priority if rt_priority is not None else _env_priority()
+        self.realtime = False  # SCHED_FIFO granted to the ticker thread
         self._ticks: list[Callable[[int], None]] = []
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -109,8 +121,48 @@ class DriveHost:
         if len(self.errors) > 100:
             del self.errors[:50]
 
+    def _next_wake(self, period: int) -> int:
+        """Model time of the next wake-up: the next grid point, or the model's next timer
+        if that comes first (read under the lock: it drops cancelled timers)."""
+        now = self.model_now()
+        nxt = (now // period + 1) * period
+        if self.timer_wakeups:
+            sched = getattr(self.drive, "sched", None)
+            if sched is not None:
+                with self.lock:
+                    due = sched.next_deadline()
+                if due is not None and now < due < nxt:
+                    nxt = due
+        return nxt
+
+    def _set_realtime(self) -> None:
+        prio = self.rt_priority
+        if not prio:
+            return
+        try:
+            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO,
+                                  os.sched_param(prio))
+        except (OSError, AttributeError, ValueError) as exc:
+            log.warning("drive host: SCHED_FIFO priority %d refused (%s): ticking at the "
+                        "normal priority", prio, exc)
+            return
+        self.realtime = True
+        log.info("drive host: ticker thread at SCHED_FIFO priority %d", prio)
+
     def _run(self) -> None:
+        self._set_realtime()
         period = int(self.period_s * 1e9)
+        if not self.timer_wakeups:
+            self._run_plain(period)
+            return
+        while not self._stop.is_set():
+            self.tick_once()
+            delay = self._next_wake(period) - self.model_now()
+            if delay > 0:  # late (a loaded host): tick at once, advancing to now, no burst
+                time.sleep(delay / 1e9)
+
+    def _run_plain(self, period: int) -> None:
+        """A tick every `period` on absolute deadlines, at any phase of the model's grid."""
         deadline = time.monotonic_ns()
         while not self._stop.is_set():
             deadline += period
@@ -120,6 +172,21 @@ class DriveHost:
                 time.sleep(delay / 1e9)
             elif delay < -50 * period:  # fell far behind (suspended?): resynchronise
                 deadline = time.monotonic_ns()
+
+
+def _env_priority() -> int | None:
+    raw = os.environ.get("HIL_RT_PRIORITY", "").strip()
+    if not raw:
+        return None
+    try:
+        prio = int(raw)
+    except ValueError:
+        log.warning("HIL_RT_PRIORITY=%r is not an integer 1-99: ignored", raw)
+        return None
+    if not 1 <= prio <= 99:
+        log.warning("HIL_RT_PRIORITY=%d is outside 1-99: ignored", prio)
+        return None
+    return prio
 
 
 class _SyncedLock:
