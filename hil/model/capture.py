@@ -1,6 +1,7 @@
 """High-speed position CAPTURE (A3 manual §7.2.2, L5148-5176; P5.036-P5.039 L11471-11542).
 
-`attach_capture(core, pr)` wires a `Capture` into a drive (core.py). The rules, each from the manual
+`attach_capture(core, pr=...)` wires a `Capture` into a drive (core.py). The rules, each
+from the manual
 (choices: docs/manual-choices.md#capture, `CaptureOptions` under `ModelOptions.extra["capture"]`):
 
 * DI7 triggers, in hardware, in 5 µs (L5150): the terminal edge before the P2.009 filter; the
@@ -271,8 +272,8 @@ class Capture:
             self.stop()  # P5.038 stays 0: "為零時抓取結束" (L5155)
 
 
-def attach_capture(drive: DriveCore, pr: PrEngine, options: CaptureOptions | None = None
-                   ) -> Capture:
+def attach_capture(drive: DriveCore, options: CaptureOptions | None = None, *,
+                   pr: PrEngine) -> Capture:
     """Create the CAPTURE function of `drive` and wire its parameters and DI7."""
     cap = Capture(drive, options or CaptureOptions.from_dict(drive.options.extra.get("capture")),
                   pr)

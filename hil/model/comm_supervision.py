@@ -18,6 +18,7 @@ Times are ns: `sent` is the sender's stamp of a frame, `now` the model time it a
 
 from __future__ import annotations
 
+import logging
 from collections import deque
 from collections.abc import Callable
 
@@ -25,6 +26,8 @@ from hil.model.options import ModelOptions
 from hil.units import MS, US
 
 ERROR_PASSIVE = 128  # AL185: "Rx/Tx error counter > 128" (L20029)
+
+log = logging.getLogger(__name__)
 
 
 class CommSupervision:
@@ -40,6 +43,13 @@ class CommSupervision:
         self._sdo_answered = 0
         self._pdo_prev: dict[int, tuple[int, int]] = {}  # RPDO COB-ID -> (sent, processed)
         self.reset()
+
+    def _alarm(self, code: str) -> None:
+        """Raise `code`; a failing alarm path must not stop the supervision or the face."""
+        try:
+            self._raise(code)
+        except Exception:
+            log.exception("communication supervision: raising %s failed", code)
 
     def reset(self) -> None:
         """NMT reset / power-on: monitoring starts anew (the error counter is the
@@ -58,7 +68,7 @@ class CommSupervision:
         if prev is None or opts.dev_ignore_sdo_flood:
             return
         if sent - prev < opts.sdo_flood_window_us * US and sent < self._sdo_answered:
-            self._raise("AL111")
+            self._alarm("AL111")
 
     def sdo_answered(self, t: int) -> None:
         """The answer left (or the request needed none) at wall time `t`: the buffer is free."""
@@ -71,7 +81,7 @@ class CommSupervision:
         if prev is None or opts.dev_ignore_pdo_overflow:
             return
         if 0 <= sent - prev[0] < opts.pdo_overflow_window_us * US and sent < prev[1]:
-            self._raise("AL112")
+            self._alarm("AL112")
 
     def rpdo_processed(self, cob: int, sent: int, t: int) -> None:
         self._pdo_prev[cob] = (sent, t)
@@ -84,7 +94,7 @@ class CommSupervision:
         limit = opts.dev_bus_error_limit or ERROR_PASSIVE
         if self.rx_error_counter > limit and not self._bus_error_raised:
             self._bus_error_raised = True
-            self._raise("AL185")
+            self._alarm("AL185")
 
     def valid_frame(self) -> None:
         """A valid frame lowers the counter (ISO 11898-1 fault confinement)."""
@@ -121,7 +131,7 @@ class CommSupervision:
             self.life_deadline = None
             out = True
         if out:
-            self._raise("AL180")
+            self._alarm("AL180")
         return out
 
     # ---------------------------------------------------------------- SYNC (IP mode)
@@ -152,7 +162,7 @@ class CommSupervision:
             e_ns = self._p3009_e() * 10 * US
             early_limit, fail_tol = period_ns - e_ns, e_ns
         if dt < early_limit and not opts.dev_ignore_early_sync:
-            self._raise("AL3E2")  # SYNC too early (L20159-20163)
+            self._alarm("AL3E2")  # SYNC too early (L20159-20163)
             return
         window = max(1, int(opts.sync_fail_window))
         self._sync_intervals.append(dt)
@@ -161,7 +171,7 @@ class CommSupervision:
         if len(self._sync_intervals) == window:
             mean = sum(self._sync_intervals) / window
             if abs(mean - period_ns) > fail_tol and not opts.dev_ignore_sync_cycle:
-                self._raise("AL301")  # synchronisation failure (L20123-20127)
+                self._alarm("AL301")  # synchronisation failure (L20123-20127)
                 self._sync_intervals.clear()
 
     def sync_timed_out(self, now: int, monitored: bool) -> None:
@@ -170,7 +180,7 @@ class CommSupervision:
             return
         self.sync_deadline = None  # re-armed by the next SYNC
         if monitored:
-            self._raise("AL3E3")  # SYNC timeout in IP mode (L20165-20169)
+            self._alarm("AL3E3")  # SYNC timeout in IP mode (L20165-20169)
             self._sync_prev_sent = None
             self._sync_intervals.clear()
 

@@ -1,6 +1,7 @@
 """High-speed position COMPARE (A3 manual §7.2.3, L5186-5215; P5.056-P5.059 L11692-11781).
 
-`attach_compare(core, capture, pr)` wires a `Compare` into a drive (after `attach_capture`). Rules
+`attach_compare(core, capture=..., pr=...)` wires a `Compare` into a drive (after
+`attach_capture`). Rules
 (choices: docs/manual-choices.md#capture, `CaptureOptions`):
 
 * The compare axis (P5.059.Y, L11751-11756): 0 the capture axis (then P5.039.Y is locked),
@@ -257,8 +258,8 @@ class Compare:
         d.dio.force_do(COMPARE_DO, self._idle_level() if self.running else None)
 
 
-def attach_compare(drive: DriveCore, capture: Capture, pr: PrEngine,
-                   options: CaptureOptions | None = None) -> Compare:
+def attach_compare(drive: DriveCore, options: CaptureOptions | None = None, *,
+                   capture: Capture, pr: PrEngine) -> Compare:
     """Create the COMPARE function of `drive` and wire its parameters."""
     cmp_ = Compare(drive, options or capture.options, capture, pr)
     capture.compare = cmp_

@@ -257,7 +257,7 @@ class DiFunctions:
             self._cclr_step()
 
 
-def attach_di_functions(drive: DriveCore, absolute: AbsoluteEncoder) -> DiFunctions:
+def attach_di_functions(drive: DriveCore, *, absolute: AbsoluteEncoder) -> DiFunctions:
     """Create the DI functions of `drive` and wire their triggers and parameters."""
     fns = DiFunctions(drive, absolute)
     dio = drive.dio

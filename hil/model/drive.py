@@ -121,13 +121,13 @@ class Drive:
         for n, closed in (inputs or {}).items():
             self.dio.set_input(n, closed, settled=True)  # present before power-up
         self._update_sensors(force=True)
-        self.homing = attach_homing(self, self.absolute)  # homing methods (docs/homing.md)
-        self.pr = attach_pr(self, self.homing)  # PR#1-#99 (chapter 7, docs/pr.md)
-        self.capture = attach_capture(self, self.pr)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
+        self.homing = attach_homing(self, absolute=self.absolute)  # homing methods (docs/homing.md)
+        self.pr = attach_pr(self, homing=self.homing)  # PR#1-#99 (chapter 7, docs/pr.md)
+        self.capture = attach_capture(self, pr=self.pr)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
         # COMPARE on DO4 (§7.2.3, docs/capture.md)
-        self.compare = attach_compare(self, self.capture, self.pr)
+        self.compare = attach_compare(self, capture=self.capture, pr=self.pr)
         # PFQS, JOG, TRQLM/SPDLM, ZCLAMP, CCLR, GAINUP
-        self.difunc = attach_di_functions(self, self.absolute)
+        self.difunc = attach_di_functions(self, absolute=self.absolute)
         self.pulse = attach_pulse_train(self)  # PT input, OA/OB/OZ output (docs/pulse.md)
         self.difunc.pulse = self.pulse  # CCLR clears the PT error too (L9749)
         self._boot()
@@ -677,7 +677,7 @@ class Drive:
         """Motion in whole steps of the drive's own grid (1 ms: the command generator's
         cycle, L4178, L4909), whatever the caller's slices: between two grid points the
         axis keeps the state of the last one, and a command given inside a cycle acts from
-        the next one (`_commit_cycle`). So every slicing of the same scenario gives the same
+        the next one (`commit_cycle`). So every slicing of the same scenario gives the same
         positions at every grid point (tests/model/test_manual_rules_wave3.py)."""
         sched = self.sched
         step = self.step_ns

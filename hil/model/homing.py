@@ -1,6 +1,7 @@
 """Homing that moves the axis: CANopen (6098h, L18838-18869) and PR mode (P5.004, manual chapter 7).
 
-`attach_homing(core)` wires a `Homing` into a drive through its public pieces only (core.py):
+`attach_homing(core, absolute=...)` wires a `Homing` into a drive through its public pieces
+only (core.py):
 
 * CANopen: `drive.cia402.start_homing` / `stop_homing` (6040h bit 4 edges in HM, halt,
   leaving OPERATION ENABLED); result through `cia402.set_homing_status(attained, error)`
@@ -465,8 +466,8 @@ def _accel_ms(get: Any, index: int) -> float:
     return float(get(f"P5.{20 + index:03d}"))
 
 
-def attach_homing(drive: DriveCore, absolute: AbsoluteEncoder | None = None,
-                  options: HomingOptions | None = None) -> Homing:
+def attach_homing(drive: DriveCore, options: HomingOptions | None = None, *,
+                  absolute: AbsoluteEncoder | None = None) -> Homing:
     """Create the homing engine of `drive` and wire it through the drive's public pieces."""
     homing = Homing(drive, options, absolute)
     cia = drive.cia402

@@ -1,6 +1,7 @@
 """The PR executor (A3 manual §7.1.5-7.1.6): triggers, scheduler, executor, motion generator.
 
-`attach_pr(core, homing)` wires a `PrEngine` into a drive through its public pieces (core.py), like
+`attach_pr(core, homing=...)` wires a `PrEngine` into a drive through its public pieces
+(core.py), like
 `homing.attach_homing`. PR#0 stays in `homing.py`; its PATH (P6.000.YX) continues here.
 
 Rules, each from the manual (choices: docs/manual-choices.md#pr, `PrOptions`):
@@ -652,8 +653,8 @@ def _pos_number(dio: Any) -> int:
     return sum(1 << i for i, f in enumerate(POS_BITS) if dio.function_active(f))
 
 
-def attach_pr(drive: DriveCore, homing: Homing | None = None,
-              options: PrOptions | None = None) -> PrEngine:
+def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
+              homing: Homing | None = None) -> PrEngine:
     """Create the PR engine of `drive` and wire triggers, hooks and parameters."""
     pr = PrEngine(drive, options, homing)
     dio = drive.dio

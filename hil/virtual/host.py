@@ -36,6 +36,8 @@ class DriveHost:
         self.timer_wakeups = timer_wakeups
         self.rt_priority = rt_priority if rt_priority is not None else _env_priority()
         self.realtime = False  # SCHED_FIFO granted to the ticker thread
+        self._wake: threading.Event | None = None  # set to wake the ticker early (poke)
+        self._planned = 0  # model time of the ticker's planned wake-up
         self._ticks: list[Callable[[int], None]] = []
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -74,7 +76,10 @@ class DriveHost:
         """Bring the model up to now, then run `fn` under the lock."""
         with self.lock:
             self._advance()
-            return fn(*args, **kwargs)
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.poke()
 
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self) -> DriveHost:
@@ -122,18 +127,35 @@ class DriveHost:
             del self.errors[:50]
 
     def _next_wake(self, period: int) -> int:
-        """Model time of the next wake-up: the next grid point, or the model's next timer
-        if that comes first (read under the lock: it drops cancelled timers)."""
+        """Model time of the next wake-up: the next point of the host's period and of the
+        model's motion grid, or the model's next timer if that comes first; a timer already
+        due (armed during the tick) means at once. Read under the lock: the scheduler drops
+        cancelled timers as it is read, and faces arm timers from their threads."""
         now = self.model_now()
         nxt = (now // period + 1) * period
+        step = getattr(self.drive, "step_ns", None)
+        if isinstance(step, int) and step > 0:
+            nxt = min(nxt, (now // step + 1) * step)
         if self.timer_wakeups:
             sched = getattr(self.drive, "sched", None)
             if sched is not None:
                 with self.lock:
                     due = sched.next_deadline()
-                if due is not None and now < due < nxt:
-                    nxt = due
+                    if due is not None and due > self.drive.now and due < nxt:
+                        nxt = due
+                    self._planned = nxt
         return nxt
+
+    def poke(self) -> None:
+        """Wake the ticker now if the model's next timer comes before its planned wake-up
+        (a face armed one from its own thread). Call with the lock held."""
+        if not self.timer_wakeups or self._wake is None:
+            return
+        sched = getattr(self.drive, "sched", None)
+        due = sched.next_deadline() if sched is not None else None
+        if due is not None and due < self._planned:
+            self._planned = due
+            self._wake.set()
 
     def _set_realtime(self) -> None:
         prio = self.rt_priority
@@ -155,11 +177,20 @@ class DriveHost:
         if not self.timer_wakeups:
             self._run_plain(period)
             return
+        wake = self._wake = threading.Event()
+        behind = 0
         while not self._stop.is_set():
             self.tick_once()
             delay = self._next_wake(period) - self.model_now()
-            if delay > 0:  # late (a loaded host): tick at once, advancing to now, no burst
-                time.sleep(delay / 1e9)
+            if delay > 0:
+                behind = 0
+                if wake.wait(delay / 1e9):
+                    wake.clear()
+            else:  # late (a loaded host): tick at once, advancing to now, no burst; but
+                behind += 1  # never spin: at SCHED_FIFO that would hold a core
+                if behind >= 10:
+                    behind = 0
+                    time.sleep(period / 10e9)
 
     def _run_plain(self, period: int) -> None:
         """A tick every `period` on absolute deadlines, at any phase of the model's grid."""
@@ -205,7 +236,10 @@ class _SyncedLock:
         return ok
 
     def release(self) -> None:
-        self._host.lock.release()
+        try:
+            self._host.poke()  # a timer the face armed may come before the planned wake-up
+        finally:
+            self._host.lock.release()
 
     def __enter__(self) -> _SyncedLock:
         self.acquire()

@@ -46,6 +46,32 @@ def test_later_and_cancelled_timers_and_the_plain_ticker_keep_the_grid() -> None
     assert plain._next_wake(MS) == 3 * MS
 
 
+def test_a_timer_armed_during_the_tick_and_already_due_means_at_once() -> None:
+    """The tick advanced the model to 2.3 ms; the host decides at 2.4 ms; a timer at 2.35 ms
+    has not fired: the host ticks again at once instead of sleeping to the grid."""
+    host = _host_at(2_400 * US)
+    host.drive.now = 2_300 * US
+    host.drive.sched.at(2_350 * US, lambda: None)
+    assert host._next_wake(MS) == 2_350 * US  # <= model_now: no sleep
+
+
+def test_a_timer_a_face_arms_wakes_the_sleeping_ticker() -> None:
+    import threading
+
+    host = _host_at(2_300 * US)
+    host._wake = threading.Event()
+    assert host._next_wake(MS) == 3 * MS  # planned: the grid
+    host.drive.sched.at(2_800 * US, lambda: None)  # armed from a face's thread
+    with host.lock:
+        host.poke()
+    assert host._wake.is_set()
+    host._wake.clear()
+    host.drive.sched.at(2_900 * US, lambda: None)  # not earlier than the new plan
+    with host.lock:
+        host.poke()
+    assert not host._wake.is_set()
+
+
 def test_a_filtered_di_edge_reaches_a_subscriber_at_its_model_time() -> None:
     """On a real host: SON through the 3 ms P2.009 filter; DO2 = SON (table 8.2) changes
     at the filter's model time, and the host delivers it well before the next grid point

@@ -60,7 +60,7 @@ def _core_with_capture():
     core = SmallCore()
     pr = SimpleNamespace(capture_puu=0, triggered=[])
     pr.trigger = lambda n, why: pr.triggered.append((n, why))
-    cap = attach_capture(core, pr)
+    cap = attach_capture(core, pr=pr)
     return core, pr, cap
 
 
@@ -89,7 +89,7 @@ def test_capture_on_a_small_core_latches_into_the_shared_array() -> None:
 
 def test_compare_on_a_small_core_reads_its_target_from_the_shared_array() -> None:
     core, pr, cap = _core_with_capture()
-    cmp_ = attach_compare(core, cap, pr)
+    cmp_ = attach_compare(core, capture=cap, pr=pr)
     assert cap.compare is cmp_
     core.array[20] = 1234
     core.params.write("P5.056", 20)

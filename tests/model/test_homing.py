@@ -39,7 +39,7 @@ def mech(s: float, **kw: float | None) -> Mechanics:
 def make(s: float = 0.0, homing: dict | None = None, m: Mechanics | None = None, **params: int):
     opts = ModelOptions(extra={"homing": homing or {}})
     drive = Drive(options=opts, mechanics=m or mech(s), inputs={8: True}, params=BENCH | params)
-    return drive, attach_homing(drive, drive.absolute)
+    return drive, attach_homing(drive, absolute=drive.absolute)
 
 
 def home_rev(h, s: float) -> float:
@@ -227,7 +227,7 @@ def test_torque_homing_into_the_hard_stop(y: int, expected: float) -> None:
         options=ModelOptions(), mechanics=mech(s), inputs={6: True, 7: True, 8: True},
         sensors={"ORGP": (9, "no")}, params=BENCH | p,
     )  # fmt: skip
-    h = attach_homing(drive, drive.absolute)
+    h = attach_homing(drive, absolute=drive.absolute)
     drive.set_di(1, True)
     drive.advance(100 * MS)
     drive.set_di(10, True)
