@@ -90,6 +90,8 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
         self.clock = clock
         self.sdo_timeout_ns = sdo_timeout_ms * MS
         self.comm = drive.comm  # the drive's supervision of this traffic (AL111 ... AL3E3)
+        # a failing alarm path is counted and logged here, as any other failure of the face
+        self.comm.on_error = lambda code, exc: self.last_resort(f"alarm {code}", exc)
         # (frame, its sender stamp, model time it acted) per frame handled: delivery delay
         self.on_frame = on_frame
         self.on_nmt_reset = on_nmt_reset or getattr(drive, "nmt_reset", None)

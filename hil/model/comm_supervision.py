@@ -18,7 +18,6 @@ Times are ns: `sent` is the sender's stamp of a frame, `now` the model time it a
 
 from __future__ import annotations
 
-import logging
 from collections import deque
 from collections.abc import Callable
 
@@ -26,8 +25,6 @@ from hil.model.options import ModelOptions
 from hil.units import MS, US
 
 ERROR_PASSIVE = 128  # AL185: "Rx/Tx error counter > 128" (L20029)
-
-log = logging.getLogger(__name__)
 
 
 class CommSupervision:
@@ -37,6 +34,9 @@ class CommSupervision:
                  p3009: Callable[[], int]) -> None:
         self.options = options
         self._raise = raise_alarm
+        # where a failing alarm path is reported (the CANopen face sets its last resort);
+        # without one the exception propagates to the caller
+        self.on_error: Callable[[str, Exception], None] | None = None
         self._p3009 = p3009
         self.rx_error_counter = 0  # receive error counter (AL185)
         self._bus_error_raised = False
@@ -45,11 +45,14 @@ class CommSupervision:
         self.reset()
 
     def _alarm(self, code: str) -> None:
-        """Raise `code`; a failing alarm path must not stop the supervision or the face."""
+        """Raise `code`; a failing alarm path is reported to `on_error` (counted and logged
+        by the face), so the supervision and the rest of the face's work go on."""
         try:
             self._raise(code)
-        except Exception:
-            log.exception("communication supervision: raising %s failed", code)
+        except Exception as exc:
+            if self.on_error is None:
+                raise
+            self.on_error(code, exc)
 
     def reset(self) -> None:
         """NMT reset / power-on: monitoring starts anew (the error counter is the

@@ -24,6 +24,9 @@ from typing import Any
 
 log = logging.getLogger(__name__)
 
+# the ticker never sleeps less between two late ticks, nor wakes on a finer grid
+MIN_WAKE_NS = 100_000
+
 
 class DriveHost:
     """Real-time owner of one `Drive`: lock, ticker thread, tick callbacks."""
@@ -91,6 +94,8 @@ class DriveHost:
 
     def stop(self) -> None:
         self._stop.set()
+        if self._wake is not None:
+            self._wake.set()  # not a period later
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
@@ -134,14 +139,14 @@ class DriveHost:
         now = self.model_now()
         nxt = (now // period + 1) * period
         step = getattr(self.drive, "step_ns", None)
-        if isinstance(step, int) and step > 0:
+        if isinstance(step, int) and step >= MIN_WAKE_NS:  # a finer grid would be a busy loop
             nxt = min(nxt, (now // step + 1) * step)
         if self.timer_wakeups:
             sched = getattr(self.drive, "sched", None)
             if sched is not None:
                 with self.lock:
                     due = sched.next_deadline()
-                    if due is not None and due > self.drive.now and due < nxt:
+                    if due is not None and due < nxt:  # due already: the next tick fires it
                         nxt = due
                     self._planned = nxt
         return nxt
@@ -151,11 +156,14 @@ class DriveHost:
         (a face armed one from its own thread). Call with the lock held."""
         if not self.timer_wakeups or self._wake is None:
             return
-        sched = getattr(self.drive, "sched", None)
-        due = sched.next_deadline() if sched is not None else None
-        if due is not None and due < self._planned:
-            self._planned = due
-            self._wake.set()
+        try:
+            sched = getattr(self.drive, "sched", None)
+            due = sched.next_deadline() if sched is not None else None
+            if due is not None and due < self._planned:
+                self._planned = due
+                self._wake.set()
+        except Exception as exc:  # never in place of the caller's own result or error
+            self._note_error("poke", exc)
 
     def _set_realtime(self) -> None:
         prio = self.rt_priority
@@ -178,19 +186,22 @@ class DriveHost:
             self._run_plain(period)
             return
         wake = self._wake = threading.Event()
-        behind = 0
+        late = False
         while not self._stop.is_set():
             self.tick_once()
-            delay = self._next_wake(period) - self.model_now()
+            try:
+                delay = self._next_wake(period) - self.model_now()
+            except Exception as exc:  # a broken drive must not stop the clock
+                self._note_error("next wake-up", exc)
+                delay = period
             if delay > 0:
-                behind = 0
+                late = False
                 if wake.wait(delay / 1e9):
                     wake.clear()
-            else:  # late (a loaded host): tick at once, advancing to now, no burst; but
-                behind += 1  # never spin: at SCHED_FIFO that would hold a core
-                if behind >= 10:
-                    behind = 0
-                    time.sleep(period / 10e9)
+            elif late:  # late twice in a row (a loaded host, a stuck model): never spin,
+                time.sleep(MIN_WAKE_NS / 1e9)  # which at SCHED_FIFO would hold a core
+            else:  # late once: tick at once, advancing to now, no burst
+                late = True
 
     def _run_plain(self, period: int) -> None:
         """A tick every `period` on absolute deadlines, at any phase of the model's grid."""

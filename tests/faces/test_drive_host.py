@@ -55,6 +55,15 @@ def test_a_timer_armed_during_the_tick_and_already_due_means_at_once() -> None:
     assert host._next_wake(MS) == 2_350 * US  # <= model_now: no sleep
 
 
+def test_a_timer_armed_at_the_model_time_itself_means_at_once() -> None:
+    """`Scheduler.at` moves a past deadline up to now: a timer at drive.now is due too."""
+    host = _host_at(2_400 * US)
+    host.drive.now = 2_300 * US
+    host.drive.sched.now = 2_300 * US
+    host.drive.sched.at(1_000 * US, lambda: None)  # in the past: due at 2.3 ms
+    assert host._next_wake(MS) == 2_300 * US
+
+
 def test_a_timer_a_face_arms_wakes_the_sleeping_ticker() -> None:
     import threading
 

@@ -88,3 +88,23 @@ def test_sync_rules_in_ip_mode() -> None:
         idle.sync(k * 100 * US, k * 100 * US, period, monitored=False)
     idle.sync_timed_out(10 * period, monitored=False)
     assert quiet == []
+
+
+def test_a_failing_alarm_path_is_reported_and_the_supervision_goes_on() -> None:
+    def broken(code: str) -> None:
+        raise RuntimeError(f"cannot raise {code}")
+
+    sup = CommSupervision(ModelOptions(), broken, lambda: 0x5055)
+    sup.heartbeat(0, 100, bootup=False)
+    try:
+        sup.timed_out(101 * MS)
+    except RuntimeError:
+        pass
+    else:
+        raise AssertionError("without an error sink the failure must propagate")
+    seen: list[tuple[str, str]] = []
+    sup.on_error = lambda code, exc: seen.append((code, str(exc)))
+    for _ in range(17):
+        sup.error_frame()
+    assert seen == [("AL185", "cannot raise AL185")]
+    assert sup.rx_error_counter == 136  # counting went on
