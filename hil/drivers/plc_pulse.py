@@ -31,6 +31,8 @@ from typing import Any
 from hil import clock
 from hil.units import MS, S
 
+EXT_POLL_S = 0.0002  # how often a running segment looks at EXT / abort on the wall clock
+
 MAX_STEPS = 250  # 001:26
 MAX_DRVC = 8  # 001:40
 OUTPUT_MAX_HZ = {"single": 200_000, "differential": 920_000}  # 001:14
@@ -422,7 +424,9 @@ class PulseMaster:
         if timeout_ns is not None:
             dur = min(dur, timeout_ns)
         pred = (lambda: self._abort or until()) if until else (lambda: self._abort)
-        hit = clock.wait_for(pred, dur / S)
+        # EXT and abort act at once (001:28): on the wall clock the lines are looked at every
+        # 0.2 ms (a PLC scan), not at the 2 ms default of a harness wait
+        hit = clock.wait_for(pred, dur / S, poll_s=EXT_POLL_S)
         self._close_segment()
         return bool(hit)
 
