@@ -332,6 +332,9 @@ class Scan:
     error_offset: int | None
     size: int
     corrupt: bool = False  # the broken record was whole but unreadable (not merely cut short)
+    # an unreadable chunk's first log time (its header was readable): every message logged
+    # before it was read, none from it on
+    cut_log_ns: int | None = None
 
 
 def _parse(cls: Any, body: bytes) -> Any:
@@ -394,9 +397,11 @@ def scan(data: bytes) -> Scan:
             out.error = f"record (opcode 0x{op:02x}) at offset {off} truncated: needs {ln} bytes"
             out.error_offset = off
             break
+        c_min: int | None = None
         try:
             if op == Opcode.CHUNK:
                 _c_min, _c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(data, body)
+                c_min = _c_min
                 p = body + 28
                 (clen,) = struct.unpack_from("<I", data, p)
                 comp = data[p + 4 : p + 4 + clen].decode()
@@ -435,6 +440,7 @@ def scan(data: bytes) -> Scan:
             out.error = f"{what} at offset {off} unreadable: {exc}"
             out.error_offset = off
             out.corrupt = True
+            out.cut_log_ns = c_min
             break
         off = end
     return out

@@ -114,6 +114,12 @@ class Recording:
         return self._scan.corrupt
 
     @property
+    def cut_log_ns(self) -> int | None:
+        """For a damaged file: the log time from which nothing was read (the unreadable
+        chunk's first message), if its header said so; else None."""
+        return self._scan.cut_log_ns
+
+    @property
     def size(self) -> int:
         return self._scan.size
 

@@ -96,6 +96,8 @@ class Occ:
 class Missing:
     why: str
     root: bool = False  # an event with no `after`/`before` never happened: no such scenario
+    # the search ran past the end of what a damaged recording let be read: unknown, not absent
+    cut: bool = False
 
 
 @dataclass
@@ -573,6 +575,11 @@ class Scope:
             return occs[0]
         span = min(hi, ctx.end) - (anchor.t if anchor else max(lo, ctx.start))
         after = f" after {ctx.label(ev.after)}" if ev.after else ""
+        cut = getattr(ctx.source, "cut_ns", None)
+        if cut is not None and hi > cut:
+            return Missing(f"expected {ctx.expectation(ev.name)}{after}; not seen in the "
+                           f"{_dur(max(span, 0))} before the recording's damage, and what "
+                           "followed could not be read", root=not ev.after, cut=True)
         return Missing(f"expected {ctx.expectation(ev.name)}{after}; it never did in "
                        f"{_dur(max(span, 0))}", root=not ev.after)
 
@@ -701,6 +708,8 @@ def _judge(ctx: Context, c: ConstraintDef, sc: Scope) -> Verdict:
         if ref.root:
             return Verdict(**base, status="skipped", t_ns=t_ref,
                            message=f"not applicable: {ref.why}")
+        if ref.cut and c.kind == "window":
+            return Verdict(**base, status="inconclusive", t_ns=t_ref, message=ref.why)
         status = "fail" if c.kind == "window" else "skipped"
         return Verdict(**base, status=status, t_ns=t_ref, message=ref.why)
     assert ref is not None
@@ -744,7 +753,7 @@ def _judge_window(ctx, c, sc, f: Occ, base) -> Verdict:
     common = dict(base, t_ns=f.t, from_ns=f.t, window_ms=(lo, hi),
                   window_expr=c.window.text(), values=used)
     if isinstance(to, Missing):
-        return Verdict(**common, status="fail", message=to.why)
+        return Verdict(**common, status="inconclusive" if to.cut else "fail", message=to.why)
     d = _ms(to.t - f.t)
     dlo, dhi = d - _ms(to.res), d + _ms(f.res)
     flo = -math.inf if lo is None else lo

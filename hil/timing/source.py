@@ -153,12 +153,23 @@ class RecordingSource(MemorySource):
         try:
             msgs: dict[str, list[tuple[int, dict]]] = {}
             wanted = list(topics) if topics is not None else None
+            lag = 0  # the largest publish-to-log delay read
             for topic, log_t, pub_t, data in rec.messages(topics=wanted):
                 if until_log_ns is not None and log_t > until_log_ns:
                     continue
                 t = pub_t if time == "publish" and pub_t else log_t
+                lag = max(lag, log_t - t)
                 msgs.setdefault(topic, []).append((int(t), data if isinstance(data, dict) else
                                                    {"value": data}))
+            #: a damaged file: the time (of this source's clock) up to which every message
+            #: is known to have been read; what came later is dropped, so nothing is judged
+            #: on a part of the recording that lost some of its messages (None: whole file)
+            self.cut_ns: int | None = None
+            cut = rec.cut_log_ns if rec.corrupt else None
+            if cut is not None:
+                self.cut_ns = cut - lag  # a message stamped this late may be in the lost chunk
+                for topic, lst in msgs.items():
+                    msgs[topic] = [m for m in lst if m[0] < self.cut_ns]
             self.meta = _metadata(rec)
             res = _resolutions(rec, self.meta)
             #: the first broken record (None if the file is whole) and whether it is damage

@@ -72,6 +72,21 @@ def test_corrupt_middle_chunk_is_incomplete_not_pass(recording, tmp_path, capsys
     assert f"damaged: chunk at offset {off}" in capsys.readouterr().err
 
 
+def test_no_damaged_chunk_turns_the_passing_run_into_a_fail_or_a_pass(recording, tmp_path,
+                                                                         capsys):
+    """Whichever chunk is lost (the recorder closes one every 50 ms of wall time, so which
+    events share a chunk varies from run to run), what was lost is unknown, not absent: an
+    event expected after the damage is inconclusive, never a FAIL, and the run incomplete."""
+    n = len(chunk_offsets(recording.read_bytes()))
+    codes = {}
+    for which in range(n):
+        bad = tmp_path / f"bad{which}.mcap"
+        corrupt(recording, bad, which)
+        codes[which] = hil(["check", str(bad)])
+        capsys.readouterr()
+    assert set(codes.values()) == {4}, codes
+
+
 def test_spec_without_data_is_not_a_pass(recording, capsys):
     """The brake recording has no STO event: `--spec sto` judges nothing."""
     assert hil(["check", str(recording), "--spec", "sto"]) == 4
@@ -126,3 +141,33 @@ def test_cut_recording_of_a_killed_run_is_incomplete_not_pass(recording, tmp_pat
     cut.write_bytes(data[: offsets[2]])  # two whole chunks, then the file ends
     assert hil(["check", str(cut)]) == 4
     assert "truncated (no footer" in capsys.readouterr().err
+
+
+def test_a_damaged_chunk_cuts_the_source_where_messages_may_be_missing(tmp_path):
+    """One message per chunk, each published 5 ms before it was logged; chunk 5 (logged at
+    60 ms) unreadable: nothing published from 55 ms on is judged, as a message published
+    then may have been in the lost chunk."""
+    import json
+    import os
+
+    from hil.timing.source import RecordingSource
+
+    path = tmp_path / "cut.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=1)
+        w.start()
+        sid = w.register_schema("hil.Any", "jsonschema", b'{"type": "object"}')
+        cid = w.register_channel("/x", "json", sid, {})
+        for k in range(1, 11):
+            t = k * 10_000_000
+            data = json.dumps({"v": k, "pad": os.urandom(120).hex()}).encode()
+            w.add_message(cid, log_time=t, publish_time=t - 5_000_000, data=data)
+        w.finish()
+    chunks = chunk_offsets(path.read_bytes())
+    assert len(chunks) == 10
+    bad = tmp_path / "bad.mcap"
+    corrupt(path, bad, 5)
+    src = RecordingSource(bad)
+    assert src.corrupt and src.cut_ns == 55_000_000
+    assert [m["v"] for _t, m in src.messages("/x")] == [1, 2, 3, 4, 5]
+    assert RecordingSource(path).cut_ns is None  # a whole file is not cut

@@ -401,3 +401,13 @@ def test_message_event_needs_a_topic_signal():
         "  first: {message: SYNC,", "  first: {message: NOT_GO,")
     with pytest.raises(Exception, match=r"not read from a topic"):
         loads_spec(bad)
+
+
+def test_a_brake_release_lost_with_a_damaged_chunk_is_inconclusive_not_a_fail():
+    """A recording damaged at 150 ms (hil.timing.source: `cut_ns`): BRKR's rise, due after
+    SON accepted at 102 ms, may be in the part that could not be read. Unknown, not absent."""
+    src = servo_on([None])
+    assert by_name(check(SPECS["servo_on_brake"], src), BRAKE_ON)[0].status == "fail"
+    src.cut_ns = 150_000_000
+    v = by_name(check(SPECS["servo_on_brake"], src), BRAKE_ON)[0]
+    assert v.status == "inconclusive" and "could not be read" in v.message
