@@ -362,8 +362,7 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
             self._sdo_abort(e.index, e.sub, cop.ABORT_TIMEOUT)
         if self.state != "OPERATIONAL":
             return
-        if self.comm.sync_deadline is not None and now > self.comm.sync_deadline:
-            self.comm.sync_timed_out(now, self._ip_sync_monitored())  # AL3E3
+        self.comm.sync_timed_out(now, self._ip_sync_monitored)  # AL3E3
         for n in range(4):
             if self._tpdo_active(n) and self._values[(0x1800 + n, 2)] >= 254:
                 self._event_tpdo(n, now)

@@ -49,6 +49,7 @@ stage itself belongs to the drive (STO, brake, alarms) and is switched through
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -179,20 +180,14 @@ _DTYPES = {"UNSIGNED8": "U8", "INTEGER8": "I8", "UNSIGNED16": "U16", "INTEGER16"
            "UNSIGNED32": "U32", "INTEGER32": "I32"}
 
 
+@functools.cache
 def _od_objects() -> dict[tuple[int, int], _Obj]:
     """The 6xxx rows of the A3 object list (hil.profile.od, fixtures/drive/a3_objects.csv:
     L18202-L19278), read once."""
-    global _OD_CACHE
-    if _OD_CACHE is None:
-        _OD_CACHE = {
-            (e.index, e.sub): _Obj(e.name, _DTYPES[e.type], e.writable, e.default or 0, e.min,
-                                   e.max)
-            for e in load_objects() if 0x6000 <= e.index <= 0x6FFF
-        }
-    return _OD_CACHE
-
-
-_OD_CACHE: dict[tuple[int, int], _Obj] | None = None
+    return {
+        (e.index, e.sub): _Obj(e.name, _DTYPES[e.type], e.writable, e.default or 0, e.min, e.max)
+        for e in load_objects() if 0x6000 <= e.index <= 0x6FFF
+    }
 
 
 def _objects(max_speed_rpm: int) -> dict[tuple[int, int], _Obj]:

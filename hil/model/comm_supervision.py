@@ -177,12 +177,13 @@ class CommSupervision:
                 self._alarm("AL301")  # synchronisation failure (L20123-20127)
                 self._sync_intervals.clear()
 
-    def sync_timed_out(self, now: int, monitored: bool) -> None:
-        """AL3E3 when no SYNC came in time (IP mode); a resumed SYNC starts anew."""
+    def sync_timed_out(self, now: int, monitored: Callable[[], bool]) -> None:
+        """AL3E3 when no SYNC came in time and `monitored()` (IP mode, asked only then); a
+        resumed SYNC starts anew."""
         if self.sync_deadline is None or now <= self.sync_deadline:
             return
         self.sync_deadline = None  # re-armed by the next SYNC
-        if monitored:
+        if monitored():
             self._alarm("AL3E3")  # SYNC timeout in IP mode (L20165-20169)
             self._sync_prev_sent = None
             self._sync_intervals.clear()

@@ -79,14 +79,14 @@ def test_sync_rules_in_ip_mode() -> None:
     sup.sync(period, period, period, monitored=True)
     sup.sync(period + 500 * US, period + 500 * US, period, monitored=True)  # 0.5 ms: early
     assert raised == ["AL3E2"]
-    sup.sync_timed_out(period + 500 * US + 3 * period, monitored=True)
+    sup.sync_timed_out(period + 500 * US + 3 * period, monitored=lambda: True)
     assert raised == ["AL3E2"]
-    sup.sync_timed_out(period + 500 * US + 3 * period + 1, monitored=True)
+    sup.sync_timed_out(period + 500 * US + 3 * period + 1, monitored=lambda: True)
     assert raised == ["AL3E2", "AL3E3"]
     idle, quiet = make()
     for k in range(5):
         idle.sync(k * 100 * US, k * 100 * US, period, monitored=False)
-    idle.sync_timed_out(10 * period, monitored=False)
+    idle.sync_timed_out(10 * period, monitored=lambda: False)
     assert quiet == []
 
 
