@@ -72,9 +72,12 @@ def test_two_gateways_two_runners_leases_honoured(make_rig):
         finally:
             alice_bus.shutdown()
             bob_bus.shutdown()
-    wait(lambda: not b1.gateway.lease.safing, what="safe state after release")
+    # the gateway drives the safe state on its own thread after a release: wait for its report
+    wait(lambda: len(b1.gateway.safe_reports) >= 1 and not b1.gateway.lease.safing,
+         what="safe state after alice's release")
     with acquire("lab", "bench1", holder="bob", connect=[b1.endpoint]) as again:
         assert again.since_ns > a1.since_ns
+    wait(lambda: len(b1.gateway.safe_reports) >= 2, what="safe state after bob's release")
     assert [r["reason"] for r in b1.gateway.safe_reports] == ["released by alice",
                                                               "released by bob"]
 
