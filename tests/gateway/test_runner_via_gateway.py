@@ -12,6 +12,7 @@ from hil.plan.plan import loads_plan
 from hil.plan.runner import run_plan
 from hil.plan.session import BenchError, open_session
 from hil.record.recorder import Recorder
+from tests.gateway.test_gateway import wait
 
 pytestmark = pytest.mark.integration
 
@@ -59,6 +60,10 @@ def test_plan_runs_through_the_gateway_under_a_lease(tmp_path: Path, make_rig) -
     bench = load_bench(runner_bench(tmp_path, rig, "runner-a"))
     result = run_plan(loads_plan(PLAN), bench, tmp_path / "out")
     assert result.passed, [(s.label, s.status, s.message) for s in result.steps]
+    # the gateway drives its safe state on its own thread after the release: until it is
+    # done it refuses any lease ("safing"), so wait for it before taking the lease again
+    wait(lambda: rig.gateway.safe_reports and not rig.gateway.lease.safing
+         and not rig.gateway.lease.status()["held"], what="gateway safe state after runner-a")
     # while one runner holds the lease, another one is refused, naming the holder
     rec = Recorder(tmp_path / "a.mcap")
     first = open_session(bench, rec)

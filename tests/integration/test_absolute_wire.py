@@ -145,13 +145,22 @@ class Bench:
 
     def by_modbus(self) -> tuple[int, int, int]:
         self.mb.write_param("P0.049", 1)  # latch P0.050-P0.052 (L7477-7491)
-        time.sleep(0.05)
+        _until_zero(lambda: self.mb.read_param("P0.049"))  # P0.049 = 0 once latched (L16529)
         return tuple(self.mb.read_param(f"P0.05{n}") for n in (0, 1, 2))  # type: ignore
 
     def by_sdo(self) -> tuple[int, int, int]:
         self.cia.write(0x2031, 0, 1)  # P0.049 as 2031h
-        time.sleep(0.05)
+        _until_zero(lambda: self.cia.read(0x2031))
         return tuple(self.cia.read(0x2032 + n) for n in range(3))  # type: ignore
+
+
+def _until_zero(read, timeout_s: float = 5.0) -> None:
+    """Poll a latch command register until the drive has cleared it (the latch is done)."""
+    deadline = time.monotonic() + timeout_s
+    while read() != 0:
+        if time.monotonic() > deadline:
+            raise AssertionError(f"P0.049 still not 0 after {timeout_s} s")
+        time.sleep(0.01)
 
 
 @pytest.fixture

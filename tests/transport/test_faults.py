@@ -298,7 +298,9 @@ def test_stuck_line_holds_then_goes_to_the_harness_level():
     assert port.levels["DI1"] is True  # freed: the level the harness set last
     assert [(r[0], r[2]) for r in sink.records] == [("stuck", True), ("stuck", False)]
     f = dio.inject("stuck", "DI3", level=True, duration_ns=20 * MS)  # never set: back to open
-    time.sleep(0.1)
+    deadline = time.monotonic() + 5.0  # the fault's end runs on a timer thread
+    while port.sets[-2:] != [("DI3", True), ("DI3", False)] and time.monotonic() < deadline:
+        time.sleep(0.01)
     assert port.sets[-2:] == [("DI3", True), ("DI3", False)]
 
 
