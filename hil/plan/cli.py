@@ -54,9 +54,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-level", choices=LOG_LEVELS, metavar="LEVEL",
                         help=f"log messages of this level and above to stderr "
                         f"({', '.join(LOG_LEVELS)}; default: warning)")
-    parser.add_argument("-j", "--jobs", metavar="N", default="1",
+    parser.add_argument("-j", "--jobs", metavar="N", default=None,
                         help="run N plans at a time, each in its own process on its own "
-                        "virtual bench (0 or auto: one per CPU; default 1). A bench that is "
+                        "virtual bench (0 or auto: one per CPU). Default: one per CPU in "
+                        "virtual time where the bench allows it, else 1. A bench that is "
                         "not virtual, or shares a fixed transport, runs plans one at a time")
     parser.add_argument("--clock", choices=CLOCKS, default=None,
                         help="the bench's clock: virtual (the model's, deterministic and much "
@@ -126,7 +127,17 @@ def _listeners(args: argparse.Namespace, plans: list[Plan]) -> list[Listener]:
 
 
 def _jobs(args: argparse.Namespace, bench: Bench, n_plans: int) -> int:
-    """Plans at a time: `-j`, but 1 where the bench cannot be shared (said on stderr)."""
+    """Plans at a time: `-j`, but 1 where the bench cannot be shared (said on stderr).
+    Without `-j`: one per CPU in virtual time on a bench whose runs share nothing (the plans
+    are CPU-bound and independent there, docs/plans.md), else one at a time, silently."""
+    if args.jobs is None:
+        if bench.clock != "virtual" or parallel_blocker(bench) is not None:
+            return 1
+        jobs = min(jobs_from_arg("auto"), n_plans)
+        if jobs > 1 and not args.quiet:
+            print(f"jobs: {jobs} plans at a time (one per CPU in virtual time; -j 1 for one "
+                  "at a time)", file=sys.stderr)
+        return jobs
     jobs = min(jobs_from_arg(args.jobs), n_plans)
     if jobs > 1 and (why := parallel_blocker(bench)) is not None:
         print(f"hil run: -j {args.jobs}: {why}; running plans one at a time", file=sys.stderr)
@@ -139,7 +150,8 @@ def _jobs(args: argparse.Namespace, bench: Bench, n_plans: int) -> int:
 def main(args: argparse.Namespace) -> int:
     _logging(args)
     try:
-        jobs_from_arg(args.jobs)
+        if args.jobs is not None:
+            jobs_from_arg(args.jobs)
     except ValueError as e:
         print(f"hil run: -j: {e}", file=sys.stderr)
         return 2

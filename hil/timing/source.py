@@ -33,6 +33,9 @@ class SignalSource(Protocol):
     def end_time(self) -> int | None:
         """Last timestamp in the source (ns), None when empty."""
 
+    def start_time(self) -> int | None:
+        """First timestamp in the source (ns), None when empty."""
+
 
 def get_field(msg: Any, path: str) -> Any:
     """`msg["a"]["b"]` for path "a.b"; _MISSING when absent."""
@@ -124,6 +127,10 @@ class MemorySource:
         ends = [lst[-1][0] for lst in self._msgs.values() if lst]
         return max(ends) if ends else None
 
+    def start_time(self) -> int | None:
+        starts = [lst[0][0] for lst in self._msgs.values() if lst]
+        return min(starts) if starts else None
+
 
 def _nest(field: str, value: Any) -> dict:
     out: dict = {}
@@ -188,13 +195,16 @@ class RecordingSource(MemorySource):
 
 class LiveSource(MemorySource):
     """The recording of a running plan, for its `check_timing` steps: each message is decoded
-    once from the recorder's `mirror` (`Recorder.keep_messages`), so a plan's checks cost
-    what its recording holds, not that times the number of checks. `refresh(rec)` (after
-    `rec.flush()`) takes what was written since; the file gives metadata and resolutions, as
-    `RecordingSource` reads them."""
+    at most once from the recorder's `mirror` (`Recorder.keep_messages`), so a plan's checks
+    cost what its recording holds, not that times the number of checks. Decoding is lazy, per
+    topic: a topic no check reads (the bus frames of statusword polling, say) is never decoded.
+    `refresh(rec)` (after `rec.flush()`) takes what was written since; the file gives metadata
+    and resolutions, as `RecordingSource` reads them."""
 
     def __init__(self) -> None:
         super().__init__()
+        #: per topic, what was written but not yet decoded: (t_ns, JSON bytes), file order
+        self._raw: dict[str, list[tuple[int, bytes]]] = {}
         self._seen = 0
         self._head_key: tuple = ()
         self.meta: dict[str, dict[str, str]] = {}
@@ -214,21 +224,48 @@ class LiveSource(MemorySource):
             self._head_key = key
         mirror = rec.keep_messages()
         n = len(mirror)
+        if n == self._seen:
+            return self
         names = rec.topic_of
-        touched: set[str] = set()
+        raw = self._raw
         for cid, log_t, pub_t, data in mirror[self._seen:n]:
             topic = names.get(cid, f"?{cid}")
-            obj = decode(data)
-            lst = self._msgs.setdefault(topic, [])
-            t = int(pub_t or log_t)
-            if lst and t < lst[-1][0]:
-                touched.add(topic)
-            lst.append((t, obj if isinstance(obj, dict) else {"value": obj}))
-        for topic in touched:
-            self._msgs[topic].sort(key=lambda m: m[0])
+            pend = raw.get(topic)
+            if pend is None:
+                pend = raw[topic] = []
+            pend.append((int(pub_t or log_t), data))
         self._seen = n
         self._samples_cache.clear()
         return self
+
+    def messages(self, topic: str) -> list[tuple[int, dict]]:
+        pend = self._raw.pop(topic, None)
+        if pend:
+            lst = self._msgs.setdefault(topic, [])
+            last = lst[-1][0] if lst else None
+            ordered = True
+            for t, data in pend:
+                obj = decode(data)
+                if last is not None and t < last:
+                    ordered = False
+                last = t
+                lst.append((t, obj if isinstance(obj, dict) else {"value": obj}))
+            if not ordered:
+                lst.sort(key=lambda m: m[0])  # stable: equal times keep file order
+        return self._msgs.get(topic, [])
+
+    def topics(self) -> list[str]:
+        return sorted(set(self._msgs) | set(self._raw))
+
+    def end_time(self) -> int | None:
+        ends = [lst[-1][0] for lst in self._msgs.values() if lst]
+        ends += [max(t for t, _ in lst) for lst in self._raw.values() if lst]
+        return max(ends) if ends else None
+
+    def start_time(self) -> int | None:
+        starts = [lst[0][0] for lst in self._msgs.values() if lst]
+        starts += [min(t for t, _ in lst) for lst in self._raw.values() if lst]
+        return min(starts) if starts else None
 
 
 def _metadata(rec: Any) -> dict[str, dict[str, str]]:

@@ -43,7 +43,7 @@ def _statuses(out: Path, names: list[str]) -> dict[str, tuple[str, list[str]]]:
 
 def test_j2_gives_the_same_verdicts_reports_and_exit_code_as_j1(tmp_path, capsys):
     one, two = tmp_path / "j1", tmp_path / "j2"
-    assert hil(["run", *QUICK, "--out", str(one), "-q"]) == 0
+    assert hil(["run", *QUICK, "--out", str(one), "-q", "-j", "1"]) == 0
     out1 = capsys.readouterr().out
     assert hil(["run", *QUICK, "--out", str(two), "-j", "2", "-q"]) == 0
     out2 = capsys.readouterr().out
@@ -90,6 +90,33 @@ def test_only_a_bench_private_to_each_process_runs_in_parallel():
     assert "7447" in (parallel_blocker(port) or "")
     auto = replace(port, can={"can0": "zenoh:auto?listen=tcp/127.0.0.1:auto"})
     assert parallel_blocker(auto) is None
+
+
+@pytest.mark.parametrize("extra, jobs", [
+    ([], os.cpu_count() or 1),  # virtual time, a bench of its own per process: one per CPU
+    (["--clock", "real"], 1),   # the wall clock: plans would time each other's load
+    (["-j", "1"], 1),
+])
+def test_without_j_plans_run_one_per_cpu_in_virtual_time_only(tmp_path, capsys, monkeypatch,
+                                                              extra, jobs):
+    import hil.plan.cli as run_cli
+
+    seen: list[int] = []
+
+    def fake_parallel(plans, bench, out, *, jobs, **kw):
+        seen.append(jobs)
+        return []
+
+    def fake_serial(plans, bench, out, **kw):
+        seen.append(1)
+        return []
+
+    monkeypatch.setattr(run_cli, "run_parallel", fake_parallel)
+    monkeypatch.setattr(run_cli, "run_plans", fake_serial)
+    hil(["run", *QUICK, "--out", str(tmp_path), *extra])
+    err = capsys.readouterr().err
+    assert seen == [min(jobs, len(QUICK))]
+    assert "running plans one at a time" not in err  # the default never complains
 
 
 def test_j2_on_a_real_bench_runs_one_plan_at_a_time_and_says_so(tmp_path, capsys,
