@@ -82,6 +82,12 @@ def test_role_rules_and_errors():
         harness.set("DI1", True)
 
 
+def _until(pred, timeout_s: float = 5.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not pred() and time.monotonic() < deadline:
+        time.sleep(0.005)
+
+
 def test_zenoh_inputs_outputs_and_query(port, tap):
     ep = f"tcp/127.0.0.1:{port}"
     drive = open_dio(f"zenoh:tzd/drive1?listen={ep}", role="drive")
@@ -95,10 +101,12 @@ def test_zenoh_inputs_outputs_and_query(port, tap):
         harness.set("STO_B", True)
         harness.set("DI4", True)
         assert drive.wait_for("DI4", True, 2.0)
+        _until(lambda: len(got) >= 3)  # listeners run after the level is stored and waited on
         assert got == [("STO_A", True), ("STO_B", True), ("DI4", True)]
         t_set = time.time_ns()
         drive.set("FDBK", True)
         assert harness.wait_for("FDBK", True, 2.0) >= t_set
+        _until(lambda: any(r[1] == "FDBK" for r in tap.dio_levels))  # the tap, likewise
         fdbk = [r for r in tap.dio_levels if r[1] == "FDBK"]
         assert fdbk and fdbk[0][4] is not None and fdbk[0][4] <= fdbk[0][3]  # source_t
         # current levels answerable on request, from both sides, payload b"1"/b"0"

@@ -11,7 +11,13 @@ import pytest
 
 from hil.transport.pulse import PulseAdapter, PulseError, check_segment, open_pulse
 from hil.transport.urls import TransportUrlError, parse_url
-from hil.transport.zenoh_net import close_session, config_from, open_session
+from hil.transport.zenoh_net import (
+    close_session,
+    config_from,
+    open_session,
+    wait_connected,
+    wait_matching,
+)
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -132,7 +138,10 @@ def test_zenoh_hostile_payloads_never_stop_the_line(port):
         got: list = []
         drv.subscribe(lambda k, d, t, s: got.append((k, d)))
         rnd = random.Random(26)
-        time.sleep(0.3)
+        wait_connected(session, 5, what="fuzzer")
+        probe = session.declare_publisher("tzh/pulse/seg")
+        assert wait_matching(probe, 5)  # the drive's subscriber is known: nothing is lost
+        probe.undeclare()
         for i in range(200):
             key = rnd.choice(["seg", "Y8", "oab", "oz", "X0", "seg"])
             raw = rnd.choice([
