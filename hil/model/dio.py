@@ -311,6 +311,10 @@ class DigitalIO:
     def do_levels(self) -> list[bool]:
         return list(self._do_level)
 
+    def input_levels(self) -> list[bool]:
+        """Physical terminal levels of DI1..DI10 (`input_level` of each)."""
+        return list(self._raw)
+
     def _update_spo(self) -> None:
         word = self.params.get("P4.006")  # SPO_0..SPO_F = P4.006 bits (L15353-15403)
         changed = False

@@ -199,6 +199,7 @@ class Drive:
         self._hold_timer = None
         self._dout_cache: dict[str, bool] = {}
         self._sensor_state: dict[str, bool] = {}
+        self._sensor_key: tuple[bool, bool, bool] | None = None  # (NL, PL, ORGP) last seen
 
     def _make_absolute(self, options: ModelOptions) -> None:
         """The absolute encoder and its DI/DO handshake (section 10.3), restored from the
@@ -432,9 +433,9 @@ class Drive:
             "abs_turns": self.absolute.turns,
             "abs_single_turn": self.absolute.single_turn,
             "statusword": self.cia402.statusword,
-            "do": [self.dio.do_level(n) for n in range(1, 7)],
+            "do": self.dio.do_levels(),  # DO1..DO6
             # terminal levels DI1..DI10 (the bench's sensors drive some: ORGP, NL, PL)
-            "di": [self.dio.input_level(n) for n in range(1, 11)],
+            "di": self.dio.input_levels(),
             "homing_phase": self.homing.phase,
             "gain_switched": self.difunc.gain_switched,
             **self.pulse.snapshot(),
@@ -759,7 +760,11 @@ class Drive:
             return
         pos = self.axis.position
         nl, pl = self.mech.limit_states(pos)
-        states = {"NL": nl, "PL": pl, "ORGP": self.mech.home_sensor(pos)}
+        org = self.mech.home_sensor(pos)
+        if not force and (nl, pl, org) == self._sensor_key:
+            return  # no switch changed since the last step (the usual case)
+        self._sensor_key = (nl, pl, org)
+        states = {"NL": nl, "PL": pl, "ORGP": org}
         for fn, (n, kind) in self.sensors.items():
             act = states.get(fn, False)
             if force or self._sensor_state.get(fn) != act:
