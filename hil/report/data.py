@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime
 import json
 from bisect import bisect_left, bisect_right
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from sys import intern
 from typing import Any
@@ -96,28 +96,40 @@ def _is_bus(topic: str) -> bool:
 
 
 _RUNS: dict[tuple[str, int, int], RunData] = {}
+# the same without the ground truth: what a run's JUnit and index read of every plan
+_SUMMARIES: dict[tuple[str, int, int], RunData] = {}
+_SUMMARIES_KEPT = 1024
 
 
-def load_run(path: str | Path) -> RunData:
+def load_run(path: str | Path, *, truth: bool = True) -> RunData:
     """The report's view of a recording; the last two files read are kept (by path, size and
-    mtime), so a plan's JUnit and HTML report read its recording once."""
+    mtime), so a plan's JUnit and HTML report read its recording once. `truth=False`: without
+    the ground-truth samples (`truth` stays empty), for what shows no plot (the run's JUnit and
+    index); those are kept for every recording read, so a run's end reads no file again."""
     try:
         st = Path(path).stat()
         key: tuple[str, int, int] | None = (str(Path(path).resolve()), st.st_mtime_ns,
                                             st.st_size)
     except OSError:
         key = None
-    if key is not None and key in _RUNS:
-        return _RUNS[key]
-    data = _load_run(path)
     if key is not None:
-        while len(_RUNS) >= 2:
-            del _RUNS[next(iter(_RUNS))]
-        _RUNS[key] = data
+        if key in _RUNS:
+            return _RUNS[key]
+        if not truth and key in _SUMMARIES:
+            return _SUMMARIES[key]
+    data = _load_run(path, truth=truth)
+    if key is not None:
+        if truth:
+            while len(_RUNS) >= 2:
+                del _RUNS[next(iter(_RUNS))]
+            _RUNS[key] = data
+        while len(_SUMMARIES) >= _SUMMARIES_KEPT:
+            del _SUMMARIES[next(iter(_SUMMARIES))]
+        _SUMMARIES[key] = replace(data, truth={}, bus=[]) if truth else data
     return data
 
 
-def _load_run(path: str | Path) -> RunData:
+def _load_run(path: str | Path, *, truth: bool = True) -> RunData:
     rec = Recording.open(path)
     meta = rec.metadata()
     run_meta = meta.get("hil.run", {})
@@ -141,6 +153,8 @@ def _load_run(path: str | Path) -> RunData:
         if _is_bus(topic):  # read again when shown: only failing checks and steps show them
             data.bus_pending = True
             continue
+        if not truth and topic.startswith("/drive/") and topic.endswith("/state"):
+            continue  # a summary: no ground truth, not even decoded
         msg = _decode(raw)
         if topic == topics.PLAN_STEPS:
             t_plan = lt if t_plan is None else min(t_plan, lt)

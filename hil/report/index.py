@@ -32,7 +32,7 @@ def _row(rec: Path, out_dir: Path) -> dict:
     row: dict = {"recording": rec, "plan": rec.stem, "status": "unreadable", "info": {},
                  "steps": (0, 0), "verdicts": Counter(), "duration_ms": None, "reason": ""}
     try:
-        run = load_run(rec)
+        run = load_run(rec, truth=False)
     except (RecordingError, OSError) as e:
         row["reason"] = str(e)
         return row

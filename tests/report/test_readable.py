@@ -136,3 +136,43 @@ def test_the_report_keeps_only_the_ground_truth_it_draws(tmp_path) -> None:
     # a recording whose specs are unknown keeps every field
     assert report_data.truth_fields(["no_such_spec"]) is None
     assert report_data.truth_fields(None) is None
+
+
+def test_a_runs_junit_and_index_read_no_recording_again(tmp_path, monkeypatch) -> None:
+    """The run's JUnit and index need each plan's steps and verdicts, not its ground truth: they
+    use the summaries kept when each plan's own reports read its recording (a 55-plan run
+    re-read every recording twice at its end), and a summary read from a file skips the
+    ground truth. Either way they say what a whole read says."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, load_plan
+    from hil.plan.runner import run_plan
+    from hil.report import data as report_data
+    from hil.report.index import write_index
+    from hil.report.junit import junit_xml, write_junit
+
+    bench = load_bench(None)
+    recs = [run_plan(load_plan(find_plans([n])[0]), bench, tmp_path).recording
+            for n in ("emgs", "param_access", "plc_drv_gear")]
+    reads: list[tuple[str, bool]] = []
+    real = report_data._load_run
+    monkeypatch.setattr(report_data, "_load_run",
+                        lambda p, *, truth=True: (reads.append((str(p), truth)),
+                                                  real(p, truth=truth))[1])
+    write_junit(recs, tmp_path / "junit.xml")
+    write_index(recs, tmp_path / "index.html")
+    assert reads == []
+    # a new process (a `-j` parent): each recording read once, without its ground truth
+    report_data._RUNS.clear()
+    report_data._SUMMARIES.clear()
+    from_files = junit_xml(recs, tmp_path)
+    assert reads == [(str(r), False) for r in recs]
+    assert (tmp_path / "junit.xml").read_text() == from_files  # the same from either
+    summary = report_data.load_run(recs[2], truth=False)
+    assert summary.truth == {} and len(reads) == 3  # kept: not read again
+    whole = report_data.load_run(recs[2])
+    assert whole.truth["drive1"] and reads[-1] == (str(recs[2]), True)
+    assert (summary.steps, summary.verdicts, summary.status, summary.t0) == (
+        whole.steps, whole.verdicts, whole.status, whole.t0)
+    report_data._RUNS.clear()
+    report_data._SUMMARIES.clear()
+    assert junit_xml(recs, tmp_path) == from_files
