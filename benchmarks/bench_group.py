@@ -3,6 +3,7 @@ bus carries at SYNC 1, 2 and 4 ms with 0 missed cycles, beside the limit the wir
 allows, and the CPU cost per axis-cycle. Prints, asserts nothing.
 
     .venv/bin/python benchmarks/bench_group.py [--seconds 600] [--cycles 1,2,4]
+        [--clock virtual|real] [--transport inproc|zenoh] [--start N]
 
 Each run is a plan on a generated bench of N virtual A3 on one in-process bus, in virtual
 time: `group` (IP mode, RPDO + SYNC + TPDO per axis per cycle), a harmonic PG move on every
@@ -11,6 +12,9 @@ the plan checker's limit (worst-case stuffing, 115 bits a 6-byte PDO frame; the 
 refuses more) and goes down until a run has 0 missed cycles; the wire's exact limit is printed
 beside it (the frames' own stuff bits, hil.transport.sim.frame_bits). Each run's progress goes
 to stderr.
+`--clock real` runs the same on the wall clock (the real-time path: how many axes one host
+carries with 0 missed cycles); `--transport zenoh` puts each drive in a `hil drive` process
+reached over zenoh on loopback. `--start N` begins the search at N.
 The baseline is that exact limit; the CPU cost is the process CPU time (drive models, bus,
 recorder and group together) over axis-cycles, and "bench time / wall" how much faster than
 real time the run went.
@@ -20,10 +24,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -35,15 +41,20 @@ from hil.plan.plan import loads_plan
 from hil.plan.runner import run_plan
 from hil.transport.sim import frame_bits
 
+ZENOH = "zenoh:auto?listen=tcp/127.0.0.1:auto"  # the drive listens, the harness connects
 
-def _bench(n: int) -> str:
+
+def _bench(n: int, transport: str = "inproc") -> str:
+    """N A3 on one bus: in this process on `virtual:` (inproc), or each a `hil drive` process
+    reached over zenoh on loopback (zenoh: the real-time path of a remote bench)."""
+    url, process = ("virtual:auto", "inproc") if transport == "inproc" else (ZENOH, "subprocess")
     drives = "\n".join(
         f"  axis{i}: {{profile: asda-a3, can: can0, node_id: {i}, param_via: sdo,\n"
-        f"           dio: \"virtual:auto\", wiring: {{SON: DI1, EMGS: \"DI8:b\"}},\n"
+        f"           dio: \"{url}\", wiring: {{SON: DI1, EMGS: \"DI8:b\"}},\n"
         f"           mechanics: {{nl_rev: -1000, pl_rev: 1000, hard_stop_neg_rev: null,\n"
         f"                       hard_stop_pos_rev: null}}}}"
         for i in range(1, n + 1))
-    return (f"name: group{n}\nvirtual: true\nprocess: inproc\ncan:\n  can0: \"virtual:auto\"\n"
+    return (f"name: group{n}\nvirtual: true\nprocess: {process}\ncan:\n  can0: \"{url}\"\n"
             f"drives:\n{drives}\nsafe_state: {{controlword: disable_voltage, wait_brake: false,"
             " timeout: 3s}\n"
             "motion_allowed: true\n")
@@ -81,9 +92,12 @@ def checker_limit(cycle_ms: int, bitrate: int = 1_000_000) -> int:
     return n
 
 
-def run(n: int, cycle_ms: int, seconds: float) -> tuple[int, int, float]:
+def run(n: int, cycle_ms: int, seconds: float, clock: str = "virtual",
+        transport: str = "inproc") -> tuple[int, int, float]:
     with tempfile.TemporaryDirectory() as tmp:
-        bench = loads_bench(_bench(n), str(Path(tmp) / "bench.yaml"))
+        path = Path(tmp) / "bench.yaml"
+        path.write_text(_bench(n, transport))
+        bench = replace(loads_bench(_bench(n, transport), str(path)), clock=clock)
         t0 = time.process_time()
         res = run_plan(loads_plan(_plan(n, cycle_ms, seconds), "scale.yaml"), bench,
                        Path(tmp))
@@ -101,15 +115,25 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=600.0, help="bench time per run")
     ap.add_argument("--cycles", default="1,2,4", help="SYNC cycles in ms")
+    ap.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+                    help="virtual time (default) or the wall clock (the real-time path)")
+    ap.add_argument("--transport", choices=("inproc", "zenoh"), default="inproc",
+                    help="drives in this process (default) or each a `hil drive` process "
+                    "over zenoh on loopback (real time only)")
+    ap.add_argument("--start", type=int, default=0,
+                    help="first N to try (default: the plan checker's limit)")
     a = ap.parse_args()
-    print(f"bench time per run: {a.seconds:g} s", flush=True)
+    if a.transport == "zenoh" and a.clock != "real":
+        ap.error("--transport zenoh runs on the wall clock: add --clock real")
+    print(f"bench time per run: {a.seconds:g} s, clock {a.clock}, drives {a.transport}, "
+          f"{os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f}", flush=True)
     rows = []
     for cyc in (int(x) for x in a.cycles.split(",")):
         # from the plan checker's limit down: the first N with 0 missed cycles is the answer
         best, row = 0, (0, 0, 0.0, 0.0)
-        for n in range(checker_limit(cyc), 0, -1):
+        for n in range(min(a.start or checker_limit(cyc), checker_limit(cyc)), 0, -1):
             t0 = time.perf_counter()
-            cycles, missed, cpu = run(n, cyc, a.seconds)
+            cycles, missed, cpu = run(n, cyc, a.seconds, a.clock, a.transport)
             wall = time.perf_counter() - t0
             print(f"  SYNC {cyc} ms, {n} axes: {cycles} cycles, {missed} missed, "
                   f"{wall:.0f} s wall, {cpu:.0f} s CPU", file=sys.stderr, flush=True)

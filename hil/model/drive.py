@@ -763,7 +763,6 @@ class Drive:
         org = self.mech.home_sensor(pos)
         if not force and (nl, pl, org) == self._sensor_key:
             return  # no switch changed since the last step (the usual case)
-        self._sensor_key = (nl, pl, org)
         states = {"NL": nl, "PL": pl, "ORGP": org}
         for fn, (n, kind) in self.sensors.items():
             act = states.get(fn, False)
@@ -773,6 +772,7 @@ class Drive:
                 self.dio.set_input(n, level, settled=force)
                 if not force:
                     self.emit(InputChanged(self.sched.now, n, level))
+        self._sensor_key = (nl, pl, org)  # after: a sensor not yet driven is tried again
 
 
 def _abort_for(exc: ModelError, value: int) -> int:

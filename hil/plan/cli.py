@@ -14,7 +14,7 @@ from hil.bench.bench import CLOCKS, Bench, load_bench, with_clock
 from hil.bench.yamlio import PlanFileError
 from hil.plan.events import Listener
 from hil.plan.listeners import StepLines
-from hil.plan.parallel import jobs_from_arg, parallel_blocker, run_parallel
+from hil.plan.parallel import jobs_from_arg, parallel_blocker, run_parallel, usable_cpus
 from hil.plan.plan import Plan, check_plan, find_plans, load_plan
 from hil.plan.plansdir import choose_plans_dir
 from hil.plan.progress import RunProgress
@@ -56,9 +56,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         f"({', '.join(LOG_LEVELS)}; default: warning)")
     parser.add_argument("-j", "--jobs", metavar="N", default=None,
                         help="run N plans at a time, each in its own process on its own "
-                        "virtual bench (0 or auto: one per CPU). Default: one per CPU in "
-                        "virtual time where the bench allows it, else 1. A bench that is "
-                        "not virtual, or shares a fixed transport, runs plans one at a time")
+                        "virtual bench (0 or auto: one per usable CPU). Default: one per CPU "
+                        "(at most 8) for 8 plans or more in virtual time where the bench "
+                        "allows it and without -v, else 1. With -j, a bench that is not "
+                        "virtual, or shares a fixed transport, runs plans one at a time")
     parser.add_argument("--clock", choices=CLOCKS, default=None,
                         help="the bench's clock: virtual (the model's, deterministic and much "
                         "faster than real time) or real (the wall clock). Default: the bench "
@@ -126,14 +127,20 @@ def _listeners(args: argparse.Namespace, plans: list[Plan]) -> list[Listener]:
     return [RunProgress(sum(len(p.steps) for p in plans), len(plans))]
 
 
+DEFAULT_PARALLEL_MIN_PLANS = 8  # without -j: fewer plans than this run one at a time
+DEFAULT_JOBS_MAX = 8  # without -j: at most this many workers, whatever the CPU count
+
+
 def _jobs(args: argparse.Namespace, bench: Bench, n_plans: int) -> int:
     """Plans at a time: `-j`, but 1 where the bench cannot be shared (said on stderr).
-    Without `-j`: one per CPU in virtual time on a bench whose runs share nothing (the plans
-    are CPU-bound and independent there, docs/plans.md), else one at a time, silently."""
+    Without `-j`: one per usable CPU (at most 8) in virtual time on a bench whose runs share
+    nothing, for 8 plans or more and without `-v` (the plans are CPU-bound and independent
+    there, docs/plans.md); else one at a time, silently."""
     if args.jobs is None:
-        if bench.clock != "virtual" or parallel_blocker(bench) is not None:
-            return 1
-        jobs = min(jobs_from_arg("auto"), n_plans)
+        if (bench.clock != "virtual" or parallel_blocker(bench) is not None
+                or n_plans < DEFAULT_PARALLEL_MIN_PLANS or args.verbose):
+            return 1  # a worker's start (~2 s of imports) is not won back on a few plans
+        jobs = min(usable_cpus(), DEFAULT_JOBS_MAX, n_plans)
         if jobs > 1 and not args.quiet:
             print(f"jobs: {jobs} plans at a time (one per CPU in virtual time; -j 1 for one "
                   "at a time)", file=sys.stderr)

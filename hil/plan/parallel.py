@@ -47,17 +47,26 @@ log = logging.getLogger(__name__)
 STOP_GRACE_S = 60.0  # how long a stopped worker may take to go safe and close its recording
 
 
-def jobs_from_arg(text: str) -> int:
-    """`-j N`: a positive count; `0` or `auto` = the number of CPUs."""
-    if text.strip().lower() == "auto":
+def usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity: `taskset`, a container's cpuset), not
+    the host's count."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except (AttributeError, OSError):
         return os.cpu_count() or 1
+
+
+def jobs_from_arg(text: str) -> int:
+    """`-j N`: a positive count; `0` or `auto` = the number of usable CPUs."""
+    if text.strip().lower() == "auto":
+        return usable_cpus()
     try:
         n = int(text)
     except ValueError:
         n = -1
     if n < 0:
         raise ValueError(f"{text!r}: a number of plans at a time (0 or auto = CPUs)")
-    return n or os.cpu_count() or 1
+    return n or usable_cpus()
 
 
 def parallel_blocker(bench: Bench) -> str | None:

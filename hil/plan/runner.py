@@ -46,6 +46,7 @@ from hil.plan.plan import Plan, check_plan, plan_spec
 from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, Session, open_session
 from hil.record.recorder import Recorder
+from hil.report.data import forget as forget_report
 from hil.timing.registry import SpecRegistry, load_specs
 
 __all__ = ["Cancelled", "PlanResult", "StepContext", "StepFailed", "StepResult", "run_plan",
@@ -320,6 +321,7 @@ def _open_recording(plan: Plan, bench: Bench, out_dir: Path,
     stem = stem or plan_stem(plan)
     res = PlanResult(plan.name, plan.path, bench.name, recording=str(out_dir / f"{stem}.mcap"))
     res.steps = [StepResult(s.index, s.label, s.kind, s.line) for s in plan.steps]
+    forget_report(res.recording)  # a report's cache of the file this run overwrites
     rec = Recorder(res.recording, metadata={"plan": plan.name, "plan_file": plan.path,
                                             "bench": bench.name, "bench_file": bench.path})
     rec.add_metadata("hil.plan", {"name": plan.name, "file": plan.path,

@@ -98,14 +98,24 @@ def _is_bus(topic: str) -> bool:
 _RUNS: dict[tuple[str, int, int], RunData] = {}
 # the same without the ground truth: what a run's JUnit and index read of every plan
 _SUMMARIES: dict[tuple[str, int, int], RunData] = {}
-_SUMMARIES_KEPT = 1024
+_SUMMARIES_KEPT = 256
+
+
+def forget(path: str | Path) -> None:
+    """Drop what is kept of `path` (a recorder is about to write it again: the new file could
+    have the old one's size within one mtime tick)."""
+    name = str(Path(path).resolve())
+    for cache in (_RUNS, _SUMMARIES):
+        for key in [k for k in cache if k[0] == name]:
+            del cache[key]
 
 
 def load_run(path: str | Path, *, truth: bool = True) -> RunData:
     """The report's view of a recording; the last two files read are kept (by path, size and
     mtime), so a plan's JUnit and HTML report read its recording once. `truth=False`: without
     the ground-truth samples (`truth` stays empty), for what shows no plot (the run's JUnit and
-    index); those are kept for every recording read, so a run's end reads no file again."""
+    index); those are kept for the last 256 recordings read, so a run's end reads no file
+    again."""
     try:
         st = Path(path).stat()
         key: tuple[str, int, int] | None = (str(Path(path).resolve()), st.st_mtime_ns,

@@ -102,6 +102,25 @@ def resolve_auto(bench: Bench, tmpdir: Path) -> dict[str, str]:
     return out
 
 
+def bus_mesh(url: str, n: int) -> tuple[list[str], str]:
+    """The URLs of `n` drive processes on one zenoh bus whose URL listens on loopback, and the
+    URL whose `harness_side` reaches them all. One port takes one listener, and zenoh peers do
+    not route for each other, so drive i listens on a port of its own (the first keeps the
+    bus's) and connects to the drives before it: every pair of processes is linked."""
+    head, _, query = url.partition("?")
+    items = query.split("&") if query else []
+    listen = [ep for i in items if i.startswith("listen=") for ep in i[7:].split(",") if ep]
+    if n < 2 or not url.startswith("zenoh:") or len(listen) != 1 \
+            or not listen[0].startswith("tcp/127.0.0.1:"):
+        return [url] * n, url
+    rest = [i for i in items if not i.startswith(("listen=", "connect="))]
+    eps = listen + [f"tcp/127.0.0.1:{free_loopback_port()}" for _ in range(n - 1)]
+    drives = [f"{head}?" + "&".join([f"listen={ep}",
+                                     *([f"connect={','.join(eps[:i])}"] if i else []), *rest])
+              for i, ep in enumerate(eps)]
+    return drives, f"{head}?" + "&".join([f"listen={','.join(eps)}", *rest])
+
+
 def harness_side(url: str) -> str:
     """The URL the harness opens for a drive-side URL: a pty's far end as a serial port; for
     zenoh, the drive's `listen=` endpoints become the harness's `connect=` ones."""
@@ -438,6 +457,14 @@ class SubprocessWorld:
         ready = ready_timeout_s or bench.timeouts["ready"] / 1e9
         self._tmp = tempfile.TemporaryDirectory(prefix="hil-bench-")
         self.urls = resolve_auto(bench, Path(self._tmp.name))
+        # a CAN bus several drive processes share: each its own port, linked to each other
+        self.can_urls: dict[str, str] = {}
+        for bus in bench.can:
+            names = [n for n, d in bench.drives.items() if d.can == bus]
+            if not names:
+                continue
+            per_drive, self.urls[f"can:{bus}"] = bus_mesh(self.urls[f"can:{bus}"], len(names))
+            self.can_urls.update(zip(names, per_drive, strict=True))
         self.procs: dict[str, subprocess.Popen] = {}
         self._ids = itertools.count(1)
         self._replies: dict[int, dict] = {}
@@ -449,7 +476,7 @@ class SubprocessWorld:
                 cmd = [sys.executable, "-m", "hil.cli", "drive", "--bench", bench.path,
                        "--drive", name, "--name", name, "--control", "stdio"]
                 if spec.can:
-                    cmd += ["--can", self.urls[f"can:{spec.can}"], "--node-id", str(spec.node_id)]
+                    cmd += ["--can", self.can_urls[name], "--node-id", str(spec.node_id)]
                 if spec.rs485:
                     cmd += ["--rs485", self.urls[f"rs485:{spec.rs485}"],
                             "--station", str(spec.station)]

@@ -81,3 +81,58 @@ def test_pr_soft_limit_judges_its_parameters_from_the_streamed_snapshot(tmp_path
     params = [m for _t, _l, _p, m in rec.messages([T.drive_params("drive1")])]
     assert any(m.get("snapshot") for m in params)
     assert not any(m.get("source") == "read" for m in params)
+
+
+TWO_ON_ONE_BUS = """\
+name: two_on_one_bus
+virtual: true
+process: subprocess
+can:
+  can0: "zenoh:auto?listen=tcp/127.0.0.1:auto"
+drives:
+  axis1: {profile: asda-a3, can: can0, node_id: 1, param_via: sdo,
+          dio: "zenoh:auto?listen=tcp/127.0.0.1:auto", wiring: {SON: DI1, EMGS: "DI8:b"}}
+  axis2: {profile: asda-a3, can: can0, node_id: 2, param_via: sdo,
+          dio: "zenoh:auto?listen=tcp/127.0.0.1:auto", wiring: {SON: DI1, EMGS: "DI8:b"}}
+safe_state: {controlword: disable_voltage, wait_brake: false, timeout: 3s}
+"""
+
+HEARD = """\
+name: heard
+steps:
+  - {drive: axis1, state: OPERATION ENABLED}
+  - {drive: axis2, state: OPERATION ENABLED}
+  - {drive: axis1, sdo: {"1017": 50}}              # node 1: a heartbeat every 50 ms
+  - {drive: axis2, sdo: {"1016:1": 0x000100C8}}    # node 2 consumes node 1's: 200 ms
+  - wait: 600ms
+  - {drive: axis2, expect: {alarm: none}}          # node 2 hears node 1, not through us
+  - {drive: axis1, sdo: {"1017": 0}}               # node 1 falls silent
+  - {drive: axis2, wait_until: {alarm: AL180, timeout: 2s}}
+"""
+
+
+def test_several_drive_processes_share_one_zenoh_bus(tmp_path):
+    """Two `hil drive` processes on one zenoh CAN bus: each listens on a port of its own and
+    links to the other (one port takes one listener; zenoh peers do not route for each
+    other), the harness reaches both, and one drive hears the other's heartbeat directly."""
+    path = tmp_path / "two.yaml"
+    path.write_text(TWO_ON_ONE_BUS)
+    bench = load_bench(path)
+    [r] = run_plans([loads_plan(HEARD, str(tmp_path / "heard.yaml"))], bench, tmp_path,
+                    stream=io.StringIO())
+    assert r.passed, [(s.label, s.status, s.message) for s in r.steps if s.status != "pass"]
+
+
+def test_bus_mesh_gives_each_drive_its_own_port_linked_to_the_earlier_ones():
+    from hil.virtual.world import bus_mesh, harness_side
+
+    url = "zenoh:hil/1-1/can?listen=tcp/127.0.0.1:7001&mode=peer"
+    drives, harness = bus_mesh(url, 3)
+    ports = [d.split("listen=")[1].split("&")[0] for d in drives]
+    assert ports[0] == "tcp/127.0.0.1:7001" and len(set(ports)) == 3
+    assert "connect=" not in drives[0]
+    assert f"connect={ports[0]}&" in drives[1]
+    assert f"connect={ports[0]},{ports[1]}&" in drives[2]
+    assert all(d.startswith("zenoh:hil/1-1/can?") and d.endswith("&mode=peer") for d in drives)
+    assert harness_side(harness) == f"zenoh:hil/1-1/can?connect={','.join(ports)}&mode=peer"
+    assert bus_mesh(url, 1) == ([url], url)  # one drive: the bus as it is

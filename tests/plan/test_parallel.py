@@ -72,10 +72,16 @@ def test_a_failing_plan_under_j2_exits_1_and_its_neighbours_still_pass(tmp_path,
 
 def test_jobs_argument():
     assert jobs_from_arg("3") == 3
-    assert jobs_from_arg("0") == jobs_from_arg("auto") == (os.cpu_count() or 1)
+    # the CPUs this process may use (taskset, a container's cpuset), not the host's count
+    assert jobs_from_arg("0") == jobs_from_arg("auto") == len(os.sched_getaffinity(0))
     for bad in ("-1", "two"):
         with pytest.raises(ValueError, match="plans at a time"):
             jobs_from_arg(bad)
+
+
+def test_auto_counts_the_cpus_this_process_may_use(monkeypatch):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3})  # `taskset -c 3`
+    assert jobs_from_arg("auto") == jobs_from_arg("0") == 1
 
 
 def test_only_a_bench_private_to_each_process_runs_in_parallel():
@@ -92,13 +98,19 @@ def test_only_a_bench_private_to_each_process_runs_in_parallel():
     assert parallel_blocker(auto) is None
 
 
-@pytest.mark.parametrize("extra, jobs", [
-    ([], os.cpu_count() or 1),  # virtual time, a bench of its own per process: one per CPU
-    (["--clock", "real"], 1),   # the wall clock: plans would time each other's load
-    (["-j", "1"], 1),
+MANY = ["pr_*"]  # 13 plans: enough for workers to pay off
+
+
+@pytest.mark.parametrize("plans, extra, jobs", [
+    # virtual time, a bench of its own per process: one per usable CPU, at most 8
+    (MANY, [], min(len(os.sched_getaffinity(0)), 8)),
+    (MANY, ["--clock", "real"], 1),  # the wall clock: plans would time each other's load
+    (MANY, ["-j", "1"], 1),
+    (MANY, ["-v"], 1),  # step lines as they happen
+    (QUICK, [], 1),  # a few plans: a worker's start (~2 s) is not won back
 ])
 def test_without_j_plans_run_one_per_cpu_in_virtual_time_only(tmp_path, capsys, monkeypatch,
-                                                              extra, jobs):
+                                                              plans, extra, jobs):
     import hil.plan.cli as run_cli
 
     seen: list[int] = []
@@ -113,9 +125,9 @@ def test_without_j_plans_run_one_per_cpu_in_virtual_time_only(tmp_path, capsys, 
 
     monkeypatch.setattr(run_cli, "run_parallel", fake_parallel)
     monkeypatch.setattr(run_cli, "run_plans", fake_serial)
-    hil(["run", *QUICK, "--out", str(tmp_path), *extra])
+    hil(["run", *plans, "--out", str(tmp_path), *extra])
     err = capsys.readouterr().err
-    assert seen == [min(jobs, len(QUICK))]
+    assert seen == [jobs]
     assert "running plans one at a time" not in err  # the default never complains
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import re
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 from hil.report.html import _verdict_rows
 from hil.timing.checker import Trace
@@ -176,3 +177,29 @@ def test_a_runs_junit_and_index_read_no_recording_again(tmp_path, monkeypatch) -
     report_data._RUNS.clear()
     report_data._SUMMARIES.clear()
     assert junit_xml(recs, tmp_path) == from_files
+
+
+def test_a_recording_written_again_is_read_again(tmp_path, monkeypatch) -> None:
+    """A plan run again into the same file could leave it with the old size and, on a coarse
+    file system, the old mtime: the runner drops what the report kept of that file."""
+    from hil.bench.bench import load_bench
+    from hil.plan import runner
+    from hil.plan.plan import find_plans, load_plan
+    from hil.report import data as report_data
+
+    plan = load_plan(find_plans(["emgs"])[0])
+    first = runner.run_plan(plan, load_bench(None), tmp_path)
+    name = str(Path(first.recording).resolve())
+    report_data.load_run(first.recording, truth=False)
+    assert any(k[0] == name for k in report_data._SUMMARIES)
+    forgotten: list[tuple[str, bool]] = []
+    real = runner.forget_report
+
+    def forget(p):
+        real(p)
+        kept = any(k[0] == name for c in (report_data._RUNS, report_data._SUMMARIES) for k in c)
+        forgotten.append((p, kept))
+
+    monkeypatch.setattr(runner, "forget_report", forget)
+    second = runner.run_plan(plan, load_bench(None), tmp_path)
+    assert forgotten == [(second.recording, False)] and second.recording == first.recording
