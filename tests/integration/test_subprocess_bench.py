@@ -103,11 +103,11 @@ steps:
   - {drive: axis1, state: OPERATION ENABLED}
   - {drive: axis2, state: OPERATION ENABLED}
   - {drive: axis1, sdo: {"1017": 50}}              # node 1: a heartbeat every 50 ms
-  - {drive: axis2, sdo: {"1016:1": 0x000100C8}}    # node 2 consumes node 1's: 200 ms
-  - wait: 600ms
+  - {drive: axis2, sdo: {"1016:1": 0x000101F4}}    # node 2 consumes node 1's: 500 ms
+  - wait: 1s
   - {drive: axis2, expect: {alarm: none}}          # node 2 hears node 1, not through us
   - {drive: axis1, sdo: {"1017": 0}}               # node 1 falls silent
-  - {drive: axis2, wait_until: {alarm: AL180, timeout: 2s}}
+  - {drive: axis2, wait_until: {alarm: AL180, timeout: 3s}}
 """
 
 
