@@ -330,7 +330,17 @@ class Context:
                 pts = [(t, bool(v) != invert) for t, v in raw]
             elif s.kind == "alarm":
                 codes = [self.fmt(c) for c in s.alarm or []]
-                pts = [(t, _alarm_active(v, codes)) for t, v in raw]
+                pts = []
+                append = pts.append
+                last: Any = None
+                active = False
+                for t, v in raw:
+                    # the alarm list rarely changes between two state samples: an equal list of
+                    # strings gives the same answer (a str equals only a str)
+                    if not (type(v) is list and v == last and all(type(x) is str for x in v)):
+                        active = _alarm_active(v, codes)
+                        last = v if type(v) is list else None
+                    append((t, active))
             else:
                 pts = raw
             pts = self._transform(s, pts)
