@@ -1,16 +1,20 @@
 """Time `hil check` (all shipped specs) on a large synthetic recording vs a bare mcap read.
 
-    .venv/bin/python benchmarks/bench_check.py [--messages 500000]
+    .venv/bin/python benchmarks/bench_check.py [--messages 500000] [--bus-fps 9000]
 
 Writes a recording with the `mcap` package: drive state at 1 kHz, DI/DO/STO lines toggling
 through servo-on/off, STO and EMGS cycles, CANopen control/status words. Prints messages/s
 for a bare `mcap` reader pass (decode JSON too) and for the full check, and their ratio.
+`--bus-fps N` adds N raw CAN frames a second on /can/can0/raw (9000: a saturated 1 Mbit/s
+bus), which no shipped spec reads. Also prints the time one hour of the same mix would take at
+the measured rate, and the peak RSS.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -21,7 +25,7 @@ from mcap.writer import Writer
 MS = 1_000_000
 
 
-def write(path: Path, n: int) -> int:
+def write(path: Path, n: int, bus_fps: int = 0) -> int:
     """About `n` messages: a 1 ms state stream plus edges every cycle of 1 s."""
     count = 0
     with open(path, "wb") as f:
@@ -56,6 +60,11 @@ def write(path: Path, n: int) -> int:
                 "alarms": ["AL500"] if cyc % 4 == 3 and 710 <= phase < 902 else []})
             put("/canopen/can0", t, {"statusword": 0x0237 if on else 0x0250,
                                      "controlword": 0x0F if 100 <= phase < 600 else 0x06})
+            for k in range(bus_fps * (t_ms + 1) // 1000 - bus_fps * t_ms // 1000):
+                put("/can/can0/raw", t + k * 1000, {
+                    "id": 0x181 + k % 4, "ext": False, "rtr": False, "err": False, "fd": False,
+                    "brs": False, "esi": False, "dlc": 8,
+                    "data": (t_ms * 8 + k).to_bytes(8, "little").hex(), "dir": "rx"})
             if phase == 100:
                 put("/dio/drive1/DI1", t, {"level": True})
             if phase == 252:
@@ -86,6 +95,7 @@ def bare(path: Path) -> int:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--messages", type=int, default=500_000)
+    ap.add_argument("--bus-fps", type=int, default=0, help="raw CAN frames a second")
     args = ap.parse_args()
     from hil.timing.checker import check_all, summary
     from hil.timing.source import RecordingSource
@@ -94,7 +104,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "bench.mcap"
         t0 = time.perf_counter()
-        n = write(path, args.messages)
+        n = write(path, args.messages, args.bus_fps)
         print(f"wrote {n} messages ({path.stat().st_size / 1e6:.1f} MB) "
               f"in {time.perf_counter() - t0:.1f} s")
         t0 = time.perf_counter()
@@ -111,6 +121,12 @@ def main() -> None:
           f"of which reading {t_load:.2f} s)")
     print(f"ratio check/bare    : {t_check / t_bare:.2f}x the time")
     print(f"verdicts: {summary(verdicts)}")
+    per_s = 2000 + args.bus_fps  # state + CANopen at 1 kHz each, plus the raw frames
+    hour = 3600 * per_s
+    print(f"one hour of this mix: {hour / 1e6:.1f} M messages -> {hour / (n / t_check) / 60:.1f} "
+          f"min at the measured rate (goal 2 min)")
+    print(f"peak RSS: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024} MB "
+          f"for {n} messages (goal: 500 MB whatever the length)")
 
 
 if __name__ == "__main__":

@@ -142,7 +142,78 @@ def _nest(field: str, value: Any) -> dict:
     return out
 
 
-class RecordingSource(MemorySource):
+class _LazySource(MemorySource):
+    """A source that keeps each topic's messages as recorded bytes until `messages(topic)`
+    is first asked for that topic, then decodes them once: a topic nothing reads (the raw
+    frames of a busy bus, say) costs neither decoding nor a dict per message."""
+
+    def __init__(self, messages: Mapping[str, list[tuple[int, dict]]] | None = None,
+                 resolutions: Mapping[str, int] | None = None) -> None:
+        super().__init__(messages, resolutions)
+        #: per topic, what was read but not yet decoded: (t_ns, JSON bytes), file order
+        self._raw: dict[str, list[tuple[int, bytes]]] = {}
+        self._raw_span: dict[str, list[int]] = {}  # per topic, [first t, last t] of `_raw`
+
+    def _keep(self, topic: str, t: int, data: bytes) -> None:
+        pend = self._raw.get(topic)
+        if pend is None:
+            pend = self._raw[topic] = []
+            self._raw_span[topic] = [t, t]
+        else:
+            span = self._raw_span[topic]
+            if t < span[0]:
+                span[0] = t
+            elif t > span[1]:
+                span[1] = t
+        pend.append((t, data))
+
+    def _keep_all(self, raw: dict[str, list[tuple[int, bytes]]]) -> None:
+        """Every topic's undecoded messages at once (a file read)."""
+        self._raw = {topic: lst for topic, lst in raw.items() if lst}
+        self._raw_span = {topic: [min(t for t, _ in lst), max(t for t, _ in lst)]
+                          for topic, lst in self._raw.items()}
+
+    def messages(self, topic: str) -> list[tuple[int, dict]]:
+        pend = self._raw.pop(topic, None)
+        self._raw_span.pop(topic, None)
+        if pend:
+            lst = self._msgs.setdefault(topic, [])
+            last = lst[-1][0] if lst else None
+            ordered = True
+            for t, data in pend:
+                obj = decode(data)
+                if last is not None and t < last:
+                    ordered = False
+                last = t
+                lst.append((t, obj if isinstance(obj, dict) else {"value": obj}))
+            if not ordered:
+                lst.sort(key=lambda m: m[0])  # stable: equal times keep file order
+        return self._msgs.get(topic, [])
+
+    def add(self, topic: str, t: int, msg: dict) -> None:
+        self.messages(topic)  # what is pending comes first
+        super().add(topic, t, msg)
+
+    def put_topic(self, topic: str, msgs: list[tuple[int, dict]]) -> None:
+        self._raw.pop(topic, None)
+        self._raw_span.pop(topic, None)
+        super().put_topic(topic, msgs)
+
+    def topics(self) -> list[str]:
+        return sorted(set(self._msgs) | set(self._raw))
+
+    def end_time(self) -> int | None:
+        ends = [lst[-1][0] for lst in self._msgs.values() if lst]
+        ends += [span[1] for span in self._raw_span.values()]
+        return max(ends) if ends else None
+
+    def start_time(self) -> int | None:
+        starts = [lst[0][0] for lst in self._msgs.values() if lst]
+        starts += [span[0] for span in self._raw_span.values()]
+        return min(starts) if starts else None
+
+
+class RecordingSource(_LazySource):
     """Messages of an MCAP recording, read once through `hil.record.reader.Recording`.
 
     `time="publish"` uses the source's own timestamps (default), `"log"` the harness's.
@@ -157,17 +228,20 @@ class RecordingSource(MemorySource):
         if time not in ("publish", "log"):
             raise ValueError(f"time must be 'publish' or 'log', not {time!r}")
         rec = Recording.open(str(path))
+        super().__init__()
         try:
-            msgs: dict[str, list[tuple[int, dict]]] = {}
+            raw: dict[str, list[tuple[int, bytes]]] = {}
             wanted = list(topics) if topics is not None else None
             lag = 0  # the largest publish-to-log delay read
-            for topic, log_t, pub_t, data in rec.messages(topics=wanted):
+            for topic, log_t, pub_t, data in rec.raw_messages(topics=wanted):
                 if until_log_ns is not None and log_t > until_log_ns:
                     continue
                 t = pub_t if time == "publish" and pub_t else log_t
                 lag = max(lag, log_t - t)
-                msgs.setdefault(topic, []).append((int(t), data if isinstance(data, dict) else
-                                                   {"value": data}))
+                lst = raw.get(topic)
+                if lst is None:
+                    lst = raw[topic] = []
+                lst.append((int(t), data))
             #: a damaged file: the time (of this source's clock) up to which every message
             #: is known to have been read; what came later is dropped, so nothing is judged
             #: on a part of the recording that lost some of its messages (None: whole file)
@@ -175,8 +249,9 @@ class RecordingSource(MemorySource):
             cut = rec.cut_log_ns if rec.corrupt else None
             if cut is not None:
                 self.cut_ns = cut - lag  # a message stamped this late may be in the lost chunk
-                for topic, lst in msgs.items():
-                    msgs[topic] = [m for m in lst if m[0] < self.cut_ns]
+                for topic, lst in raw.items():
+                    raw[topic] = [m for m in lst if m[0] < self.cut_ns]
+            self._keep_all(raw)
             self.meta = _metadata(rec)
             res = _resolutions(rec, self.meta)
             #: the first broken record (None if the file is whole) and whether it is damage
@@ -189,11 +264,11 @@ class RecordingSource(MemorySource):
             close = getattr(rec, "close", None)
             if close:
                 close()
-        super().__init__(msgs, res)
+        self._res = dict(res)
         self.path = str(path)
 
 
-class LiveSource(MemorySource):
+class LiveSource(_LazySource):
     """The recording of a running plan, for its `check_timing` steps: each message is decoded
     at most once from the recorder's `mirror` (`Recorder.keep_messages`), so a plan's checks
     cost what its recording holds, not that times the number of checks. Decoding is lazy, per
@@ -203,8 +278,6 @@ class LiveSource(MemorySource):
 
     def __init__(self) -> None:
         super().__init__()
-        #: per topic, what was written but not yet decoded: (t_ns, JSON bytes), file order
-        self._raw: dict[str, list[tuple[int, bytes]]] = {}
         self._seen = 0
         self._head_key: tuple = ()
         self.meta: dict[str, dict[str, str]] = {}
@@ -227,45 +300,12 @@ class LiveSource(MemorySource):
         if n == self._seen:
             return self
         names = rec.topic_of
-        raw = self._raw
+        keep = self._keep
         for cid, log_t, pub_t, data in mirror[self._seen:n]:
-            topic = names.get(cid, f"?{cid}")
-            pend = raw.get(topic)
-            if pend is None:
-                pend = raw[topic] = []
-            pend.append((int(pub_t or log_t), data))
+            keep(names.get(cid, f"?{cid}"), int(pub_t or log_t), data)
         self._seen = n
         self._samples_cache.clear()
         return self
-
-    def messages(self, topic: str) -> list[tuple[int, dict]]:
-        pend = self._raw.pop(topic, None)
-        if pend:
-            lst = self._msgs.setdefault(topic, [])
-            last = lst[-1][0] if lst else None
-            ordered = True
-            for t, data in pend:
-                obj = decode(data)
-                if last is not None and t < last:
-                    ordered = False
-                last = t
-                lst.append((t, obj if isinstance(obj, dict) else {"value": obj}))
-            if not ordered:
-                lst.sort(key=lambda m: m[0])  # stable: equal times keep file order
-        return self._msgs.get(topic, [])
-
-    def topics(self) -> list[str]:
-        return sorted(set(self._msgs) | set(self._raw))
-
-    def end_time(self) -> int | None:
-        ends = [lst[-1][0] for lst in self._msgs.values() if lst]
-        ends += [max(t for t, _ in lst) for lst in self._raw.values() if lst]
-        return max(ends) if ends else None
-
-    def start_time(self) -> int | None:
-        starts = [lst[0][0] for lst in self._msgs.values() if lst]
-        starts += [min(t for t, _ in lst) for lst in self._raw.values() if lst]
-        return min(starts) if starts else None
 
 
 def _metadata(rec: Any) -> dict[str, dict[str, str]]:

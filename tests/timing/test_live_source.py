@@ -68,3 +68,33 @@ def test_out_of_order_messages_are_sorted_when_decoded(tmp_path):
     assert [t for t, _m in got] == [3 * MS, 4 * MS, 5 * MS]
     assert [m["level"] for _t, m in got] == [False, True, False]
     rec.close()
+
+
+def test_a_file_source_decodes_only_the_topics_read(tmp_path, monkeypatch):
+    """`RecordingSource` (`hil check`, reports) keeps each topic's bytes until it is read: the
+    raw frames of a busy bus that no spec reads are never decoded, and what is read is what a
+    full decoding of the file gives, in time order."""
+    from hil.record.reader import Recording
+
+    path = tmp_path / "file.mcap"
+    rec = Recorder(path)
+    _record(rec, 0, 40)
+    for t in (45 * MS, 41 * MS, 43 * MS):  # stamped by their source, written as they came
+        rec.dio("drive1", "DI1", t == 43 * MS, 50 * MS, source_t=t)
+    rec.close()
+    calls: list[bytes] = []
+    real = source_mod.decode
+    monkeypatch.setattr(source_mod, "decode", lambda b: (calls.append(b), real(b))[1])
+    src = RecordingSource(path)
+    assert calls == []
+    assert (src.start_time(), src.end_time()) == (0, 45 * MS)  # DI1's latest source stamp
+    assert calls == []  # first and last times come without decoding
+    state = src.messages("/drive/drive1/state")
+    assert len(calls) == len(state) == 40
+    full = {}
+    for topic, log_t, pub_t, msg in Recording.open(str(path)).messages():
+        full.setdefault(topic, []).append((pub_t or log_t, msg))
+    for topic in src.topics():
+        assert src.messages(topic) == sorted(full[topic], key=lambda m: m[0]), topic
+    assert [t for t, _m in src.messages("/dio/drive1/DI1")] == [41 * MS, 43 * MS, 45 * MS]
+    assert set(src.topics()) == set(full)
