@@ -95,9 +95,9 @@ def checker_limit(cycle_ms: int, bitrate: int = 1_000_000) -> int:
 def run(n: int, cycle_ms: int, seconds: float, clock: str = "virtual",
         transport: str = "inproc") -> tuple[int, int, float]:
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "bench.yaml"
-        path.write_text(_bench(n, transport))
-        bench = replace(loads_bench(_bench(n, transport), str(path)), clock=clock)
+        path, text = Path(tmp) / "bench.yaml", _bench(n, transport)
+        path.write_text(text)  # `hil drive` processes read the bench from its file
+        bench = replace(loads_bench(text, str(path)), clock=clock)
         t0 = time.process_time()
         res = run_plan(loads_plan(_plan(n, cycle_ms, seconds), "scale.yaml"), bench,
                        Path(tmp))

@@ -44,17 +44,16 @@ class Reports(Listener):
         res = e.result
         # the HTML first: it reads the recording whole (ground truth too), and the JUnit then
         # finds that read in `load_run`'s cache rather than reading the file again
+        html_error = junit_error = ""
         try:
             res.html = str(write_html(res.recording, self.out_dir / f"{self.stem}.html"))
         except Exception as exc:
             html_error = f"HTML report failed: {exc}"
-        else:
-            html_error = ""
         try:
             res.junit = str(write_junit([res.recording], self.out_dir / f"{self.stem}.junit.xml"))
         except Exception as exc:
-            res.error = res.error or f"JUnit report failed: {exc}"
-        res.error = res.error or html_error
+            junit_error = f"JUnit report failed: {exc}"
+        res.error = res.error or junit_error or html_error
 
 
 class StepLines(Listener):

@@ -143,16 +143,6 @@ def _eq(a: Any, b: Any) -> bool:
     return isinstance(a, str) and isinstance(b, str) and a.strip().lower() == b.strip().lower()
 
 
-def _start_time(source: SignalSource) -> int:
-    """The source's first timestamp (0 when empty), without decoding it where it can tell."""
-    if hasattr(source, "start_time"):
-        start = source.start_time()
-    else:  # a source of an older shape: every topic's first message
-        starts = [m[0][0] for topic in source.topics() if (m := source.messages(topic))]
-        start = min(starts) if starts else None
-    return start if start is not None else 0
-
-
 class Context:
     """Resolves a spec's signals and events on one source with one binding."""
 
@@ -169,7 +159,8 @@ class Context:
         self._topic_sampling: dict[str, tuple[set[int], set[int], list[int]]] = {}
         end = source.end_time()
         self.end = end if end is not None else 0
-        self.start = _start_time(source)  # first timestamp (for "never in <span>")
+        start = source.start_time()  # first timestamp (for "never in <span>")
+        self.start = start if start is not None else 0
 
     # --- names ------------------------------------------------------------------------
     def env(self, t: int | None) -> dict[str, Any]:

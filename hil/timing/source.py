@@ -147,9 +147,8 @@ class _LazySource(MemorySource):
     is first asked for that topic, then decodes them once: a topic nothing reads (the raw
     frames of a busy bus, say) costs neither decoding nor a dict per message."""
 
-    def __init__(self, messages: Mapping[str, list[tuple[int, dict]]] | None = None,
-                 resolutions: Mapping[str, int] | None = None) -> None:
-        super().__init__(messages, resolutions)
+    def __init__(self) -> None:
+        super().__init__()
         #: per topic, what was read but not yet decoded: (t_ns, JSON bytes), file order
         self._raw: dict[str, list[tuple[int, bytes]]] = {}
         self._raw_span: dict[str, list[int]] = {}  # per topic, [first t, last t] of `_raw`
