@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from io import BytesIO
 from typing import IO, Any
@@ -355,8 +355,12 @@ def decompress(compression: str, data: bytes, size: int) -> bytes:
     raise ValueError(f"unknown chunk compression {compression!r}")
 
 
-def iter_chunk(buf: bytes, schemas: dict, channels: dict) -> Iterator[tuple[int, int, int, bytes]]:
-    """Messages of one uncompressed chunk; schema and channel records update the dicts."""
+def iter_chunk(buf: bytes, schemas: dict, channels: dict,
+               keep: Callable[[int], bool] | None = None, kept: dict[int, bool] | None = None
+               ) -> Iterator[tuple[int, int, int, bytes]]:
+    """Messages of one uncompressed chunk; schema and channel records update the dicts.
+    `keep(channel id)`: only those messages are yielded (the others are walked, not copied);
+    `kept` caches its answers (asked first)."""
     off = 0
     n = len(buf)
     unpack_rec = _REC.unpack_from
@@ -368,8 +372,16 @@ def iter_chunk(buf: bytes, schemas: dict, channels: dict) -> Iterator[tuple[int,
         if end > n:
             raise ValueError(f"record at chunk offset {off} runs past the chunk end")
         if op == 5:
-            cid, _seq, lt, pt = unpack_msg(buf, body)
-            yield cid, lt, pt, buf[body + 22 : end]
+            if keep is None:
+                cid, _seq, lt, pt = unpack_msg(buf, body)
+                yield cid, lt, pt, buf[body + 22 : end]
+            else:
+                cid, _seq, lt, pt = unpack_msg(buf, body)
+                k = kept.get(cid) if kept is not None else None
+                if k is None:
+                    k = keep(cid)
+                if k:
+                    yield cid, lt, pt, buf[body + 22 : end]
         elif op == 3:
             s = _parse(Schema, buf[body:end])
             schemas[s.id] = s
@@ -379,54 +391,86 @@ def iter_chunk(buf: bytes, schemas: dict, channels: dict) -> Iterator[tuple[int,
         off = end
 
 
-def scan(data: bytes) -> Scan:
-    """Read every complete record of `data`; stop at the first broken one and say where."""
+class FileBytes:
+    """The slices of an open file that `scan` asks for, read when asked: a recording is
+    scanned without holding the whole file in memory."""
+
+    def __init__(self, f: IO[bytes], size: int) -> None:
+        self._f = f
+        self._size = size
+
+    def __len__(self) -> int:
+        return self._size
+
+    def __getitem__(self, s: slice) -> bytes:
+        start = s.start or 0
+        stop = self._size if s.stop is None else min(s.stop, self._size)
+        if stop <= start:
+            return b""
+        self._f.seek(start)
+        return self._f.read(stop - start)
+
+
+#: what `scan` hands each readable chunk instead of keeping it: (uncompressed payload,
+#: schemas, channels); it walks the chunk itself and raises on a broken record
+ChunkSink = Callable[[bytes, dict, dict], None]
+
+
+def scan(data: bytes | FileBytes, sink: ChunkSink | None = None) -> Scan:
+    """Read every complete record of `data`; stop at the first broken one and say where.
+    With `sink`, each chunk goes to it (after its CRC check) and is not kept; the sink's
+    walk is the chunk's structural check, so it must keep nothing of a chunk it could not
+    walk to the end."""
     out = Scan({}, {}, [], [], [], [], False, False, None, None, len(data))
     if data[:8] != MAGIC:
         raise ValueError("not an MCAP file (bad magic at offset 0)")
     off = 8
     n = len(data)
     while off < n:
-        if off + 9 > n:
+        head = data[off : off + 9]
+        if len(head) < 9:
             out.error, out.error_offset = f"truncated record header at offset {off}", off
             break
-        op, ln = _REC.unpack_from(data, off)
-        body = off + 9
-        end = body + ln
+        op, ln = _REC.unpack_from(head, 0)
+        end = off + 9 + ln
         if end > n:
             out.error = f"record (opcode 0x{op:02x}) at offset {off} truncated: needs {ln} bytes"
             out.error_offset = off
             break
+        rec = data[off + 9 : end]
         c_min: int | None = None
         try:
             if op == Opcode.CHUNK:
-                _c_min, _c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(data, body)
+                _c_min, _c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(rec, 0)
                 c_min = _c_min
-                p = body + 28
-                (clen,) = struct.unpack_from("<I", data, p)
-                comp = data[p + 4 : p + 4 + clen].decode()
+                p = 28
+                (clen,) = struct.unpack_from("<I", rec, p)
+                comp = rec[p + 4 : p + 4 + clen].decode()
                 p += 4 + clen
-                (dlen,) = struct.unpack_from("<Q", data, p)
-                raw = decompress(comp, data[p + 8 : p + 8 + dlen], usize)
+                (dlen,) = struct.unpack_from("<Q", rec, p)
+                raw = decompress(comp, rec[p + 8 : p + 8 + dlen], usize)
                 if ucrc and zlib.crc32(raw) != ucrc:
                     raise ValueError("chunk CRC mismatch")
-                # validate structure now so a bad chunk is reported as the broken record
-                for _ in iter_chunk(raw, out.schemas, out.channels):
-                    pass
-                out.chunks.append(raw)
+                if sink is not None:
+                    sink(raw, out.schemas, out.channels)
+                else:
+                    # validate structure now so a bad chunk is reported as the broken record
+                    for _ in iter_chunk(raw, out.schemas, out.channels):
+                        pass
+                    out.chunks.append(raw)
             elif op == Opcode.MESSAGE:
-                cid, _seq, lt, pt = _MSG_BODY.unpack_from(data, body)
-                out.loose.append((cid, lt, pt, data[body + 22 : end]))
+                cid, _seq, lt, pt = _MSG_BODY.unpack_from(rec, 0)
+                out.loose.append((cid, lt, pt, rec[22:]))
             elif op == Opcode.SCHEMA:
-                s = _parse(Schema, data[body:end])
+                s = _parse(Schema, rec)
                 out.schemas[s.id] = s
             elif op == Opcode.CHANNEL:
-                c = _parse(Channel, data[body:end])
+                c = _parse(Channel, rec)
                 out.channels[c.id] = c
             elif op == Opcode.METADATA:
-                out.metadata.append(_parse(Metadata, data[body:end]))
+                out.metadata.append(_parse(Metadata, rec))
             elif op == Opcode.ATTACHMENT:
-                out.attachments.append(_parse(Attachment, data[body:end]))
+                out.attachments.append(_parse(Attachment, rec))
             elif op == Opcode.DATA_END:
                 out.has_data_end = True
             elif op == Opcode.FOOTER:

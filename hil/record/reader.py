@@ -8,15 +8,16 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hil.fileio import FileProblem, read_limited
-from hil.record.mcapio import Scan, iter_chunk, scan
+from hil.fileio import FileProblem, read_limited, require_regular
+from hil.record.mcapio import FileBytes, Scan, iter_chunk, scan
 
 _loads = json.loads
+_UNSEEN: Any = object()
 
 
 def decode(data: bytes) -> Any:
@@ -79,6 +80,7 @@ class Recording:
                 cid, ch.topic, schema.name if schema else "", ch.message_encoding, ch.metadata
             )
         self._by_topic = {c.topic: c.id for c in self.channel_info.values()}
+        self.message_topics: list[str] | None = None  # known after `stream`
 
     @classmethod
     def open(cls, path: str | os.PathLike) -> Recording:
@@ -95,6 +97,60 @@ class Recording:
         except ValueError as exc:
             raise RecordingError(f"{p}: {exc}") from exc
         return cls(p, sc)
+
+    @classmethod
+    def stream(cls, path: str | os.PathLike, topics: Iterable[str] | None,
+               on_message: Callable[[str, int, int, bytes], None]) -> Recording:
+        """Read `path` a record at a time and hand each message of `topics` (None: every
+        topic) to `on_message(topic, log_time, publish_time, data)`, in file order, keeping
+        no message and no chunk: a recording of any length is read in bounded memory. The
+        Recording returned has the channels, metadata and the file's state, no messages.
+        A chunk that cannot be read whole gives none of its messages (as `open`)."""
+        p = Path(path)
+        want = None if topics is None else set(topics)
+        try:
+            require_regular(p, "recording")  # not a device: /dev/zero never ends
+            fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
+        except FileProblem as exc:
+            raise RecordingError(str(exc)) from exc
+        except OSError as exc:
+            raise RecordingError(f"{p}: cannot read: {exc.strerror or exc}") from exc
+        topic_of: dict[int, str | None] = {}  # channel id -> its topic if wanted, else None
+        seen: dict[int, str] = {}  # channel id -> topic, of each channel with a message
+        kept: dict[int, bool] = {}  # channel id -> wanted (known channels only)
+
+        def sink(raw: bytes, schemas: dict, channels: dict) -> None:
+            def keep(cid: int) -> bool:
+                got = topic_of.get(cid, _UNSEEN)
+                if got is _UNSEEN:
+                    ch = channels.get(cid)
+                    name = ch.topic if ch is not None else f"?{cid}"
+                    got = name if want is None or name in want else None
+                    if ch is not None:
+                        topic_of[cid] = got
+                        seen[cid] = name
+                        kept[cid] = got is not None
+                return got is not None
+
+            got = list(iter_chunk(raw, schemas, channels, keep, kept))  # whole, or raises
+            for cid, lt, pt, data in got:
+                on_message(topic_of.get(cid) or f"?{cid}", lt, pt, data)
+
+        with os.fdopen(fd, "rb") as f:
+            try:
+                sc = scan(FileBytes(f, os.fstat(fd).st_size), sink)
+            except ValueError as exc:
+                raise RecordingError(f"{p}: {exc}") from exc
+        rec = cls(p, sc)
+        for cid, lt, pt, data in sc.loose:  # messages outside chunks (the writer makes none)
+            name = rec.channel_info[cid].topic if cid in rec.channel_info else f"?{cid}"
+            seen[cid] = name
+            if want is None or name in want:
+                on_message(name, lt, pt, data)
+        sc.loose.clear()
+        #: the topics with at least one message, wanted or not
+        rec.message_topics = sorted(set(seen.values()))
+        return rec
 
     # -- state of the file ----------------------------------------------------------------------
     @property

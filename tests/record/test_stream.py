@@ -1,0 +1,80 @@
+"""`Recording.stream` (what `hil check` reads with) gives what `Recording.open` gives, one
+record at a time: the same messages of the wanted topics, the same verdict on a truncated or
+damaged file, and no message of a chunk it could not read whole."""
+
+from __future__ import annotations
+
+import io
+import random
+
+import pytest
+
+from hil.record.mcapio import McapWriter
+from hil.record.reader import Recording, RecordingError
+
+
+def _file(tmp_path, n: int = 3000):
+    buf = io.BytesIO()
+    w = McapWriter(buf, chunk_size=4096)
+    sid = w.add_schema("hil.Any", "jsonschema", b"{}")
+    a = w.add_channel("/a", "json", sid, {})
+    b = w.add_channel("/b", "json", sid, {})
+    for i in range(n):
+        w.add_message(a if i % 3 else b, i * 1000, i * 1000 + 7, b'{"i": %d}' % i)
+        if i % 500 == 0:
+            w.flush()
+    w.add_metadata("hil.run", {"k": "v"})
+    w.finish()
+    path = tmp_path / "r.mcap"
+    path.write_bytes(buf.getvalue())
+    return path
+
+
+def _streamed(path, topics):
+    got = []
+    rec = Recording.stream(path, topics, lambda *m: got.append(m))
+    return rec, got
+
+
+@pytest.mark.parametrize("topics", [None, ["/a"], ["/b", "/none"], []])
+def test_stream_gives_what_open_gives(tmp_path, topics) -> None:
+    path = _file(tmp_path)
+    rec, got = _streamed(path, topics)
+    whole = Recording.open(path)
+    assert got == list(whole.raw_messages(topics if topics is not None else None))
+    assert rec.metadata() == whole.metadata() == {"hil.run": {"k": "v"}}
+    assert rec.message_topics == ["/a", "/b"]
+    assert not rec.truncated and rec.error is None
+
+
+def test_truncated_and_damaged_files_read_alike(tmp_path) -> None:
+    path = _file(tmp_path)
+    data = path.read_bytes()
+    rng = random.Random(7)
+    cut = tmp_path / "cut.mcap"
+    for size in sorted(rng.sample(range(9, len(data)), 25)):
+        cut.write_bytes(data[:size])
+        rec, got = _streamed(cut, None)
+        whole = Recording.open(cut)
+        assert got == list(whole.raw_messages()), size
+        assert (rec.truncated, rec.corrupt, rec.error) == (whole.truncated, whole.corrupt,
+                                                          whole.error)
+    for _ in range(10):  # a flipped byte mid-file: the chunk's CRC or its records break
+        pos = rng.randrange(200, len(data) - 200)
+        bad = bytearray(data)
+        bad[pos] ^= 0x5A
+        cut.write_bytes(bytes(bad))
+        rec, got = _streamed(cut, None)
+        whole = Recording.open(cut)
+        assert got == list(whole.raw_messages()), pos
+        assert (rec.corrupt, rec.error, rec.cut_log_ns) == (whole.corrupt, whole.error,
+                                                           whole.cut_log_ns)
+
+
+def test_not_a_recording_is_named(tmp_path) -> None:
+    p = tmp_path / "x.mcap"
+    p.write_bytes(b"not mcap at all")
+    with pytest.raises(RecordingError, match="x.mcap"):
+        Recording.stream(p, None, lambda *m: None)
+    with pytest.raises(RecordingError, match="not a regular"):
+        Recording.stream(tmp_path, None, lambda *m: None)
