@@ -15,6 +15,9 @@ from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plan
 from hil.pytest_plugin import explain
 from hil.record.schemas import message_problems
+from hil.timing.checker import Context, check_all
+from hil.timing.cli import read_plan, resolve_specs
+from hil.timing.source import RecordingSource, infer_places, recorded_specs
 
 PLANS = find_plans()
 
@@ -22,7 +25,7 @@ PLANS = find_plans()
 @pytest.mark.hil
 @pytest.mark.virtual_time
 @pytest.mark.parametrize("plan", PLANS, ids=[p.stem for p in PLANS])
-def test_shipped_plan(plan, hil_run_plan, hil_bench, tmp_path) -> None:
+def test_shipped_plan(plan, hil_run_plan, hil_bench, tmp_path, monkeypatch) -> None:
     result = hil_run_plan(plan)
     assert result.passed, explain(result)
     assert schema_problems(result.recording) == []
@@ -35,6 +38,24 @@ def test_shipped_plan(plan, hil_run_plan, hil_bench, tmp_path) -> None:
         diff = next((i for i, (a, b) in enumerate(zip(first, second, strict=True)) if a != b),
                     None)
         assert diff is None, f"message {diff} differs: {first[diff]} vs {second[diff]}"
+        whole, columns = judged_both_ways(result.recording)
+        assert whole == columns  # what `hil check` reads of a long recording judges the same
+        # the runs of equal values judge as every sample does
+        monkeypatch.setattr(Context, "_runs_suffice", lambda self, s: False)
+        assert judged_both_ways(result.recording) == (whole, columns)
+
+
+def judged_both_ways(path: str) -> tuple[list[dict], list[dict]]:
+    """The recorded specs judged on the recording read as messages, then as `hil check`
+    reads it (only the topics the specs read, the signal topics as columns)."""
+    whole = RecordingSource(path)
+    names, rec_bind = recorded_specs(whole.meta)
+    specs = resolve_specs(names)
+    bind = infer_places(whole.topics()) | rec_bind
+    wanted, columns = read_plan(specs, [bind])
+    cols = RecordingSource(path, topics=wanted, columns=columns)
+    return ([v.to_dict() for v in check_all(specs, whole, binding=bind)],
+            [v.to_dict() for v in check_all(specs, cols, binding=bind)])
 
 
 def messages(path: str) -> list[tuple[str, int, bytes]]:

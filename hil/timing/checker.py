@@ -26,7 +26,12 @@ from typing import Any
 
 from hil.record import topics
 from hil.timing.expr import ExprError, check_number, is_param
-from hil.timing.source import MemorySource, ParamTimeline, SignalSource, samples
+from hil.timing.source import (
+    MemorySource,
+    ParamTimeline,
+    SignalSource,
+    samples,
+)
 from hil.timing.spec import ConstraintDef, EventDef, SignalDef, Spec, WindowDef
 from hil.units import MS
 
@@ -247,9 +252,8 @@ class Context:
         if not raw or not any(k.startswith("CAN ") for k in deliveries):
             return {}
         cobs: dict[int, set[int]] = {}
-        for t, m in self.source.messages(topic):
-            if isinstance(m, dict) and m.get("dir") == "tx" and "cob_id" in m:
-                cobs.setdefault(t, set()).add(int(m["cob_id"]))
+        for t, cob in samples(self.source, topic, "cob_id", {"dir": "tx"}):
+            cobs.setdefault(t, set()).add(int(cob))
         out = {}
         for t, _v in raw:
             lags = [d for c in cobs.get(t, ()) for sent, _lv, d in
@@ -264,6 +268,10 @@ class Context:
         polled, an SDO upload response (`kind: sdo_tx`; gap since the previous sample of the
         same field: a change first seen there happened after that one, e.g. a statusword
         polled late by a loaded harness)."""
+        cols = getattr(self.source, "columns", None)
+        table = cols(topic) if cols is not None else None
+        if table is not None:  # a long recording's columns: asked at the samples' times
+            return self._sampling_columns(table, raw)
         # once per topic and source: every signal and every check of a source shares it
         store = getattr(self.source, "_samples_cache", None)
         key = ("_sampling", topic)
@@ -298,6 +306,25 @@ class Context:
             prev = t
         return out
 
+    @staticmethod
+    def _sampling_columns(table: Any, raw: list[tuple[int, Any]]
+                          ) -> dict[int, tuple[int, int]]:
+        """`_sampling` on a topic held as columns: the same answer, looked up at each
+        sample's time rather than built for every message."""
+        if "periodic" not in table.cols and "kind" not in table.cols:
+            return {}
+        times = table.times
+        out = {}
+        prev = None
+        for t, _v in raw:
+            i = bisect.bisect_left(times, t)
+            if i > 0 and table.any_at(t, "periodic", bool):
+                out[t] = (0, t - times[i - 1])
+            elif prev is not None and table.any_at(t, "kind", lambda k: k == "sdo_tx"):
+                out[t] = (0, t - prev)
+            prev = t
+        return out
+
     def trace(self, name: str) -> Trace:
         if name not in self._traces:
             self._traces[name] = self._build(name)
@@ -315,7 +342,7 @@ class Context:
         s = self._signal_def(name)
         if s.kind in ("topic", "function", "line", "alarm"):
             topic, fld, invert = self._where_from(s)
-            raw = samples(self.source, topic, fld, s.where)
+            raw = samples(self.source, topic, fld, s.where, runs=self._runs_suffice(s))
             res = self._resolution(topic, s)
             if s.kind == "function" or s.kind == "line":
                 pts = [(t, bool(v) != invert) for t, v in raw]
@@ -342,6 +369,18 @@ class Context:
             return self._held(s, _compress(s.name, pts, parent.res, parent.lags))
         parents = [self.trace(p) for p in s.parts]
         return _combine(s.name, s.kind, parents)
+
+    def _runs_suffice(self, s: SignalDef) -> bool:
+        """A change-point trace of `s` needs only the first and last sample of each run of
+        equal values, unless a threshold changes over time (a parameter written mid-run
+        moves the change of `below`/`above` into the run)."""
+        tf = s.transforms
+        if "below" not in tf and "above" not in tf:
+            return True
+        times = self.params.change_times() or [0]
+        keys = [k for k in ("below", "above") if k in tf]
+        first = [tf[k].eval(self.env(times[0])) for k in keys]
+        return all([tf[k].eval(self.env(t)) for k in keys] == first for t in times[1:])
 
     def _where_from(self, s: SignalDef) -> tuple[str, str, bool]:
         if s.kind == "function":
@@ -623,6 +662,35 @@ def spec_topics(spec: Spec, binding: Mapping[str, str] | None = None) -> set[str
                 out.add(ctx._where_from(s)[0])
             except KeyError:
                 continue
+    return out
+
+
+#: the fields the checker reads of every signal topic besides the signals' own: whether a
+#: sample is periodic or a poll (`_sampling`), and a sent frame's COB-ID (`_frame_lags`)
+_SAMPLING_FIELDS = ("periodic", "kind", "dir", "cob_id")
+
+
+def spec_columns(spec: Spec, binding: Mapping[str, str] | None = None
+                 ) -> dict[str, set[str]]:
+    """The signal topics judging `spec` reads under `binding`, each with the top-level
+    fields read of it: what a long recording's source holds as columns
+    (`RecordingSource(columns=...)`). The drive's parameters and input deliveries are not
+    among them (they stay messages: `spec_topics` has them)."""
+    bind = spec.binding(binding)
+    ctx = Context(spec, MemorySource(), ParamTimeline(), bind, None, None)
+    out: dict[str, set[str]] = {}
+    for s in spec.signals.values():
+        if s.kind not in ("topic", "function", "line", "alarm"):
+            continue
+        try:
+            topic, fld, _inv = ctx._where_from(s)
+        except KeyError:
+            continue
+        fields = out.setdefault(topic, set(_SAMPLING_FIELDS))
+        fields.add(fld.split(".")[0])
+        fields.update(k.split(".")[0] for k in s.where)
+    drive = bind.get("drive", "drive1")  # `alarm:ALnnn` events read the drive's alarms
+    out.setdefault(topics.drive_state(drive), set(_SAMPLING_FIELDS)).add("alarms")
     return out
 
 

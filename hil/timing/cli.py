@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from hil.record import topics
 from hil.record.reader import RecordingError
 from hil.record.reader import incomplete as reader_incomplete
 from hil.record.reader import not_hil as reader_not_hil
@@ -37,6 +38,8 @@ from hil.timing.checker import (
     constants_for,
     missing_data,
     occurrences_since,
+    spec_columns,
+    spec_topics,
     summary,
 )
 from hil.timing.expr import MAX_MAGNITUDE
@@ -264,6 +267,22 @@ def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> i
     return code
 
 
+def read_plan(specs: list[Spec], bindings: list[dict[str, str]]
+              ) -> tuple[set[str], dict[str, set[str]]]:
+    """What judging `specs` reads of a recording, under any of `bindings`: the topics to
+    keep, and among them the signal topics to hold as columns with the fields read (a
+    recording of any length is then read in memory that grows with the changes of those
+    fields, and a topic no spec reads, such as a busy bus's raw frames, is skipped)."""
+    wanted: set[str] = {topics.TIMING_VERDICTS}
+    columns: dict[str, set[str]] = {}
+    for spec in specs:
+        for bind in bindings:
+            wanted |= spec_topics(spec, bind)
+            for topic, fields in spec_columns(spec, bind).items():
+                columns.setdefault(topic, set()).update(fields)
+    return wanted, columns
+
+
 def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: dict,
             consts: dict, res: dict) -> int:
     """Re-judge every `check_timing` step of a plan recording on what the run had seen by then,
@@ -282,10 +301,12 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
     except ValueError as e:
         print(f"hil check: {e}", file=sys.stderr)
         return 2
+    read = read_plan(specs, [dict(run["binding"]) | binding for run in runs])
     for run, spec in zip(runs, specs, strict=True):
         until = int(run["until_ns"])
         src = cache.get(until) or cache.setdefault(
-            until, RecordingSource(args.recording, time=args.time, until_log_ns=until))
+            until, RecordingSource(args.recording, time=args.time, until_log_ns=until,
+                                   topics=read[0], columns=read[1]))
         vs = check(spec, src, params=(run["params"] | params) or None,
                    binding=dict(run["binding"]) | binding,
                    constants=(run["constants"] | consts) or None, resolution=res)
@@ -310,8 +331,9 @@ def main(args: argparse.Namespace) -> int:
         why = "not a regular file" if Path(args.recording).exists() else "no such file"
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)
         return 2
-    try:
-        source = RecordingSource(args.recording, time=args.time)
+    try:  # first what the file says of itself, then only what the chosen specs read
+        source = RecordingSource(args.recording, time=args.time,
+                                 topics=[topics.TIMING_VERDICTS])
     except ImportError as e:
         print(f"hil check: cannot read recordings ({e})", file=sys.stderr)
         return 2
@@ -340,6 +362,14 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: {e}", file=sys.stderr)
         return 2
     bind = infer_places(source.topics()) | rec_binding | binding
+    try:
+        wanted, columns = read_plan(specs, [bind])
+        source = RecordingSource(args.recording, time=args.time, topics=wanted,
+                                 columns=columns)
+    except Exception as e:  # the file changed since the first read
+        why = str(e) if isinstance(e, RecordingError) else f"{args.recording}: cannot read: {e}"
+        print(f"hil check: {why}", file=sys.stderr)
+        return EXIT_USAGE
     bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
     incomplete: list[str] = []

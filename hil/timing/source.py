@@ -10,7 +10,8 @@ from __future__ import annotations
 import bisect
 import fnmatch
 import json
-from collections.abc import Iterable, Mapping
+from array import array
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -18,6 +19,7 @@ from hil.record import topics
 from hil.record.reader import Recording, decode
 
 _MISSING = object()
+MISSING_FIELD = _MISSING  # what a column holds where its messages lack the field
 
 
 class SignalSource(Protocol):
@@ -49,11 +51,25 @@ def get_field(msg: Any, path: str) -> Any:
 
 
 def samples(source: SignalSource, topic: str, field: str,
-            where: Mapping[str, Any] | None = None) -> list[tuple[int, Any]]:
+            where: Mapping[str, Any] | None = None, runs: bool = False
+            ) -> list[tuple[int, Any]]:
     """(t_ns, value) of `field` in `topic`, skipping messages without it or not matching
-    `where` (field -> required value)."""
+    `where` (field -> required value). `runs=True`: a source that stores its messages as
+    columns may give, of each run of equal values, only its first and last sample (what a
+    change-point trace needs: every change, and the sample before it)."""
+    cols = getattr(source, "columns", None)
+    table = cols(topic) if cols is not None else None
+    if table is not None:
+        return table.samples(field, where, runs)
     cache = getattr(source, "_samples_cache", None)
     key = (topic, field, tuple(sorted((where or {}).items(), key=repr)))
+    if runs:  # the whole list once, then its runs once, until the source grows
+        got = cache.get((*key, "runs")) if cache is not None else None
+        if got is None:
+            got = runs_of(samples(source, topic, field, where))
+            if cache is not None:
+                cache[(*key, "runs")] = got
+        return got
     if cache is not None and key in cache:
         return cache[key]
     out = []
@@ -69,6 +85,235 @@ def samples(source: SignalSource, topic: str, field: str,
     if cache is not None:
         cache[key] = out
     return out
+
+
+def runs_of(full: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
+    """Of each run of equal values (`_same`) in `full`, its first and its last sample."""
+    out: list[tuple[int, Any]] = []
+    append = out.append
+    n = len(full)
+    i = 0
+    while i < n:
+        t, v = full[i]
+        tv = type(v)
+        j = i
+        while j + 1 < n and type(full[j + 1][1]) is tv and full[j + 1][1] == v:
+            j += 1
+        append((t, v))
+        if j > i:
+            append(full[j])
+        i = j + 1
+    return out
+
+
+def _same(a: Any, b: Any) -> bool:
+    """One value, for a run: equal and of one type (True is not 1 to a `map`)."""
+    return type(a) is type(b) and a == b
+
+
+class Column:
+    """One field of a topic in runs: `starts[k]` is the first message index of run k, whose
+    value is `values[k]` (`_MISSING`: the messages of that run lack the field)."""
+
+    __slots__ = ("_last", "starts", "values")
+
+    def __init__(self) -> None:
+        self.starts = array("q")
+        self.values: list[Any] = []
+        self._last = -1  # the last message index given a value
+
+    def put(self, i: int, v: Any) -> None:
+        if self._last == i - 1 and self.values and _same(self.values[-1], v):
+            self._last = i
+            return
+        if self._last < i - 1:  # the messages between had no such field
+            if not self.values or self.values[-1] is not _MISSING:
+                self.starts.append(self._last + 1)
+                self.values.append(_MISSING)
+            if self.values and _same(self.values[-1], v):
+                self._last = i
+                return
+        self.starts.append(i)
+        self.values.append(v)
+        self._last = i
+
+    def close(self, n: int) -> None:
+        """`n` messages in all: the tail without the field is a missing run."""
+        if self._last < n - 1 and (not self.values or self.values[-1] is not _MISSING):
+            self.starts.append(self._last + 1)
+            self.values.append(_MISSING)
+        self._last = n - 1
+
+    def value_list(self, n: int) -> list[Any]:
+        out: list[Any] = []
+        for k, v in enumerate(self.values):
+            end = self.starts[k + 1] if k + 1 < len(self.starts) else n
+            out.extend([v] * (end - self.starts[k]))
+        return out
+
+
+class ColumnTable:
+    """The messages of one topic as columns: their times (sorted) and, per top-level field,
+    its values in runs. A field that rarely changes costs a few runs however long the
+    recording; a value that changes every message costs a reference to it."""
+
+    def __init__(self, fields: set[str] | None = None) -> None:
+        self.times = array("q")
+        self.cols: dict[str, Column] = {}
+        self._only = fields  # None: every field
+        self._sorted = True
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def add_again(self, t: int) -> None:
+        """A message equal to the one added before it (its bytes were): only its time."""
+        i = len(self.times)
+        if t < self.times[-1]:
+            self._sorted = False
+        self.times.append(t)
+        for col in self.cols.values():
+            if col._last == i - 1 and col.values[-1] is not _MISSING:
+                col._last = i
+
+    def add(self, t: int, msg: Any) -> None:
+        times = self.times
+        i = len(times)
+        if i and t < times[-1]:
+            self._sorted = False
+        times.append(t)
+        if type(msg) is not dict:
+            msg = {"value": msg}
+        cols = self.cols
+        only = self._only
+        for k, v in msg.items():
+            if only is not None and k not in only:
+                continue
+            col = cols.get(k)
+            if col is None:
+                col = cols[k] = Column()
+            col.put(i, v)
+
+    def finish(self) -> None:
+        """After the last `add`: close the runs, and put the messages in time order (a
+        stable sort: equal times keep file order)."""
+        n = len(self.times)
+        for col in self.cols.values():
+            col.close(n)
+        if self._sorted:
+            return
+        order = sorted(range(n), key=self.times.__getitem__)
+        self.times = array("q", (self.times[i] for i in order))
+        for name, col in list(self.cols.items()):
+            vals = col.value_list(n)
+            new = Column()
+            for j, i in enumerate(order):
+                v = vals[i]
+                if v is not _MISSING:
+                    new.put(j, v)
+            new.close(n)
+            self.cols[name] = new
+        self._sorted = True
+
+    def cut(self, t_end: int) -> None:
+        """Drop the messages at `t_end` or later (a damaged file's unsure tail)."""
+        n = bisect.bisect_left(self.times, t_end)
+        if n == len(self.times):
+            return
+        del self.times[n:]
+        for col in self.cols.values():
+            k = bisect.bisect_left(col.starts, n)
+            del col.starts[k:]
+            del col.values[k:]
+            col._last = n - 1
+
+    def any_at(self, t: int, field: str, pred: Callable[[Any], bool]) -> bool:
+        """Whether a message at time `t` has `field` and its value passes `pred`."""
+        col = self.cols.get(field)
+        if col is None:
+            return False
+        i = bisect.bisect_left(self.times, t)
+        j = bisect.bisect_right(self.times, t)
+        while i < j:
+            k = bisect.bisect_right(col.starts, i) - 1
+            v = col.values[k]
+            if v is not _MISSING and pred(v):
+                return True
+            i = col.starts[k + 1] if k + 1 < len(col.starts) else j
+        return False
+
+    def rows(self) -> list[tuple[int, dict]]:
+        """The messages again, as (t, dict) with the kept fields."""
+        n = len(self.times)
+        rows: list[tuple[int, dict]] = [(t, {}) for t in self.times]
+        for name, col in self.cols.items():
+            for i, v in enumerate(col.value_list(n)):
+                if v is not _MISSING:
+                    rows[i][1][name] = v
+        return rows
+
+    def _segments(self, names: list[str]) -> list[tuple[int, int, list[Any]]]:
+        """[(first index, end index, [value of each name])] over which no named column
+        changes."""
+        n = len(self.times)
+        cols = [self.cols.get(name) for name in names]
+        bounds = sorted({0, *(s for c in cols if c is not None for s in c.starts)})
+        out = []
+        pos = [0] * len(cols)
+        for b_i, b in enumerate(bounds):
+            if b >= n:
+                break
+            end = bounds[b_i + 1] if b_i + 1 < len(bounds) else n
+            vals = []
+            for j, c in enumerate(cols):
+                if c is None:
+                    vals.append(_MISSING)
+                    continue
+                k = pos[j]
+                while k + 1 < len(c.starts) and c.starts[k + 1] <= b:
+                    k += 1
+                pos[j] = k
+                vals.append(c.values[k] if c.starts and c.starts[k] <= b else _MISSING)
+            out.append((b, min(end, n), vals))
+        return out
+
+    def samples(self, field: str, where: Mapping[str, Any] | None,
+                runs: bool) -> list[tuple[int, Any]]:
+        head, _, rest = field.partition(".")
+        conds = list((where or {}).items())
+        names = [head] + [k.partition(".")[0] for k, _v in conds]
+        times = self.times
+        out: list[tuple[int, Any]] = []
+        first = 0  # where the run of the last sample begins in `out`
+        for a, b, vals in self._segments(names):
+            v = vals[0]
+            if v is not _MISSING and rest:
+                v = get_field(v, rest)
+            if v is _MISSING:
+                continue
+            ok = True
+            for j, (k, want) in enumerate(conds):
+                w = vals[j + 1]
+                sub = k.partition(".")[2]
+                if w is not _MISSING and sub:
+                    w = get_field(w, sub)
+                if w is _MISSING or w != want:
+                    ok = False
+                    break
+            if not ok:
+                continue
+            if runs:  # of each run of equal values: its first and its last sample
+                for t in ((times[a], times[b - 1]) if b - 1 > a else (times[a],)):
+                    if out and _same(out[-1][1], v):
+                        if len(out) - 1 > first:
+                            out[-1] = (t, v)  # the run goes on: a new last sample
+                            continue
+                    else:
+                        first = len(out)
+                    out.append((t, v))
+            else:
+                out.extend([(times[j], v) for j in range(a, b)])
+        return out
 
 
 class MemorySource:
@@ -221,50 +466,107 @@ class RecordingSource(_LazySource):
     """
 
     def __init__(self, path: str | Path, topics: Iterable[str] | None = None,
-                 time: str = "publish", until_log_ns: int | None = None) -> None:
-        """`until_log_ns`: only what the harness had seen by then (re-checking a live check)."""
+                 time: str = "publish", until_log_ns: int | None = None,
+                 columns: Mapping[str, Iterable[str] | None] | None = None) -> None:
+        """`until_log_ns`: only what the harness had seen by then (re-checking a live check).
+        `columns`: topic -> the fields to keep (None: all) of topics to hold as columns
+        (`ColumnTable`) rather than as messages: what a long recording's checks read, in
+        memory that grows with the changes of those fields, not with the messages. The
+        file is read a record at a time, never whole."""
 
         if time not in ("publish", "log"):
             raise ValueError(f"time must be 'publish' or 'log', not {time!r}")
-        rec = Recording.open(str(path))
         super().__init__()
-        try:
-            raw: dict[str, list[tuple[int, bytes]]] = {}
-            wanted = list(topics) if topics is not None else None
-            lag = 0  # the largest publish-to-log delay read
-            for topic, log_t, pub_t, data in rec.raw_messages(topics=wanted):
-                if until_log_ns is not None and log_t > until_log_ns:
-                    continue
-                t = pub_t if time == "publish" and pub_t else log_t
-                lag = max(lag, log_t - t)
-                lst = raw.get(topic)
-                if lst is None:
-                    lst = raw[topic] = []
-                lst.append((int(t), data))
-            #: a damaged file: the time (of this source's clock) up to which every message
-            #: is known to have been read; what came later is dropped, so nothing is judged
-            #: on a part of the recording that lost some of its messages (None: whole file)
-            self.cut_ns: int | None = None
-            cut = rec.cut_log_ns if rec.corrupt else None
-            if cut is not None:
-                self.cut_ns = cut - lag  # a message stamped this late may be in the lost chunk
-                for topic, lst in raw.items():
-                    raw[topic] = [m for m in lst if m[0] < self.cut_ns]
-            self._keep_all(raw)
-            self.meta = _metadata(rec)
-            res = _resolutions(rec, self.meta)
-            #: the first broken record (None if the file is whole) and whether it is damage
-            #: mid-file (`corrupt`) rather than a killed run's cut tail
-            self.error: str | None = rec.error
-            self.corrupt: bool = rec.corrupt
-            self.truncated: bool = rec.truncated  # no footer: a killed (or running) recorder
-            self.schemas: set[str] = {c.schema for c in rec.channels()}
-        finally:
-            close = getattr(rec, "close", None)
-            if close:
-                close()
+        raw: dict[str, list[tuple[int, bytes]]] = {}
+        tables = {topic: ColumnTable(None if f is None else set(f))
+                  for topic, f in (columns or {}).items()}
+        last: dict[str, bytes] = {}  # per column topic, the bytes of its last message
+        wanted = None if topics is None else set(topics) | set(tables)
+        lag = 0  # the largest publish-to-log delay read
+        use_pub = time == "publish"
+        loads = _decode_obj
+
+        def take(topic: str, log_t: int, pub_t: int, data: bytes) -> None:
+            nonlocal lag
+            if until_log_ns is not None and log_t > until_log_ns:
+                return
+            t = pub_t if use_pub and pub_t else log_t
+            if log_t - t > lag:
+                lag = log_t - t
+            table = tables.get(topic)
+            if table is not None:
+                if last.get(topic) == data:  # a repeated state: not decoded again
+                    table.add_again(t)
+                else:
+                    table.add(t, loads(data))
+                    last[topic] = data
+                return
+            lst = raw.get(topic)
+            if lst is None:
+                lst = raw[topic] = []
+            lst.append((t, data))
+
+        rec = Recording.stream(str(path), wanted, take)
+        #: a damaged file: the time (of this source's clock) up to which every message
+        #: is known to have been read; what came later is dropped, so nothing is judged
+        #: on a part of the recording that lost some of its messages (None: whole file)
+        self.cut_ns: int | None = None
+        cut = rec.cut_log_ns if rec.corrupt else None
+        for table in tables.values():
+            table.finish()
+        if cut is not None:
+            self.cut_ns = cut - lag  # a message stamped this late may be in the lost chunk
+            for topic, lst in raw.items():
+                raw[topic] = [m for m in lst if m[0] < self.cut_ns]
+            for table in tables.values():
+                table.cut(self.cut_ns)
+        self._keep_all(raw)
+        self._tables = {topic: table for topic, table in tables.items() if len(table)}
+        #: every topic with a message in the file, kept or not
+        self._file_topics = set(rec.message_topics or ())
+        self.meta = _metadata(rec)
+        res = _resolutions(rec, self.meta)
+        #: the first broken record (None if the file is whole) and whether it is damage
+        #: mid-file (`corrupt`) rather than a killed run's cut tail
+        self.error: str | None = rec.error
+        self.corrupt: bool = rec.corrupt
+        self.truncated: bool = rec.truncated  # no footer: a killed (or running) recorder
+        self.schemas: set[str] = {c.schema for c in rec.channels()}
         self._res = dict(res)
         self.path = str(path)
+
+    def columns(self, topic: str) -> ColumnTable | None:
+        """The topic's columns, when it is held as columns."""
+        return self._tables.get(topic)
+
+    def messages(self, topic: str) -> list[tuple[int, dict]]:
+        table = self._tables.get(topic)
+        if table is None:
+            return super().messages(topic)
+        if topic not in self._msgs:  # rebuilt once, for a reader that wants messages
+            self._msgs[topic] = table.rows()
+        return self._msgs[topic]
+
+    def topics(self) -> list[str]:
+        """Every topic with a message in the file, including those not kept (`topics=`)."""
+        return sorted(set(super().topics()) | set(self._tables) | self._file_topics)
+
+    def end_time(self) -> int | None:
+        ends = [t.times[-1] for t in self._tables.values()]
+        if (other := super().end_time()) is not None:
+            ends.append(other)
+        return max(ends) if ends else None
+
+    def start_time(self) -> int | None:
+        starts = [t.times[0] for t in self._tables.values()]
+        if (other := super().start_time()) is not None:
+            starts.append(other)
+        return min(starts) if starts else None
+
+
+def _decode_obj(data: bytes) -> dict:
+    obj = decode(data)
+    return obj if isinstance(obj, dict) else {"value": obj}
 
 
 class LiveSource(_LazySource):

@@ -1,0 +1,176 @@
+"""A recording read as columns (`RecordingSource(columns=...)`, what `hil check` does) gives
+the checker what a recording read as messages gives: the same samples, and, where the runs of
+equal values are enough, their first and last samples; the same verdicts."""
+
+from __future__ import annotations
+
+import json
+import random
+
+import pytest
+from mcap.writer import Writer
+
+from hil.timing.checker import Context, check_all, spec_columns, spec_topics
+from hil.timing.source import (
+    MISSING_FIELD,
+    ColumnTable,
+    MemorySource,
+    RecordingSource,
+    runs_of,
+    samples,
+)
+from hil.timing.spec import load_spec, shipped_specs
+
+MS = 1_000_000
+
+
+def _runs_of(full: list[tuple[int, object]]) -> list[tuple[int, object]]:
+    """Reference: of each run of equal values (same type), the first and the last sample."""
+    out: list[tuple[int, object]] = []
+    i = 0
+    while i < len(full):
+        j = i
+        while (j + 1 < len(full) and type(full[j + 1][1]) is type(full[i][1])
+               and full[j + 1][1] == full[i][1]):
+            j += 1
+        out.append(full[i])
+        if j > i:
+            out.append(full[j])
+        i = j + 1
+    return out
+
+
+def _random_messages(rng: random.Random, n: int) -> list[tuple[int, dict]]:
+    msgs = []
+    t = 0
+    for _ in range(n):
+        t += rng.choice((0, 1, 1, 1, 2)) * MS  # equal times happen
+        m: dict = {}
+        if rng.random() < 0.9:
+            m["a"] = rng.choice((0, 1, True, 1.0, "x", None, [1], [1, 2]))
+        if rng.random() < 0.7:
+            m["kind"] = rng.choice(("sdo_tx", "pdo", "sdo_tx"))
+        if rng.random() < 0.5:
+            m["n"] = {"b": rng.choice((1, 2)), "c": rng.random() < 0.5}
+        msgs.append((t, m))
+    return msgs
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_column_samples_match_the_messages(seed: int) -> None:
+    rng = random.Random(seed)
+    msgs = _random_messages(rng, rng.randint(0, 300))
+    if rng.random() < 0.3:  # file order is not always time order
+        rng.shuffle(msgs)
+    table = ColumnTable()
+    for k, (t, m) in enumerate(msgs):
+        if k and rng.random() < 0.5:
+            m = dict(msgs[k - 1][1])  # a repeated message: its time alone is added
+            msgs[k] = (t, m)
+            table.add_again(t)
+        else:
+            table.add(t, m)
+    table.finish()
+    mem = MemorySource({"/x": msgs})
+    assert list(table.times) == [t for t, _m in mem.messages("/x")]
+    for field, where in (("a", None), ("a", {"kind": "sdo_tx"}), ("n.b", None),
+                         ("n.c", {"n.b": 2}), ("kind", {"a": 1}), ("missing", None)):
+        full = samples(mem, "/x", field, where)
+        assert table.samples(field, where, runs=False) == full, (field, where)
+        assert table.samples(field, where, runs=True) == _runs_of(full), (field, where)
+        assert samples(mem, "/x", field, where, runs=True) == _runs_of(full)
+        assert runs_of(full) == _runs_of(full)
+
+
+def test_a_value_run_keeps_true_apart_from_one() -> None:
+    """`map: {1: on, True: yes}` must see True and 1 as they were recorded."""
+    table = ColumnTable()
+    for i, v in enumerate((1, True, True, 1.0, 1)):
+        table.add(i * MS, {"a": v})
+    table.finish()
+    got = table.samples("a", None, runs=True)
+    assert [type(v) for _t, v in got] == [int, bool, bool, float, int]
+
+
+def test_cut_drops_the_unsure_tail() -> None:
+    table = ColumnTable()
+    for i in range(10):
+        table.add(i * MS, {"a": i // 4, "b": "k"} if i % 3 else {"a": i // 4})
+    table.finish()
+    table.cut(6 * MS)
+    assert list(table.times) == [i * MS for i in range(6)]
+    assert [t for t, _v in table.samples("a", None, runs=False)] == list(table.times)
+    assert table.samples("b", None, runs=False) == [(MS, "k"), (2 * MS, "k"), (4 * MS, "k"),
+                                                   (5 * MS, "k")]
+    assert MISSING_FIELD not in [v for _t, v in table.samples("b", None, runs=False)]
+
+
+def _bench_like(path, seconds: int) -> None:
+    """Drive state and CANopen at 1 kHz with servo-on/off, STO and alarm cycles, DI/DO edges
+    (the mix of benchmarks/bench_check.py), and a raw bus no spec reads."""
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("hil.Any", "jsonschema", b'{"type": "object"}')
+        chans: dict[str, int] = {}
+
+        def put(topic: str, t: int, payload: dict) -> None:
+            if topic not in chans:
+                chans[topic] = w.register_channel(topic, "json", sid, {})
+            w.add_message(chans[topic], log_time=t, publish_time=t,
+                          data=json.dumps(payload).encode())
+
+        put("/drive/drive1/params", 0, {"snapshot": True, "values": {
+            "P1.042": 150, "P1.043": 100, "P1.038": 100, "P2.009": 2}})
+        for line, lvl in (("DI1", False), ("DI5", False), ("DI8", True), ("DO1", True),
+                          ("DO6", False), ("STO_A", True), ("STO_B", True)):
+            put(f"/dio/drive1/{line}", 0, {"level": lvl})
+        for t_ms in range(seconds * 1000):
+            cyc, phase, t = t_ms // 1000, t_ms % 1000, t_ms * MS
+            on = 102 <= phase < 602
+            put("/drive/drive1/state", t, {
+                "state": "OPERATION ENABLED" if on else "SWITCH ON DISABLED",
+                "servo_on": on, "torque_enabled": on, "brake_released": 252 <= phase < 602,
+                "speed_rpm": 1000.0 * (phase - 300) / 280 if 300 <= phase < 580 else 0.0,
+                "position": t_ms * 7, "periodic": phase % 3 == 0,
+                "alarms": ["AL500"] if cyc % 4 == 3 and 710 <= phase < 902 else []})
+            put("/canopen/can0", t, {"statusword": 0x0237 if on else 0x0250,
+                                     "controlword": 0x0F if 100 <= phase < 600 else 0x06,
+                                     "kind": "sdo_tx" if phase % 2 else "pdo"})
+            put("/can/can0/raw", t, {"id": 0x181, "data": f"{t_ms:016x}", "dir": "rx"})
+            for p, line, lvl in ((100, "DI1", True), (252, "DO6", True), (600, "DI1", False),
+                                 (602, "DO6", False)):
+                if phase == p:
+                    put(f"/dio/drive1/{line}", t, {"level": lvl})
+            if cyc % 4 == 3 and phase in (700, 800):
+                for ch in ("STO_A", "STO_B"):
+                    put(f"/dio/drive1/{ch}", t, {"level": phase == 800})
+            if cyc % 4 == 3 and phase in (900, 950):
+                put("/dio/drive1/DI5", t, {"level": phase == 900})
+        w.finish()
+
+
+def test_every_shipped_spec_judges_columns_as_messages(tmp_path, monkeypatch) -> None:
+    path = tmp_path / "mix.mcap"
+    _bench_like(path, 8)
+    specs = [load_spec(p) for p in shipped_specs()]
+    bind = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
+    wanted: set[str] = set()
+    columns: dict[str, set[str]] = {}
+    for spec in specs:
+        wanted |= spec_topics(spec, bind)
+        for topic, fields in spec_columns(spec, bind).items():
+            columns.setdefault(topic, set()).update(fields)
+    whole = RecordingSource(path)
+    cols = RecordingSource(path, topics=wanted, columns=columns)
+    assert "/can/can0/raw" in cols.topics()  # named, but no message kept
+    assert cols.messages("/can/can0/raw") == []
+    assert cols.columns("/drive/drive1/state") is not None
+    a = [v.to_dict() for v in check_all(specs, whole, binding=bind)]
+    b = [v.to_dict() for v in check_all(specs, cols, binding=bind)]
+    assert any(v["status"] == "fail" for v in a) and any(v["status"] == "pass" for v in a)
+    assert a == b
+    # and as every sample, not only the first and last of each run
+    monkeypatch.setattr(Context, "_runs_suffice", lambda self, s: False)
+    assert [v.to_dict() for v in check_all(specs, RecordingSource(path), binding=bind)] == a
+    assert cols.end_time() == whole.end_time() and cols.start_time() == whole.start_time()
