@@ -38,24 +38,24 @@ def test_shipped_plan(plan, hil_run_plan, hil_bench, tmp_path, monkeypatch) -> N
         diff = next((i for i, (a, b) in enumerate(zip(first, second, strict=True)) if a != b),
                     None)
         assert diff is None, f"message {diff} differs: {first[diff]} vs {second[diff]}"
-        whole, columns = judged_both_ways(result.recording)
+        whole, columns = judged_both_ways(result.recording, monkeypatch)
         assert whole == columns  # what `hil check` reads of a long recording judges the same
-        # the runs of equal values judge as every sample does
-        monkeypatch.setattr(Context, "_runs_suffice", lambda self, s: False)
-        assert judged_both_ways(result.recording) == (whole, columns)
 
 
-def judged_both_ways(path: str) -> tuple[list[dict], list[dict]]:
-    """The recorded specs judged on the recording read as messages, then as `hil check`
-    reads it (only the topics the specs read, the signal topics as columns)."""
+def judged_both_ways(path: str, monkeypatch) -> tuple[list[dict], list[dict]]:
+    """The recorded specs judged as `hil check` reads the recording (only the topics the
+    specs read, the signal topics as columns, each run of equal values as its first and last
+    sample), and on every message and every sample."""
     whole = RecordingSource(path)
     names, rec_bind = recorded_specs(whole.meta)
     specs = resolve_specs(names)
     bind = infer_places(whole.topics()) | rec_bind
     wanted, columns = read_plan(specs, [bind])
     cols = RecordingSource(path, topics=wanted, columns=columns)
-    return ([v.to_dict() for v in check_all(specs, whole, binding=bind)],
-            [v.to_dict() for v in check_all(specs, cols, binding=bind)])
+    fast = [v.to_dict() for v in check_all(specs, cols, binding=bind)]
+    with monkeypatch.context() as m:
+        m.setattr(Context, "_runs_suffice", lambda self, s: False)
+        return [v.to_dict() for v in check_all(specs, whole, binding=bind)], fast
 
 
 def messages(path: str) -> list[tuple[str, int, bytes]]:
