@@ -267,6 +267,17 @@ def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> i
     return code
 
 
+def print_json(verdicts: list[Verdict]) -> None:
+    """The verdicts as a JSON list on stdout, one at a time (an hour-long recording's tens
+    of thousands of verdicts are never one string in memory)."""
+    out = sys.stdout
+    out.write("[")
+    for i, v in enumerate(verdicts):
+        text = json.dumps(v.to_dict(), indent=2, default=str)
+        out.write(("," if i else "") + "\n  " + text.replace("\n", "\n  "))
+    out.write("\n]\n" if verdicts else "]\n")
+
+
 def read_plan(specs: list[Spec], bindings: list[dict[str, str]]
               ) -> tuple[set[str], dict[str, set[str]]]:
     """What judging `specs` reads of a recording, under any of `bindings`: the topics to
@@ -312,7 +323,7 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
                    constants=(run["constants"] | consts) or None, resolution=res)
         verdicts.extend(occurrences_since(vs, run["since_ns"]))
     if args.json:
-        print(json.dumps([v.to_dict() for v in verdicts], indent=2, default=str))
+        print_json(verdicts)
     else:
         print(format_table(verdicts, args.verbose))
     return final_code(verdicts, next(iter(cache.values())), [])
@@ -393,7 +404,7 @@ def main(args: argparse.Namespace) -> int:
                       f"{e.strerror or e}", file=sys.stderr)
                 return 2
     if args.json:
-        print(json.dumps([v.to_dict() for v in verdicts], indent=2, default=str))
+        print_json(verdicts)
     else:
         print(format_table(verdicts, args.verbose))
     if not _judged(verdicts) and not args.spec:

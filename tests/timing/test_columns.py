@@ -174,3 +174,15 @@ def test_every_shipped_spec_judges_columns_as_messages(tmp_path, monkeypatch) ->
     monkeypatch.setattr(Context, "_runs_suffice", lambda self, s: False)
     assert [v.to_dict() for v in check_all(specs, RecordingSource(path), binding=bind)] == a
     assert cols.end_time() == whole.end_time() and cols.start_time() == whole.start_time()
+
+
+def test_hil_check_json_is_written_verdict_by_verdict_and_reads_as_one_list(capsys) -> None:
+    from hil.timing.checker import Verdict
+    from hil.timing.cli import print_json
+
+    vs = [Verdict("a", "b", "pass", "two\nlines", values={"P1.038": 1.5}),
+          Verdict("c", "d", "fail", "é", window_ms=(None, 3.0))]
+    for lst in (vs, vs[:1], []):
+        print_json(lst)
+        assert capsys.readouterr().out == json.dumps([v.to_dict() for v in lst], indent=2,
+                                                     default=str) + "\n"
