@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import random
+import struct
 
 import pytest
 from mcap.writer import Writer
@@ -186,3 +187,40 @@ def test_hil_check_json_is_written_verdict_by_verdict_and_reads_as_one_list(caps
         print_json(lst)
         assert capsys.readouterr().out == json.dumps([v.to_dict() for v in lst], indent=2,
                                                      default=str) + "\n"
+
+
+@pytest.mark.parametrize("damage", ["cut", "flip"])
+def test_a_damaged_recording_judges_alike_as_columns(tmp_path, damage: str) -> None:
+    """A killed run's cut tail, or a chunk damaged mid-file: columns and messages keep the
+    same part (up to the cut) and judge it alike."""
+    path = tmp_path / "mix.mcap"
+    _bench_like(path, 4)
+    data = bytearray(path.read_bytes())
+    if damage == "cut":
+        del data[len(data) * 2 // 3:]
+    else:  # a byte of the middle chunk's compressed data
+        chunks, off = [], 8
+        while off + 9 <= len(data):
+            op, ln = struct.unpack_from("<BQ", data, off)
+            if op == 0x06:
+                chunks.append((off, off + 9 + ln))
+            off += 9 + ln
+        _start, end = chunks[len(chunks) // 2]
+        data[end - 20] ^= 0x40
+    path.write_bytes(bytes(data))
+    specs = [load_spec(p) for p in shipped_specs()]
+    bind = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
+    columns: dict[str, set[str]] = {}
+    wanted: set[str] = set()
+    for spec in specs:
+        wanted |= spec_topics(spec, bind)
+        for topic, fields in spec_columns(spec, bind).items():
+            columns.setdefault(topic, set()).update(fields)
+    whole = RecordingSource(path)
+    cols = RecordingSource(path, topics=wanted, columns=columns)
+    assert whole.truncated and cols.truncated
+    assert whole.corrupt == (damage == "flip")
+    assert (whole.corrupt, whole.cut_ns, whole.error) == (cols.corrupt, cols.cut_ns, cols.error)
+    assert whole.end_time() == cols.end_time()
+    assert [v.to_dict() for v in check_all(specs, whole, binding=bind)] == [
+        v.to_dict() for v in check_all(specs, cols, binding=bind)]
