@@ -395,9 +395,11 @@ class FileBytes:
     """The slices of an open file that `scan` asks for, read when asked: a recording is
     scanned without holding the whole file in memory."""
 
-    def __init__(self, f: IO[bytes], size: int) -> None:
+    def __init__(self, f: IO[bytes], size: int,
+                 on_read: Callable[[int], None] | None = None) -> None:
         self._f = f
         self._size = size
+        self._on_read = on_read  # told the offset each read ended at (progress)
 
     def __len__(self) -> int:
         return self._size
@@ -408,7 +410,10 @@ class FileBytes:
         if stop <= start:
             return b""
         self._f.seek(start)
-        return self._f.read(stop - start)
+        data = self._f.read(stop - start)
+        if self._on_read is not None:
+            self._on_read(stop)
+        return data
 
 
 #: what `scan` hands each readable chunk instead of keeping it: (uncompressed payload,

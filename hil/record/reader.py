@@ -100,12 +100,14 @@ class Recording:
 
     @classmethod
     def stream(cls, path: str | os.PathLike, topics: Iterable[str] | None,
-               on_message: Callable[[str, int, int, bytes], None]) -> Recording:
+               on_message: Callable[[str, int, int, bytes], None],
+               progress: Callable[[int, int], None] | None = None) -> Recording:
         """Read `path` a record at a time and hand each message of `topics` (None: every
         topic) to `on_message(topic, log_time, publish_time, data)`, in file order, keeping
         no message and no chunk: a recording of any length is read in bounded memory. The
         Recording returned has the channels, metadata and the file's state, no messages.
-        A chunk that cannot be read whole gives none of its messages (as `open`)."""
+        A chunk that cannot be read whole gives none of its messages (as `open`).
+        `progress(bytes read, file size)` is told as the reading goes."""
         p = Path(path)
         want = None if topics is None else set(topics)
         try:
@@ -138,7 +140,9 @@ class Recording:
 
         with os.fdopen(fd, "rb") as f:
             try:
-                sc = scan(FileBytes(f, os.fstat(fd).st_size), sink)
+                size = os.fstat(fd).st_size
+                on_read = (lambda off: progress(off, size)) if progress is not None else None
+                sc = scan(FileBytes(f, size, on_read), sink)
             except ValueError as exc:
                 raise RecordingError(f"{p}: {exc}") from exc
         rec = cls(p, sc)

@@ -24,6 +24,7 @@ import json
 import math
 import re
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -278,6 +279,63 @@ def print_json(verdicts: list[Verdict]) -> None:
     out.write("\n]\n" if verdicts else "]\n")
 
 
+#: files at least this large show a progress bar while read (on a terminal)
+PROGRESS_MIN_BYTES = 32 * 1024 * 1024
+
+
+class ReadProgress:
+    """`hil check` reading a long recording: a transient bar on stderr when it is a terminal
+    and the file is large (an hour of a busy bus is about 1 GB), nothing otherwise."""
+
+    def __init__(self, path: str, stream: Any = None) -> None:
+        self.stream = stream or sys.stderr
+        try:
+            big = Path(path).stat().st_size >= PROGRESS_MIN_BYTES
+        except OSError:
+            big = False
+        self.on = big and self.stream.isatty()
+        self._bar: Any = None
+        self._task: Any = None
+        self._last = 0.0
+        self._text = "reading"
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.on:
+            return
+        now = time.monotonic()
+        if now - self._last < 0.2 and done < total:
+            return
+        self._last = now
+        self._task_of(total)
+        self._bar.update(self._task, completed=done, total=total)
+
+    def label(self, text: str) -> None:
+        """What is being read (the file's own records, then the specs' topics)."""
+        self._text = text
+
+    def _task_of(self, total: int) -> None:
+        if self._bar is None:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                DownloadColumn,
+                Progress,
+                TextColumn,
+                TimeRemainingColumn,
+            )
+
+            self._bar = Progress(TextColumn("{task.description}"), BarColumn(),
+                                 DownloadColumn(), TimeRemainingColumn(),
+                                 console=Console(file=self.stream), transient=True)
+            self._bar.start()
+            self._task = self._bar.add_task(self._text, total=total)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = None
+
+
 def read_plan(specs: list[Spec], bindings: list[dict[str, str]]
               ) -> tuple[set[str], dict[str, set[str]]]:
     """What judging `specs` reads of a recording, under any of `bindings`: the topics to
@@ -342,9 +400,11 @@ def main(args: argparse.Namespace) -> int:
         why = "not a regular file" if Path(args.recording).exists() else "no such file"
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)
         return 2
+    progress = ReadProgress(args.recording)
     try:  # first what the file says of itself, then only what the chosen specs read
+        progress.label("hil check: what the recording says of itself")
         source = RecordingSource(args.recording, time=args.time,
-                                 topics=[topics.TIMING_VERDICTS])
+                                 topics=[topics.TIMING_VERDICTS], progress=progress)
     except ImportError as e:
         print(f"hil check: cannot read recordings ({e})", file=sys.stderr)
         return 2
@@ -352,6 +412,8 @@ def main(args: argparse.Namespace) -> int:
         why = str(e) if isinstance(e, RecordingError) else f"{args.recording}: cannot read: {e}"
         print(f"hil check: {why}", file=sys.stderr)
         return EXIT_USAGE
+    finally:
+        progress.close()
     why = not_hil(source)
     if why and not source.corrupt:
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)
@@ -375,12 +437,16 @@ def main(args: argparse.Namespace) -> int:
     bind = infer_places(source.topics()) | rec_binding | binding
     try:
         wanted, columns = read_plan(specs, [bind])
+        progress = ReadProgress(args.recording)
+        progress.label("hil check: the topics the specs read")
         source = RecordingSource(args.recording, time=args.time, topics=wanted,
-                                 columns=columns)
+                                 columns=columns, progress=progress)
     except Exception as e:  # the file changed since the first read
         why = str(e) if isinstance(e, RecordingError) else f"{args.recording}: cannot read: {e}"
         print(f"hil check: {why}", file=sys.stderr)
         return EXIT_USAGE
+    finally:
+        progress.close()
     bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
     incomplete: list[str] = []

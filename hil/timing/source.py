@@ -467,12 +467,14 @@ class RecordingSource(_LazySource):
 
     def __init__(self, path: str | Path, topics: Iterable[str] | None = None,
                  time: str = "publish", until_log_ns: int | None = None,
-                 columns: Mapping[str, Iterable[str] | None] | None = None) -> None:
+                 columns: Mapping[str, Iterable[str] | None] | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> None:
         """`until_log_ns`: only what the harness had seen by then (re-checking a live check).
         `columns`: topic -> the fields to keep (None: all) of topics to hold as columns
         (`ColumnTable`) rather than as messages: what a long recording's checks read, in
         memory that grows with the changes of those fields, not with the messages. The
-        file is read a record at a time, never whole."""
+        file is read a record at a time, never whole; `progress(bytes read, size)` is told
+        as it goes."""
 
         if time not in ("publish", "log"):
             raise ValueError(f"time must be 'publish' or 'log', not {time!r}")
@@ -506,7 +508,7 @@ class RecordingSource(_LazySource):
                 lst = raw[topic] = []
             lst.append((t, data))
 
-        rec = Recording.stream(str(path), wanted, take)
+        rec = Recording.stream(str(path), wanted, take, progress)
         #: a damaged file: the time (of this source's clock) up to which every message
         #: is known to have been read; what came later is dropped, so nothing is judged
         #: on a part of the recording that lost some of its messages (None: whole file)

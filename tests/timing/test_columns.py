@@ -224,3 +224,41 @@ def test_a_damaged_recording_judges_alike_as_columns(tmp_path, damage: str) -> N
     assert whole.end_time() == cols.end_time()
     assert [v.to_dict() for v in check_all(specs, whole, binding=bind)] == [
         v.to_dict() for v in check_all(specs, cols, binding=bind)]
+
+
+def test_reading_progress_shows_on_a_terminal_for_a_large_file_only(tmp_path) -> None:
+    import io
+
+    from hil.timing import cli
+
+    path = tmp_path / "mix.mcap"
+    _bench_like(path, 2)
+
+    class Tty(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    seen: list[tuple[int, int]] = []
+    small = cli.ReadProgress(str(path), Tty())
+    assert not small.on  # a small file reads at once: no bar
+    old = cli.PROGRESS_MIN_BYTES
+    cli.PROGRESS_MIN_BYTES = 1
+    try:
+        tty, pipe = Tty(), io.StringIO()
+        shown, hidden = cli.ReadProgress(str(path), tty), cli.ReadProgress(str(path), pipe)
+    finally:
+        cli.PROGRESS_MIN_BYTES = old
+    assert shown.on and not hidden.on  # a pipe or a CI log gets no bar
+
+    def both(done: int, total: int) -> None:
+        seen.append((done, total))
+        shown(done, total)
+        hidden(done, total)
+
+    shown.label("hil check: the topics the specs read")
+    RecordingSource(path, progress=both)
+    shown.close()
+    size = path.stat().st_size
+    assert seen and seen[-1][0] == size and all(t == size for _d, t in seen)
+    assert [d for d, _t in seen] == sorted(d for d, _t in seen)
+    assert "the topics the specs read" in tty.getvalue() and pipe.getvalue() == ""
