@@ -678,6 +678,8 @@ def spec_columns(spec: Spec, binding: Mapping[str, str] | None = None
     among them (they stay messages: `spec_topics` has them)."""
     bind = spec.binding(binding)
     ctx = Context(spec, MemorySource(), ParamTimeline(), bind, None, None)
+    drive = bind.get("drive", "drive1")
+    whole = {topics.drive_params(drive), topics.drive_inputs(drive)}  # read as messages
     out: dict[str, set[str]] = {}
     for s in spec.signals.values():
         if s.kind not in ("topic", "function", "line", "alarm"):
@@ -686,10 +688,12 @@ def spec_columns(spec: Spec, binding: Mapping[str, str] | None = None
             topic, fld, _inv = ctx._where_from(s)
         except KeyError:
             continue
+        if topic in whole:
+            continue
         fields = out.setdefault(topic, set(_SAMPLING_FIELDS))
         fields.add(fld.split(".")[0])
         fields.update(k.split(".")[0] for k in s.where)
-    drive = bind.get("drive", "drive1")  # `alarm:ALnnn` events read the drive's alarms
+    # `alarm:ALnnn` events read the drive's alarms
     out.setdefault(topics.drive_state(drive), set(_SAMPLING_FIELDS)).add("alarms")
     return out
 

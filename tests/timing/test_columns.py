@@ -262,3 +262,25 @@ def test_reading_progress_shows_on_a_terminal_for_a_large_file_only(tmp_path) ->
     assert seen and seen[-1][0] == size and all(t == size for _d, t in seen)
     assert [d for d, _t in seen] == sorted(d for d, _t in seen)
     assert "the topics the specs read" in tty.getvalue() and pipe.getvalue() == ""
+
+
+def test_a_spec_reading_the_parameters_or_input_deliveries_reads_them_as_messages(tmp_path):
+    """The parameters and the input deliveries stay messages (the checker reads them whole);
+    a user's spec with a signal on them still judges from them."""
+    from hil.timing.spec import loads_spec
+
+    spec = loads_spec("""
+id: user_params
+title: a user's spec on the parameters
+source: "test"
+signals:
+  p: {topic: "/drive/{drive}/params", field: snapshot}
+  son: {topic: "/drive/{drive}/state", field: servo_on}
+events:
+  son_up: {rise: son}
+  snap: {rise: p}
+constraints:
+  - {name: c, from: son_up, to: snap, window: {max: 1}}
+""", "user.yaml")
+    cols = spec_columns(spec, {"drive": "drive1"})
+    assert "/drive/drive1/params" not in cols and "/drive/drive1/state" in cols
