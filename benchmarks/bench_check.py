@@ -30,8 +30,9 @@ from mcap.writer import Writer
 MS = 1_000_000
 
 
-def write(path: Path, n: int, bus_fps: int = 0) -> int:
-    """About `n` messages: a 1 ms state stream plus edges every cycle of 1 s."""
+def write(path: Path, n: int, bus_fps: int = 0, moving: bool = False) -> int:
+    """About `n` messages: a 1 ms state stream plus edges every cycle of 1 s. `moving`: the
+    speed wobbles and a position changes at every sample (the worst case for columns)."""
     count = 0
     with open(path, "wb") as f:
         w = Writer(f)
@@ -61,7 +62,8 @@ def write(path: Path, n: int, bus_fps: int = 0) -> int:
             put("/drive/drive1/state", t, {
                 "state": "OPERATION ENABLED" if on else "SWITCH ON DISABLED",
                 "servo_on": on, "torque_enabled": on, "brake_released": 252 <= phase < 602,
-                "speed_rpm": 1000.0 if 300 <= phase < 580 else 0.0,
+                "speed_rpm": (1000.0 if 300 <= phase < 580 else 0.0) + moving * (t_ms % 7) / 10,
+                **({"position_puu": t_ms * 3} if moving else {}),
                 "alarms": ["AL500"] if cyc % 4 == 3 and 710 <= phase < 902 else []})
             put("/canopen/can0", t, {"statusword": 0x0237 if on else 0x0250,
                                      "controlword": 0x0F if 100 <= phase < 600 else 0x06})
@@ -129,6 +131,8 @@ def main() -> None:
     ap.add_argument("--messages", type=int, default=500_000)
     ap.add_argument("--bus-fps", type=int, default=0, help="raw CAN frames a second")
     ap.add_argument("--no-bare", action="store_true", help="skip the bare mcap read")
+    ap.add_argument("--moving", action="store_true",
+                    help="speed and position change at every state sample")
     ap.add_argument("--no-whole", action="store_true",
                     help="skip the baseline check on the whole file read as messages")
     args = ap.parse_args()
@@ -136,7 +140,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "bench.mcap"
         t0 = time.perf_counter()
-        n = write(path, args.messages, args.bus_fps)
+        n = write(path, args.messages, args.bus_fps, args.moving)
         print(f"wrote {n} messages ({path.stat().st_size / 1e6:.1f} MB) "
               f"in {time.perf_counter() - t0:.1f} s")
         t0 = time.perf_counter()

@@ -372,16 +372,13 @@ def iter_chunk(buf: bytes, schemas: dict, channels: dict,
         if end > n:
             raise ValueError(f"record at chunk offset {off} runs past the chunk end")
         if op == 5:
-            if keep is None:
-                cid, _seq, lt, pt = unpack_msg(buf, body)
-                yield cid, lt, pt, buf[body + 22 : end]
-            else:
-                cid, _seq, lt, pt = unpack_msg(buf, body)
+            cid, _seq, lt, pt = unpack_msg(buf, body)
+            if keep is not None:
                 k = kept.get(cid) if kept is not None else None
-                if k is None:
-                    k = keep(cid)
-                if k:
-                    yield cid, lt, pt, buf[body + 22 : end]
+                if not (k if k is not None else keep(cid)):
+                    off = end
+                    continue
+            yield cid, lt, pt, buf[body + 22 : end]
         elif op == 3:
             s = _parse(Schema, buf[body:end])
             schemas[s.id] = s

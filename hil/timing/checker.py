@@ -26,12 +26,7 @@ from typing import Any
 
 from hil.record import topics
 from hil.timing.expr import ExprError, check_number, is_param
-from hil.timing.source import (
-    MemorySource,
-    ParamTimeline,
-    SignalSource,
-    samples,
-)
+from hil.timing.source import MemorySource, ParamTimeline, SignalSource, samples
 from hil.timing.spec import ConstraintDef, EventDef, SignalDef, Spec, WindowDef
 from hil.units import MS
 

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import bisect
 import fnmatch
+import heapq
+import itertools
 import json
 from array import array
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -252,30 +254,39 @@ class ColumnTable:
                     rows[i][1][name] = v
         return rows
 
-    def _segments(self, names: list[str]) -> list[tuple[int, int, list[Any]]]:
-        """[(first index, end index, [value of each name])] over which no named column
-        changes."""
+    def _segments(self, names: list[str]) -> Iterator[tuple[int, int, list[Any]]]:
+        """(first index, end index, [value of each name]) over which no named column
+        changes, in order (the columns' run starts merged, not collected)."""
         n = len(self.times)
         cols = [self.cols.get(name) for name in names]
-        bounds = sorted({0, *(s for c in cols if c is not None for s in c.starts)})
-        out = []
+        if len(cols) == 1 and cols[0] is not None:  # one column: its runs are the segments
+            starts, values = cols[0].starts, cols[0].values
+            for k, a in enumerate(starts):
+                if a >= n:
+                    break
+                end = starts[k + 1] if k + 1 < len(starts) else n
+                yield a, min(end, n), [values[k]]
+            return
         pos = [0] * len(cols)
-        for b_i, b in enumerate(bounds):
-            if b >= n:
-                break
-            end = bounds[b_i + 1] if b_i + 1 < len(bounds) else n
+        bounds = heapq.merge(*(c.starts for c in cols if c is not None))
+        b = 0
+        for nxt in itertools.chain(bounds, (n,)):
+            if nxt <= b:
+                continue
             vals = []
             for j, c in enumerate(cols):
-                if c is None:
+                if c is None or not c.starts:
                     vals.append(_MISSING)
                     continue
                 k = pos[j]
                 while k + 1 < len(c.starts) and c.starts[k + 1] <= b:
                     k += 1
                 pos[j] = k
-                vals.append(c.values[k] if c.starts and c.starts[k] <= b else _MISSING)
-            out.append((b, min(end, n), vals))
-        return out
+                vals.append(c.values[k] if c.starts[k] <= b else _MISSING)
+            yield b, min(nxt, n), vals
+            b = nxt
+            if b >= n:
+                break
 
     def samples(self, field: str, where: Mapping[str, Any] | None,
                 runs: bool) -> list[tuple[int, Any]]:
