@@ -11,7 +11,8 @@ import struct
 import pytest
 from mcap.writer import Writer
 
-from hil.timing.checker import Context, check_all, spec_columns, spec_topics
+from hil.timing.checker import Context, check_all, spec_columns
+from hil.timing.cli import read_plan
 from hil.timing.source import (
     MISSING_FIELD,
     ColumnTable,
@@ -156,12 +157,7 @@ def test_every_shipped_spec_judges_columns_as_messages(tmp_path, monkeypatch) ->
     _bench_like(path, 8)
     specs = [load_spec(p) for p in shipped_specs()]
     bind = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
-    wanted: set[str] = set()
-    columns: dict[str, set[str]] = {}
-    for spec in specs:
-        wanted |= spec_topics(spec, bind)
-        for topic, fields in spec_columns(spec, bind).items():
-            columns.setdefault(topic, set()).update(fields)
+    wanted, columns = read_plan(specs, [bind])  # what `hil check` reads
     whole = RecordingSource(path)
     cols = RecordingSource(path, topics=wanted, columns=columns)
     assert "/can/can0/raw" in cols.topics()  # named, but no message kept
@@ -210,12 +206,7 @@ def test_a_damaged_recording_judges_alike_as_columns(tmp_path, damage: str) -> N
     path.write_bytes(bytes(data))
     specs = [load_spec(p) for p in shipped_specs()]
     bind = {"drive": "drive1", "dio": "drive1", "bus": "can0"}
-    columns: dict[str, set[str]] = {}
-    wanted: set[str] = set()
-    for spec in specs:
-        wanted |= spec_topics(spec, bind)
-        for topic, fields in spec_columns(spec, bind).items():
-            columns.setdefault(topic, set()).update(fields)
+    wanted, columns = read_plan(specs, [bind])  # what `hil check` reads
     whole = RecordingSource(path)
     cols = RecordingSource(path, topics=wanted, columns=columns)
     assert whole.truncated and cols.truncated
