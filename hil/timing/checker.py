@@ -18,15 +18,17 @@ from __future__ import annotations
 
 import bisect
 import fnmatch
+import itertools
 import math
 import re
-from collections.abc import Callable, Mapping
+from array import array
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from hil.record import topics
 from hil.timing.expr import ExprError, check_number, is_param
-from hil.timing.source import MemorySource, ParamTimeline, SignalSource, samples
+from hil.timing.source import MemorySource, ParamTimeline, SampleList, SignalSource, samples
 from hil.timing.spec import ConstraintDef, EventDef, SignalDef, Spec, WindowDef
 from hil.units import MS
 
@@ -360,7 +362,7 @@ class Context:
             return self._held(s, _compress(s.name, pts, res, self._lags(s, topic, raw)))
         if s.kind == "signal":
             parent = self.trace(s.source or "")
-            pts = self._transform(s, list(zip(parent.times, parent.values, strict=True)))
+            pts = self._transform(s, SampleList(parent.times, parent.values))
             return self._held(s, _compress(s.name, pts, parent.res, parent.lags))
         parents = [self.trace(p) for p in s.parts]
         return _combine(s.name, s.kind, parents)
@@ -411,8 +413,9 @@ class Context:
         if tf.get("nonempty"):
             ops.append(bool)
         cmp = "below" if "below" in tf else "above" if "above" in tf else None
-        out = []
-        append = out.append
+        ts: array = array("q")
+        vs: list[Any] = []
+        t_append, v_append = ts.append, vs.append
         for t, v in pts:
             for op in ops:
                 v = op(v)
@@ -422,8 +425,9 @@ class Context:
                     v = v < lim["below"]
                 elif cmp == "above":
                     v = v > lim["above"]
-            append((t, v))
-        return out
+            t_append(t)
+            v_append(v)
+        return SampleList(ts, vs)  # 16 bytes a sample: a long recording's signal is long
 
     def _held(self, s: SignalDef, tr: Trace) -> Trace:
         """`held: D`: true only once the value has been true for D ms (an on-delay timer)."""
@@ -519,11 +523,20 @@ def _alarm_active(v: Any, codes: list[str]) -> bool:
     return any(c in items for c in codes)
 
 
-def _compress(name: str, pts: list[tuple[int, Any]], res: int,
+def _in_order(pts: Sequence[tuple[int, Any]]) -> bool:
+    if isinstance(pts, SampleList):
+        return all(a <= b for a, b in itertools.pairwise(pts.times))
+    return all(a[0] <= b[0] for a, b in itertools.pairwise(pts))
+
+
+def _compress(name: str, pts: Sequence[tuple[int, Any]], res: int,
               lags: Mapping[int, tuple[int, int]] | None = None) -> Trace:
-    pts = sorted(pts, key=lambda p: p[0])
-    times: list[int] = []
-    values: list[Any] = []
+    if not _in_order(pts):  # sources give samples in time order: this is the rare case
+        pts = sorted(pts, key=lambda p: p[0])
+    times: Any = array("q")  # the change times: 8 bytes each, however many
+    # numbers straight from a typed column stay typed (a speed that changes every sample)
+    typed = isinstance(pts, SampleList) and type(pts.values) is array
+    values: Any = array(pts.values.typecode) if typed else []  # type: ignore[union-attr]
     for t, v in pts:
         if values and times[-1] == t:
             values[-1] = v  # the later message at the same instant wins

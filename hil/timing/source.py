@@ -13,7 +13,7 @@ import heapq
 import itertools
 import json
 from array import array
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -113,37 +113,61 @@ def _same(a: Any, b: Any) -> bool:
     return type(a) is type(b) and a == b
 
 
+#: a column's runs go into a typed array once this many are all floats (or all ints)
+_TYPED_AFTER = 1024
+_INT64 = (-(2**63), 2**63 - 1)
+
+
 class Column:
     """One field of a topic in runs: `starts[k]` is the first message index of run k, whose
-    value is `values[k]` (`_MISSING`: the messages of that run lack the field)."""
+    value is `values[k]` (`_MISSING`: the messages of that run lack the field). The values of
+    a field that is always a float (or always an int) are kept in a typed array: 8 bytes a
+    run, what matters for a field that changes at every message."""
 
-    __slots__ = ("_last", "starts", "values")
+    __slots__ = ("_last", "_tried", "starts", "values")
 
     def __init__(self) -> None:
         self.starts = array("q")
-        self.values: list[Any] = []
+        self.values: list[Any] | array = []
         self._last = -1  # the last message index given a value
+        self._tried = False  # the values were looked at for a typed array
 
     def put(self, i: int, v: Any) -> None:
-        if self._last == i - 1 and self.values and _same(self.values[-1], v):
+        values = self.values
+        if self._last == i - 1 and values and _same(values[-1], v):
             self._last = i
             return
-        if self._last < i - 1:  # the messages between had no such field
-            if not self.values or self.values[-1] is not _MISSING:
-                self.starts.append(self._last + 1)
-                self.values.append(_MISSING)
-            if self.values and _same(self.values[-1], v):
-                self._last = i
-                return
+        if self._last < i - 1 and (not values or values[-1] is not _MISSING):
+            self.starts.append(self._last + 1)  # the messages between had no such field
+            self._append(_MISSING)
         self.starts.append(i)
-        self.values.append(v)
+        self._append(v)
         self._last = i
+
+    def _append(self, v: Any) -> None:
+        values = self.values
+        if type(values) is list:
+            values.append(v)
+            if not self._tried and len(values) >= _TYPED_AFTER:
+                self._tried = True
+                kind = type(values[0])
+                if kind is float and all(type(x) is float for x in values):
+                    self.values = array("d", values)
+                elif kind is int and all(type(x) is int and _INT64[0] <= x <= _INT64[1]
+                                         for x in values):
+                    self.values = array("q", values)
+            return
+        if (type(v) is float and values.typecode == "d") or (
+                type(v) is int and values.typecode == "q" and _INT64[0] <= v <= _INT64[1]):
+            values.append(v)
+        else:  # another kind of value: objects from now on
+            self.values = [*values, v]
 
     def close(self, n: int) -> None:
         """`n` messages in all: the tail without the field is a missing run."""
         if self._last < n - 1 and (not self.values or self.values[-1] is not _MISSING):
             self.starts.append(self._last + 1)
-            self.values.append(_MISSING)
+            self._append(_MISSING)
         self._last = n - 1
 
     def value_list(self, n: int) -> list[Any]:
@@ -289,13 +313,16 @@ class ColumnTable:
                 break
 
     def samples(self, field: str, where: Mapping[str, Any] | None,
-                runs: bool) -> list[tuple[int, Any]]:
+                runs: bool) -> SampleList:
         head, _, rest = field.partition(".")
         conds = list((where or {}).items())
         names = [head] + [k.partition(".")[0] for k, _v in conds]
         times = self.times
-        out: list[tuple[int, Any]] = []
-        first = 0  # where the run of the last sample begins in `out`
+        col = self.cols.get(head)
+        typed = col is not None and type(col.values) is array and not rest and not conds
+        ts = array("q")
+        vs: Any = array(col.values.typecode) if typed else []  # type: ignore[union-attr]
+        first = 0  # where the run of the last sample begins
         for a, b, vals in self._segments(names):
             v = vals[0]
             if v is not _MISSING and rest:
@@ -315,16 +342,47 @@ class ColumnTable:
                 continue
             if runs:  # of each run of equal values: its first and its last sample
                 for t in ((times[a], times[b - 1]) if b - 1 > a else (times[a],)):
-                    if out and _same(out[-1][1], v):
-                        if len(out) - 1 > first:
-                            out[-1] = (t, v)  # the run goes on: a new last sample
+                    if vs and _same(vs[-1], v):
+                        if len(vs) - 1 > first:
+                            ts[-1] = t  # the run goes on: a new last sample
                             continue
                     else:
-                        first = len(out)
-                    out.append((t, v))
+                        first = len(vs)
+                    ts.append(t)
+                    vs.append(v)
             else:
-                out.extend([(times[j], v) for j in range(a, b)])
-        return out
+                ts.extend(times[a:b])
+                vs.extend([v] * (b - a))
+        return SampleList(ts, vs)
+
+
+class SampleList(Sequence):
+    """(t, value) samples kept as two sequences, the times in an integer array: about 16
+    bytes a sample, not a tuple each (a signal of a long recording may have millions)."""
+
+    __slots__ = ("times", "values")
+
+    def __init__(self, times: Sequence[int], values: Sequence[Any]) -> None:
+        self.times, self.values = times, values
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def __iter__(self) -> Iterator[tuple[int, Any]]:
+        return zip(self.times, self.values, strict=True)
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return list(zip(self.times[i], self.values[i], strict=True))
+        return self.times[i], self.values[i]
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Sequence) and list(self) == list(other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"SampleList({list(self)!r})"
 
 
 class MemorySource:

@@ -11,6 +11,7 @@ import struct
 import pytest
 from mcap.writer import Writer
 
+from hil.timing import source as source_mod
 from hil.timing.checker import Context, check_all, spec_columns
 from hil.timing.cli import read_plan
 from hil.timing.source import (
@@ -54,13 +55,21 @@ def _random_messages(rng: random.Random, n: int) -> list[tuple[int, dict]]:
             m["kind"] = rng.choice(("sdo_tx", "pdo", "sdo_tx"))
         if rng.random() < 0.5:
             m["n"] = {"b": rng.choice((1, 2)), "c": rng.random() < 0.5}
+        if rng.random() < 0.97:  # a float that changes often, now and then another kind
+            m["f"] = rng.choice((rng.random(), rng.random(), 0.0, -0.0, 2.0 ** 70,
+                                 1 if rng.random() < 0.02 else 0.5))
+        m["i"] = rng.choice((rng.randint(-5, 5), 2 ** 63 - 1, -(2 ** 63),
+                             2 ** 64 if rng.random() < 0.01 else 7, True if rng.random() < 0.01
+                             else 3))
         msgs.append((t, m))
     return msgs
 
 
 @pytest.mark.parametrize("seed", range(40))
-def test_column_samples_match_the_messages(seed: int) -> None:
+def test_column_samples_match_the_messages(seed: int, monkeypatch) -> None:
     rng = random.Random(seed)
+    if seed % 2:  # typed arrays early, and their fall back to objects
+        monkeypatch.setattr(source_mod, "_TYPED_AFTER", rng.randint(1, 5))
     msgs = _random_messages(rng, rng.randint(0, 300))
     if rng.random() < 0.3:  # file order is not always time order
         rng.shuffle(msgs)
@@ -75,7 +84,8 @@ def test_column_samples_match_the_messages(seed: int) -> None:
     table.finish()
     mem = MemorySource({"/x": msgs})
     assert list(table.times) == [t for t, _m in mem.messages("/x")]
-    for field, where in (("a", None), ("a", {"kind": "sdo_tx"}), ("n.b", None),
+    for field, where in (("f", None), ("i", None), ("f", {"i": 3}),
+                         ("a", None), ("a", {"kind": "sdo_tx"}), ("n.b", None),
                          ("n.c", {"n.b": 2}), ("kind", {"a": 1}), ("missing", None)):
         full = samples(mem, "/x", field, where)
         assert table.samples(field, where, runs=False) == full, (field, where)
