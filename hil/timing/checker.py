@@ -413,7 +413,8 @@ class Context:
         if tf.get("nonempty"):
             ops.append(bool)
         cmp = "below" if "below" in tf else "above" if "above" in tf else None
-        ts: array = array("q")
+        # times from an integer array stay in one (any other source: as they come)
+        ts: Any = array("q") if isinstance(pts, SampleList) and type(pts.times) is array else []
         vs: list[Any] = []
         t_append, v_append = ts.append, vs.append
         for t, v in pts:
@@ -533,9 +534,11 @@ def _compress(name: str, pts: Sequence[tuple[int, Any]], res: int,
               lags: Mapping[int, tuple[int, int]] | None = None) -> Trace:
     if not _in_order(pts):  # sources give samples in time order: this is the rare case
         pts = sorted(pts, key=lambda p: p[0])
-    times: Any = array("q")  # the change times: 8 bytes each, however many
+    # the change times from an integer array stay in one: 8 bytes each, however many; and
     # numbers straight from a typed column stay typed (a speed that changes every sample)
-    typed = isinstance(pts, SampleList) and type(pts.values) is array
+    whole = isinstance(pts, SampleList) and type(pts.times) is array
+    times: Any = array("q") if whole else []
+    typed = whole and type(pts.values) is array  # type: ignore[union-attr]
     values: Any = array(pts.values.typecode) if typed else []  # type: ignore[union-attr]
     for t, v in pts:
         if values and times[-1] == t:
