@@ -22,7 +22,7 @@ import itertools
 import math
 import re
 from array import array
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -159,6 +159,7 @@ class Context:
         self._occs: dict[str, list[Occ]] = {}
         self._deliveries: dict[str, list[tuple[int, bool, int]]] | None = None
         self._topic_sampling: dict[str, tuple[set[int], set[int], list[int]]] = {}
+        self._thr: dict[int, Any] = {}  # id(transforms) -> `_thresholds`
         end = source.end_time()
         self.end = end if end is not None else 0
         start = source.start_time()  # first timestamp (for "never in <span>")
@@ -265,62 +266,49 @@ class Context:
         polled, an SDO upload response (`kind: sdo_tx`; gap since the previous sample of the
         same field: a change first seen there happened after that one, e.g. a statusword
         polled late by a loaded harness)."""
+        index = self._sampling_index(topic)
+        if index is None:
+            return {}
+        periodic, polled, times = index
+        out = {}
+        prev = None
+        for t, _v in raw:
+            i = bisect.bisect_left(times, t)  # the gap: since the message before the first at t
+            if i > 0 and periodic(t):
+                out[t] = (0, t - times[i - 1])
+            elif prev is not None and polled(t):
+                out[t] = (0, t - prev)
+            prev = t
+        return out
+
+    def _sampling_index(self, topic: str) -> tuple[Callable[[int], bool],
+                                                   Callable[[int], bool], Any] | None:
+        """(a periodic sample at t?, a poll at t?, every message time) of `topic`; None when it
+        has neither. Columns answer at each time asked; messages are indexed once per topic
+        and source (every signal and every check of a source shares it)."""
         cols = getattr(self.source, "columns", None)
         table = cols(topic) if cols is not None else None
-        if table is not None:  # a long recording's columns: asked at the samples' times
-            return self._sampling_columns(table, raw)
-        # once per topic and source: every signal and every check of a source shares it
+        if table is not None:
+            if "periodic" not in table.cols and "kind" not in table.cols:
+                return None
+            return (lambda t: table.any_at(t, "periodic", bool),
+                    lambda t: table.any_at(t, "kind", _is_poll), table.times)
         store = getattr(self.source, "_samples_cache", None)
         key = ("_sampling", topic)
         cached = store.get(key) if store is not None else self._topic_sampling.get(topic)
         if cached is None:
             msgs = self.source.messages(topic)
             periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
-            polled = {t for t, m in msgs if isinstance(m, dict) and m.get("kind") == "sdo_tx"}
-            # a periodic sample's gap: since the message before the first one at its time
-            times = [t for t, _m in msgs] if periodic else []
-            gaps = {}
-            for t in periodic:
-                i = bisect.bisect_left(times, t)
-                if i > 0:
-                    gaps[t] = t - times[i - 1]
-            cached = (gaps, polled)
+            polled = {t for t, m in msgs if isinstance(m, dict) and _is_poll(m.get("kind"))}
+            cached = (periodic, polled, [t for t, _m in msgs] if periodic or polled else [])
             if store is not None:
                 store[key] = cached  # cleared with the source's samples when it grows
             else:
                 self._topic_sampling[topic] = cached
-        gaps, polled = cached
-        if not gaps and not polled:
-            return {}
-        out = {}
-        prev = None
-        for t, _v in raw:
-            g = gaps.get(t)
-            if g is not None:
-                out[t] = (0, g)
-            elif prev is not None and t in polled:
-                out[t] = (0, t - prev)
-            prev = t
-        return out
-
-    @staticmethod
-    def _sampling_columns(table: Any, raw: list[tuple[int, Any]]
-                          ) -> dict[int, tuple[int, int]]:
-        """`_sampling` on a topic held as columns: the same answer, looked up at each
-        sample's time rather than built for every message."""
-        if "periodic" not in table.cols and "kind" not in table.cols:
-            return {}
-        times = table.times
-        out = {}
-        prev = None
-        for t, _v in raw:
-            i = bisect.bisect_left(times, t)
-            if i > 0 and table.any_at(t, "periodic", bool):
-                out[t] = (0, t - times[i - 1])
-            elif prev is not None and table.any_at(t, "kind", lambda k: k == "sdo_tx"):
-                out[t] = (0, t - prev)
-            prev = t
-        return out
+        periodic, polled, times = cached
+        if not periodic and not polled:
+            return None
+        return periodic.__contains__, polled.__contains__, times
 
     def trace(self, name: str) -> Trace:
         if name not in self._traces:
@@ -371,13 +359,8 @@ class Context:
         """A change-point trace of `s` needs only the first and last sample of each run of
         equal values, unless a threshold changes over time (a parameter written mid-run
         moves the change of `below`/`above` into the run)."""
-        tf = s.transforms
-        if "below" not in tf and "above" not in tf:
-            return True
-        times = self.params.change_times() or [0]
-        keys = [k for k in ("below", "above") if k in tf]
-        first = [tf[k].eval(self.env(times[0])) for k in keys]
-        return all([tf[k].eval(self.env(t)) for k in keys] == first for t in times[1:])
+        thresholds = self._thresholds(s.transforms)
+        return thresholds is None or thresholds.constant
 
     def _where_from(self, s: SignalDef) -> tuple[str, str, bool]:
         if s.kind == "function":
@@ -449,19 +432,25 @@ class Context:
                     lags[due] = tr.lags[t]
         return _compress(tr.name, pts, tr.res, lags)
 
-    def _thresholds(self, tf: dict[str, Any]):
+    def _thresholds(self, tf: dict[str, Any]) -> Any:
+        """`below`/`above` in force at t (`.constant`: one value throughout); None without
+        them. Evaluated once per transform and context."""
         keys = [k for k in ("below", "above") if k in tf]  # `held` is applied after
         if not keys:
             return None
+        if id(tf) in self._thr:
+            return self._thr[id(tf)]
         times = self.params.change_times() or [0]
         vals = [{k: tf[k].eval(self.env(t)) for k in keys} for t in times]
-        if all(v == vals[0] for v in vals):  # the usual case: one value throughout
-            first = vals[0]
-            return lambda _t: first
 
         def at(t: int) -> dict[str, float]:
             return vals[max(0, bisect.bisect_right(times, t) - 1)]
 
+        constant = all(v == vals[0] for v in vals)  # the usual case: one value throughout
+        if constant:
+            times, vals = times[:1], vals[:1]  # no search per sample
+        at.constant = constant  # type: ignore[attr-defined]
+        self._thr[id(tf)] = at
         return at
 
     # --- events -----------------------------------------------------------------------
@@ -515,6 +504,11 @@ class Context:
             "cleared": f"{sig} to clear", "first_true": f"{sig} to be true",
             "message": f"a {sig} message",
         }.get(ev.kind, self.label(name))
+
+
+def _is_poll(kind: Any) -> bool:
+    """An SDO upload response: a value the harness polled."""
+    return kind == "sdo_tx"
 
 
 def _alarm_active(v: Any, codes: list[str]) -> bool:
@@ -660,19 +654,26 @@ class Scope:
 # --- constraints -----------------------------------------------------------------------
 
 
+def _signal_reads(spec: Spec, bind: Mapping[str, str]) -> Iterator[tuple[SignalDef, str, str]]:
+    """(signal, topic, field) of each recorded signal of `spec` under a resolved `bind`
+    (a signal whose function or line is not bound is left out)."""
+    ctx = Context(spec, MemorySource(), ParamTimeline(), bind, None, None)
+    for s in spec.signals.values():
+        if s.kind in ("topic", "function", "line", "alarm"):
+            try:
+                topic, fld, _inv = ctx._where_from(s)
+            except KeyError:
+                continue
+            yield s, topic, fld
+
+
 def spec_topics(spec: Spec, binding: Mapping[str, str] | None = None) -> set[str]:
     """The topics judging `spec` reads under `binding`: its recorded signals' topics, the
     drive's parameters and its input deliveries (for a reader that decodes only those)."""
     bind = spec.binding(binding)
-    ctx = Context(spec, MemorySource(), ParamTimeline(), bind, None, None)
     drive = bind.get("drive", "drive1")  # `alarm:ALnnn` events read the drive's state
     out = {topics.drive_params(drive), topics.drive_inputs(drive), topics.drive_state(drive)}
-    for s in spec.signals.values():
-        if s.kind in ("topic", "function", "line", "alarm"):
-            try:
-                out.add(ctx._where_from(s)[0])
-            except KeyError:
-                continue
+    out.update(topic for _s, topic, _f in _signal_reads(spec, bind))
     return out
 
 
@@ -688,17 +689,10 @@ def spec_columns(spec: Spec, binding: Mapping[str, str] | None = None
     (`RecordingSource(columns=...)`). The drive's parameters and input deliveries are not
     among them (they stay messages: `spec_topics` has them)."""
     bind = spec.binding(binding)
-    ctx = Context(spec, MemorySource(), ParamTimeline(), bind, None, None)
     drive = bind.get("drive", "drive1")
     whole = {topics.drive_params(drive), topics.drive_inputs(drive)}  # read as messages
     out: dict[str, set[str]] = {}
-    for s in spec.signals.values():
-        if s.kind not in ("topic", "function", "line", "alarm"):
-            continue
-        try:
-            topic, fld, _inv = ctx._where_from(s)
-        except KeyError:
-            continue
+    for s, topic, fld in _signal_reads(spec, bind):
         if topic in whole:
             continue
         fields = out.setdefault(topic, set(_SAMPLING_FIELDS))

@@ -287,8 +287,9 @@ class ReadProgress:
     """`hil check` reading a long recording: a transient bar on stderr when it is a terminal
     and the file is large (an hour of a busy bus is about 1 GB), nothing otherwise."""
 
-    def __init__(self, path: str, stream: Any = None) -> None:
+    def __init__(self, path: str, text: str = "reading", stream: Any = None) -> None:
         self.stream = stream or sys.stderr
+        self._text = text  # what is being read
         try:
             big = Path(path).stat().st_size >= PROGRESS_MIN_BYTES
         except OSError:
@@ -297,7 +298,6 @@ class ReadProgress:
         self._bar: Any = None
         self._task: Any = None
         self._last = 0.0
-        self._text = "reading"
 
     def __call__(self, done: int, total: int) -> None:
         if not self.on:
@@ -308,10 +308,6 @@ class ReadProgress:
         self._last = now
         self._task_of(total)
         self._bar.update(self._task, completed=done, total=total)
-
-    def label(self, text: str) -> None:
-        """What is being read (the file's own records, then the specs' topics)."""
-        self._text = text
 
     def _task_of(self, total: int) -> None:
         if self._bar is None:
@@ -334,6 +330,23 @@ class ReadProgress:
         if self._bar is not None:
             self._bar.stop()
             self._bar = None
+
+
+def _read(args: argparse.Namespace, what: str, **kw: Any) -> RecordingSource | int:
+    """The recording as `RecordingSource(**kw)`, with a progress bar saying `what` on a
+    terminal; the exit code (said on stderr) when it cannot be read."""
+    progress = ReadProgress(args.recording, what)
+    try:
+        return RecordingSource(args.recording, time=args.time, progress=progress, **kw)
+    except ImportError as e:
+        print(f"hil check: cannot read recordings ({e})", file=sys.stderr)
+        return 2
+    except Exception as e:
+        why = str(e) if isinstance(e, RecordingError) else f"{args.recording}: cannot read: {e}"
+        print(f"hil check: {why}", file=sys.stderr)
+        return EXIT_USAGE
+    finally:
+        progress.close()
 
 
 def read_plan(specs: list[Spec], bindings: list[dict[str, str]]
@@ -400,20 +413,11 @@ def main(args: argparse.Namespace) -> int:
         why = "not a regular file" if Path(args.recording).exists() else "no such file"
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)
         return 2
-    progress = ReadProgress(args.recording)
-    try:  # first what the file says of itself, then only what the chosen specs read
-        progress.label("hil check: what the recording says of itself")
-        source = RecordingSource(args.recording, time=args.time,
-                                 topics=[topics.TIMING_VERDICTS], progress=progress)
-    except ImportError as e:
-        print(f"hil check: cannot read recordings ({e})", file=sys.stderr)
-        return 2
-    except Exception as e:
-        why = str(e) if isinstance(e, RecordingError) else f"{args.recording}: cannot read: {e}"
-        print(f"hil check: {why}", file=sys.stderr)
-        return EXIT_USAGE
-    finally:
-        progress.close()
+    # first what the file says of itself, then only what the chosen specs read
+    source = _read(args, "hil check: what the recording says of itself",
+                   topics=[topics.TIMING_VERDICTS])
+    if isinstance(source, int):
+        return source
     why = not_hil(source)
     if why and not source.corrupt:
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)
@@ -435,18 +439,10 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: {e}", file=sys.stderr)
         return 2
     bind = infer_places(source.topics()) | rec_binding | binding
-    try:
-        wanted, columns = read_plan(specs, [bind])
-        progress = ReadProgress(args.recording)
-        progress.label("hil check: the topics the specs read")
-        source = RecordingSource(args.recording, time=args.time, topics=wanted,
-                                 columns=columns, progress=progress)
-    except Exception as e:  # the file changed since the first read
-        why = str(e) if isinstance(e, RecordingError) else f"{args.recording}: cannot read: {e}"
-        print(f"hil check: {why}", file=sys.stderr)
-        return EXIT_USAGE
-    finally:
-        progress.close()
+    wanted, columns = read_plan(specs, [bind])
+    source = _read(args, "hil check: the topics the specs read", topics=wanted, columns=columns)
+    if isinstance(source, int):  # the file changed since the first read
+        return source
     bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
     incomplete: list[str] = []

@@ -54,7 +54,7 @@ def get_field(msg: Any, path: str) -> Any:
 
 def samples(source: SignalSource, topic: str, field: str,
             where: Mapping[str, Any] | None = None, runs: bool = False
-            ) -> list[tuple[int, Any]]:
+            ) -> Sequence[tuple[int, Any]]:
     """(t_ns, value) of `field` in `topic`, skipping messages without it or not matching
     `where` (field -> required value). `runs=True`: a source that stores its messages as
     columns may give, of each run of equal values, only its first and last sample (what a
@@ -202,14 +202,12 @@ class ColumnTable:
             if col._last == i - 1 and col.values[-1] is not _MISSING:
                 col._last = i
 
-    def add(self, t: int, msg: Any) -> None:
+    def add(self, t: int, msg: dict) -> None:
         times = self.times
         i = len(times)
         if i and t < times[-1]:
             self._sorted = False
         times.append(t)
-        if type(msg) is not dict:
-            msg = {"value": msg}
         cols = self.cols
         only = self._only
         for k, v in msg.items():
@@ -494,11 +492,10 @@ class _LazySource(MemorySource):
             last = lst[-1][0] if lst else None
             ordered = True
             for t, data in pend:
-                obj = decode(data)
                 if last is not None and t < last:
                     ordered = False
                 last = t
-                lst.append((t, obj if isinstance(obj, dict) else {"value": obj}))
+                lst.append((t, _decode_obj(data)))
             if not ordered:
                 lst.sort(key=lambda m: m[0])  # stable: equal times keep file order
         return self._msgs.get(topic, [])
@@ -603,7 +600,7 @@ class RecordingSource(_LazySource):
         self.corrupt: bool = rec.corrupt
         self.truncated: bool = rec.truncated  # no footer: a killed (or running) recorder
         self.schemas: set[str] = {c.schema for c in rec.channels()}
-        self._res = dict(res)
+        self._res = res
         self.path = str(path)
 
     def columns(self, topic: str) -> ColumnTable | None:

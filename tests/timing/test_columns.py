@@ -240,13 +240,14 @@ def test_reading_progress_shows_on_a_terminal_for_a_large_file_only(tmp_path) ->
             return True
 
     seen: list[tuple[int, int]] = []
-    small = cli.ReadProgress(str(path), Tty())
+    small = cli.ReadProgress(str(path), stream=Tty())
     assert not small.on  # a small file reads at once: no bar
     old = cli.PROGRESS_MIN_BYTES
     cli.PROGRESS_MIN_BYTES = 1
     try:
         tty, pipe = Tty(), io.StringIO()
-        shown, hidden = cli.ReadProgress(str(path), tty), cli.ReadProgress(str(path), pipe)
+        shown = cli.ReadProgress(str(path), "hil check: the topics the specs read", stream=tty)
+        hidden = cli.ReadProgress(str(path), stream=pipe)
     finally:
         cli.PROGRESS_MIN_BYTES = old
     assert shown.on and not hidden.on  # a pipe or a CI log gets no bar
@@ -256,7 +257,6 @@ def test_reading_progress_shows_on_a_terminal_for_a_large_file_only(tmp_path) ->
         shown(done, total)
         hidden(done, total)
 
-    shown.label("hil check: the topics the specs read")
     RecordingSource(path, progress=both)
     shown.close()
     size = path.stat().st_size
