@@ -32,7 +32,8 @@ class SerialItem(NamedTuple):
 
 
 class BytesItem(NamedTuple):
-    """An already encoded message on `topic` (JSON payloads of the harness topics)."""
+    """An already encoded message on `topic` (JSON payloads of the harness topics); `obj`:
+    the payload itself where it is exactly what decoding `data` gives (`Recorder.mirror`)."""
 
     topic: str
     schema: str
@@ -40,6 +41,7 @@ class BytesItem(NamedTuple):
     data: bytes
     t: int
     source_t: int | None
+    obj: Any = None
 
 
 class AttachItem(NamedTuple):

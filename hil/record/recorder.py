@@ -94,6 +94,27 @@ def dumps(obj: Any) -> bytes:
         return _enc({"error": f"unencodable payload: {exc}"}).encode()
 
 
+_SCALARS = frozenset((str, int, float, bool, type(None)))
+
+
+def json_plain(payload: dict) -> bool:
+    """True when decoding `dumps(payload)` gives back `payload` exactly, types included: string
+    keys, and values that are str, int, float, bool, None or lists of those (not an enum, a
+    tuple or an int subclass, which JSON would turn into something else)."""
+    scalars = _SCALARS
+    for k, v in payload.items():
+        tv = type(v)
+        if type(k) is not str:
+            return False
+        if tv is list:
+            for x in v:
+                if type(x) not in scalars:
+                    return False
+        elif tv not in scalars:
+            return False
+    return True
+
+
 @cache
 def versions() -> dict[str, str]:
     """Versions of the stack and the git revision of the hil checkout (if any)."""
@@ -200,7 +221,9 @@ class Recorder:
         self._schema_ids: dict[str, int] = {}
         self.topic_of: dict[int, str] = {}  # channel id -> topic
         self.metadata_count = 0  # metadata records added (a live reader's cache key)
-        self.mirror: list[tuple[int, int, int, bytes]] | None = None  # see keep_messages()
+        #: see keep_messages(): (channel id, log time, publish time, bytes, payload or None)
+        self.mirror: list[tuple[int, int, int, bytes, Any]] | None = None
+        self._mirror_obj: Any = None  # the payload of the message being written, if kept
         self._channels: dict[str, int] = {}
         self._chan_meta: dict[str, dict[str, str]] = {}
         self._can_ch: dict[str, tuple] = {}
@@ -385,7 +408,8 @@ class Recorder:
         if "state" in payload and not isinstance(payload["state"], str):
             s = payload["state"]
             payload["state"] = s.name if isinstance(s, enum.Enum) else str(s)
-        self._put(topics.drive_state(drive), "hil.DriveState", "model", dumps(payload), t, source_t)
+        self._put(topics.drive_state(drive), "hil.DriveState", "model", dumps(payload), t, source_t,
+                  payload if self.mirror is not None and json_plain(payload) else None)
 
     def drive_event(
         self, drive: str, event: Any, *, t: int | None = None, source_t: int | None = None
@@ -466,10 +490,12 @@ class Recorder:
         self.metadata_count += 1
         self._control(MetadataItem(name, _str_map(data)))
 
-    def keep_messages(self) -> list[tuple[int, int, int, bytes]]:
+    def keep_messages(self) -> list[tuple[int, int, int, bytes, Any]]:
         """From now on, also keep every message written (channel id, log time, publish
-        time, bytes) in `mirror`, in file order, for a live checker that reads each message
-        once (`hil.timing.source.LiveSource`) instead of re-reading the file."""
+        time, bytes, payload) in `mirror`, in file order, for a live checker that reads each
+        message once (`hil.timing.source.LiveSource`) instead of re-reading the file. The
+        payload is the ground truth's own dict where decoding the bytes gives exactly it
+        (`json_plain`), so the checker need not decode it; None for any other message."""
         if self.mirror is None:
             self.mirror = []
             mirror, write = self.mirror, self._w.add_message
@@ -477,7 +503,7 @@ class Recorder:
             def add_message(cid: int, log_time: int, publish_time: int, data: bytes,
                             *args: Any, **kw: Any) -> Any:
                 out = write(cid, log_time, publish_time, data, *args, **kw)
-                mirror.append((cid, log_time, publish_time, data))
+                mirror.append((cid, log_time, publish_time, data, self._mirror_obj))
                 return out
 
             self._w.add_message = add_message  # type: ignore[method-assign]
@@ -560,11 +586,12 @@ class Recorder:
         data: bytes,
         t: int | None,
         source_t: int | None,
+        obj: Any = None,
     ) -> None:
         if t is None:
             t = clock.time_ns()
         if self._open and self._room():
-            self._q.append(BytesItem(topic, schema, source, data, t, source_t))
+            self._q.append(BytesItem(topic, schema, source, data, t, source_t, obj))
         else:
             self._drop()
 
@@ -656,11 +683,18 @@ class Recorder:
         self._describe_adu, self._decoders["modbus"] = _load("hil.protocol.modbus", "describe_adu")
 
     def _do_bytes(self, item: BytesItem) -> None:
-        topic, schema, source, data, t, st = item
+        topic, schema, source, data, t, st, obj = item
         cid = self._channels.get(topic)
         if cid is None:
             cid = self._channel(topic, schema, source or ("harness" if st is None else "adapter"))
-        self._w.add_message(cid, t, t if st is None else st, data)
+        if obj is None:
+            self._w.add_message(cid, t, t if st is None else st, data)
+            return
+        self._mirror_obj = obj
+        try:
+            self._w.add_message(cid, t, t if st is None else st, data)
+        finally:
+            self._mirror_obj = None
 
     def _can_channels(self, bus: str, st: int | None) -> tuple:
         if not self._decoders_loaded:

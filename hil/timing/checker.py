@@ -158,7 +158,7 @@ class Context:
         self._traces: dict[str, Trace] = {}
         self._occs: dict[str, list[Occ]] = {}
         self._deliveries: dict[str, list[tuple[int, bool, int]]] | None = None
-        self._topic_sampling: dict[str, tuple[set[int], set[int], list[int]]] = {}
+        self._topic_sampling: dict[str, tuple[int, set[int], set[int], list[int]]] = {}
         self._thr: dict[int, Any] = {}  # id(transforms) -> `_thresholds`
         end = source.end_time()
         self.end = end if end is not None else 0
@@ -296,16 +296,19 @@ class Context:
         store = getattr(self.source, "_samples_cache", None)
         key = ("_sampling", topic)
         cached = store.get(key) if store is not None else self._topic_sampling.get(topic)
-        if cached is None:
-            msgs = self.source.messages(topic)
-            periodic = {t for t, m in msgs if isinstance(m, dict) and m.get("periodic")}
-            polled = {t for t, m in msgs if isinstance(m, dict) and _is_poll(m.get("kind"))}
-            cached = (periodic, polled, [t for t, _m in msgs] if periodic or polled else [])
+        msgs = self.source.messages(topic)
+        if cached is None or cached[0] != len(msgs):
+            # a live source only grows (a re-sorted topic drops this): index what is new
+            done, periodic, polled, times = cached or (0, set(), set(), [])
+            new = msgs[done:] if done else msgs
+            periodic = periodic | {t for t, m in new if isinstance(m, dict) and m.get("periodic")}
+            polled = polled | {t for t, m in new if isinstance(m, dict) and _is_poll(m.get("kind"))}
+            cached = (len(msgs), periodic, polled, times + [t for t, _m in new])
             if store is not None:
-                store[key] = cached  # cleared with the source's samples when it grows
+                store[key] = cached
             else:
                 self._topic_sampling[topic] = cached
-        periodic, polled, times = cached
+        _n, periodic, polled, times = cached
         if not periodic and not polled:
             return None
         return periodic.__contains__, polled.__contains__, times

@@ -65,36 +65,57 @@ def samples(source: SignalSource, topic: str, field: str,
         return table.samples(field, where, runs)
     cache = getattr(source, "_samples_cache", None)
     key = (topic, field, tuple(sorted((where or {}).items(), key=repr)))
-    if runs:  # the whole list once, then its runs once, until the source grows
+    msgs = source.messages(topic)
+    n = len(msgs)
+    if runs:  # the whole list once, then its runs once; a grown topic extends them
         got = cache.get((*key, "runs")) if cache is not None else None
+        if got is not None and got[0] == n:
+            return got[1]
+        full = samples(source, topic, field, where)
         if got is None:
-            got = runs_of(samples(source, topic, field, where))
-            if cache is not None:
-                cache[(*key, "runs")] = got
-        return got
-    if cache is not None and key in cache:
-        return cache[key]
+            out, k_last, start = [], 0, 0
+        else:  # the last run may go on: redo it and what came after it
+            _n, out, k_last, start = got
+            out = out[:len(out) - k_last]
+        tail, k_last, start = _runs(full, start)
+        out = out + tail
+        if cache is not None:
+            cache[(*key, "runs")] = (n, out, k_last, start)
+        return out
+    got = cache.get(key) if cache is not None else None
+    if got is not None and got[0] == n:
+        return got[1]
+    # a live source only grows (a topic re-sorted drops its entries): extend what was derived
+    done, prev = got if got is not None else (0, [])
     out = []
     append = out.append
     flat = "." not in field
-    for t, msg in source.messages(topic):
+    for t, msg in msgs[done:] if done else msgs:
         if where and any(get_field(msg, k) != v for k, v in where.items()):
             continue
         # fast path for a plain top-level field
         val = msg.get(field, _MISSING) if flat and type(msg) is dict else get_field(msg, field)
         if val is not _MISSING:
             append((t, val))
+    if prev:
+        out = prev + out  # a new list: one handed out before stays as it was
     if cache is not None:
-        cache[key] = out
+        cache[key] = (n, out)
     return out
 
 
 def runs_of(full: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
     """Of each run of equal values (`_same`) in `full`, its first and its last sample."""
+    return _runs(full, 0)[0]
+
+
+def _runs(full: Sequence[tuple[int, Any]], i: int) -> tuple[list[tuple[int, Any]], int, int]:
+    """`runs_of(full[i:])`, the number of its entries the last run gave (0, 1 or 2) and the
+    index in `full` where that run begins (what to redo when `full` grows)."""
     out: list[tuple[int, Any]] = []
     append = out.append
     n = len(full)
-    i = 0
+    k_last, last = 0, i
     while i < n:
         t, v = full[i]
         tv = type(v)
@@ -102,10 +123,12 @@ def runs_of(full: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
         while j + 1 < n and type(full[j + 1][1]) is tv and full[j + 1][1] == v:
             j += 1
         append((t, v))
+        k_last, last = 1, i
         if j > i:
             append(full[j])
+            k_last = 2
         i = j + 1
-    return out
+    return out, k_last, last
 
 
 def _same(a: Any, b: Any) -> bool:
@@ -392,7 +415,9 @@ class MemorySource:
         for topic, lst in (messages or {}).items():
             self._msgs[topic] = sorted(lst, key=lambda m: m[0])
         self._res = dict(resolutions or {})
-        self._samples_cache: dict[tuple, list[tuple[int, Any]]] = {}
+        #: what the checker derived from each topic's messages, keyed by topic first; each
+        #: entry knows how many messages it covers, so a live source that grew extends it
+        self._samples_cache: dict[tuple, Any] = {}
 
     @classmethod
     def from_series(cls, series: Mapping[tuple[str, str], list[tuple[int, Any]]],
@@ -422,6 +447,12 @@ class MemorySource:
         """All messages of `topic` at once (t_ns, payload), e.g. decoded elsewhere."""
         self._samples_cache.clear()
         self._msgs[topic] = sorted(msgs, key=lambda m: m[0])
+
+    def _forget(self, topic: str) -> None:
+        """Drop what was derived from `topic`'s messages (they were reordered)."""
+        cache = self._samples_cache
+        for key in [k for k in cache if k[0] == topic or k == ("_sampling", topic)]:
+            del cache[key]
 
     def messages(self, topic: str) -> list[tuple[int, dict]]:
         return self._msgs.get(topic, [])
@@ -461,22 +492,25 @@ class _LazySource(MemorySource):
 
     def __init__(self) -> None:
         super().__init__()
-        #: per topic, what was read but not yet decoded: (t_ns, JSON bytes), file order
-        self._raw: dict[str, list[tuple[int, bytes]]] = {}
+        #: per topic, what was read but not yet decoded: (t_ns, JSON bytes), file order (or
+        #: the payload dict itself, where the recorder kept it: nothing to decode)
+        self._raw: dict[str, list[tuple[int, bytes | dict]]] = {}
         self._raw_span: dict[str, list[int]] = {}  # per topic, [first t, last t] of `_raw`
+        #: bytes -> decoded message, for a source whose readers never change a message (one
+        #: dict then serves every message with those bytes); None: each is decoded anew
+        self._shared: dict[bytes, dict] | None = None
 
-    def _keep(self, topic: str, t: int, data: bytes) -> None:
+    def _keep_many(self, topic: str, msgs: list[tuple[int, bytes | dict]]) -> None:
+        """`_keep` of each of `msgs` (one topic's, in file order)."""
+        lo, hi = min(t for t, _ in msgs), max(t for t, _ in msgs)
         pend = self._raw.get(topic)
         if pend is None:
-            pend = self._raw[topic] = []
-            self._raw_span[topic] = [t, t]
+            self._raw[topic] = msgs
+            self._raw_span[topic] = [lo, hi]
         else:
+            pend.extend(msgs)
             span = self._raw_span[topic]
-            if t < span[0]:
-                span[0] = t
-            elif t > span[1]:
-                span[1] = t
-        pend.append((t, data))
+            span[0], span[1] = min(span[0], lo), max(span[1], hi)
 
     def _keep_all(self, raw: dict[str, list[tuple[int, bytes]]]) -> None:
         """Every topic's undecoded messages at once (a file read)."""
@@ -491,13 +525,25 @@ class _LazySource(MemorySource):
             lst = self._msgs.setdefault(topic, [])
             last = lst[-1][0] if lst else None
             ordered = True
+            shared = self._shared
             for t, data in pend:
                 if last is not None and t < last:
                     ordered = False
                 last = t
-                lst.append((t, _decode_obj(data)))
+                if type(data) is not dict:
+                    if shared is None:
+                        data = _decode_obj(data)
+                    else:  # a repeated message (a statusword poll) is decoded once
+                        obj = shared.get(data)
+                        if obj is None:
+                            if len(shared) >= _SHARED_MAX:
+                                shared.clear()
+                            obj = shared[data] = _decode_obj(data)
+                        data = obj
+                lst.append((t, data))
             if not ordered:
                 lst.sort(key=lambda m: m[0])  # stable: equal times keep file order
+                self._forget(topic)  # what was derived from its messages no longer holds
         return self._msgs.get(topic, [])
 
     def add(self, topic: str, t: int, msg: dict) -> None:
@@ -632,6 +678,9 @@ class RecordingSource(_LazySource):
         return min(starts) if starts else None
 
 
+_SHARED_MAX = 4096  # distinct messages a live source keeps decoded for reuse
+
+
 def _decode_obj(data: bytes) -> dict:
     obj = decode(data)
     return obj if isinstance(obj, dict) else {"value": obj}
@@ -647,6 +696,7 @@ class LiveSource(_LazySource):
 
     def __init__(self) -> None:
         super().__init__()
+        self._shared = {}  # read by the checker only, which changes no message
         self._seen = 0
         self._head_key: tuple = ()
         self.meta: dict[str, dict[str, str]] = {}
@@ -669,11 +719,15 @@ class LiveSource(_LazySource):
         if n == self._seen:
             return self
         names = rec.topic_of
-        keep = self._keep
-        for cid, log_t, pub_t, data in mirror[self._seen:n]:
-            keep(names.get(cid, f"?{cid}"), int(pub_t or log_t), data)
+        batch: dict[int, list[tuple[int, bytes | dict]]] = {}
+        for cid, log_t, pub_t, data, obj in mirror[self._seen:n]:
+            lst = batch.get(cid)
+            if lst is None:
+                lst = batch[cid] = []
+            lst.append((int(pub_t or log_t), data if obj is None else obj))
+        for cid, lst in batch.items():
+            self._keep_many(names.get(cid, f"?{cid}"), lst)
         self._seen = n
-        self._samples_cache.clear()
         return self
 
 

@@ -19,7 +19,7 @@ def _record(rec: Recorder, t0: int, n: int) -> None:
         t = t0 + i * MS
         rec.drive_state("drive1", {"state": "OPERATION ENABLED", "speed_rpm": float(i),
                                    "periodic": True}, t=t, source_t=t)
-        rec.can("can0", can.Message(arbitration_id=0x181, data=bytes([i & 0xFF, 0]),
+        rec.can("can0", can.Message(arbitration_id=0x181, data=bytes([i & 0xFF, t0 // MS & 0xFF]),
                                     is_extended_id=False), "rx", t)
     rec.dio("drive1", "DO2", bool(n & 1), t0 + n * MS)
 
@@ -39,13 +39,25 @@ def test_live_source_decodes_only_what_is_read_and_matches_the_file(tmp_path, mo
     assert "/can/can0/raw" in live.topics() and "/drive/drive1/state" in live.topics()
     assert live.start_time() == 0 and live.end_time() == 50 * MS
     state = live.messages("/drive/drive1/state")
-    assert len(state) == 50 and len(calls) == 50  # that topic only, each message once
-    assert live.messages("/drive/drive1/state") is state and len(calls) == 50
+    assert len(state) == 50 and calls == []  # the ground truth comes as the recorder's dicts
+    frames = live.messages("/canopen/can0")
+    assert len(frames) == 50 and len(calls) == 50  # that topic only, each message once
+    assert live.messages("/canopen/can0") is frames and len(calls) == 50
     _record(rec, 50 * MS, 30)  # the plan goes on: only the new messages are decoded
     rec.flush()
     live.refresh(rec)
-    assert len(live.messages("/drive/drive1/state")) == 80 and len(calls) == 80
+    assert len(live.messages("/drive/drive1/state")) == 80
+    assert len(live.messages("/canopen/can0")) == 80 and len(calls) == 80
     assert live.end_time() == 80 * MS
+    _record(rec, 0, 20)  # the same frames again (a statusword poll): decoded once, shared
+    rec.flush()
+    live.refresh(rec)
+    again = live.messages("/canopen/can0")
+    assert len(again) == 100 and len(calls) == 80
+    assert [t for t, _m in again] == sorted(t for t, _m in again)  # in time order
+    for i in range(20):  # each of the first 20 ms now has its frame twice, alike
+        [a, b] = [m for t, m in again if t == i * MS]
+        assert a == b and a["data"] == bytes([i, 0]).hex()
     rec.close()
     whole = RecordingSource(path)
     for topic in whole.topics():
@@ -98,3 +110,102 @@ def test_a_file_source_decodes_only_the_topics_read(tmp_path, monkeypatch):
         assert src.messages(topic) == sorted(full[topic], key=lambda m: m[0]), topic
     assert [t for t, _m in src.messages("/dio/drive1/DI1")] == [41 * MS, 43 * MS, 45 * MS]
     assert set(src.topics()) == set(full)
+
+
+def test_a_live_source_grown_in_steps_derives_what_a_fresh_one_derives(tmp_path):
+    """The samples, runs and sampling index a live source extends at each refresh (runs that
+    go on across a refresh, a `where` filter, messages that arrive out of order) are what a
+    source holding all of it at once derives from scratch."""
+    import random
+
+    from hil.timing.checker import Context
+    from hil.timing.source import MemorySource, samples
+
+    rnd = random.Random(7)
+    path = tmp_path / "grow.mcap"
+    rec = Recorder(path)
+    rec.keep_messages()
+    live = LiveSource()
+    fresh_ctx = Context.__new__(Context)
+    sent: dict[str, list[tuple[int, dict]]] = {}
+    t = 0
+    for _round in range(12):
+        for _ in range(rnd.randint(0, 40)):
+            t += MS
+            speed = rnd.choice([0.0, 0.0, 0.0, 10.5, 20.0])
+            msg = {"state": rnd.choice(["A", "A", "B"]), "speed_rpm": speed,
+                   "periodic": rnd.random() < 0.8}
+            rec.drive_state("drive1", msg, t=t, source_t=t)
+            sent.setdefault("/drive/drive1/state", []).append((t, msg))
+            if rnd.random() < 0.2:  # an edge stamped a little in the past now and then
+                ts = t - rnd.randint(0, 3) * MS
+                rec.dio("drive1", "DO2", rnd.random() < 0.5, t, source_t=ts)
+        rec.flush()
+        live.refresh(rec)
+        whole = MemorySource({topic: live.messages(topic) for topic in live.topics()})
+        for topic, field, where in (("/drive/drive1/state", "speed_rpm", None),
+                                    ("/drive/drive1/state", "speed_rpm", {"state": "A"}),
+                                    ("/drive/drive1/state", "state", None),
+                                    ("/dio/drive1/DO2", "level", None)):
+            for runs in (False, True):
+                got = samples(live, topic, field, where, runs)
+                assert list(got) == list(samples(whole, topic, field, where, runs)), \
+                    (topic, field, where, runs)
+        for topic in live.topics():
+            fresh_ctx.source, fresh_ctx._topic_sampling = whole, {}
+            want = Context._sampling_index(fresh_ctx, topic)
+            fresh_ctx.source = live
+            have = Context._sampling_index(fresh_ctx, topic)
+            assert (want is None) == (have is None), topic
+            if want is not None:
+                times = [m[0] for m in whole.messages(topic)]
+                assert list(have[2]) == list(want[2]) == times
+                assert [have[0](x) for x in times] == [want[0](x) for x in times]
+    assert len(sent["/drive/drive1/state"]) > 100
+    rec.close()
+
+
+def test_the_mirror_holds_the_ground_truth_as_decoding_gives_it(tmp_path):
+    """The recorder hands a live check the model's own state dict instead of its bytes only
+    where decoding the bytes gives exactly that dict, types included; anything JSON would
+    change (a tuple, an enum, an int key) is decoded from the bytes as before."""
+    import enum
+    import json
+
+    from hil.model.drive import Drive
+
+    def deep_types(x):
+        if isinstance(x, dict):
+            return {k: deep_types(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [deep_types(v) for v in x]
+        return type(x).__name__
+
+    class Mode(enum.IntEnum):
+        PP = 1
+
+    rec = Recorder(tmp_path / "mirror.mcap")
+    mirror = rec.keep_messages()
+    drive = Drive(inputs={8: True})
+    drive.write_object(0x6060, 0, 1)
+    for cw in (0x06, 0x07, 0x0F):
+        drive.write_object(0x6040, 0, cw)
+    drive.write_object(0x607A, 0, 200_000)
+    drive.write_object(0x6040, 0, 0x1F)
+    for _ in range(20):
+        drive.advance(5 * MS)
+        rec.drive_state("drive1", {**drive.snapshot(), "periodic": True})
+    rec.drive_state("drive1", {"mode": Mode.PP})  # JSON makes it 1, an int
+    rec.drive_state("drive1", {"do": (True, False)})  # JSON makes it a list
+    rec.drive_state("drive1", {"pt": {1: 2.0}})  # JSON makes the key "1"
+    rec.flush()
+    kept = [(data, obj) for _cid, _lt, _pt, data, obj in mirror]
+    assert len(kept) == 23
+    for data, obj in kept[:20]:  # the model's snapshots: all kept, all exact
+        assert obj is not None
+        assert json.loads(data) == obj and deep_types(json.loads(data)) == deep_types(obj)
+    assert [obj for _data, obj in kept[20:]] == [None, None, None]
+    live = LiveSource().refresh(rec)
+    got = live.messages("/drive/drive1/state")
+    assert [m for _t, m in got[20:]] == [{"mode": 1}, {"do": [True, False]}, {"pt": {"1": 2.0}}]
+    rec.close()
