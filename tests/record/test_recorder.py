@@ -319,3 +319,25 @@ def test_flush_makes_data_readable_before_close(tmp_path):
         assert r.counts()["/can/can0/raw"] == 50
     finally:
         rec.close()
+
+
+def test_an_unencodable_or_self_containing_payload_is_an_error_object(tmp_path):
+    """A payload JSON cannot encode (an object, a dict that contains itself) is recorded as an
+    `error` object naming why; the messages around it are recorded as they are."""
+    from hil.record.reader import Recording
+
+    path = tmp_path / "bad.mcap"
+    rec = Recorder(path)
+    loop: dict = {"state": "x"}
+    loop["self"] = loop
+    rec.drive_state("drive1", {"state": "A", "n": 1}, t=1)
+    rec.drive_state("drive1", loop, t=2)
+    rec.drive_event("drive1", {"type": "X", "obj": {(1, 2): 3}}, t=3)  # a tuple key
+    rec.drive_state("drive1", {"state": "B", "n": 2}, t=4)
+    rec.close()
+    got = Recording.open(str(path))
+    state = [m for _topic, _lt, _pt, m in got.messages() if _topic == "/drive/drive1/state"]
+    assert state[0] == {"state": "A", "n": 1} and state[2] == {"state": "B", "n": 2}
+    assert state[1]["error"].startswith("unencodable payload: maximum recursion depth")
+    [event] = [m for _topic, _lt, _pt, m in got.messages() if _topic == "/drive/drive1/events"]
+    assert event["error"].startswith("unencodable payload:")
