@@ -26,6 +26,7 @@ import contextlib
 import re
 import struct
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Literal
 
@@ -51,6 +52,9 @@ Listener = Callable[[str, bool, int], None]
 _INPUT = re.compile(r"^(DI[1-9][0-9]*|STO_A|STO_B)$")
 _OUTPUT = re.compile(r"^(DO[1-9][0-9]*|FDBK)$")
 _T = struct.Struct("<q")
+# a line never heard of is asked for again (`_ask_levels`) at most this often, this long
+_ASK_EVERY_S = 0.1
+_ASK_TIMEOUT_S = 0.25
 
 
 def is_input(line: str) -> bool:
@@ -109,7 +113,16 @@ class DioPort:
         is_input(line)
         with self._cond:
             entry = self._levels.get(line)
+        if entry is None and not self.owns(line) and self._ask_levels():
+            with self._cond:
+                entry = self._levels.get(line)
         return entry[0] if entry else False
+
+    def _ask_levels(self) -> bool:
+        """Ask the other side again for its lines' levels (a backend that can); True if it
+        asked. For a line never heard of: its level may have been set before this side was
+        there to hear it, and a line that does not change is not published again."""
+        return False
 
     def levels(self) -> dict[str, bool]:
         """Every line seen or set so far, with its level."""
@@ -136,6 +149,8 @@ class DioPort:
         Raises TimeoutError naming the line, the expected and the last seen level."""
         is_input(line)
         deadline = clock.monotonic() + timeout_s
+        if line not in self._levels and not self.owns(line):
+            self._ask_levels()
         with self._cond:
             while True:
                 entry = self._levels.get(line)
@@ -263,6 +278,8 @@ class ZenohDio(DioPort):
             raise TransportUrlError(url, str(e)) from None
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._sub = self._queryable = None
+        self._query_timeout = query_timeout
+        self._asked_at = float("-inf")  # time.monotonic() of the last `_ask_levels`
         try:
             if ep.connect:
                 wait_connected(self.session, connect_timeout, what=url, endpoints=ep.connect)
@@ -270,9 +287,7 @@ class ZenohDio(DioPort):
                 f"{self.key}/*", self._on_sample, allowed_origin=zenoh.Locality.REMOTE)
             self._queryable = self.session.declare_queryable(f"{self.key}/**", self._on_query)
             if ep.connect:  # learn the other side's current levels (and sync routing)
-                for line, level in self.query_levels(query_timeout).items():
-                    if not self.owns(line):
-                        self._changed(line, level)
+                self._learn_levels(query_timeout)
         except (ConnectionError, zenoh.ZError) as e:
             self._close_backend()
             raise TransportUrlError(url, str(e)) from None
@@ -306,6 +321,24 @@ class ZenohDio(DioPort):
             key = f"{self.key}/{line}"
             if zenoh.KeyExpr(key).intersects(query.key_expr):
                 query.reply(key, b"1" if level else b"0", attachment=_T.pack(t))
+
+    def _learn_levels(self, timeout_s: float) -> None:
+        for line, level in self.query_levels(timeout_s).items():
+            if not self.owns(line):
+                self._changed(line, level)
+
+    def _ask_levels(self) -> bool:
+        """Query the key again, at most every `_ASK_EVERY_S` (a query costs a round trip):
+        a level the other side set before this side's subscriber was routed is learned."""
+        now = time.monotonic()
+        if self._closed or now - self._asked_at < _ASK_EVERY_S:
+            return False
+        self._asked_at = now
+        try:
+            self._learn_levels(min(self._query_timeout, _ASK_TIMEOUT_S))
+        except zenoh.ZError:
+            return False
+        return True
 
     def query_levels(self, timeout_s: float = 1.0) -> dict[str, bool]:
         """Ask every side on the key for its lines' current levels."""

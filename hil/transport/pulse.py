@@ -29,6 +29,7 @@ import math
 import re
 import struct
 import threading
+import time
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -53,6 +54,9 @@ Listener = Callable[[str, dict[str, Any], int, int | None], None]
 _X = re.compile(r"^X[0-9]{1,3}$")
 _Y = re.compile(r"^Y[0-9]{1,3}$")
 _T = struct.Struct("<q")
+# a level never heard of is asked for again (`_ask_levels`) at most this often, this long
+_ASK_EVERY_S = 0.1
+_ASK_TIMEOUT_S = 0.25
 
 
 class PulseError(ValueError):
@@ -155,8 +159,18 @@ class PulsePort:
             return True
 
     def get(self, line: str) -> bool:
+        """Last known level of `line` (False if never seen)."""
         with self._lock:
-            return self._levels.get(line, False)
+            level = self._levels.get(line)
+        if level is None and not _owns(self.role, line) and self._ask_levels():
+            with self._lock:
+                level = self._levels.get(line)
+        return bool(level)
+
+    def _ask_levels(self) -> bool:
+        """Ask the other side again for its levels (a backend that can); True if it asked: a
+        level set before this side's subscriber was routed is not published again."""
+        return False
 
     def levels(self) -> dict[str, bool]:
         with self._lock:
@@ -299,6 +313,8 @@ class ZenohPulse(PulsePort):
             raise TransportUrlError(url, str(e)) from None
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._sub = self._queryable = None
+        self._query_timeout = query_timeout
+        self._asked_at = float("-inf")  # time.monotonic() of the last `_ask_levels`
         try:
             if ep.connect:
                 wait_connected(self.session, connect_timeout, what=url, endpoints=ep.connect)
@@ -306,12 +322,27 @@ class ZenohPulse(PulsePort):
                 f"{self.key}/*", self._on_sample, allowed_origin=zenoh.Locality.REMOTE)
             self._queryable = self.session.declare_queryable(f"{self.key}/**", self._on_query)
             if ep.connect:
-                for reply in self.session.get(f"{self.key}/**", timeout=query_timeout):
-                    if reply.ok is not None:
-                        self._level_sample(reply.ok)
+                self._learn_levels(query_timeout)
         except (ConnectionError, zenoh.ZError) as e:
             self._close_backend()
             raise TransportUrlError(url, str(e)) from None
+
+    def _learn_levels(self, timeout_s: float) -> None:
+        for reply in self.session.get(f"{self.key}/**", timeout=timeout_s):
+            if reply.ok is not None:
+                self._level_sample(reply.ok)
+
+    def _ask_levels(self) -> bool:
+        """Query the key again, at most every `_ASK_EVERY_S` (a query costs a round trip)."""
+        now = time.monotonic()
+        if self.closed or now - self._asked_at < _ASK_EVERY_S:
+            return False
+        self._asked_at = now
+        try:
+            self._learn_levels(min(self._query_timeout, _ASK_TIMEOUT_S))
+        except zenoh.ZError:
+            return False
+        return True
 
     @staticmethod
     def _source_t(sample: zenoh.Sample) -> int | None:

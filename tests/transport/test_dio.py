@@ -120,6 +120,48 @@ def test_zenoh_inputs_outputs_and_query(port, tap):
         drive.close()
 
 
+def test_zenoh_level_missed_at_connect_is_asked_for_again(port, monkeypatch):
+    """The drive set its outputs before the harness could hear them, and its first answer to
+    the harness's query was lost (a queryable not yet routed): a steady level is published
+    once only, so the harness asks again when a plan reads a line it never heard of, at most
+    every 100 ms, and a level it knows is read without asking."""
+    import hil.transport.dio as dio_mod
+
+    ep = f"tcp/127.0.0.1:{port}"
+    drive = open_dio(f"zenoh:tzq/drive1?listen={ep}", role="drive")
+    drive.set("DO3", True)
+    drive.set("DO5", True)
+    answered = drive._on_query
+    queries = []
+
+    def late(query):  # the first query goes unanswered, as if the drive were not routed yet
+        queries.append(str(query.key_expr))
+        if len(queries) > 1:
+            answered(query)
+
+    monkeypatch.setattr(drive, "_on_query", late)
+    drive._queryable.undeclare()
+    drive._queryable = drive.session.declare_queryable("tzq/drive1/**", drive._on_query)
+    harness = open_dio(f"zenoh:tzq/drive1?connect={ep}", role="harness")
+    try:
+        assert len(queries) == 1 and harness.levels() == {}  # the connect-time answer lost
+        assert harness.get("DO3") is True  # asked again
+        assert len(queries) == 2
+        assert harness.wait_for("DO5", True, 1.0)  # learnt by that same answer
+        assert harness.get("DO3") is True and len(queries) == 2  # known: nothing asked
+        assert harness.get("DO6") is False  # the drive never set it: still unknown
+        n = len(queries)
+        for _ in range(20):  # read in a loop: asked at most every 100 ms, not every read
+            assert harness.get("DO6") is False
+        assert len(queries) - n <= 1
+        time.sleep(dio_mod._ASK_EVERY_S + 0.05)
+        harness.get("DO6")
+        assert len(queries) - n <= 2
+    finally:
+        harness.close()
+        drive.close()
+
+
 # -- Modbus TCP remote I/O ---------------------------------------------------------------
 
 

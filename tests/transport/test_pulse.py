@@ -127,6 +127,36 @@ def test_zenoh_line_between_two_sessions(port, tap):
         drv.close()
 
 
+def test_zenoh_level_missed_at_connect_is_asked_for_again(port, monkeypatch):
+    """The drive's X level was set before the PLC could hear it and its first answer was
+    lost: the PLC asks again when it reads a level it never heard of (at most every 100 ms)."""
+    ep = f"tcp/127.0.0.1:{port}"
+    drv = open_pulse(f"zenoh:tzl/drive1/pulse?listen={ep}", role="drive")
+    drv.set("X2", True)
+    answered = drv._on_query
+    queries = []
+
+    def late(query):
+        queries.append(1)
+        if len(queries) > 1:
+            answered(query)
+
+    monkeypatch.setattr(drv, "_on_query", late)
+    drv._queryable.undeclare()
+    drv._queryable = drv.session.declare_queryable("tzl/drive1/pulse/**", drv._on_query)
+    plc = open_pulse(f"zenoh:tzl/drive1/pulse?connect={ep}", role="master", name="drive1")
+    try:
+        assert len(queries) == 1 and plc.levels() == {}
+        assert plc.get("X2") is True and len(queries) == 2
+        assert plc.get("X2") is True and len(queries) == 2  # known: nothing asked
+        for _ in range(20):  # never set by the drive: asked at most every 100 ms
+            assert plc.get("X5") is False
+        assert len(queries) <= 3
+    finally:
+        plc.close()
+        drv.close()
+
+
 def test_zenoh_hostile_payloads_never_stop_the_line(port):
     """Random bytes, broken JSON and wrong fields on every key: each is refused (kept in
     `errors` where it was a message), and a good segment after them still arrives."""
