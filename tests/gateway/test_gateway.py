@@ -223,8 +223,10 @@ def test_bus_off_error_frame_is_reported(make_rig):
     rig.stack.can_bus.send(can.Message(arbitration_id=0x40 | 0x04 | 0x200, is_error_frame=True,
                                        data=bytes([0, 0x20, 0, 0, 0, 0, 248, 127])))
     h = rig.gateway.can["can0"].health
-    wait(lambda: h.bus_off, what="bus-off")
-    assert h.state == "bus-off" and (h.tx_error_counter, h.rx_error_counter) == (248, 127)
+    # a snapshot is taken under the health's lock: the frame's whole update or none of it
+    snap = wait(lambda: (s := h.snapshot())["bus_off"] and s, what="bus-off")
+    assert snap["state"] == "bus-off"
+    assert (snap["tx_error_counter"], snap["rx_error_counter"]) == (248, 127)
 
 
 class Unpluggable(can.BusABC):

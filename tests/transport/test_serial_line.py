@@ -115,9 +115,13 @@ def test_read_frame_splits_on_silence(pty_line, far_end):
     far = far_end()
     far.write(READ_REQ)
     far.flush()
-    time.sleep(0.02)  # > t3.5 (1.75 ms): a new frame (not an assertion on wall time)
-    far.write(b"\x02\x03")
+    # the first frame ends at t3.5 (1.75 ms) of silence, not at the timeout; the next bytes
+    # are written only once it has (a host that stalls the reader for longer than a fixed
+    # pause between the writes would otherwise see them back to back, as one frame)
+    t0 = time.monotonic()
     assert line.read_frame(timeout=2).data == READ_REQ
+    assert time.monotonic() - t0 < 1.5
+    far.write(b"\x02\x03")
     assert line.read_frame(timeout=2).data == b"\x02\x03"
     assert line.read_frame(timeout=0.05) is None
 
