@@ -98,24 +98,29 @@ def dumps(obj: Any) -> bytes:
 
 
 _SCALARS = frozenset((str, int, float, bool, type(None)))
+_BIG = 10**4000  # an int this long may exceed Python's int-to-str digit limit
 
 
-def json_plain(payload: dict) -> bool:
-    """True when decoding `dumps(payload)` gives back `payload` exactly, types included: string
-    keys, and values that are str, int, float, bool, None or lists of those (not an enum, a
-    tuple or an int subclass, which JSON would turn into something else)."""
+def json_plain(payload: dict) -> dict | None:
+    """A copy of `payload` (its lists copied too) when decoding `dumps(payload)` gives back
+    exactly that, types included: string keys, and values that are str, int, float, bool,
+    None or lists of those (not an enum, a tuple or an int subclass, which JSON would turn
+    into something else, nor an int too long to encode). None otherwise."""
     scalars = _SCALARS
+    out = {}
     for k, v in payload.items():
         tv = type(v)
         if type(k) is not str:
-            return False
+            return None
         if tv is list:
             for x in v:
-                if type(x) not in scalars:
-                    return False
-        elif tv not in scalars:
-            return False
-    return True
+                if type(x) not in scalars or (type(x) is int and not -_BIG < x < _BIG):
+                    return None
+            v = v.copy()
+        elif tv not in scalars or (tv is int and not -_BIG < v < _BIG):
+            return None
+        out[k] = v
+    return out
 
 
 @cache
@@ -228,7 +233,6 @@ class Recorder:
         self.metadata_count = 0  # metadata records added (a live reader's cache key)
         #: see keep_messages(): (channel id, log time, publish time, bytes, payload or None)
         self.mirror: list[tuple[int, int, int, bytes, Any]] | None = None
-        self._mirror_obj: Any = None  # the payload of the message being written, if kept
         self._channels: dict[str, int] = {}
         self._chan_meta: dict[str, dict[str, str]] = {}
         self._can_ch: dict[str, tuple] = {}
@@ -414,7 +418,7 @@ class Recorder:
             s = payload["state"]
             payload["state"] = s.name if isinstance(s, enum.Enum) else str(s)
         self._put(topics.drive_state(drive), "hil.DriveState", "model", dumps(payload), t, source_t,
-                  payload if self.mirror is not None and json_plain(payload) else None)
+                  json_plain(payload) if self.mirror is not None else None)
 
     def drive_event(
         self, drive: str, event: Any, *, t: int | None = None, source_t: int | None = None
@@ -502,16 +506,17 @@ class Recorder:
         payload is the ground truth's own dict where decoding the bytes gives exactly it
         (`json_plain`), so the checker need not decode it; None for any other message."""
         if self.mirror is None:
-            self.mirror = []
-            mirror, write = self.mirror, self._w.add_message
+            mirror: list[tuple[int, int, int, bytes, Any]] = []
+            write = self._w.add_message
 
             def add_message(cid: int, log_time: int, publish_time: int, data: bytes,
-                            *args: Any, **kw: Any) -> Any:
+                            *args: Any, obj: Any = None, **kw: Any) -> Any:
                 out = write(cid, log_time, publish_time, data, *args, **kw)
-                mirror.append((cid, log_time, publish_time, data, self._mirror_obj))
+                mirror.append((cid, log_time, publish_time, data, obj))
                 return out
 
             self._w.add_message = add_message  # type: ignore[method-assign]
+            self.mirror = mirror  # only now: a payload is queued with its dict from here on
         return self.mirror
 
     def flush(self, timeout: float = 10.0) -> bool:
@@ -694,12 +699,8 @@ class Recorder:
             cid = self._channel(topic, schema, source or ("harness" if st is None else "adapter"))
         if obj is None:
             self._w.add_message(cid, t, t if st is None else st, data)
-            return
-        self._mirror_obj = obj
-        try:
-            self._w.add_message(cid, t, t if st is None else st, data)
-        finally:
-            self._mirror_obj = None
+        else:  # only with the mirror kept (`drive_state`): its add_message takes the payload
+            self._w.add_message(cid, t, t if st is None else st, data, obj=obj)
 
     def _can_channels(self, bus: str, st: int | None) -> tuple:
         if not self._decoders_loaded:

@@ -295,8 +295,8 @@ class Context:
                     lambda t: table.any_at(t, "kind", _is_poll), table.times)
         store = getattr(self.source, "_samples_cache", None)
         key = ("_sampling", topic)
+        msgs = self.source.messages(topic)  # first: a re-sort here drops the cached entry
         cached = store.get(key) if store is not None else self._topic_sampling.get(topic)
-        msgs = self.source.messages(topic)
         if cached is None or cached[0] != len(msgs):
             # a live source only grows (a re-sorted topic drops this): index what is new
             done, periodic, polled, times = cached or (0, set(), set(), [])

@@ -719,14 +719,15 @@ class LiveSource(_LazySource):
         if n == self._seen:
             return self
         names = rec.topic_of
-        batch: dict[int, list[tuple[int, bytes | dict]]] = {}
-        for cid, log_t, pub_t, data, obj in mirror[self._seen:n]:
-            lst = batch.get(cid)
+        batch: dict[str, list[tuple[int, bytes | dict]]] = {}  # by topic (a topic may
+        for cid, log_t, pub_t, data, obj in mirror[self._seen:n]:  # have two channels)
+            topic = names.get(cid) or f"?{cid}"
+            lst = batch.get(topic)
             if lst is None:
-                lst = batch[cid] = []
+                lst = batch[topic] = []
             lst.append((int(pub_t or log_t), data if obj is None else obj))
-        for cid, lst in batch.items():
-            self._keep_many(names.get(cid, f"?{cid}"), lst)
+        for topic, lst in batch.items():
+            self._keep_many(topic, lst)
         self._seen = n
         return self
 

@@ -113,16 +113,14 @@ class DioPort:
         is_input(line)
         with self._cond:
             entry = self._levels.get(line)
-        if entry is None and not self.owns(line) and self._ask_levels():
-            with self._cond:
-                entry = self._levels.get(line)
+        if entry is None and not self.owns(line):
+            self._ask_levels()
         return entry[0] if entry else False
 
-    def _ask_levels(self) -> bool:
-        """Ask the other side again for its lines' levels (a backend that can); True if it
-        asked. For a line never heard of: its level may have been set before this side was
-        there to hear it, and a line that does not change is not published again."""
-        return False
+    def _ask_levels(self) -> None:
+        """Ask the other side again, in the background, for the levels of lines never heard
+        of (a backend that can): a level set before this side was there to hear it is not
+        published again while the line does not change. Never blocks the caller."""
 
     def levels(self) -> dict[str, bool]:
         """Every line seen or set so far, with its level."""
@@ -168,12 +166,13 @@ class DioPort:
                     self._cond.wait(left)
 
     def _changed(self, line: str, level: bool, t: int | None = None,
-                 source_t: int | None = None) -> None:
-        """Backends report the other side's line levels here."""
+                 source_t: int | None = None, *, if_unknown: bool = False) -> None:
+        """Backends report the other side's line levels here (`if_unknown`: only for a line
+        never heard of; a query's answer must not undo a change seen since it was asked)."""
         t = clock.time_ns() if t is None else t
         with self._cond:
             old = self._levels.get(line)
-            if old is not None and old[0] == level:
+            if old is not None and (if_unknown or old[0] == level):
                 return
             self._levels[line] = (level, t)
             listeners = list(self._listeners)
@@ -287,7 +286,7 @@ class ZenohDio(DioPort):
                 f"{self.key}/*", self._on_sample, allowed_origin=zenoh.Locality.REMOTE)
             self._queryable = self.session.declare_queryable(f"{self.key}/**", self._on_query)
             if ep.connect:  # learn the other side's current levels (and sync routing)
-                self._learn_levels(query_timeout)
+                self._learn_levels(query_timeout, if_unknown=True)
         except (ConnectionError, zenoh.ZError) as e:
             self._close_backend()
             raise TransportUrlError(url, str(e)) from None
@@ -322,23 +321,25 @@ class ZenohDio(DioPort):
             if zenoh.KeyExpr(key).intersects(query.key_expr):
                 query.reply(key, b"1" if level else b"0", attachment=_T.pack(t))
 
-    def _learn_levels(self, timeout_s: float) -> None:
+    def _learn_levels(self, timeout_s: float, if_unknown: bool = False) -> None:
         for line, level in self.query_levels(timeout_s).items():
             if not self.owns(line):
-                self._changed(line, level)
+                self._changed(line, level, if_unknown=if_unknown)
 
-    def _ask_levels(self) -> bool:
-        """Query the key again, at most every `_ASK_EVERY_S` (a query costs a round trip):
-        a level the other side set before this side's subscriber was routed is learned."""
+    def _ask_levels(self) -> None:
+        """Query the key again on a thread of its own, at most every `_ASK_EVERY_S` (a query
+        costs a round trip): a level the other side set before this side's subscriber was
+        routed is learned; a line heard of meanwhile keeps what was heard."""
         now = time.monotonic()
         if self._closed or now - self._asked_at < _ASK_EVERY_S:
-            return False
+            return
         self._asked_at = now
-        try:
-            self._learn_levels(min(self._query_timeout, _ASK_TIMEOUT_S))
-        except zenoh.ZError:
-            return False
-        return True
+
+        def ask() -> None:
+            with contextlib.suppress(Exception):  # closed meanwhile: nothing to learn
+                self._learn_levels(min(self._query_timeout, _ASK_TIMEOUT_S), if_unknown=True)
+
+        threading.Thread(target=ask, daemon=True, name=f"dio-ask-{self.key}").start()
 
     def query_levels(self, timeout_s: float = 1.0) -> dict[str, bool]:
         """Ask every side on the key for its lines' current levels."""

@@ -24,6 +24,7 @@ A real pulse generator / high-speed counter implements `PulsePort` (see `PulseAd
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import re
@@ -150,10 +151,12 @@ class PulsePort:
             self.tap.dio(self.name, line, level, t, source_t)
         self._publish_level(line, level, t if source_t is None else source_t)
 
-    def _store_level(self, line: str, level: bool) -> bool:
-        """Keep `level` of `line`; False when it was that already (nothing to publish)."""
+    def _store_level(self, line: str, level: bool, if_unknown: bool = False) -> bool:
+        """Keep `level` of `line`; False when it was that already (nothing to publish), or,
+        with `if_unknown`, when the line was heard of at all."""
         with self._lock:
-            if self._levels.get(line) == level:
+            old = self._levels.get(line)
+            if old == level or (if_unknown and old is not None):
                 return False
             self._levels[line] = level
             return True
@@ -162,15 +165,14 @@ class PulsePort:
         """Last known level of `line` (False if never seen)."""
         with self._lock:
             level = self._levels.get(line)
-        if level is None and not _owns(self.role, line) and self._ask_levels():
-            with self._lock:
-                level = self._levels.get(line)
+        if level is None and not _owns(self.role, line):
+            self._ask_levels()
         return bool(level)
 
-    def _ask_levels(self) -> bool:
-        """Ask the other side again for its levels (a backend that can); True if it asked: a
-        level set before this side's subscriber was routed is not published again."""
-        return False
+    def _ask_levels(self) -> None:
+        """Ask the other side again, in the background, for levels never heard of (a backend
+        that can): a level set before this side's subscriber was routed is not published
+        again while it does not change. Never blocks the caller."""
 
     def levels(self) -> dict[str, bool]:
         with self._lock:
@@ -197,10 +199,11 @@ class PulsePort:
             self.tap.pulse(self.name, kind, body, t, source_t)
         self._deliver(kind, body, t, source_t)
 
-    def _received_level(self, line: str, level: bool, source_t: int | None) -> None:
+    def _received_level(self, line: str, level: bool, source_t: int | None,
+                        if_unknown: bool = False) -> None:
         if self.closed or _owns(self.role, line) or not (_X.match(line) or _Y.match(line)):
             return
-        if not self._store_level(line, level):
+        if not self._store_level(line, level, if_unknown):
             return
         t = clock.time_ns()
         if self.tap is not None:
@@ -322,27 +325,29 @@ class ZenohPulse(PulsePort):
                 f"{self.key}/*", self._on_sample, allowed_origin=zenoh.Locality.REMOTE)
             self._queryable = self.session.declare_queryable(f"{self.key}/**", self._on_query)
             if ep.connect:
-                self._learn_levels(query_timeout)
+                self._learn_levels(query_timeout, if_unknown=True)
         except (ConnectionError, zenoh.ZError) as e:
             self._close_backend()
             raise TransportUrlError(url, str(e)) from None
 
-    def _learn_levels(self, timeout_s: float) -> None:
+    def _learn_levels(self, timeout_s: float, if_unknown: bool = False) -> None:
         for reply in self.session.get(f"{self.key}/**", timeout=timeout_s):
             if reply.ok is not None:
-                self._level_sample(reply.ok)
+                self._level_sample(reply.ok, if_unknown)
 
-    def _ask_levels(self) -> bool:
-        """Query the key again, at most every `_ASK_EVERY_S` (a query costs a round trip)."""
+    def _ask_levels(self) -> None:
+        """Query the key again on a thread of its own, at most every `_ASK_EVERY_S`; a level
+        heard of meanwhile keeps what was heard."""
         now = time.monotonic()
         if self.closed or now - self._asked_at < _ASK_EVERY_S:
-            return False
+            return
         self._asked_at = now
-        try:
-            self._learn_levels(min(self._query_timeout, _ASK_TIMEOUT_S))
-        except zenoh.ZError:
-            return False
-        return True
+
+        def ask() -> None:
+            with contextlib.suppress(Exception):  # closed meanwhile: nothing to learn
+                self._learn_levels(min(self._query_timeout, _ASK_TIMEOUT_S), if_unknown=True)
+
+        threading.Thread(target=ask, daemon=True, name=f"pulse-ask-{self.key}").start()
 
     @staticmethod
     def _source_t(sample: zenoh.Sample) -> int | None:
@@ -351,11 +356,11 @@ class ZenohPulse(PulsePort):
         raw = sample.attachment.to_bytes()
         return _T.unpack_from(raw)[0] if len(raw) >= _T.size else None
 
-    def _level_sample(self, sample: zenoh.Sample) -> None:
+    def _level_sample(self, sample: zenoh.Sample, if_unknown: bool = False) -> None:
         line = str(sample.key_expr).rsplit("/", 1)[-1]
         payload = sample.payload.to_bytes()
         if payload in (b"0", b"1"):
-            self._received_level(line, payload == b"1", self._source_t(sample))
+            self._received_level(line, payload == b"1", self._source_t(sample), if_unknown)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         last = str(sample.key_expr).rsplit("/", 1)[-1]

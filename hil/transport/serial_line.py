@@ -244,12 +244,16 @@ class SerialLine:
 
     # -- for backends ----------------------------------------------------------------
     def _received(self, data: bytes, t_ns: int, *, rel_ends_ns: list[int] | None = None,
-                  source_t: int | None = None, gap_ns: int = 0) -> None:
+                  source_t: int | None = None, gap_ns: int = 0,
+                  continues: bool = False) -> None:
         """Stamp bytes that arrived at `t_ns` (monotonic) and queue them for reading.
 
         Emulated: the chunk starts at max(t_ns, end of the previous character) and its
         characters end at `rel_ends_ns` (from the sender) or back to back, never closer
         than one character time; `gap_ns` is idle line time the sender left before it.
+        `continues`: the sender's own times say the chunk follows the previous one `gap_ns`
+        later, so it starts there however late it arrived (a chunk held up on a loaded host
+        does not open a silence the wire never had, which would split a Modbus frame).
         Real line: the last byte ended at `t_ns`.
         """
         if not data:
@@ -258,7 +262,7 @@ class SerialLine:
         n = len(data)
         with self._cond:
             if self.emulate_rx:
-                start = max(t_ns, self._rx_free + gap_ns)
+                start = self._rx_free + gap_ns if continues else max(t_ns, self._rx_free + gap_ns)
                 prev = start
                 for i, b in enumerate(data):
                     rel = rel_ends_ns[i] if rel_ends_ns else (i + 1) * c
@@ -524,7 +528,7 @@ class ZenohLine(SerialLine):
         gap = None if self._prev_end_wall is None else t0 - self._prev_end_wall
         self._prev_end_wall = t0 + (rel[-1] if rel else 0)
         if gap is not None and 0 <= gap <= MAX_GAP_NS:  # follows the previous chunk: keep gap
-            self._received(data, t, rel_ends_ns=rel, source_t=t0, gap_ns=gap)
+            self._received(data, t, rel_ends_ns=rel, source_t=t0, gap_ns=gap, continues=True)
         else:  # after idle: keep how far ahead the sender scheduled it
             lead = min(max(0, t0 - pub), MAX_GAP_NS)
             self._received(data, t + lead, rel_ends_ns=rel, source_t=t0)

@@ -278,6 +278,7 @@ def test_unplug_replug_recovers_without_restart(make_rig):
             bus.shutdown()
 
 
+@pytest.mark.integration  # a real pty and zenoh in real time: t3.5 is 1.75 ms at 115200
 def test_rs485_modbus_through_the_gateway(make_rig, tmp_path):
     from hil.protocol.modbus import crc16, read_request, rtu_decode, rtu_encode
     from hil.transport.serial_line import open_serial

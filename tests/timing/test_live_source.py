@@ -119,7 +119,7 @@ def test_a_live_source_grown_in_steps_derives_what_a_fresh_one_derives(tmp_path)
     import random
 
     from hil.timing.checker import Context
-    from hil.timing.source import MemorySource, samples
+    from hil.timing.source import samples
 
     rnd = random.Random(7)
     path = tmp_path / "grow.mcap"
@@ -130,37 +130,50 @@ def test_a_live_source_grown_in_steps_derives_what_a_fresh_one_derives(tmp_path)
     sent: dict[str, list[tuple[int, dict]]] = {}
     t = 0
     for _round in range(12):
-        for _ in range(rnd.randint(0, 40)):
+        for i in range(rnd.randint(0, 40)):
             t += MS
             speed = rnd.choice([0.0, 0.0, 0.0, 10.5, 20.0])
             msg = {"state": rnd.choice(["A", "A", "B"]), "speed_rpm": speed,
                    "periodic": rnd.random() < 0.8}
-            rec.drive_state("drive1", msg, t=t, source_t=t)
-            sent.setdefault("/drive/drive1/state", []).append((t, msg))
+            # now and then stamped by its source a little in the past, before messages an
+            # earlier refresh brought (the topic re-sorts)
+            late = rnd.random() < (0.5 if i == 0 else 0.05)
+            ts = t - rnd.randint(2, 4) * MS if late else t
+            rec.drive_state("drive1", msg, t=t, source_t=ts)
+            sent.setdefault("/drive/drive1/state", []).append((ts, msg))
             if rnd.random() < 0.2:  # an edge stamped a little in the past now and then
                 ts = t - rnd.randint(0, 3) * MS
                 rec.dio("drive1", "DO2", rnd.random() < 0.5, t, source_t=ts)
         rec.flush()
         live.refresh(rec)
-        whole = MemorySource({topic: live.messages(topic) for topic in live.topics()})
-        for topic, field, where in (("/drive/drive1/state", "speed_rpm", None),
-                                    ("/drive/drive1/state", "speed_rpm", {"state": "A"}),
-                                    ("/drive/drive1/state", "state", None),
-                                    ("/dio/drive1/DO2", "level", None)):
-            for runs in (False, True):
-                got = samples(live, topic, field, where, runs)
-                assert list(got) == list(samples(whole, topic, field, where, runs)), \
-                    (topic, field, where, runs)
-        for topic in live.topics():
-            fresh_ctx.source, fresh_ctx._topic_sampling = whole, {}
-            want = Context._sampling_index(fresh_ctx, topic)
-            fresh_ctx.source = live
-            have = Context._sampling_index(fresh_ctx, topic)
-            assert (want is None) == (have is None), topic
-            if want is not None:
-                times = [m[0] for m in whole.messages(topic)]
-                assert list(have[2]) == list(want[2]) == times
-                assert [have[0](x) for x in times] == [want[0](x) for x in times]
+        whole = RecordingSource(path)  # the file as it stands, read from scratch
+
+        def same_samples(whole=whole):
+            for topic, field, where in (("/drive/drive1/state", "speed_rpm", None),
+                                        ("/drive/drive1/state", "speed_rpm", {"state": "A"}),
+                                        ("/drive/drive1/state", "state", None),
+                                        ("/dio/drive1/DO2", "level", None)):
+                for runs in (False, True):
+                    got = samples(live, topic, field, where, runs)
+                    assert list(got) == list(samples(whole, topic, field, where, runs)), \
+                        (topic, field, where, runs)
+
+        def same_sampling_index(whole=whole):
+            for topic in whole.topics():
+                fresh_ctx.source, fresh_ctx._topic_sampling = whole, {}
+                want = Context._sampling_index(fresh_ctx, topic)
+                fresh_ctx.source = live
+                have = Context._sampling_index(fresh_ctx, topic)
+                assert (want is None) == (have is None), topic
+                if want is not None:
+                    times = [m[0] for m in whole.messages(topic)]
+                    assert list(have[2]) == list(want[2]) == times
+                    assert [have[0](x) for x in times] == [want[0](x) for x in times]
+
+        # either may be the first to read what the refresh brought (and re-sort a topic)
+        for check in ((same_samples, same_sampling_index) if _round % 2
+                      else (same_sampling_index, same_samples)):
+            check()
     assert len(sent["/drive/drive1/state"]) > 100
     rec.close()
 
@@ -198,14 +211,21 @@ def test_the_mirror_holds_the_ground_truth_as_decoding_gives_it(tmp_path):
     rec.drive_state("drive1", {"mode": Mode.PP})  # JSON makes it 1, an int
     rec.drive_state("drive1", {"do": (True, False)})  # JSON makes it a list
     rec.drive_state("drive1", {"pt": {1: 2.0}})  # JSON makes the key "1"
+    rec.drive_state("drive1", {"n": 10**5000})  # too long to encode: an `error` object
+    alarms = ["AL013"]
+    rec.drive_state("drive1", {"alarms": alarms})
+    alarms.append("AL014")  # the caller's list changes after: the mirror keeps what was sent
     rec.flush()
     kept = [(data, obj) for _cid, _lt, _pt, data, obj in mirror]
-    assert len(kept) == 23
+    assert len(kept) == 25
+    assert kept[23][1] is None and "error" in json.loads(kept[23][0])
+    assert kept[24][1] == json.loads(kept[24][0]) == {"alarms": ["AL013"]}
+    kept = kept[:23]
     for data, obj in kept[:20]:  # the model's snapshots: all kept, all exact
         assert obj is not None
         assert json.loads(data) == obj and deep_types(json.loads(data)) == deep_types(obj)
     assert [obj for _data, obj in kept[20:]] == [None, None, None]
     live = LiveSource().refresh(rec)
     got = live.messages("/drive/drive1/state")
-    assert [m for _t, m in got[20:]] == [{"mode": 1}, {"do": [True, False]}, {"pt": {"1": 2.0}}]
+    assert [m for _t, m in got[20:23]] == [{"mode": 1}, {"do": [True, False]}, {"pt": {"1": 2.0}}]
     rec.close()

@@ -145,18 +145,30 @@ def test_zenoh_level_missed_at_connect_is_asked_for_again(port, monkeypatch):
     harness = open_dio(f"zenoh:tzq/drive1?connect={ep}", role="harness")
     try:
         assert len(queries) == 1 and harness.levels() == {}  # the connect-time answer lost
-        assert harness.get("DO3") is True  # asked again
-        assert len(queries) == 2
-        assert harness.wait_for("DO5", True, 1.0)  # learnt by that same answer
+        assert harness.get("DO3") is False  # not known: asked in the background, no wait
+        _until(lambda: harness.get("DO3"), 2.0)
+        assert harness.get("DO3") is True and len(queries) == 2  # learnt by asking again
+        assert harness.wait_for("DO5", True, 1.0)  # by that same answer
         assert harness.get("DO3") is True and len(queries) == 2  # known: nothing asked
-        assert harness.get("DO6") is False  # the drive never set it: still unknown
-        n = len(queries)
-        for _ in range(20):  # read in a loop: asked at most every 100 ms, not every read
-            assert harness.get("DO6") is False
-        assert len(queries) - n <= 1
         time.sleep(dio_mod._ASK_EVERY_S + 0.05)
-        harness.get("DO6")
-        assert len(queries) - n <= 2
+        n, t0 = len(queries), time.monotonic()
+        for _ in range(20):  # the drive never set DO6: asked at most every 100 ms
+            assert harness.get("DO6") is False
+        took = time.monotonic() - t0
+        _until(lambda: len(queries) > n, 1.0)
+        time.sleep(0.05)
+        assert n + 1 <= len(queries) <= n + 1 + int(took / dio_mod._ASK_EVERY_S)
+        # an answer must not undo what was heard since: the drive's queryable is made to
+        # answer a stale DO4 = 0 after DO4 = 1 was published and heard
+        drive.set("DO4", True)
+        assert harness.wait_for("DO4", True, 2.0)
+        monkeypatch.setattr(drive, "_on_query", lambda q: q.reply("tzq/drive1/DO4", b"0"))
+        drive._queryable.undeclare()
+        drive._queryable = drive.session.declare_queryable("tzq/drive1/**", drive._on_query)
+        _until(lambda: "DO4" in harness.query_levels(0.2), 3.0)  # (the new queryable routed)
+        assert harness.query_levels(1.0)["DO4"] is False  # the stale answer is there ...
+        harness._learn_levels(1.0, if_unknown=True)
+        assert harness.get("DO4") is True  # ... and does not count
     finally:
         harness.close()
         drive.close()

@@ -212,6 +212,33 @@ def test_chunk_packing():
         unpack_chunk(payload[:-1])
 
 
+def test_zenoh_chunk_held_up_in_transit_continues_its_frame(port):
+    """A Modbus answer sent as two chunks back to back (the sender's own times say so) stays
+    one frame when the second chunk reaches this host 5 ms late, well past t3.5: the
+    line's timeline is the sender's, not the arrival's."""
+    from types import SimpleNamespace
+
+    line = open_serial(f"zenoh:tzc/rs485?listen=tcp/127.0.0.1:{port}&baud=115200")
+    try:
+        c = line.char_time_ns
+        answer = bytes.fromhex("0103040064000000") + b"\xbb"  # 9 bytes as 8 + 1
+        wall = time.time_ns()
+
+        def sample(data: bytes, t0: int):
+            payload = pack_chunk(data, t0, [(i + 1) * c for i in range(len(data))], t0)
+            return SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda: payload))
+
+        line._on_sample(sample(answer[:8], wall))
+        time.sleep(0.005)  # held up in transit (t3.5 at 115200 baud is 1.75 ms)
+        line._on_sample(sample(answer[8:], wall + 8 * c))  # right after the 8th character
+        frame = line.read_frame(timeout=2)
+        assert frame.data == answer
+        assert frame.t_end_ns - frame.t_start_ns == len(answer) * c  # back to back, as sent
+        assert line.read_frame(timeout=0.05) is None
+    finally:
+        line.close()
+
+
 def test_zenoh_serial_between_two_sessions_keeps_timing(port, tap):
     ep = f"tcp/127.0.0.1:{port}"
     slave = open_serial(f"zenoh:tz/rs485?listen={ep}&role=slave&baud=1200&stopbits=1")
