@@ -418,11 +418,16 @@ class FileBytes:
 ChunkSink = Callable[[bytes, dict, dict], None]
 
 
-def scan(data: bytes | FileBytes, sink: ChunkSink | None = None) -> Scan:
+_IN_CHUNKS = frozenset((Opcode.CHUNK, Opcode.MESSAGE_INDEX))  # what `chunks=False` steps over
+
+
+def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
+         chunks: bool = True) -> Scan:
     """Read every complete record of `data`; stop at the first broken one and say where.
     With `sink`, each chunk goes to it (after its CRC check) and is not kept; the sink's
     walk is the chunk's structural check, so it must keep nothing of a chunk it could not
-    walk to the end."""
+    walk to the end. `chunks=False`: chunks are stepped over unread (what the file says of
+    itself outside them: metadata, attachments, its end)."""
     out = Scan({}, {}, [], [], [], [], False, False, None, None, len(data))
     if data[:8] != MAGIC:
         raise ValueError("not an MCAP file (bad magic at offset 0)")
@@ -439,6 +444,9 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None) -> Scan:
             out.error = f"record (opcode 0x{op:02x}) at offset {off} truncated: needs {ln} bytes"
             out.error_offset = off
             break
+        if not chunks and op in _IN_CHUNKS:
+            off = end
+            continue
         rec = data[off + 9 : end]
         c_min: int | None = None
         try:

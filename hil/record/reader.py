@@ -108,15 +108,7 @@ class Recording:
         Recording returned has the channels, metadata and the file's state, no messages.
         A chunk that cannot be read whole gives none of its messages (as `open`).
         `progress(bytes read, file size)` is told as the reading goes."""
-        p = Path(path)
         want = None if topics is None else set(topics)
-        try:
-            require_regular(p, "recording")  # not a device: /dev/zero never ends
-            fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
-        except FileProblem as exc:
-            raise RecordingError(str(exc)) from exc
-        except OSError as exc:
-            raise RecordingError(f"{p}: cannot read: {exc.strerror or exc}") from exc
         topic_of: dict[int, str | None] = {}  # channel id -> its topic if wanted, else None
         seen: dict[int, str] = {}  # channel id -> topic, of each channel with a message
         kept: dict[int, bool] = {}  # channel id -> wanted (known channels only)
@@ -138,14 +130,8 @@ class Recording:
             for cid, lt, pt, data in got:
                 on_message(topic_of.get(cid) or f"?{cid}", lt, pt, data)
 
-        with os.fdopen(fd, "rb") as f:
-            try:
-                size = os.fstat(fd).st_size
-                on_read = (lambda off: progress(off, size)) if progress is not None else None
-                sc = scan(FileBytes(f, size, on_read), sink)
-            except ValueError as exc:
-                raise RecordingError(f"{p}: {exc}") from exc
-        rec = cls(p, sc)
+        rec = cls._scan_file(path, sink, progress)
+        sc = rec._scan
         for cid, lt, pt, data in sc.loose:  # messages outside chunks (the writer makes none)
             name = rec.channel_info[cid].topic if cid in rec.channel_info else f"?{cid}"
             seen[cid] = name
@@ -155,6 +141,34 @@ class Recording:
         #: the topics with at least one message, wanted or not
         rec.message_topics = sorted(set(seen.values()))
         return rec
+
+    @classmethod
+    def head(cls, path: str | os.PathLike) -> Recording:
+        """What `path` says of itself outside its chunks: metadata, attachments and whether
+        it ends whole. Its chunks are stepped over unread (no channel, no message): cheap on a
+        recording of any length."""
+        return cls._scan_file(path, None, None, chunks=False)
+
+    @classmethod
+    def _scan_file(cls, path: str | os.PathLike, sink: Any,
+                   progress: Callable[[int, int], None] | None, *,
+                   chunks: bool = True) -> Recording:
+        p = Path(path)
+        try:
+            require_regular(p, "recording")  # not a device: /dev/zero never ends
+            fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
+        except FileProblem as exc:
+            raise RecordingError(str(exc)) from exc
+        except OSError as exc:
+            raise RecordingError(f"{p}: cannot read: {exc.strerror or exc}") from exc
+        with os.fdopen(fd, "rb") as f:
+            try:
+                size = os.fstat(fd).st_size
+                on_read = (lambda off: progress(off, size)) if progress is not None else None
+                sc = scan(FileBytes(f, size, on_read), sink, chunks=chunks)
+            except ValueError as exc:
+                raise RecordingError(f"{p}: {exc}") from exc
+        return cls(p, sc)
 
     # -- state of the file ----------------------------------------------------------------------
     @property

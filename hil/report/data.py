@@ -140,31 +140,27 @@ def load_run(path: str | Path, *, truth: bool = True) -> RunData:
 
 
 def _load_run(path: str | Path, *, truth: bool = True) -> RunData:
-    rec = Recording.open(path)
-    meta = rec.metadata()
-    run_meta = meta.get("hil.run", {})
-    result = meta.get("hil.result", {})
-    data = RunData(str(path), run_meta.get("plan", Path(path).stem),
-                   run_meta.get("bench", "?"), result.get("status", ""), metadata=meta,
-                   truncated=rec.truncated)
-    for a in rec.attachments():
-        try:
-            data.attachments[a.name] = a.data.decode("utf-8")
-        except UnicodeDecodeError:
-            data.attachments[a.name] = f"<{len(a.data)} bytes>"
+    """Read `path` twice, neither time holding the file or its chunks: first its metadata
+    outside the chunks (which fields of the ground truth to keep), then each message as it
+    comes (a recording of any length costs what the report keeps of it). What the report
+    says of the file (metadata, attachments, cut or whole) is what that second, full read
+    found, as `Recording.open` would."""
+    keep = truth_fields(_spec_ids(Recording.head(path).metadata()))
+    data = RunData(str(path), Path(path).stem, "?", "", truth_fields=keep)
     steps: dict[int, StepData] = {}
     t_first: int | None = None
     t_plan: int | None = None
-    keep = data.truth_fields = truth_fields(_spec_ids(meta))
-    for topic, lt, pt, raw in rec.raw_messages():
+
+    def take(topic: str, lt: int, pt: int, raw: bytes) -> None:
+        nonlocal t_first, t_plan
         t_first = lt if t_first is None else min(t_first, lt)
         if topic.startswith("/can/"):
-            continue  # raw frames: /canopen/<bus> has them decoded
+            return  # raw frames: /canopen/<bus> has them decoded
         if _is_bus(topic):  # read again when shown: only failing checks and steps show them
             data.bus_pending = True
-            continue
+            return
         if not truth and topic.startswith("/drive/") and topic.endswith("/state"):
-            continue  # a summary: no ground truth, not even decoded
+            return  # a summary: no ground truth, not even decoded
         msg = _decode(raw)
         if topic == topics.PLAN_STEPS:
             t_plan = lt if t_plan is None else min(t_plan, lt)
@@ -195,6 +191,19 @@ def _load_run(path: str | Path, *, truth: bool = True) -> RunData:
         elif topic.startswith("/drive/") and topic.endswith("/params"):
             d = topic.split("/")[2]
             data.params.setdefault(d, {}).update(msg.get("values") or {})
+
+    rec = Recording.stream(path, None, take)
+    data.truncated = rec.truncated
+    data.metadata = meta = rec.metadata()
+    run_meta = meta.get("hil.run", {})
+    data.plan = run_meta.get("plan", data.plan)
+    data.bench = run_meta.get("bench", data.bench)
+    data.status = meta.get("hil.result", {}).get("status", "")
+    for a in rec.attachments():
+        try:
+            data.attachments[a.name] = a.data.decode("utf-8")
+        except UnicodeDecodeError:
+            data.attachments[a.name] = f"<{len(a.data)} bytes>"
     data.t0 = t_plan or t_first or 0
     data.steps = [steps[k] for k in sorted(steps)]
     if not data.status:
@@ -290,10 +299,13 @@ def bus_of(run: RunData) -> list[tuple[int, str, bytes | dict]]:
     recording the first time a report shows them (a passing run never needs them)."""
     if run.bus_pending:
         run.bus_pending = False
-        rec = Recording.open(run.path)
-        entries = [(lt, topic, bytes(raw), pt or lt)
-                   for topic, lt, pt, raw in rec.raw_messages()
-                   if _is_bus(topic) and not topic.startswith("/can/")]
+        entries: list[tuple[int, str, bytes, int]] = []
+
+        def take(topic: str, lt: int, pt: int, raw: bytes) -> None:
+            if _is_bus(topic) and not topic.startswith("/can/"):
+                entries.append((lt, topic, bytes(raw), pt or lt))
+
+        Recording.stream(run.path, None, take)  # a message at a time, not the whole file
         entries.sort(key=lambda e: e[0])
         run.bus = [(lt, topic, raw) for lt, topic, raw, _pt in entries]
         run.bus_source_t = [pt for *_x, pt in entries]

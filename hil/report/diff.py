@@ -30,7 +30,7 @@ import yaml
 
 from hil.fileio import write_text_atomic
 from hil.record import topics
-from hil.record.reader import Recording
+from hil.record.reader import Recording, decode
 from hil.report.html import CSS
 from hil.units import MS
 
@@ -65,7 +65,9 @@ def _bench_drive(text: str) -> dict:
 
 
 def load_side(path: str | Path) -> Side:
-    rec = Recording.open(path)
+    """One side of a diff, read twice without holding the file or its chunks: its metadata
+    and attachments (the wiring) outside the chunks, then each message as it comes."""
+    rec = Recording.head(path)
     meta = rec.metadata()
     run = meta.get("hil.run", {})
     side = Side(str(path), run.get("plan", Path(path).stem), run.get("bench", "?"))
@@ -87,7 +89,13 @@ def load_side(path: str | Path) -> Side:
         line_func[line] = (func, contact == "b")
     last: dict[str, Any] = {}
     states: dict[str, list[str]] = {}
-    for topic, lt, pt, msg in rec.messages():
+
+    def take(topic: str, lt: int, pt: int, raw: bytes) -> None:
+        if topic.startswith("/can/"):
+            return  # raw frames: nothing here reads them
+        msg = decode(raw)
+        if not isinstance(msg, dict):
+            return
         t = pt or lt
         if topic == topics.PLAN_STEPS:
             idx = msg.get("index")
@@ -121,6 +129,8 @@ def load_side(path: str | Path) -> Side:
             seq = states.setdefault(f"{topic} statusword", [])
             if not seq or seq[-1] != str(msg["statusword"]):
                 seq.append(str(msg["statusword"]))
+
+    Recording.stream(path, None, take)
     side.states = states
     side.t0 = min(side.starts.values()) if side.starts else 0
     for name in list(side.edges):  # only what happened during the plan
