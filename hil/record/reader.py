@@ -144,9 +144,9 @@ class Recording:
 
     @classmethod
     def head(cls, path: str | os.PathLike) -> Recording:
-        """What `path` says of itself outside its chunks: metadata, attachments and whether
-        it ends whole. Its chunks are stepped over unread (no channel, no message): cheap on a
-        recording of any length."""
+        """What `path` says of itself outside its chunks: metadata, attachments, whether it
+        ends whole, and the channels its summary lists (none for a cut file). Its chunks are
+        stepped over unread (no message): cheap on a recording of any length."""
         return cls._scan_file(path, None, None, chunks=False)
 
     @classmethod

@@ -115,3 +115,35 @@ def test_hostile_bytes_never_crash_the_stream_and_read_as_open_reads(tmp_path) -
         except RecordingError as e:
             got = ("error", str(e))
         assert got == want, k
+        try:  # the head steps over the chunks: it never crashes, and knows no message
+            head = Recording.head(bad)
+            assert list(head.raw_messages()) == []
+        except RecordingError:
+            pass
+
+
+def test_head_reads_what_a_recording_says_of_itself_without_its_chunks(tmp_path) -> None:
+    """`Recording.head`: the metadata and attachments of a whole read and whether the file
+    ends whole, with the chunks stepped over unread (no message; the channels only as the
+    file's summary lists them)."""
+    from hil.record import mcapio
+
+    path = _file(tmp_path, 500)
+    whole = Recording.open(path)
+    opened: list[int] = []
+    real = mcapio.decompress
+    mcapio.decompress = lambda *a: (opened.append(1), real(*a))[1]
+    try:
+        head = Recording.head(path)
+    finally:
+        mcapio.decompress = real
+    assert opened == []  # no chunk opened
+    assert head.metadata() == whole.metadata() and head.metadata()
+    assert [a.name for a in head.attachments()] == [a.name for a in whole.attachments()]
+    assert not head.truncated and list(head.raw_messages()) == []
+    assert head.topics() == whole.topics()  # from the summary of a whole file
+    data = path.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    assert Recording.head(cut).truncated
+
