@@ -7,6 +7,8 @@ the time includes the writer thread draining the queue, raw JSON, decoded CANope
 (`hil.protocol.canopen.describe_frame` if present), SDO pairing and zstd chunks of 64 KiB.
 Bare: `mcap.writer.Writer.add_message` with the raw JSON pre-encoded (no decoding), 1 MiB
 chunks (its default). Also a Recorder run without decoding (`decode=False`) and the reader.
+Then the issue's baseline: the bare Writer on exactly the messages each recorder run wrote
+(read back from its file, already encoded), its time against the recorder's.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import tempfile
 import time
 
 import can
+from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from hil.record.reader import Recording
@@ -76,6 +79,39 @@ def run_bare(path: str, msgs: list[can.Message]) -> float:
     return time.perf_counter() - t0
 
 
+def recorded(path: str) -> tuple[list, list]:
+    """(channels as (topic, schema name, schema bytes), messages as (channel index, log time,
+    publish time, bytes)) of a recording, in file order: what a bare writer writes again."""
+    with open(path, "rb") as f:
+        chans: dict[int, int] = {}
+        channels: list = []
+        out = []
+        for schema, channel, m in make_reader(f).iter_messages(log_time_order=False):
+            k = chans.get(channel.id)
+            if k is None:
+                k = chans[channel.id] = len(channels)
+                channels.append((channel.topic, schema.name, schema.data))
+            out.append((k, m.log_time, m.publish_time, bytes(m.data)))
+    return channels, out
+
+
+def run_bare_same(path: str, channels: list, messages: list) -> float:
+    """The bare `mcap` Writer writing exactly the messages the recorder wrote, already
+    encoded (the issue's baseline: "a bare mcap writer on the same messages")."""
+    t0 = time.perf_counter()
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        ids = []
+        for topic, name, data in channels:
+            sid = w.register_schema(name, "jsonschema", data)
+            ids.append(w.register_channel(topic, "json", sid))
+        for k, lt, pt, data in messages:
+            w.add_message(ids[k], lt, data, pt)
+        w.finish()
+    return time.perf_counter() - t0
+
+
 def main() -> int:
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 200_000
     msgs = frames(n)
@@ -84,6 +120,11 @@ def main() -> int:
         dt_rec, rec = run_recorder(p_rec, msgs, decode=True)
         dt_raw, rec_raw = run_recorder(p_raw, msgs, decode=False)
         dt_bare = run_bare(p_bare, msgs)
+        same = {}  # the bare writer on the very messages each recorder run wrote
+        for name, p in (("decode", p_rec), ("no decode", p_raw)):
+            channels, written = recorded(p)
+            same[name] = (len(written), run_bare_same(os.path.join(tmp, "s.mcap"), channels,
+                                                      written))
         t0 = time.perf_counter()
         r = Recording.open(p_rec)
         n_read = sum(1 for _ in r.messages())
@@ -111,6 +152,11 @@ def main() -> int:
         f"ratio recorder(no decode)/bare: {fps_raw / fps_bare:.2f}   "
         f"recorder(decode)/bare: {fps_rec / fps_bare:.2f}"
     )
+    print("the issue's baseline, the bare mcap Writer on the same messages (already encoded):")
+    for name, dt in (("decode", dt_rec), ("no decode", dt_raw)):
+        k, dt_same = same[name]
+        print(f"  recorder ({name:9s}): {k / dt:>10,.0f} msg/s   bare on its {k:,} messages: "
+              f"{k / dt_same:>10,.0f} msg/s   ratio {dt_same / dt:.2f}")
     print(f"reader (Recording.messages, json decoded): {n_read / dt_read:,.0f} msgs/s")
     return 0
 
