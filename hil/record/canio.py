@@ -8,14 +8,14 @@ Files are ordinary hil recordings: frames go to `/can/<bus>/raw` (+ decoded CANo
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import can
 from can.io.generic import MessageReader, MessageWriter
 
-from hil.record.reader import Recording
+from hil.record.reader import Recording, decode
 from hil.record.recorder import Recorder
 
 
@@ -43,13 +43,8 @@ def can_buses(rec: Recording) -> list[str]:
     return sorted(t[5:-4] for t in rec.topics() if t.startswith("/can/") and t.endswith("/raw"))
 
 
-def can_messages(
-    rec: Recording, bus: str | None = None, *, time: str = "log"
-) -> Iterator[tuple[str, can.Message]]:
-    """(bus, can.Message) for every recorded frame (of `bus`), timestamps from log_time or
-    publish_time, in file order."""
-    if time not in ("log", "publish"):
-        raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+def bus_topics(rec: Recording, bus: str | None) -> dict[str, str]:
+    """{raw topic: bus} of `bus` (None: every bus) in `rec`; ValueError naming the buses."""
     buses = can_buses(rec)
     if bus is not None:
         if bus not in buses:
@@ -57,10 +52,38 @@ def can_messages(
                 f"bus {bus!r}: not in {rec.path} (buses: {', '.join(buses) or 'none'})"
             )
         buses = [bus]
-    names = {f"/can/{b}/raw": b for b in buses}
+    return {f"/can/{b}/raw": b for b in buses}
+
+
+def can_messages(
+    rec: Recording, bus: str | None = None, *, time: str = "log"
+) -> Iterator[tuple[str, can.Message]]:
+    """(bus, can.Message) for every recorded frame (of `bus`), timestamps from log_time or
+    publish_time, in file order."""
+    if time not in ("log", "publish"):
+        raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+    names = bus_topics(rec, bus)
     for topic, lt, pt, obj in rec.messages(list(names)):
         b = names[topic]
         yield b, frame_from_json(obj, (lt if time == "log" else pt) / 1e9, b)
+
+
+def stream_can(path: str | Path, bus: str | None, on_frame: Callable[[str, can.Message], None],
+               *, time: str = "log", head: Recording | None = None) -> Recording:
+    """`can_messages` a frame at a time without holding the recording: a first read learns
+    the buses (`head`: that reading, done already), the second hands each frame of `bus`
+    (None: every bus) to `on_frame(bus, message)`, in file order."""
+    if time not in ("log", "publish"):
+        raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+    if head is None:
+        head = Recording.stream(path, (), lambda *_m: None)  # channels and state, no message
+    names = bus_topics(head, bus)
+
+    def take(topic: str, lt: int, pt: int, data: bytes) -> None:
+        b = names[topic]
+        on_frame(b, frame_from_json(decode(data), (lt if time == "log" else pt) / 1e9, b))
+
+    return Recording.stream(path, list(names), take)
 
 
 class McapCanWriter(MessageWriter):

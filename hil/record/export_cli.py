@@ -13,14 +13,14 @@ from __future__ import annotations
 import argparse
 import io
 import sys
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
 import can
 
 from hil.fileio import atomic_path, refuse_input
-from hil.record.canio import can_messages
+from hil.record.canio import bus_topics, stream_can
 from hil.record.reader import Recording, RecordingError
 
 FORMATS = ("candump", "asc", "blf", "csv", "trc", "mf4")
@@ -109,24 +109,42 @@ def candump_line(bus: str, msg: can.Message) -> str:
     return f"({msg.timestamp:.6f}) {bus} {body}"
 
 
-def write_candump(items: Iterable[tuple[str, can.Message]], out: TextIO) -> int:
+def write_candump(items: Iterable[tuple[str, can.Message]] | Callable[..., Any],
+                  out: TextIO) -> int:
+    """candump -L lines of `items`, or of what `items(on_frame)` hands over."""
     n = 0
-    for bus, msg in items:
+
+    def on_frame(bus: str, msg: can.Message) -> None:
+        nonlocal n
         out.write(candump_line(bus, msg) + "\n")
         n += 1
+
+    if callable(items):
+        items(on_frame)
+    else:
+        for bus, msg in items:
+            on_frame(bus, msg)
     return n
 
 
-def _write_can(fmt: str, target: Any, items: list[tuple[str, can.Message]]) -> int:
-    """Write `items` with python-can's writer for `fmt` (asc, blf, csv) to `target`."""
+def _write_can(fmt: str, target: Any, feed: Callable[[Callable[[str, can.Message], None]], Any]
+               ) -> int:
+    """Write what `feed(on_frame)` hands over with python-can's writer for `fmt` (asc, blf,
+    csv, trc, mf4) to `target`."""
     writer = {"asc": can.ASCWriter, "blf": can.BLFWriter, "csv": can.CSVWriter,
               "trc": can.TRCWriter, "mf4": can.MF4Writer}[fmt](target)
+    n = 0
+
+    def on_frame(_bus: str, msg: can.Message) -> None:
+        nonlocal n
+        writer.on_message_received(msg)
+        n += 1
+
     try:
-        for _bus, msg in items:
-            writer.on_message_received(msg)
+        feed(on_frame)
     finally:
         writer.stop()
-    return len(items)
+    return n
 
 
 def main(args: argparse.Namespace) -> int:
@@ -139,32 +157,41 @@ def main(args: argparse.Namespace) -> int:
     try:
         if output != STDOUT:
             refuse_input(output, [args.file], "-o")
-        rec = Recording.open(args.file)
-        items = list(can_messages(rec, args.bus, time=args.time))
+        # the recording's buses and state first (a bad --bus or file is said before any
+        # output exists), then its frames a message at a time: never held whole
+        head = Recording.stream(args.file, (), lambda *_m: None)
+        bus_topics(head, args.bus)
     except (RecordingError, ValueError) as exc:
         print(f"hil export: {exc}", file=sys.stderr)
         return 2
-    if rec.truncated:
+    if head.truncated:
         print(
-            f"hil export: {args.file} is truncated ({rec.error or 'no footer'}); "
+            f"hil export: {args.file} is truncated ({head.error or 'no footer'}); "
             "exporting what is readable",
             file=sys.stderr,
         )
+
+    def feed(on_frame: Callable[[str, can.Message], None]) -> None:
+        stream_can(args.file, args.bus, on_frame, time=args.time, head=head)
+
     to_stdout = output == STDOUT
     try:
         if fmt == "candump":
             if to_stdout:
-                n = write_candump(items, sys.stdout)
+                n = write_candump(feed, sys.stdout)
                 sys.stdout.flush()
             else:
                 with atomic_path(output) as tmp, open(tmp, "w", encoding="ascii") as f:
-                    n = write_candump(items, f)
+                    n = write_candump(feed, f)
         elif to_stdout:
             n = _write_can(fmt, _KeepOpen(sys.stdout.buffer, encoding="utf-8",
-                                          write_through=True), items)
+                                          write_through=True), feed)
         else:
             with atomic_path(output) as tmp:  # a failed export leaves the old file
-                n = _write_can(fmt, str(tmp), items)
+                n = _write_can(fmt, str(tmp), feed)
+    except (RecordingError, ValueError) as exc:  # the file changed since its first read
+        print(f"hil export: {exc}", file=sys.stderr)
+        return 2
     except OSError as exc:
         print(f"hil export: cannot write {output}: {exc}", file=sys.stderr)
         return 2

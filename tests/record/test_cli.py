@@ -64,6 +64,32 @@ def test_export_candump(tmp_path, capsys):
     assert "bus 'can9'" in capsys.readouterr().err
 
 
+def test_export_reads_the_recording_a_message_at_a_time(tmp_path, monkeypatch, capsys):
+    """`hil export` never holds a recording whole (an hour of a saturated bus is 32 M frames):
+    what it writes is what the whole read (`can_messages`) gives, a cut file is exported as far
+    as it reads, and a bad `--bus` still leaves no output."""
+    from hil.record.canio import can_messages
+    from hil.record.export_cli import candump_line as line
+
+    p = make(tmp_path / "a.mcap")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(p.read_bytes()[: p.stat().st_size - 200])
+    want = {f: [line(b, m) for b, m in can_messages(Recording.open(f))] for f in (p, cut)}
+
+    def banned(*_a, **_k):
+        raise AssertionError("read whole")
+
+    monkeypatch.setattr(Recording, "open", classmethod(banned))
+    for f in (p, cut):
+        out = tmp_path / "out.log"
+        assert hil(["export", str(f), "-f", "candump", "-o", str(out)]) == 0
+        assert out.read_text().splitlines() == want[f] and want[f]
+    assert "is truncated" in capsys.readouterr().err  # said of the cut file
+    out = tmp_path / "none.log"
+    assert hil(["export", str(p), "-f", "candump", "-o", str(out), "--bus", "can9"]) == 2
+    assert not out.exists()
+
+
 def test_candump_error_frame():
     m = can.Message(arbitration_id=0x4, is_error_frame=True, data=bytes(8), timestamp=1.5)
     assert candump_line("can0", m) == "(1.500000) can0 20000004#0000000000000000"
