@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import heapq
 import itertools
 import sys
+from array import array
 from pathlib import Path
 
 from hil.record.mcapio import McapWriter
@@ -36,31 +38,35 @@ def _fmt_ns(ns: int) -> str:
     return f"{ns / 1e3:.1f} µs"
 
 
-def summarise(rec: Recording, gaps: int = 3) -> str:
-    """The text `hil inspect` prints."""
+def summarise(rec: Recording, gaps: int = 3,
+              times: dict[str, array] | None = None) -> str:
+    """The text `hil inspect` prints; `times`: each topic's log times, read already
+    (`Recording.stream`), else read from `rec`."""
     lines = [f"file: {rec.path} ({rec.size:,} bytes)"]
     if rec.truncated:
         why = rec.error or "no footer/summary (the writer did not finish: killed run?)"
         lines.append(f"TRUNCATED: {why}; everything before it is readable")
     else:
         lines.append("complete: footer and summary present")
-    times: dict[str, list[int]] = {c.topic: [] for c in rec.channels()}
-    for topic, lt, _pt, _d in rec.raw_messages():
-        times.setdefault(topic, []).append(lt)
-    all_t = [t for ts in times.values() for t in ts]
-    if all_t:
-        t0, t1 = min(all_t), max(all_t)
-        lines.append(f"messages: {len(all_t):,}  span: {_fmt_ns(t1 - t0)}  (log_time {t0} .. {t1})")
+    if times is None:
+        times = {}
+        for topic, lt, _pt, _d in rec.raw_messages():
+            times.setdefault(topic, array("q")).append(lt)
+    n_all = sum(len(ts) for ts in times.values())
+    if n_all:
+        t0 = min(min(ts) for ts in times.values() if ts)
+        t1 = max(max(ts) for ts in times.values() if ts)
+        lines.append(f"messages: {n_all:,}  span: {_fmt_ns(t1 - t0)}  (log_time {t0} .. {t1})")
     else:
         lines.append("messages: 0")
     lines.append("channels:")
     for c in rec.channels():
-        ts = times.get(c.topic, [])
+        ts = times.get(c.topic, array("q"))
         src = c.metadata.get("publish_time_source", "?")
         lines.append(f"  {c.topic:<32} {len(ts):>9,}  {c.schema:<20} publish_time: {src}")
         if len(ts) > 1 and gaps > 0:
-            ts.sort()
-            worst = sorted(((b - a, a) for a, b in itertools.pairwise(ts)), reverse=True)
+            ts = sorted(ts)
+            worst = heapq.nlargest(gaps, ((b - a, a) for a, b in itertools.pairwise(ts)))
             shown = ", ".join(f"{_fmt_ns(g)} after +{_fmt_ns(a - ts[0])}" for g, a in worst[:gaps])
             lines.append(f"  {'':<32} largest gaps: {shown}")
     meta = rec.metadata()
@@ -83,8 +89,10 @@ def summarise(rec: Recording, gaps: int = 3) -> str:
     return "\n".join(lines)
 
 
-def repair(rec: Recording, out: Path) -> int:
-    """Rewrite everything readable of `rec` into a complete MCAP file; return messages."""
+def repair(rec: Recording, out: Path, *, stream: bool = False) -> int:
+    """Rewrite everything readable of `rec` into a complete MCAP file; return messages.
+    `stream`: `rec` was streamed (it holds no message): its messages are read again from
+    its file, a record at a time, and written as they come."""
     if out.resolve() == rec.path.resolve():
         raise ValueError(f"--repair {out}: must differ from the input file")
     n = 0
@@ -105,10 +113,18 @@ def repair(rec: Recording, out: Path) -> int:
             w.add_metadata(m.name, m.metadata)
         for a in sc.attachments:
             w.add_attachment(a.name, a.media_type, a.data, a.log_time, a.create_time)
-        for cid, lt, pt, data in rec._raw(None):
+
+        def write(cid: int, lt: int, pt: int, data: bytes) -> None:
+            nonlocal n
             if cid in chan_ids:
                 w.add_message(chan_ids[cid], lt, pt, data)
                 n += 1
+
+        if stream:
+            Recording.stream(rec.path, None, write, by_channel=True)
+        else:
+            for cid, lt, pt, data in rec._raw(None):
+                write(cid, lt, pt, data)
         w.add_metadata(
             "hil.repair",
             {
@@ -123,15 +139,26 @@ def repair(rec: Recording, out: Path) -> int:
 
 
 def main(args: argparse.Namespace) -> int:
-    try:
-        rec = Recording.open(args.file)
+    times: dict[str, array] = {}
+
+    def take(topic: str, lt: int, _pt: int, _data: bytes) -> None:
+        ts = times.get(topic)
+        if ts is None:
+            ts = times[topic] = array("q")
+        ts.append(lt)
+
+    try:  # a message at a time: the file is never held whole
+        rec = Recording.stream(args.file, None, take)
     except RecordingError as exc:
         print(f"hil inspect: {exc}", file=sys.stderr)
         return 2
-    print(summarise(rec, args.gaps))
+    print(summarise(rec, args.gaps, times))
     if args.repair:
         try:
-            n = repair(rec, args.repair)
+            n = repair(rec, args.repair, stream=True)
+        except RecordingError as exc:  # the file changed since it was read
+            print(f"hil inspect: {exc}", file=sys.stderr)
+            return 2
         except (OSError, ValueError) as exc:
             print(f"hil inspect: cannot repair {args.file}: {exc}", file=sys.stderr)
             return 2

@@ -100,18 +100,21 @@ class Recording:
 
     @classmethod
     def stream(cls, path: str | os.PathLike, topics: Iterable[str] | None,
-               on_message: Callable[[str, int, int, bytes], None],
-               progress: Callable[[int, int], None] | None = None) -> Recording:
+               on_message: Callable[[Any, int, int, bytes], None],
+               progress: Callable[[int, int], None] | None = None, *,
+               by_channel: bool = False) -> Recording:
         """Read `path` a record at a time and hand each message of `topics` (None: every
         topic) to `on_message(topic, log_time, publish_time, data)`, in file order, keeping
         no message and no chunk: a recording of any length is read in bounded memory. The
         Recording returned has the channels, metadata and the file's state, no messages.
         A chunk that cannot be read whole gives none of its messages (as `open`).
-        `progress(bytes read, file size)` is told as the reading goes."""
+        `progress(bytes read, file size)` is told as the reading goes. `by_channel`: the
+        message's channel id is handed over instead of its topic."""
         want = None if topics is None else set(topics)
         topic_of: dict[int, str | None] = {}  # channel id -> its topic if wanted, else None
         seen: dict[int, str] = {}  # channel id -> topic, of each channel with a message
         kept: dict[int, bool] = {}  # channel id -> wanted (known channels only)
+        failed: list[Exception] = []  # what `on_message` raised: the caller's, not damage
 
         def sink(raw: bytes, schemas: dict, channels: dict) -> None:
             def keep(cid: int) -> bool:
@@ -127,16 +130,23 @@ class Recording:
                 return got is not None
 
             got = list(iter_chunk(raw, schemas, channels, keep, kept))  # whole, or raises
-            for cid, lt, pt, data in got:
-                on_message(topic_of.get(cid) or f"?{cid}", lt, pt, data)
+            try:
+                for cid, lt, pt, data in got:
+                    on_message(cid if by_channel else topic_of.get(cid) or f"?{cid}",
+                               lt, pt, data)
+            except Exception as exc:
+                failed.append(exc)  # `scan` stops here; raised again below, as it was
+                raise
 
         rec = cls._scan_file(path, sink, progress)
+        if failed:
+            raise failed[0]
         sc = rec._scan
         for cid, lt, pt, data in sc.loose:  # messages outside chunks (the writer makes none)
             name = rec.channel_info[cid].topic if cid in rec.channel_info else f"?{cid}"
             seen[cid] = name
             if want is None or name in want:
-                on_message(name, lt, pt, data)
+                on_message(cid if by_channel else name, lt, pt, data)
         sc.loose.clear()
         #: the topics with at least one message, wanted or not
         rec.message_topics = sorted(set(seen.values()))
@@ -168,6 +178,8 @@ class Recording:
                 sc = scan(FileBytes(f, size, on_read), sink, chunks=chunks)
             except ValueError as exc:
                 raise RecordingError(f"{p}: {exc}") from exc
+            except OSError as exc:  # the disk failed mid-way (EIO): not a broken record
+                raise RecordingError(f"{p}: cannot read: {exc.strerror or exc}") from exc
         return cls(p, sc)
 
     # -- state of the file ----------------------------------------------------------------------

@@ -130,7 +130,8 @@ def load_side(path: str | Path) -> Side:
             if not seq or seq[-1] != str(msg["statusword"]):
                 seq.append(str(msg["statusword"]))
 
-    Recording.stream(path, None, take)
+    full = Recording.stream(path, None, take).metadata().get("hil.run", {})
+    side.plan, side.bench = full.get("plan", side.plan), full.get("bench", side.bench)
     side.states = states
     side.t0 = min(side.starts.values()) if side.starts else 0
     for name in list(side.edges):  # only what happened during the plan

@@ -252,8 +252,11 @@ class SerialLine:
         characters end at `rel_ends_ns` (from the sender) or back to back, never closer
         than one character time; `gap_ns` is idle line time the sender left before it.
         `continues`: the sender's own times say the chunk follows the previous one `gap_ns`
-        later, so it starts there however late it arrived (a chunk held up on a loaded host
-        does not open a silence the wire never had, which would split a Modbus frame).
+        later; while bytes of that previous chunk are still unread, it starts there however
+        late it arrived (a chunk held up on a loaded host does not open a silence the wire
+        never had, which would split a Modbus frame). Once the reader has taken them, it
+        starts no earlier than its arrival (a reader already waiting is never handed bytes
+        stamped in its past).
         Real line: the last byte ended at `t_ns`.
         """
         if not data:
@@ -262,7 +265,9 @@ class SerialLine:
         n = len(data)
         with self._cond:
             if self.emulate_rx:
-                start = self._rx_free + gap_ns if continues else max(t_ns, self._rx_free + gap_ns)
+                start = self._rx_free + gap_ns
+                if not (continues and self._rx):
+                    start = max(t_ns, start)
                 prev = start
                 for i, b in enumerate(data):
                     rel = rel_ends_ns[i] if rel_ends_ns else (i + 1) * c

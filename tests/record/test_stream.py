@@ -147,3 +147,16 @@ def test_head_reads_what_a_recording_says_of_itself_without_its_chunks(tmp_path)
     cut.write_bytes(data[: len(data) // 2])
     assert Recording.head(cut).truncated
 
+
+def test_a_callback_error_is_the_callers_not_damage(tmp_path) -> None:
+    """An error raised by the caller's `on_message` (a bug, a payload it cannot take) comes
+    out as that error: the file is not called damaged and the read does not end quietly."""
+    path = _file(tmp_path, 500)
+
+    def picky(topic, _lt, _pt, data):
+        if b'"i": 250}' in data:
+            raise KeyError("payload the caller cannot take")
+
+    with pytest.raises(KeyError, match="cannot take"):
+        Recording.stream(path, None, picky)
+

@@ -239,6 +239,33 @@ def test_zenoh_chunk_held_up_in_transit_continues_its_frame(port):
         line.close()
 
 
+def test_zenoh_chunk_after_a_frame_was_read_is_not_stamped_in_the_past(port):
+    """The reader took the previous frame; the next chunk follows it by the sender's clock
+    (within 1 s) but arrives later than that says: it starts at its arrival, never in the
+    reader's past (a waiting reader would take it at once and end the frame early)."""
+    from types import SimpleNamespace
+
+    line = open_serial(f"zenoh:tzp/rs485?listen=tcp/127.0.0.1:{port}&baud=115200")
+    try:
+        c = line.char_time_ns
+        wall = time.time_ns()
+
+        def sample(data: bytes, t0: int):
+            payload = pack_chunk(data, t0, [(i + 1) * c for i in range(len(data))], t0)
+            return SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda: payload))
+
+        line._on_sample(sample(b"\x01\x03", wall))
+        assert line.read_frame(timeout=1).data == b"\x01\x03"
+        time.sleep(0.03)  # the sender says 10 ms later; it arrives 30 ms later
+        arrived = time.monotonic_ns()
+        line._on_sample(sample(b"\x01\x83\x02", wall + 2 * c + 10_000_000))
+        frame = line.read_frame(timeout=1)
+        assert frame.data == b"\x01\x83\x02"
+        assert frame.t_start_ns >= arrived - 1_000_000  # not 20 ms before it arrived
+    finally:
+        line.close()
+
+
 def test_zenoh_serial_between_two_sessions_keeps_timing(port, tap):
     ep = f"tcp/127.0.0.1:{port}"
     slave = open_serial(f"zenoh:tz/rs485?listen={ep}&role=slave&baud=1200&stopbits=1")
