@@ -38,6 +38,34 @@ def test_inspect_truncated_and_repair(tmp_path, capsys):
     assert not r.truncated and sum(r.counts().values()) == n
 
 
+def test_inspect_and_repair_read_a_message_at_a_time(tmp_path, monkeypatch, capsys):
+    """`hil inspect` and `--repair` never hold the recording whole (a killed run of hours):
+    the summary is the one a whole read gives, and the repaired file has every readable
+    message, channel by channel."""
+    from hil.record.cli import summarise
+
+    p = make(tmp_path / "a.mcap")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(p.read_bytes()[: p.stat().st_size - 200])
+    want = {f: summarise(Recording.open(f)) for f in (p, cut)}
+    whole = [(t, lt, pt, bytes(d)) for t, lt, pt, d in Recording.open(cut).raw_messages()]
+
+    def banned(*_a, **_k):
+        raise AssertionError("read whole")
+
+    with monkeypatch.context() as m:
+        m.setattr(Recording, "open", classmethod(banned))
+        for f in (p, cut):
+            assert hil(["inspect", str(f)]) == 0
+            assert capsys.readouterr().out.strip() == want[f]
+        fixed = tmp_path / "fixed.mcap"
+        assert hil(["inspect", str(cut), "--repair", str(fixed)]) == 0
+    assert f"repaired: {len(whole)} messages" in capsys.readouterr().out
+    back = Recording.open(fixed)
+    assert not back.truncated
+    assert [(t, lt, pt, bytes(d)) for t, lt, pt, d in back.raw_messages()] == whole
+
+
 def test_inspect_unreadable_names_the_file(tmp_path, capsys):
     bad = tmp_path / "notes.txt"
     bad.write_text("hello")
