@@ -26,7 +26,6 @@ import contextlib
 import re
 import struct
 import threading
-import time
 from collections.abc import Callable, Mapping
 from typing import Literal
 
@@ -37,6 +36,8 @@ from hil import clock
 from hil.record.tap import Tap
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 from hil.transport.zenoh_net import (
+    ASK_TIMEOUT_S,
+    AskAgain,
     close_session,
     config_from,
     lease_token,
@@ -52,9 +53,6 @@ Listener = Callable[[str, bool, int], None]
 _INPUT = re.compile(r"^(DI[1-9][0-9]*|STO_A|STO_B)$")
 _OUTPUT = re.compile(r"^(DO[1-9][0-9]*|FDBK)$")
 _T = struct.Struct("<q")
-# a line never heard of is asked for again (`_ask_levels`) at most this often, this long
-_ASK_EVERY_S = 0.1
-_ASK_TIMEOUT_S = 0.25
 
 
 def is_input(line: str) -> bool:
@@ -277,8 +275,9 @@ class ZenohDio(DioPort):
             raise TransportUrlError(url, str(e)) from None
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._sub = self._queryable = None
-        self._query_timeout = query_timeout
-        self._asked_at = float("-inf")  # time.monotonic() of the last `_ask_levels`
+        self._asker = AskAgain(
+            lambda: self._learn_levels(min(query_timeout, ASK_TIMEOUT_S), if_unknown=True),
+            f"dio-ask-{self.key}")
         try:
             if ep.connect:
                 wait_connected(self.session, connect_timeout, what=url, endpoints=ep.connect)
@@ -327,19 +326,8 @@ class ZenohDio(DioPort):
                 self._changed(line, level, if_unknown=if_unknown)
 
     def _ask_levels(self) -> None:
-        """Query the key again on a thread of its own, at most every `_ASK_EVERY_S` (a query
-        costs a round trip): a level the other side set before this side's subscriber was
-        routed is learned; a line heard of meanwhile keeps what was heard."""
-        now = time.monotonic()
-        if self._closed or now - self._asked_at < _ASK_EVERY_S:
-            return
-        self._asked_at = now
-
-        def ask() -> None:
-            with contextlib.suppress(Exception):  # closed meanwhile: nothing to learn
-                self._learn_levels(min(self._query_timeout, _ASK_TIMEOUT_S), if_unknown=True)
-
-        threading.Thread(target=ask, daemon=True, name=f"dio-ask-{self.key}").start()
+        if not self._closed:  # a line heard of meanwhile keeps what was heard (if_unknown)
+            self._asker()
 
     def query_levels(self, timeout_s: float = 1.0) -> dict[str, bool]:
         """Ask every side on the key for its lines' current levels."""

@@ -24,13 +24,11 @@ A real pulse generator / high-speed counter implements `PulsePort` (see `PulseAd
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import re
 import struct
 import threading
-import time
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -39,6 +37,8 @@ import zenoh
 from hil import clock
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 from hil.transport.zenoh_net import (
+    ASK_TIMEOUT_S,
+    AskAgain,
     close_session,
     config_from,
     open_session,
@@ -55,9 +55,6 @@ Listener = Callable[[str, dict[str, Any], int, int | None], None]
 _X = re.compile(r"^X[0-9]{1,3}$")
 _Y = re.compile(r"^Y[0-9]{1,3}$")
 _T = struct.Struct("<q")
-# a level never heard of is asked for again (`_ask_levels`) at most this often, this long
-_ASK_EVERY_S = 0.1
-_ASK_TIMEOUT_S = 0.25
 
 
 class PulseError(ValueError):
@@ -316,8 +313,9 @@ class ZenohPulse(PulsePort):
             raise TransportUrlError(url, str(e)) from None
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._sub = self._queryable = None
-        self._query_timeout = query_timeout
-        self._asked_at = float("-inf")  # time.monotonic() of the last `_ask_levels`
+        self._asker = AskAgain(
+            lambda: self._learn_levels(min(query_timeout, ASK_TIMEOUT_S), if_unknown=True),
+            f"pulse-ask-{self.key}")
         try:
             if ep.connect:
                 wait_connected(self.session, connect_timeout, what=url, endpoints=ep.connect)
@@ -336,18 +334,8 @@ class ZenohPulse(PulsePort):
                 self._level_sample(reply.ok, if_unknown)
 
     def _ask_levels(self) -> None:
-        """Query the key again on a thread of its own, at most every `_ASK_EVERY_S`; a level
-        heard of meanwhile keeps what was heard."""
-        now = time.monotonic()
-        if self.closed or now - self._asked_at < _ASK_EVERY_S:
-            return
-        self._asked_at = now
-
-        def ask() -> None:
-            with contextlib.suppress(Exception):  # closed meanwhile: nothing to learn
-                self._learn_levels(min(self._query_timeout, _ASK_TIMEOUT_S), if_unknown=True)
-
-        threading.Thread(target=ask, daemon=True, name=f"pulse-ask-{self.key}").start()
+        if not self.closed:  # a line heard of meanwhile keeps what was heard (if_unknown)
+            self._asker()
 
     @staticmethod
     def _source_t(sample: zenoh.Sample) -> int | None:

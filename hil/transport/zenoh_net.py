@@ -30,7 +30,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -225,6 +225,33 @@ def wait_matching(publisher: zenoh.Publisher, timeout_s: float) -> bool:
             return False
         time.sleep(0.0005)
     return True
+
+
+ASK_EVERY_S = 0.1  # a level never heard of is asked for again at most this often ...
+ASK_TIMEOUT_S = 0.25  # ... and waited for this long
+
+
+class AskAgain:
+    """Runs `learn()` (a query of a key's current levels) on a thread of its own, at most
+    every `every_s`: for a DI/DO or pulse level never heard of, set before this side's
+    subscriber was routed and not published again while it does not change. Never blocks
+    the caller; an error (the session closed meanwhile) means nothing is learned."""
+
+    def __init__(self, learn: Callable[[], Any], name: str, every_s: float = ASK_EVERY_S
+                 ) -> None:
+        self.learn, self.name, self.every_s = learn, name, every_s
+        self._at = float("-inf")  # time.monotonic() of the last ask
+
+    def __call__(self) -> None:
+        now = time.monotonic()
+        if now - self._at < self.every_s:
+            return
+        self._at = now
+        threading.Thread(target=self._run, daemon=True, name=self.name).start()
+
+    def _run(self) -> None:
+        with contextlib.suppress(Exception):
+            self.learn()
 
 
 # -- router --------------------------------------------------------------------------

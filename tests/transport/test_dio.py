@@ -125,7 +125,7 @@ def test_zenoh_level_missed_at_connect_is_asked_for_again(port, monkeypatch):
     the harness's query was lost (a queryable not yet routed): a steady level is published
     once only, so the harness asks again when a plan reads a line it never heard of, at most
     every 100 ms, and a level it knows is read without asking."""
-    import hil.transport.dio as dio_mod
+    import hil.transport.zenoh_net as zenoh_net
 
     ep = f"tcp/127.0.0.1:{port}"
     drive = open_dio(f"zenoh:tzq/drive1?listen={ep}", role="drive")
@@ -150,14 +150,14 @@ def test_zenoh_level_missed_at_connect_is_asked_for_again(port, monkeypatch):
         assert harness.get("DO3") is True and len(queries) == 2  # learnt by asking again
         assert harness.wait_for("DO5", True, 1.0)  # by that same answer
         assert harness.get("DO3") is True and len(queries) == 2  # known: nothing asked
-        time.sleep(dio_mod._ASK_EVERY_S + 0.05)
+        time.sleep(zenoh_net.ASK_EVERY_S + 0.05)
         n, t0 = len(queries), time.monotonic()
         for _ in range(20):  # the drive never set DO6: asked at most every 100 ms
             assert harness.get("DO6") is False
         took = time.monotonic() - t0
         _until(lambda: len(queries) > n, 1.0)
         time.sleep(0.05)
-        assert n + 1 <= len(queries) <= n + 1 + int(took / dio_mod._ASK_EVERY_S)
+        assert n + 1 <= len(queries) <= n + 1 + int(took / zenoh_net.ASK_EVERY_S)
         # an answer must not undo what was heard since: the drive's queryable is made to
         # answer a stale DO4 = 0 after DO4 = 1 was published and heard
         drive.set("DO4", True)
