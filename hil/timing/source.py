@@ -501,7 +501,7 @@ class _LazySource(MemorySource):
         self._shared: dict[bytes, dict] | None = None
 
     def _keep_many(self, topic: str, msgs: list[tuple[int, bytes | dict]]) -> None:
-        """`_keep` of each of `msgs` (one topic's, in file order)."""
+        """Keep `msgs` (one topic's, in file order) undecoded until the topic is read."""
         lo, hi = min(t for t, _ in msgs), max(t for t, _ in msgs)
         pend = self._raw.get(topic)
         if pend is None:
