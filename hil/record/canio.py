@@ -8,6 +8,8 @@ Files are ordinary hil recordings: frames go to `/can/<bus>/raw` (+ decoded CANo
 
 from __future__ import annotations
 
+import queue
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -120,18 +122,71 @@ class McapCanReader(MessageReader):
 
     def __init__(self, file: Any, bus: str | None = None, time: str = "log", **kwargs: Any):
         self.file = file
-        self.recording = Recording.open(file)
         self.bus = bus
         self.time = time
         if time not in ("log", "publish"):
             raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
-        buses = can_buses(self.recording)
-        if bus is not None and bus not in buses:
-            raise ValueError(f"bus {bus!r}: not in {file} (buses: {', '.join(buses) or 'none'})")
+        # its buses and state now (a bad bus is said at once); its frames as they are read
+        self.recording = Recording.stream(file, (), lambda *_m: None)
+        bus_topics(self.recording, bus)
+        self._stop = threading.Event()
 
     def __iter__(self) -> Iterator[can.Message]:
-        for _bus, msg in can_messages(self.recording, self.bus, time=self.time):
-            yield msg
+        """The frames, read a record at a time on a thread of its own (a long recording is
+        never held whole; at most `_AHEAD` frames wait to be taken)."""
+        q: queue.Queue = queue.Queue(maxsize=_AHEAD)
+        stop = threading.Event()
+        self._stop = stop
+
+        def on_frame(_bus: str, msg: can.Message) -> None:
+            while not stop.is_set():
+                try:
+                    q.put(msg, timeout=0.1)
+                    return
+                except queue.Full:
+                    continue
+            raise _Stopped
+
+        def read() -> None:
+            try:
+                stream_can(self.file, self.bus, on_frame, time=self.time, head=self.recording)
+            except _Stopped:
+                return
+            except BaseException as exc:  # handed to the iterating thread
+                q.put(_Failed(exc))
+                return
+            q.put(_END)
+
+        thread = threading.Thread(target=read, daemon=True, name="mcap-can-reader")
+        thread.start()
+        try:
+            while True:
+                item = q.get()
+                if item is _END:
+                    return
+                if isinstance(item, _Failed):
+                    raise item.exc
+                yield item
+        finally:  # the caller stopped early (or is done): the reading thread ends too
+            stop.set()
+            thread.join(timeout=5)
 
     def stop(self) -> None:
-        pass
+        self._stop.set()
+
+
+_AHEAD = 4096  # frames read ahead of the caller
+
+
+class _Stopped(Exception):
+    """The iterating caller stopped: the reading thread ends its read."""
+
+
+class _Failed:
+    __slots__ = ("exc",)
+
+    def __init__(self, exc: BaseException) -> None:
+        self.exc = exc
+
+
+_END = object()

@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import can
+import pytest
 from rec_helpers import make
 
 from hil.cli import main as hil
@@ -157,6 +158,38 @@ def test_python_can_logger_and_logreader(tmp_path, canio_entry_points):
     for a, b in zip(sent, back, strict=True):
         assert a.equals(b, timestamp_delta=1e-6), (a, b)
     assert Recording.open(p).topics()[0] == "/can/vcan0/raw"
+
+
+def test_logreader_reads_a_frame_at_a_time_and_stops_with_its_caller(tmp_path, monkeypatch):
+    """`can.LogReader("x.mcap")` never holds the recording whole: it reads ahead at most a few
+    thousand frames on a thread of its own, gives what a whole read gives, and a caller that
+    stops early ends that thread."""
+    import threading
+
+    from hil.record import canio
+    from hil.record.canio import can_messages
+
+    p = tmp_path / "many.mcap"
+    with McapCanWriter(p) as w:
+        for i in range(3 * canio._AHEAD):
+            w(can.Message(timestamp=1700000000.0 + i / 1e4, arbitration_id=0x181 + i % 4,
+                          is_extended_id=False, data=i.to_bytes(4, "little"), channel="can0"))
+    want = [m for _b, m in can_messages(Recording.open(p))]
+
+    def banned(*_a, **_k):
+        raise AssertionError("read whole")
+
+    monkeypatch.setattr(Recording, "open", classmethod(banned))
+    got = list(McapCanReader(p))
+    assert len(got) == len(want) == 3 * canio._AHEAD
+    assert all(a.equals(b, timestamp_delta=1e-9) for a, b in zip(got, want, strict=True))
+    it = iter(McapCanReader(p))
+    first = [next(it) for _ in range(10)]
+    assert first[0].equals(want[0], timestamp_delta=1e-9)
+    it.close()  # the caller stops early
+    assert not [t for t in threading.enumerate() if t.name == "mcap-can-reader"]
+    with pytest.raises(ValueError, match="can9"):  # a bus not in the file, said at once
+        McapCanReader(p, bus="can9")
 
 
 def test_can_player_replays_an_mcap(tmp_path, canio_entry_points):
