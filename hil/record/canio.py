@@ -161,7 +161,12 @@ class McapCanReader(MessageReader):
         thread.start()
         try:
             while True:
-                item = q.get()
+                try:
+                    item = q.get(timeout=0.1)
+                except queue.Empty:
+                    if thread.is_alive():
+                        continue
+                    return  # `stop()` ended the read: nothing more comes
                 if item is _END:
                     return
                 if isinstance(item, _Failed):

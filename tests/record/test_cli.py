@@ -188,6 +188,13 @@ def test_logreader_reads_a_frame_at_a_time_and_stops_with_its_caller(tmp_path, m
     assert first[0].equals(want[0], timestamp_delta=1e-9)
     it.close()  # the caller stops early
     assert not [t for t in threading.enumerate() if t.name == "mcap-can-reader"]
+    reader = McapCanReader(p)  # stop() from elsewhere ends the iteration, it never hangs
+    it = iter(reader)
+    next(it)
+    reader.stop()
+    rest = list(it)
+    assert len(rest) < len(want) - 1
+    assert not [t for t in threading.enumerate() if t.name == "mcap-can-reader"]
     with pytest.raises(ValueError, match="can9"):  # a bus not in the file, said at once
         McapCanReader(p, bus="can9")
 
