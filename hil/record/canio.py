@@ -78,7 +78,7 @@ def stream_can(path: str | Path, bus: str | None, on_frame: Callable[[str, can.M
     if time not in ("log", "publish"):
         raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
     if head is None:
-        head = Recording.stream(path, (), lambda *_m: None)  # channels and state, no message
+        head = Recording.survey(path)  # channels and state, no message
     names = bus_topics(head, bus)
 
     def take(topic: str, lt: int, pt: int, data: bytes) -> None:
@@ -127,7 +127,7 @@ class McapCanReader(MessageReader):
         if time not in ("log", "publish"):
             raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
         # its buses and state now (a bad bus is said at once); its frames as they are read
-        self.recording = Recording.stream(file, (), lambda *_m: None)
+        self.recording = Recording.survey(file)
         bus_topics(self.recording, bus)
         self._stop = threading.Event()
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import io
 import sys
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -109,9 +109,8 @@ def candump_line(bus: str, msg: can.Message) -> str:
     return f"({msg.timestamp:.6f}) {bus} {body}"
 
 
-def write_candump(items: Iterable[tuple[str, can.Message]] | Callable[..., Any],
-                  out: TextIO) -> int:
-    """candump -L lines of `items`, or of what `items(on_frame)` hands over."""
+def write_candump(feed: Callable[[Callable[[str, can.Message], None]], Any], out: TextIO) -> int:
+    """candump -L lines of what `feed(on_frame)` hands over."""
     n = 0
 
     def on_frame(bus: str, msg: can.Message) -> None:
@@ -119,11 +118,7 @@ def write_candump(items: Iterable[tuple[str, can.Message]] | Callable[..., Any],
         out.write(candump_line(bus, msg) + "\n")
         n += 1
 
-    if callable(items):
-        items(on_frame)
-    else:
-        for bus, msg in items:
-            on_frame(bus, msg)
+    feed(on_frame)
     return n
 
 
@@ -159,7 +154,7 @@ def main(args: argparse.Namespace) -> int:
             refuse_input(output, [args.file], "-o")
         # the recording's buses and state first (a bad --bus or file is said before any
         # output exists), then its frames a message at a time: never held whole
-        head = Recording.stream(args.file, (), lambda *_m: None)
+        head = Recording.survey(args.file)
         bus_topics(head, args.bus)
     except (RecordingError, ValueError) as exc:
         print(f"hil export: {exc}", file=sys.stderr)

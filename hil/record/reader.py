@@ -153,6 +153,12 @@ class Recording:
         return rec
 
     @classmethod
+    def survey(cls, path: str | os.PathLike) -> Recording:
+        """Every record of `path` read once, no message kept: its channels, metadata and state
+        (`stream` with no topic wanted)."""
+        return cls.stream(path, (), lambda *_m: None)
+
+    @classmethod
     def head(cls, path: str | os.PathLike) -> Recording:
         """What `path` says of itself outside its chunks: metadata, attachments, whether it
         ends whole, and the channels its summary lists (none for a cut file). Its chunks are

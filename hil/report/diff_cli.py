@@ -29,7 +29,7 @@ def _check_inputs(paths: list[str]) -> tuple[str | None, list[str]]:
     checks: a non-hil MCAP is bad input, a damaged or cut recording an incomplete result."""
     partial = []
     for p in paths:
-        rec = Recording.stream(p, (), lambda *_m: None)  # channels and state, no message kept
+        rec = Recording.survey(p)  # channels and state, no message kept
         chans = rec.channels()
         why = not_hil(rec.metadata(), [c.schema for c in chans], rec.topics())
         if why and not rec.corrupt:
