@@ -242,7 +242,6 @@ def test_unique_names_keep_single_plans_as_they_were(tmp_path: Path) -> None:
     assert output_stems(plans) == ["x", "y"]
 
 
-@pytest.mark.integration
 @pytest.mark.parametrize("jobs", ["1", "2"])
 def test_same_named_plans_of_two_folders_both_keep_their_recording(tmp_path, jobs) -> None:
     a = _plan_file(tmp_path / "a" / "same.yaml", "same_a")

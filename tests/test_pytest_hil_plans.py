@@ -7,8 +7,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 PASSING = """name: brake_ok
 tags: [brake, quick]
 steps:
@@ -37,7 +35,6 @@ def _pytest(cwd: Path, *args: str) -> subprocess.CompletedProcess:
                            *args], cwd=cwd, capture_output=True, text=True, timeout=300)
 
 
-@pytest.mark.integration
 def test_plans_are_collected_run_and_explained(tmp_path):
     proj = _project(tmp_path)
     r = _pytest(proj, "-m", "hil")
@@ -47,7 +44,6 @@ def test_plans_are_collected_run_and_explained(tmp_path):
     assert (proj / "out" / "brake_ok.mcap").exists() and (proj / "out" / "never_on.mcap").exists()
 
 
-@pytest.mark.integration
 def test_tags_are_markers_and_k_selects_by_name(tmp_path):
     proj = _project(tmp_path)
     r = _pytest(proj, "-m", "brake")
@@ -56,7 +52,6 @@ def test_tags_are_markers_and_k_selects_by_name(tmp_path):
     assert "never_on" in r.stdout and "brake_ok" not in r.stdout
 
 
-@pytest.mark.integration
 def test_a_malformed_plan_is_a_collection_error_naming_file_and_line(tmp_path):
     proj = _project(tmp_path)
     (proj / "plans" / "broken.yaml").write_text("name: b\nsteps:\n  - frobnicate: 1\n")
@@ -65,7 +60,6 @@ def test_a_malformed_plan_is_a_collection_error_naming_file_and_line(tmp_path):
     assert "broken.yaml:3: steps[0].frobnicate: unknown step kind" in r.stdout + r.stderr
 
 
-@pytest.mark.integration
 def test_xdist_runs_plans_in_parallel_workers(tmp_path):
     proj = _project(tmp_path)
     r = _pytest(proj, "-n", "2", "-m", "hil")
@@ -73,7 +67,6 @@ def test_xdist_runs_plans_in_parallel_workers(tmp_path):
     assert "[gw" in r.stdout or "2 workers" in r.stdout
 
 
-@pytest.mark.integration
 def test_same_named_plans_of_two_folders_keep_both_recordings(tmp_path):
     """`hil run`'s naming rule under pytest too: two plan directories a/ and b/ (`hil_plans =
     a b`) with a same.yaml each -> a-same.mcap
@@ -109,7 +102,6 @@ def test_a_bad_hil_bench_is_one_clear_error(tmp_path):
         assert "Traceback" not in out and len(out.splitlines()) < 20, out
 
 
-@pytest.mark.integration
 def test_pytest_and_hil_run_write_one_junit_shape(tmp_path):
     """One testcase per plan from either entry point, the same properties (recording relative
     to the JUnit file, bench, status, a property per step), and the project's junit_family

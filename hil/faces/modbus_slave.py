@@ -141,7 +141,7 @@ class ModbusSlave:
         )
         self._next_line: LineSettings | None = None
         self.stats: dict[str, int] = dict.fromkeys(
-            ("frames", "replies", "exceptions", "foreign", "broadcast", "bad_check",
+            ("bytes", "frames", "replies", "exceptions", "foreign", "broadcast", "bad_check",
              "dropped", "timeouts"), 0,
         )  # fmt: skip
         self.errors: list[str] = []  # last few reasons a frame was dropped (for debugging)
@@ -225,6 +225,7 @@ class ModbusSlave:
                 self._rtu_byte(byte, t, char)
             else:
                 self._ascii_byte(byte, t)
+        self.stats["bytes"] += n  # after they are in hand (`settled` is read from elsewhere)
         self.tick(t_ns)
 
     def feed_timed(self, data: bytes, times_ns: tuple[int, ...] | list[int]) -> None:
@@ -238,8 +239,15 @@ class ModbusSlave:
                 self._rtu_byte(byte, t, char)
             else:
                 self._ascii_byte(byte, t)
+        self.stats["bytes"] += len(data)
         if times_ns:
             self.tick(times_ns[-1])
+
+    @property
+    def settled(self) -> bool:
+        """Nothing in hand: no burst waiting for the silence that ends it, no ASCII frame
+        open, no reply waiting for its P3.007 delay."""
+        return not (self._in_burst or self._in_ascii or self._outbox)
 
     @property
     def _in_burst(self) -> bool:

@@ -53,17 +53,19 @@ def test_modbus_fuzz_100k_frames(caplog):
     )
     char = face.line.char_time_ns
     rng = random.Random(20250112)
-    counts = {"frames": 0, "owed": 0, "answered": 0, "units": 0}
+    counts = {"frames": 0, "owed": 0, "answered": 0, "units": 0, "bytes": 0}
     problems: list[str] = []
     t = 0
     with caplog.at_level(logging.ERROR):
         for unit in units(rng, list(drive.params.table), 100_000):
             t += len(unit.data) * char
             face.feed(unit.data, t)  # back to back, the last character ending at t
+            counts["bytes"] += len(unit.data)
             t += face.silence_ns
             face.tick(t)  # the silence ends the burst
             t += face.response_delay_ns() + 1  # P3.007 (the fuzz may have written it)
             face.tick(t)
+            assert face.settled, unit  # judged, and any reply sent
             counts["units"] += 1
             counts["frames"] += unit.frames
             counts["owed"] += len(unit.replies)
@@ -79,20 +81,25 @@ def test_modbus_fuzz_100k_frames(caplog):
     assert face.last_resort.count == 0, face.last_resort.last  # zero drive exceptions
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
     assert face.stats["frames"] >= counts["owed"]  # every owed request reached the store
+    assert face.stats["bytes"] == counts["bytes"]
 
 
-def _exchange(fd: int, unit, char_s: float) -> list[bytes]:
+def _exchange(fd: int, unit, face: ModbusSlave, line: dict[str, int]) -> list[bytes]:
     """Write one unit; its replies (after t3.5 the line is idle again), or for a unit owed
-    none its characters then t3.5 (1.75 ms) with room for a late pty reader. A drive-side
-    reader descheduled for longer than that room (a loaded host) reads this unit and the
-    next as one burst with no silence to end a frame: a unit whose replies are wrong is sent
-    once more after 100 ms of silence, and must then be right (a face bug fails both)."""
+    none, wait until the drive has read every byte written so far and judged them (its
+    silence ended, no reply pending: `ModbusSlave.settled`). A drive-side reader descheduled
+    between two reads can still see a unit and the next as one burst: a unit whose replies
+    are wrong is sent once more after 100 ms of silence, and must then be right (a face bug
+    fails both)."""
     os.write(fd, unit.data)
-    wire = len(unit.data) * char_s
+    line["written"] += len(unit.data)
+    wire = len(unit.data) * face.line.char_time_ns / 1e9
     if unit.replies:
         return _read_replies(fd, len(unit.replies), wire + 2.0)
-    time.sleep(wire + 0.015)
-    return _read_replies(fd, 1, 0.0) if unit.silent else []
+    end = time.monotonic() + wire + 2.0
+    while not (face.stats["bytes"] >= line["written"] and face.settled) and time.monotonic() < end:
+        time.sleep(0.0005)
+    return _read_replies(fd, 1, 0.001) if unit.silent else []
 
 
 def _read_replies(fd: int, count: int, timeout: float) -> list[bytes]:
@@ -121,16 +128,16 @@ def test_modbus_fuzz_over_a_real_pty(tmp_path, caplog):
     with caplog.at_level(logging.ERROR), VirtualDriveStack(spec) as stack:
         fd = os.open(link, os.O_RDWR | os.O_NOCTTY)
         tty.setraw(fd)
+        face, line = stack.modbus, {"written": 0}
         try:
-            char_s = stack.serial.char_time_s
             for unit in units(rng, list(stack.drive.params.table), 2_000):
-                sent = _exchange(fd, unit, char_s)
+                sent = _exchange(fd, unit, face, line)
                 why = check_replies(unit, sent)
                 if why is not None:  # sent again after a long silence (see _exchange)
                     retried.append(f"{unit.data[:40].hex()}: {why}")
                     time.sleep(0.1)
                     _read_replies(fd, 64, 0.0)  # whatever the merged burst produced
-                    sent = _exchange(fd, unit, char_s)
+                    sent = _exchange(fd, unit, face, line)
                     why = check_replies(unit, sent)
                 owed += len(unit.replies)
                 answered += len(sent) if unit.replies else 0
@@ -140,7 +147,7 @@ def test_modbus_fuzz_over_a_real_pty(tmp_path, caplog):
             leftover = _read_replies(fd, 1, 0.0)
         finally:
             os.close(fd)
-        face, runner = stack.modbus, stack.modbus_runner
+        runner = stack.modbus_runner
         assert runner._thread.is_alive() and runner.error is None, runner.error
     assert problems == [], f"{len(problems)} bad units, first: {problems[:5]}"
     assert len(retried) <= 20, f"{len(retried)} units needed a second try: {retried[:5]}"

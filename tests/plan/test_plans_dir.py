@@ -14,8 +14,6 @@ import pytest
 from hil.paths import plans_dir
 from hil.plan.plansdir import checkout_root
 
-pytestmark = pytest.mark.integration  # real plans / processes in real time
-
 PLAN = "edited_brake"  # a plan that exists only in the user's checkout
 
 

@@ -11,12 +11,8 @@ import sys
 import time
 from types import SimpleNamespace
 
-import pytest
-
 from hil.plan.events import PlanEnded, PlanStarted, StepEnded, StepStarted
 from hil.plan.progress import RunProgress
-
-pytestmark = pytest.mark.integration  # real plans / processes in real time
 
 TWO = ["alarm_reset", "cia402_power_states"]  # short plans (16 + 14 steps)
 

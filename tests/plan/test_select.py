@@ -16,8 +16,6 @@ from hil.paths import fixture
 from hil.plan.plan import find_plans
 from hil.plan.select import Expr, ExprError, matches, select
 
-pytestmark = pytest.mark.integration  # real plans / processes in real time
-
 
 def P(name, tags=(), path=None):
     return SimpleNamespace(name=name, tags=list(tags), path=path or f"plans/{name}.yaml")
@@ -131,7 +129,6 @@ def test_hil_bench_environment_variable_chooses_the_bench(tmp_path):
     assert r.returncode == 2 and "nope.yaml" in r.stderr
 
 
-@pytest.mark.integration
 def test_last_failed_reruns_only_what_failed(tmp_path, capsys):
     """`hil run --lf`: the plans whose testcase failed in `<out>/junit.xml`; all of them when
     there was no previous run or none failed (as pytest's --lf)."""

@@ -7,7 +7,6 @@ import xml.etree.ElementTree as ET
 import pytest
 
 pytest_plugins = ["pytester"]
-pytestmark = pytest.mark.integration
 
 INNER = '''
 import pytest
