@@ -18,20 +18,25 @@ Input (A3 manual §6.2, P1.000 L7660-7745):
   GNUM0/GNUM1 (L9850), M = P1.045; allowed 1/4 < Nx/M < 262144 (L8547): a write that
   leaves it is refused (option `pt_gear_check`).
 * INHP (DI 0x45) stops accepting pulses, only on DI8 (L3550, L15244); P2.065 bit 11: at a
-  limit, pulses towards it are not accepted (L9896-9900).
+  limit, pulses towards it are not accepted (L9926-9930); with bit 11 = 0 they are (L9928),
+  but PL / NL still forbid the motor to run towards the limit (L15186-15191).
 * CCLR (P2.050, L9742-9753): the accumulated position error is cleared: the command
   position becomes the feedback position and the pulses still to come count from there.
 * Smoothing: P1.068 moving filter (ms, L8832) then P1.008 low-pass (10 ms, L7921), on the
   1 ms command grid; the axis follows the smoothed command one cycle later.
 * AL009 when the error exceeds P2.035 (L9556) is the drive's usual check; TPOS in PT is
   |command - feedback| < P1.054 (L8689).
+* Servo on in PT: the axis follows the pulses received (L3503, L3510), also those of a train
+  that began while the servo was off or the PR side of PT-PR was selected.
+* P2.069.Y = 0: no pulse is accepted while AL060 / AL06A is active (L10027-10029).
 * Monitors: pulse command count (accepted pulses, `accepted`) and frequency in kpps
-  (monitor 006, L15446).
+  (monitor 006, L15446); P5.018 / monitor 049 the pulses CN1 decodes (L11298, L15483).
 
 Output (P1.046 L8556-8571): OA/OB with P1.046 pulses per revolution and phase (4 x P1.046
-quadrature counts), summed over `output_window_ms` windows into segments; OZ (C11, L1851)
+quadrature counts; P1.046 / P1.097 with P1.097 != 0, L9053-9081; P1.003.Y = 1 reversed,
+L7866-7869), summed over `output_window_ms` windows into segments; OZ (C11, L1851)
 one pulse per revolution at the encoder's index, `ocz_width_us` wide (a choice: the manual
-gives no width). AL018 when rpm / 60 x P1.046 x 4 > 19.8 MHz (L8569) unless P2.065 bit 13.
+gives no width). AL018 when rpm / 60 x those counts > 19.8 MHz (L8569) unless P2.065 bit 13.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from hil.model.dio import N_DI
 from hil.model.errors import OutOfRange
 from hil.model.mechanics import COUNTS_PER_REV
 
@@ -55,8 +61,9 @@ GEAR_MIN, GEAR_MAX = 0.25, 262144.0  # 1/4 < Nx/M < 262144 (L8547)
 PT_YX = (0x00, 0x06, 0x07, 0x0D, 0x0E, 0x0F)  # P1.001.YX with a PT side (L7749-7800)
 CRUISE_NS = 200_000_000  # the longest cruise before an exact resync
 # the parameters `_Config` reads: a write of one ends a cruise (P0.046, P4.009 ... do not)
-_CONFIG_PARAMS = frozenset({"P1.000", "P1.001", "P1.008", "P1.044", "P1.045", "P1.046",
-                            "P1.068", "P2.017", "P2.060", "P2.061", "P2.062", "P2.065"})
+_CONFIG_PARAMS = frozenset({"P1.000", "P1.001", "P1.003", "P1.008", "P1.044", "P1.045",
+                            "P1.046", "P1.068", "P1.097", "P2.017", "P2.060", "P2.061",
+                            "P2.062", "P2.065", "P2.069"})
 _INTERP_MODE = 5  # Axis._INTERP
 
 
@@ -72,7 +79,9 @@ class _Config:
     p1068: int
     tau_ms: float
     pt_yx: bool
-    p1046: int
+    out_per_rev: float  # OA/OB quadrature counts per revolution (P1.046, P1.097)
+    out_sign: int  # P1.003.Y: 0 forward, 1 reverse output (L7866-7869)
+    abs_lost_blocks: bool  # P2.069.Y = 0 (L10027-10029)
 
 
 @dataclass(frozen=True)
@@ -107,6 +116,13 @@ class Segment:
         return sign * (4 if self.form == "ab" else 1)
 
 
+def output_per_rev(p1046: int, p1097: int) -> float:
+    """OA/OB quadrature counts per motor revolution (CN2 the source, P1.074.Y = 0): 4 x P1.046
+    with P1.097 = 0, else P1.046 / P1.097 with no x4 (L9060-9081: 2500 / 7 is 2500 per seven
+    turns)."""
+    return 4.0 * p1046 if p1097 == 0 else p1046 / p1097
+
+
 def filter_max_hz(p1_000: int) -> float | None:
     """Highest frequency P1.000.UY lets through (half period >= width), None without a
     filter (L7716-7733: Y 0 none; width Y+1 us for U = 0, (Y+1)/10 us for U = 1)."""
@@ -129,6 +145,9 @@ class PulseTrain:
         self.line_total = 0  # signed pulses seen on the line (before any filter)
         self._machine: dict[str, bool] = {}  # DOG / NL / PL as the PLC's inputs see them
         self.lost_format = self.lost_limit = self.lost_inhibit = self.lost_off = 0
+        self.lost_alarm = 0  # refused while AL060 / AL06A (P2.069.Y = 0)
+        self.cn1 = 0  # decoded pulses at CN1 whatever the mode (P5.018, monitor 049)
+        self._cn1_base = 0  # P5.018 as last written (the counter presets to it)
         self.command = 0.0  # PT command position, physical counts (before smoothing)
         self._base = 0.0  # the command before the pulses began (the filters start from it)
         self._frac = 0.0  # gear remainder, counts
@@ -156,7 +175,9 @@ class PulseTrain:
         # encoder output (OA/OB window, OZ)
         self._out_t = 0
         self._out_pos = 0.0
-        self._out_acc = 0.0
+        self._out_pos0 = 0.0  # the position the output counts from
+        self._out_sent = 0  # counts output since then
+        self._out_scale: tuple[float, int] | None = None
 
     # ------------------------------------------------------------------ configuration
     def _config(self) -> _Config:
@@ -179,7 +200,9 @@ class PulseTrain:
                 p1068=get("P1.068"),
                 tau_ms=get("P1.008") * 10.0,
                 pt_yx=(get("P1.001") & 0xFF) in PT_YX,
-                p1046=get("P1.046"),
+                out_per_rev=output_per_rev(get("P1.046"), get("P1.097")),
+                out_sign=-1 if (get("P1.003") >> 4) & 0xF == 1 else 1,
+                abs_lost_blocks=(get("P2.069") >> 4) & 0xF == 0,
             )
         return c
 
@@ -266,23 +289,29 @@ class PulseTrain:
             return
         self._taken += n
         self.line_total += s.direction * n
-        if s.count and self._taken >= s.count:
+        self._count(n, s, pt)
+        if s.count and self._taken >= s.count:  # its last pulse: none come now (monitor 006)
             self.seg = None
             self.freq_hz = 0.0
-        self._count(n, s, pt)
 
     def _count(self, n: int, s: Segment, pt: bool | None = None, force: bool = False) -> None:
         d = self.d
         c = self._config()
         counts = s.counts(c.logic)
         if force:  # a cruise's pulses: every condition held, as checked when it began
+            self.cn1 += n * counts
             self._add(n, s, counts)
             return
+        if s.form == c.form and s.freq <= c.max_hz:  # the input decodes them: CN1 counts
+            self.cn1 += n * counts
         if s.form != c.form:
             self.lost_format += n
             return
         if not d.servo_on or not (self.in_pt() if pt is None else pt):
             self.lost_off += n
+            return
+        if self._abs_lost():
+            self.lost_alarm += n
             return
         if s.freq > c.max_hz:  # beyond the interface or the P1.000.UY filter
             self.lost_limit += n
@@ -297,6 +326,28 @@ class PulseTrain:
             self.lost_inhibit += n
             return
         self._add(n, s, counts)
+
+    def cn1_count(self) -> int:
+        """P5.018 / monitor 049: the pulse command count at CN1 (L11298-11305, L15483), in
+        decoder counts (A/B: four a period, as monitor 001), signed 32-bit, preset by a write
+        of P5.018. It counts what the input decodes in any mode and servo state: P5.018 is
+        also how PR mode's E-cam watches CN1 (L5585)."""
+        s = self.seg
+        n = self.cn1 + self._cn1_base
+        if self._cruise_end and s is not None:  # a cruise takes its pulses at its end
+            n += s.counts(self._config().logic) * (s.pulses_at(self.d.now) - self._taken)
+        return (n + 2**31) % 2**32 - 2**31
+
+    def preset_cn1(self, _name: str, _old: int, value: int) -> None:
+        self._cn1_base = value - self.cn1
+
+    def _abs_lost(self) -> bool:
+        """P2.069.Y = 0: no pulse command is accepted while AL060 or AL06A is active
+        (L10027-10029). Both arise at power-up or from the handshake, never inside a cruise."""
+        if not self._config().abs_lost_blocks:
+            return False
+        active = self.d.alarms.active
+        return "AL060" in active or "AL06A" in active
 
     def _add(self, n: int, s: Segment, counts: int) -> None:
         self.accepted += n * counts
@@ -322,14 +373,30 @@ class PulseTrain:
         d = self.d
         if not (d.servo_on and self.in_pt()):
             return
-        ax = d.axis
+        self._follow()
+        if not self._at_limit():  # a limit's ramp stop (drive._on_limit) runs on
+            d.axis.interpolate_to(d.axis.demand, d.step_ns, by="PT")
+
+    def _follow(self) -> None:
+        """The axis follows the PT command from here on, starting from its own demand."""
         if not self._active:
             self._active = self.used = True
-            self.command = self._base = ax.demand
+            self.command = self._base = self.d.axis.demand
             self._frac = 0.0
             self._ma.clear()
             self._lpf = None
-        ax.interpolate_to(ax.demand, d.step_ns, by="PT")
+
+    def _at_limit(self) -> bool:
+        dio = self.d.dio
+        return dio.function_active("PL") or dio.function_active("NL")
+
+    def _towards_limit(self, target: float) -> bool:
+        """PL / NL forbid running forward / in reverse in every mode (L15186-15191): with
+        P2.065 bit 11 = 0 the pulses still enter the drive (L9928), the motor does not go."""
+        dio = self.d.dio
+        demand = self.d.axis.demand
+        return ((target > demand and dio.function_active("PL"))
+                or (target < demand and dio.function_active("NL")))
 
     def _smoothed(self) -> float:
         """P1.068 moving average (ms samples) then P1.008 low-pass (10 ms)."""
@@ -357,6 +424,10 @@ class PulseTrain:
 
     def after_step(self) -> None:
         d = self.d
+        if not d.servo_on and self.used and not self._active:  # the command follows the
+            pos = d.axis.position                                # feedback (a coasting motor)
+            if self.command != pos:
+                self.command = self._base = pos
         if self.seg is None and not self._active:
             self._pt_now = False
             if self.listeners or d.axis.velocity:
@@ -376,6 +447,8 @@ class PulseTrain:
             self._resync()
         self._pt_now = pt = self.in_pt()  # once per step (TPOS reads it too)
         if self.seg is not None:
+            if not self._active and pt and d.servo_on:
+                self._follow()  # a train already running as the servo came on / PT began
             self._take(d.now, pt)
         if "CCLR" in d.axis.locks:  # a level CCLR keeps the error at 0 (L9753)
             self.clear_error()
@@ -390,8 +463,9 @@ class PulseTrain:
                 settled = (self.seg is None and target == self.command
                            and all(v == self.command for v in self._ma))
                 if not settled or d.axis.demand != target:
-                    d.axis.interpolate_to(target, d.step_ns, by="PT")
-                    self._maybe_cruise(pt)
+                    if not self._towards_limit(target):  # else the limit's stop holds it
+                        d.axis.interpolate_to(target, d.step_ns, by="PT")
+                        self._maybe_cruise(pt)
                 else:
                     self._active = False
         if self.listeners or d.axis.velocity:
@@ -405,7 +479,7 @@ class PulseTrain:
         as they come (another form, the filter, INHP, a limit: then no cruise)."""
         c = self._config()
         d = self.d
-        if s.form != c.form or s.freq > c.max_hz or not d.servo_on:
+        if s.form != c.form or s.freq > c.max_hz or not d.servo_on or self._abs_lost():
             return None
         dio = d.dio
         if c.inhp_di8 and dio.function_active("INHP"):
@@ -515,17 +589,25 @@ class PulseTrain:
 
     # ------------------------------------------------------------------ encoder output
     def _encoder_output(self) -> None:
-        """OA/OB counts summed per window; OZ at each index crossing; AL018 (L8569)."""
+        """OA/OB counts summed per window; OZ at each index crossing; AL018 (L8569).
+
+        The counts output are those of the motor's travel since the reference position
+        `_out_pos0`, converted at once (not summed from increments, whose rounding drifts):
+        a motor back at its start has output exactly zero. P1.003.Y = 1 reverses them."""
         d = self.d
         ax = d.axis
-        per_rev = 4 * self._config().p1046  # quadrature counts per revolution
-        if (ax.velocity and not self._config().p2065 & (1 << 13)
+        c = self._config()
+        per_rev = c.out_per_rev
+        if (ax.velocity and not c.p2065 & (1 << 13)
                 and abs(ax.velocity) / COUNTS_PER_REV * per_rev > OUTPUT_MAX_HZ):
             d.alarms.raise_alarm("AL018")
-        if not self.listeners:
-            self._out_pos = ax.position
+        if not self.listeners or (per_rev, c.out_sign) != self._out_scale:
+            self._out_scale = (per_rev, c.out_sign)  # a new scale counts from here
+            self._out_pos0 = self._out_pos = ax.position
+            self._out_sent = 0
             self._out_t = d.now
-            return
+            if not self.listeners:
+                return
         for z in d.mech.index_crossed(ax.last_position, ax.position):
             span = ax.position - ax.last_position
             frac = (z - ax.last_position) / span if span else 1.0
@@ -537,9 +619,10 @@ class PulseTrain:
             return
         if d.now - self._out_t < window and ax.position != ax.last_position:
             return  # the window runs on (a motor coming to rest flushes it at once)
-        delta = (ax.position - self._out_pos) * per_rev / COUNTS_PER_REV + self._out_acc
-        whole = math.trunc(delta)
-        self._out_acc = delta - whole
+        total = c.out_sign * math.floor(
+            (ax.position - self._out_pos0) * per_rev / COUNTS_PER_REV + 1e-6)
+        whole = total - self._out_sent
+        self._out_sent = total
         dt = d.now - self._out_t
         if whole:
             self.emit("OAB", {"t": self._out_t, "freq": abs(whole) * 1e9 / dt,
@@ -557,6 +640,9 @@ class PulseTrain:
         self._taken = 0
         self.accepted = self.line_total = 0
         self.lost_format = self.lost_limit = self.lost_inhibit = self.lost_off = 0
+        self.lost_alarm = 0
+        self.cn1 = 0
+        self._cn1_base = self.d.params.stored("P5.018")
         self._cruise_end = 0
         self._rebuild = None
         self._active = self.used = False
@@ -572,6 +658,12 @@ class PulseTrain:
                 "pt_error": round(self.error()) if self.used else 0}
 
 
+def _gnum_wired(d: DriveCore) -> bool:
+    """GNUM0 or GNUM1 on a DI: N2-N4 can be selected (without them Nx is P1.044, L9850)."""
+    dio = d.dio
+    return any(dio.di_function(n) in ("GNUM0", "GNUM1") for n in range(1, N_DI + 1))
+
+
 def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
     def validate(name: str, value: int) -> None:
         # the range is of the command *pulse* input ratio (L8543-8547): PT modes only
@@ -579,7 +671,8 @@ def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
             return
         p = d.params
         m = value if name == "P1.045" else p.get("P1.045")
-        nums = [p.get("P1.044")] if name == "P1.045" else [value]
+        nums = [value] if name != "P1.045" else [p.get("P1.044")] + (
+            [p.get(n) for n in ("P2.060", "P2.061", "P2.062")] if _gnum_wired(d) else [])
         for nx in nums:
             if not GEAR_MIN < nx / m < GEAR_MAX:
                 other = "numerator" if name == "P1.045" else "denominator P1.045"
@@ -592,10 +685,12 @@ def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
 def _monitor(d: DriveCore, pt: PulseTrain, select: str, stored: Callable[[], int]
              ) -> Callable[[], int]:
     """P0.009-P0.013 read the monitor code their P0.017-P0.021 select (L7147-7237): the
-    position codes 000-006 of the monitor table (L15440-15446); other codes keep the stored
-    value (not modelled)."""
+    position codes 000-006 of the monitor table (L15440-15446) and 049, the CN1 pulse count
+    (L15483); other codes keep the stored value (not modelled)."""
     def read() -> int:
         code = d.params.get(select)
+        if code == 49:  # pulse command count at CN1 (L15483), = P5.018
+            return pt.cn1_count()
         if code > 6:
             return stored()
         ax = d.axis
@@ -619,6 +714,8 @@ def attach_pulse_train(drive: DriveCore) -> PulseTrain:
         reg, select = f"P0.{9 + i:03d}", f"P0.{17 + i:03d}"
         drive.params.on_read(reg, _monitor(drive, pt, select,
                                            lambda r=reg: drive.params.stored(r)))
+    drive.params.on_read("P5.018", pt.cn1_count)
+    drive.params.on_write("P5.018", pt.preset_cn1)
     drive.hooks.step.append(pt.after_step)
     validate = _check_gear(drive)
     for name in ("P1.044", "P1.045", "P2.060", "P2.061", "P2.062"):

@@ -3,7 +3,7 @@
 P1.000 input form / logic / filter L7660-7745; line driver 4 Mpps, open collector 200 kpps
 L7700-7707; AL008 L19535-19538 and P2.065 bit 6 L9892; e-gear §6.2.5 L3578-3598, P1.044
 L8518, P1.045 L8534-8547 (1/4 < Nx/M < 262144), GNUM0/GNUM1 with P2.060-P2.062 L9843-9850;
-INHP only on DI8 L3550, L15244; P2.065 bit 11 L9896-9900; CCLR P2.050 L9742-9753; P1.068
+INHP only on DI8 L3550, L15244; P2.065 bit 11 L9926-9930; CCLR P2.050 L9742-9753; P1.068
 L8832; P1.008 L7921; AL009 by P2.035 L9549-9556; TPOS by P1.054 L8685-8693; P1.046 OA/OB
 L8556-8571 and AL018; OCZ C11 L1851; PT-PR L15200.
 """
@@ -182,7 +182,7 @@ def test_inhp_on_another_di_has_no_effect() -> None:
 
 
 def test_p2065_bit11_blocks_only_pulses_towards_the_active_limit() -> None:
-    # bit 11 = 1: at the positive limit no forward pulse, reverse pulses accepted (L9896-9900)
+    # bit 11 = 1: at the positive limit no forward pulse, reverse pulses accepted (L9926-9930)
     d = make(**{"P2.065": 0x0800, "P2.014": 0x0123})  # DI5 = PL, a contact (L15190)
     d.set_di(5, True)
     d.advance(5 * MS)
@@ -383,3 +383,139 @@ def test_malformed_segments_are_refused() -> None:
     with pytest.raises(ValueError):
         d.pulse.segment(1.0, 1, 0, form="zigzag")
     assert d.pulse.accepted == 0
+
+
+# -- found by a review against the manual (wave 3, session 9) ----------------------------------
+GEAR_10K = {"P1.044": 16777216, "P1.045": 10000}  # 10 000 pulses a revolution
+
+
+@pytest.mark.parametrize("when", ["servo_cycle", "train_before_son", "pt_pr_to_pt"])
+def test_a_train_already_running_drives_the_motor_once_servo_on_in_pt(when: str) -> None:
+    # Servo on in PT: the pulses received drive the motor (L3503, L3510) whether the train
+    # began before, during or after the servo came on or PT was selected (PT-PR, L15200).
+    d = make(**GEAR_10K, **({"P1.001": 0x000D, "P2.014": 0x012B} if when == "pt_pr_to_pt"
+                            else {}))
+    if when == "servo_cycle":
+        d.pulse.segment(10_000, 1, 0)  # 1 rev/s
+        d.advance(200 * MS)
+        d.set_di(1, False)
+    elif when == "train_before_son":
+        d.set_di(1, False)
+        d.advance(20 * MS)
+        d.pulse.segment(10_000, 1, 0)
+    else:
+        d.set_di(5, True)  # PR
+        d.advance(5 * MS)
+        d.pulse.segment(10_000, 1, 0)
+    d.advance(100 * MS)
+    accepted, start = d.pulse.accepted, d.axis.position
+    if when == "pt_pr_to_pt":
+        d.set_di(5, False)
+    else:
+        d.set_di(1, True)
+    d.advance(20 * MS)
+    assert d.servo_on and d.difunc.control_mode() == "PT"
+    d.pulse.stop()
+    took = d.pulse.accepted - accepted
+    assert took >= 150  # 10 kpps for about 20 ms
+    d.advance(500 * MS)
+    moved = d.axis.position - start
+    assert moved == pytest.approx(took * COUNTS_PER_REV / 10_000, abs=COUNTS_PER_REV / 10_000)
+    assert abs(d.pulse.error()) < COUNTS_PER_REV / 10_000 and d.do(4)  # TPOS (L8692)
+
+
+def test_the_command_follows_a_coasting_motor_while_servo_off() -> None:
+    d = make(**GEAR_10K)
+    d.pulse.segment(10_000, 1, 0)
+    d.advance(200 * MS)
+    d.set_di(1, False)  # the motor coasts on after the servo goes off
+    for _ in range(5):
+        d.advance(20 * MS)
+        assert d.snapshot()["pt_error"] == 0
+
+
+def test_pl_with_p2065_bit11_off_takes_the_pulses_but_the_motor_does_not_run_into_it() -> None:
+    # PL forbids running forward in every mode (L15186-15191); with P2.065 bit 11 = 0 the
+    # pulses still enter the drive (L9928), so the error grows; reverse pulses run it back.
+    d = make(**GEAR_10K, **{"P2.065": 0, "P2.014": 0x0123})  # DI5 = PL, a contact
+    d.pulse.segment(10_000, 1, 0)
+    d.advance(100 * MS)
+    d.set_di(5, True)
+    d.advance(100 * MS)  # the P5.003 ramp stop ends
+    at_limit, accepted = d.axis.position, d.pulse.accepted
+    d.advance(300 * MS)
+    assert d.axis.position == pytest.approx(at_limit, abs=1)
+    assert d.pulse.accepted - accepted >= 2900 and d.pulse.lost_inhibit == 0
+    assert d.pulse.error() > 2900 * COUNTS_PER_REV / 10_000 and not d.do(4)
+    assert "AL015" in d.alarms.active
+    d.pulse.segment(10_000, -1, 0)  # reverse: once the command is behind the motor again,
+    d.advance(500 * MS)  # the motor runs back, away from the limit
+    assert d.axis.velocity < 0 and d.axis.position < at_limit - 500 * COUNTS_PER_REV / 10_000
+
+
+def test_pulses_are_refused_while_al06a_with_p2069_y_0() -> None:
+    # P2.069.Y = 0: with AL060 or AL06A active, no pulse command is accepted (L10027-10029)
+    d = Drive(inputs={8: True}, params=BENCH | {"P2.069": 0x0001})  # absolute, no origin
+    d.set_di(1, True)
+    d.advance(20 * MS)
+    assert "AL06A" in d.alarms.active and d.servo_on  # a warning (L19795)
+    run(d, 10_000, 1000)
+    assert d.pulse.accepted == 0 and d.pulse.lost_alarm == 1000 and d.axis.position == 0
+
+
+def test_p5018_and_monitor_049_count_the_cn1_pulses_in_any_state() -> None:
+    # P5.018: the pulse command count (L11298-11305); monitor 049: CN1 pulse count (L15483)
+    d = make(**{"P0.017": 49})
+    run(d, 10_000, 1234)
+    assert d.params.read("P5.018") == 1234 and d.params.read("P0.009") == 1234
+    d.set_di(1, False)
+    d.advance(10 * MS)
+    run(d, 10_000, 100, direction=-1)  # servo off: not a command, still counted at CN1
+    assert d.pulse.accepted == 1234 and d.params.read("P5.018") == 1134
+    d.params.write("P5.018", 0)  # a write presets the counter
+    run(d, 10_000, 10)
+    assert d.params.read("P5.018") == 10 and d.params.read("P0.009") == 10
+
+
+def test_monitor_006_reads_zero_once_a_counted_segment_has_ended() -> None:
+    # monitor 006: the pulse command frequency received now, kpps (L15446)
+    d = make(**{"P0.017": 6})
+    d.pulse.segment(10_000, 1, 50)
+    d.advance(2 * MS)
+    assert d.params.read("P0.009") == 10
+    d.advance(100 * MS)
+    assert d.params.read("P0.009") == 0 and d.snapshot()["pt_freq_kpps"] == 0
+
+
+@pytest.mark.parametrize("p1097, p1003, per_rev", [(0, 0, 10_000), (7, 0, 2500 / 7),
+                                                    (0, 0x10, -10_000)])
+def test_oa_ob_counts_per_revolution_with_p1097_and_p1003(p1097: int, p1003: int,
+                                                          per_rev: float) -> None:
+    # P1.097 = 0: 4 x P1.046 (example 1, L9065-9069); P1.097 = 7, P1.046 = 2500: 2500 per
+    # seven turns, no x4 (example 2, L9071-9081); P1.003.Y = 1 reverses the output (L7869)
+    d = make(**GEAR_10K, **{"P1.046": 2500, "P1.097": p1097, "P1.003": p1003})
+    seen: list[dict] = []
+    d.pulse.listeners.append(lambda k, data: seen.append(data) if k == "OAB" else None)
+    run(d, 10_000, 10_000)  # one revolution
+    one = sum(x["direction"] * x["count"] for x in seen)
+    assert one == int(per_rev)
+    run(d, 10_000, 60_000)  # six more
+    assert sum(x["direction"] * x["count"] for x in seen) == round(7 * per_rev)
+
+
+def test_oa_ob_output_nothing_net_for_a_motor_back_where_it_started() -> None:
+    d = make(**GEAR_10K, **{"P1.046": 2500, "P1.008": 5})  # a low-pass: the motor overshoots
+    seen: list[dict] = []
+    d.pulse.listeners.append(lambda k, data: seen.append(data) if k == "OAB" else None)
+    for direction in (1, -1, 1, -1):
+        run(d, 7_000, 3_333, direction=direction)
+    assert sum(x["direction"] * x["count"] for x in seen) == 0
+
+
+def test_a_p1045_write_checks_every_numerator_gnum_can_select() -> None:
+    # 1/4 < Nx/M < 262144 for N1-N4 (L8547); N2-N4 are chosen by GNUM0/GNUM1 (L9850)
+    wired = Drive(inputs={8: True}, params=BENCH | {"P2.060": 30_000, "P2.013": 0x0143})
+    with pytest.raises(OutOfRange, match="30000/200000"):
+        wired.params.write("P1.045", 200_000)  # N2 / M = 0.15
+    alone = Drive(inputs={8: True}, params=BENCH | {"P2.060": 30_000})
+    alone.params.write("P1.045", 200_000)  # no GNUM input: Nx is P1.044 (L9850)
