@@ -17,7 +17,8 @@ Input (A3 manual §6.2, P1.000 L7660-7745):
 * Electronic gear: counts = pulses x Nx / M, Nx = P1.044 / P2.060 / P2.061 / P2.062 by
   GNUM0/GNUM1 (L9850), M = P1.045; allowed 1/4 < Nx/M < 262144 (L8547): a write that
   leaves it is refused (option `pt_gear_check`).
-* INHP (DI 0x45) stops accepting pulses, only on DI8 (L3550, L15244); P2.065 bit 11: at a
+* INHP (DI 0x45) stops accepting pulses, only on DI8 (L3550, L15244), at the terminal edge
+  ("real-time", L15244: not through P2.009's filter); P2.065 bit 11: at a
   limit, pulses towards it are not accepted (L9926-9930); with bit 11 = 0 they are (L9928),
   but PL / NL still forbid the motor to run towards the limit (L15186-15191).
 * CCLR (P2.050, L9742-9753): the accumulated position error is cleared: the command
@@ -63,7 +64,7 @@ CRUISE_NS = 200_000_000  # the longest cruise before an exact resync
 # the parameters `_Config` reads: a write of one ends a cruise (P0.046, P4.009 ... do not)
 _CONFIG_PARAMS = frozenset({"P1.000", "P1.001", "P1.003", "P1.008", "P1.044", "P1.045",
                             "P1.046", "P1.068", "P1.097", "P2.017", "P2.060", "P2.061",
-                            "P2.062", "P2.065", "P2.069"})
+                            "P2.062", "P2.065", "P2.069", "P3.006"})
 _INTERP_MODE = 5  # Axis._INTERP
 
 
@@ -75,6 +76,8 @@ class _Config:
     numerators: tuple[int, int, int, int]
     m: int
     inhp_di8: bool
+    inhp_a: bool  # DI8's contact: a (on when closed) or b (P2.017 digit Z)
+    inhp_sdi: bool  # DI8 from the software DI (P3.006 bit 7, L10585-10606)
     p2065: int
     p1068: int
     tau_ms: float
@@ -172,6 +175,7 @@ class PulseTrain:
         for f in ("INHP", "GNUM0", "GNUM1", "PL", "NL", "PT-PR", "CCLR", "SON"):
             drive.dio.on_function(f, self._input_changed)
         drive.params.subscribe(self._on_param)
+        drive.dio.on_raw(self._on_terminal)
         # encoder output (OA/OB window, OZ)
         self._out_t = 0
         self._out_pos = 0.0
@@ -196,6 +200,8 @@ class PulseTrain:
                 numerators=(get("P1.044"), get("P2.060"), get("P2.061"), get("P2.062")),
                 m=get("P1.045"),
                 inhp_di8=get("P2.017") & 0xFF == 0x45,
+                inhp_a=bool((get("P2.017") >> 8) & 0xF),
+                inhp_sdi=bool((get("P3.006") >> 7) & 1),
                 p2065=get("P2.065"),
                 p1068=get("P1.068"),
                 tau_ms=get("P1.008") * 10.0,
@@ -317,7 +323,7 @@ class PulseTrain:
             self.lost_limit += n
             return
         dio = d.dio
-        if c.inhp_di8 and dio.function_active("INHP"):
+        if self._inhibited(c):
             self.lost_inhibit += n
             return
         if c.p2065 & (1 << 11) and (  # single-direction inhibit at a limit
@@ -340,6 +346,26 @@ class PulseTrain:
 
     def preset_cn1(self, _name: str, _old: int, value: int) -> None:
         self._cn1_base = value - self.cn1
+
+    def _inhibited(self, c: _Config) -> bool:
+        """INHP on DI8 acts at the terminal, not after P2.009's filter: DI8 only, "to
+        guarantee a real-time pulse inhibit" (L15244); a software DI8 (P3.006) as mapped."""
+        if not c.inhp_di8:
+            return False
+        dio = self.d.dio
+        if c.inhp_sdi:
+            return dio.function_active("INHP")
+        return dio.input_level(8) == c.inhp_a
+
+    def _on_terminal(self, n: int, _closed: bool) -> None:
+        """A DI terminal edge, before the filter (and before the level changes): with INHP on
+        DI8, the pulses up to now count under the state before the edge."""
+        if n != 8 or self.seg is None or not self._config().inhp_di8:
+            return
+        if self._cruise_end:
+            self._resync()
+        self._take(self.d.now)
+        self._steady_since = self.d.now
 
     def _abs_lost(self) -> bool:
         """P2.069.Y = 0: no pulse command is accepted while AL060 or AL06A is active
@@ -482,7 +508,7 @@ class PulseTrain:
         if s.form != c.form or s.freq > c.max_hz or not d.servo_on or self._abs_lost():
             return None
         dio = d.dio
-        if c.inhp_di8 and dio.function_active("INHP"):
+        if self._inhibited(c):
             return None
         if c.p2065 & (1 << 11) and (dio.function_active("PL") or dio.function_active("NL")):
             return None

@@ -519,3 +519,22 @@ def test_a_p1045_write_checks_every_numerator_gnum_can_select() -> None:
         wired.params.write("P1.045", 200_000)  # N2 / M = 0.15
     alone = Drive(inputs={8: True}, params=BENCH | {"P2.060": 30_000})
     alone.params.write("P1.045", 200_000)  # no GNUM input: Nx is P1.044 (L9850)
+
+
+@pytest.mark.parametrize("p2009", [0, 2, 10])
+def test_inhp_on_di8_inhibits_at_the_terminal_edge_whatever_p2009(p2009: int) -> None:
+    # "DI.INHP 僅在 DI 8 支援此功能，以確保即時的脈波禁止" (L15244): not through the filter
+    d = make(**{"P2.017": 0x0145, "P2.009": p2009})  # DI8 = INHP, a contact
+    d.set_di(8, False)
+    d.advance(20 * MS)
+    d.pulse.segment(1_000_000, 1, 0)  # 1 MHz
+    d.advance(10 * MS + 123_456)  # off the 1 ms grid
+    sent = d.pulse.seg.pulses_at(d.now)
+    d.set_di(8, True)
+    d.advance(50 * MS)
+    assert d.pulse.accepted == sent
+    d.set_di(8, False)
+    resumed = d.pulse.seg.pulses_at(d.now)
+    d.advance(3 * MS + 500_000)
+    d.pulse.stop()
+    assert d.pulse.accepted == sent + d.pulse.line_total - resumed
