@@ -117,6 +117,11 @@ REFUSED = [
     ("inject: {options: {motion_step_ms: .nan}}", "motion_step_ms"),
     ("inject: {options: {dev_ignore_speed_rule: maybe}}", "dev_ignore_speed_rule"),
     ("inject: {options: {nmt_stop_action: halt}}", "nmt_stop_action"),
+    # plc_program's expected status: the kind each field holds (an execution fuzz of
+    # accepted plans found these raising TypeError at the end of the program)
+    *((f"plc_program: {{program: [{{SPD: 1000, DRV: 'ABS,,1,Ps'}}], expect: {{{k}: {v}}}}}",
+       f"expect.{k}") for k, v in (("feedback_tol", "0ms"), ("feedback", "DI8"), ("done", 1),
+                                  ("position", 1.5), ("feedback_tol", -1))),
 ]
 
 

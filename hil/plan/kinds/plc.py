@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from typing import TYPE_CHECKING, Any
 
@@ -36,7 +37,9 @@ if TYPE_CHECKING:
 _STEP_KEYS = {"SPD", "DRV", "DRVC", "DRVZ", "WAIT", "ACT", "EXT", "GOTO"}
 _X = re.compile(r"^[XMY][0-9]{1,4}$")
 _DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?)\s*,\s*(Ut|Ps)\s*$")
-_EXPECT = {"position", "remaining", "error", "done", "freq", "feedback", "feedback_tol"}
+# what `expect:` may name, and what each holds (the PLC's status, hil.drivers.plc_pulse.Status)
+_EXPECT = {"position": "int", "remaining": "int", "error": "int", "done": "bool",
+           "freq": "number", "feedback": "int", "feedback_tol": "tolerance"}
 _AXIS = {f.name: f for f in dataclasses.fields(AxisParams)}
 
 
@@ -68,6 +71,21 @@ def _drv(v: Checker, text: Any, line: int, where: str, chained: bool) -> Drv:
                     "or \"ADR,+,200,Ut\" (mode ABS/ADR, direction +/-/blank, stroke, unit "
                     "Ut/Ps; error 43)")
     return Drv(m.group(1), m.group(2), float(m.group(3)), m.group(4), chained)
+
+
+def _expect_value(v: Checker, val: Any, line: int, where: str, kind: str) -> None:
+    """An `expect:` value of the kind its status field holds."""
+    if kind == "bool":
+        if not isinstance(val, bool):
+            raise v.err(line, where, f"{val!r}: true or false")
+        return
+    number = isinstance(val, int | float) and not isinstance(val, bool)
+    if not number or not math.isfinite(val):
+        raise v.err(line, where, f"{val!r}: a number")
+    if kind == "int" and val != int(val):
+        raise v.err(line, where, f"{val!r}: a whole number (the PLC counts pulses)")
+    if kind == "tolerance" and val < 0:
+        raise v.err(line, where, f"{val!r}: a tolerance, 0 or more")
 
 
 def _line_name(v: Checker, val: Any, line: int, where: str) -> str:
@@ -179,7 +197,9 @@ class PlcProgram(StepKind):
         expect: dict[str, Any] = {}
         if "expect" in m:
             e = v.mapping(m["expect"], m.kline("expect"), join(where, "expect"))
-            v.keys(e, _EXPECT, join(where, "expect"))
+            v.keys(e, set(_EXPECT), join(where, "expect"))
+            for k, val in e.items():
+                _expect_value(v, val, e.kline(k), join(join(where, "expect"), k), _EXPECT[k])
             expect = dict(e)
         return PlcProgramArgs(axis, prog, timeout, expect, slice_ns / 1e6)
 
