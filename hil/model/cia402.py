@@ -769,6 +769,9 @@ class Cia402:
         period = round(unit * 10.0**index * S) if unit > 0 else MS  # L19089-19113
         target = self.axis.origin + puu_to_counts(pos_puu, self._num, self._den)
         self._ip_target = target
+        demand = self.axis.demand
+        if (self._pl and target > demand) or (self._nl and target < demand):
+            return  # PL/NL forbid running that way in every mode (L15188-15191): the stop holds
         self.axis.interpolate_to(target, max(period, 1))
 
     def _apply_halt(self) -> None:

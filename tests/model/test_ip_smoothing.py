@@ -124,3 +124,32 @@ def test_the_same_set_point_every_cycle_lets_the_axis_settle() -> None:
         assert not d.axis.moving and d.axis.at_target
         settled.append(steps)
     assert abs(settled[0] - settled[1]) <= 5  # the motor's own settling, not the filter's
+
+
+@pytest.mark.parametrize("period_ms", [1, 2])
+def test_ip_set_points_never_run_into_an_active_limit(period_ms: int) -> None:
+    # PL forbids running forward in every mode (L15191, statusword bit 14 L18316): a master
+    # that re-enables (0x0F) at the limit and streams forward set-points does not move the
+    # motor; set-points behind it run it back (a review against the manual, session 9)
+    d = Drive(inputs={6: True, 7: True, 8: True}, params={"P2.041": 0x0108, "P1.068": 0},
+              sensors={})  # DI6/DI7 = NL/PL, b contacts (factory), no cams
+    d.write_object(0x6060, 0, 7)
+    d.write_object(0x60C2, 1, period_ms)
+    for cw in (0x06, 0x07, 0x0F):
+        d.write_object(0x6040, 0, cw)
+    d.advance(50 * MS)
+    d.set_di(7, False)  # PL
+    d.advance(10 * MS)
+    assert "AL015" in d.alarms.active and d.read_object(0x6041, 0) & 0x4000
+    d.write_object(0x6040, 0, 0x0F)
+    start = sp = d.read_object(0x6064, 0)
+    for _ in range(100 // period_ms):
+        sp += 100 * period_ms
+        d.write_object(0x60C1, 1, sp)
+        d.advance(period_ms * MS)
+    assert d.read_object(0x6064, 0) == start
+    for _ in range(20):
+        sp = start - 1000
+        d.write_object(0x60C1, 1, sp)
+        d.advance(period_ms * MS)
+    assert d.read_object(0x6064, 0) < start - 500
