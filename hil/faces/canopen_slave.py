@@ -316,7 +316,10 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
         if cid == self._values.get((0x1005, 0), 0x80) & 0x7FF:
             if self.state == "OPERATIONAL":
                 period = self._values.get((0x1006, 0), 0) * US
-                self.comm.sync(sent_ns(msg), now, period, self._ip_sync_monitored())
+                ip = int(self.drive.read_object(0x6061, 0)) == IP_MODE
+                if ip and period <= 0:
+                    self.comm.sync_period_error()  # AL305: IP on SYNC, 1006h = 0
+                self.comm.sync(sent_ns(msg), now, period, ip and period > 0)
                 self._on_sync(now)
             return
         if self._on_heartbeat_in(cid, data, now, msg.is_remote_frame):

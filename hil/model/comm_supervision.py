@@ -11,7 +11,8 @@ does about it (docs/faults.md; thresholds and deviation knobs: `ModelOptions`):
 * AL180 heartbeat consumer / life guarding timeout (L17806-L17838), and what 1029h makes of
   it (`error_behaviour`);
 * in IP mode with 1006h > 0: AL3E2 early SYNC (L20159-20163), AL301 cycle off 1006h
-  (L20123-20127, P3.009 E, L10629-10645), AL3E3 SYNC timeout (L20165-20169).
+  (L20123-20127, P3.009 E, L10629-10645), AL3E3 SYNC timeout (L20165-20169); with 1006h = 0,
+  AL305 at a SYNC (L20135-20139).
 
 Times are ns: `sent` is the sender's stamp of a frame, `now` the model time it acts.
 """
@@ -176,6 +177,12 @@ class CommSupervision:
             if abs(mean - period_ns) > fail_tol and not opts.dev_ignore_sync_cycle:
                 self._alarm("AL301")  # synchronisation failure (L20123-20127)
                 self._sync_intervals.clear()
+
+    def sync_period_error(self) -> None:
+        """A SYNC for IP mode while 1006h is 0: AL305 "SYNC period error", 1006h <= 0
+        (L20135-20139). 0 also means "SYNC not used" (L17630), and the manual names no moment
+        for the check: it is made when a SYNC arrives in IP mode (docs/manual-choices.md)."""
+        self._alarm("AL305")
 
     def sync_timed_out(self, now: int, monitored: Callable[[], bool]) -> None:
         """AL3E3 when no SYNC came in time and `monitored()` (IP mode, asked only then); a

@@ -239,7 +239,7 @@ class Drive:
         # P1.039, TPOS P1.054, MC_OK hold / AL380 P1.048: L8608-8632, L15269-15275)
         for name_ in ("P1.038", "P1.039", "P1.048", "P1.054"):
             self.params.on_write(name_, lambda *_: self.refresh_outputs())
-        for name_ in ("P1.068", "P1.036"):  # IP smoothing (L17236-17238)
+        for name_ in ("P1.068", "P1.036"):  # IP smoothing (L17232)
             self.params.on_write(name_, lambda *_: self._ip_filters())
         self._ip_filters()
 
@@ -495,7 +495,7 @@ class Drive:
 
     def _ip_filters(self) -> None:
         """P1.068 (moving filter, ms, L8826-8840) then P1.036 (S-curve, ms, L8358-8365) on IP
-        set-points, as the IP section recommends (L17236-17238; option `ip_smoothing`)."""
+        set-points, as the IP section recommends (L17232; option `ip_smoothing`)."""
         step_ms = self.step_ns / MS  # one sample per model step
         self.axis.ip_windows = tuple(
             max(1, round(self.params.get(name) / step_ms)) for name in ("P1.068", "P1.036")

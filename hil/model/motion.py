@@ -211,7 +211,7 @@ class Axis:
         self._ip_target = 0.0
         self._ip_rate = 0.0
         self._ip_rem = 0
-        # IP set-point smoothing (P1.068 moving filter, P1.036 S-curve; L17236-17238): moving
+        # IP set-point smoothing (P1.068 moving filter, P1.036 S-curve; L17232): moving
         # averages over the interpolated command, windows in samples (one per model step)
         self.ip_windows: tuple[int, ...] = ()
         self._ip_raw = 0.0

@@ -161,7 +161,7 @@ class ModelOptions:
     output_window_ms: float = 10.0
     # --- IP mode (docs/group.md) ---
     # The IP section recommends P1.036 (S-curve) and P1.068 (moving filter) to smooth the
-    # set-points (L17236-17238), while P1.068's own mode column lists PT/PR only (L8832):
+    # set-points (L17232), while P1.068's own mode column lists PT/PR only (L8832):
     # "manual" applies both to IP set-points (P1.068 ms moving average, then a P1.036 ms one,
     # the S-curve of a ramp); "off" leaves IP set-points unfiltered.
     ip_smoothing: str = "manual"

@@ -437,3 +437,26 @@ def test_sync_rules_are_timed_from_the_wire_not_from_a_late_producer(tmp_path):
     # from the fault's start (the old anchor, [2 x 20, 3 x 20 + 20] ms) both would fail
     assert not 40 <= (alarms["AL3E3"] - t_drop) / 1e6 <= 80
     assert (alarms["AL3E2"] - t_dup) / 1e6 > 40
+
+
+def test_al305_when_sync_drives_ip_mode_with_1006h_zero(tmp_path):
+    """AL305 "SYNC period error": 1006h <= 0 (L20135-20139); 0 also means "SYNC not used"
+    (L17630), so it is judged when a SYNC arrives in IP mode. Not outside IP mode, not with
+    1006h set; cleared by a 6040h reset (L20139)."""
+    rig = FaultRig(tmp_path / "run.mcap")
+    try:
+        rig.nmt(0x01)
+        enable(rig)  # profile position: SYNC with 1006h = 0 is no error
+        rig.produce("sync", 20, 0x80)
+        rig.run(100)
+        assert "AL305" not in rig.alarms
+        rig.sdo_write(0x6060, 0, 7, 1)  # IP mode
+        rig.run(100)
+        assert "AL305" in rig.alarms
+        rig.sdo_write(0x1006, 0, 20_000)
+        rig.sdo_write(0x6040, 0, 0x8F, 2)
+        rig.sdo_write(0x6040, 0, 0x0F, 2)
+        rig.run(200)
+        assert "AL305" not in rig.alarms
+    finally:
+        rig.close()
