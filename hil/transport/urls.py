@@ -229,6 +229,11 @@ def check_zenoh_key(url: str, key: str) -> None:
                                      "trailing or double '/')")
 
 
+def can_bitrate(url: str) -> int:
+    """A CAN bus's bit rate from its URL (`?bitrate=`), else 1 Mbit/s (the A3's CANopen)."""
+    return parse_url(url, "can").int_param("bitrate", 1_000_000, 10_000, 1_000_000)
+
+
 def parse_url(url: str, kind: Kind) -> TransportUrl:
     """Parse and check a transport URL for a CAN bus, a serial line or a DI/DO set."""
     if kind not in SCHEMES:

@@ -112,3 +112,32 @@ def test_a_burst_the_host_stretched_past_1ms_is_sent_again():
         _burst(slow, "sdo_flood", [frame(0x601)] * 2)
     assert "sent again" not in _burst(FaultyCanBus(SlowBus([0.002] * 3), "can0"),
                                       "bus_error", [frame(0)] * 3)  # no window
+
+
+def test_a_burst_the_wire_cannot_carry_within_1ms_is_refused_at_check():
+    """9 SDO requests are 9 x 124 bits: 1.1 ms at 1 Mbit/s, never within AL111's 1 ms
+    (L19933): `--check` says so, naming the count (an execution fuzz found it failing at run
+    time as "host under load")."""
+    from hil.plan.plan import loads_plan
+
+    bench = load_bench(fixture("benches", "virtual.yaml"))
+    check_plan(loads_plan("name: p\nsteps:\n  - fault: {can: sdo_flood, count: 8}\n"), bench)
+    with pytest.raises(PlanFileError, match=r"count: 9 frames take 1116 µs on the wire at "
+                                            r"1000 kbit/s"):
+        check_plan(loads_plan("name: p\nsteps:\n  - fault: {can: sdo_flood, count: 9}\n"), bench)
+
+
+def test_in_virtual_time_a_burst_over_1ms_says_the_bus_is_full_not_the_host(tmp_path):
+    """7 requests with the drive's answers between them take 1.8 ms of wire: in virtual time
+    that is the same on every try, so the step ends at once and says why."""
+    import dataclasses
+
+    from hil.plan.plan import loads_plan
+    from hil.plan.runner import run_plan
+
+    bench = dataclasses.replace(load_bench(fixture("benches", "virtual.yaml")), clock="virtual")
+    plan = loads_plan("name: p\nsteps:\n  - fault: {can: sdo_flood, count: 7}\n")
+    r = run_plan(plan, bench, tmp_path, reports=False)
+    [step] = r.steps
+    assert step.status == "error" and "send fewer" in step.message, step.message
+    assert "host under load" not in step.message

@@ -35,6 +35,7 @@ from hil.bench.param_rules import sdo_parameter
 from hil.bench.yamlio import Checker, join, parse_duration, shorten
 from hil.plan.context import Outcome
 from hil.plan.kinds.base import CheckContext, StepKind
+from hil.plan.session import BenchError
 from hil.transport.cyclic import CyclicSender
 from hil.transport.faults import (
     BURST_WINDOW_NS,
@@ -46,6 +47,8 @@ from hil.transport.faults import (
     FaultyCanBus,
     error_frames,
 )
+from hil.transport.sim import frame_bits
+from hil.transport.urls import can_bitrate
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
@@ -131,6 +134,18 @@ def _node(d: Any) -> int:
 BURST_ATTEMPTS = 5
 
 
+def _burst_frames(a: Any, node: int) -> list[can.Message]:
+    """The frames of a burst fault: `count` of them."""
+    if a.kind == "sdo_flood":  # 1000h uploads back to back: well within 1 ms
+        req = bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])
+        return [can.Message(arbitration_id=0x600 + node, data=req, is_extended_id=False)
+                for _ in range(a.count)]
+    if a.kind == "duplicate_pdo":
+        return [can.Message(arbitration_id=a.cob_id, data=a.data, is_extended_id=False)
+                for _ in range(a.count)]
+    return error_frames(a.count)
+
+
 def _burst(bus: FaultyCanBus, kind: str, frames: list[can.Message]) -> str:
     window = BURST_WINDOW_NS.get(kind)
     late: list[str] = []
@@ -142,10 +157,15 @@ def _burst(bus: FaultyCanBus, kind: str, frames: list[can.Message]) -> str:
                      f"{window / 1e6:g} ms the fault needs)" if late else "")
             return f"{kind}: {n} frames back to back on can:{bus.name} in {spread}{again}"
         late.append(spread)
+        if clock.is_virtual():  # the wire's own time, the same every try: the bus is full
+            raise BenchError(f"{kind}: {len(frames)} frames took {spread} on can:{bus.name} "
+                             f"with the traffic around them (the drive's answers), over the "
+                             f"{window / 1e6:g} ms the fault needs: the fault was not "
+                             "injected; send fewer")
         clock.sleep(0.002)  # apart from the stretched one
-    raise RuntimeError(f"{kind}: the host could not send {len(frames)} frames within "
-                       f"{window / 1e6:g} ms in {BURST_ATTEMPTS} tries ({', '.join(late)}): "
-                       "the fault was not injected (host under load)")
+    raise BenchError(f"{kind}: the host could not send {len(frames)} frames within "
+                     f"{window / 1e6:g} ms in {BURST_ATTEMPTS} tries ({', '.join(late)}): "
+                     "the fault was not injected (host under load)")
 
 
 def _late_logger(ctx: Any, what: str) -> Any:
@@ -288,6 +308,14 @@ class Fault(StepKind):
             if bus not in cc.bench.can:
                 raise cc.err(f"no CAN bus {bus!r} on bench {cc.bench.name!r} (buses: "
                              f"{', '.join(cc.bench.can) or 'none'})", "bus")
+            window = BURST_WINDOW_NS.get(a.kind)
+            if window is not None:  # the burst must fit the window on the wire at all
+                bitrate = can_bitrate(cc.bench.can[bus])
+                wire_ns = a.count * frame_bits(_burst_frames(a, 1)[0]) * 1e9 / bitrate
+                if wire_ns >= window:
+                    raise cc.err(f"{a.count} frames take {wire_ns / 1e3:.0f} µs on the wire at "
+                                 f"{bitrate / 1e3:g} kbit/s, not within the {window / 1e6:g} ms "
+                                 f"{a.kind} needs (AL111/AL112)", "count")
         elif t == "rs485" and d.rs485 is None:
             raise cc.err(f"drive {cc.dname} has no RS-485 line on bench {cc.bench.name!r}")
         elif t == "dio":
@@ -317,17 +345,7 @@ class Fault(StepKind):
                 bus.inject(kind, match=match, duration_ns=dur, rate=a.rate, delay_ns=a.delay,
                            every=a.every)
                 return f"{kind} {match.describe() or 'every frame'} on can:{bus.name}"
-            node = _node(d)
-            if kind == "sdo_flood":  # 1000h uploads back to back: well within 1 ms
-                req = bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])
-                frames = [can.Message(arbitration_id=0x600 + node, data=req, is_extended_id=False)
-                          for _ in range(a.count)]
-            elif kind == "duplicate_pdo":
-                frames = [can.Message(arbitration_id=a.cob_id, data=a.data,
-                                      is_extended_id=False) for _ in range(a.count)]
-            else:
-                frames = error_frames(a.count)
-            return _burst(bus, kind, frames)
+            return _burst(bus, kind, _burst_frames(a, _node(d)))
         if a.transport == "rs485":
             line = sess.fault_serial.get(d.spec.rs485 or "")
             if line is None:

@@ -31,7 +31,7 @@ from hil.drivers.axis_group import (
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds.base import CheckContext, NoArgs, StepKind
 from hil.plan.kinds.capture import arm_capture, read_array
-from hil.transport.urls import parse_url
+from hil.transport.urls import can_bitrate
 from hil.units import MS, S
 
 if TYPE_CHECKING:
@@ -308,7 +308,7 @@ class Group(StepKind):
             raise cc.err(f"the axes are on different CAN buses ({', '.join(sorted(buses))}): "
                          "an axis group is one bus", "axes")
         url = cc.bench.can[buses.pop()]
-        bitrate = _bitrate(url)
+        bitrate = can_bitrate(url)
         bits = worst_case_bits(len(names), heartbeat=bool(self.args.heartbeat))
         if bits / bitrate > self.args.cycle / S:
             raise cc.err(f"{len(names)} axes need up to {bits} bits a cycle: "
@@ -336,7 +336,7 @@ class Group(StepKind):
         group = AxisGroup(net, axes, self.args.cycle / S,
                           sdo_write=lambda name, i, s, val: drives[name].cia.write(i, s, val),
                           on_cycle=on_cycle,
-                          bitrate=_bitrate(ctx.bench.can[drives[axes[0].name].spec.can]),
+                          bitrate=can_bitrate(ctx.bench.can[drives[axes[0].name].spec.can]),
                           heartbeat_s=self.args.heartbeat / S or None,
                           heartbeat_timeout_s=self.args.heartbeat_timeout / S or None,
                           on_capture=on_capture)
@@ -362,11 +362,6 @@ class Group(StepKind):
 
     def describe(self) -> str:
         return f"group {', '.join(self.args.axes)} every {self.args.cycle / MS:g} ms"
-
-
-def _bitrate(url: str) -> int:
-    """The bus's bit rate from its URL (`?bitrate=`), else 1 Mbit/s (the A3's CANopen)."""
-    return parse_url(url, "can").int_param("bitrate", 1_000_000, 10_000, 1_000_000)
 
 
 class GroupMove(StepKind):
