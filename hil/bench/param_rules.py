@@ -36,6 +36,17 @@ def check_param(v: Checker, line: int, field: str, name: str, value: int | None,
                     "(chapter 8): the drive refuses the write")
 
 
+def wire_range(name: str, via: str) -> tuple[int, int]:
+    """The values a write of parameter `name` can carry on a route: its 2xxxh object is an
+    INTEGER16 / INTEGER32 on SDO (hil.profile.od), its Modbus words are its size, signed when
+    its range is (hil.drivers.delta_modbus). A value outside is never sent."""
+    spec = _table().spec(name)
+    bits = spec.size
+    if via == "modbus" and not spec.signed:
+        return 0, (1 << bits) - 1
+    return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+
+
 def sdo_parameter(index: int, sub: int, value: int) -> tuple[str, int] | None:
     """A raw SDO write to a 2xxxh object as the parameter it sets (Pa-bc <=> 2aBCh,
     L18154-18156): (name, value as the parameter reads it), or None for any other object."""

@@ -117,6 +117,10 @@ REFUSED = [
     ("inject: {options: {motion_step_ms: .nan}}", "motion_step_ms"),
     ("inject: {options: {dev_ignore_speed_rule: maybe}}", "dev_ignore_speed_rule"),
     ("inject: {options: {nmt_stop_action: halt}}", "nmt_stop_action"),
+    # a refusal the drive can give: a value the route can carry (SDO 2xxxh: INTEGER16;
+    # Modbus: P1.042's 16 bits unsigned); an execution fuzz found these raising ValueError
+    ("write: {P1.042: 65535, via: sdo, expect_error: 0x06090031}", "P1.042"),
+    ("write: {P1.042: -1, via: modbus, expect_error: 3}", "P1.042"),
     # plc_program's expected status: the kind each field holds (an execution fuzz of
     # accepted plans found these raising TypeError at the end of the program)
     *((f"plc_program: {{program: [{{SPD: 1000, DRV: 'ABS,,1,Ps'}}], expect: {{{k}: {v}}}}}",

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil.bench import virtual_rules
-from hil.bench.param_rules import check_param
+from hil.bench.param_rules import check_param, wire_range
 from hil.bench.yamlio import Checker, LDict, join
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds import fields
@@ -78,6 +78,13 @@ class Write(StepKind):
             line = raw.kline("expect_error") if hasattr(raw, "kline") else cc.step.line
             fields.check_expect_error(cc.v, line, join(cc.field, "expect_error"),
                                  self.args.expect_error, via)
+            for k, val in self.args.values.items():  # the refusal must be the drive's
+                lo, hi = wire_range(k, via)
+                if val is not None and not lo <= val <= hi:
+                    line = raw.kline(k) if hasattr(raw, "kline") else cc.step.line
+                    raise cc.err(f"{val} cannot be sent via {via}: {k} carries {lo}..{hi} "
+                                 "there, so the drive would never see the write to refuse it",
+                                 k, line=line)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         want = self.args.expect_error
