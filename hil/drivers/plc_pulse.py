@@ -109,8 +109,8 @@ class AxisParams:
         for code, name, ok, want in rules:
             if not ok:
                 raise PlcError(code, f"{name} = {getattr(self, name)!r}: {want}", field=name)
-        if not 0 <= self.backlash <= 32767:
-            raise PlcError(39, f"backlash = {self.backlash}: 0 ~ 32767 Ps", field="backlash")
+        if not 0 <= self.backlash <= 32767:  # P7: error 8 (001:34, parameter number + 1)
+            raise PlcError(8, f"backlash = {self.backlash}: 0 ~ 32767 Ps", field="backlash")
         if self.output not in FORMS:
             raise PlcError(1, f"output {self.output!r}: one of {', '.join(FORMS)}",
                            field="output")
@@ -122,7 +122,7 @@ class AxisParams:
         if self.max_speed_pps > top:
             raise PlcError(37, f"max_speed {self.max_speed_pps:g} Ps/s above the {self.hardware}"
                                f" {self.output} output's {top} Hz (001:14)", field="max_speed")
-        if not 1 <= self.start_speed_pps <= self.max_speed_pps:
+        if not 1 <= self.start_speed_pps <= self.max_speed_pps:  # 38: start/stop frequency
             raise PlcError(38, f"start_speed {self.start_speed} not within 1 ~ max_speed",
                            field="start_speed")
         if not 0 <= self.zero_count <= 255:
@@ -130,6 +130,11 @@ class AxisParams:
         if self.pg0_edge not in ("leading", "trailing"):
             raise PlcError(52, f"pg0_edge {self.pg0_edge!r}: leading or trailing",
                            field="pg0_edge")
+        for name, prefix, top, code in (("dog", "X", 15, 51), ("clr", "Y", 23, 53)):
+            val = getattr(self, name)  # host points only (001:58-60: X0~X15, Y0~Y23)
+            if val and not (len(val) > 1 and val[0] == prefix and val[1:].isdigit()
+                            and int(val[1:]) <= top):
+                raise PlcError(code, f"{name} {val!r}: {prefix}0 ~ {prefix}{top}", field=name)
         if self.clr and self.clr_ms <= CLR_MIN_MS:
             raise PlcError(53, f"clr_ms {self.clr_ms:g}: the CLR pulse must be > 20 ms "
                                "(001:124)", field="clr_ms")
@@ -393,7 +398,9 @@ class PulseMaster:
         if self._seg is not None:
             n = self._output_now()
             self.total += self._seg[2] * n
-            self.status.position += self._seg[2] * n * self._counted
+            # P9-0 = 1: forward pulses count down, reverse pulses count up (001:56)
+            sign = -1 if self.p.run_direction else 1
+            self.status.position += sign * self._seg[2] * n * self._counted
             self._seg = None
 
     def _send(self, freq: float, direction: int, count: int = 0, *, counted: bool = True
@@ -487,7 +494,8 @@ class PulseMaster:
     def home(self, mode: str, speed: float, timeout_s: float) -> None:
         """DRVZ MD0 / MD1 / MD2 (001:108-124). Raises TimeoutError when no zero is found."""
         p = self.p
-        hd = p.home_direction
+        # P9-1 names the count's direction (001:58): P9-0 = 1 reverses the pulses for it
+        hd = -p.home_direction if p.run_direction else p.home_direction
         v0 = min(p.start_speed_pps, speed)
         creep = float(p.creep_speed)
         self.status.homed, self.status.drvz = False, mode
@@ -514,19 +522,21 @@ class PulseMaster:
                 self._front_of_dog(speed, v0, left)
                 self.ramp_run(v0, speed, hd, self.dog, left())
         # DOG is on, moving in the homing direction at `speed`
-        if mode == "MD0":
-            self.ramp_run(speed, creep, hd, lambda: not self.dog(), left())
+        if mode == "MD0":  # at DOG at once to the creep speed (001:110, 122)
+            self._run(creep, hd, 0, lambda: not self.dog(), round(left() * S))
         elif mode == "MD1":
             self.ramp_stop(speed, hd)
             clock.sleep(MD1_WAIT_NS / S)
+            if not self.dog():  # the P8 stop ran past DOG: back into it first (a choice)
+                self._run(creep, -hd, 0, self.dog, round(left() * S))
             self._run(creep, -hd, 0, lambda: not self.dog(), round(left() * S))
         else:
-            if p.pg0_edge == "leading":
+            if p.pg0_edge == "leading":  # at DOG at once to the creep speed (001:114)
                 self._oz = 0
                 goal = p.zero_count
-                self.ramp_run(speed, creep, hd, lambda: self._oz >= goal, left())
+                self._run(creep, hd, 0, lambda: self._oz >= goal, round(left() * S))
             else:
-                self.ramp_run(speed, creep, hd, lambda: not self.dog(), left())
+                self._run(creep, hd, 0, lambda: not self.dog(), round(left() * S))
                 self._oz = 0
                 goal = p.zero_count
                 self._run(creep, hd, 0, lambda: self._oz >= goal, round(left() * S))
@@ -642,9 +652,14 @@ class PulseMaster:
             # stroke 0: run until the transition (001:38)
             v = chain[0][1] or self.p.max_speed_pps
             direction = -1 if first.direction == "-" else 1
-            self.ramp_run(self.p.start_speed_pps, v, direction, until or (lambda: False),
-                          left)
+            if self.p.run_direction:
+                direction = -direction
+            hit = self.ramp_run(self.p.start_speed_pps, v, direction,
+                                until or (lambda: False), left)
             self.stop()
+            if not hit:  # it runs until execute goes off (001:38): the program did not end
+                raise TimeoutError(f"a stroke-0 move ran {left:g} s without its EXT/ACT "
+                                   "transition")
             return
         cut = self.move(segs, direction, until)
         if cut and ext:

@@ -96,8 +96,12 @@ FAST = dict(max_speed=100_000, start_speed=500, accel_ms=100)
     ({"pulses_per_rev": 0}, 2), ({"creep_speed": 70000}, 7), ({"accel_ms": 30001}, 9),
     ({"max_speed": 250_000}, 37), ({"max_speed": 500_000, "hardware": "differential",
                                      "output": "A/B"}, 37),
-    ({"start_speed": 300_000}, 38), ({"backlash": 32768}, 39), ({"zero_count": 256}, 15),
+    ({"start_speed": 300_000}, 38), ({"zero_count": 256}, 15),
     ({"clr": "Y8", "clr_ms": 20.0}, 53),
+    # P7 is parameter 7: error 8 (39 is the travel compensation of P10/P11, 001:34)
+    ({"backlash": 32768}, 8),
+    # DOG and CLR are host points X0~X15 / Y0~Y23 (001:58-60): errors 51 / 53
+    ({"dog": "X16"}, 51), ({"dog": "Q7"}, 51), ({"clr": "Y24"}, 53),
 ])
 def test_fun141_refuses_with_its_error_code(kw, code):
     with pytest.raises(PlcError) as e:
@@ -269,3 +273,53 @@ def test_drvz_without_a_zero_point_times_out_and_stops():
         with pytest.raises(TimeoutError, match="DRVZ MD0"):
             r.plc.run(prog(Step(spd=20_000, drive="MD0")), timeout_s=0.5)
         assert r.segs[-1][1]["freq"] == 0  # the pulses stopped
+
+
+# -- found by a review against seed 001 (wave 3, session 9) --------------------------------------
+
+
+def test_p9_0_reversed_counts_down_for_forward_pulses_and_abs_still_arrives():
+    # P9-0 = 1: forward pulses count down, reverse pulses count up (001:56); ABS is from the
+    # position register (001:38), so the move still ends at its target
+    with rig(AxisParams(**FAST, run_direction=1)) as r:
+        r.plc.run(prog(Step(spd=20_000, drive=Drv("ABS", "", 5000), wait_time=0.1)))
+        assert r.plc.status.position == 5000
+        assert {s["direction"] for _, s in r.segs if s["freq"] > 0} == {-1}  # reverse pulses
+        assert r.rev() == pytest.approx(-0.5, abs=2 / PER_REV)
+        r.plc.run(prog(Step(spd=20_000, drive=Drv("ABS", "", 5000), wait_time=0.1)))
+        assert r.plc.status.position == 5000  # already there
+        r.plc.run(prog(Step(spd=20_000, drive=Drv("ADR", "+", 1000), wait_time=0.1)))
+        assert r.plc.status.position == 6000
+
+
+@pytest.mark.parametrize("mode", ["MD0", "MD2"])
+def test_md0_md2_drop_to_the_creep_speed_at_dog_at_once(mode):
+    # "碰到近點 DOG ... 立即降為原點復歸速度" (001:122; MD0 001:110, MD2 001:114): with the
+    # default P8 = 5000 ms the zero point is still taken at P6, not on a slope
+    mech = Mechanics(home_lo_rev=-0.25, home_hi_rev=0.25)  # a DOG half a revolution wide
+    with rig(AxisParams(**HOME | {"accel_ms": 5000}), mech=mech) as r:
+        _home(r, mode)
+        assert r.plc.status.homed
+        moving = [s for _, s in r.segs if s["freq"] > 0]
+        assert moving[-1]["freq"] == pytest.approx(2000)
+        assert r.rev() == pytest.approx(-0.25 if mode == "MD0" else 0.0, abs=10 / PER_REV)
+
+
+def test_md1_after_a_stop_past_dog_comes_back_through_it():
+    # MD1 (001:112): stop with P8, wait 0.5 s, reverse at P6, the zero where DOG turns off.
+    # A long P8 stop can run past a narrow DOG: the reverse run comes back into DOG first,
+    # and the zero is DOG's near edge, as after a stop inside it
+    mech = Mechanics(home_lo_rev=-0.25, home_hi_rev=0.25)
+    with rig(AxisParams(**HOME | {"accel_ms": 5000}), mech=mech) as r:
+        r.plc.run(prog(Step(spd=50_000, drive=Drv("ABS", "", 30_000), wait_time=0.1)))
+        r.plc.run(prog(Step(spd=20_000, drive="MD1")), timeout_s=30)
+        assert r.plc.status.homed
+        assert r.rev() == pytest.approx(0.25, abs=10 / PER_REV)  # DOG's near edge
+
+
+def test_a_stroke_0_move_that_never_meets_its_transition_is_not_a_finished_program():
+    # stroke 0: run until the transition (001:38); WAIT acts once the pulses are done (001:42),
+    # which never happens: the program has not ended when the time runs out
+    with rig(AxisParams(**FAST)) as r, pytest.raises(TimeoutError):
+        r.plc.run(prog(Step(spd=10_000, drive=Drv("ADR", "+", 0), ext="X5"), Step(end=True)),
+                  timeout_s=1.0)
