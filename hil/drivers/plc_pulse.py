@@ -141,15 +141,19 @@ class AxisParams:
 
     # -- units -----------------------------------------------------------------------------
     def pulses(self, value: float, unit: str = "Ps") -> int:
-        """A stroke in pulses: `Ut` through P1/P2 (mechanical unit), `Ps` as is."""
+        """A stroke in pulses: `Ut` in the mechanical unit (P0 = 0 or 2) is mm with P3
+        decimals, P2 (B) is µm a revolution and P1 (A) pulses a revolution (001:54-56);
+        `Ps` (or P0 = 1) as is."""
         if unit == "Ut" and self.unit != 1:
-            return round(value * self.pulses_per_rev / self.travel_per_rev)
+            um = value * 10 ** (3 - self.decimals)
+            return round(um * self.pulses_per_rev / self.travel_per_rev)
         return round(value)
 
     def speed(self, value: float) -> float:
-        """An SPD value in Ps/s."""
+        """A speed (SPD, P4, P5, P6) in Ps/s: with P0 = 0 it is cm/min, f = V x 1000 x A /
+        (6 x B) (001:54-56); P0 = 1 and 2 give it in Ps/s."""
         if self.unit == 0:
-            return value * self.pulses_per_rev / self.travel_per_rev
+            return value * 1000 * self.pulses_per_rev / (6 * self.travel_per_rev)
         return float(value)
 
     @property
@@ -497,7 +501,7 @@ class PulseMaster:
         # P9-1 names the count's direction (001:58): P9-0 = 1 reverses the pulses for it
         hd = -p.home_direction if p.run_direction else p.home_direction
         v0 = min(p.start_speed_pps, speed)
-        creep = float(p.creep_speed)
+        creep = p.speed(p.creep_speed)
         self.status.homed, self.status.drvz = False, mode
         self._report("drvz")
         deadline = clock.monotonic_ns() + round(timeout_s * S)

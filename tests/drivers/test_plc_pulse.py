@@ -323,3 +323,25 @@ def test_a_stroke_0_move_that_never_meets_its_transition_is_not_a_finished_progr
     with rig(AxisParams(**FAST)) as r, pytest.raises(TimeoutError):
         r.plc.run(prog(Step(spd=10_000, drive=Drv("ADR", "+", 0), ext="X5"), Step(end=True)),
                   timeout_s=1.0)
+
+
+@pytest.mark.parametrize("unit, decimals, stroke, pulses", [
+    (2, 2, 100, 2000),  # 1.00 mm of a 5000 µm/rev screw at 10000 Ps/rev
+    (2, 0, 100, 200_000),  # 100 mm
+    (0, 3, 2500, 5000),  # 2.500 mm
+    (1, 2, 100, 100),  # the motor unit: pulses
+])
+def test_mechanical_units_use_p3_decimals_and_p2_in_um(unit, decimals, stroke, pulses):
+    # P0: 0 mechanical (mm and cm/min), 1 motor, 2 compound (mm and Ps/s); P2 (B) µm/rev,
+    # P1 (A) Ps/rev, P3 decimals (001:54-56)
+    p = AxisParams(unit=unit, pulses_per_rev=10_000, travel_per_rev=5000, decimals=decimals)
+    assert p.pulses(stroke, "Ut") == pulses
+
+
+def test_mechanical_speeds_are_cm_per_minute():
+    # f = V x 1000 x A / (6 x B) (001:54-56): 100 cm/min of a 5 mm/rev screw is 3.33 rev/s
+    p = AxisParams(unit=0, pulses_per_rev=10_000, travel_per_rev=5000, max_speed=100,
+                   start_speed=1, creep_speed=6)
+    assert p.max_speed_pps == pytest.approx(33_333.3, abs=0.1)
+    assert p.speed(6) == pytest.approx(2000)
+    assert AxisParams(unit=2, max_speed=100).max_speed_pps == 100  # compound: Ps/s

@@ -125,7 +125,7 @@ REFUSED = [
     # accepted plans found these raising TypeError at the end of the program)
     *((f"plc_program: {{program: [{{SPD: 1000, DRV: 'ABS,,1,Ps'}}], expect: {{{k}: {v}}}}}",
        f"expect.{k}") for k, v in (("feedback_tol", "0ms"), ("feedback", "DI8"), ("done", 1),
-                                  ("position", 1.5), ("feedback_tol", -1))),
+                                  ("position", 1.5), ("feedback_tol", -1), ("error", 40))),
 ]
 
 

@@ -200,6 +200,11 @@ class PlcProgram(StepKind):
             v.keys(e, set(_EXPECT), join(where, "expect"))
             for k, val in e.items():
                 _expect_value(v, val, e.kline(k), join(join(where, "expect"), k), _EXPECT[k])
+            if e.get("error", 0) != 0:  # a program the PLC would refuse is refused here
+                raise v.err(e.kline("error"), join(join(where, "expect"), "error"),
+                            f"{e['error']}: R4060 only ever reads 0 here: a program or "
+                            "parameter the PLC refuses with an error code is refused by "
+                            "--check with that code (docs/pulse.md)")
             expect = dict(e)
         return PlcProgramArgs(axis, prog, timeout, expect, slice_ns / 1e6)
 
