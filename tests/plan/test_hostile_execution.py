@@ -1,0 +1,74 @@
+"""Accepted plans with hostile values, executed (wave 3, session 9): `hil run --check`
+validates every field (test_hostile_steps.py), but a value the check lets through must also
+run without an unexpected exception. Each case takes a shipped single-drive plan, puts one
+plausible-but-odd value (0, -1, 2**31, a string where a number goes, ...) into one field of
+one step; those the check accepts run in virtual time on the built-in bench. A step may pass,
+fail or end in error with the harness's own explanation, never with a Python error (a
+TypeError, KeyError, ...). An exploratory run of this found plc_program's expected values and
+refused writes the route cannot carry raising TypeError / ValueError at run time."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import random
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+from test_hostile_yaml import _paths as _leaves  # every key and index path of a tree
+
+from hil.bench.bench import load_bench
+from hil.bench.yamlio import PlanFileError
+from hil.paths import plans_dir
+from hil.plan.plan import loads_plan
+from hil.plan.runner import check_plan, run_plan, timing_specs
+
+pytestmark = pytest.mark.virtual_time
+
+VALUES = [0, 1, -1, 2, 7, 99, 1000, 65535, 65536, 2**31 - 1, -(2**31), 2**31, 0.5, 1e-3,
+          "0", "1ms", "0ms", "10s", "1us", "off", "on", True, False, "DI1", "DI8", "X0", "Y0",
+          "ABS,,0,Ps", "ADR,-,1,Ps", [], [0], {}, "x"]
+PYTHON_ERRORS = re.compile(r"^(TypeError|KeyError|AttributeError|IndexError|ZeroDivisionError|"
+                           r"OverflowError|UnboundLocalError|NameError|AssertionError|"
+                           r"RecursionError|ValueError|RuntimeError): ")
+
+
+def _accepted(seed: int, n: int, bench, specs):
+    rng = random.Random(seed)
+    plans = sorted(p for p in Path(plans_dir()).glob("*.yaml"))  # single-drive plans
+    raw = {p: yaml.safe_load(p.read_text(encoding="utf-8")) for p in plans}
+    found = 0
+    for _ in range(5000):
+        p = rng.choice(plans)
+        data = copy.deepcopy(raw[p])
+        i = rng.randrange(len(data["steps"]))
+        paths = list(_leaves(data["steps"][i]))
+        if not paths:
+            continue
+        where, value = rng.choice(paths), rng.choice(VALUES)
+        obj = data["steps"][i]
+        for k in where[:-1]:
+            obj = obj[k]
+        obj[where[-1]] = value
+        try:
+            plan = loads_plan(yaml.safe_dump(data, allow_unicode=True), p.name)
+            check_plan(plan, bench, specs)
+        except PlanFileError:
+            continue
+        yield plan, (p.name, i, where, value)
+        found += 1
+        if found == n:
+            return
+
+
+@pytest.mark.parametrize("seed", [11, 13])
+def test_accepted_odd_values_run_without_a_python_error(tmp_path, seed: int) -> None:
+    bench = dataclasses.replace(load_bench(None), clock="virtual")
+    specs = timing_specs()
+    for k, (plan, case) in enumerate(_accepted(seed, 24, bench, specs)):
+        r = run_plan(plan, bench, tmp_path / str(k), specs=specs, reports=False)
+        bad = [(s.label, s.message) for s in r.steps
+               if s.status == "error" and PYTHON_ERRORS.match(s.message or "")]
+        assert not bad, (case, bad)
