@@ -12,8 +12,8 @@ Choices where the seed is garbled or silent (docs/pulse.md):
   (mechanical) converts `value x P1 / P2`; P3 (decimals) is not applied;
 * acceleration is a constant slope (P4 - P5) / P8 from the start speed P5 (001:56), the
   profile is cut into `slice_ms` slices, one segment each (a cruise is one segment);
-* DRVC: the speed changes at the start of the next segment; the stop ramp lies inside the
-  last one (001:40 gives no figure);
+* DRVC: a faster segment accelerates from its start, a slower one is reached at its own speed
+  (the slope begins before the joint, as the stop ramp before the end; 001:40 gives no figure);
 * a stop at the zero point, EXT and abort are immediate (M1991 OFF, 001:28);
 * the CLR pulse is `clr_ms` = 30 ms (> 20 ms, 001:124);
 * P7 backlash is output on a reversal and not counted in the position; P10/P11 travel
@@ -290,6 +290,10 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
         want = segments[i][1]
         rem = total - x
         stop_cap = math.sqrt(v0 * v0 + 2.0 * dec * rem) if math.isfinite(dec) else math.inf
+        if math.isfinite(dec):  # a slower segment ahead is entered at its own speed
+            for j in range(i + 1, len(segments)):
+                vj = segments[j][1]
+                stop_cap = min(stop_cap, math.sqrt(vj * vj + 2.0 * dec * (bounds[j - 1] - x)))
         target = min(want, stop_cap)
         if v < target:
             v = min(target, v + acc * dt) if math.isfinite(acc) else target

@@ -345,3 +345,20 @@ def test_mechanical_speeds_are_cm_per_minute():
     assert p.max_speed_pps == pytest.approx(33_333.3, abs=0.1)
     assert p.speed(6) == pytest.approx(2000)
     assert AxisParams(unit=2, max_speed=100).max_speed_pps == 100  # compound: Ps/s
+
+
+@pytest.mark.parametrize("accel_ms", [50, 1000, 5000])
+def test_a_drvc_chain_enters_a_slower_segment_at_its_own_speed(accel_ms):
+    # the seed's multi-speed chain (001:40): 20000 at 10 kHz, 60000 at 50 kHz, 5000 at 3 kHz;
+    # with the default P8 (5000 ms) too, the last segment runs at its 3 kHz
+    p = AxisParams(max_speed=100_000, start_speed=500, accel_ms=accel_ms)
+    slices = plan_profile([(20_000, 10_000.0), (60_000, 50_000.0), (5000, 3000.0)],
+                          p.start_speed_pps, p.accel, p.decel)
+    x, speeds_in_last = 0, []
+    for dur, n in slices:
+        if x >= 80_000:
+            speeds_in_last.append(n * S / dur)
+        x += n
+    assert x == 85_000
+    assert max(speeds_in_last) <= 3000 * 1.05  # entered at 3 kHz (10 ms slices average)
+    assert sum(1 for v in speeds_in_last if v == pytest.approx(3000, rel=0.01)) >= 1
