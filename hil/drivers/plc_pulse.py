@@ -243,6 +243,9 @@ class Program:
                 raise PlcError(43, f"{d.mode!r}: ABS or ADR", step=i, field="DRV")
             if chain and d.mode == "ABS":
                 raise PlcError(41, "only the first DRVC may be ABS (001:40)", step=i)
+            if d.chained and not chain and d.mode == "ADR" and not d.direction:
+                raise PlcError(43, "the first DRVC's direction is + or - (the chain runs "
+                                   "that way, 001:40)", step=i, field="DRVC")
             if d.chained:
                 chain += 1
                 if chain >= MAX_DRVC:
@@ -487,12 +490,14 @@ class PulseMaster:
         left = end - clock.monotonic_ns()
         return left > 0 and self._run(v_to, direction, 0, until, left)
 
-    def ramp_stop(self, v: float, direction: int) -> None:
-        """Decelerate from `v` to the start speed with P8/P12 and stop (MD1, 001:112)."""
+    def ramp_stop(self, v: float, direction: int, slope: float | None = None) -> None:
+        """Decelerate from `v` to the start speed (P12, or P8 when P12 = 0; `slope` instead
+        if given) and stop."""
         p = self.p
         v0 = min(p.start_speed_pps, v)
-        if math.isfinite(p.decel) and v > v0:
-            t = (v - v0) / p.decel
+        slope = p.decel if slope is None else slope
+        if math.isfinite(slope) and v > v0:
+            t = (v - v0) / slope
             n = max(1, math.ceil(t * S / self.slice_ns))
             for k in range(1, n + 1):
                 self._run(v + (v0 - v) * k / n, direction, 0, None, round(t * S / n))
@@ -532,8 +537,8 @@ class PulseMaster:
         # DOG is on, moving in the homing direction at `speed`
         if mode == "MD0":  # at DOG at once to the creep speed (001:110, 122)
             self._run(creep, hd, 0, lambda: not self.dog(), round(left() * S))
-        elif mode == "MD1":
-            self.ramp_stop(speed, hd)
+        elif mode == "MD1":  # "以加減速時間設定 (參數 8) 之斜率減速停止" (001:112): P8, not P12
+            self.ramp_stop(speed, hd, p.accel)
             clock.sleep(MD1_WAIT_NS / S)
             if not self.dog():  # the P8 stop ran past DOG: back into it first (a choice)
                 self._run(creep, -hd, 0, self.dog, round(left() * S))

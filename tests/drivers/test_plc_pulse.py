@@ -122,6 +122,9 @@ def test_fun140_refusals():
         (prog(Step(spd=1000, drive="MD2")), 52),
         (prog(Step(spd=1000, drive="MD4")), 50),
         (prog(Step(drive=Drv("ADR", "+", 10))), 30),
+        # the chain's direction is the first DRVC's + or - (001:40); blank is refused
+        (prog(Step(spd=1000, drive=Drv("ADR", "", 10, chained=True)),
+              Step(spd=1000, drive=Drv("ADR", "+", 10))), 43),
     ]
     for program, code in cases:
         with pytest.raises(PlcError) as e:
@@ -362,3 +365,18 @@ def test_a_drvc_chain_enters_a_slower_segment_at_its_own_speed(accel_ms):
     assert x == 85_000
     assert max(speeds_in_last) <= 3000 * 1.05  # entered at 3 kHz (10 ms slices average)
     assert sum(1 for v in speeds_in_last if v == pytest.approx(3000, rel=0.01)) >= 1
+
+
+def test_md1_stops_with_the_p8_slope_even_when_p12_is_set():
+    # "由目前速度以加減速時間設定 (參數 8) 之斜率減速停止" (001:112)
+    with rig(AxisParams(**HOME | {"accel_ms": 1000, "decel_ms": 10})) as r:
+        _home(r, "MD1")
+        moving = [(t, s) for t, s in r.segs if s["freq"] > 0]
+        turn = next(i for i, (_, s) in enumerate(moving) if s["direction"] == 1 and i > 0
+                    and moving[i - 1][1]["direction"] == -1)
+        last = max(i for i, (_, s) in enumerate(moving[:turn])
+                   if s["freq"] == pytest.approx(20_000))  # the homing speed, until DOG
+        slowing = [t for t, s in r.segs if moving[last][0] < t <= moving[turn - 1][0]]
+        stop = next(t for t, s in r.segs if t > moving[turn - 1][0] and s["freq"] == 0)
+        # 20 kHz down to P5 (500) on P8's slope (~100 kHz a second): about 0.2 s, not 2 ms
+        assert 0.15 * S < stop - slowing[0] < 0.3 * S
