@@ -93,13 +93,35 @@ class Pg:
     _t: float = 0.0
 
     def start_position(self, target: float) -> None:
-        """Absolute positioning to `target` (PG.Mode = 1); from rest or on the fly."""
+        """Absolute positioning to `target` (PG.Mode = 1); from rest or on the fly. Acc, Dec
+        and PosSpeed are limits (004:220): a move running away from the new target, faster
+        than PosSpeed, or too fast to stop on it first brakes with Dec (to rest, or down to
+        PosSpeed), then plans the rest from there; nothing jumps."""
         self.peak_acc = 0.0
         self.dpos = float(target)
         self.mode = 1
         self.rdy = False
-        self._plan = self._position_plan(self.apos, self.aspeed, self.dpos)
+        self._plan_to(self.dpos)
+
+    def _plan_to(self, target: float) -> None:
         self._t = 0.0
+        v0, dist = self.aspeed, target - self.apos
+        sign = 1.0 if dist >= 0 else -1.0
+        toward = v0 * sign
+        _, sd = _shapes(self.type)
+        stop = toward * toward / self.dec * (1.0 - _area(sd)) if self.dec > 0 else 0.0
+        if v0 and (toward < 0 or stop > abs(dist) + 1e-9):
+            self._brake(0.0, target)  # away, or past it: to rest, then back
+        elif abs(v0) > self.pos_speed > 0:
+            self._brake(math.copysign(self.pos_speed, v0), target)
+        else:
+            self._plan = self._position_plan(self.apos, v0, target)
+
+    def _brake(self, v1: float, then: float) -> None:
+        """Ramp the speed to `v1` with Dec, then position to `then`."""
+        v0 = self.aspeed
+        t = abs(v1 - v0) / self.dec if self.dec > 0 else 0.0
+        self._plan = ("brake", v0, v1, t, _shapes(self.type)[1], then)
 
     def start_speed(self, speed: float) -> None:
         """Speed control (PG.Mode = 0): ramp to `speed` with Acc (004:226)."""
@@ -156,16 +178,20 @@ class Pg:
             return
         self._t += dt
         t = self._t
-        if plan[0] == "speed":
-            _, v0, v1, tr, shape = plan
+        if plan[0] in ("speed", "brake"):
+            v0, v1, tr, shape = plan[1:5]
             v = v1 if tr <= 0 or t >= tr else v0 + (v1 - v0) * _shape(shape, t / tr)
             self.apos += (self.aspeed + v) / 2 * dt
             self.aspeed = v
             if t >= tr:
+                if plan[0] == "brake":  # then position from here
+                    self._plan_to(plan[5])
+                    return
                 self._plan = None
                 if v1 == 0.0:
                     self.mode = 0
-                self.rdy = True
+                # Rdy means the target position was reached (004:220, 004:256): not at the
+                # end of a speed ramp, whose end the manual waits for by ASpeed = 0 (004:224)
             return
         _, p0, sign, v0, v, ta, tc, td, sa, sd, p1 = plan
         if t < ta:

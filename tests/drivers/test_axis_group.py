@@ -69,6 +69,43 @@ def test_speed_mode_abort_and_on_the_fly_target() -> None:
     assert pg2.apos == 20_000
 
 
+@pytest.mark.parametrize("case", ["behind", "too_close", "slower"])
+def test_a_new_target_on_the_fly_keeps_acc_dec_and_pos_speed_as_limits(case: str) -> None:
+    # Acc, Dec and PosSpeed are the limits of the profile (004:220); a new DPos while moving
+    # (004:224): no cycle changes the speed by more than Dec x cycle, the position never
+    # jumps, and the axis lands on the new target (a review against the seed, session 9)
+    pg = Pg(acc=200_000, dec=200_000, pos_speed=50_000, type=3)
+    pg.start_position(1_000_000)
+    for _ in range(300):
+        pg.tick(DT)
+    assert pg.aspeed == pytest.approx(50_000)
+    target = {"behind": 2_000.0, "too_close": pg.apos + 1000, "slower": pg.apos + 100_000}[case]
+    if case == "slower":
+        pg.pos_speed = 10_000
+    pg.start_position(target)
+    trace = [(0.0, pg.apos, pg.aspeed), *_run(pg, 30.0)]
+    for (_, p0, v0), (_, p1, v1) in pairwise(trace):
+        assert abs(v1 - v0) <= 200_000 * DT * 1.001
+        assert abs(p1 - p0) <= 50_000 * DT * 1.001
+    assert pg.rdy and pg.apos == target and pg.aspeed == 0
+    if case == "slower":
+        assert max(abs(v) for _, _, v in trace[300:]) <= 10_000 + 1e-6
+
+
+def test_rdy_means_the_target_was_reached_not_a_speed_ramp_ended() -> None:
+    # PG.Rdy: target position reached (004:220, 004:256); a speed run and an abort are
+    # waited for by ASpeed = 0 (004:224)
+    pg = Pg(acc=100_000, type=3)
+    pg.start_speed(20_000)
+    for _ in range(500):
+        pg.tick(DT)
+    assert pg.aspeed == pytest.approx(20_000) and not pg.rdy
+    pg.abort()
+    for _ in range(500):
+        pg.tick(DT)
+    assert pg.aspeed == 0 and not pg.rdy
+
+
 def test_gear_ratio_and_clutch_ramp() -> None:
     # Position += d(master) x ActualIn / Out; ActualIn ramps by IncIn per tick (004:230)
     g = Gea(gin=1.0, gout=2.0, inc_in=0.1, mode=1)
