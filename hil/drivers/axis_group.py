@@ -490,6 +490,12 @@ class ServoAxis:
             if table is None:
                 g.mode = 1
                 self.mode = 4 if self.mode in (1, 4) else 3
+                # GEA.Position at the switch is Par9 (004:242; the seed's example sets it to 0
+                # and the Offset so the axis stays, 004:236-238): a second sync after a sync
+                # off does not jump by the gear's old position
+                g.position = p[9]
+                pg_part = self.pg.apos if self.mode == 4 else 0.0
+                self.offset = self.write_position - g.position - pg_part - self.correction
             else:
                 g.cam, g.cam_type, g.cam_scale = table, kind - 2, p[8] or 1.0
                 g.position, g.cam_inc_position = p[9], p[13]

@@ -333,3 +333,54 @@ class _NullNet:
         @staticmethod
         def send(msg) -> None:
             pass
+
+
+class _Net:
+    """A network that carries nothing: the group's arithmetic alone, cycle by cycle."""
+
+    class bus:  # python-can's attribute name
+        @staticmethod
+        def send(_msg) -> None:
+            return None
+
+    def subscribe(self, *_a) -> None:
+        return None
+
+    def send_message(self, *_a) -> None:
+        return None
+
+
+def _command(group, axis, code: int, par: dict[int, float]) -> None:
+    axis.par = [float(par.get(k, 0.0)) for k in range(15)]
+    axis.command = code
+    for _ in range(100_000):
+        if not axis.command:
+            return
+        group.cycle()
+    raise AssertionError(f"COMMAND {code} never accepted")
+
+
+def test_a_second_sync_after_sync_off_does_not_jump_by_the_old_gear_position() -> None:
+    # COMMAND 6 Par9 is GEA.Position at the switch (004:242); the seed's gear example resets
+    # GEA.Position and sets the Offset so the axis stays (004:236-238)
+    from hil.drivers.axis_group import AxisGroup, ServoAxis
+
+    axes = [ServoAxis("m", 1), ServoAxis("f", 2)]
+    group = AxisGroup(_Net(), axes, 0.001, sdo_write=lambda *a: None)
+    for a in axes:
+        a.status = 3
+    m, f = axes
+    _command(group, f, 6, {0: 0, 1: 1, 2: 1, 3: 1, 4: 1})  # gear 1:1 on the master
+    _command(group, m, 2, {0: 100_000, 1: 100_000, 2: 50_000, 3: 20_000, 5: 3})
+    for _ in range(1000):
+        group.cycle()
+    assert f.write_position == pytest.approx(20_000)
+    _command(group, f, 7, {5: 0.01})  # sync off
+    before = f.write_position
+    _command(group, f, 6, {0: 0, 1: 1, 2: 1, 3: 1, 4: 1})  # sync on again, master at rest
+    group.cycle()
+    assert f.write_position == pytest.approx(before)
+    _command(group, m, 3, {0: 100_000, 1: 100_000, 2: 50_000, 3: 5000, 5: 3})
+    for _ in range(1000):
+        group.cycle()
+    assert f.write_position == pytest.approx(before + 5000)  # follows from where it stood
