@@ -459,19 +459,21 @@ class ServoAxis:
                 self._connect_pg()
                 self.gea.mode = 0
                 self.mode = 1
+            elif self.gea.mode:
+                self._superimpose()
             else:
-                self.mode = 4 if self.gea.mode else 1
+                self.mode = 1
             pg.start_speed(p[2])
         elif code in (2, 3):  # absolute / relative: Par0 Acc, Par1 Dec, Par2 Speed, Par3
             pg.acc, pg.dec, pg.pos_speed = p[0] or pg.acc, p[1] or pg.dec, p[2] or pg.pos_speed
             if self.mode == 3:
-                self.mode = 4
+                self._superimpose()
             pg.start_position(p[3] if code == 2 else pg.apos + p[3])
         elif code == 4:  # set reference: the PG's position is declared Par3; Offset takes
-            # the difference, so the set-point (and the motor) stays where it is (004:226)
-            gear = self.gea.position if self.mode in (3, 4) and self.gea.mode == 1 else 0.0
-            self.offset = self.write_position - self.correction - gear - p[3]
+            # the difference, so the set-point (and the motor) stays where it is (004:226):
+            # WritePosition = [PG.APos] + [GEA part] + Offset + Correction, by Servo.Mode
             pg.apos = p[3]
+            self.offset = self.write_position - self.correction - self._base()
         elif code == 5:  # abort: Par1 Dec
             pg.acc = p[1] or pg.acc
             pg.abort()
@@ -489,7 +491,9 @@ class ServoAxis:
             g.actual_in = 0.0 if p[5] else p[3]
             if table is None:
                 g.mode = 1
-                self.mode = 4 if self.mode in (1, 4) else 3
+                # Par12 ServoMode for a gear too (004:242); without it the PG stays in
+                self.mode = (int(p[12]) if int(p[12]) in (3, 4)
+                             else 4 if self.mode in (1, 4) else 3)
                 # GEA.Position at the switch is Par9 (004:242; the seed's example sets it to 0
                 # and the Offset so the axis stays, 004:236-238): a second sync after a sync
                 # off does not jump by the gear's old position
@@ -532,6 +536,13 @@ class ServoAxis:
                                f"written to CamTab {tab}")
         return list(mem[line:line + length])
 
+    def _superimpose(self) -> None:
+        """Servo.Mode 4: the PG's moves on top of the gear / cam (004:218). The PG joins
+        with its position as it stands, so the Offset takes it out: nothing jumps."""
+        if self.mode != 4:
+            self.offset -= self.pg.apos if self.mode == 3 else 0.0
+            self.mode = 4
+
     def _connect_pg(self) -> None:
         """The PG takes over where the axis stands: PG.APos = WritePosition - Offset -
         Correction (004:224), so leaving the gear moves nothing."""
@@ -542,15 +553,20 @@ class ServoAxis:
     def position_error(self) -> float:
         return self.write_position - self.position
 
-    def compute(self) -> None:
-        """WritePosition from the PG and/or GEA (004:216). An axis without torque (never
-        enabled, faulted, ready without torque) follows itself: its Offset takes up what the
-        PG or GEA moved, so the set-point is where the motor is when torque comes on."""
+    def _base(self) -> float:
+        """The PG's and the GEA's parts of WritePosition in this Servo.Mode (004:216-218)."""
         base = 0.0
         if self.mode in (1, 4):
             base += self.pg.apos
         if self.mode in (3, 4):
             base += self.gea.cam_position if self.gea.mode == 2 else self.gea.position
+        return base
+
+    def compute(self) -> None:
+        """WritePosition from the PG and/or GEA (004:216). An axis without torque (never
+        enabled, faulted, ready without torque) follows itself: its Offset takes up what the
+        PG or GEA moved, so the set-point is where the motor is when torque comes on."""
+        base = self._base()
         if self.status in (STATUS_NEVER, STATUS_FAULT, STATUS_READY) and self._ever:
             self.offset = self.position - base - self.correction
         self.write_position = base + self.offset + self.correction

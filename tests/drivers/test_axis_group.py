@@ -384,3 +384,45 @@ def test_a_second_sync_after_sync_off_does_not_jump_by_the_old_gear_position() -
     for _ in range(1000):
         group.cycle()
     assert f.write_position == pytest.approx(before + 5000)  # follows from where it stood
+
+
+def _geared_pair():
+    from hil.drivers.axis_group import AxisGroup, ServoAxis
+
+    axes = [ServoAxis("m", 1), ServoAxis("f", 2)]
+    group = AxisGroup(_Net(), axes, 0.001, sdo_write=lambda *a: None)
+    for a in axes:
+        a.status = 3
+    m, f = axes
+    _command(group, m, 2, {0: 100_000, 1: 100_000, 2: 50_000, 3: 7000, 5: 3})
+    for _ in range(1500):
+        group.cycle()
+    _command(group, f, 6, {0: 0, 1: 1, 2: 1, 3: 1, 4: 1, 12: 3})  # Servo.Mode 3: gear only
+    _command(group, m, 3, {0: 100_000, 1: 100_000, 2: 50_000, 3: 7000, 5: 3})
+    for _ in range(1500):
+        group.cycle()
+    assert f.mode == 3 and f.write_position == pytest.approx(7000)
+    return group, m, f
+
+
+def test_set_reference_on_a_geared_axis_moves_nothing() -> None:
+    # COMMAND 4: the current position is declared Par3, nothing moves (004:242, 004:226)
+    group, _m, f = _geared_pair()
+    before = f.write_position
+    _command(group, f, 4, {3: 100_000})
+    group.cycle()
+    assert f.write_position == pytest.approx(before) and f.pg.apos == 100_000
+
+
+def test_a_pg_move_on_top_of_a_gear_starts_where_the_axis_stands() -> None:
+    # COMMAND 3 with Par4 = 1: the PG's move superimposed (Servo.Mode 4, 004:218, 004:242)
+    group, _m, f = _geared_pair()
+    before = f.write_position
+    _command(group, f, 3, {0: 100_000, 1: 100_000, 2: 50_000, 3: 10, 4: 1, 5: 3})
+    steps = []
+    for _ in range(200):
+        last = f.write_position
+        group.cycle()
+        steps.append(abs(f.write_position - last))
+    assert f.mode == 4 and max(steps) < 60  # no jump by the PG's old position
+    assert f.write_position == pytest.approx(before + 10)
