@@ -259,7 +259,9 @@ class Gea:
     cam_type: int = 0  # 0 return, 1 incremental
     cam_scale: float = 1.0
     cam_position: float = 0.0
-    cam_inc_position: float = 0.0  # CamIncPosition: added to the cam (004:258, COMMAND Par13)
+    # CamIncPosition (COMMAND Par13): the incremental cam's stroke given outright, in place of
+    # its last table value (004:242, "to remove the rounding error"); 0: the last value
+    cam_inc_position: float = 0.0
     _last: float | None = None
 
     def cam_value(self, pointer: float) -> float:
@@ -273,12 +275,15 @@ class Gea:
             i = k % n
             a, b = table[i], table[(i + 1) % n]
             return (a + (b - a) * frac) * self.cam_scale
-        span = n - 1  # incremental: n - 1 segments, the last value added each pass
+        # incremental (004:232): n segments a pass, the first from an explicit 0 to the first
+        # value; the last value is the stroke each pass adds (or CamIncPosition)
         k = math.floor(step)
-        passes, i = divmod(k, span)
+        passes, i = divmod(k, n)
         frac = step - k
-        a, b = table[i], table[i + 1]
-        return (passes * table[-1] + a + (b - a) * frac) * self.cam_scale
+        a = table[i - 1] if i else 0.0
+        b = table[i]
+        stroke = self.cam_inc_position or table[-1]
+        return (passes * stroke + a + (b - a) * frac) * self.cam_scale
 
     def tick(self, master_value: float) -> None:
         if self.mode == 0:
@@ -300,7 +305,7 @@ class Gea:
         self._last = master_value
         self.position += delta * self.actual_in / self.gout + ds
         if self.mode == 2 and self.cam:
-            self.cam_position = self.cam_value(self.position) + self.cam_inc_position
+            self.cam_position = self.cam_value(self.position)
 
 
 # ------------------------------------------------------------------------------ SDO interface
@@ -503,7 +508,7 @@ class ServoAxis:
             else:
                 g.cam, g.cam_type, g.cam_scale = table, kind - 2, p[8] or 1.0
                 g.position, g.cam_inc_position = p[9], p[13]
-                g.cam_position = g.cam_value(g.position) + g.cam_inc_position
+                g.cam_position = g.cam_value(g.position)
                 g.mode = 2
                 self.mode = int(p[12]) if int(p[12]) in (3, 4) else 3
                 # the cam starts where the axis stands: 004:216 holds at the switch, with the

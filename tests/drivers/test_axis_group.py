@@ -146,19 +146,27 @@ def test_return_cam_runs_back_to_the_first_point_and_repeats() -> None:
 
 
 def test_incremental_cam_adds_the_last_value_each_pass() -> None:
-    # incremental cam: the last value is a stroke added on every pass (004:234)
-    g = Gea(mode=2, cam=[0.0, 50.0, 120.0], cam_type=1, cam_scale=2.0)
-    assert g.cam_value(2 * 1024) == pytest.approx(240)  # end of pass 1 = start of pass 2
-    assert g.cam_value(3 * 1024) == pytest.approx((120 + 50) * 2)
-    assert g.cam_value(4 * 1024 + 512) == pytest.approx((2 * 120 + 0) * 2 + 25 * 2)
+    # incremental cam (004:232): "at the start of the table the interpolation runs between an
+    # explicit 0 and the first value"; the last value is the stroke added on the next pass,
+    # so the table best starts non-zero: n points are n segments a pass
+    g = Gea(mode=2, cam=[50.0, 120.0], cam_type=1, cam_scale=2.0)
+    assert g.cam_value(0) == 0 and g.cam_value(512) == pytest.approx(25 * 2)
+    assert g.cam_value(1024) == pytest.approx(50 * 2)
+    assert g.cam_value(2 * 1024) == pytest.approx(120 * 2)  # end of pass 1 = start of pass 2
+    assert g.cam_value(2 * 1024 + 512) == pytest.approx((120 + 25) * 2)
+    assert g.cam_value(4 * 1024) == pytest.approx(2 * 120 * 2)
+    # CamIncPosition (Par13) gives the stroke outright (004:242)
+    g.cam_inc_position = 121.0
+    assert g.cam_value(2 * 1024 + 512) == pytest.approx((121 + 25) * 2)
 
 
 def test_a_cam_follows_its_master_through_the_ratio() -> None:
-    g = Gea(mode=2, gin=1.0, gout=2.0, cam=[0.0, 1000.0], cam_type=1)
+    g = Gea(mode=2, gin=1.0, gout=2.0, cam=[500.0, 1000.0], cam_type=1)
     g.tick(0.0)
     for k in range(1, 11):
         g.tick(k * 512.0)  # the master moves 512 a tick: the pointer 256
-    assert g.position == pytest.approx(2560) and g.cam_position == pytest.approx(2500)
+    # pointer 2560 = 2.5 table steps: halfway from 1000 (end of pass 1, the stroke) to 1500
+    assert g.position == pytest.approx(2560) and g.cam_position == pytest.approx(1250)
 
 
 def test_command_control_returns_to_0_on_acceptance_and_7_after_its_ramp() -> None:
@@ -207,23 +215,25 @@ def test_command_6_takes_its_cam_from_the_cam_memory() -> None:
 
     master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
     axes = {"m": master, "s": slave}
-    cams = {0: [], 1: [7.0, 7.0, 0.0, 10.0, 40.0, 90.0]}  # the cam at lines 2-5 of CamTab 1
+    cams = {0: [], 1: [7.0, 7.0, 10.0, 40.0, 90.0]}  # the cam at lines 2-4 of CamTab 1
     slave.write_position = 500.0
-    slave.par = [0, 1, 3, 1, 1, 0, 2, 4, 2.0, 1024, 1, 0, 4, 5.0, 0]
+    slave.par = [0, 1, 3, 1, 1, 0, 2, 3, 2.0, 1024, 1, 0, 4, 0.0, 0]
     slave.command = 6
     slave.accept_command(axes, cams)
     g = slave.gea
     assert slave.command == 0 and g.mode == 2 and g.cam_type == 1 and slave.mode == 4
-    assert g.cam == [0.0, 10.0, 40.0, 90.0] and g.cam_scale == 2.0
-    assert g.cam_position == 10.0 * 2.0 + 5.0  # IniPosition 1024: one table step in
+    assert g.cam == [10.0, 40.0, 90.0] and g.cam_scale == 2.0
+    assert g.cam_position == 10.0 * 2.0  # IniPosition 1024: one table step in (0 -> 10)
     slave.compute()
     assert slave.write_position == pytest.approx(500.0)  # no jump at the switch
     g.tick(0.0)
     g.tick(512.0)  # half a step on: between 10 and 40
-    assert g.cam_position == pytest.approx((25.0 * 2.0) + 5.0)
+    assert g.cam_position == pytest.approx(25.0 * 2.0)
     g.tick(512.0 + 3 * 1024)  # one whole pass (3 segments) later: + the last value, 90
-    assert g.cam_position == pytest.approx((25.0 + 90.0) * 2.0 + 5.0)
-    for par, why in (([0, 1, 3, 1, 1, 0, 4, 4, 1, 0, 1, 0, 0, 0, 0], "past the 6 values"),
+    assert g.cam_position == pytest.approx((25.0 + 90.0) * 2.0)
+    g.cam_inc_position = 91.0  # Par13: the stroke given outright (004:242)
+    assert g.cam_value(g.position) == pytest.approx((25.0 + 91.0) * 2.0)
+    for par, why in (([0, 1, 3, 1, 1, 0, 4, 4, 1, 0, 1, 0, 0, 0, 0], "past the 5 values"),
                      ([0, 1, 2, 1, 1, 0, 0, 1, 1, 0, 1, 0, 0, 0, 0], "2 points or more"),
                      ([0, 1, 2, 1, 1, 0, 0, 2, 1, 0, 5, 0, 0, 0, 0], "CamTab 5"),
                      ([0, 1, 9, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "Par2 9")):
