@@ -471,7 +471,11 @@ class ServoAxis:
             pg.start_speed(p[2])
         elif code in (2, 3):  # absolute / relative: Par0 Acc, Par1 Dec, Par2 Speed, Par3
             pg.acc, pg.dec, pg.pos_speed = p[0] or pg.acc, p[1] or pg.dec, p[2] or pg.pos_speed
-            if self.mode == 3:
+            if not p[4] and self.gea.mode:  # Par4 0: an active GEA is cancelled, the PG
+                self._connect_pg()          # takes over where the axis stands (004:242)
+                self.gea.mode = 0
+                self.mode = 1
+            elif self.mode == 3:
                 self._superimpose()
             pg.start_position(p[3] if code == 2 else pg.apos + p[3])
         elif code == 4:  # set reference: the PG's position is declared Par3; Offset takes
@@ -489,9 +493,14 @@ class ServoAxis:
             kind = int(p[2]) or 1
             if kind not in (1, 2, 3):
                 raise CommandError(f"Par2 {p[2]:g}: 1 gear, 2 return cam, 3 incremental cam")
+            src = int(p[1])
+            if src not in (1, 2, 3):  # 0 "GEA inactive", 4 the master's ExtPosition (004:230,
+                raise CommandError(  # 004:258): no gear to run / no external encoder modelled
+                    f"Par1 {p[1]:g}: the master's source 1 WritePosition, 2 Position or "
+                    "3 ServoTick (0 is no gear; 4 ExtPosition is not modelled)")
             table = self._cam_table(cams or {}, p) if kind >= 2 else None
             g.master = names[idx] if 0 <= idx < len(names) else g.master
-            g.source = int(p[1]) or 1
+            g.source = src
             g.gin, g.gout, g.inc_in = p[3], p[4] or 1.0, p[5]
             g.actual_in = 0.0 if p[5] else p[3]
             if table is None:
@@ -528,17 +537,22 @@ class ServoAxis:
     @staticmethod
     def _cam_table(cams: dict[int, list[float]], p: list[float]) -> list[float]:
         """The cam of COMMAND 6: CamLen doubles from CamLine of table CamTab (004:232)."""
-        tab, line, length = int(p[10]), int(p[6]), int(p[7])
+        tab, line_bytes, length = int(p[10]), int(p[6]), int(p[7])
         if tab not in CAM_MEMORY:
             raise CommandError(f"CamTab {tab}: 0 (TGM_Cam_Profile) or 1 (TGM_Data)")
+        if line_bytes % 8:  # CamLine: the data's start in bytes, 8 a double (004:258)
+            raise CommandError(f"CamLine {line_bytes}: a byte offset of a double, a multiple "
+                               "of 8")
+        line = line_bytes // 8
         if int(p[2]) not in (2, 3):
             raise CommandError(f"Par2 {p[2]:g}: 1 gear, 2 return cam, 3 incremental cam")
         if length < 2 or line < 0:
-            raise CommandError(f"CamLine {line}, CamLen {length}: a cam needs 2 points or more")
+            raise CommandError(f"CamLine {line_bytes}, CamLen {length}: a cam needs 2 points "
+                               "or more")
         mem = cams.get(tab, [])
         if line + length > len(mem):
-            raise CommandError(f"CamLine {line} + CamLen {length} past the {len(mem)} values "
-                               f"written to CamTab {tab}")
+            raise CommandError(f"CamLine {line_bytes} (value {line}) + CamLen {length} past the "
+                               f"{len(mem)} values written to CamTab {tab}")
         return list(mem[line:line + length])
 
     def _superimpose(self) -> None:

@@ -215,9 +215,10 @@ def test_command_6_takes_its_cam_from_the_cam_memory() -> None:
 
     master, slave = ServoAxis("m", 1), ServoAxis("s", 2)
     axes = {"m": master, "s": slave}
-    cams = {0: [], 1: [7.0, 7.0, 10.0, 40.0, 90.0]}  # the cam at lines 2-4 of CamTab 1
+    cams = {0: [], 1: [7.0, 7.0, 10.0, 40.0, 90.0]}  # the cam at values 2-4 of CamTab 1
     slave.write_position = 500.0
-    slave.par = [0, 1, 3, 1, 1, 0, 2, 3, 2.0, 1024, 1, 0, 4, 0.0, 0]
+    # CamLine is the start in bytes (004:258): 16 = the third double
+    slave.par = [0, 1, 3, 1, 1, 0, 16, 3, 2.0, 1024, 1, 0, 4, 0.0, 0]
     slave.command = 6
     slave.accept_command(axes, cams)
     g = slave.gea
@@ -233,7 +234,10 @@ def test_command_6_takes_its_cam_from_the_cam_memory() -> None:
     assert g.cam_position == pytest.approx((25.0 + 90.0) * 2.0)
     g.cam_inc_position = 91.0  # Par13: the stroke given outright (004:242)
     assert g.cam_value(g.position) == pytest.approx((25.0 + 91.0) * 2.0)
-    for par, why in (([0, 1, 3, 1, 1, 0, 4, 4, 1, 0, 1, 0, 0, 0, 0], "past the 5 values"),
+    for par, why in (([0, 1, 3, 1, 1, 0, 32, 4, 1, 0, 1, 0, 0, 0, 0], "past the 5 values"),
+                     ([0, 1, 3, 1, 1, 0, 4, 2, 1, 0, 1, 0, 0, 0, 0], "a multiple of 8"),
+                     ([0, 4, 3, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "ExtPosition"),
+                     ([0, 0, 3, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "0 is no gear"),
                      ([0, 1, 2, 1, 1, 0, 0, 1, 1, 0, 1, 0, 0, 0, 0], "2 points or more"),
                      ([0, 1, 2, 1, 1, 0, 0, 2, 1, 0, 5, 0, 0, 0, 0], "CamTab 5"),
                      ([0, 1, 9, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "Par2 9")):
@@ -436,3 +440,15 @@ def test_a_pg_move_on_top_of_a_gear_starts_where_the_axis_stands() -> None:
         steps.append(abs(f.write_position - last))
     assert f.mode == 4 and max(steps) < 60  # no jump by the PG's old position
     assert f.write_position == pytest.approx(before + 10)
+
+
+def test_a_pg_move_with_par4_0_cancels_the_gear_and_starts_where_the_axis_stands() -> None:
+    # COMMAND 2 / 3 Par4 = 0: an active GEA is cancelled and the PG activated (004:240-242)
+    group, m, f = _geared_pair()
+    before = f.write_position
+    _command(group, f, 3, {0: 100_000, 1: 100_000, 2: 50_000, 3: 10, 4: 0, 5: 3})
+    assert f.gea.mode == 0 and f.mode == 1
+    _command(group, m, 3, {0: 100_000, 1: 100_000, 2: 50_000, 3: 5000, 5: 3})
+    for _ in range(1500):
+        group.cycle()
+    assert f.write_position == pytest.approx(before + 10)  # its own move; no longer geared
