@@ -9,19 +9,14 @@ refused writes the route cannot carry raising TypeError / ValueError at run time
 
 from __future__ import annotations
 
-import copy
 import dataclasses
-import random
 import re
-from pathlib import Path
 
 import pytest
-import yaml
-from test_hostile_yaml import _paths as _leaves  # every key and index path of a tree
+from test_hostile_steps import _corpus  # one odd value in one field of one shipped plan
 
 from hil.bench.bench import load_bench
 from hil.bench.yamlio import PlanFileError
-from hil.paths import plans_dir
 from hil.plan.plan import loads_plan
 from hil.plan.runner import check_plan, run_plan, timing_specs
 
@@ -36,28 +31,14 @@ PYTHON_ERRORS = re.compile(r"^(TypeError|KeyError|AttributeError|IndexError|Zero
 
 
 def _accepted(seed: int, n: int, bench, specs):
-    rng = random.Random(seed)
-    plans = sorted(p for p in Path(plans_dir()).glob("*.yaml"))  # single-drive plans
-    raw = {p: yaml.safe_load(p.read_text(encoding="utf-8")) for p in plans}
     found = 0
-    for _ in range(5000):
-        p = rng.choice(plans)
-        data = copy.deepcopy(raw[p])
-        i = rng.randrange(len(data["steps"]))
-        paths = list(_leaves(data["steps"][i]))
-        if not paths:
-            continue
-        where, value = rng.choice(paths), rng.choice(VALUES)
-        obj = data["steps"][i]
-        for k in where[:-1]:
-            obj = obj[k]
-        obj[where[-1]] = value
+    for name, text, case in _corpus(seed, 5000, VALUES):  # the shipped single-drive plans
         try:
-            plan = loads_plan(yaml.safe_dump(data, allow_unicode=True), p.name)
+            plan = loads_plan(text, name)
             check_plan(plan, bench, specs)
         except PlanFileError:
             continue
-        yield plan, (p.name, i, where, value)
+        yield plan, (name, *case)
         found += 1
         if found == n:
             return

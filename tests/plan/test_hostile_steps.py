@@ -40,7 +40,9 @@ def _set(obj, path, value):
     obj[path[-1]] = value
 
 
-def _corpus(seed: int, n: int):
+def _corpus(seed: int, n: int, values: list = HOSTILE):
+    """`n` draws: (plan file name, the plan with one step field set to one of `values`,
+    (step index, field path, value)); a step with no field is skipped."""
     rng = random.Random(seed)
     plans = sorted(Path(plans_dir()).glob("*.yaml"))
     raw = {p: yaml.safe_load(p.read_text(encoding="utf-8")) for p in plans}
@@ -52,7 +54,7 @@ def _corpus(seed: int, n: int):
         if not paths:
             continue
         where = rng.choice(paths)
-        value = rng.choice(HOSTILE)
+        value = rng.choice(values)
         _set(data["steps"][i], where, value)
         yield p.name, yaml.safe_dump(data, allow_unicode=True), (i, where, value)
 
