@@ -123,19 +123,21 @@ class Pg:
         t = abs(v1 - v0) / self.dec if self.dec > 0 else 0.0
         self._plan = ("brake", v0, v1, t, _shapes(self.type)[1], then)
 
-    def start_speed(self, speed: float) -> None:
-        """Speed control (PG.Mode = 0): ramp to `speed` with Acc (004:226)."""
+    def start_speed(self, speed: float, slope: float | None = None) -> None:
+        """Speed control (PG.Mode = 0): ramp to `speed` with Acc (004:226), or `slope`."""
         self.peak_acc = 0.0
         self.mode = 0
         self.rdy = False
         v0 = self.aspeed
-        t = abs(speed - v0) / self.acc if self.acc > 0 else 0.0
+        slope = self.acc if slope is None else slope
+        t = abs(speed - v0) / slope if slope > 0 else 0.0
         self._plan = ("speed", v0, float(speed), t, _shapes(self.type)[0])
         self._t = 0.0
 
-    def abort(self) -> None:
-        """PG.Mode = 0, PG.Speed = 0: brake to rest (004:226)."""
-        self.start_speed(0.0)
+    def abort(self, dec: float | None = None) -> None:
+        """PG.Mode = 0, PG.Speed = 0: brake to rest (004:226), with `dec` (COMMAND 5's Par1)
+        if given; PG.Acc is left as it was."""
+        self.start_speed(0.0, dec)
         self.mode = 3
 
     def _position_plan(self, p0: float, v0: float, p1: float) -> tuple:
@@ -457,7 +459,9 @@ class ServoAxis:
             return
         pg = self.pg
         if code in (1, 2, 3, 5):
-            pg.type = int(p[5]) if int(p[5]) in RAMP_TYPES else pg.type
+            if int(p[5]) not in RAMP_TYPES or p[5] != int(p[5]):
+                raise CommandError(f"Par5 {p[5]:g}: a ramp type 0-3 (004:222)")
+            pg.type = int(p[5])
         if code == 1:  # run speed: Par0 Acc, Par2 Speed, Par4 0 cancel GEA / 1 superimpose
             pg.acc = p[0] or pg.acc
             if not p[4]:
@@ -483,9 +487,8 @@ class ServoAxis:
             # WritePosition = [PG.APos] + [GEA part] + Offset + Correction, by Servo.Mode
             pg.apos = p[3]
             self.offset = self.write_position - self.correction - self._base()
-        elif code == 5:  # abort: Par1 Dec
-            pg.acc = p[1] or pg.acc
-            pg.abort()
+        elif code == 5:  # abort: Par1 Dec (PG.Acc stays for the next move)
+            pg.abort(p[1] or pg.acc)
         elif code == 6:  # sync on: Par0 master, Par1 source, Par2 1 gear / 2 + CamType cam,
             g = self.gea  # Par3/4 In/Out, Par5 IncIn; cams: Par6 CamLine, Par7 CamLen, Par8
             names = list(axes)  # CamScale, Par9 IniPosition, Par10 CamTab, Par12 ServoMode,
@@ -498,10 +501,15 @@ class ServoAxis:
                 raise CommandError(  # 004:258): no gear to run / no external encoder modelled
                     f"Par1 {p[1]:g}: the master's source 1 WritePosition, 2 Position or "
                     "3 ServoTick (0 is no gear; 4 ExtPosition is not modelled)")
+            if not 0 <= idx < len(names) or p[0] != idx:
+                raise CommandError(f"Par0 {p[0]:g}: the master is an axis index 0-"
+                                   f"{len(names) - 1} of the group")
+            if not p[4]:
+                raise CommandError("Par4 Out 0: the ratio In/Out needs Out != 0")
             table = self._cam_table(cams or {}, p) if kind >= 2 else None
-            g.master = names[idx] if 0 <= idx < len(names) else g.master
+            g.master = names[idx]
             g.source = src
-            g.gin, g.gout, g.inc_in = p[3], p[4] or 1.0, p[5]
+            g.gin, g.gout, g.inc_in = p[3], p[4], p[5]
             g.actual_in = 0.0 if p[5] else p[3]
             if table is None:
                 g.mode = 1
@@ -526,6 +534,9 @@ class ServoAxis:
                 self.offset = self.write_position - g.cam_position - pg_part - self.correction
         elif code == 7:  # sync off: the ratio ramps to 0 by Par5 a cycle, then GEA idles
             g = self.gea
+            if not g.mode:  # no gear or cam on: nothing to switch off
+                self.command = 0
+                return
             g.gin, g.inc_in = 0.0, p[5]
             if g.actual_in != 0.0:
                 return  # still ramping: Control stays 7 (004:240)

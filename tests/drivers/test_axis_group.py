@@ -238,6 +238,8 @@ def test_command_6_takes_its_cam_from_the_cam_memory() -> None:
                      ([0, 1, 3, 1, 1, 0, 4, 2, 1, 0, 1, 0, 0, 0, 0], "a multiple of 8"),
                      ([0, 4, 3, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "ExtPosition"),
                      ([0, 0, 3, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "0 is no gear"),
+                     ([9, 1, 3, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "axis index"),
+                     ([0, 1, 3, 1, 0, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "Out != 0"),
                      ([0, 1, 2, 1, 1, 0, 0, 1, 1, 0, 1, 0, 0, 0, 0], "2 points or more"),
                      ([0, 1, 2, 1, 1, 0, 0, 2, 1, 0, 5, 0, 0, 0, 0], "CamTab 5"),
                      ([0, 1, 9, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "Par2 9")):
@@ -452,3 +454,28 @@ def test_a_pg_move_with_par4_0_cancels_the_gear_and_starts_where_the_axis_stands
     for _ in range(1500):
         group.cycle()
     assert f.write_position == pytest.approx(before + 10)  # its own move; no longer geared
+
+
+def test_abort_uses_its_dec_and_leaves_acc_and_sync_off_of_nothing_is_done_at_once() -> None:
+    # COMMAND 5: abort with Par1 Dec (004:242); PG.Acc is the next move's. COMMAND 7 on an axis
+    # with no gear or cam has nothing to ramp out: Control back to 0 (004:240). A ramp type
+    # outside 0-3 (004:222) is refused, not kept silently.
+    from hil.drivers.axis_group import AxisGroup, CommandError, ServoAxis
+
+    axes = [ServoAxis("m", 1), ServoAxis("f", 2)]
+    group = AxisGroup(_Net(), axes, 0.001, sdo_write=lambda *a: None)
+    for a in axes:
+        a.status = 3
+    m, f = axes
+    _command(group, m, 1, {0: 100_000, 2: 20_000})  # run at 20000 with Acc 100000
+    for _ in range(300):
+        group.cycle()
+    _command(group, m, 5, {1: 400_000})  # abort with Dec 400000: 50 ms to rest
+    for _ in range(60):
+        group.cycle()
+    assert m.pg.aspeed == 0 and m.pg.acc == 100_000
+    _command(group, f, 7, {5: 0.01})  # returns: Control 0 at once
+    assert f.command == 0
+    m.par, m.command = [0.0] * 5 + [9.0] + [0.0] * 9, 2
+    with pytest.raises(CommandError, match="ramp type 0-3"):
+        m.accept_command({"m": m, "f": f})
