@@ -376,16 +376,21 @@ def _command(group, axis, code: int, par: dict[int, float]) -> None:
     raise AssertionError(f"COMMAND {code} never accepted")
 
 
-def test_a_second_sync_after_sync_off_does_not_jump_by_the_old_gear_position() -> None:
-    # COMMAND 6 Par9 is GEA.Position at the switch (004:242); the seed's gear example resets
-    # GEA.Position and sets the Offset so the axis stays (004:236-238)
+def _pair():
+    """A master `m` and a follower `f` in a 1 ms group, both enabled (Status 3)."""
     from hil.drivers.axis_group import AxisGroup, ServoAxis
 
     axes = [ServoAxis("m", 1), ServoAxis("f", 2)]
     group = AxisGroup(_Net(), axes, 0.001, sdo_write=lambda *a: None)
     for a in axes:
         a.status = 3
-    m, f = axes
+    return group, *axes
+
+
+def test_a_second_sync_after_sync_off_does_not_jump_by_the_old_gear_position() -> None:
+    # COMMAND 6 Par9 is GEA.Position at the switch (004:242); the seed's gear example resets
+    # GEA.Position and sets the Offset so the axis stays (004:236-238)
+    group, m, f = _pair()
     _command(group, f, 6, {0: 0, 1: 1, 2: 1, 3: 1, 4: 1})  # gear 1:1 on the master
     _command(group, m, 2, {0: 100_000, 1: 100_000, 2: 50_000, 3: 20_000, 5: 3})
     for _ in range(1000):
@@ -403,13 +408,7 @@ def test_a_second_sync_after_sync_off_does_not_jump_by_the_old_gear_position() -
 
 
 def _geared_pair():
-    from hil.drivers.axis_group import AxisGroup, ServoAxis
-
-    axes = [ServoAxis("m", 1), ServoAxis("f", 2)]
-    group = AxisGroup(_Net(), axes, 0.001, sdo_write=lambda *a: None)
-    for a in axes:
-        a.status = 3
-    m, f = axes
+    group, m, f = _pair()
     _command(group, m, 2, {0: 100_000, 1: 100_000, 2: 50_000, 3: 7000, 5: 3})
     for _ in range(1500):
         group.cycle()
@@ -460,13 +459,9 @@ def test_abort_uses_its_dec_and_leaves_acc_and_sync_off_of_nothing_is_done_at_on
     # COMMAND 5: abort with Par1 Dec (004:242); PG.Acc is the next move's. COMMAND 7 on an axis
     # with no gear or cam has nothing to ramp out: Control back to 0 (004:240). A ramp type
     # outside 0-3 (004:222) is refused, not kept silently.
-    from hil.drivers.axis_group import AxisGroup, CommandError, ServoAxis
+    from hil.drivers.axis_group import CommandError
 
-    axes = [ServoAxis("m", 1), ServoAxis("f", 2)]
-    group = AxisGroup(_Net(), axes, 0.001, sdo_write=lambda *a: None)
-    for a in axes:
-        a.status = 3
-    m, f = axes
+    group, m, f = _pair()
     _command(group, m, 1, {0: 100_000, 2: 20_000})  # run at 20000 with Acc 100000
     for _ in range(300):
         group.cycle()
