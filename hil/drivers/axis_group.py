@@ -520,18 +520,15 @@ class ServoAxis:
                 # and the Offset so the axis stays, 004:236-238): a second sync after a sync
                 # off does not jump by the gear's old position
                 g.position = p[9]
-                pg_part = self.pg.apos if self.mode == 4 else 0.0
-                self.offset = self.write_position - g.position - pg_part - self.correction
             else:
                 g.cam, g.cam_type, g.cam_scale = table, kind - 2, p[8] or 1.0
                 g.position, g.cam_inc_position = p[9], p[13]
                 g.cam_position = g.cam_value(g.position)
                 g.mode = 2
                 self.mode = int(p[12]) if int(p[12]) in (3, 4) else 3
-                # the cam starts where the axis stands: 004:216 holds at the switch, with the
-                # PG's position in it for ServoMode 4
-                pg_part = self.pg.apos if self.mode == 4 else 0.0
-                self.offset = self.write_position - g.cam_position - pg_part - self.correction
+            # the gear or cam starts where the axis stands: 004:216 holds at the switch (with
+            # the PG's position in it for ServoMode 4), the Offset takes the difference
+            self.offset = self.write_position - self.correction - self._base()
         elif code == 7:  # sync off: the ratio ramps to 0 by Par5 a cycle, then GEA idles
             g = self.gea
             if not g.mode:  # no gear or cam on: nothing to switch off
@@ -570,8 +567,9 @@ class ServoAxis:
         """Servo.Mode 4: the PG's moves on top of the gear / cam (004:218). The PG joins
         with its position as it stands, so the Offset takes it out: nothing jumps."""
         if self.mode != 4:
-            self.offset -= self.pg.apos if self.mode == 3 else 0.0
+            before = self._base()
             self.mode = 4
+            self.offset += before - self._base()
 
     def _connect_pg(self) -> None:
         """The PG takes over where the axis stands: PG.APos = WritePosition - Offset -

@@ -627,13 +627,14 @@ class PulseTrain:
         if (ax.velocity and not c.p2065 & (1 << 13)
                 and abs(ax.velocity) / COUNTS_PER_REV * per_rev > OUTPUT_MAX_HZ):
             d.alarms.raise_alarm("AL018")
-        if not self.listeners or (per_rev, c.out_sign) != self._out_scale:
-            self._out_scale = (per_rev, c.out_sign)  # a new scale counts from here
+        if not self.listeners:  # nothing to output: a listener's output starts where it joins
+            self._out_scale = None
+            return
+        if (per_rev, c.out_sign) != self._out_scale:  # a listener joined, or a new scale
+            self._out_scale = (per_rev, c.out_sign)
             self._out_pos0 = self._out_pos = ax.position
             self._out_sent = 0
             self._out_t = d.now
-            if not self.listeners:
-                return
         for z in d.mech.index_crossed(ax.last_position, ax.position):
             span = ax.position - ax.last_position
             frac = (z - ax.last_position) / span if span else 1.0

@@ -45,6 +45,11 @@ def can_buses(rec: Recording) -> list[str]:
     return sorted(t[5:-4] for t in rec.topics() if t.startswith("/can/") and t.endswith("/raw"))
 
 
+def _check_time(time: str) -> None:
+    if time not in ("log", "publish"):
+        raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+
+
 def bus_topics(rec: Recording, bus: str | None) -> dict[str, str]:
     """{raw topic: bus} of `bus` (None: every bus) in `rec`; ValueError naming the buses."""
     buses = can_buses(rec)
@@ -62,8 +67,7 @@ def can_messages(
 ) -> Iterator[tuple[str, can.Message]]:
     """(bus, can.Message) for every recorded frame (of `bus`), timestamps from log_time or
     publish_time, in file order."""
-    if time not in ("log", "publish"):
-        raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+    _check_time(time)
     names = bus_topics(rec, bus)
     for topic, lt, pt, obj in rec.messages(list(names)):
         b = names[topic]
@@ -75,8 +79,7 @@ def stream_can(path: str | Path, bus: str | None, on_frame: Callable[[str, can.M
     """`can_messages` a frame at a time without holding the recording: a first read learns
     the buses (`head`: that reading, done already), the second hands each frame of `bus`
     (None: every bus) to `on_frame(bus, message)`, in file order."""
-    if time not in ("log", "publish"):
-        raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+    _check_time(time)
     if head is None:
         head = Recording.survey(path)  # channels and state, no message
     names = bus_topics(head, bus)
@@ -124,8 +127,7 @@ class McapCanReader(MessageReader):
         self.file = file
         self.bus = bus
         self.time = time
-        if time not in ("log", "publish"):
-            raise ValueError(f"time {time!r}: must be 'log' or 'publish'")
+        _check_time(time)
         # its buses and state now (a bad bus is said at once); its frames as they are read
         self.recording = Recording.survey(file)
         bus_topics(self.recording, bus)
