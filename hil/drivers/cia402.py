@@ -175,13 +175,13 @@ class Cia402Driver:
         """SDO upload decoded with the EDS type (raises SdoError)."""
         try:
             with self.lock:
-                if index not in self.node.object_dictionary:
+                obj = self.node.object_dictionary.get(index)
+                if obj is None:
                     return int.from_bytes(self.node.sdo.upload(index, sub), "little")
-                return (
-                    self.node.sdo[index][sub].raw
-                    if self._is_compound(index)
-                    else (self.node.sdo[index].raw)
-                )
+                var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[sub]
+                # canopen's `Variable.raw` without its debug text, which it formats even
+                # when nothing logs it: the statusword poll is the busiest call here
+                return var.decode_raw(self.node.sdo.upload(var.index, var.subindex))
         except (SdoAbortedError, SdoCommunicationError) as exc:
             raise SdoError(self.node_id, index, sub, "upload", exc) from None
 

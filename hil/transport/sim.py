@@ -133,6 +133,26 @@ class SimMessage(Message):
         super().__init__(*args, **kw)
         self.sender_time_ns = sender_time_ns
 
+    @classmethod
+    def frame(cls, timestamp: float, msg: Message, data: bytes, channel: Any,
+              sender_time_ns: int | None) -> SimMessage:
+        """A classic-CAN copy of `msg` with these fields: what `Message.__init__` makes of
+        them (`data` a new bytearray, empty for a remote frame), without its argument
+        handling, once per frame and receiver on a virtual bus."""
+        m = cls.__new__(cls)
+        m.timestamp = timestamp
+        m.arbitration_id = msg.arbitration_id
+        m.is_extended_id = msg.is_extended_id
+        m.is_remote_frame = rtr = msg.is_remote_frame
+        m.is_error_frame = msg.is_error_frame
+        m.channel = channel
+        m.is_fd = m.bitrate_switch = m.error_state_indicator = False
+        m.is_rx = True
+        m.data = bytearray() if rtr else bytearray(data)
+        m.dlc = msg.dlc
+        m.sender_time_ns = sender_time_ns
+        return m
+
 
 class CanMedium:
     """One CAN bus on the clock: arbitration, bit time, delivery."""
@@ -167,11 +187,14 @@ class CanMedium:
         pending = self._pending
         if not pending:
             return
-        heads: dict[int, tuple[int, int, SimCanBus, Message]] = {}
-        for p in pending:  # in queueing order: the first of each sender is its head
-            heads.setdefault(id(p[2]), p)
-        best = min(heads.values(), key=lambda p: (p[0], p[1]))
-        pending.remove(best)
+        if len(pending) == 1:  # one frame waiting (a poll and its answer): no arbitration
+            best = pending.pop()
+        else:
+            heads: dict[int, tuple[int, int, SimCanBus, Message]] = {}
+            for p in pending:  # in queueing order: the first of each sender is its head
+                heads.setdefault(id(p[2]), p)
+            best = min(heads.values(), key=lambda p: (p[0], p[1]))
+            pending.remove(best)
         _, _, sender, msg = best
         dur = self.bit_ns(frame_bits(msg))
         start = max(self.clock.time_ns(), self.busy_until)
@@ -186,12 +209,7 @@ class CanMedium:
             for node in list(self.nodes):
                 if node is not sender or node.receive_own_messages:
                     try:  # a copy each: canopen keeps a PDO's buffer and writes into it
-                        node._deliver(SimMessage(
-                            timestamp=t / S, arbitration_id=msg.arbitration_id, data=data,
-                            is_extended_id=msg.is_extended_id,
-                            is_remote_frame=msg.is_remote_frame,
-                            is_error_frame=msg.is_error_frame, dlc=msg.dlc,
-                            channel=self.channel, sender_time_ns=sent))
+                        node._deliver(SimMessage.frame(t / S, msg, data, self.channel, sent))
                     except Exception as exc:  # one receiver's bug: the others get the frame
                         node.errors.append(exc)
         finally:
@@ -224,10 +242,8 @@ class SimCanBus(BusABC):
 
     def send(self, msg: Message, timeout: float | None = None) -> None:
         self._check_open()
-        out = SimMessage(arbitration_id=msg.arbitration_id, data=bytes(msg.data),
-                         is_extended_id=msg.is_extended_id, is_remote_frame=msg.is_remote_frame,
-                         is_error_frame=msg.is_error_frame, dlc=msg.dlc,
-                         channel=self.channel_info, sender_time_ns=self.clock.time_ns())
+        out = SimMessage.frame(0.0, msg, bytes(msg.data), self.channel_info,
+                               self.clock.time_ns())
         self.medium.transmit(self, out)
         self.clock.settle(lambda: not self.medium.idle())
 

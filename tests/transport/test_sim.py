@@ -170,3 +170,38 @@ def test_arbitration_compares_the_bits_in_wire_order() -> None:
     assert key(m(0x005)) < key(m(0x005 << 18, ext=True))
     assert key(m(0x005)) < key(m(0x005, rtr=True)) < key(m(0x005 << 18, ext=True))
     assert key(m(0x005 << 18 | 7, ext=True)) < key(m(0x005 << 18 | 7, ext=True, rtr=True))
+
+
+def test_a_delivered_frame_is_what_python_can_makes_of_the_sent_one() -> None:
+    """Each receiver gets its own frame with the fields `can.Message` gives them: data a
+    bytearray of its own (empty for a remote frame), the DLC as sent, classic CAN flags."""
+    rnd = random.Random(7)
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b, d = (open_can("virtual:sim-copy") for _ in range(3))
+        got_b: list[can.Message] = []
+        got_d: list[can.Message] = []
+        pump(b, got_b.append)
+        pump(d, got_d.append)
+        sent = []
+        for _ in range(200):
+            ext, rtr = rnd.random() < 0.3, rnd.random() < 0.2
+            data = bytes(rnd.randrange(256) for _ in range(rnd.randrange(9)))
+            msg = can.Message(arbitration_id=rnd.randrange(1 << (29 if ext else 11)),
+                              is_extended_id=ext, is_remote_frame=rtr, data=data,
+                              dlc=rnd.randrange(9) if rtr else len(data))
+            sent.append(msg)
+            a.send(msg)
+        assert len(got_b) == len(got_d) == len(sent)
+        for msg, rb, rd in zip(sent, got_b, got_d, strict=True):
+            ref = can.Message(arbitration_id=msg.arbitration_id, data=bytes(msg.data),
+                              is_extended_id=msg.is_extended_id,
+                              is_remote_frame=msg.is_remote_frame, dlc=msg.dlc)
+            for got in (rb, rd):
+                assert got.equals(ref, timestamp_delta=None, check_channel=False)
+                assert type(got.data) is bytearray and got.is_rx and not got.is_fd
+                assert not got.bitrate_switch and not got.error_state_indicator
+                assert got.sender_time_ns is not None and got.timestamp * 1e9 >= got.sender_time_ns
+            assert rb.data is not rd.data  # canopen writes into a PDO's buffer: one each
+        for bus in (a, b, d):
+            bus.shutdown()
