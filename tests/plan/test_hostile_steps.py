@@ -40,11 +40,12 @@ def _set(obj, path, value):
     obj[path[-1]] = value
 
 
-def _corpus(seed: int, n: int, values: list = HOSTILE):
+def _corpus(seed: int, n: int, values: list = HOSTILE, folder: Path | None = None):
     """`n` draws: (plan file name, the plan with one step field set to one of `values`,
-    (step index, field path, value)); a step with no field is skipped."""
+    (step index, field path, value)); a step with no field is skipped. `folder`: where the
+    plans are (default: the shipped single-drive plans)."""
     rng = random.Random(seed)
-    plans = sorted(Path(plans_dir()).glob("*.yaml"))
+    plans = sorted(Path(folder or plans_dir()).glob("*.yaml"))
     raw = {p: yaml.safe_load(p.read_text(encoding="utf-8")) for p in plans}
     for _ in range(n):
         p = rng.choice(plans)
