@@ -361,6 +361,9 @@ class PdoMaps:
         self._cob: dict[tuple[int, str, int], int] = {}
         self._entries: dict[tuple[int, str, int], dict[int, int]] = {}
         self._count: dict[tuple[int, str, int], int] = {}
+        # COB-ID -> (PDO, mapping) or None, until the configuration changes: a recorder
+        # decodes every PDO frame of the bus with it
+        self._resolved: dict[int, tuple[tuple[int, str, int], list] | None] = {}
 
     @staticmethod
     def _which(index: int) -> tuple[str, int, str] | None:
@@ -377,6 +380,7 @@ class PdoMaps:
             return
         kind, n, what = which
         key = (node, kind, n)
+        self._resolved.clear()
         if what == "cob":
             if sub == 1:
                 self._cob[key] = value
@@ -390,6 +394,7 @@ class PdoMaps:
         for store in (self._cob, self._entries, self._count):
             for key in [k for k in store if node in (0, k[0])]:
                 del store[key]
+        self._resolved.clear()
 
     def _mapping(self, key: tuple[int, str, int]) -> list[tuple[int, int, int]]:
         if key in self._count or key in self._entries:
@@ -419,12 +424,15 @@ class PdoMaps:
     def decode(self, cob_id: int, data: bytes) -> dict | None:
         """The mapped objects of a PDO frame (None: not a PDO this map knows), e.g.
         {"pdo": "TPDO1", "objects": {"6041h:00": 0x1637, ...}, "statusword": 0x1637}."""
-        key = self._find(cob_id)
-        if key is None:
+        try:
+            found = self._resolved[cob_id]
+        except KeyError:
+            key = self._find(cob_id)
+            mapping = self._mapping(key) if key is not None else []
+            found = self._resolved[cob_id] = (key, mapping) if key and mapping else None
+        if found is None:
             return None
-        mapping = self._mapping(key)
-        if not mapping:
-            return None
+        key, mapping = found
         out: dict = {"pdo": f"{key[1].upper()}{key[2]}", "objects": {}}
         bit = 0
         raw = int.from_bytes(bytes(data), "little")

@@ -1,7 +1,8 @@
 """What callers put on the recorder's queue: one named tuple per kind of item.
 
 The caller side only builds one of these and appends it (the hot path); the writer thread
-dispatches on its type (`Recorder._run`).
+dispatches on its type (`Recorder._run`). A CAN frame, the busiest item, goes as a plain tuple
+in `CanItem`'s field order: a named tuple's constructor is a Python call per frame.
 """
 
 from __future__ import annotations

@@ -21,6 +21,7 @@ import subprocess
 import sys
 import threading
 import time
+from binascii import hexlify
 from collections import Counter, deque
 from collections.abc import Callable, Mapping
 from functools import cache
@@ -29,7 +30,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from hil import clock
-from hil.protocol.canopen import PdoMaps, is_pdo, is_sdo
+from hil.protocol.canopen import PdoMaps
 from hil.record import topics
 from hil.record.mcapio import McapWriter
 from hil.record.modbus_pairing import AduAssembler, ModbusPairing, guess_mode
@@ -245,7 +246,8 @@ class Recorder:
         self._decoders: dict[str, str] = {}
         self._decoders_loaded = False
         self._handlers: dict[type, Callable[[Any], None]] = {
-            CanItem: self._do_can, SerialItem: self._do_serial, BytesItem: self._do_bytes,
+            CanItem: self._do_can, tuple: self._do_can,  # a frame: a plain tuple (can())
+            SerialItem: self._do_serial, BytesItem: self._do_bytes,
             AttachItem: self._do_attach, MetadataItem: self._do_metadata,
             BarrierItem: self._do_barrier,
         }
@@ -268,8 +270,8 @@ class Recorder:
         self, bus: str, frame: Any, direction: str, t: int, source_t: int | None = None
     ) -> None:
         """A python-can `Message` seen on `bus` ("rx"/"tx" as seen by the harness)."""
-        if self._open and self._room():
-            self._q.append(CanItem(bus, frame, direction, t, source_t))
+        if self._open and (len(self._q) < self._max_queue or self._room()):
+            self._q.append((bus, frame, direction, t, source_t))  # CanItem's fields
         else:
             self._drop()
 
@@ -723,54 +725,57 @@ class Recorder:
         pt = t if st is None else st
         d = _DIRS.get(direction) or json.dumps(str(direction))[1:-1]
         data = bytes(frame.data or b"")
-        hx = data.hex()
+        hxb = hexlify(data)
         cid = frame.arbitration_id
         ext = frame.is_extended_id
         err = frame.is_error_frame
         w = self._w
         rtr = frame.is_remote_frame
-        key = (ext, rtr, err, frame.is_fd, frame.bitrate_switch, frame.error_state_indicator)
-        flags = _FLAGS.get(key) or _FLAGS[tuple(bool(x) for x in key)]
-        w.add_message(raw_cid, t, pt, (_CAN_FMT % (cid, flags, frame.dlc, hx, d)).encode())
+        # the raw frame's JSON around its data, per frame shape (a bus repeats its shapes)
+        shape = (cid, frame.dlc, d, ext, rtr, err, frame.is_fd, frame.bitrate_switch,
+                 frame.error_state_indicator)
+        around = cache_.get(shape)
+        if around is None:
+            flags = _FLAGS.get(shape[3:]) or _FLAGS[tuple(bool(x) for x in shape[3:])]
+            pre, post = (_CAN_FMT % (cid, flags, frame.dlc, "\0", d)).encode().split(b"\0")
+            if len(cache_) >= _DECODE_CACHE_MAX:
+                cache_.clear()
+            around = cache_[shape] = (pre, post)
+        w.add_message(raw_cid, t, pt, around[0] + hxb + around[1])
         if ext or err:
             return  # CANopen uses 11-bit identifiers
         if cid == 0 and len(data) >= 2 and data[0] in (0x81, 0x82):
             pdos.nmt_reset(data[1])  # reset node / communication: PDOs back to defaults
-        pdo = pdos.decode(cid, data) if dec_cid is not None and not rtr and is_pdo(cid) \
-            else None
+        is_pdo_ = 0x180 <= cid <= 0x57F  # hil.protocol.canopen.is_pdo, inline: every frame
+        pdo = pdos.decode(cid, data) if dec_cid is not None and not rtr and is_pdo_ else None
         if pdo is not None:  # a PDO whose mapping the bus configured: its objects by name
-            base = json.loads(self._describe_can(cid, data, hx, False))
+            base = json.loads(self._describe_can(cid, data, hxb.decode(), False))
             w.add_message(dec_cid, t, pt, dumps({"dir": d, **base, **pdo}))
         elif dec_cid is not None:
-            # PDO payloads change every frame: their decoding is a fixed prefix + the data
-            tmpl = None if rtr else cache_.get((cid, len(data)))
-            if tmpl is not None:
-                enc = tmpl + hx.encode() + b'"}'
+            # PDO payloads change every frame: their decoding is a fixed prefix (direction
+            # included) + the data
+            pre = None if rtr else cache_.get((cid, len(data), d))
+            if pre is not None:
+                w.add_message(dec_cid, t, pt, pre + hxb + b'"}')
             else:
                 key = (cid, rtr, data)
                 enc = cache_.get(key)
                 if enc is None:
-                    enc = self._describe_can(cid, data, hx, key[1])
+                    enc = self._describe_can(cid, data, hxb.decode(), key[1])
                     if len(cache_) >= _DECODE_CACHE_MAX:
                         cache_.clear()
                     cache_[key] = enc
-                    suffix = b'"data":"' + hx.encode() + b'"}'
-                    if (
-                        is_pdo(cid)
-                        and not rtr
-                        and enc.endswith(suffix)
-                        and enc.count(b'"') == 14
-                    ):  # exactly kind/node/cob_id/dlc/data
-                        cache_[(cid, len(data))] = enc[: -len(hx) - 2]
-            w.add_message(
-                dec_cid,
-                t,
-                pt,
-                b'{"dir":"%s",' % d.encode() + enc[1:]
-                if len(enc) > 2
-                else b'{"dir":"%s"}' % d.encode(),
-            )
-        if is_sdo(cid):
+                dirb = d.encode()
+                out = b'{"dir":"%s",' % dirb + enc[1:] if len(enc) > 2 else b'{"dir":"%s"}' % dirb
+                if (
+                    is_pdo_
+                    and not rtr
+                    and enc.endswith(b'"data":"' + hxb + b'"}')
+                    and enc.count(b'"') == 14
+                ):  # exactly kind/node/cob_id/dlc/data
+                    cache_[(cid, len(data), d)] = out[: -len(hxb) - 2]
+                w.add_message(dec_cid, t, pt, out)
+        if 0x580 < cid <= 0x67F:  # is_sdo(cid)
             for txn in pairing.feed(cid, data, pt):
                 w.add_message(sdo_cid, t, pt, dumps(txn))
                 if (txn.get("access") == "download" and txn.get("status") == "ok"
