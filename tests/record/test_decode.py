@@ -219,3 +219,43 @@ def test_pdo_fast_path_equals_the_decoder(tmp_path) -> None:
     for f, m in zip(frames, got, strict=True):
         m.pop("dir")
         assert m == describe_frame(f.arbitration_id, bytes(f.data))
+
+
+def test_raw_and_decoded_frames_read_back_as_sent(tmp_path) -> None:
+    """The raw frame's JSON (cached per frame shape around its data) and the decoded CANopen
+    text (cached per PDO, direction included) read back as each frame's own fields and as
+    `describe_frame` says, for random shapes, directions and repeated frames."""
+    import can
+
+    from hil.protocol.canopen import describe_frame
+
+    rng = random.Random(29)
+    sent = []
+    for _ in range(3000):
+        ext, rtr = rng.random() < 0.2, rng.random() < 0.1
+        data = bytes(rng.randrange(256) for _ in range(rng.randrange(9)))
+        cid = rng.choice([0x80, 0x185, 0x185, 0x205, 0x601, 0x581, 0x70A,
+                          rng.randrange(1 << (29 if ext else 11))])
+        f = can.Message(arbitration_id=cid, is_extended_id=ext, is_remote_frame=rtr,
+                        is_error_frame=rng.random() < 0.03, is_fd=rng.random() < 0.05,
+                        data=data, dlc=rng.randrange(9) if rtr else len(data))
+        sent.append((f, rng.choice(["rx", "tx", 'odd "dir"'])))
+    path = tmp_path / "shapes.mcap"
+    with Recorder(path) as rec:
+        for i, (f, d) in enumerate(sent):
+            rec.can("can0", f, d, T0 + i, None)
+    r = Recording.open(path)
+    raw = [o for *_x, o in r.messages(topics.can_raw("can0"))]
+    dec = iter(o for *_x, o in r.messages(topics.canopen("can0")))
+    assert len(raw) == len(sent)
+    for (f, d), o in zip(sent, raw, strict=True):
+        assert o == {"id": f.arbitration_id, "ext": f.is_extended_id, "rtr": f.is_remote_frame,
+                     "err": f.is_error_frame, "fd": f.is_fd, "brs": False, "esi": False,
+                     "dlc": f.dlc, "data": bytes(f.data).hex(), "dir": d}
+        if f.is_extended_id or f.is_error_frame:
+            continue  # CANopen uses 11-bit identifiers: no decoded message
+        m = next(dec)
+        assert m.pop("dir") == d
+        kw = {"remote": True} if f.is_remote_frame else {}
+        assert m == describe_frame(f.arbitration_id, bytes(f.data), **kw)
+    assert next(dec, None) is None
