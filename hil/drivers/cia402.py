@@ -105,6 +105,17 @@ class HomingError(Cia402Error):
     """Homing reported an error (statusword bit 13, L18337-L18338)."""
 
 
+class ObjectValueError(Cia402Error):
+    """A value the object's EDS type cannot carry: refused before anything is sent."""
+
+    def __init__(self, node: int, index: int, sub: int, value: int,
+                 rng: tuple[int, int] | str) -> None:
+        self.index, self.sub, self.value = index, sub, value
+        what = (f"holds a {rng}, not an integer" if isinstance(rng, str)
+                else f"takes {rng[0]}..{rng[1]} by the EDS")
+        super().__init__(f"node {node}: {index:04X}h sub {sub} {what}: {value} not sent")
+
+
 class SdoError(Cia402Error):
     """An SDO access aborted or timed out (abort code and its CiA 301 text)."""
 
@@ -131,6 +142,48 @@ def object_dictionary(eds: str | Path, node_id: int) -> canopen.ObjectDictionary
     if od is None:
         od = _ODS[key] = canopen.import_od(str(path), node_id)
     return od
+
+
+def od_variable(od: canopen.ObjectDictionary, index: int, sub: int
+                ) -> canopen.objectdictionary.ODVariable | None:
+    """The EDS entry of `index:sub` (a plain variable is its own sub 0); None if absent."""
+    obj = od.get(index)
+    if obj is None:
+        return None
+    if isinstance(obj, canopen.objectdictionary.ODVariable):
+        return obj if sub == obj.subindex else None
+    try:
+        return obj[sub]
+    except KeyError:
+        return None
+
+
+def value_range(var: canopen.objectdictionary.ODVariable) -> tuple[int, int] | str:
+    """The integers an object of this EDS type can carry, or its type's name when it holds
+    no integer (a string, a domain)."""
+    fmt = var.STRUCT_TYPES.get(var.data_type)
+    if fmt is None:
+        return DATA_TYPE_NAMES.get(var.data_type, f"data type {var.data_type:#x}")
+    code = fmt.format.lstrip("<")
+    if code == "?":
+        return 0, 1
+    if code in "fd":  # REAL32 / REAL64 take an integer as its float
+        return -(2**31), 2**32 - 1
+    bits = 8 * fmt.size
+    if code.islower():
+        return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    return 0, (1 << bits) - 1
+
+
+DATA_TYPE_NAMES = {0x09: "VISIBLE_STRING", 0x0A: "OCTET_STRING", 0x0B: "UNICODE_STRING",
+                   0x0F: "DOMAIN"}
+
+
+def eds_value_range(index: int, sub: int, node_id: int = 1) -> tuple[int, int] | str | None:
+    """What a write of `index:sub` can carry by the drive's EDS (`value_range`); None when
+    the EDS has no such object (the driver then writes it as 32 bits, and the drive says)."""
+    var = od_variable(object_dictionary(EDS_PATH, node_id), index, sub)
+    return None if var is None else value_range(var)
 
 
 class Cia402Driver:
@@ -175,10 +228,9 @@ class Cia402Driver:
         """SDO upload decoded with the EDS type (raises SdoError)."""
         try:
             with self.lock:
-                obj = self.node.object_dictionary.get(index)
-                if obj is None:
+                var = od_variable(self.node.object_dictionary, index, sub)
+                if var is None:  # not in the EDS: the bytes the drive gives, little-endian
                     return int.from_bytes(self.node.sdo.upload(index, sub), "little")
-                var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[sub]
                 # canopen's `Variable.raw` without its debug text, which it formats even
                 # when nothing logs it: the statusword poll is the busiest call here
                 return var.decode_raw(self.node.sdo.upload(var.index, var.subindex))
@@ -186,11 +238,20 @@ class Cia402Driver:
             raise SdoError(self.node_id, index, sub, "upload", exc) from None
 
     def write(self, index: int, sub: int, value: int) -> None:
-        """SDO download encoded with the EDS type (raises SdoError)."""
+        """SDO download encoded with the EDS type; an object the EDS lacks goes as 32 bits
+        (the drive answers, e.g. abort 0602 0000). Raises SdoError, or ObjectValueError for a
+        value its EDS type cannot carry (nothing is sent)."""
         self._step("sdo_write", index=index, sub=sub, value=value)
+        var = od_variable(self.node.object_dictionary, index, sub)
+        if var is not None:
+            rng = value_range(var)
+            if isinstance(rng, str) or not rng[0] <= value <= rng[1]:
+                raise ObjectValueError(self.node_id, index, sub, value, rng)
         try:
             with self.lock:
-                if self._is_compound(index):
+                if var is None:
+                    self.node.sdo.download(index, sub, (value & 0xFFFFFFFF).to_bytes(4, "little"))
+                elif self._is_compound(index):
                     self.node.sdo[index][sub].raw = value
                 else:
                     self.node.sdo[index].raw = value

@@ -15,6 +15,7 @@ from hil.drivers.cia402 import (
     Cia402Fault,
     Cia402ModeError,
     Cia402Timeout,
+    ObjectValueError,
     SdoError,
     decode_state,
 )
@@ -111,6 +112,22 @@ def test_sdo_error_names_abort(rig):
         drv.read(0x3000, 0)
     with pytest.raises(ValueError, match="unknown names"):
         Cia402Driver(None, 1, timeouts={"nope": 1})
+
+
+def test_writes_go_by_the_eds_type_or_as_32_bits_when_it_lacks_the_object(rig):
+    """CiA 301: an object the dictionary lacks is answered with abort 0602 0000; the driver
+    sends it (32 bits) instead of failing in canopen's lookup. A value its EDS type cannot
+    carry (6060h is INTEGER8, 1017h UNSIGNED16) is refused before anything is sent."""
+    b, drv = rig
+    with pytest.raises(SdoError, match=r"3000h sub 0: abort 0x06020000"):
+        drv.write(0x3000, 0, 1)
+    for index, value in ((0x6060, 200), (0x1017, -1), (0x6040, 0x10000)):
+        sent = b.slave.stats["rx"]
+        with pytest.raises(ObjectValueError, match=f"{index:04X}h sub 0 takes"):
+            drv.write(index, 0, value)
+        assert b.slave.stats["rx"] == sent  # nothing on the bus
+    drv.write(0x1017, 0, 250)  # in range: written, and read back by its type
+    assert drv.read(0x1017, 0) == 250
 
 
 def test_two_threads_share_one_sdo_client(rig):

@@ -33,6 +33,7 @@ import can
 from hil import clock
 from hil.bench.param_rules import sdo_parameter
 from hil.bench.yamlio import Checker, join, parse_duration, shorten
+from hil.drivers.cia402 import eds_value_range
 from hil.plan.context import Outcome
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.session import BenchError
@@ -206,6 +207,7 @@ class ProduceArgs:
 @dataclass(frozen=True)
 class SdoArgs:
     values: list[tuple[int, int, int]]  # (index, sub, value)
+    keys: list[tuple[str, int]] = field(default_factory=list)  # each object as written, line
 
 
 @dataclass(frozen=True)
@@ -444,6 +446,7 @@ class Sdo(StepKind):
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> SdoArgs:
         m = v.mapping(obj, line, where)
         values: list[tuple[int, int, int]] = []
+        keys: list[tuple[str, int]] = []
         for k, x in m.items():
             if not isinstance(k, str):  # (keys keep their text: hil.yamlio)
                 raise v.err(m.kline(k), join(where, str(k)), f"{k!r}: write the object as quoted "
@@ -459,9 +462,26 @@ class Sdo(StepKind):
                             "0..255")
             values.append((index, sub,
                            _int(v, x, m.kline(k), join(where, k), -(2**31), 2**32 - 1)))
+            keys.append((k, m.kline(k)))
         if not values:
             raise v.err(line, where, "one or more objects: {\"1016:1\": 0x007F0064}")
-        return SdoArgs(values)
+        return SdoArgs(values, keys)
+
+    def check(self, cc: CheckContext) -> None:
+        """A value the object's type in the drive's EDS cannot carry is refused here: the
+        driver encodes by that type and would send nothing (an object the EDS lacks goes
+        as 32 bits, and the drive answers)."""
+        if not cc.drive.can:
+            raise cc.err(f"drive {cc.dname} has no CAN bus (bench `can:`)")
+        for (index, sub, value), (key, line) in zip(self.args.values, self.args.keys,
+                                                     strict=True):
+            rng = eds_value_range(index, sub, cc.drive.node_id or 1)
+            if isinstance(rng, str):
+                raise cc.err(f"{index:04X}h sub {sub} holds a {rng} (fixtures/drive/a3.eds): "
+                             "the sdo step writes integers", key, line)
+            if rng is not None and not rng[0] <= value <= rng[1]:
+                raise cc.err(f"{value}: {index:04X}h sub {sub} takes {rng[0]}..{rng[1]} by "
+                             "the drive's EDS (fixtures/drive/a3.eds)", key, line)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         for index, sub, value in self.args.values:
