@@ -17,12 +17,18 @@ Choices where the seed is garbled or silent (docs/pulse.md):
 * a stop at the zero point, EXT and abort are immediate (M1991 OFF, 001:28);
 * the CLR pulse is `clr_ms` = 30 ms (> 20 ms, 001:124);
 * P7 backlash is output on a reversal and not counted in the position; P10/P11 travel
-  compensation is not modelled.
+  compensation is not modelled;
+* register operands (Rxxxx / Dxxxx, 001:38-44): SPD and DRV strokes read two registers (the
+  named one the low word, the next the high word, 32 bits signed), TIME (WAIT, ACT, in 0.01 s)
+  and GOTO one register (16 bits); the PLC's own status registers of Ps0 are read as they
+  stand when the step runs: R4060 error, R4064 step, DR4072 remaining pulses, DR4080
+  frequency, DR4088 position.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import accumulate
@@ -40,6 +46,12 @@ AB_MAX_HZ = 460_000  # two-phase (A/B) maximum (001:14)
 MD1_WAIT_NS = 500 * MS  # "wait 0.5 s" (001:112)
 CLR_MIN_MS = 20.0  # "> 20 ms" (001:124)
 DRVZ_MODES = ("MD0", "MD1", "MD2")
+# Register operands (001:38-44): data registers R0-R3839, R5000-R8071 and D0-D3999 (the
+# register map of FUN141's operand table, 001:50), and Ps0's status registers (001:28-34)
+REGISTER = re.compile(r"^([RD])([0-9]{1,4})$")
+STATUS_REGISTERS = {"R4060": "error", "R4064": "step", "R4072": "remaining", "R4080": "freq",
+                    "R4088": "position"}
+TIME_UNIT_S = 0.01  # WAIT TIME / ACT count 0.01 s (001:42)
 FORMS = {"P/R": "pulse_sign", "U/D": "cw_ccw", "A/B": "ab"}
 
 # Error codes R4060 (001:34, 74); FUN141 parameter k -> code k + 1 (0-9) / k + 1 (12-14)
@@ -61,6 +73,36 @@ class PlcError(ValueError):
         self.code, self.step, self.field = code, step, field
         what = ERRORS.get(code, "FUN141 parameter")
         super().__init__(f"error {code} ({what}): {message}")
+
+
+def data_register(name: str) -> bool:
+    """A register a plan may set (`registers:`): R0-R3839, R5000-R8071, D0-D3999."""
+    m = REGISTER.match(name)
+    if not m:
+        return False
+    n = int(m.group(2))
+    return n <= 3999 if m.group(1) == "D" else (n <= 3839 or 5000 <= n <= 8071)
+
+
+def operand_register(name: Any) -> bool:
+    """A register a program step may name as its operand: a data or a status register."""
+    return isinstance(name, str) and (data_register(name) or name in STATUS_REGISTERS)
+
+
+def read_register(name: str, registers: dict[str, int], status: Any, bits: int) -> int:
+    """`name`'s value: a status register as the PLC shows it now, else the data register
+    (unset: 0); 16 bits read the low word, 32 bits the pair (signed)."""
+    if name in STATUS_REGISTERS:
+        v = int(getattr(status, STATUS_REGISTERS[name]))
+    else:
+        v = registers.get(name, 0)
+    if bits == 16:
+        return v & 0xFFFF
+    v &= 0xFFFFFFFF
+    return v - (1 << 32) if v >> 31 else v
+
+
+Operand = float | str  # a constant or a register name (Rxxxx / Dxxxx)
 
 
 @dataclass
@@ -183,7 +225,7 @@ class Drv:
 
     mode: str  # "ABS" | "ADR"
     direction: str
-    value: float
+    value: Operand  # pulses or units, or a register holding them (32 bits)
     unit: str = "Ps"
     chained: bool = False  # DRVC
 
@@ -192,13 +234,13 @@ class Drv:
 class Step:
     """One program step: SPD, a drive command, a transition, GOTO (001:38-44)."""
 
-    spd: float | None = None
+    spd: Operand | None = None  # a speed, or a register holding it (32 bits)
     drive: Drv | str | None = None  # Drv, "MD0"/"MD1"/"MD2" (DRVZ), None
-    wait_time: float | None = None  # WAIT TIME, s
+    wait_time: Operand | None = None  # WAIT TIME: s, or a register of 0.01 s (16 bits)
     wait_line: str = ""  # WAIT X<n>
-    act: float | None = None  # ACT, s
+    act: Operand | None = None  # ACT: s, or a register of 0.01 s (16 bits)
     ext: str = ""  # EXT X<n>
-    goto: int | None = None  # None = NEXT; 1-based step number
+    goto: int | str | None = None  # None = NEXT; a 1-based step number or a register
     end: bool = False  # MD
     line: int = 0  # plan-file line, for errors
 
@@ -219,12 +261,17 @@ class Program:
                 if chain:
                     raise PlcError(34, "a DRVC chain must end with a DRV (001:40)", step=i)
                 continue
-            if s.spd is not None and not 1 <= p.speed(s.spd) <= p.max_speed_pps:
-                raise PlcError(31, f"SPD {s.spd:g}: 1 ~ max_speed {p.max_speed_pps:g} Ps/s",
-                               step=i, field="SPD")
-            if s.goto is not None and not 1 <= s.goto <= len(self.steps):
-                raise PlcError(34, f"GOTO {s.goto}: no such step (1 ~ {len(self.steps)})",
-                               step=i, field="GOTO")
+            if isinstance(s.spd, str):
+                if not operand_register(s.spd):
+                    raise PlcError(30, f"SPD {s.spd}: not a register (R0-R3839, R5000-R8071, "
+                                       "D0-D3999, or a status register)", step=i, field="SPD")
+            elif s.spd is not None:
+                self.check_speed(p, s.spd, i)
+            for fld, op in (("WAIT", s.wait_time), ("ACT", s.act), ("GOTO", s.goto)):
+                if isinstance(op, str) and not operand_register(op):
+                    raise PlcError(34, f"{fld} {op}: not a register", step=i, field=fld)
+            if isinstance(s.goto, int):
+                self.check_goto(s.goto, i)
             d = s.drive
             if isinstance(d, str):
                 if chain:
@@ -237,8 +284,12 @@ class Program:
                 continue
             if s.spd is None:
                 raise PlcError(30, "a DRV/DRVC step needs an SPD", step=i, field="SPD")
-            if abs(p.pulses(d.value, d.unit)) >= 2**31:
-                raise PlcError(33, f"stroke {d.value:g}: beyond 32 bits", step=i, field="DRV")
+            if isinstance(d.value, str):
+                if not operand_register(d.value):
+                    raise PlcError(32, f"stroke {d.value}: not a register", step=i,
+                                   field="DRV")
+            else:
+                self.check_stroke(p, d, d.value, i)
             if d.mode not in ("ABS", "ADR"):
                 raise PlcError(43, f"{d.mode!r}: ABS or ADR", step=i, field="DRV")
             if chain and d.mode == "ABS":
@@ -256,6 +307,41 @@ class Program:
         if chain:
             raise PlcError(34, "a DRVC chain must end with a DRV (001:40)",
                            step=len(self.steps))
+
+    @staticmethod
+    def check_speed(p: AxisParams, value: float, i: int, via: str = "") -> None:
+        if value == 0 and via:  # the PLC waits for a non-zero value (001:38): for ever here
+            raise PlcError(31, f"SPD {via} holds 0: the step would wait for ever for a non-zero "
+                               "speed (001:38)", step=i, field="SPD")
+        if not 1 <= p.speed(value) <= p.max_speed_pps:
+            raise PlcError(31, f"SPD {via + ' = ' if via else ''}{value:g}: 1 ~ max_speed "
+                               f"{p.max_speed_pps:g} Ps/s", step=i, field="SPD")
+
+    @staticmethod
+    def check_stroke(p: AxisParams, d: Drv, value: float, i: int, via: str = "") -> None:
+        if abs(p.pulses(value, d.unit)) >= 2**31:
+            raise PlcError(33, f"stroke {via + ' = ' if via else ''}{value:g}: beyond 32 bits",
+                           step=i, field="DRV")
+
+    def check_goto(self, goto: int, i: int, via: str = "") -> None:
+        if not 1 <= goto <= len(self.steps):
+            raise PlcError(34, f"GOTO {via + ' = ' if via else ''}{goto}: no such step "
+                               f"(1 ~ {len(self.steps)})", step=i, field="GOTO")
+
+    def check_registers(self, p: AxisParams, registers: dict[str, int]) -> None:
+        """What the program reads from data registers, checked as the constants are:
+        nothing changes them while it runs (the status registers are read at run time)."""
+        def val(name: str, bits: int) -> int:
+            return read_register(name, registers, None, bits)
+        for i, s in enumerate(self.steps, 1):
+            if isinstance(s.spd, str) and s.spd not in STATUS_REGISTERS:
+                self.check_speed(p, val(s.spd, 32), i, via=s.spd)
+            d = s.drive
+            if isinstance(d, Drv) and isinstance(d.value, str) \
+                    and d.value not in STATUS_REGISTERS:
+                self.check_stroke(p, d, val(d.value, 32), i, via=d.value)
+            if isinstance(s.goto, str) and s.goto not in STATUS_REGISTERS:
+                self.check_goto(val(s.goto, 16), i, via=s.goto)
 
     @staticmethod
     def _check_drvz(p: AxisParams, mode: str, i: int) -> None:
@@ -363,6 +449,7 @@ class PulseMaster:
         self._oz = 0
         self._abort = False
         self._counted = 1
+        self.registers: dict[str, int] = {}  # data registers the program's operands read
         self.on_status = on_status
         self._unsub = port.subscribe(self._on_line)
         self.init_outputs()
@@ -577,10 +664,37 @@ class PulseMaster:
         self.stop()
 
     # -- the program ---------------------------------------------------------------------
+    def _op(self, op: Operand, bits: int = 32) -> float:
+        """An operand's value now: the constant, or what its register holds."""
+        if isinstance(op, str):
+            return read_register(op, self.registers, self.status, bits)
+        return op
+
+    def _seconds(self, op: Operand) -> float:
+        """WAIT TIME / ACT in s: a register counts 0.01 s (001:42)."""
+        return self._op(op, 16) * TIME_UNIT_S if isinstance(op, str) else float(op)
+
+    def _speed(self, program: Program, s: Step, i: int, left: float) -> float:
+        """SPD in Ps/s; from a register holding 0 the step waits until it is not 0
+        (001:38), then its value is checked as a constant's (error 31)."""
+        op = s.spd
+        assert op is not None
+        if isinstance(op, str) and self._op(op) == 0 \
+                and not clock.wait_for(lambda: self._op(op) != 0, left):
+            raise TimeoutError(f"SPD {op} stayed 0: the step waited for a speed (001:38)")
+        v = self._op(op)
+        if isinstance(op, str):
+            program.check_speed(self.p, v, i, via=op)
+        return self.p.speed(v)
+
     def run(self, program: Program, timeout_s: float = 60.0, *,
-            log: Callable[[str], None] | None = None) -> Status:
-        """Run `program` from step 1 until MD or its last step (001:26-44)."""
+            log: Callable[[str], None] | None = None,
+            registers: dict[str, int] | None = None) -> Status:
+        """Run `program` from step 1 until MD or its last step (001:26-44). `registers`:
+        the data registers its operands read (unset ones hold 0)."""
         program.check(self.p)
+        self.registers = dict(registers or {})
+        program.check_registers(self.p, self.registers)
         st = self.status
         st.ready, st.done, st.error = False, False, 0
         deadline = clock.monotonic_ns() + round(timeout_s * S)
@@ -594,17 +708,18 @@ class PulseMaster:
                 self._report("step")
                 if s.end:
                     break
-                if s.spd is not None:
-                    spd = self.p.speed(s.spd)
                 left = (deadline - clock.monotonic_ns()) / S
                 if left <= 0:
                     raise TimeoutError(f"program timeout {timeout_s:g} s at step {i + 1}")
+                if s.spd is not None:
+                    spd = self._speed(program, s, i + 1, left)
                 if isinstance(s.drive, Drv):
                     chain = [(s, spd)]
                     while chain[-1][0].drive.chained and i + 1 < len(steps):
                         i += 1
                         nxt = steps[i]
-                        spd = self.p.speed(nxt.spd) if nxt.spd is not None else spd
+                        if nxt.spd is not None:
+                            spd = self._speed(program, nxt, i + 1, left)
                         chain.append((nxt, spd))
                     s = chain[-1][0]
                     self._drive(chain, s, left)
@@ -615,12 +730,20 @@ class PulseMaster:
                     self._transition_after(s, left)
                 if self._abort:
                     break
-                i = (s.goto - 1) if s.goto is not None else i + 1
+                if s.goto is None:
+                    i += 1
+                else:
+                    goto = int(self._op(s.goto, 16))
+                    if isinstance(s.goto, str):
+                        program.check_goto(goto, i + 1, via=s.goto)
+                    i = goto - 1
                 st.done = True  # DN stays on until cleared (001:26)
                 self._report("done")
-        except BaseException:
+        except BaseException as e:
             self.stop()
             st.ready = True
+            if isinstance(e, PlcError):
+                st.error = e.code  # R4060 keeps the latest error code (001:34)
             self._report("error")
             raise
         st.ready = True
@@ -636,10 +759,18 @@ class PulseMaster:
         pos = self.status.position
         segs: list[tuple[int, float]] = []
         direction = 0
+        values = []
+        for s, _spd in chain:  # each stroke as its register holds it now
+            d = s.drive
+            assert isinstance(d, Drv)
+            v = self._op(d.value)
+            if isinstance(d.value, str):
+                Program.check_stroke(self.p, d, v, self.status.step, via=d.value)
+            values.append(v)
         for k, (s, spd) in enumerate(chain):
             d = s.drive
             assert isinstance(d, Drv)
-            n = self.p.pulses(d.value, d.unit)
+            n = self.p.pulses(values[k], d.unit)
             if k == 0 and d.mode == "ABS":
                 n = n - pos
             elif d.direction == "-":
@@ -653,7 +784,7 @@ class PulseMaster:
             direction = -direction
         segs = [(n, v) for n, v in segs if n > 0]
         ext = last.ext
-        act_ns = round(last.act * S) if last.act is not None else None
+        act_ns = round(self._seconds(last.act) * S) if last.act is not None else None
         t0 = clock.monotonic_ns()
         if ext:
             until = lambda: self.port.get(ext)  # noqa: E731 - EXT (001:42-44)
@@ -661,7 +792,7 @@ class PulseMaster:
             until = lambda: clock.monotonic_ns() - t0 >= act_ns  # noqa: E731 - ACT
         else:
             until = None
-        if len(chain) == 1 and self.p.pulses(first.value, first.unit) == 0:
+        if len(chain) == 1 and self.p.pulses(values[0], first.unit) == 0:
             # stroke 0: run until the transition (001:38)
             v = chain[0][1] or self.p.max_speed_pps
             direction = -1 if first.direction == "-" else 1
@@ -683,7 +814,7 @@ class PulseMaster:
     def _transition_after(self, s: Step, left: float) -> None:
         """WAIT time / line, EXT as WAIT once the pulses are done (001:42-44)."""
         if s.wait_time is not None:
-            clock.sleep(s.wait_time)
+            clock.sleep(self._seconds(s.wait_time))
         line = s.wait_line or s.ext
         if line and not clock.wait_for(lambda: self.port.get(line), left):
             raise TimeoutError(f"WAIT {line}: not on within the program's time")

@@ -380,3 +380,87 @@ def test_md1_stops_with_the_p8_slope_even_when_p12_is_set():
         stop = next(t for t, s in r.segs if t > moving[turn - 1][0] and s["freq"] == 0)
         # 20 kHz down to P5 (500) on P8's slope (~100 kHz a second): about 0.2 s, not 2 ms
         assert 0.15 * S < stop - slowing[0] < 0.3 * S
+
+
+# -- register operands (001:38-44) -------------------------------------------------------------
+
+
+def test_the_seeds_register_example_continues_the_pulses_ext_left_in_dr4072():
+    """The seed's own program (001:44): SPD R1000 (DR1000), DRV ADR,+,D100 (DD100), WAIT
+    TIME,R500 (0.01 s); then SPD R1002, DRV ADR,-,D102 with EXT X0: cut at the cam, the next
+    step runs DRV ADR,-,R4072,Ps, the pulses step 3 did not output (its minus sign is lost in
+    the OCR, as every minus of that page). The motor ends where step 3 alone would have."""
+    regs = {"R1000": 50_000, "D100": 30_000, "R500": 20, "R1002": 20_000, "D102": 50_000}
+    with rig(AxisParams(**FAST)) as r:
+        t0 = clock.monotonic_ns()
+        st = r.plc.run(prog(Step(spd="R1000", drive=Drv("ADR", "+", "D100"), wait_time="R500"),
+                            Step(spd="R1002", drive=Drv("ADR", "-", "D102"), ext="X0"),
+                            Step(spd=2000, drive=Drv("ADR", "-", "R4072", "Ps"),
+                                 wait_time=0.1),
+                            Step(end=True)), registers=regs)
+        assert st.position == 30_000 - 50_000 and st.remaining == 0
+        assert r.rev() == pytest.approx(-2.0, abs=2 / PER_REV)
+        # step 3 ran at 2 kHz: the cut left more than 20 000 pulses, so it took over 10 s
+        assert clock.monotonic_ns() - t0 > 10 * S
+
+
+def test_wait_and_act_times_from_a_register_count_hundredths_of_a_second():
+    with rig(AxisParams(**FAST)) as r:
+        t0 = clock.monotonic_ns()
+        r.plc.run(prog(Step(wait_time="R10"), Step(spd=10_000, drive=Drv("ADR", "+", 0),
+                                                   act="D7"), Step(end=True)),
+                  registers={"R10": 50, "D7": 30})
+        took = clock.monotonic_ns() - t0
+        assert 0.8 * S <= took < 0.8 * S + 5 * MS  # 0.5 s, then ACT 0.3 s
+        assert r.plc.status.position == pytest.approx(3000 - 30, abs=60)
+
+
+def test_goto_a_register_and_unset_registers_read_0():
+    with rig(AxisParams(**FAST)) as r:
+        # GOTO R20 = 3 skips step 2; DRV D5 (unset: 0) would be a continuous run, so it
+        # must be skipped for the program to end
+        st = r.plc.run(prog(Step(spd=10_000, drive=Drv("ADR", "+", 1000), goto="R20"),
+                            Step(spd=10_000, drive=Drv("ADR", "+", "D5")),
+                            Step(spd=10_000, drive=Drv("ADR", "+", 500)),
+                            Step(end=True)), registers={"R20": 3})
+        assert st.position == 1500
+
+
+def test_register_operands_are_refused_as_the_plc_refuses_them():
+    p = AxisParams(**FAST)
+    # an operand that is no register: SPD error 30, stroke error 32, others 34
+    for program, code in [
+        (prog(Step(spd="R4000", drive=Drv("ADR", "+", 10))), 30),
+        (prog(Step(spd=1000, drive=Drv("ADR", "+", "D4000"))), 32),
+        (prog(Step(goto="R9000"), Step(end=True)), 34),
+    ]:
+        with pytest.raises(PlcError) as e:
+            program.check(p)
+        assert e.value.code == code
+    # values the data registers hold, checked as constants: SPD above P4 (31), a stroke
+    # beyond 32 bits in mechanical units (33), a GOTO to no step (34), and an SPD of 0,
+    # which the PLC would wait on for ever (001:38)
+    mech = AxisParams(**FAST, unit=0, travel_per_rev=1)
+    for params, program, regs, code in [
+        (p, prog(Step(spd="R1", drive=Drv("ADR", "+", 10))), {"R1": 200_000}, 31),
+        (p, prog(Step(spd="R1", drive=Drv("ADR", "+", 10))), {}, 31),
+        (mech, prog(Step(spd=1, drive=Drv("ADR", "+", "D1", "Ut"))), {"D1": 2**30}, 33),
+        (p, prog(Step(goto="R1"), Step(end=True)), {"R1": 3}, 34),
+    ]:
+        program.check(params)
+        with pytest.raises(PlcError) as e:
+            program.check_registers(params, regs)
+        assert e.value.code == code, (program, regs, e.value)
+
+
+def test_a_status_register_read_at_run_time_is_checked_then():
+    # SPD from DR4088 (the position register): 0 at the start, so the step waits for a
+    # non-zero speed (001:38) and the program's time runs out; R4060 stays 0
+    with rig(AxisParams(**FAST)) as r:
+        with pytest.raises(TimeoutError, match="SPD R4088 stayed 0"):
+            r.plc.run(prog(Step(spd="R4088", drive=Drv("ADR", "+", 10))), timeout_s=0.5)
+        # once the position is 300 000, SPD R4088 is above P4 (100 kHz): error 31 in R4060
+        r.plc.run(prog(Step(spd=50_000, drive=Drv("ABS", "", 300_000))))
+        with pytest.raises(PlcError) as e:
+            r.plc.run(prog(Step(spd="R4088", drive=Drv("ADR", "+", 10))))
+        assert e.value.code == 31 and r.plc.status.error == 31

@@ -13,6 +13,8 @@
 `axis:` is FUN141 (hil.drivers.plc_pulse.AxisParams field names), `program:` FUN140 steps
 (SPD, DRV, DRVC, DRVZ, WAIT, ACT, EXT, GOTO, MD). What the PLC would refuse (its error codes
 30-60 and parameter errors 1-15, seed 001:34, 74) is refused here with file:line.
+`registers:` sets data registers (`{R1000: 5000, D100: -20000}`, 32 bits each) that SPD, DRV
+strokes, WAIT / ACT times and GOTO may name instead of a constant (001:38-44).
 """
 
 from __future__ import annotations
@@ -23,7 +25,15 @@ import re
 from typing import TYPE_CHECKING, Any
 
 from hil.bench.yamlio import Checker, join, level, parse_duration
-from hil.drivers.plc_pulse import AxisParams, Drv, PlcError, Program
+from hil.drivers.plc_pulse import (
+    STATUS_REGISTERS,
+    AxisParams,
+    Drv,
+    PlcError,
+    Program,
+    data_register,
+    operand_register,
+)
 from hil.drivers.plc_pulse import Step as PlcStep
 from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds.base import CheckContext, StepKind
@@ -36,7 +46,9 @@ if TYPE_CHECKING:
 
 _STEP_KEYS = {"SPD", "DRV", "DRVC", "DRVZ", "WAIT", "ACT", "EXT", "GOTO"}
 _X = re.compile(r"^[XMY][0-9]{1,4}$")
-_DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?)\s*,\s*(Ut|Ps)\s*$")
+_DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?|[RD][0-9]{1,4})"
+                  r"\s*,\s*(Ut|Ps)\s*$")
+_REG = re.compile(r"^[RD][0-9]{1,4}$")  # a register operand (checked by operand_register)
 # what `expect:` may name, and what each holds (the PLC's status, hil.drivers.plc_pulse.Status)
 _EXPECT = {"position": "int", "remaining": "int", "error": "int", "done": "bool",
            "freq": "number", "feedback": "int", "feedback_tol": "tolerance"}
@@ -70,7 +82,46 @@ def _drv(v: Checker, text: Any, line: int, where: str, chained: bool) -> Drv:
         raise v.err(line, where, f"{text!r}: write it as the PLC does, e.g. \"ABS,,300000,Ps\" "
                     "or \"ADR,+,200,Ut\" (mode ABS/ADR, direction +/-/blank, stroke, unit "
                     "Ut/Ps; error 43)")
-    return Drv(m.group(1), m.group(2), float(m.group(3)), m.group(4), chained)
+    value = m.group(3)
+    if _REG.match(value):
+        if not operand_register(value):
+            raise v.err(line, where, f"{value}: not a register (R0-R3839, R5000-R8071, "
+                        "D0-D3999 or a status register; error 32)")
+        return Drv(m.group(1), m.group(2), value, m.group(4), chained)
+    return Drv(m.group(1), m.group(2), float(value), m.group(4), chained)
+
+
+def _register(v: Checker, val: Any, line: int, where: str, code: int) -> str | None:
+    """`val` if it names a register a step may read; None if it is no register name."""
+    if not isinstance(val, str) or not _REG.match(val):
+        return None
+    if not operand_register(val):
+        raise v.err(line, where, f"{val}: not a register (R0-R3839, R5000-R8071, D0-D3999 "
+                    f"or a status register {', '.join(STATUS_REGISTERS)}; error {code})")
+    return val
+
+
+def _registers(v: Checker, obj: Any, line: int, where: str) -> dict[str, int]:
+    """`registers:` the data registers a program reads: 32-bit values, each taking its
+    register and the next (the low and the high word, 001:38)."""
+    m = v.mapping(obj, line, where)
+    out: dict[str, int] = {}
+    for k, val in m.items():
+        name, at = str(k), join(where, str(k))
+        if name in STATUS_REGISTERS:
+            raise v.err(m.kline(k), at, f"{name} is the PLC's status, not set by a plan")
+        if not data_register(name):
+            raise v.err(m.kline(k), at, f"{name!r}: a data register R0-R3839, R5000-R8071 "
+                        "or D0-D3999")
+        if not isinstance(val, int) or isinstance(val, bool) or not -(2**31) <= val < 2**31:
+            raise v.err(m.kline(k), at, f"{val!r}: a 32-bit whole number")
+        out[name] = val
+    for name in out:  # a value takes its register and the next: two may not overlap
+        nxt = f"{name[0]}{int(name[1:]) + 1}"
+        if nxt in out:
+            raise v.err(m.kline(nxt) if nxt in m else line, join(where, nxt),
+                        f"{nxt} is the high word of {name}'s 32-bit value")
+    return out
 
 
 def _expect_value(v: Checker, val: Any, line: int, where: str, kind: str) -> None:
@@ -106,9 +157,14 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
     s = PlcStep(line=line)
     if "SPD" in m:
         val = m["SPD"]
-        if not isinstance(val, int | float) or isinstance(val, bool):
-            raise v.err(m.kline("SPD"), join(where, "SPD"), f"{val!r}: a speed (error 31)")
-        s.spd = float(val)
+        reg = _register(v, val, m.kline("SPD"), join(where, "SPD"), 30)
+        if reg is not None:
+            s.spd = reg
+        elif not isinstance(val, int | float) or isinstance(val, bool):
+            raise v.err(m.kline("SPD"), join(where, "SPD"),
+                        f"{val!r}: a speed or a register (error 31)")
+        else:
+            s.spd = float(val)
     drives = [k for k in ("DRV", "DRVC", "DRVZ") if k in m]
     if len(drives) > 1:
         raise v.err(line, where, f"one drive command per step, not {' and '.join(drives)} "
@@ -124,7 +180,10 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
                     "(error 34)")
     if "WAIT" in m:
         val = m["WAIT"]
-        if isinstance(val, str) and _X.match(val):
+        reg = _register(v, val, m.kline("WAIT"), join(where, "WAIT"), 34)
+        if reg is not None:
+            s.wait_time = reg  # TIME from a register, 0.01 s (001:42)
+        elif isinstance(val, str) and _X.match(val):
             s.wait_line = val
         else:
             try:
@@ -133,18 +192,25 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
                 raise v.err(m.kline("WAIT"), join(where, "WAIT"),
                             f"a time (e.g. 500ms) or a line (X3): {e}") from None
     if "ACT" in m:
-        try:
-            s.act = parse_duration(m["ACT"]) / S
-        except ValueError as e:
-            raise v.err(m.kline("ACT"), join(where, "ACT"), str(e)) from None
+        reg = _register(v, m["ACT"], m.kline("ACT"), join(where, "ACT"), 34)
+        if reg is not None:
+            s.act = reg
+        else:
+            try:
+                s.act = parse_duration(m["ACT"]) / S
+            except ValueError as e:
+                raise v.err(m.kline("ACT"), join(where, "ACT"), str(e)) from None
     if "EXT" in m:
         s.ext = _line_name(v, m["EXT"], m.kline("EXT"), join(where, "EXT"))
     if "GOTO" in m:
         val = m["GOTO"]
-        if val != "NEXT":
+        reg = _register(v, val, m.kline("GOTO"), join(where, "GOTO"), 34)
+        if reg is not None:
+            s.goto = reg
+        elif val != "NEXT":
             if not isinstance(val, int) or isinstance(val, bool):
                 raise v.err(m.kline("GOTO"), join(where, "GOTO"),
-                            f"{val!r}: NEXT or a step number (error 34)")
+                            f"{val!r}: NEXT, a step number or a register (error 34)")
             s.goto = val
     return s
 
@@ -156,6 +222,7 @@ class PlcProgramArgs:
     timeout: int  # ns
     expect: dict[str, Any]  # status fields to expect at the end
     slice_ms: float  # the PLC's scan slice
+    registers: dict[str, int] = dataclasses.field(default_factory=dict)  # data registers
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,7 +240,7 @@ class PlcProgram(StepKind):
     @classmethod
     def parse(cls, v: Checker, obj: Any, line: int, where: str) -> PlcProgramArgs:
         m = v.mapping(obj, line, where)
-        v.keys(m, {"axis", "program", "timeout", "expect", "slice"}, where)
+        v.keys(m, {"axis", "program", "timeout", "expect", "slice", "registers"}, where)
         axis = (_axis(v, m["axis"], m.kline("axis"), join(where, "axis")) if "axis" in m
                 else AxisParams())
         if "program" not in m:
@@ -183,8 +250,11 @@ class PlcProgram(StepKind):
         steps = [_step(v, it, lines[i], join(where, f"program[{i}]"))
                  for i, it in enumerate(items)]
         prog = Program(steps)
+        regs = (_registers(v, m["registers"], m.kline("registers"), join(where, "registers"))
+                if "registers" in m else {})
         try:
             prog.check(axis)
+            prog.check_registers(axis, regs)
         except PlcError as e:
             s = steps[e.step - 1] if e.step else None
             fld = join(where, f"program[{e.step - 1}]") if e.step else join(where, "program")
@@ -202,11 +272,13 @@ class PlcProgram(StepKind):
                 _expect_value(v, val, e.kline(k), join(join(where, "expect"), k), _EXPECT[k])
             if e.get("error", 0) != 0:  # a program the PLC would refuse is refused here
                 raise v.err(e.kline("error"), join(join(where, "expect"), "error"),
-                            f"{e['error']}: R4060 only ever reads 0 here: a program or "
-                            "parameter the PLC refuses with an error code is refused by "
-                            "--check with that code (docs/pulse.md)")
+                            f"{e['error']}: R4060 reads 0 at the end of a program that "
+                            "ran: a program or parameter the PLC refuses with an error code "
+                            "is refused by --check with that code, and a status register "
+                            "read as an operand that it refuses fails the step with it "
+                            "(docs/pulse.md)")
             expect = dict(e)
-        return PlcProgramArgs(axis, prog, timeout, expect, slice_ns / 1e6)
+        return PlcProgramArgs(axis, prog, timeout, expect, slice_ns / 1e6, regs)
 
     def check(self, cc: CheckContext) -> None:
         if not cc.drive.pulse:
@@ -228,8 +300,8 @@ class PlcProgram(StepKind):
         plc.on_status = on_status
         cancel = getattr(ctx, "cancel", None)
         try:
-            st = plc.run(a.program, a.timeout / S)
-        except TimeoutError as e:
+            st = plc.run(a.program, a.timeout / S, registers=a.registers)
+        except (TimeoutError, PlcError) as e:  # PlcError: a status register's value, R4060
             raise StepFailed(f"PLC program: {e}") from None
         finally:
             if cancel is not None and cancel.is_set():
