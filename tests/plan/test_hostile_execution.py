@@ -29,7 +29,8 @@ pytestmark = pytest.mark.virtual_time
 
 VALUES = [0, 1, -1, 2, 7, 99, 1000, 65535, 65536, 2**31 - 1, -(2**31), 2**31, 0.5, 1e-3,
           "0", "1ms", "0ms", "10s", "1us", "off", "on", True, False, "DI1", "DI8", "X0", "Y0",
-          "ABS,,0,Ps", "ADR,-,1,Ps", [], [0], {}, "x"]
+          "ABS,,0,Ps", "ADR,-,1,Ps", "ADR,-,R4072,Ps", "R1000", "R4088", "D4000", [], [0],
+          {}, "x"]
 PYTHON_ERRORS = re.compile(r"^(TypeError|KeyError|AttributeError|IndexError|ZeroDivisionError|"
                            r"OverflowError|UnboundLocalError|NameError|AssertionError|"
                            r"RecursionError|ValueError|RuntimeError): ")
