@@ -241,12 +241,12 @@ class Cia402Driver:
         """SDO download encoded with the EDS type; an object the EDS lacks goes as 32 bits
         (the drive answers, e.g. abort 0602 0000). Raises SdoError, or ObjectValueError for a
         value its EDS type cannot carry (nothing is sent)."""
-        self._step("sdo_write", index=index, sub=sub, value=value)
         var = od_variable(self.node.object_dictionary, index, sub)
         if var is not None:
             rng = value_range(var)
             if isinstance(rng, str) or not rng[0] <= value <= rng[1]:
                 raise ObjectValueError(self.node_id, index, sub, value, rng)
+        self._step("sdo_write", index=index, sub=sub, value=value)
         try:
             with self.lock:
                 if var is None:
