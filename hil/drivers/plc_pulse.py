@@ -75,31 +75,70 @@ class PlcError(ValueError):
         super().__init__(f"error {code} ({what}): {message}")
 
 
-def data_register(name: str) -> bool:
-    """A register a plan may set (`registers:`): R0-R3839, R5000-R8071, D0-D3999."""
-    m = REGISTER.match(name)
-    if not m:
+def canonical_register(name: Any) -> str | None:
+    """`R0500` -> `R500`: the register a name means (None: no register name)."""
+    m = REGISTER.match(name) if isinstance(name, str) else None
+    return f"{m.group(1)}{int(m.group(2))}" if m else None
+
+
+def _next(name: str) -> str:
+    return f"{name[0]}{int(name[1:]) + 1}"
+
+
+def data_register(name: str, bits: int = 16) -> bool:
+    """A data register (R0-R3839, R5000-R8071, D0-D3999); with `bits` 32 its high word,
+    the next register, is one too."""
+    reg = canonical_register(name)
+    if reg is None:
         return False
-    n = int(m.group(2))
-    return n <= 3999 if m.group(1) == "D" else (n <= 3839 or 5000 <= n <= 8071)
+    def ok(r: str) -> bool:
+        n = int(r[1:])
+        return n <= 3999 if r[0] == "D" else (n <= 3839 or 5000 <= n <= 8071)
+    return ok(reg) and (bits == 16 or ok(_next(reg)))
 
 
-def operand_register(name: Any) -> bool:
+def operand_register(name: Any, bits: int = 16) -> bool:
     """A register a program step may name as its operand: a data or a status register."""
-    return isinstance(name, str) and (data_register(name) or name in STATUS_REGISTERS)
+    return isinstance(name, str) and (data_register(name, bits) or name in STATUS_REGISTERS)
 
 
-def read_register(name: str, registers: dict[str, int], status: Any, bits: int) -> int:
-    """`name`'s value: a status register as the PLC shows it now, else the data register
-    (unset: 0); 16 bits read the low word, 32 bits the pair (signed)."""
+def register_words(values: dict[str, Any]) -> dict[str, int]:
+    """The 16-bit words a plan's `registers:` sets: a value of 0-65535 is one word; a
+    negative or larger one (32 bits signed) is a pair, its register the low word and the
+    next the high word (001:38). Raises ValueError when two values set one word."""
+    words: dict[str, int] = {}
+    for name, value in values.items():
+        reg = canonical_register(name)
+        if reg is None or not data_register(reg):
+            raise ValueError(f"{name}: a data register R0-R3839, R5000-R8071 or D0-D3999")
+        if not isinstance(value, int) or isinstance(value, bool) \
+                or not -(2**31) <= value < 2**32:
+            raise ValueError(f"{name} = {value!r}: a whole number of 16 or 32 bits")
+        pair = not 0 <= value <= 0xFFFF
+        if pair and not data_register(reg, 32):
+            raise ValueError(f"{name} = {value}: a 32-bit value takes {reg} and "
+                             f"{_next(reg)}, which is no data register")
+        v = value & 0xFFFFFFFF
+        for r, w in ((reg, v & 0xFFFF), (_next(reg), v >> 16)) if pair else ((reg, v),):
+            if r in words:
+                raise ValueError(f"{name}: {r} is set twice (a 32-bit value takes its "
+                                 "register and the next, the high word)")
+            words[r] = w
+    return words
+
+
+def read_register(name: str, words: dict[str, int], status: Any, bits: int) -> int:
+    """`name`'s value: a status register as the PLC shows it now, else the data register's
+    word (unset: 0); 16 bits unsigned, 32 bits the word and the next (high) signed."""
     if name in STATUS_REGISTERS:
         v = int(getattr(status, STATUS_REGISTERS[name]))
+        v = v & 0xFFFF if bits == 16 else v & 0xFFFFFFFF
     else:
-        v = registers.get(name, 0)
-    if bits == 16:
-        return v & 0xFFFF
-    v &= 0xFFFFFFFF
-    return v - (1 << 32) if v >> 31 else v
+        reg = canonical_register(name) or name
+        v = words.get(reg, 0)
+        if bits == 32:
+            v |= words.get(_next(reg), 0) << 16
+    return v - (1 << 32) if bits == 32 and v >> 31 else v
 
 
 Operand = float | str  # a constant or a register name (Rxxxx / Dxxxx)
@@ -262,9 +301,10 @@ class Program:
                     raise PlcError(34, "a DRVC chain must end with a DRV (001:40)", step=i)
                 continue
             if isinstance(s.spd, str):
-                if not operand_register(s.spd):
-                    raise PlcError(30, f"SPD {s.spd}: not a register (R0-R3839, R5000-R8071, "
-                                       "D0-D3999, or a status register)", step=i, field="SPD")
+                if not operand_register(s.spd, 32):
+                    raise PlcError(30, f"SPD {s.spd}: not a register pair (R0-R3839, "
+                                       "R5000-R8071, D0-D3999 and the next, or a status "
+                                       "register)", step=i, field="SPD")
             elif s.spd is not None:
                 self.check_speed(p, s.spd, i)
             for fld, op in (("WAIT", s.wait_time), ("ACT", s.act), ("GOTO", s.goto)):
@@ -285,8 +325,8 @@ class Program:
             if s.spd is None:
                 raise PlcError(30, "a DRV/DRVC step needs an SPD", step=i, field="SPD")
             if isinstance(d.value, str):
-                if not operand_register(d.value):
-                    raise PlcError(32, f"stroke {d.value}: not a register", step=i,
+                if not operand_register(d.value, 32):
+                    raise PlcError(32, f"stroke {d.value}: not a register pair", step=i,
                                    field="DRV")
             else:
                 self.check_stroke(p, d, d.value, i)
@@ -328,11 +368,17 @@ class Program:
             raise PlcError(34, f"GOTO {via + ' = ' if via else ''}{goto}: no such step "
                                f"(1 ~ {len(self.steps)})", step=i, field="GOTO")
 
-    def check_registers(self, p: AxisParams, registers: dict[str, int]) -> None:
-        """What the program reads from data registers, checked as the constants are:
-        nothing changes them while it runs (the status registers are read at run time)."""
+    def check_registers(self, p: AxisParams, registers: dict[str, Any]) -> None:
+        """What the program reads from data registers (`registers:` values, `register_words`),
+        checked as the constants are: nothing changes them while it runs (the status
+        registers are read at run time)."""
+        try:
+            words = register_words(registers)
+        except ValueError as e:
+            raise PlcError(34, str(e)) from None
+
         def val(name: str, bits: int) -> int:
-            return read_register(name, registers, None, bits)
+            return read_register(name, words, None, bits)
         for i, s in enumerate(self.steps, 1):
             if isinstance(s.spd, str) and s.spd not in STATUS_REGISTERS:
                 self.check_speed(p, val(s.spd, 32), i, via=s.spd)
@@ -449,7 +495,7 @@ class PulseMaster:
         self._oz = 0
         self._abort = False
         self._counted = 1
-        self.registers: dict[str, int] = {}  # data registers the program's operands read
+        self.registers: dict[str, int] = {}  # the data registers' 16-bit words
         self.on_status = on_status
         self._unsub = port.subscribe(self._on_line)
         self.init_outputs()
@@ -693,16 +739,24 @@ class PulseMaster:
         """Run `program` from step 1 until MD or its last step (001:26-44). `registers`:
         the data registers its operands read (unset ones hold 0)."""
         program.check(self.p)
-        self.registers = dict(registers or {})
-        program.check_registers(self.p, self.registers)
+        program.check_registers(self.p, registers or {})
+        self.registers = register_words(registers or {})
         st = self.status
         st.ready, st.done, st.error = False, False, 0
         deadline = clock.monotonic_ns() + round(timeout_s * S)
         steps = program.steps
         i = 0
         spd: float | None = None
+        instant, seen = clock.monotonic_ns(), set()  # steps run in this instant of time
         try:
             while 0 <= i < len(steps):
+                now = clock.monotonic_ns()
+                if now != instant:
+                    instant, seen = now, set()
+                if i in seen:  # back at a step with no time passed: the GOTOs loop for ever
+                    raise TimeoutError(f"step {i + 1} is reached again by GOTO with no time "
+                                       "passed: the program loops without end")
+                seen.add(i)
                 s = steps[i]
                 st.step = i + 1
                 self._report("step")
@@ -814,7 +868,12 @@ class PulseMaster:
     def _transition_after(self, s: Step, left: float) -> None:
         """WAIT time / line, EXT as WAIT once the pulses are done (001:42-44)."""
         if s.wait_time is not None:
-            clock.sleep(self._seconds(s.wait_time))
+            wait = self._seconds(s.wait_time)
+            if wait > left:
+                clock.sleep(left)
+                raise TimeoutError(f"WAIT {wait:g} s: longer than the program's time left "
+                                   f"({left:g} s)")
+            clock.sleep(wait)
         line = s.wait_line or s.ext
         if line and not clock.wait_for(lambda: self.port.get(line), left):
             raise TimeoutError(f"WAIT {line}: not on within the program's time")

@@ -464,3 +464,51 @@ def test_a_status_register_read_at_run_time_is_checked_then():
         with pytest.raises(PlcError) as e:
             r.plc.run(prog(Step(spd="R4088", drive=Drv("ADR", "+", 10))))
         assert e.value.code == 31 and r.plc.status.error == 31
+
+
+def test_registers_are_16_bit_words_and_a_32_bit_value_takes_the_next_as_its_high_word():
+    # 132072 = 2 << 16 | 1000: R10 holds 1000, R11 holds 2 (001:38: low word, high word)
+    from hil.drivers.plc_pulse import read_register, register_words
+    w = register_words({"R10": 132072, "R500": 20, "R501": 2, "D102": -3000})
+    assert (w["R10"], w["R11"], w["R500"], w["R501"]) == (1000, 2, 20, 2)
+    assert read_register("R10", w, None, 32) == 132072
+    assert read_register("R11", w, None, 16) == 2
+    assert read_register("R500", w, None, 32) == 2 << 16 | 20  # the pair a PLC reads
+    assert read_register("D102", w, None, 32) == -3000 and read_register("D103", w, None, 16) \
+        == 0xFFFF
+    assert read_register("R0500", w, None, 16) == 20  # R0500 is R500
+    for bad in ({"D102": -1, "D103": 5}, {"R3839": 70000}, {"R1": "5"}, {"R4088": 1}):
+        with pytest.raises(ValueError):
+            register_words(bad)
+    with rig(AxisParams(**FAST)) as r:  # GOTO R11 reads the high word of R10's value: 2
+        st = r.plc.run(prog(Step(goto="R11"), Step(spd=10_000, drive=Drv("ADR", "+", 700)),
+                            Step(end=True)), registers={"R10": 132072})
+        assert st.position == 700
+    # a 32-bit operand needs its high word in the register map: R3839 + R3840 is not
+    with pytest.raises(PlcError) as e:
+        prog(Step(spd="R3839", drive=Drv("ADR", "+", 10))).check(AxisParams(**FAST))
+    assert e.value.code == 30
+
+
+def test_a_goto_loop_that_takes_no_time_is_refused_not_spun_for_ever():
+    # WAIT R500 = 0 then GOTO 1: in virtual time no time passes, so the program's timeout
+    # would never come; the PLC would spin for ever. The step fails at once instead.
+    with rig(AxisParams(**FAST)) as r:
+        for program, regs in ((prog(Step(wait_time="R500", goto="R7")), {"R500": 0, "R7": 1}),
+                              (prog(Step(wait_time=0.0, goto=1)), {})):
+            t0 = clock.monotonic_ns()
+            with pytest.raises(TimeoutError, match="loops without end"):
+                r.plc.run(program, timeout_s=2.0, registers=regs)
+            assert clock.monotonic_ns() == t0
+        # a loop that moves takes time: it ends at the program's timeout as before
+        with pytest.raises(TimeoutError, match="program timeout"):
+            r.plc.run(prog(Step(spd=5000, drive=Drv("ADR", "+", 100), goto=1)), timeout_s=0.5)
+
+
+def test_a_wait_longer_than_the_program_time_fails_at_that_time():
+    with rig(AxisParams(**FAST)) as r:
+        t0 = clock.monotonic_ns()
+        with pytest.raises(TimeoutError, match="longer than the program's time"):
+            r.plc.run(prog(Step(wait_time="R500"), Step(end=True)), timeout_s=2.0,
+                      registers={"R500": -1})  # 65535 x 0.01 s
+        assert 1.99 * S <= clock.monotonic_ns() - t0 <= 2.01 * S

@@ -31,8 +31,10 @@ from hil.drivers.plc_pulse import (
     Drv,
     PlcError,
     Program,
+    canonical_register,
     data_register,
     operand_register,
+    register_words,
 )
 from hil.drivers.plc_pulse import Step as PlcStep
 from hil.plan.context import Outcome, StepFailed
@@ -46,9 +48,11 @@ if TYPE_CHECKING:
 
 _STEP_KEYS = {"SPD", "DRV", "DRVC", "DRVZ", "WAIT", "ACT", "EXT", "GOTO"}
 _X = re.compile(r"^[XMY][0-9]{1,4}$")
-_DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?|[RD][0-9]{1,4})"
+_DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?|[A-Za-z]{1,2}[0-9]+)"
                   r"\s*,\s*(Ut|Ps)\s*$")
-_REG = re.compile(r"^[RD][0-9]{1,4}$")  # a register operand (checked by operand_register)
+# meant as a register (R1000, r1000, DR1000, R10000, R0500): checked by operand_register
+_REG = re.compile(r"^[A-Za-z]{1,2}[0-9]+$")
+_LINE_MAX = {"X": 255, "Y": 255, "M": 1911}  # 001:42
 # what `expect:` may name, and what each holds (the PLC's status, hil.drivers.plc_pulse.Status)
 _EXPECT = {"position": "int", "remaining": "int", "error": "int", "done": "bool",
            "freq": "number", "feedback": "int", "feedback_tol": "tolerance"}
@@ -84,21 +88,24 @@ def _drv(v: Checker, text: Any, line: int, where: str, chained: bool) -> Drv:
                     "Ut/Ps; error 43)")
     value = m.group(3)
     if _REG.match(value):
-        if not operand_register(value):
-            raise v.err(line, where, f"{value}: not a register (R0-R3839, R5000-R8071, "
-                        "D0-D3999 or a status register; error 32)")
-        return Drv(m.group(1), m.group(2), value, m.group(4), chained)
+        reg = _register(v, value, line, where, 32, 32)
+        return Drv(m.group(1), m.group(2), reg, m.group(4), chained)
     return Drv(m.group(1), m.group(2), float(value), m.group(4), chained)
 
 
-def _register(v: Checker, val: Any, line: int, where: str, code: int) -> str | None:
-    """`val` if it names a register a step may read; None if it is no register name."""
+def _register(v: Checker, val: Any, line: int, where: str, code: int, bits: int = 16
+              ) -> str | None:
+    """The register `val` names (`R0500` is R500), if a step may read it with `bits`; None
+    if `val` is no register name. SPD and strokes read a pair (32 bits, 001:38)."""
     if not isinstance(val, str) or not _REG.match(val):
         return None
-    if not operand_register(val):
-        raise v.err(line, where, f"{val}: not a register (R0-R3839, R5000-R8071, D0-D3999 "
-                    f"or a status register {', '.join(STATUS_REGISTERS)}; error {code})")
-    return val
+    reg = canonical_register(val)
+    if reg is None or not operand_register(reg, bits):
+        pair = " and the next register, its high word," if bits == 32 else ""
+        raise v.err(line, where, f"{val}: not a register{pair} (R0-R3839, R5000-R8071, "
+                    f"D0-D3999 or a status register {', '.join(STATUS_REGISTERS)}; "
+                    f"error {code})")
+    return reg
 
 
 def _registers(v: Checker, obj: Any, line: int, where: str) -> dict[str, int]:
@@ -108,19 +115,22 @@ def _registers(v: Checker, obj: Any, line: int, where: str) -> dict[str, int]:
     out: dict[str, int] = {}
     for k, val in m.items():
         name, at = str(k), join(where, str(k))
-        if name in STATUS_REGISTERS:
+        reg = canonical_register(name)
+        if reg in STATUS_REGISTERS:
             raise v.err(m.kline(k), at, f"{name} is the PLC's status, not set by a plan")
-        if not data_register(name):
+        if reg is None or not data_register(reg):
             raise v.err(m.kline(k), at, f"{name!r}: a data register R0-R3839, R5000-R8071 "
                         "or D0-D3999")
-        if not isinstance(val, int) or isinstance(val, bool) or not -(2**31) <= val < 2**31:
-            raise v.err(m.kline(k), at, f"{val!r}: a 32-bit whole number")
-        out[name] = val
-    for name in out:  # a value takes its register and the next: two may not overlap
-        nxt = f"{name[0]}{int(name[1:]) + 1}"
-        if nxt in out:
-            raise v.err(m.kline(nxt) if nxt in m else line, join(where, nxt),
-                        f"{nxt} is the high word of {name}'s 32-bit value")
+        if not isinstance(val, int) or isinstance(val, bool) or not -(2**31) <= val < 2**32:
+            raise v.err(m.kline(k), at, f"{val!r}: a whole number of 16 or 32 bits")
+        if reg in out:
+            raise v.err(m.kline(k), at, f"{name} is {reg}, set above" if name != reg
+                        else f"{reg} is set above (as a name with leading zeros)")
+        try:  # 0-65535 is one word; a negative or larger value its register and the next
+            register_words({**out, reg: val})
+        except ValueError as e:
+            raise v.err(m.kline(k), at, str(e)) from None
+        out[reg] = val
     return out
 
 
@@ -142,6 +152,8 @@ def _expect_value(v: Checker, val: Any, line: int, where: str, kind: str) -> Non
 def _line_name(v: Checker, val: Any, line: int, where: str) -> str:
     if not isinstance(val, str) or not _X.match(val):
         raise v.err(line, where, f"{val!r}: a PLC line like X3 (error 34)")
+    if int(val[1:]) > _LINE_MAX[val[0]]:
+        raise v.err(line, where, f"{val}: X0-X255, Y0-Y255 or M0-M1911 (001:42; error 34)")
     return val
 
 
@@ -157,7 +169,7 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
     s = PlcStep(line=line)
     if "SPD" in m:
         val = m["SPD"]
-        reg = _register(v, val, m.kline("SPD"), join(where, "SPD"), 30)
+        reg = _register(v, val, m.kline("SPD"), join(where, "SPD"), 30, 32)
         if reg is not None:
             s.spd = reg
         elif not isinstance(val, int | float) or isinstance(val, bool):
@@ -180,11 +192,12 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
                     "(error 34)")
     if "WAIT" in m:
         val = m["WAIT"]
-        reg = _register(v, val, m.kline("WAIT"), join(where, "WAIT"), 34)
+        reg = (None if isinstance(val, str) and _X.match(val)  # a line: X, Y, M
+               else _register(v, val, m.kline("WAIT"), join(where, "WAIT"), 34))
         if reg is not None:
             s.wait_time = reg  # TIME from a register, 0.01 s (001:42)
         elif isinstance(val, str) and _X.match(val):
-            s.wait_line = val
+            s.wait_line = _line_name(v, val, m.kline("WAIT"), join(where, "WAIT"))
         else:
             try:
                 s.wait_time = parse_duration(val) / S
