@@ -108,12 +108,9 @@ class HomingError(Cia402Error):
 class ObjectValueError(Cia402Error):
     """A value the object's EDS type cannot carry: refused before anything is sent."""
 
-    def __init__(self, node: int, index: int, sub: int, value: int,
-                 rng: tuple[int, int] | str) -> None:
+    def __init__(self, node: int, index: int, sub: int, value: int, why: str) -> None:
         self.index, self.sub, self.value = index, sub, value
-        what = (f"holds a {rng}, not an integer" if isinstance(rng, str)
-                else f"takes {rng[0]}..{rng[1]} by the EDS")
-        super().__init__(f"node {node}: {index:04X}h sub {sub} {what}: {value} not sent")
+        super().__init__(f"node {node}: {why}: {value} not sent")
 
 
 class SdoError(Cia402Error):
@@ -179,11 +176,19 @@ DATA_TYPE_NAMES = {0x09: "VISIBLE_STRING", 0x0A: "OCTET_STRING", 0x0B: "UNICODE_
                    0x0F: "DOMAIN"}
 
 
-def eds_value_range(index: int, sub: int, node_id: int = 1) -> tuple[int, int] | str | None:
-    """What a write of `index:sub` can carry by the drive's EDS (`value_range`); None when
-    the EDS has no such object (the driver then writes it as 32 bits, and the drive says)."""
-    var = od_variable(object_dictionary(EDS_PATH, node_id), index, sub)
-    return None if var is None else value_range(var)
+def value_refusal(od: canopen.ObjectDictionary, index: int, sub: int, value: int
+                  ) -> str | None:
+    """Why the EDS type of `index:sub` cannot carry `value` (None: it can, or the EDS has no
+    such object, which the driver writes as 32 bits and the drive answers)."""
+    var = od_variable(od, index, sub)
+    if var is None:
+        return None
+    rng = value_range(var)
+    if isinstance(rng, str):
+        return f"{index:04X}h sub {sub} holds a {rng}, not an integer"
+    if not rng[0] <= value <= rng[1]:
+        return f"{index:04X}h sub {sub} takes {rng[0]}..{rng[1]} by the drive's EDS"
+    return None
 
 
 class Cia402Driver:
@@ -241,26 +246,19 @@ class Cia402Driver:
         """SDO download encoded with the EDS type; an object the EDS lacks goes as 32 bits
         (the drive answers, e.g. abort 0602 0000). Raises SdoError, or ObjectValueError for a
         value its EDS type cannot carry (nothing is sent)."""
-        var = od_variable(self.node.object_dictionary, index, sub)
-        if var is not None:
-            rng = value_range(var)
-            if isinstance(rng, str) or not rng[0] <= value <= rng[1]:
-                raise ObjectValueError(self.node_id, index, sub, value, rng)
+        od = self.node.object_dictionary
+        why = value_refusal(od, index, sub, value)
+        if why is not None:
+            raise ObjectValueError(self.node_id, index, sub, value, why)
+        var = od_variable(od, index, sub)
+        data = ((value & 0xFFFFFFFF).to_bytes(4, "little") if var is None
+                else var.encode_raw(value))
         self._step("sdo_write", index=index, sub=sub, value=value)
         try:
             with self.lock:
-                if var is None:
-                    self.node.sdo.download(index, sub, (value & 0xFFFFFFFF).to_bytes(4, "little"))
-                elif self._is_compound(index):
-                    self.node.sdo[index][sub].raw = value
-                else:
-                    self.node.sdo[index].raw = value
+                self.node.sdo.download(index, sub, data)
         except (SdoAbortedError, SdoCommunicationError) as exc:
             raise SdoError(self.node_id, index, sub, "download", exc) from None
-
-    def _is_compound(self, index: int) -> bool:
-        obj = self.node.object_dictionary.get(index)
-        return obj is not None and not isinstance(obj, canopen.objectdictionary.ODVariable)
 
     @property
     def statusword(self) -> int:

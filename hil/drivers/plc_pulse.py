@@ -85,16 +85,16 @@ def _next(name: str) -> str:
     return f"{name[0]}{int(name[1:]) + 1}"
 
 
+def _in_map(reg: str) -> bool:
+    n = int(reg[1:])
+    return n <= 3999 if reg[0] == "D" else (n <= 3839 or 5000 <= n <= 8071)
+
+
 def data_register(name: str, bits: int = 16) -> bool:
     """A data register (R0-R3839, R5000-R8071, D0-D3999); with `bits` 32 its high word,
     the next register, is one too."""
     reg = canonical_register(name)
-    if reg is None:
-        return False
-    def ok(r: str) -> bool:
-        n = int(r[1:])
-        return n <= 3999 if r[0] == "D" else (n <= 3839 or 5000 <= n <= 8071)
-    return ok(reg) and (bits == 16 or ok(_next(reg)))
+    return reg is not None and _in_map(reg) and (bits == 16 or _in_map(_next(reg)))
 
 
 def operand_register(name: Any, bits: int = 16) -> bool:
@@ -368,10 +368,10 @@ class Program:
             raise PlcError(34, f"GOTO {via + ' = ' if via else ''}{goto}: no such step "
                                f"(1 ~ {len(self.steps)})", step=i, field="GOTO")
 
-    def check_registers(self, p: AxisParams, registers: dict[str, Any]) -> None:
+    def check_registers(self, p: AxisParams, registers: dict[str, Any]) -> dict[str, int]:
         """What the program reads from data registers (`registers:` values, `register_words`),
         checked as the constants are: nothing changes them while it runs (the status
-        registers are read at run time)."""
+        registers are read at run time). Returns the registers' words."""
         try:
             words = register_words(registers)
         except ValueError as e:
@@ -388,6 +388,7 @@ class Program:
                 self.check_stroke(p, d, val(d.value, 32), i, via=d.value)
             if isinstance(s.goto, str) and s.goto not in STATUS_REGISTERS:
                 self.check_goto(val(s.goto, 16), i, via=s.goto)
+        return words
 
     @staticmethod
     def _check_drvz(p: AxisParams, mode: str, i: int) -> None:
@@ -739,8 +740,7 @@ class PulseMaster:
         """Run `program` from step 1 until MD or its last step (001:26-44). `registers`:
         the data registers its operands read (unset ones hold 0)."""
         program.check(self.p)
-        program.check_registers(self.p, registers or {})
-        self.registers = register_words(registers or {})
+        self.registers = program.check_registers(self.p, registers or {})
         st = self.status
         st.ready, st.done, st.error = False, False, 0
         deadline = clock.monotonic_ns() + round(timeout_s * S)

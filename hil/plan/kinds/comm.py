@@ -33,10 +33,12 @@ import can
 from hil import clock
 from hil.bench.param_rules import sdo_parameter
 from hil.bench.yamlio import Checker, join, parse_duration, shorten
-from hil.drivers.cia402 import eds_value_range
+from hil.drivers.cia402 import object_dictionary, value_refusal
 from hil.plan.context import Outcome
 from hil.plan.kinds.base import CheckContext, StepKind
+from hil.plan.kinds.fields import check_can
 from hil.plan.session import BenchError
+from hil.profile.od import EDS_PATH
 from hil.transport.cyclic import CyclicSender
 from hil.transport.faults import (
     BURST_WINDOW_NS,
@@ -471,17 +473,13 @@ class Sdo(StepKind):
         """A value the object's type in the drive's EDS cannot carry is refused here: the
         driver encodes by that type and would send nothing (an object the EDS lacks goes
         as 32 bits, and the drive answers)."""
-        if not cc.drive.can:
-            raise cc.err(f"drive {cc.dname} has no CAN bus (bench `can:`)")
+        check_can(cc)
+        od = object_dictionary(EDS_PATH, cc.drive.node_id or 1)
         for (index, sub, value), (key, line) in zip(self.args.values, self.args.keys,
                                                      strict=True):
-            rng = eds_value_range(index, sub, cc.drive.node_id or 1)
-            if isinstance(rng, str):
-                raise cc.err(f"{index:04X}h sub {sub} holds a {rng} (fixtures/drive/a3.eds): "
-                             "the sdo step writes integers", key, line)
-            if rng is not None and not rng[0] <= value <= rng[1]:
-                raise cc.err(f"{value}: {index:04X}h sub {sub} takes {rng[0]}..{rng[1]} by "
-                             "the drive's EDS (fixtures/drive/a3.eds)", key, line)
+            why = value_refusal(od, index, sub, value)
+            if why is not None:
+                raise cc.err(f"{value}: {why} (fixtures/drive/a3.eds)", key, line)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         for index, sub, value in self.args.values:
