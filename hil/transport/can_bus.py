@@ -1,7 +1,7 @@
 """`open_can(url)`: a python-can bus from a transport URL, optionally tapped for recording.
 
     socketcan:can0            -> can.Bus(interface="socketcan", channel="can0")
-    virtual:bus0              -> can.Bus(interface="virtual", channel="bus0")
+    virtual:bus0              -> python-can's virtual bus "bus0" (hil.transport.inline.InlineBus)
     zenoh:<key>?connect=...   -> ZenohBus(channel=<key>, connect=[...], mode=...)
     pcan:PCAN_USBBUS1?bitrate=500000 -> can.Bus(interface="pcan", ..., bitrate=500000)
 
@@ -21,6 +21,7 @@ from can import BusABC, Message
 
 from hil import clock
 from hil.record.tap import Tap
+from hil.transport.inline import InlineBus, courier_of, raw_virtual
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 
 # Interfaces whose msg.timestamp is host receive time rather than a source timestamp.
@@ -58,7 +59,10 @@ def open_can(url: str, *, tap: Tap | None = None, name: str | None = None,
                                                         if k not in ("interface", "channel")})
         return bus if tap is None else TappedBus(bus, tap, name or u.target, interface="sim")
     try:
-        bus = can.Bus(ignore_config=True, **kwargs)
+        if u.scheme == "virtual":  # in process: answers in the sender's thread (inline.py)
+            bus = InlineBus(**{k: v for k, v in kwargs.items() if k != "interface"})
+        else:
+            bus = can.Bus(ignore_config=True, **kwargs)
     except OSError as e:
         raise _os_error(u, e) from e
     except can.CanInitializationError as e:
@@ -107,15 +111,21 @@ class TappedBus(BusABC):
         self.interface = interface
         self.channel_info = f"{bus.channel_info} (tapped as {name})"
         self._can_protocol = bus.protocol
+        self._raw = raw_virtual(bus)
         super().__init__(channel=getattr(bus, "channel", name))
 
     def send(self, msg: Message, timeout: float | None = None) -> None:
-        if clock.is_virtual():  # a virtual bus delivers the answers inside send: tx first
+        if clock.is_virtual() or self._inline():  # the answers come inside send: tx first
             self.tap.can(self.name, msg, "tx", clock.time_ns(), None)
             self.bus.send(msg, timeout)
             return
         self.bus.send(msg, timeout)
         self.tap.can(self.name, msg, "tx", clock.time_ns(), None)
+
+    def _inline(self) -> bool:
+        """A receiver on this in-process channel is fed in the sender's thread (inline.py)."""
+        raw = self._raw
+        return raw is not None and courier_of(raw.channel_id) is not None
 
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
         msg = self.bus.recv(timeout)

@@ -6,7 +6,8 @@ L20159-20163) and a cycle off 1006h (AL301, L20123-20127) that the harness made,
 drive. A real master's producer does not do that, so this one re-phases instead: a frame
 more than `rephase` x period late is sent at once and the cycle restarts from it. Every
 interval is then at least (1 - rephase) x period; a stall still makes one long interval
-(that is what a stalled master does) and is reported through `on_late`.
+(that is what a stalled master does) and is reported through `on_late`. With
+`HIL_RT_PRIORITY` the producer's thread asks for `SCHED_FIFO` (hil.realtime).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from collections.abc import Callable
 import can
 
 from hil import clock
+from hil.realtime import env_priority, set_fifo
 
 REPHASE = 0.25  # of the period: later than this, restart the cycle from the late frame
 
@@ -54,6 +56,7 @@ class Cyclic:
         self._event = self._clock.after(self.period_ns, self._tick)
 
     def _run(self) -> None:
+        set_fifo(env_priority(), self._thread.name if self._thread else "cyclic")
         due = time.perf_counter_ns()
         while not self._stop.is_set():
             now = time.perf_counter_ns()

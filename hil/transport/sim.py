@@ -310,12 +310,15 @@ def pump(bus: BusABC, fn: Callable[[Message], None]) -> Callable[[], None]:
 
 
 class ListenerPump:
-    """python-can listeners (canopen's `MessageListener`) fed by `pump`: a Notifier's stand-in."""
+    """python-can listeners (canopen's `MessageListener`) fed by `pump` (or another feed such
+    as `hil.transport.inline.inline_pump` on the wall clock): a Notifier's stand-in."""
 
-    def __init__(self, bus: BusABC, listeners: list[Any]) -> None:
+    def __init__(self, bus: BusABC, listeners: list[Any],
+                 feed: Callable[[BusABC, Callable[[Message], None]],
+                                Callable[[], None]] = pump) -> None:
         self.listeners = listeners
         self.exception: BaseException | None = None  # canopen's send_message checks it
-        self._stop = pump(bus, self._dispatch)
+        self._stop = feed(bus, self._dispatch)
 
     def _dispatch(self, msg: Message) -> None:
         for listener in list(self.listeners):

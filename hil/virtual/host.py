@@ -9,18 +9,19 @@ makes reaches the faces as late as the host's wake-up, not up to a period later
 (`timer_wakeups=False` is the plain ticker, kept as the benchmark's baseline:
 benchmarks/bench_edges.py). With `rt_priority` (or the environment variable
 `HIL_RT_PRIORITY`, 1-99) the ticker thread asks for `SCHED_FIFO` at that priority where the
-host allows it, and says so in the log either way. Model time starts at 0 when the host
-starts; `wall_ns(t)` maps it to epoch ns for records.
+host allows it, and says so in the log either way (hil.realtime). Model time starts at 0
+when the host starts; `wall_ns(t)` maps it to epoch ns for records.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable
 from typing import Any
+
+from hil.realtime import env_priority, set_fifo
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +38,7 @@ class DriveHost:
         self.lock = threading.RLock()
         self.period_s = period_s
         self.timer_wakeups = timer_wakeups
-        self.rt_priority = rt_priority if rt_priority is not None else _env_priority()
+        self.rt_priority = rt_priority if rt_priority is not None else env_priority()
         self.realtime = False  # SCHED_FIFO granted to the ticker thread
         self._wake: threading.Event | None = None  # set to wake the ticker early (poke)
         self._planned = 0  # model time of the ticker's planned wake-up
@@ -166,18 +167,7 @@ class DriveHost:
             self._note_error("poke", exc)
 
     def _set_realtime(self) -> None:
-        prio = self.rt_priority
-        if not prio:
-            return
-        try:
-            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO,
-                                  os.sched_param(prio))
-        except (OSError, AttributeError, ValueError) as exc:
-            log.warning("drive host: SCHED_FIFO priority %d refused (%s): ticking at the "
-                        "normal priority", prio, exc)
-            return
-        self.realtime = True
-        log.info("drive host: ticker thread at SCHED_FIFO priority %d", prio)
+        self.realtime = set_fifo(self.rt_priority, "drive host ticker")
 
     def _run(self) -> None:
         self._set_realtime()
@@ -214,21 +204,6 @@ class DriveHost:
                 time.sleep(delay / 1e9)
             elif delay < -50 * period:  # fell far behind (suspended?): resynchronise
                 deadline = time.monotonic_ns()
-
-
-def _env_priority() -> int | None:
-    raw = os.environ.get("HIL_RT_PRIORITY", "").strip()
-    if not raw:
-        return None
-    try:
-        prio = int(raw)
-    except ValueError:
-        log.warning("HIL_RT_PRIORITY=%r is not an integer 1-99: ignored", raw)
-        return None
-    if not 1 <= prio <= 99:
-        log.warning("HIL_RT_PRIORITY=%d is outside 1-99: ignored", prio)
-        return None
-    return prio
 
 
 class _SyncedLock:

@@ -28,6 +28,7 @@ from hil.model.options import ModelOptions
 from hil.record.topics import CAN_LATE_NS, can_line
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
+from hil.transport.inline import inline_pump, raw_virtual
 from hil.transport.pulse import open_pulse
 from hil.transport.serial_line import open_serial
 from hil.transport.sim import pump
@@ -194,8 +195,11 @@ class VirtualDriveStack:
                 pdo_defaults=spec.tpdo_defaults,
                 on_frame=self._frame_applied,
             )
-            if self.clock is None:
-                self.canopen.start()
+            if self.clock is None and raw_virtual(self.can_bus) is None:
+                self.canopen.start()  # its own receive thread (zenoh, a real interface)
+            elif self.clock is None:  # in process: frames in the sender's thread (inline.py)
+                self.canopen.start(thread=False)
+                self._closers.append(inline_pump(self.can_bus, self.canopen.feed))
             else:  # frames handed over inside the clock's delivery events
                 self.canopen.start(thread=False)
                 self._closers.append(pump(self.can_bus, self.canopen.feed))

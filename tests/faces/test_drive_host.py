@@ -106,12 +106,13 @@ def test_a_filtered_di_edge_reaches_a_subscriber_at_its_model_time() -> None:
 
 
 def test_hil_rt_priority_is_read_and_checked(monkeypatch) -> None:
-    from hil.virtual.host import _env_priority
+    from hil.realtime import env_priority
 
     for raw, want in (("", None), ("10", 10), ("99", 99), ("0", None), ("100", None),
                       ("fifo", None)):
         monkeypatch.setenv("HIL_RT_PRIORITY", raw)
-        assert _env_priority() == want, raw
+        assert env_priority() == want, raw
     monkeypatch.setenv("HIL_RT_PRIORITY", "7")
     assert DriveHost(_Clocked()).rt_priority == 7
     assert DriveHost(_Clocked(), rt_priority=3).rt_priority == 3
+

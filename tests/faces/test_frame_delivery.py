@@ -33,9 +33,19 @@ def test_a_frame_held_back_by_a_busy_model_is_reported_with_its_delay():
             master.send(nmt)  # pre-operational: a frame handled at once, under 0.5 ms
             time.sleep(0.2)
             quick = list(reports)
-            with stack.host.lock:  # the model is busy (a loaded host) for 20 ms
-                master.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
-                time.sleep(0.02)
+            held = threading.Event()
+
+            def busy() -> None:  # the model is busy (a loaded host) for 20 ms
+                with stack.host.lock:
+                    held.set()
+                    time.sleep(0.02)
+
+            worker = threading.Thread(target=busy)
+            worker.start()
+            held.wait(2)
+            # handed to the face in this thread (hil.transport.inline), behind the lock
+            master.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
+            worker.join(2)
             deadline = time.monotonic() + 2.0  # the 080h frame's own report, not the NMT's
             while time.monotonic() < deadline and not any(
                     r[0] == can_line(0x080) for r in list(reports)):
@@ -48,3 +58,31 @@ def test_a_frame_held_back_by_a_busy_model_is_reported_with_its_delay():
     assert len(late) == 1, reports
     _line, level, sent, applied = late[0]
     assert level is True and applied - sent >= 19_000_000  # held 20 ms behind the lock
+
+
+def test_an_in_process_drive_answers_in_the_senders_thread():
+    """On an in-process `virtual:` bus in real time the drive's CANopen face has no receive
+    thread: an SDO request is answered, and the answer reaches an inline receiver, before the
+    request's `send` returns (hil.transport.inline; docs/clock.md, "The real-time path")."""
+    from hil.transport.can_bus import open_can
+    from hil.transport.inline import inline_pump
+
+    chan = f"inline-{uuid.uuid4().hex}"
+    with VirtualDriveStack(DriveSpec(name="d1", can=f"virtual:{chan}", node_id=1)):
+        assert not [t.name for t in threading.enumerate() if t.name.startswith("canopen-")]
+        master = open_can(f"virtual:{chan}")
+        got: list[tuple[int, bytes, int]] = []
+        stop = inline_pump(master, lambda m: got.append(
+            (m.arbitration_id, bytes(m.data), threading.get_ident())))
+        try:
+            # SDO upload of 1000h (device type): initiate upload request, CiA 301 7.2.4.3.6
+            master.send(can.Message(arbitration_id=0x601, is_extended_id=False,
+                                    data=bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])))
+            answers = [g for g in got if g[0] == 0x581]
+        finally:
+            stop()
+            master.shutdown()
+    assert len(answers) == 1, got
+    _cob, data, ident = answers[0]
+    assert data[0] & 0xE0 == 0x40 and data[1:4] == bytes([0x00, 0x10, 0x00])  # upload response
+    assert ident == threading.get_ident()
