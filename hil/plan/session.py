@@ -31,7 +31,7 @@ from hil.profile.params import parse_name
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
 from hil.transport.faults import FaultyCanBus, FaultyDio, FaultySerial, next_fault_id
-from hil.transport.inline import inline_pump, raw_virtual
+from hil.transport.inline import can_inline, inline_pump
 from hil.transport.pulse import open_pulse
 from hil.transport.serial_line import open_serial
 
@@ -331,7 +331,7 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
         if clock.is_virtual():  # frames handed to canopen inside the clock's delivery events
             from hil.transport.sim import ListenerPump
             net.notifier = ListenerPump(bus, net.listeners)
-        elif raw_virtual(bus) is not None:  # in process: in the sender's thread (inline.py)
+        elif can_inline(bus):  # in the thread that delivers each frame (inline.py)
             from hil.transport.sim import ListenerPump
             net.notifier = ListenerPump(bus, net.listeners, inline_pump)
         else:

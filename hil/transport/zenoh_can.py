@@ -24,7 +24,7 @@ import logging
 import queue
 import struct
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import can
@@ -124,6 +124,7 @@ class ZenohBus(BusABC):
         self.preserve_timestamps = preserve_timestamps
         self._can_protocol = CanProtocol.CAN_FD if fd else CanProtocol.CAN_20
         self._queue: queue.SimpleQueue[Message] = queue.SimpleQueue()
+        self._notify: Callable[[], None] | None = None  # set_inline
         self._sub = self._pub = self._sync = None
         listen_l, connect_l = _endpoints(listen), _endpoints(connect)
         what = f"zenoh CAN bus {key!r}"
@@ -164,12 +165,26 @@ class ZenohBus(BusABC):
     def session(self) -> zenoh.Session:
         return self._session
 
+    def set_inline(self, notify: Callable[[], None] | None) -> None:
+        """Call `notify()` after each received frame is queued, in the thread it arrived in
+        (zenoh's): `hil.transport.inline.inline_pump` then reads it at once instead of a
+        receive thread. None: frames wait for `recv` again."""
+        self._notify = notify
+
+    def pending(self) -> int:
+        """Frames waiting for `recv`."""
+        return self._queue.qsize()
+
     def _on_sample(self, sample: zenoh.Sample) -> None:
         t = time.time()
         try:
             self._queue.put(unpack(sample.payload.to_bytes(), t, self._key))
         except ValueError as e:
             log.warning("%s: dropped sample: %s", self.channel_info, e)
+            return
+        notify = self._notify
+        if notify is not None:
+            notify()
 
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
         if self._is_shutdown:
@@ -194,6 +209,9 @@ class ZenohBus(BusABC):
             own = unpack(pack(msg, sender_ns), time.time(), self._key)
             own.is_rx = False
             self._queue.put(own)
+            notify = self._notify
+            if notify is not None:
+                notify()
 
     def _close_zenoh(self) -> None:
         undeclare(self._sub, self._sync, self._pub)

@@ -28,7 +28,7 @@ from hil.model.options import ModelOptions
 from hil.record.topics import CAN_LATE_NS, can_line
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
-from hil.transport.inline import inline_pump, raw_virtual
+from hil.transport.inline import can_inline, inline_pump
 from hil.transport.pulse import open_pulse
 from hil.transport.serial_line import open_serial
 from hil.transport.sim import pump
@@ -195,15 +195,15 @@ class VirtualDriveStack:
                 pdo_defaults=spec.tpdo_defaults,
                 on_frame=self._frame_applied,
             )
-            if self.clock is None and raw_virtual(self.can_bus) is None:
-                self.canopen.start()  # its own receive thread (zenoh, a real interface)
-            elif self.clock is None:  # in process: frames in the sender's thread (inline.py)
+            self._closers.append(self.canopen.close)  # after its frames stop (closers: LIFO)
+            if self.clock is None and not can_inline(self.can_bus):
+                self.canopen.start()  # its own receive thread (a real interface)
+            elif self.clock is None:  # frames in the thread that delivers them (inline.py)
                 self.canopen.start(thread=False)
                 self._closers.append(inline_pump(self.can_bus, self.canopen.feed))
             else:  # frames handed over inside the clock's delivery events
                 self.canopen.start(thread=False)
                 self._closers.append(pump(self.can_bus, self.canopen.feed))
-            self._closers.append(self.canopen.close)
             host.add_tick(self.canopen.tick)
         if spec.rs485:
 

@@ -234,7 +234,7 @@ def test_inline_pump_refuses_a_bus_that_is_not_python_cans_virtual():
         def _recv_internal(self, timeout):
             return None, False
 
-    with pytest.raises(TypeError, match="not a python-can virtual bus"):
+    with pytest.raises(TypeError, match="neither a python-can virtual bus nor"):
         inline_pump(Other(), lambda m: None)
 
 
@@ -264,3 +264,165 @@ def test_a_frames_copy_is_what_python_cans_virtual_bus_makes_of_it():
         for slot in can.Message.__slots__[1:]:
             assert getattr(got, slot) == getattr(want, slot), slot
         assert type(got.data) is bytearray and got.data is not msg.data
+
+
+class _Hooked(can.BusABC):
+    """A bus that calls back on each frame it queues (as ZenohBus.set_inline)."""
+
+    def __init__(self) -> None:
+        super().__init__(channel="hooked")
+        self.q: list[can.Message] = []
+        self.notify = None
+
+    def set_inline(self, notify) -> None:
+        self.notify = notify
+
+    def pending(self) -> int:
+        return len(self.q)
+
+    def arrive(self, msg: can.Message) -> None:
+        self.q.append(msg)
+        if self.notify is not None:
+            self.notify()
+
+    def send(self, msg, timeout=None) -> None: ...
+
+    def _recv_internal(self, timeout):
+        return (self.q.pop(0) if self.q else None), False
+
+
+def test_a_bus_with_set_inline_hands_frames_over_as_they_arrive_waiting_ones_first():
+    bus = _Hooked()
+    bus.arrive(_frame(1))  # before the pump
+    got: list[int] = []
+    stop = inline_pump(bus, lambda m: got.append(m.arbitration_id))
+    assert got == [1]
+
+    def reply_inside(m: can.Message) -> None:  # a frame arriving while one is handed over
+        got.append(m.arbitration_id)
+        if m.arbitration_id == 2:
+            bus.arrive(_frame(3))
+            assert got[-1] == 2  # not re-entered: 3 waits until 2 is done
+    stop()
+    stop = inline_pump(bus, reply_inside)
+    bus.arrive(_frame(2))
+    assert got == [1, 2, 3]
+    stop()
+    bus.arrive(_frame(4))
+    assert got == [1, 2, 3] and bus.recv(0).arbitration_id == 4
+
+
+def _pause_second_copy(monkeypatch, thread_name: str):
+    """Pause `thread_name` inside its send, between two receivers' puts (a thread switch)."""
+    import hil.transport.inline as il
+
+    paused, go, n = threading.Event(), threading.Event(), [0]
+    orig = il.copy_frame
+
+    def copy_frame(*a):
+        if threading.current_thread().name == thread_name:
+            n[0] += 1
+            if n[0] == 2:
+                paused.set()
+                go.wait(5)
+        return orig(*a)
+
+    monkeypatch.setattr(il, "copy_frame", copy_frame)
+    return paused, go
+
+
+def test_an_answer_never_overtakes_its_cause_when_another_thread_sends_meanwhile(
+        ch, monkeypatch):
+    """T2 is between two puts of its frame 0x100 when the main thread sends 0x300: R1's
+    answer 0x200 to 0x100 still reaches R2 after 0x100 (found by review: it came first)."""
+    s, r1, r2, x = _bus(ch), _bus(ch), _bus(ch), _bus(ch)
+    got: list[int] = []
+    stops = [inline_pump(r1, lambda m: m.arbitration_id == 0x100 and r1.send(_frame(0x200))),
+             inline_pump(r2, lambda m: got.append(m.arbitration_id))]
+    paused, go = _pause_second_copy(monkeypatch, "T2")
+    t2 = threading.Thread(target=lambda: s.send(_frame(0x100)), name="T2")
+    try:
+        t2.start()
+        assert paused.wait(5)
+        threading.Timer(0.05, go.set).start()  # T2 goes on while the main thread sends
+        x.send(_frame(0x300))
+        t2.join(5)
+        assert sorted(got) == [0x100, 0x200, 0x300]
+        assert got.index(0x100) < got.index(0x200)
+    finally:
+        go.set()
+        for stop in stops:
+            stop()
+        for bus in (s, r1, r2, x):
+            bus.shutdown()
+
+
+def test_a_frame_put_while_the_pump_is_installed_is_not_lost(ch, monkeypatch):
+    s, r = _bus(ch), _bus(ch)
+    paused, go = _pause_second_copy(monkeypatch, "T2")
+    s2 = _bus(ch)  # a third queue, so T2's second copy is for r (after s2's)
+    got: list[int] = []
+    t2 = threading.Thread(target=lambda: s.send(_frame(0x701)), name="T2")
+    try:
+        t2.start()
+        assert paused.wait(5)
+        stop = inline_pump(r, lambda m: got.append(m.arbitration_id))
+        go.set()
+        t2.join(5)
+        s.send(_frame(0x702))
+        assert got == [0x701, 0x702]
+        stop()
+    finally:
+        go.set()
+        for bus in (s, r, s2):
+            bus.shutdown()
+
+
+def test_after_stop_the_receiver_gets_nothing_and_frames_wait_for_recv(ch):
+    a, b, tx = _bus(ch), _bus(ch), _bus(ch)
+    got: list[tuple[str, int]] = []
+    stop_b: list = []
+
+    def on_a(m: can.Message) -> None:  # handed over first: stops b before b's turn
+        got.append(("a", m.arbitration_id))
+        if stop_b:
+            stop_b.pop()()
+
+    stop_a = inline_pump(a, on_a)
+    stop_b.append(inline_pump(b, lambda m: got.append(("b", m.arbitration_id))))
+    try:
+        tx.send(_frame(0x80))
+        assert got == [("a", 0x80)]
+        assert b.recv(1).arbitration_id == 0x80  # left for recv, not lost
+    finally:
+        stop_a()
+        for bus in (a, b, tx):
+            bus.shutdown()
+
+
+def test_ctrl_c_inside_a_hand_over_reaches_the_sender_and_the_channel_goes_on(ch):
+    """A KeyboardInterrupt raised while the main thread hands a frame over propagates to its
+    send; the next frames are handed over, none lost, none a frame behind."""
+    tx, rx = _bus(ch), _bus(ch)
+    got: list[int] = []
+    fire = [True]
+
+    def handler(m: can.Message) -> None:
+        if fire[0] and m.arbitration_id == 1:
+            fire[0] = False
+            raise KeyboardInterrupt
+        got.append(m.arbitration_id)
+
+    stop = inline_pump(rx, handler)
+    try:
+        tx.send(_frame(0))
+        with pytest.raises(KeyboardInterrupt):
+            tx.send(_frame(1))
+        tx.send(_frame(2))
+        assert got == [0, 2]  # 1 was being handled when Ctrl-C came: not handed again
+        tx.send(_frame(3))
+        assert got == [0, 2, 3]
+    finally:
+        stop()
+        tx.shutdown()
+        rx.shutdown()

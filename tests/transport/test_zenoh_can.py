@@ -138,3 +138,29 @@ def test_three_processes_through_project_router(port, spawn):
             got += _recv_until(bus, lambda g: False, timeout=0.1)
         assert sorted(m.arbitration_id for m in got) == [0x500, 0x600]  # each child, once
     assert not router.alive
+
+
+def test_inline_receiver_gets_each_frame_in_zenohs_thread_in_order(port):
+    """`inline_pump` on a ZenohBus: each frame handed to the receiver as it arrives, in
+    order, by the thread zenoh delivers it in (no `recv` loop); after `stop` frames wait for
+    `recv` again."""
+    import threading
+
+    from hil.transport.inline import can_inline, inline_pump
+
+    ep = f"tcp/127.0.0.1:{port}"
+    got: list[tuple[int, int]] = []
+    with ZenohBus("t/inl", listen=[ep]) as a, ZenohBus("t/inl", connect=[ep]) as b:
+        assert can_inline(a)
+        stop = inline_pump(a, lambda m: got.append((m.data[0], threading.get_ident())))
+        for k in range(50):
+            b.send(can.Message(arbitration_id=0x181, data=bytes([k]), is_extended_id=False))
+        deadline = time.monotonic() + 5
+        while len(got) < 50 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        stop()
+        b.send(can.Message(arbitration_id=0x182, data=b"\x63", is_extended_id=False))
+        late = a.recv(2)
+    assert [k for k, _ in got] == list(range(50))
+    assert threading.get_ident() not in {t for _, t in got}
+    assert late is not None and late.arbitration_id == 0x182
