@@ -28,6 +28,7 @@ import can
 
 from hil import clock
 from hil.protocol.canopen import FUNCTION_SPANS, is_function
+from hil.transport import inline
 
 CAN_ACTIONS = ("drop", "delay", "corrupt", "duplicate")
 # CANopen functions a fault may match: the classification of hil.protocol.canopen
@@ -231,13 +232,19 @@ class FaultyCanBus(can.BusABC):
         frames = list(frames)
         if within_ns is None:
             within_ns = BURST_WINDOW_NS.get(kind)
-        t0 = clock.time_ns()
+        t0 = t1 = clock.time_ns()
         try:
-            with clock.batch():  # back to back, as a flooding master queues them
-                for m in frames:
-                    self.bus.send(m)
+            # back to back, as a flooding master queues them: the drive sees them all
+            # before it answers any (virtual clock: one settle, the frames' wire time in the
+            # spread; in process: handed over at the end, the drive's work not in it)
+            with inline.hold(self.bus):
+                try:
+                    with clock.batch():
+                        for m in frames:
+                            self.bus.send(m)
+                finally:
+                    t1 = clock.time_ns()
         finally:
-            t1 = clock.time_ns()
             self.last_spread_ns = t1 - t0
             info: dict[str, Any] = {"frames": len(frames), "spread_us": round((t1 - t0) / 1e3, 1)}
             if within_ns is not None:

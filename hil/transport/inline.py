@@ -27,13 +27,14 @@ safe state wait for their SDO answers in the plan's thread, outside any handler.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import queue
 import threading
 import time
 import weakref
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import can
@@ -75,6 +76,7 @@ class Courier:
         self._busy = False  # a thread is handing frames over
         self._due: deque[_Receiver] = deque()  # a receiver per frame put, in put order
         self.put_lock = threading.Lock()  # held by an InlineBus putting one frame everywhere
+        self.held = 0  # > 0 inside `hold`: frames wait in the line until its end
 
     def add(self, receiver: _Receiver) -> None:
         """A frame was put for `receiver` (hand it over with `kick`)."""
@@ -83,15 +85,15 @@ class Courier:
     def kick(self) -> None:
         """Hand the frames put so far over now, or leave them to the thread doing so."""
         due, mutex = self._due, self._mutex
-        while due:  # re-checked after the turn: a frame put between the last pop and its end
+        while due and not self.held:  # re-checked after the turn: one put meanwhile
             mine = False
             current: _Receiver | None = None
             try:
                 with mutex:
-                    if self._busy:
+                    if self._busy or self.held:
                         return
                     self._busy = mine = True
-                while due:
+                while due and not self.held:
                     current = due[0]  # noted before it leaves the line: see the except
                     due.popleft()
                     current.hand_one()
@@ -215,6 +217,27 @@ class InlineQueue(_Receiver):
 
     def empty(self) -> bool:
         return not self._items
+
+
+@contextlib.contextmanager
+def hold(bus: Any) -> Iterator[None]:
+    """Frames put on `bus`'s in-process channel inside the block are handed over only at its
+    end, back to back: a master's burst (an SDO flood, duplicate PDOs) that reaches the
+    drive before the drive has answered any of it, as on a wire (AL111/AL112). Nothing to
+    do on another bus (zenoh delivers in order on its own time)."""
+    raw = raw_virtual(bus)
+    courier = courier_of(raw.channel_id) if raw is not None else None
+    if courier is None:
+        yield
+        return
+    with courier._mutex:
+        courier.held += 1
+    try:
+        yield
+    finally:
+        with courier._mutex:
+            courier.held -= 1
+        courier.kick()
 
 
 def _under(bus: Any, test: Callable[[Any], bool]) -> Any:

@@ -58,3 +58,19 @@ def test_fault_plans_on_the_zenoh_subprocess_bench(tmp_path):
     bench_file = fixture("benches", "virtual-zenoh.yaml")
     assert load_bench(bench_file).process == "subprocess"
     _run_all(bench_file, tmp_path)
+
+
+def test_burst_fault_plans_on_the_in_process_bench_in_real_time(tmp_path):
+    """The in-process bench on the wall clock hands each frame over in the sender's thread
+    (hil.transport.inline): a burst (an SDO flood, duplicate PDOs) must still reach the drive
+    back to back, before it answers any, for AL111/AL112 (docs/clock.md)."""
+    from dataclasses import replace
+
+    bench = replace(load_bench(), clock="real")
+    plans = [load_plan(p) for p in FAULT_PLANS
+             if p.stem in ("fault_sdo_flood", "fault_duplicate_pdo")]
+    assert len(plans) == 2
+    for r in run_plans(plans, bench, tmp_path, stream=io.StringIO()):
+        assert r.passed, (r.plan, [(s.label, s.status, s.message) for s in r.steps
+                                        if s.status != "pass"])
+        _every_fault_starts_and_ends(r.plan, r.recording)

@@ -426,3 +426,25 @@ def test_ctrl_c_inside_a_hand_over_reaches_the_sender_and_the_channel_goes_on(ch
         stop()
         tx.shutdown()
         rx.shutdown()
+
+
+def test_a_held_burst_reaches_the_receiver_only_after_its_last_frame_is_put(ch):
+    """`hold`: a master's burst goes on the channel back to back; the receiver is handed
+    the frames at the end, in order (the drive sees them all before it answers any)."""
+    from hil.transport.inline import hold
+
+    tx, rx = _bus(ch), _bus(ch)
+    got: list[int] = []
+    stop = inline_pump(rx, lambda m: got.append(m.data[0]))
+    try:
+        with hold(tx):
+            for k in range(3):
+                tx.send(_frame(0x601, bytes([k])))
+            assert got == []
+        assert got == [0, 1, 2]
+        tx.send(_frame(0x601, b"\x03"))  # after the hold: at once again
+        assert got == [0, 1, 2, 3]
+    finally:
+        stop()
+        tx.shutdown()
+        rx.shutdown()
