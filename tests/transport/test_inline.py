@@ -24,6 +24,13 @@ def _frame(cid: int, data: bytes = b"") -> can.Message:
     return can.Message(arbitration_id=cid, data=data, is_extended_id=False)
 
 
+def _close(stops, *buses) -> None:
+    for stop in stops:
+        stop()
+    for bus in buses:
+        bus.shutdown()
+
+
 @pytest.fixture
 def ch():
     return f"inline-{next(_chan)}"
@@ -66,10 +73,7 @@ def test_answers_come_in_order_and_no_receiver_is_re_entered(ch):
                         ((0x601, bytes([k])), (0x581, bytes([k])), (0x181, bytes([k])))]
         assert deepest[0] == 1
     finally:
-        for s in stops:
-            s()
-        for b in (server, master, listener):
-            b.shutdown()
+        _close(stops, server, master, listener)
 
 
 def test_threads_sending_at_once_each_frame_handed_over_once_receivers_one_at_a_time(ch):
@@ -143,10 +147,7 @@ def test_a_failing_receiver_loses_nothing_for_the_others(ch, caplog):
         tx.send(_frame(4))  # the courier is free again after the errors
         assert got == [1, 2, 3, 4]
     finally:
-        for s in stops:
-            s()
-        for bus in (bad, good, tx):
-            bus.shutdown()
+        _close(stops, bad, good, tx)
 
 
 def test_frames_waiting_before_go_first_and_after_stop_frames_wait_for_recv(ch):
