@@ -285,10 +285,27 @@ def inline_pump(bus: can.BusABC, fn: Callable[[can.Message], None]) -> Callable[
             courier = _couriers[raw.channel_id] = Courier()
         old = raw.queue
         new = InlineQueue(courier, lambda: bus.recv(0), fn)
-        _move(old, new)  # frames that were waiting go first
-        old.put = new.put  # a sender that already holds the old queue puts in the new one
-        _move(old, new)  # any put between the move and the forward
-        _swap(raw, old, new)
+        with courier._mutex:  # nothing handed over until the new queue is in place
+            courier.held += 1
+        try:
+            # a sender from now on, or one already inside the old queue's `put`, puts in
+            # the new one; what waited in the old one goes before it, in order
+            old.put = new.put
+            if isinstance(old, queue.Queue):
+                old._put = new.put  # type: ignore[attr-defined]
+            waiting: list[can.Message] = []
+            while True:
+                try:
+                    waiting.append(old.get_nowait())
+                except queue.Empty:
+                    break
+            new._items.extendleft(reversed(waiting))
+            for _ in waiting:
+                courier.add(new)
+            _swap(raw, old, new)
+        finally:
+            with courier._mutex:
+                courier.held -= 1
     courier.kick()
 
     def stop() -> None:
@@ -304,15 +321,6 @@ def inline_pump(bus: can.BusABC, fn: Callable[[can.Message], None]) -> Callable[
             _swap(raw, new, plain)
 
     return stop
-
-
-def _move(old: Any, new: InlineQueue) -> None:
-    while True:
-        try:
-            new._items.append(old.get_nowait())
-        except queue.Empty:
-            return
-        new.courier.add(new)
 
 
 def _swap(raw: VirtualBus, old: Any, new: Any) -> None:

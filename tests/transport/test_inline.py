@@ -449,3 +449,76 @@ def test_a_held_burst_reaches_the_receiver_only_after_its_last_frame_is_put(ch):
         stop()
         tx.shutdown()
         rx.shutdown()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_fuzz_threads_receivers_answers_and_a_sniffer(seed):
+    """Random senders in threads, inline receivers that answer some frames (an answer names
+    its cause in its data), one receiver installed while frames fly, a plain sniffer: every
+    receiver gets every frame not its own exactly once; each sender's frames in its order;
+    at every receiver an answer comes after its cause; handlers never overlap."""
+    import random
+    import sys
+
+    rng = random.Random(seed)
+    ch = f"inline-fuzz-{seed}-{next(_chan)}"
+    n_rx, n_tx, per = rng.randint(2, 4), rng.randint(2, 3), rng.randint(100, 200)
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # threads switch between almost any two bytecodes
+    rxs = [_bus(ch) for _ in range(n_rx)]
+    txs = [_bus(ch) for _ in range(n_tx)]
+    sniffer = can.Bus(interface="virtual", channel=ch, ignore_config=True)
+    seen: list[list[tuple[int, int, int]]] = [[] for _ in rxs]  # (cob, origin, seq)
+    active, overlap = [0], [0]
+    answers = {i: rng.random() < 0.5 for i in range(n_rx)}
+
+    def handler(i: int):
+        def fn(m: can.Message) -> None:
+            active[0] += 1
+            overlap[0] = max(overlap[0], active[0])
+            cob, origin, seq = m.arbitration_id, m.data[0], int.from_bytes(m.data[1:3], "big")
+            seen[i].append((cob, origin, seq))
+            if answers[i] and cob < 0x500 and rng.random() < 0.3:
+                rxs[i].send(_frame(0x580 + i, bytes([origin]) + seq.to_bytes(2, "big")
+                                   + bytes([cob & 0xFF])))
+            active[0] -= 1
+        return fn
+
+    late = rng.randrange(n_rx)
+    stops = [inline_pump(rx, handler(i)) for i, rx in enumerate(rxs) if i != late]
+
+    def sender(k: int) -> None:
+        for seq in range(per):
+            txs[k].send(_frame(0x100 + k, bytes([k]) + seq.to_bytes(2, "big")))
+            if rng.random() < 0.2:
+                time.sleep(0.0002)
+
+    threads = [threading.Thread(target=sender, args=(k,)) for k in range(n_tx)]
+    try:
+        for t in threads:
+            t.start()
+        time.sleep(0.001)
+        stops.append(inline_pump(rxs[late], handler(late)))  # installed while frames fly
+        for t in threads:
+            t.join(10)
+        sent = {(0x100 + k, k, s) for k in range(n_tx) for s in range(per)}
+        for i, got in enumerate(seen):
+            requests = [g for g in got if g[0] < 0x500]
+            # exactly once each (the late receiver too: what waited in python-can's queue
+            # before its pump is handed over first, what came after through the pump)
+            assert sorted(requests) == sorted(sent), (i, late, sorted(set(sent) - set(requests)))
+            for k in range(n_tx):
+                mine = [s for c, o, s in requests if o == k]
+                assert mine == sorted(mine), (i, k)  # each sender's order
+            for pos, (cob, origin, seq) in enumerate(got):
+                if cob >= 0x580:  # an answer: its cause came before it at this receiver
+                    cause = (0x100 + origin, origin, seq)
+                    assert cause in got[:pos], (i, cob, cause)
+        assert overlap[0] == 1
+        sniffed = []
+        while (m := sniffer.recv(0)) is not None:
+            sniffed.append(m.arbitration_id)
+        assert sniffed.count(0x100) == per
+    finally:
+        sys.setswitchinterval(interval)
+        _close(stops, *rxs, *txs, sniffer)
