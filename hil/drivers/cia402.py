@@ -181,8 +181,11 @@ def value_refusal(od: canopen.ObjectDictionary, index: int, sub: int, value: int
     """Why the EDS type of `index:sub` cannot carry `value` (None: it can, or the EDS has no
     such object, which the driver writes as 32 bits and the drive answers)."""
     var = od_variable(od, index, sub)
-    if var is None:
-        return None
+    return None if var is None else _refusal(var, index, sub, value)
+
+
+def _refusal(var: canopen.objectdictionary.ODVariable, index: int, sub: int, value: int
+             ) -> str | None:
     rng = value_range(var)
     if isinstance(rng, str):
         return f"{index:04X}h sub {sub} holds a {rng}, not an integer"
@@ -246,11 +249,10 @@ class Cia402Driver:
         """SDO download encoded with the EDS type; an object the EDS lacks goes as 32 bits
         (the drive answers, e.g. abort 0602 0000). Raises SdoError, or ObjectValueError for a
         value its EDS type cannot carry (nothing is sent)."""
-        od = self.node.object_dictionary
-        why = value_refusal(od, index, sub, value)
+        var = od_variable(self.node.object_dictionary, index, sub)
+        why = None if var is None else _refusal(var, index, sub, value)
         if why is not None:
             raise ObjectValueError(self.node_id, index, sub, value, why)
-        var = od_variable(od, index, sub)
         data = ((value & 0xFFFFFFFF).to_bytes(4, "little") if var is None
                 else var.encode_raw(value))
         self._step("sdo_write", index=index, sub=sub, value=value)

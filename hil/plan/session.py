@@ -328,12 +328,12 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
         if faults:
             bus = s.fault_can[bname] = FaultyCanBus(bus, bname, sink=rec)
         net = canopen.Network(bus)
-        if clock.is_virtual():  # frames handed to canopen inside the clock's delivery events
-            from hil.transport.sim import ListenerPump
-            net.notifier = ListenerPump(bus, net.listeners)
-        elif can_inline(bus):  # in the thread that delivers each frame (inline.py)
-            from hil.transport.sim import ListenerPump
-            net.notifier = ListenerPump(bus, net.listeners, inline_pump)
+        # frames handed to canopen inside the clock's delivery events (virtual clock), or in
+        # the thread that delivers each (inline.py), instead of a Notifier thread
+        if clock.is_virtual() or can_inline(bus):
+            from hil.transport.sim import ListenerPump, pump
+            net.notifier = ListenerPump(bus, net.listeners,
+                                        pump if clock.is_virtual() else inline_pump)
         else:
             net.notifier = can.Notifier(bus, net.listeners, 0.05)
         nets[bname] = s.nets[bname] = net

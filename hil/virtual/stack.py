@@ -196,14 +196,15 @@ class VirtualDriveStack:
                 on_frame=self._frame_applied,
             )
             self._closers.append(self.canopen.close)  # after its frames stop (closers: LIFO)
-            if self.clock is None and not can_inline(self.can_bus):
-                self.canopen.start()  # its own receive thread (a real interface)
-            elif self.clock is None:  # frames in the thread that delivers them (inline.py)
+            # frames handed over inside the clock's delivery events (virtual clock), or in the
+            # thread that delivers them (inline.py); else the face's own receive thread
+            feed = (pump if self.clock is not None
+                    else inline_pump if can_inline(self.can_bus) else None)
+            if feed is None:
+                self.canopen.start()
+            else:
                 self.canopen.start(thread=False)
-                self._closers.append(inline_pump(self.can_bus, self.canopen.feed))
-            else:  # frames handed over inside the clock's delivery events
-                self.canopen.start(thread=False)
-                self._closers.append(pump(self.can_bus, self.canopen.feed))
+                self._closers.append(feed(self.can_bus, self.canopen.feed))
             host.add_tick(self.canopen.tick)
         if spec.rs485:
 
