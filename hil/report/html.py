@@ -10,10 +10,12 @@ the safe-state actions, the bus log of each failing step, parameters, bench and 
 from __future__ import annotations
 
 import html
+import json
 import os
 from collections.abc import Mapping
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 from hil.fileio import write_text_atomic
 from hil.record import topics
@@ -155,6 +157,9 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
     except Exception as e:  # a truncated or foreign recording: the table still stands
         return [("timing diagrams", f"<p>Diagrams not drawn: {esc(str(e))}</p>")]
     names = {f.name for f in fields(Verdict)}
+    # one context per spec, binding and parameters: the checks of one spec at several steps
+    # (a homing spec after each homing) draw from the same traces, built once
+    contexts: dict[str, Any] = {}
     for (sid, step), vds in groups.items():
         spec = specs.get(sid)
         label = f"{sid}" + (f" (step {int(step) + 1})" if isinstance(step, int) else "")
@@ -172,8 +177,11 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
                                              for v in verdicts), o))
         binding = vds[0].get("binding") or None
         params = vds[0].get("check_params") or None
-        try:  # one context per spec and step: its traces are built once for every diagram
-            ctx = context(spec, source, params, binding)
+        key = json.dumps([sid, binding, params], sort_keys=True, default=repr)
+        try:  # its traces are built once for every diagram drawn from it
+            ctx = contexts.get(key)
+            if ctx is None:
+                ctx = contexts[key] = context(spec, source, params, binding)
         except Exception as e:
             out.append((label, f"<p>Diagram not drawn: {esc(type(e).__name__)}: "
                                f"{esc(str(e))}</p>"))

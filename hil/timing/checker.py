@@ -20,6 +20,7 @@ import bisect
 import fnmatch
 import itertools
 import math
+import operator
 import re
 from array import array
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -353,10 +354,26 @@ class Context:
             return self._held(s, _compress(s.name, pts, res, self._lags(s, topic, raw)))
         if s.kind == "signal":
             parent = self.trace(s.source or "")
-            pts = self._transform(s, SampleList(parent.times, parent.values))
+            pts = self._transform(s, self._with_limit_changes(s, parent))
             return self._held(s, _compress(s.name, pts, parent.res, parent.lags))
         parents = [self.trace(p) for p in s.parts]
         return _combine(s.name, s.kind, parents)
+
+    def _with_limit_changes(self, s: SignalDef, parent: Trace) -> SampleList:
+        """The parent's change points, and where a `below`/`above` limit changes between two
+        of them (a parameter written while the value holds), the value held then: the
+        comparison changes at the write, not at the parent's next change."""
+        pts = SampleList(parent.times, parent.values)
+        thresholds = self._thresholds(s.transforms)
+        if thresholds is None or thresholds.constant or not parent.times:
+            return pts
+        first = parent.times[0]
+        have = set(parent.times)
+        extra = [t for t in self.params.change_times() if t > first and t not in have]
+        if not extra:
+            return pts
+        merged = sorted([*pts, *((t, parent.value_at(t)) for t in extra)], key=lambda p: p[0])
+        return SampleList([t for t, _v in merged], [v for _t, v in merged])
 
     def _runs_suffice(self, s: SignalDef) -> bool:
         """A change-point trace of `s` needs only the first and last sample of each run of
@@ -403,15 +420,21 @@ class Context:
         ts: Any = array("q") if isinstance(pts, SampleList) and type(pts.times) is array else []
         vs: list[Any] = []
         t_append, v_append = ts.append, vs.append
+        # the limit in force over [lo, hi): looked up again only when a sample leaves it (the
+        # samples come in time order; a parameter written mid-run moves it a few times)
+        lim_v: Any = None
+        lo, hi = POS_INF, NEG_INF
         for t, v in pts:
             for op in ops:
                 v = op(v)
             if thresholds:
-                lim = thresholds(t)
+                if not lo <= t < hi:
+                    lim, lo, hi = thresholds.span(t)
+                    lim_v = lim[cmp] if cmp else None
                 if cmp == "below":
-                    v = v < lim["below"]
+                    v = v < lim_v
                 elif cmp == "above":
-                    v = v > lim["above"]
+                    v = v > lim_v
             t_append(t)
             v_append(v)
         return SampleList(ts, vs)  # 16 bytes a sample: a long recording's signal is long
@@ -449,10 +472,18 @@ class Context:
         def at(t: int) -> dict[str, float]:
             return vals[max(0, bisect.bisect_right(times, t) - 1)]
 
+        def span(t: int) -> tuple[dict[str, float], int, int]:
+            """The limits in force at t, and the times [lo, hi) they hold over."""
+            k = bisect.bisect_right(times, t) - 1
+            lo = times[k] if k >= 0 else NEG_INF
+            hi = times[k + 1] if k + 1 < len(times) else POS_INF
+            return vals[max(0, k)], lo, hi
+
         constant = all(v == vals[0] for v in vals)  # the usual case: one value throughout
         if constant:
             times, vals = times[:1], vals[:1]  # no search per sample
         at.constant = constant  # type: ignore[attr-defined]
+        at.span = span  # type: ignore[attr-defined]
         self._thr[id(tf)] = at
         return at
 
@@ -522,9 +553,8 @@ def _alarm_active(v: Any, codes: list[str]) -> bool:
 
 
 def _in_order(pts: Sequence[tuple[int, Any]]) -> bool:
-    if isinstance(pts, SampleList):
-        return all(a <= b for a, b in itertools.pairwise(pts.times))
-    return all(a[0] <= b[0] for a, b in itertools.pairwise(pts))
+    times = pts.times if isinstance(pts, SampleList) else [p[0] for p in pts]
+    return all(map(operator.le, times, itertools.islice(times, 1, None)))
 
 
 def _compress(name: str, pts: Sequence[tuple[int, Any]], res: int,

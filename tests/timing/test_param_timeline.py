@@ -80,3 +80,28 @@ def test_spec_params_lists_the_parameters_of_windows_thresholds_and_constants():
     assert spec_params(SPECS["servo_off_brake"]) == {"P1.038", "P1.043"}
     assert spec_params(SPECS["pr_soft_limit"]) == {"P2.009", "P5.008"}
     assert spec_params(SPECS["sto"]) == set()
+
+
+def test_a_threshold_that_changes_mid_recording_applies_from_each_change_on():
+    """`above: P5.008` where P5.008 is written three times while the position sits still and
+    moves: each sample is compared with the value in force at its own time (a sample at a
+    change time takes the new value), in time order or not (L11191)."""
+    from hil.timing.checker import context
+
+    writes = [(0, 300000), (5 * MS, 100000), (8 * MS, 250000), (12 * MS, 50000)]
+    pos = {t * MS: p for t, p in [(0, 0), (2, 200000), (4, 200000), (5, 200000), (6, 200000),
+                                  (8, 200000), (9, 260000), (11, 260000), (12, 60000),
+                                  (13, 40000)]}
+    in_force = ParamTimeline.from_source(
+        MemorySource({PARAMS: [(t, {"values": {"P5.008": v}}) for t, v in writes]}), PARAMS)
+    want = [(t, p > in_force.at(t)["P5.008"]) for t, p in sorted(pos.items())]
+    # the change points the samples give, one per change of the value
+    want = [pt for i, pt in enumerate(want) if i == 0 or pt[1] != want[i - 1][1]]
+    assert want == [(0, False), (5 * MS, True), (8 * MS, False), (9 * MS, True),
+                    (13 * MS, False)]
+    for order in (sorted(pos.items()), sorted(pos.items(), reverse=True)):
+        state = [(t, {"pos": p, "go": True}) for t, p in order]
+        src = MemorySource({PARAMS: [(t, {"values": {"P5.008": v}}) for t, v in writes],
+                            "/drive/drive1/state": state})
+        tr = context(loads_spec(BEYOND), src, binding={"drive": "drive1"}).trace("beyond")
+        assert list(zip(tr.times, tr.values, strict=True)) == want
