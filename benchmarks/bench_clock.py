@@ -3,8 +3,10 @@ the same run: wall time of each, the ratio, and every verdict that differs (docs
 
     .venv/bin/python benchmarks/bench_clock.py [PLAN ...] [--repeat-virtual]
 
-Prints; asserts nothing. `--repeat-virtual` also runs the virtual pass twice and counts the
-recordings whose messages differ (topics, log times, payloads): determinism.
+Prints; asserts nothing. The virtual pass runs the plans one at a time, like the real one; a
+last line also times the virtual pass as `hil run` runs it by default (one plan per usable CPU,
+docs/plans.md) against the same real pass. `--repeat-virtual` also runs the virtual pass twice
+and counts the recordings whose messages differ (topics, log times, payloads): determinism.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ from pathlib import Path
 from mcap.reader import make_reader
 
 from hil.bench.bench import load_bench
+from hil.plan.cli import DEFAULT_JOBS_MAX, DEFAULT_PARALLEL_MIN_PLANS
+from hil.plan.parallel import run_parallel, usable_cpus
 from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plans
 
@@ -73,6 +77,16 @@ def main(argv: list[str]) -> int:
                                   f"real {dr.get(k)}")
         print(f"{'TOTAL (run_plans)':<24} {wall_v:9.3f} {wall_r:8.3f} "
               f"{wall_r / wall_v if wall_v else 0:7.1f}  (real / virtual)")
+        # what `hil run` does by default in virtual time: one plan per usable CPU
+        jobs = min(usable_cpus(), DEFAULT_JOBS_MAX, len(plans))
+        if jobs > 1 and len(plans) >= DEFAULT_PARALLEL_MIN_PLANS:
+            t0 = time.perf_counter()
+            run_parallel(plans, dataclasses.replace(base, clock="virtual"), Path(tmp, "jobs"),
+                         jobs=jobs)
+            wall_j = time.perf_counter() - t0
+            print(f"{f'TOTAL (hil run, -j {jobs})':<24} {wall_j:9.3f} {wall_r:8.3f} "
+                  f"{wall_r / wall_j if wall_j else 0:7.1f}  (the real pass as above: one at "
+                  "a time, as `hil run --clock real` runs)")
         print(f"verdicts that differ: {len(differ)}")
         for line in differ:
             print("  " + line)

@@ -445,17 +445,22 @@ class Context:
             return tr
         pts: list[tuple[int, Any]] = []
         lags = dict(tr.lags)
+        since: int | None = None  # where the value became true (a true value that changes
+        due = POS_INF             # to another true value, a longer alarm list, goes on)
         for i, t in enumerate(tr.times):
             if not tr.values[i]:
+                since = None
                 pts.append((t, False))
                 continue
+            if since is None:
+                since = t
+                due = t + _ns(s.transforms["held"].eval(self.env(t)))
             nxt = tr.times[i + 1] if i + 1 < len(tr.times) else POS_INF
-            pts.append((t, False))
-            due = t + _ns(s.transforms["held"].eval(self.env(t)))
-            if due < nxt and due <= self.end:
+            pts.append((t, due <= t))
+            if t < due < nxt and due <= self.end:
                 pts.append((due, True))
-                if t in tr.lags:  # the timer started when the drive saw the edge
-                    lags[due] = tr.lags[t]
+                if since in tr.lags:  # the timer started when the drive saw the edge
+                    lags[due] = tr.lags[since]
         return _compress(tr.name, pts, tr.res, lags)
 
     def _thresholds(self, tf: dict[str, Any]) -> Any:
@@ -652,7 +657,7 @@ class Scope:
             if isinstance(b, Missing):
                 return b
             lo = NEG_INF if ev.within is None else b.t - _ns(ev.within.eval(ctx.env(b.t)))
-            occs = self._candidates(ev, lo, b.t + 1, b)
+            occs = self._candidates(ev, lo, b.t + 1, b, every=True)
             if occs:
                 return occs[-1]
             return Missing(f"no {ctx.expectation(ev.name).replace(' to ', ' ', 1)} "
@@ -670,15 +675,21 @@ class Scope:
         return Missing(f"expected {ctx.expectation(ev.name)}{after}; it never did in "
                        f"{_dur(max(span, 0))}", root=not ev.after)
 
-    def _candidates(self, ev: EventDef, lo: int, hi: int, anchor: Occ | None) -> list[Occ]:
+    def _candidates(self, ev: EventDef, lo: int, hi: int, anchor: Occ | None,
+                    every: bool = False) -> list[Occ]:
+        """The occurrences in [lo, hi) in time order; of a `first_true`, the first one (the
+        start of the range when already true then), or with `every` (a `before:` search,
+        which takes the last) each instant it became true."""
         if ev.kind == "first_true":
             tr = self.ctx.trace(ev.signal or "")
             start = max(lo, tr.times[0]) if tr.times else lo
+            head: list[Occ] = []
             if tr.times and tr.value_at(start) and start < hi:
-                if anchor is not None and start == anchor.t:
-                    return [anchor]
-                return [tr.occ(start)]
-            return [tr.occ(t) for t in tr.edges("rise") if lo <= t < hi][:1]
+                head = [anchor if anchor is not None and start == anchor.t else tr.occ(start)]
+                if not every:
+                    return head
+            rises = [tr.occ(t) for t in tr.edges("rise") if lo <= t < hi and t != start]
+            return head + rises if every else rises[:1]
         occs = self.ctx.occurrences(ev.name)
         ts = [o.t for o in occs]
         return occs[bisect.bisect_left(ts, lo):bisect.bisect_left(ts, hi)]
@@ -874,18 +885,21 @@ def _judge_window(ctx, c, sc, f: Occ, base) -> Verdict:
                   window_expr=c.window.text(), values=used)
     if isinstance(to, Missing):
         return Verdict(**common, status="inconclusive" if to.cut else "fail", message=to.why)
-    d = _ms(to.t - f.t)
-    dlo, dhi = d - _ms(to.res), d + _ms(f.res)
-    flo = -math.inf if lo is None else lo
-    fhi = math.inf if hi is None else hi
-    margin = min(d - flo, fhi - d)
+    # judged in integer ns, as the times are (in float ms, 2.2 - 1.2 > 1.0 would fail an
+    # observation whose range touches the limit); ms only for the message
+    dn = to.t - f.t
+    d = _ms(dn)
+    dlo, dhi = dn - to.res, dn + f.res
+    flo = -math.inf if lo is None else _ns(lo)
+    fhi = math.inf if hi is None else _ns(hi)
+    margin = _ms(min(dn - flo, fhi - dn))
     head = f"{ctx.label(c.to)} {d:.1f} ms after {ctx.label(c.frm)}"
     allowed = _allowed(c.window, lo, hi, used)
     if dlo >= flo and dhi <= fhi:
         status, tail = "pass", f"margin {margin:.1f} ms"
     elif dhi < flo or dlo > fhi:
         status = "fail"
-        tail = f"{d - fhi:.1f} ms late" if d > fhi else f"{flo - d:.1f} ms early"
+        tail = f"{_ms(dn - fhi):.1f} ms late" if dn > fhi else f"{_ms(flo - dn):.1f} ms early"
     else:
         status = "inconclusive"
         tail = (f"observation resolution (−{_ms(to.res):g}/+{_ms(f.res):g} ms) straddles "
@@ -893,7 +907,7 @@ def _judge_window(ctx, c, sc, f: Occ, base) -> Verdict:
     unc = (_ms(to.res), _ms(f.res))
     lower, higher = f.lag + to.early, to.lag + f.early  # delays under load (ns)
     if status == "fail" and (lower or higher):
-        llo, lhi = dlo - _ms(lower), dhi + _ms(higher)
+        llo, lhi = dlo - lower, dhi + higher
         if not (lhi < flo or llo > fhi):
             status, unc = "inconclusive", (unc[0] + _ms(lower), unc[1] + _ms(higher))
             tail += f", {_load_reason(f.lag + to.lag, f.early + to.early)}"
@@ -944,7 +958,10 @@ def _judge_forbid(ctx, c, sc, f: Occ, base) -> Verdict:
              f"within {_half_open(lo, hi, used)} of {ctx.label(c.frm)}" if c.window else "")
     if c.kind == "forbid":
         ev = ctx.spec.events[c.target]
-        occs = (ctx.occurrences(c.target) if ev.kind in
+        # an edge with no anchor: every one of them; an event tied to another (`after`,
+        # `before`, `within`: "the first Y rise after C") is that one occurrence
+        plain = ev.after is None and ev.before is None and ev.within is None
+        occs = (ctx.occurrences(c.target) if plain and ev.kind in
                 ("rise", "fall", "change", "becomes", "raised", "cleared", "message") else
                 [o for o in [sc.resolve(c.target)] if isinstance(o, Occ)])
         status, hit, why = "pass", None, " (within the observation resolution)"

@@ -831,8 +831,7 @@ class ParamTimeline:
     A parameter's first value from a snapshot or a read (`"source": "read"`, what the drive
     reported when asked) also covers the times before it: the drive held that value since its
     last recorded change, and there was none. A first value from a plain change (a write, a
-    `ParamChanged` event) does not; the earliest state still covers times before the first
-    record."""
+    `ParamChanged` event) does not, not even before the very first record (docs/timing.md)."""
 
     def __init__(self, changes: list[tuple[int, Mapping[str, Any]]] | None = None,
                  overrides: Mapping[str, Any] | None = None,
@@ -851,6 +850,7 @@ class ParamTimeline:
             for k, v in d.items():
                 if str(k) not in before and first.get(str(k), t) >= t:
                     before[str(k)] = v
+        self._before = before  # in force before the first record
         cur: dict[str, Any] = {}
         for t, d in changes:
             cur = cur | {str(k): v for k, v in d.items()}
@@ -881,11 +881,14 @@ class ParamTimeline:
         return set().union(*self._states) if self._states else set()
 
     def at(self, t: int | None) -> dict[str, Any]:
-        """Values in force at `t` (the earliest state also covers times before it)."""
+        """Values in force at `t`; before the first record, those a snapshot or a read
+        reported (held since before). `t` None: the earliest state."""
         if not self._states:
             return dict(self.overrides)
-        i = 0 if t is None else max(0, bisect.bisect_right(self._times, t) - 1)
-        return self._states[i] | self.overrides
+        if t is None:
+            return self._states[0] | self.overrides
+        i = bisect.bisect_right(self._times, t) - 1
+        return (self._states[i] if i >= 0 else self._before) | self.overrides
 
     def change_times(self) -> list[int]:
         return list(self._times)
