@@ -236,6 +236,7 @@ class EncoderMemory:
 
 class Params(Protocol):
     def get(self, name: str) -> int: ...
+    def cached(self, *names: str) -> Callable[[], tuple[int, ...]]: ...
     def set_internal(self, name: str, value: int) -> None: ...
     def on_write(self, name: str, fn: Callable[[str, int, int], None]) -> Any: ...
 
@@ -279,6 +280,9 @@ class AbsoluteEncoder:
         self.scheduler = scheduler
         self.on_origin: Callable[[], None] | None = None  # ABSC / P2.071 origin set
         self.params = params
+        self._puu_params = params.cached("P1.045", "P1.044", "P1.001", "P6.001")  # each step
+        self._safe_for: tuple[int, ...] | None = None  # the values `_safe_pulse` is for
+        self._safe_pulse = -1.0
         self.options = options or AbsoluteOptions()
         self.mem = memory or EncoderMemory()
         self._set_cause = set_cause
@@ -341,9 +345,9 @@ class AbsoluteEncoder:
 
     def puu_unwrapped(self) -> int:
         """PUU = ±pulse × P1.045/P1.044 + P6.001, sign from P1.001.Z (L16408-16410)."""
-        n, m = self.params.get("P1.045"), self.params.get("P1.044")
-        sign = -1 if self.cw_positive else 1
-        return _trunc_div(sign * self.mem.pulse_value * n, m) + self.params.get("P6.001")
+        n, m, p1001, p6001 = self._puu_params()
+        sign = -1 if (p1001 >> 8) & 0xF == self.options.cw_positive_z else 1
+        return _trunc_div(sign * self.mem.pulse_value * n, m) + p6001
 
     @property
     def puu(self) -> int:
@@ -654,10 +658,23 @@ class AbsoluteEncoder:
         changed = False
         if not m.turn_overflow and not (TURNS_MIN <= m.pulse_value // COUNTS_PER_REV <= TURNS_MAX):
             m.turn_overflow = changed = True
-        if not m.puu_overflow and not PUU_MIN <= self.puu_unwrapped() <= PUU_MAX:
+        if not m.puu_overflow and not self._puu_surely_inside(m.pulse_value) \
+                and not PUU_MIN <= self.puu_unwrapped() <= PUU_MAX:
             m.puu_overflow = changed = True
         if changed:
             self._evaluate()
+
+    def _puu_surely_inside(self, pulse: int) -> bool:
+        """Whether the PUU of `pulse` is surely inside PUU_MIN..PUU_MAX without working it
+        out: |pulse| × P1.045/P1.044 stays 1 PUU (the truncation) and 1 more (float) inside
+        the room P6.001 leaves (the bound is worked out again after a parameter change)."""
+        got = self._puu_params()
+        if got is not self._safe_for:
+            n, m, _p1001, p6001 = got
+            room = min(PUU_MAX - p6001, p6001 - PUU_MIN) - 2
+            self._safe_pulse = room * m / n if room > 0 and n > 0 and m > 0 else -1.0
+            self._safe_for = got
+        return abs(pulse) <= self._safe_pulse
 
     def _warning_present(self) -> bool:
         return any(self._causes.get(code, False) for code in self.options.absw_warnings)

@@ -401,7 +401,14 @@ class Cia402:
         """|60F4h| > 6065h (AL009 in position modes, L18452)."""
         if self._mode not in (PP, IP, HM) or not self.servo_enable_requested:
             return False
-        return abs(self._fe_puu()) > self._v[(0x6065, 0)]
+        limit = self._v[(0x6065, 0)]
+        ax = self.axis
+        # |round(a) - round(b)| <= |a - b| + 1: an error this far inside the window cannot
+        # exceed it, so the exact PUU difference is worked out only near the limit (+1 more
+        # for the float rounding of positions far from 0)
+        if abs(ax.demand - ax.position) * self._den / self._num + 2 <= limit:
+            return False
+        return abs(self._fe_puu()) > limit
 
     @property
     def statusword(self) -> int:

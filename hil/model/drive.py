@@ -139,6 +139,10 @@ class Drive:
             retained_path=self.state_path / "params.json" if self.state_path else None
         )
         self.params.servo_on = lambda: self.servo_on
+        # read every motion step: AL009 (P2.035), ZSPD, TSPD, TPOS (P1.038, P1.039, P1.054),
+        # the control mode (P1.001)
+        self._step_params = self.params.cached("P2.035", "P1.038", "P1.039", "P1.054",
+                                               "P1.001")
         self.params.subscribe(lambda n, v: self.emit(ParamChanged(self.sched.now, n, v)))
         for name_, value in (params or {}).items():
             self.params.write(name_, value)
@@ -714,7 +718,7 @@ class Drive:
         self._update_sensors()
         ax = self.axis
         if ax.power and (
-            abs(ax.following_error) > self.params.get("P2.035")
+            abs(ax.following_error) > self._step_params()[0]
             or self.cia402.following_error_exceeded
         ):
             self.alarms.raise_alarm("AL009")  # position error excessive (L19539-19542)
@@ -728,11 +732,18 @@ class Drive:
     def _refresh_speed_outputs(self) -> None:
         ax = self.axis
         rpm = ax.velocity_rpm
-        self._set_do("ZSPD", abs(rpm) < self.params.get("P1.038") / 10.0)
-        self._set_do("TSPD", rpm > self.params.get("P1.039"))
-        self._set_do("TPOS", self.tpos())
+        _p2035, p1038, p1039, _p1054, _p1001 = self._step_params()
+        last = self._dout_cache.get  # each output is set only when it changes (`_set_do`)
+        if last("ZSPD") != (on := abs(rpm) < p1038 / 10.0):
+            self._set_do("ZSPD", on)
+        if last("TSPD") != (on := rpm > p1039):
+            self._set_do("TSPD", on)
+        if last("TPOS") != (on := self.tpos()):
+            self._set_do("TPOS", on)
         # TQL: torque at a limit, not in T/Tz (L15278)
-        self._set_do("TQL", ax.torque_limited and self.difunc.control_mode() not in ("T", "Tz"))
+        on = ax.torque_limited and self.difunc.control_mode() not in ("T", "Tz")
+        if last("TQL") != on:
+            self._set_do("TQL", on)
 
     def control_mode(self) -> str:
         """The table 8.1 control mode (di_functions.py)."""
@@ -744,15 +755,16 @@ class Drive:
         the command has reached its target (L8624)."""
         ax = self.axis
         err = ax.following_error
+        _p2035, _p1038, _p1039, p1054, p1001 = self._step_params()
         # PR control mode by P1.001 (a dual mode only while its PR side is the one in effect)
         if self.pulse.used and self.pulse.in_pt_cached():  # PT: pulse command minus feedback
             err = self.pulse.error()
-        elif self.params.get("P1.001") & 0xFF in PR_MODES and self.difunc.control_mode() == "PR":
+        elif p1001 & 0xFF in PR_MODES and self.difunc.control_mode() == "PR":
             if self.pr.tpos_off:
                 return False
             if ax.mode == "position":
                 err = ax.target - ax.position
-        return abs(err) < self.params.get("P1.054")
+        return abs(err) < p1054
 
     def _update_sensors(self, force: bool = False) -> None:
         """Drive the sensor DIs from the axis position (force: at power-up, unfiltered)."""

@@ -18,6 +18,7 @@ import json
 import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 from hil.model.errors import OutOfRange, ProtectedParameter, ReadOnly, ServoOnLocked
 from hil.profile.params import ParamSpec, ParamTable
@@ -58,6 +59,8 @@ class ParameterStore:
         self._peek_hooks: dict[str, ReadHook] = {}  # current value without read side effects
         self._validators: dict[str, list[Validator]] = {}
         self._listeners: list[ChangeListener] = []
+        # bumped at every change of a value in effect or of the read hooks (`cached`)
+        self.version = 0
         self._set_all_defaults()
         if self.retained_path is not None and self.retained_path.exists():
             self._load_retained()
@@ -133,6 +136,7 @@ class ParameterStore:
         old = self._stored[spec.param]
         self._stored[spec.param] = value
         self._effective[spec.param] = value
+        self.version += 1
         if old != value:
             self._notify(spec.param, value)
 
@@ -147,6 +151,23 @@ class ParameterStore:
     def on_read(self, name: str, fn: ReadHook) -> None:
         """Compute `name` on every read()/get()/Modbus read (live monitor values)."""
         self._read_hooks[self.table.spec(name).param] = fn
+        self.version += 1
+
+    def cached(self, *names: str) -> Callable[[], tuple[int, ...]]:
+        """A getter of the values in effect of `names` (as `get`), looked up again only after
+        a change: the model's per-step reads cost one compare, not a lookup per name. A
+        parameter with a read hook (a live monitor value) is looked up at every call."""
+        keys = tuple(self.table.spec(n).param for n in names)
+        state: list[Any] = [-1, ()]
+
+        def values() -> tuple[int, ...]:
+            if state[0] != self.version:
+                state[1] = tuple(self.get(k) for k in keys)
+                live = any(k in self._read_hooks for k in keys)
+                state[0] = -1 if live else self.version
+            return state[1]
+
+        return values
 
     def on_peek(self, name: str, fn: ReadHook) -> None:
         """The current value of `name` where a read has side effects (the data-array windows
@@ -234,6 +255,7 @@ class ParameterStore:
             elif self._effective[key] != self._stored[key]:
                 self._effective[key] = self._stored[key]
                 changed.append(key)
+        self.version += 1
         if self.retained_path is not None:
             self.save()
         return changed
@@ -245,6 +267,7 @@ class ParameterStore:
                 self._stored[spec.param] = spec.default
                 self._notify(spec.param, spec.default)
             self._effective[spec.param] = spec.default
+        self.version += 1
         if self.retained_path is not None and self.autosave:
             self.save()
 
@@ -274,6 +297,7 @@ class ParameterStore:
             if spec.retained and spec.min <= int(value) <= spec.max:
                 self._stored[spec.param] = int(value)
                 self._effective[spec.param] = int(value)
+        self.version += 1
 
     # -- internals ---------------------------------------------------------------------------
 
@@ -288,6 +312,7 @@ class ParameterStore:
         self._stored[key] = value
         if not spec.power_cycle:
             self._effective[key] = value
+            self.version += 1
         if old != value:
             self._notify(key, value)
             if self.autosave and self.retained_path is not None and spec.retained:

@@ -139,6 +139,7 @@ class PrEngine:
     def __init__(self, drive: DriveCore, options: PrOptions | None = None,
                  homing: Homing | None = None) -> None:
         self.drive = drive
+        self._limit_params = drive.params.cached("P5.008", "P5.009")  # read every step
         self.options = options or PrOptions.from_dict(drive.options.extra.get("pr"))
         self.homing = homing  # PR#0 (homing.py)
         self.array = drive.array  # the data array (L5097), shared with CAPTURE/COMPARE
@@ -502,9 +503,9 @@ class PrEngine:
     # ---------------------------------------------------------------- software limits
     @property
     def _limit_check(self) -> bool:
-        get = self.drive.params.get
+        p5008, p5009 = self._limit_params()
         return (
-            get("P5.008") != DEFAULT_P5008 or get("P5.009") != DEFAULT_P5009
+            p5008 != DEFAULT_P5008 or p5009 != DEFAULT_P5009
             or self._limits["AL283"] or self._limits["AL285"]
         )
 

@@ -31,6 +31,9 @@ class Params:
     def get(self, name: str) -> int:
         return self.values[name]
 
+    def cached(self, *names: str):
+        return lambda: tuple(self.values[n] for n in names)
+
     def set_internal(self, name: str, value: int) -> None:
         self.values[name] = value
 

@@ -53,6 +53,10 @@ class FakeParams:
     def get(self, name: str) -> int:
         return self.values[name]
 
+    def cached(self, *names: str):
+        """`ParameterStore.cached`: here read at every call (a test sets `values` directly)."""
+        return lambda: tuple(self.values[n] for n in names)
+
     def set_internal(self, name: str, value: int) -> None:
         self.values[name] = int(value)
 
