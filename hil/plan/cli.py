@@ -18,7 +18,7 @@ from hil.plan.parallel import jobs_from_arg, parallel_blocker, run_parallel, usa
 from hil.plan.plan import Plan, check_plan, find_plans, load_plan
 from hil.plan.plansdir import choose_plans_dir
 from hil.plan.progress import RunProgress
-from hil.plan.runner import run_plans, summary_table, timing_specs
+from hil.plan.runner import output_stems, run_plans, summary_table, timing_specs
 from hil.plan.select import ExprError, select
 from hil.report.index import write_index
 from hil.report.junit import write_junit
@@ -87,9 +87,18 @@ def _last_failed(plans: list, out: Path, *, quiet: bool) -> list:
             print(f"--last-failed: no previous run in {out} (no readable junit.xml): "
                   "running the selection", file=sys.stderr)
         return plans
-    failed = {c.get("name") for c in cases
-              if c.find("failure") is not None or c.find("error") is not None}
-    chosen = [p for p in plans if p.name in failed]
+    # each failed testcase names its plan and its recording (`<stem>.mcap`): two plans of one
+    # name in different folders are told apart by the recording, as the run named them
+    stems = output_stems(plans)
+    chosen_ix: set[int] = set()
+    for c in cases:
+        if c.find("failure") is None and c.find("error") is None:
+            continue
+        rec = next((Path(pr.get("value") or "").stem for pr in c.iter("property")
+                    if pr.get("name") == "recording"), None)
+        same = [i for i, st in enumerate(stems) if rec is not None and st == rec]
+        chosen_ix.update(same or (i for i, p in enumerate(plans) if p.name == c.get("name")))
+    chosen = [p for i, p in enumerate(plans) if i in chosen_ix]
     if not chosen:
         if not quiet:
             print(f"--last-failed: no plan failed in the previous run ({junit}): "
@@ -99,6 +108,17 @@ def _last_failed(plans: list, out: Path, *, quiet: bool) -> list:
         print(f"--last-failed: {len(chosen)} of {len(plans)} plan(s) failed last time",
               file=sys.stderr)
     return chosen
+
+
+def _out_problem(out: Path) -> str | None:
+    """Why `--out` cannot hold the run's files (None: it can, or will once made): a file
+    where the directory belongs, or a file among its parents."""
+    if out.exists():
+        return None if out.is_dir() else "not a directory"
+    for parent in out.parents:
+        if parent.exists():
+            return None if parent.is_dir() else f"{parent} is not a directory"
+    return None
 
 
 def _logging(args: argparse.Namespace) -> None:
@@ -174,8 +194,17 @@ def main(args: argparse.Namespace) -> int:
             print(f"bench: {bench_path} (from ${BENCH_ENV})", file=sys.stderr)
     try:
         bench = with_clock(load_bench(bench_path), args.clock)
-        plans = select([load_plan(p) for p in find_plans(args.plans, plans_dir)],
-                       args.keyword, args.marker)
+        loaded, bad = [], []
+        for path in find_plans(args.plans, plans_dir):
+            try:
+                loaded.append(load_plan(path))
+            except PlanFileError as e:  # every bad file is named, not only the first
+                bad.append(e)
+        if bad:
+            for e in bad:
+                print(f"hil run: {e}", file=sys.stderr)
+            return 2
+        plans = select(loaded, args.keyword, args.marker)
     except PlanFileError as e:
         print(f"hil run: {e}", file=sys.stderr)
         return 2
@@ -195,14 +224,23 @@ def main(args: argparse.Namespace) -> int:
     if args.list:
         print(_listing(plans))
         return 0
+    out = Path(args.out)
+    if (why := _out_problem(out)) is not None:
+        print(f"hil run: --out {args.out}: {why}", file=sys.stderr)
+        return 2
     try:
         if args.check:
             specs = timing_specs()
+            failed = 0
             for p in plans:
-                check_plan(p, bench, specs)
+                try:
+                    check_plan(p, bench, specs)
+                except PlanFileError as e:  # every plan is checked; each error is said
+                    print(f"hil run: {e}", file=sys.stderr)
+                    failed += 1
+                    continue
                 print(f"{p.path}: ok ({len(p.steps)} steps)")
-            return 0
-        out = Path(args.out)
+            return 2 if failed else 0
         jobs = _jobs(args, bench, len(plans))
         if jobs > 1:
             results = run_parallel(plans, bench, out, jobs=jobs,

@@ -46,7 +46,8 @@ class Reports(Listener):
         # finds that read in `load_run`'s cache rather than reading the file again
         html_error = junit_error = ""
         try:
-            res.html = str(write_html(res.recording, self.out_dir / f"{self.stem}.html"))
+            res.html = str(write_html(res.recording, self.out_dir / f"{self.stem}.html",
+                                      index=True))  # the run writes index.html beside it
         except Exception as exc:
             html_error = f"HTML report failed: {exc}"
         try:
@@ -71,12 +72,10 @@ class StepLines(Listener):
 
     def step_ended(self, e: StepEnded) -> None:
         r = e.result
-        if r.status == SKIPPED:
-            return
         total = len(e.plan.steps)
         label = r.label if len(r.label) <= 52 else r.label[:49] + "..."
-        msg = (f"  [{r.index + 1:>2}/{total}] {label:<52} {r.status.upper():<12} "
-               f"{r.duration_ns / 1e6:8.1f} ms")
+        took = "" if r.status == SKIPPED else f"{r.duration_ns / 1e6:8.1f} ms"
+        msg = f"  [{r.index + 1:>2}/{total}] {label:<52} {r.status.upper():<12} {took}".rstrip()
         if r.status != PASS and r.message:
             msg += f"\n         {r.message}"
         self._w(msg)

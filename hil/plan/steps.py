@@ -89,6 +89,8 @@ def parse_step(v: Checker, obj: Any, index: int, line: int) -> Step:
             raise v.err(m.kline("timeout"), join(where, "timeout"),
                         "give wait_until its timeout inside: wait_until: {..., timeout: 1s}")
         step.timeout_ns = v.duration(m, "timeout", where)
+        if step.timeout_ns <= 0:  # 0 would be no timeout at all, or the bench's: neither said
+            raise v.err(m.kline("timeout"), join(where, "timeout"), "must be > 0")
     return step
 
 
@@ -98,15 +100,19 @@ def parse_steps(v: Checker, obj: Any, line: int) -> list[Step]:
         raise v.err(line, "steps", "a plan needs at least one step")
     steps = [parse_step(v, item, i, lst.item_lines[i]) for i, item in enumerate(lst)]
     stored: set[str] = set()
-    names: set[str] = set()
-    for st in steps:
+    names: dict[str, list[int]] = {}  # step name -> the lines of the steps so named
+    for st, line_ in zip(steps, lst.item_lines, strict=True):
         since = st.args.since if st.kind == "check_timing" else None
         if since is not None and since not in SINCE and since not in names:
             raise v.err(st.raw[st.kind].kline("since"), join(st.where, "check_timing.since"),
                         f"{since!r}: start, last_check or the name of an earlier step "
                         f"(named so far: {', '.join(sorted(names)) or 'none'})")
+        if since is not None and len(names.get(since, ())) > 1:
+            raise v.err(st.raw[st.kind].kline("since"), join(st.where, "check_timing.since"),
+                        f"{since!r} names {len(names[since])} earlier steps (lines "
+                        f"{', '.join(map(str, names[since]))}): give one of them its own name")
         if st.name:
-            names.add(st.name)
+            names.setdefault(st.name, []).append(line_)
         if st.kind != "abs_read":  # `same_as` names a reading an earlier `abs_read` stored
             continue
         same = st.args.same_as

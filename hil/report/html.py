@@ -268,14 +268,15 @@ def _step_name(run: RunData, index: object) -> str:
     return f"<a href='#step-{st.index + 1}'>{st.index + 1}</a>: {esc(st.label)}"
 
 
-def _nav(run: RunData, out: Path | None) -> str:
-    """Links from a plan page to the run's index (when beside it) and to its recording."""
+def _nav(run: RunData, out: Path | None, index: bool | None = None) -> str:
+    """Links from a plan page to the run's index and to its recording. `index`: whether an
+    index.html is (or will be, as `hil run` writes it after its plans) beside the page; None:
+    whether one is there now."""
     if out is None:
         return ""
     here = out.resolve().parent
     links = []
-    index = here / "index.html"
-    if index.exists():
+    if index if index is not None else (here / "index.html").exists():
         links.append("<a href='index.html'>&larr; all plans of this run</a>")
     rec = Path(run.path).resolve()
     href = Path(os.path.relpath(rec, here)).as_posix()
@@ -284,16 +285,16 @@ def _nav(run: RunData, out: Path | None) -> str:
     return "<p class='nav'>" + " · ".join(links) + "</p>"
 
 
-def render_html(run: RunData, out: Path | None = None) -> str:
+def render_html(run: RunData, out: Path | None = None, index: bool | None = None) -> str:
     """One plan's report: steps, timing verdicts and diagrams, motion, safe state, bus logs
     around failures, parameters, the plan and bench files and the log. `out`: where the page
-    goes (its links to the index and the recording are relative to it)."""
+    goes (its links to the index and the recording are relative to it); `index` as `_nav`."""
     st = run.status or "unknown"
     h: list[str] = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
         f"<title>hil report: {esc(run.plan)}</title><style>{CSS}</style>"
         f"<script>{JS}</script></head><body>",
-        _nav(run, out),
+        _nav(run, out, index),
         f"<h1>{esc(run.plan)} <span class='badge b-{esc(st)}'>{esc(st.upper())}</span></h1>",
         run_info_table(run.info()),
         f"<p>Recording <code>{esc(run.path)}</code>"
@@ -473,10 +474,12 @@ def _files_html(run: RunData) -> list[str]:
     return h
 
 
-def write_html(recording: str | Path, out: str | Path | None = None) -> Path:
+def write_html(recording: str | Path, out: str | Path | None = None,
+               index: bool | None = None) -> Path:
+    """The plan page of `recording` to `out` (default: beside it); `index` as `_nav`."""
     run = load_run(recording)
     out = Path(out) if out is not None else Path(recording).with_suffix(".html")
-    write_text_atomic(out, render_html(run, out))
+    write_text_atomic(out, render_html(run, out, index))
     return out
 
 

@@ -147,3 +147,22 @@ def test_last_failed_reruns_only_what_failed(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "1 of 2 plan(s) failed last time" in err
     assert not (out / "ok.mcap").exists()
+
+
+def test_last_failed_tells_two_plans_of_one_name_apart_by_their_recording(tmp_path, capsys):
+    """Two plans named `same` in two folders run as `a-same` and `b-same`; only b failed, so
+    `--lf` runs only b (README: "only the plans that failed in the previous run")."""
+    from hil.cli import main as hil
+
+    for folder, want in (("a", "SRDY"), ("b", "BRKR")):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "same.yaml").write_text(
+            f"name: same\nsteps:\n  - expect: {{do: {{{want}: on}}}}\n")
+    out = tmp_path / "out"
+    files = [str(tmp_path / "a" / "same.yaml"), str(tmp_path / "b" / "same.yaml")]
+    assert hil(["run", "-q", "-j", "1", "--out", str(out), *files]) == 1
+    capsys.readouterr()
+    assert hil(["run", "-j", "1", "--out", str(out), "--lf", "--list", *files]) == 0
+    cap = capsys.readouterr()
+    assert "1 of 2 plan(s) failed last time" in cap.err
+    assert [line.split()[-1] for line in cap.out.splitlines()] == [files[1]]

@@ -104,8 +104,10 @@ class WaitUntil(_Conditions):
         m = v.mapping(obj, line, where)
         v.keys(m, fields.COND_KEYS | {"timeout"}, where)
         conditions = fields.conditions(v, m, where)
-        return ConditionArgs(conditions, v.duration(m, "timeout", where) if "timeout" in m
-                             else None)
+        timeout = v.duration(m, "timeout", where) if "timeout" in m else None
+        if timeout is not None and timeout <= 0:  # 0 fell back to the bench's, unsaid
+            raise v.err(m.kline("timeout"), f"{where}.timeout", "must be > 0")
+        return ConditionArgs(conditions, timeout)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         conds = self.args.conditions
