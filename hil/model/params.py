@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.model.errors import OutOfRange, ProtectedParameter, ReadOnly, ServoOnLocked
-from hil.profile.params import ParamSpec, ParamTable
+from hil.profile.params import WRITE_ZERO_ONLY, ParamSpec, ParamTable
 
 WriteHook = Callable[[str, int, int], None]
 ReadHook = Callable[[], int]
@@ -30,8 +30,6 @@ Validator = Callable[[str, int], None]
 
 # P2.071 (absolute position reset) is writable only after P2.008 = 271 (L10081, L16454).
 PROTECTED_KEYS: dict[str, tuple[str, int]] = {"P2.071": ("P2.008", 271)}
-# P0.001: writing 0 clears the alarm (= DI.ARST); 0x0001-0xFFFF are display only (L7079-7083).
-WRITE_ZERO_ONLY = frozenset({"P0.001"})
 
 
 class ParameterStore:

@@ -245,6 +245,10 @@ def find_plans(names: list[str] | None = None, plans_dir: Path | None = None) ->
         if cand.exists():
             out.append(cand)
             continue
+        if p.exists():  # there, but not a plan file: say what it is, not that it is missing
+            what = "a directory" if p.is_dir() else "not a .yaml file"
+            raise PlanFileError(n, 0, "(plan)", f"{what}: a plan is a .yaml file, or the name "
+                                f"of one in {plans_dir}")
         known = ", ".join(sorted(x.stem for x in plans_dir.glob("*.yaml")))
         raise PlanFileError(n, 0, "(plan)", f"no such plan file, nor a plan of that name in "
                             f"{plans_dir} ({known or 'none there'})")

@@ -22,6 +22,9 @@ from dataclasses import dataclass
 from hil.paths import fixture
 from hil.profile.errors import UnknownParameter
 
+# P0.001: writing 0 clears the alarm (= DI.ARST); 0x0001-0xFFFF are display only (L7079-7083).
+WRITE_ZERO_ONLY = frozenset({"P0.001"})
+
 _NAME_RE = re.compile(r"^\s*P([0-7])[.\-]([0-9]{1,3})\s*$", re.IGNORECASE)
 
 

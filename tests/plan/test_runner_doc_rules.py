@@ -108,3 +108,22 @@ def test_a_plan_page_links_to_the_run_index_written_after_it(tmp_path):
     page = (out / "ok.html").read_text()
     assert "href='index.html'" in page and (out / "index.html").exists()
     assert "href='ok.mcap'" in page
+
+
+def test_a_write_the_drive_refuses_is_refused_by_check_p0_001(tmp_path, capsys):
+    """--check refuses what a run would: P0.001 takes only 0 (the alarm reset, L7079-7083); the
+    drive answers anything else with Modbus exception 03h."""
+    bad = _plan(tmp_path, "p1", "name: p1\nsteps:\n  - write: {P0.001: 5}\n")
+    good = _plan(tmp_path, "p0", "name: p0\nsteps:\n  - write: {P0.001: 0}\n")
+    assert hil(["run", "--check", bad]) == 2
+    assert "p1.yaml:3: " in (err := capsys.readouterr().err) and "only 0" in err
+    assert hil(["run", "--check", good]) == 0
+
+
+def test_a_plan_argument_that_exists_but_is_no_plan_file_says_so(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("name: x\n")
+    for arg, what in ((str(tmp_path / "notes.txt"), "not a .yaml file"),
+                      (str(tmp_path), "a directory")):
+        assert hil(["run", "--check", arg]) == 2
+        err = capsys.readouterr().err
+        assert what in err and "no such plan file" not in err
