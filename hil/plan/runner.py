@@ -386,11 +386,13 @@ def _idle_inputs(ctx: StepContext) -> None:
 
 def _initial_params(ctx: StepContext, plan: Plan) -> None:
     d = ctx.drive(None)
-    ctx.rec.plan_step("params", "start", plan=plan.name, index=-1)
+    line = plan.key_line("params")  # the plan's `params:` line, as a step's own
+    ctx.rec.plan_step("params", "start", plan=plan.name, index=-1, line=line)
     for p, v in plan.params.items():
         d.write_param(p, v)
         ctx.written(d.name, {p: v})
-    ctx.rec.plan_step("params", "end", plan=plan.name, index=-1, status=PASS,
+    ctx.rec.plan_step("params", "end", plan=plan.name, index=-1, status=PASS, line=line,
+                      file=plan.path,
                       message=", ".join(f"{p}={v}" for p, v in plan.params.items()))
 
 

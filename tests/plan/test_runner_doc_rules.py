@@ -127,3 +127,14 @@ def test_a_plan_argument_that_exists_but_is_no_plan_file_says_so(tmp_path, capsy
         assert hil(["run", "--check", arg]) == 2
         err = capsys.readouterr().err
         assert what in err and "no such plan file" not in err
+
+
+def test_the_plans_params_are_cited_at_their_own_line(tmp_path):
+    """A step is cited as `file:line`; the `params:` the runner writes first is no step of
+    the list, but it has a line too (not "line 0")."""
+    plan = _plan(tmp_path, "pl", "name: pl\n\nparams: {P1.042: 100}\nsteps:\n"
+                 "  - expect: {do: {SRDY: on}}\n")
+    out = tmp_path / "out"
+    assert hil(["run", "-q", "-j", "1", "--out", str(out), plan]) == 0
+    junit = (out / "junit.xml").read_text()
+    assert "step params" in junit and "pl.yaml:3): P1.042=100" in junit
