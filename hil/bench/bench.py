@@ -7,6 +7,7 @@ Format: docs/benches.md. `load_bench(path)` returns a validated `Bench` or raise
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -377,8 +378,9 @@ def _timing(v: Checker, top: LDict) -> dict[str, float]:
     c = v.mapping(m["constants"], m.kline("constants"), "timing.constants")
     out = {}
     for k, x in c.items():
-        if isinstance(x, bool) or not isinstance(x, int | float):
-            raise v.err(c.kline(k), join("timing.constants", k), f"{x!r}: a number of ms")
+        if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+            raise v.err(c.kline(k), join("timing.constants", k),
+                        f"{x!r}: a number of ms (finite, as `hil check --const`)")
         out[str(k)] = float(x)
     return out
 
@@ -437,7 +439,8 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
                 raise v.err(d.kline(kind), join(where, kind),
                             "a virtual: bus is in-process only; process: subprocess needs "
                             "zenoh: or socketcan:")
-    _drive_dio(v, spec, d, where, subprocess_virtual=process == "subprocess" and virtual)
+    _drive_dio(v, spec, d, where, subprocess_virtual=process == "subprocess" and virtual,
+               virtual=virtual)
     _drive_pulse(v, spec, d, where, subprocess_virtual=process == "subprocess" and virtual)
     if not (spec.can or spec.rs485 or spec.dio or spec.pulse):
         raise v.err(d.line, where, "a drive needs at least one of can, rs485, dio, pulse")
@@ -476,7 +479,7 @@ def _drive_buses(v: Checker, spec: DriveSpec, d: LDict, where: str, can: dict,
 
 
 def _drive_dio(v: Checker, spec: DriveSpec, d: LDict, where: str,
-               subprocess_virtual: bool) -> None:
+               subprocess_virtual: bool, virtual: bool = False) -> None:
     """`dio:` (a URL or the gateway's) and `dio_map:` (modbus-tcp only)."""
     if "dio" in d and d["dio"] == GATEWAY:
         spec.dio = GATEWAY  # from the gateway's lease (checked by parse_bench)
@@ -489,6 +492,10 @@ def _drive_dio(v: Checker, spec: DriveSpec, d: LDict, where: str,
         if subprocess_virtual and u.scheme == "virtual":
             raise v.err(d.kline("dio"), join(where, "dio"),
                         "a virtual: DI/DO set is in-process only; use zenoh: with subprocess")
+        if virtual and u.scheme == "modbus-tcp":  # the harness's side of a real I/O module
+            raise v.err(d.kline("dio"), join(where, "dio"),
+                        "modbus-tcp is a remote I/O module on a real bench; a virtual drive's "
+                        "DI/DO is virtual: or zenoh:")
         if "dio_map" in d:
             spec.dio_map = dict(v.mapping(d["dio_map"], d.kline("dio_map"), join(where, "dio_map")))
             if u.scheme != "modbus-tcp":
@@ -547,6 +554,11 @@ def _drive_lines(v: Checker, spec: DriveSpec, d: LDict, where: str, virtual: boo
         for ch, line in m.items():
             if line not in ("STO_A", "STO_B"):
                 raise v.err(m.kline(ch), join(where, f"sto.{ch}"), "STO_A or STO_B")
+            other = next((c for c, ln in spec.sto.items() if ln == line), None)
+            if other is not None:  # two channels on one line: cutting "B" would cut A
+                raise v.err(m.kline(ch), join(where, f"sto.{ch}"),
+                            f"{line} already carries channel {other}: each STO channel "
+                            "needs its own line")
             spec.sto[ch] = line
 
 
@@ -571,6 +583,17 @@ def _drive_model(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
         m = v.mapping(d["mechanics"], d.kline("mechanics"), join(where, "mechanics"))
         rules = virtual_rules()
         _known(v, m, rules.Mechanics, join(where, "mechanics"))
+        for key, val in m.items():  # each number at its own line, before the model's rules
+            if key == "brake_do" or val is None:
+                continue
+            if isinstance(val, bool) or not isinstance(val, int | float):
+                hint = (" (YAML reads an exponent as a number only with a dot: write 1.0e-4)"
+                        if isinstance(val, str) and _exponent_text(val) else "")
+                raise v.err(m.kline(key), join(join(where, "mechanics"), key),
+                            f"{val!r} is not a number{hint}")
+            if not math.isfinite(val):
+                raise v.err(m.kline(key), join(join(where, "mechanics"), key),
+                            f"{val} is not a finite number")
         try:
             rules.Mechanics.from_dict(dict(m))
         except (ValueError, TypeError) as e:
@@ -585,6 +608,14 @@ def _drive_model(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
         except (ValueError, TypeError) as e:
             raise v.err(m.line, join(where, "options"), str(e)) from None
         spec.options = _plain(m)
+
+
+_EXPONENT = re.compile(r"^[+-]?\d+(\.\d*)?[eE][+-]?\d+$")
+
+
+def _exponent_text(text: str) -> bool:
+    """`1e-4`: a number to the eye, text to YAML 1.1 (it wants `1.0e-4`)."""
+    return bool(_EXPONENT.match(text.strip()))
 
 
 def _plain(obj: Any) -> Any:
@@ -692,6 +723,8 @@ def _safe_state(v: Checker, top: LDict, drives: dict[str, DriveSpec],
         raise v.err(m.kline("wait_brake"), "safe_state.wait_brake",
                     "no drive has BRKR in its wiring, so the brake cannot be watched")
     safe.timeout_ns = v.duration(m, "timeout", "safe_state", timeouts["safe_state"])
+    if safe.timeout_ns <= 0:  # no time to see the brake engage: never confirmed
+        raise v.err(m.kline("timeout"), "safe_state.timeout", "must be > 0")
     return safe
 
 

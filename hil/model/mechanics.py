@@ -67,6 +67,14 @@ class Mechanics:
     brake_do: int | str | None = "auto"
 
     def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "brake_do" or v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, int | float):
+                raise ValueError(f"Mechanics.{f.name}: {v!r} is not a number")
+            if not math.isfinite(v):
+                raise ValueError(f"Mechanics.{f.name}: {v} is not a finite number")
         if self.counts_per_rev <= 0:
             raise ValueError(f"Mechanics.counts_per_rev: must be > 0, got {self.counts_per_rev}")
         if self.motor_inertia + self.load_inertia <= 0:

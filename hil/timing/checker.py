@@ -569,8 +569,14 @@ def _compress(name: str, pts: Sequence[tuple[int, Any]], res: int,
     # the change times from an integer array stay in one: 8 bytes each, however many; and
     # numbers straight from a typed column stay typed (a speed that changes every sample)
     whole = isinstance(pts, SampleList) and type(pts.times) is array
-    times: Any = array("q") if whole else []
     typed = whole and type(pts.values) is array  # type: ignore[union-attr]
+    if typed:  # a number straight from a column, changing at every sample (a speed): when
+        ts, vs = pts.times, pts.values  # nothing would be dropped, the arrays are the trace
+        if all(map(operator.lt, ts, itertools.islice(ts, 1, None))) and all(
+                map(operator.ne, vs, itertools.islice(vs, 1, None))):
+            kept = {t: lags[t] for t in ts if t in lags} if lags else {}
+            return Trace(name, ts, vs, res, kept)
+    times: Any = array("q") if whole else []
     values: Any = array(pts.values.typecode) if typed else []  # type: ignore[union-attr]
     for t, v in pts:
         if values and times[-1] == t:

@@ -178,9 +178,10 @@ def check_flags(specs: list[Spec], binding: dict[str, str], params: dict[str, An
     return out
 
 
-def svg_dir(path: str, specs: list[Spec]) -> Path:
+def svg_dir(path: str, specs: list[Spec], names: list[str] | None = None) -> Path:
     """The `--svg` directory, created now (ValueError naming `--svg` when it cannot be: a
-    regular file on the way, a diagram path that is a directory, no permission)."""
+    regular file on the way, a diagram path that is a directory, no permission). `names`:
+    the diagrams' file stems (default: the specs' ids)."""
     if not path.strip():
         raise ValueError("--svg: empty directory name")
     out = Path(path)
@@ -191,8 +192,8 @@ def svg_dir(path: str, specs: list[Spec]) -> Path:
     except OSError as e:
         raise ValueError(f"--svg {path}: cannot create the directory: "
                          f"{e.strerror or e}") from None
-    for spec in specs:
-        target = out / f"{spec.id}.svg"
+    for stem in names if names is not None else [spec.id for spec in specs]:
+        target = out / f"{stem}.svg"
         if target.exists() and not target.is_file():
             raise ValueError(f"--svg {path}: cannot write {target}: not a regular file")
     return out
@@ -378,13 +379,18 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
         except (SpecError, FileNotFoundError, ValueError) as e:
             print(f"hil check: step {run['step']}: {e}", file=sys.stderr)
             return 2
+    # a spec checked at several steps draws one diagram per step: <spec>-step<N>.svg
+    many = {sp.id for sp in specs if sum(x.id == sp.id for x in specs) > 1}
+    stems = [f"{sp.id}-step{int(run['step']) + 1}" if sp.id in many else sp.id
+             for run, sp in zip(runs, specs, strict=True)]
     try:
         params = check_flags(specs, binding, params, consts, res)
+        out_dir = svg_dir(args.svg, specs, stems) if args.svg is not None else None
     except ValueError as e:
         print(f"hil check: {e}", file=sys.stderr)
         return 2
     read = read_plan(specs, [dict(run["binding"]) | binding for run in runs])
-    for run, spec in zip(runs, specs, strict=True):
+    for run, spec, stem in zip(runs, specs, stems, strict=True):
         until = int(run["until_ns"])
         src = cache.get(until) or cache.setdefault(
             until, RecordingSource(args.recording, time=args.time, until_log_ns=until,
@@ -392,7 +398,17 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
         vs = check(spec, src, params=(run["params"] | params) or None,
                    binding=dict(run["binding"]) | binding,
                    constants=(run["constants"] | consts) or None, resolution=res)
-        verdicts.extend(occurrences_since(vs, run["since_ns"]))
+        vs = occurrences_since(vs, run["since_ns"])
+        verdicts.extend(vs)
+        if out_dir is not None:
+            target = out_dir / f"{stem}.svg"
+            try:
+                target.write_text(svg(spec, src, vs, (run["params"] | params) or None,
+                                      dict(run["binding"]) | binding), encoding="utf-8")
+            except OSError as e:
+                print(f"hil check: --svg {args.svg}: cannot write {target}: "
+                      f"{e.strerror or e}", file=sys.stderr)
+                return 2
     if args.json:
         print_json(verdicts)
     else:

@@ -145,12 +145,14 @@ class Column:
     """One field of a topic in runs: `starts[k]` is the first message index of run k, whose
     value is `values[k]` (`_MISSING`: the messages of that run lack the field). The values of
     a field that is always a float (or always an int) are kept in a typed array: 8 bytes a
-    run, what matters for a field that changes at every message."""
+    run, what matters for a field that changes at every message. While every message is a run
+    of its own (a speed that changes at every sample), `starts` is the `range` 0..n-1 and costs
+    nothing; it becomes an array at the first run of two."""
 
     __slots__ = ("_last", "_tried", "starts", "values")
 
     def __init__(self) -> None:
-        self.starts = array("q")
+        self.starts: range | array = range(0)
         self.values: list[Any] | array = []
         self._last = -1  # the last message index given a value
         self._tried = False  # the values were looked at for a typed array
@@ -161,11 +163,21 @@ class Column:
             self._last = i
             return
         if self._last < i - 1 and (not values or values[-1] is not _MISSING):
-            self.starts.append(self._last + 1)  # the messages between had no such field
+            self._start(self._last + 1)  # the messages between had no such field
             self._append(_MISSING)
-        self.starts.append(i)
+        self._start(i)
         self._append(v)
         self._last = i
+
+    def _start(self, i: int) -> None:
+        """A run begins at message `i`."""
+        starts = self.starts
+        if type(starts) is range:
+            if i == len(starts):  # still one run a message: 0..i
+                self.starts = range(i + 1)
+                return
+            self.starts = starts = array("q", starts)
+        starts.append(i)
 
     def _append(self, v: Any) -> None:
         values = self.values
@@ -189,7 +201,7 @@ class Column:
     def close(self, n: int) -> None:
         """`n` messages in all: the tail without the field is a missing run."""
         if self._last < n - 1 and (not self.values or self.values[-1] is not _MISSING):
-            self.starts.append(self._last + 1)
+            self._start(self._last + 1)
             self._append(_MISSING)
         self._last = n - 1
 
@@ -270,7 +282,7 @@ class ColumnTable:
         del self.times[n:]
         for col in self.cols.values():
             k = bisect.bisect_left(col.starts, n)
-            del col.starts[k:]
+            col.starts = col.starts[:k]  # a range stays a range
             del col.values[k:]
             col._last = n - 1
 

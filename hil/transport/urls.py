@@ -297,6 +297,9 @@ def _check(u: TransportUrl) -> None:
         u.float_param("timeout", 1.0, 0.01, 60)
     elif u.scheme == "virtual" and u.kind in ("dio", "pulse"):
         _only(u, set())
+    elif u.scheme == "virtual" and u.kind == "can":  # the in-process bus: its bit time only
+        _only(u, {"bitrate"})
+        u.int_param("bitrate", 1_000_000, 10_000, 1_000_000)
 
 
 def _only(u: TransportUrl, allowed: set[str]) -> None:

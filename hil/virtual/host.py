@@ -48,6 +48,9 @@ class DriveHost:
         self._mono0 = time.monotonic_ns() - drive.now
         self._wall0 = time.time_ns() - drive.now
         self.errors: list[BaseException] = []
+        # the model itself raised while advancing: what the drive shows since is not the
+        # drive's (the bench reports it dead, docs/benches.md); a face's error is only logged
+        self.model_failed: BaseException | None = None
         self._synced = _SyncedLock(self)
 
     # -- time --------------------------------------------------------------------------------
@@ -117,11 +120,20 @@ class DriveHost:
         with self.lock:
             try:
                 self._advance()
+            except Exception as exc:
+                self._model_error(exc)
+                return
+            try:
                 now = self.drive.now
                 for fn in list(self._ticks):
                     fn(now)
             except Exception as exc:  # a face bug must not stop the drive clock
                 self._note_error("tick", exc)
+
+    def _model_error(self, exc: Exception) -> None:
+        self._note_error("advance", exc)
+        if self.model_failed is None:
+            self.model_failed = exc
 
     def _note_error(self, where: str, exc: Exception) -> None:
         """Log the first error of each type with its traceback, count the rest."""
@@ -218,7 +230,7 @@ class _SyncedLock:
             try:
                 self._host._advance()
             except Exception as exc:  # the lock stays held for the caller's `with` body:
-                self._host._note_error("advance", exc)  # raising here would leak it
+                self._host._model_error(exc)  # raising here would leak it
         return ok
 
     def release(self) -> None:

@@ -308,6 +308,17 @@ class VirtualWorld:
     def harness_urls(self) -> dict[str, str]:
         return {k: harness_side(u) for k, u in self.urls.items()}
 
+    def dead(self) -> dict[str, str]:
+        """Drives whose model raised while advancing: name -> what happened. Its outputs are
+        frozen since, so a plan must not go on as if it were a drive (the runner errors)."""
+        out = {}
+        for name, vd in self.drives.items():
+            exc = getattr(vd.host, "model_failed", None)
+            if exc is not None:
+                out[name] = (f"virtual drive {name!r}: its model failed "
+                             f"({type(exc).__name__}: {exc}); see the log")
+        return out
+
     def power_cycle(self, drive: str, battery: bool = True, off_ns: int = 0) -> None:
         vd = self.drives[drive]
         if off_ns:

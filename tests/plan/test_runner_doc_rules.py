@@ -138,3 +138,40 @@ def test_the_plans_params_are_cited_at_their_own_line(tmp_path):
     assert hil(["run", "-q", "-j", "1", "--out", str(out), plan]) == 0
     junit = (out / "junit.xml").read_text()
     assert "step params" in junit and "pl.yaml:3): P1.042=100" in junit
+
+
+def test_a_virtual_drive_whose_model_fails_ends_the_plan(tmp_path, capsys, monkeypatch):
+    """A drive model that raises (a bench value the model cannot take) used to leave the
+    drive's outputs frozen and the plan passing; the bench now reports the drive dead and the
+    step errors, as a drive process that died does."""
+    from hil.model.drive import Drive
+
+    real = Drive._integrate_to
+
+    def failing(self, stop):  # the model breaks 50 ms into the plan
+        if self.sched.now > 50_000_000:
+            raise ValueError("cannot convert float NaN to integer")
+        return real(self, stop)
+
+    monkeypatch.setattr(Drive, "_integrate_to", failing)
+    plan = _plan(tmp_path, "m", "name: m\nsteps:\n  - wait: 200ms\n  - wait: 10ms\n")
+    assert hil(["run", "-v", "-j", "1", "--out", str(tmp_path / "out"), plan]) == 1
+    err = capsys.readouterr().err
+    assert "ERROR" in err and "its model failed (ValueError" in err
+
+
+def test_hil_check_svg_on_a_plan_recording_draws_each_check(tmp_path, capsys):
+    """docs/timing.md: `--svg DIR` writes the diagrams, and a DIR that is a file is bad input
+    (exit 2); on a plan recording too, where each check step is judged as it was run."""
+    out = tmp_path / "out"
+    assert hil(["run", "-q", "-j", "1", "--out", str(out), "servo_on_off_brake"]) == 0
+    rec = str(out / "servo_on_off_brake.mcap")
+    svgs = tmp_path / "svg"
+    assert hil(["check", rec, "--svg", str(svgs)]) == 0
+    drawn = sorted(p.name for p in svgs.iterdir())
+    assert drawn and all(n.endswith(".svg") for n in drawn)
+    assert all((svgs / n).read_text().startswith("<svg") for n in drawn)
+    (tmp_path / "afile").write_text("x")
+    capsys.readouterr()
+    assert hil(["check", rec, "--svg", str(tmp_path / "afile")]) == 2
+    assert "--svg" in capsys.readouterr().err

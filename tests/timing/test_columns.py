@@ -285,3 +285,29 @@ constraints:
 """, "user.yaml")
     cols = spec_columns(spec, {"drive": "drive1"})
     assert "/drive/drive1/params" not in cols and "/drive/drive1/state" in cols
+
+
+def test_a_field_that_changes_at_every_message_keeps_no_run_starts() -> None:
+    """A speed that changes at every sample is one run a message: its run starts are the
+    range 0..n-1, not an array of n numbers; a first run of two, a missing stretch and a cut
+    give the samples the messages give."""
+    msgs = [(i * MS, {"v": float(i)}) for i in range(2000)]
+    table = ColumnTable()
+    for t, m in msgs:
+        table.add(t, m)
+    assert type(table.cols["v"].starts) is range
+    msgs += [(2000 * MS, {"v": 1999.0}), (2001 * MS, {"w": 1}), (2002 * MS, {"v": 5.0})]
+    for t, m in msgs[2000:]:
+        table.add(t, m)
+    table.finish()
+    assert type(table.cols["v"].starts) is not range
+    mem = MemorySource({"/x": msgs})
+    for runs in (False, True):
+        full = samples(mem, "/x", "v")
+        want = _runs_of(full) if runs else full
+        assert table.samples("v", None, runs=runs) == want
+    table.cut(1000 * MS)
+    assert type(table.cols["v"].starts) is range or list(table.cols["v"].starts) == list(
+        range(1000))
+    assert table.samples("v", None, runs=False) == samples(
+        MemorySource({"/x": msgs[:1000]}), "/x", "v")
