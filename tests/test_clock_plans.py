@@ -123,9 +123,10 @@ def test_cli_clock_flag_refusals(tmp_path, capsys) -> None:
 
 @pytest.mark.parametrize("rate", ["0", "abc", "2000000", "-5"])
 def test_a_bad_virtual_bitrate_is_named(rate, tmp_path) -> None:
+    """Refused when the bench is read, at its line (it was an error only once the plan ran)."""
     text = Path(fixture("benches", "virtual.yaml")).read_text().replace(
         '"virtual:auto"\nrs485', f'"virtual:auto?bitrate={rate}"\nrs485')
     assert f"bitrate={rate}" in text
-    plan = loads_plan("name: p\nsteps:\n  - wait: 1ms\n", str(tmp_path / "p.yaml"))
-    res = run_plan(plan, loads_bench(text, "b.yaml"), tmp_path)
-    assert res.status == "error" and "bitrate" in res.error, res.error
+    with pytest.raises(PlanFileError) as e:
+        loads_bench(text, "b.yaml")
+    assert "b.yaml:" in str(e.value) and f"bitrate={rate}" in str(e.value).replace("'", "")
