@@ -223,11 +223,16 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil drive: ready: {stack.describe()}", flush=True)
         if control is not None:
             control.start()
+        failed = None
         while not stop.wait(0.2):
-            pass
+            failed = getattr(getattr(stack, "host", None), "model_failed", None)
+            if failed is not None:  # its outputs froze: end, so the runner sees it died
+                print(f"hil drive: the model failed ({type(failed).__name__}: {failed}); "
+                      "stopping", file=sys.stderr, flush=True)
+                break
     finally:
         if control is not None:
             control.close()
         stack.stop()
         print("hil drive: stopped", flush=True)
-    return 0
+    return 1 if failed is not None else 0

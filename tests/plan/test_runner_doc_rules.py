@@ -175,3 +175,27 @@ def test_hil_check_svg_on_a_plan_recording_draws_each_check(tmp_path, capsys):
     capsys.readouterr()
     assert hil(["check", rec, "--svg", str(tmp_path / "afile")]) == 2
     assert "--svg" in capsys.readouterr().err
+
+
+def test_a_hil_drive_process_whose_model_fails_exits(monkeypatch, capsys):
+    """`hil drive` (the drive of a subprocess bench) stops with exit 1 when its model fails,
+    so the runner sees the process die rather than a drive whose outputs froze."""
+    from hil.model.drive import Drive
+
+    real = Drive._integrate_to
+
+    def failing(self, stop):
+        if self.sched.now > 20_000_000:
+            raise ValueError("cannot convert float NaN to integer")
+        return real(self, stop)
+
+    monkeypatch.setattr(Drive, "_integrate_to", failing)
+    import signal
+
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:  # `hil drive` installs its own handlers: this process's come back after
+        assert hil(["drive", "--dio", "virtual:model-fails", "--di", "8=1"]) == 1
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    assert "the model failed (ValueError" in capsys.readouterr().err
