@@ -30,6 +30,18 @@ def require_regular(path: str | os.PathLike, what: str = "file") -> os.stat_resu
     return st
 
 
+def dir_problem(path: str | os.PathLike) -> str | None:
+    """Why `path` cannot be an output directory (None: it is one, or can be made): a file
+    where the directory belongs, or a file among its parents."""
+    out = Path(path)
+    if out.exists():
+        return None if out.is_dir() else "not a directory"
+    for parent in out.parents:
+        if parent.exists():
+            return None if parent.is_dir() else f"{parent} is not a directory"
+    return None
+
+
 def read_limited(path: str | os.PathLike, max_bytes: int | None, what: str = "file") -> bytes:
     """The bytes of regular file `path`, at most `max_bytes` (None: no cap) actually read:
     a file that grows while read (or lies about its size) cannot exhaust memory. Opened

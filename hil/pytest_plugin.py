@@ -25,6 +25,7 @@ Marker `hil`: the test uses a bench. Fixtures:
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 from collections.abc import Callable, Iterator
@@ -123,6 +124,14 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             _load_bench(config)
         except ValueError as e:
             raise pytest.UsageError(f"--hil-clock: {e}") from None
+    out = config.getoption("--hil-out")
+    if out is not None and any(isinstance(i, PlanItem) or "hil_recorder" in getattr(
+            i, "fixturenames", ()) or "hil_run_plan" in getattr(i, "fixturenames", ())
+            for i in items):
+        from hil.fileio import dir_problem
+
+        if (why := dir_problem(out)) is not None:
+            raise pytest.UsageError(f"--hil-out {out}: {why}")
     plans = [i for i in items if isinstance(i, PlanItem)]
     if plans:
         from hil.plan.runner import output_stems
@@ -217,7 +226,15 @@ def _tags_in(directory: Path) -> set[str]:
 
 
 def _safe_name(nodeid: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", nodeid).strip("_")[:150]
+    """A file name for a test id: its path and name with `_` for what a file name should not
+    hold. Parameters (`[...]`) that had to be changed also get a short hash of the exact id, so
+    `test_q[x y]` and `test_q[x_y]` keep one recording each (on any xdist worker)."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", nodeid).strip("_")
+    _head, bracket, params = nodeid.partition("[")
+    if len(safe) > 150 or (bracket and re.search(r"[^A-Za-z0-9_.-]", params.rstrip("]"))):
+        digest = hashlib.sha1(nodeid.encode()).hexdigest()[:8]
+        safe = f"{safe[:141]}-{digest}"
+    return safe
 
 
 @pytest.fixture(scope="session")
@@ -241,26 +258,64 @@ def hil_recorder(request: pytest.FixtureRequest) -> Iterator[Any]:
     rec.close()
 
 
+_REPORTS = pytest.StashKey[dict[str, pytest.TestReport]]()
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
+    """Keep each phase's report on the item: `hil_session` records why the bench went safe."""
+    rep = yield
+    item.stash.setdefault(_REPORTS, {})[rep.when] = rep
+    return rep
+
+
+def _outcome(node: pytest.Item) -> tuple[str, str]:
+    """(status, reason) of a test whose teardown is running: its call phase's report."""
+    rep = node.stash.get(_REPORTS, {}).get("call")
+    if rep is None:
+        return "error", "the test did not run"
+    if rep.failed:
+        crash = getattr(rep.longrepr, "reprcrash", None)
+        what = crash.message.splitlines()[0] if crash is not None and crash.message else ""
+        return "fail", f"test failed: {what}"[:300].rstrip(": ")
+    return ("skipped" if rep.skipped else "pass"), "end of test"
+
+
 @pytest.fixture
-def hil_session(hil_bench: Any, hil_recorder: Any) -> Iterator[Any]:
+def hil_session(hil_bench: Any, hil_recorder: Any,
+                request: pytest.FixtureRequest) -> Iterator[Any]:
     """Bench resources for one test, on the bench's clock (virtual time: wait with
     `hil.clock.sleep` / the drivers' waits, not `time.sleep`); the bench goes to its safe
-    state afterwards."""
+    state afterwards, and the recording says why (the test's failure, or its end) and how
+    the test ended (`hil.result`), as a plan's does."""
+    import time
+
     from hil import clock
     from hil.plan.safety import go_safe
     from hil.plan.session import open_session
 
     clk = clock.VirtualClock() if hil_bench.clock == "virtual" else clock.REAL
+    hil_recorder.add_metadata("hil.bench", {
+        "name": hil_bench.name, "file": hil_bench.path, "virtual": hil_bench.virtual,
+        "drives": list(hil_bench.drives), "motion_allowed": hil_bench.motion_allowed})
     with clock.use(clk):
+        hil_recorder.add_metadata("hil.clock", {
+            "clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
+            "started_wall_ns": str(time.time_ns())})
         session = open_session(hil_bench, hil_recorder)
         try:
             session.idle()
             yield session
         finally:
+            status, reason = _outcome(request.node)
+            safe = None
             try:
-                go_safe(session, "end of test", hil_recorder)
+                safe = go_safe(session, reason, hil_recorder)
             finally:
                 session.close()
+                hil_recorder.add_metadata("hil.result", {
+                    "status": status, "reason": reason,
+                    "safe_state_ok": safe.ok if safe is not None else ""})
 
 
 @pytest.fixture
@@ -273,13 +328,22 @@ def hil_drive(hil_session: Any) -> Any:
 def hil_run_plan(hil_bench: Any, request: pytest.FixtureRequest) -> Callable[[str | Path], Any]:
     """Run a plan (name or path) on the bench; returns the `PlanResult`."""
     from hil.plan.plan import find_plans, load_plan
-    from hil.plan.runner import run_plan
+    from hil.plan.runner import plan_stem, run_plan
+
+    runs: list[str] = []
 
     def run(plan: str | Path) -> Any:
         path = Path(plan)
         if not path.exists():
             path = find_plans([str(plan)])[0]
-        result = run_plan(load_plan(path), hil_bench, _out_dir(request.config))
+        loaded = load_plan(path)
+        # named after the test and the plan: never the name of a plan collected as a test
+        # (`hil_plans`) or of this plan run by another test
+        stem = f"{_safe_name(request.node.nodeid)}-{plan_stem(loaded)}"
+        runs.append(stem)
+        if runs.count(stem) > 1:
+            stem = f"{stem}-{runs.count(stem)}"
+        result = run_plan(loaded, hil_bench, _out_dir(request.config), stem=stem)
         request.node.user_properties.append(
             ("recording", _recording_property(request.config, result.recording)))
         return result
@@ -301,8 +365,14 @@ def hil_check(hil_recorder: Any) -> Callable[..., list]:
         if not path.exists():
             path = fixture("timing", f"{spec}.yaml")
         hil_recorder.flush()
-        verdicts = check(load_spec(path), RecordingSource(hil_recorder.path), binding=binding,
-                         **kw)
+        loaded = load_spec(path)
+        verdicts = check(loaded, RecordingSource(hil_recorder.path), binding=binding, **kw)
+        for v in verdicts:  # on the recording, as a plan's check_timing records them
+            if v.status != "skipped":
+                hil_recorder.verdict(v.to_dict(), binding=binding or {})
+        if not any(v.status != "skipped" for v in verdicts):  # nothing judged is not a pass
+            why = "; ".join(dict.fromkeys(v.message for v in verdicts)) or "no occurrence"
+            raise TimingFailure(f"timing spec {loaded.id}: nothing judged: {why}")
         bad = [v for v in verdicts if v.status == "fail"
                or (v.status == "inconclusive" and not allow_inconclusive)]
         if bad:
@@ -318,7 +388,8 @@ def explain(result: Any) -> str:
     lines = [f"plan {result.plan}: {result.status} (recording {result.recording})"]
     for step in result.steps:
         if step.status not in ("pass", "skipped"):
-            lines.append(f"  step {step.index} {step.label}: {step.status}: {step.message}")
+            lines.append(f"  step {step.index + 1} {step.label}: {step.status}: "
+                         f"{step.message}")
         for v in step.verdicts:
             if v.get("status") != "pass":
                 lines.append(f"    {v.get('spec')}: {v.get('constraint')}: {v.get('status')}: "

@@ -71,3 +71,47 @@ def test_drive_malformed_transport_url_is_bad_input(flag, url, needle):
     r = subprocess.run([HIL, "drive", flag, url], capture_output=True, text=True, timeout=30)
     assert r.returncode == 2, r.stdout + r.stderr
     assert needle in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("fmt", ["candump", "asc"])
+def test_export_into_head_stops_quietly(tmp_path, fmt):
+    """README: "any | 141 | its output pipe closed early ... it stops quietly": `hil export
+    x.mcap -o - | head -1` too (it said "cannot write -: Broken pipe", exit 2)."""
+    import can
+
+    from hil.record.recorder import Recorder
+
+    mcap = tmp_path / "x.mcap"
+    with Recorder(mcap) as rec:
+        for i in range(20000):
+            rec.can("can0", can.Message(arbitration_id=0x181, data=bytes([i % 256] * 8),
+                                        is_extended_id=False), "rx", i * 100_000)
+    p = subprocess.Popen([HIL, "export", str(mcap), "-o", "-", "-f", fmt],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout is not None
+    p.stdout.close()
+    _, err = p.communicate(timeout=60)
+    assert "Traceback" not in err and "Broken pipe" not in err, err
+    assert p.returncode == 141, (p.returncode, err)
+
+
+def test_report_refuses_an_mcap_that_is_no_hil_recording(tmp_path):
+    """README: `hil report` exits 2 on what is not a hil recording, as `hil check` and
+    `hil diff` do (it drew an ABORTED page for a bare MCAP magic and for a foreign MCAP)."""
+    from mcap.writer import Writer
+
+    foreign = tmp_path / "foreign.mcap"
+    with open(foreign, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("x", "jsonschema", b"{}")
+        ch = w.register_channel("/foo", "json", sid)
+        w.add_message(ch, log_time=1, publish_time=1, data=b"{}")
+        w.finish()
+    magic = tmp_path / "magic.mcap"
+    magic.write_bytes(foreign.read_bytes()[:8])
+    for path in (foreign, magic):
+        r = subprocess.run([HIL, "report", str(path), "-o", str(tmp_path / "x.html")],
+                           capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and "not a hil recording" in r.stderr, r.stderr
+        assert not (tmp_path / "x.html").exists()

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from hil.bench.bench import CLOCKS, Bench, load_bench, with_clock
 from hil.bench.yamlio import PlanFileError
+from hil.fileio import dir_problem
 from hil.plan.events import Listener
 from hil.plan.listeners import StepLines
 from hil.plan.parallel import jobs_from_arg, parallel_blocker, run_parallel, usable_cpus
@@ -108,17 +109,6 @@ def _last_failed(plans: list, out: Path, *, quiet: bool) -> list:
         print(f"--last-failed: {len(chosen)} of {len(plans)} plan(s) failed last time",
               file=sys.stderr)
     return chosen
-
-
-def _out_problem(out: Path) -> str | None:
-    """Why `--out` cannot hold the run's files (None: it can, or will once made): a file
-    where the directory belongs, or a file among its parents."""
-    if out.exists():
-        return None if out.is_dir() else "not a directory"
-    for parent in out.parents:
-        if parent.exists():
-            return None if parent.is_dir() else f"{parent} is not a directory"
-    return None
 
 
 def _logging(args: argparse.Namespace) -> None:
@@ -225,7 +215,7 @@ def main(args: argparse.Namespace) -> int:
         print(_listing(plans))
         return 0
     out = Path(args.out)
-    if (why := _out_problem(out)) is not None:
+    if (why := dir_problem(out)) is not None:
         print(f"hil run: --out {args.out}: {why}", file=sys.stderr)
         return 2
     try:

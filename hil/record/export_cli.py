@@ -187,6 +187,8 @@ def main(args: argparse.Namespace) -> int:
     except (RecordingError, ValueError) as exc:  # the file changed since its first read
         print(f"hil export: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        raise  # `-o - | head`: the reader went away; `hil` stops quietly (exit 141)
     except OSError as exc:
         print(f"hil export: cannot write {output}: {exc}", file=sys.stderr)
         return 2

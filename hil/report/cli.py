@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from hil.fileio import FileProblem, refuse_input, same_file
-from hil.record.reader import RecordingError
+from hil.record.reader import Recording, RecordingError, not_hil
 from hil.report.html import write_html
 from hil.report.index import write_index
 from hil.report.junit import write_junit
@@ -48,6 +48,12 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil report: {e}", file=sys.stderr)
         return 2
     try:
+        for r in args.recording:  # a readable MCAP that is no hil recording: bad input, as
+            rec = Recording.survey(r)  # `hil check` and `hil diff` say (a cut one is read)
+            why = not_hil(rec.metadata(), [c.schema for c in rec.channels()], rec.topics())
+            if why and not rec.corrupt:
+                print(f"hil report: {r}: {why}", file=sys.stderr)
+                return 2
         for r in args.recording:
             out = write_html(r, args.output)
             print(out)

@@ -67,3 +67,82 @@ def test_b():
                                         "-p", "no:cacheprovider")
     assert bad.ret != 0
     assert "nonexistent.yaml" in bad.stdout.str() + bad.stderr.str()
+
+
+OUTCOMES = '''
+import pytest
+
+@pytest.mark.hil
+@pytest.mark.parametrize("p", ["x y", "x_y", "a/b", "a_b"])
+def test_q(hil_recorder, p):
+    hil_recorder.log("info", p)
+
+@pytest.mark.hil
+def test_raises_midway(hil_drive):
+    hil_drive.set_function("SON", True)
+    hil_drive.dio.wait_for("DO6", True, 2.0)
+    raise RuntimeError("the fixture went wrong")
+
+@pytest.mark.hil
+def test_passes(hil_drive):
+    hil_drive.set_function("SON", True)
+
+@pytest.mark.hil
+def test_check_nothing(hil_drive, hil_check):
+    hil_check("servo_off_brake")          # no servo off happened: nothing to judge
+
+@pytest.mark.hil
+def test_run_a_plan(hil_run_plan):
+    assert hil_run_plan("servo_on_off_brake").passed
+'''
+
+
+def test_each_test_its_own_recording_and_what_ended_it(pytester: pytest.Pytester,
+                                                      tmp_path) -> None:
+    """README: `hil_recorder` is "one MCAP per test" (parameters that differ only in what a
+    file name cannot hold included); a failed test's recording says it failed and why the
+    bench went safe, a passing one says it ended; a `hil_check` that judges nothing fails, as
+    a plan's `check_timing` does; a plan run from a test and a plan collected as a test never
+    share a recording."""
+    pytester.makepyfile(test_outcomes=OUTCOMES)
+    plans = pytester.mkdir("plans")
+    (plans / "servo_on_off_brake.yaml").write_text(_shipped("servo_on_off_brake").read_text())
+    pytester.makeini("[pytest]\nhil_plans = plans\n")
+    out = tmp_path / "out"
+    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
+                                           f"--hil-out={out}")
+    result.assert_outcomes(passed=7, failed=2)
+    names = sorted(p.name for p in out.glob("*.mcap"))
+    assert len([n for n in names if "test_q" in n]) == 4, names
+    assert len(names) == len(set(names)) == 4 + 4 + 1, names  # 4 params, 4 tests, 1 plan
+    from hil.record.reader import Recording
+
+    def result_of(part: str) -> dict:
+        [path] = [p for p in out.glob("*.mcap") if part in p.name]
+        meta = Recording.open(path).metadata()
+        return dict(meta["hil.result"])
+
+    failed = result_of("test_raises_midway")
+    assert failed["status"] == "fail" and "the fixture went wrong" in failed["reason"]
+    assert failed["safe_state_ok"] in (True, "True", "true")
+    assert result_of("test_passes")["status"] == "pass"
+    assert "nothing judged" in result.stdout.str()
+    assert any(n.endswith("test_run_a_plan-servo_on_off_brake.mcap") for n in names)
+
+
+def _shipped(name: str):
+    from hil.plan.plan import find_plans
+
+    return find_plans([name])[0]
+
+
+def test_a_bad_hil_out_is_one_usage_error(pytester: pytest.Pytester) -> None:
+    """A file where `--hil-out`'s directory belongs: one line, before anything runs."""
+    pytester.makepyfile(test_one="import pytest\n@pytest.mark.hil\n"
+                                 "def test_a(hil_recorder):\n    pass\n")
+    (pytester.path / "afile").write_text("x")
+    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
+                                           "--hil-out=afile")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "--hil-out afile: not a directory" in result.stderr.str()
+    assert (pytester.path / "afile").read_text() == "x"
