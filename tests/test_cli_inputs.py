@@ -115,3 +115,22 @@ def test_report_refuses_an_mcap_that_is_no_hil_recording(tmp_path):
                            capture_output=True, text=True, timeout=60)
         assert r.returncode == 2 and "not a hil recording" in r.stderr, r.stderr
         assert not (tmp_path / "x.html").exists()
+
+
+def test_messages_name_the_options_the_user_gave(tmp_path):
+    """`hil diff a b -o z.json` has no --json; `hil export -o x.mf4` without asammdf names
+    the file it was asked for."""
+    import importlib.util
+
+    from hil.record.recorder import Recorder
+
+    mcap = tmp_path / "a.mcap"
+    with Recorder(mcap) as rec:
+        rec.log("info", "x", name="test")
+    r = subprocess.run([HIL, "diff", str(mcap), str(mcap), "-o", str(tmp_path / "z.json")],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--json" not in r.stderr and "(-o" in r.stderr, r.stderr
+    if importlib.util.find_spec("asammdf") is None:
+        r = subprocess.run([HIL, "export", str(mcap), "-o", str(tmp_path / "x.mf4")],
+                           capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and "x.mf4: MF4 needs the asammdf package" in r.stderr

@@ -77,8 +77,8 @@ def output_format(output: str, fmt: str | None) -> str:
         try:
             import asammdf  # noqa: F401  (python-can's MF4Writer needs it)
         except ImportError:
-            raise ValueError("-o .mf4: MF4 needs the asammdf package: "
-                             "pip install 'python-can[mf4]'") from None
+            raise ValueError(f"-o {output}: MF4 needs the asammdf package: "
+                             "pip install 'hil[mf4]'") from None
     return fmt
 
 

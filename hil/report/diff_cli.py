@@ -49,8 +49,9 @@ def main(args: argparse.Namespace) -> int:
             raise RecordingError(bad)
         refuse_input(out, [args.a, args.b], "-o")
         refuse_input(json_out, [args.a, args.b], "--json")
-        if same_file(out, json_out):
-            raise FileProblem(f"--json {json_out}: is the HTML output too")
+        if same_file(out, json_out):  # `-o x.json` makes its JSON beside it: the same file
+            how = "--json" if args.json else "the JSON output (-o's name with .json)"
+            raise FileProblem(f"{how} {json_out}: is the HTML output (-o) too")
         d, html_out, json_out = write_diff(args.a, args.b, out, json_out)
     except (RecordingError, FileProblem) as e:
         print(f"hil diff: {e}", file=sys.stderr)
