@@ -95,28 +95,6 @@ def test_export_into_head_stops_quietly(tmp_path, fmt):
     assert p.returncode == 141, (p.returncode, err)
 
 
-def test_report_refuses_an_mcap_that_is_no_hil_recording(tmp_path):
-    """README: `hil report` exits 2 on what is not a hil recording, as `hil check` and
-    `hil diff` do (it drew an ABORTED page for a bare MCAP magic and for a foreign MCAP)."""
-    from mcap.writer import Writer
-
-    foreign = tmp_path / "foreign.mcap"
-    with open(foreign, "wb") as f:
-        w = Writer(f)
-        w.start()
-        sid = w.register_schema("x", "jsonschema", b"{}")
-        ch = w.register_channel("/foo", "json", sid)
-        w.add_message(ch, log_time=1, publish_time=1, data=b"{}")
-        w.finish()
-    magic = tmp_path / "magic.mcap"
-    magic.write_bytes(foreign.read_bytes()[:8])
-    for path in (foreign, magic):
-        r = subprocess.run([HIL, "report", str(path), "-o", str(tmp_path / "x.html")],
-                           capture_output=True, text=True, timeout=60)
-        assert r.returncode == 2 and "not a hil recording" in r.stderr, r.stderr
-        assert not (tmp_path / "x.html").exists()
-
-
 def test_messages_name_the_options_the_user_gave(tmp_path):
     """`hil diff a b -o z.json` has no --json; `hil export -o x.mf4` without asammdf names
     the file it was asked for."""

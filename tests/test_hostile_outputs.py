@@ -167,6 +167,9 @@ def test_diff_refuses_what_is_no_hil_recording(recs) -> None:
     for other in (magic, foreign):
         assert _rc(["diff", str(a), str(other), "-o", str(root / "d.html")]) == 2
         assert _rc(["diff", str(other), str(a), "-o", str(root / "d.html")]) == 2
+        # `hil report` too (it drew an ABORTED page for either, exit 0)
+        assert _rc(["report", str(other), "-o", str(root / "r.html")]) == 2
+        assert not (root / "r.html").exists()
 
 
 @pytest.mark.parametrize("cut", ["truncated", "damaged"])
