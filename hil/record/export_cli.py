@@ -78,7 +78,7 @@ def output_format(output: str, fmt: str | None) -> str:
             import asammdf  # noqa: F401  (python-can's MF4Writer needs it)
         except ImportError:
             raise ValueError(f"-o {output}: MF4 needs the asammdf package: "
-                             "pip install 'hil[mf4]'") from None
+                             "pip install 'python-can[mf4]'") from None
     return fmt
 
 
