@@ -172,6 +172,15 @@ def test_diff_refuses_what_is_no_hil_recording(recs) -> None:
         assert not (root / "r.html").exists()
 
 
+def test_report_refuses_an_output_that_is_a_directory_before_writing_any(recs) -> None:
+    """`hil report a.mcap --junit DIR`: refused up front; a.html was written, then exit 2."""
+    root, a = recs["dir"], recs["a"]
+    (root / "out.xml").mkdir()
+    page = root / "page.html"
+    assert _rc(["report", str(a), "-o", str(page), "--junit", str(root / "out.xml")]) == 2
+    assert not page.exists()
+
+
 @pytest.mark.parametrize("cut", ["truncated", "damaged"])
 def test_diff_says_when_a_recording_is_cut_or_damaged(recs, capsys, cut: str) -> None:
     """As `hil check`: the comparison is written, exit 4 names what is incomplete."""

@@ -147,6 +147,14 @@ def main(args: argparse.Namespace) -> int:
             ts = times[topic] = array("q")
         ts.append(lt)
 
+    if args.repair:  # said before the file is read, as every output that names an input
+        from hil.fileio import FileProblem, refuse_input
+
+        try:
+            refuse_input(args.repair, [args.file], "--repair")
+        except FileProblem as exc:
+            print(f"hil inspect: {exc}", file=sys.stderr)
+            return 2
     try:  # a message at a time: the file is never held whole
         rec = Recording.stream(args.file, None, take)
     except RecordingError as exc:

@@ -32,6 +32,8 @@ def _refuse_clobber(args: argparse.Namespace) -> None:
     outs += [(flag, v) for flag, v in (("--junit", args.junit), ("--index", args.index)) if v]
     for flag, out in outs:
         refuse_input(out, args.recording, flag)
+        if Path(out).is_dir():  # said before any page is written, not after the first
+            raise FileProblem(f"{flag} {out}: is a directory; give a file name")
     for i, (flag, out) in enumerate(outs):
         for other_flag, other in outs[i + 1:]:
             if same_file(out, other):

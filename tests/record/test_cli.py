@@ -39,6 +39,19 @@ def test_inspect_truncated_and_repair(tmp_path, capsys):
     assert not r.truncated and sum(r.counts().values()) == n
 
 
+def test_repair_onto_its_input_is_refused_before_anything_is_read(tmp_path, capsys):
+    """An output that names the input is refused before the file is read (it printed the
+    whole summary first), in any spelling: here a link."""
+    p = make(tmp_path / "a.mcap")
+    link = tmp_path / "link.mcap"
+    link.symlink_to(p)
+    before = p.read_bytes()
+    assert hil(["inspect", str(p), "--repair", str(link)]) == 2
+    cap = capsys.readouterr()
+    assert "is the input" in cap.err and "complete:" not in cap.out
+    assert p.read_bytes() == before
+
+
 def test_inspect_and_repair_read_a_message_at_a_time(tmp_path, monkeypatch, capsys):
     """`hil inspect` and `--repair` never hold the recording whole (a killed run of hours):
     the summary is the one a whole read gives, and the repaired file has every readable
