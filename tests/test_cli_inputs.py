@@ -41,6 +41,14 @@ def test_node_id_outside_1_127_is_a_usage_error(value):
     assert "Traceback" not in r.stderr
 
 
+@pytest.mark.parametrize("value", ["0", "128", "247"])
+def test_station_outside_p3_000s_range_is_a_usage_error(value):
+    """P3.000 (station and node id) is 01h-7Fh (L10497): 128-247, a Modbus station elsewhere,
+    is none the A3 can be set to."""
+    r = _drive("--station", value)
+    assert r.returncode == 2 and "--station" in r.stderr, r.stderr
+
+
 @pytest.mark.parametrize("argv", [["inspect", "{mcap}"], ["run", "--check"]])
 def test_output_into_head_stops_quietly(tmp_path, argv):
     """`hil inspect x.mcap | head -1` and `hil run --check | head -1`: no BrokenPipeError."""

@@ -42,8 +42,8 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "zenoh:lab/b1/pulse?listen=tcp/127.0.0.1:7448 (docs/pulse.md)")
     p.add_argument("--node-id", type=_ranged("node id", 1, 127),
                    help="CANopen node id 1-127 (P3.000; default: parameter)")
-    p.add_argument("--station", type=_ranged("station", 1, 247),
-                   help="Modbus station 1-247 (P3.000; default: parameter)")
+    p.add_argument("--station", type=_ranged("station", 1, 0x7F),
+                   help="Modbus station 1-127 (P3.000, 01h-7Fh, L10497; default: parameter)")
     p.add_argument(
         "--params",
         type=Path,
