@@ -25,6 +25,13 @@ HARNESS_PDOS: dict[tuple[int, int], int] = {
 }
 
 
+# An RPDO entry the drive refuses raises its PDO alarm (table 13, L19965-L19987): AL124 data
+# out of the object's range, AL125 object read-only, AL127 not writable while servo on.
+_RPDO_ALARMS = {cop.ABORT_VALUE_RANGE: "AL124", cop.ABORT_VALUE_HIGH: "AL124",
+                cop.ABORT_VALUE_LOW: "AL124", cop.ABORT_READ_ONLY: "AL125",
+                cop.ABORT_DATA_STATE: "AL127"}
+
+
 @dataclass
 class PdoRun:
     """Run-time state of one PDO (configuration lives in the OD values)."""
@@ -145,8 +152,11 @@ class PdoEngine:
                 raw -= 1 << length
             try:
                 self.drive.write_object(index, sub, raw)
-            except errors.ModelError:  # refused: an RPDO has no answer (CiA 301)
-                self.stats["pdo_errors"] += 1
+            except errors.ModelError as exc:  # refused: an RPDO has no answer (CiA 301) but
+                self.stats["pdo_errors"] += 1  # the drive's PDO alarms (L19965-L19987)
+                alarm = _RPDO_ALARMS.get(getattr(exc, "abort_code", None))
+                if alarm is not None:
+                    self.drive.raise_alarm(alarm)
             except Exception as exc:
                 self.stats["pdo_errors"] += 1
                 self.last_resort("RPDO", exc)

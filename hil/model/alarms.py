@@ -120,8 +120,12 @@ class AlarmManager:
                 reg |= 0x04
             elif top == 0x4:
                 reg |= 0x08
-            elif top == 0x8 or emcy >> 8 == 0x75:
-                reg |= 0x10  # communication (L17534): 8xxxh and the serial interface 75xxh
+            elif emcy >> 8 in (0x81, 0x82, 0x87, 0x75):
+                # communication (L17534): CiA 301's 81xxh communication and 82xxh protocol
+                # errors, the SYNC controller 87xxh (AL305, AL3E3) and the serial interface
+                # 75xxh; not the drive's own monitoring (84xxh speed, 8611h following error,
+                # 8612h limits): those set the generic bit only
+                reg |= 0x10
             elif emcy == GENERIC_EMCY or top == 0xF:
                 reg |= 0x80
         return reg

@@ -303,3 +303,16 @@ def test_tpos_returns_after_a_trigger_that_moves_nothing(path: dict) -> None:
     run(d, 0.1)
     assert d.pr.cmd_ok
     assert tpos(d) and d.dio.do_function_state("MC_OK")
+
+
+@pytest.mark.parametrize(("code", "register"), [
+    ("AL009", 0x01), ("AL014", 0x01), ("AL015", 0x01), ("AL056", 0x01),  # the drive's own
+    ("AL180", 0x11), ("AL185", 0x11), ("AL111", 0x11), ("AL3E3", 0x11),  # the bus's
+])
+def test_1001h_bit_4_only_for_communication_errors(code: str, register: int) -> None:
+    """1001h bits (L17526-L17535): b0 generic, b1 current, b2 voltage, b3 temperature, b4
+    communication error, b5 reserved. A following error, a limit switch or overspeed is no
+    communication error (it set b4 from its 8xxxh EMCY code; found by helper-23)."""
+    d = Drive(inputs={8: True})
+    d.raise_alarm(code)
+    assert d.alarms.error_register == register
