@@ -96,6 +96,7 @@ def repair(rec: Recording, out: Path, *, stream: bool = False) -> int:
     if out.resolve() == rec.path.resolve():
         raise ValueError(f"--repair {out}: must differ from the input file")
     n = 0
+    out.parent.mkdir(parents=True, exist_ok=True)  # as report, diff and export make theirs
     with open(out, "wb") as f:
         w = McapWriter(f, library="hil inspect --repair")
         schema_ids: dict[int, int] = {}

@@ -199,3 +199,4 @@ def test_a_hil_drive_process_whose_model_fails_exits(monkeypatch, capsys):
         for sig, handler in saved.items():
             signal.signal(sig, handler)
     assert "the model failed (ValueError" in capsys.readouterr().err
+

@@ -238,3 +238,11 @@ def test_can_player_replays_an_mcap(tmp_path, canio_entry_points):
     )
     assert res.returncode == 0, res.stderr
     assert "1abcdef0" in res.stdout.lower() and "deadbeef" in res.stdout.lower().replace(" ", "")
+
+
+def test_repair_makes_its_missing_folders(tmp_path, capsys):
+    """As `hil report`, `diff` and `export` do for their outputs (it failed: no such file)."""
+    p = make(tmp_path / "a.mcap")
+    out = tmp_path / "new" / "dir" / "fixed.mcap"
+    assert hil(["inspect", str(p), "--repair", str(out)]) == 0
+    assert sum(Recording.open(out).counts().values()) == sum(Recording.open(p).counts().values())
