@@ -288,20 +288,14 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
     `hil.clock.sleep` / the drivers' waits, not `time.sleep`); the bench goes to its safe
     state afterwards, and the recording says why (the test's failure, or its end) and how
     the test ended (`hil.result`), as a plan's does."""
-    import time
-
     from hil import clock
+    from hil.plan.runner import record_bench
     from hil.plan.safety import go_safe
     from hil.plan.session import open_session
 
     clk = clock.VirtualClock() if hil_bench.clock == "virtual" else clock.REAL
-    hil_recorder.add_metadata("hil.bench", {
-        "name": hil_bench.name, "file": hil_bench.path, "virtual": hil_bench.virtual,
-        "drives": list(hil_bench.drives), "motion_allowed": hil_bench.motion_allowed})
     with clock.use(clk):
-        hil_recorder.add_metadata("hil.clock", {
-            "clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
-            "started_wall_ns": str(time.time_ns())})
+        record_bench(hil_recorder, hil_bench)
         session = open_session(hil_bench, hil_recorder)
         try:
             session.idle()

@@ -277,6 +277,17 @@ def _record_dut(ctx: StepContext, bench: Bench) -> None:
     ctx.rec.add_metadata("hil.dut", meta)
 
 
+def record_bench(rec: Recorder, bench: Bench) -> None:
+    """The `hil.bench` and `hil.clock` metadata of a recording made on `bench`, on the clock
+    in use (a plan's, and a pytest test's through `hil_session`)."""
+    rec.add_metadata("hil.bench", {"name": bench.name, "file": bench.path,
+                                   "virtual": bench.virtual, "drives": list(bench.drives),
+                                   "motion_allowed": bench.motion_allowed})
+    clk = clock.current()
+    rec.add_metadata("hil.clock", {"clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
+                                   "started_wall_ns": str(time.time_ns())})
+
+
 def plan_stem(plan: Plan) -> str:
     """The name of a plan's output files: its file's stem (its name for a plan from text)."""
     return Path(plan.path).stem if plan.path and plan.path != "<string>" else plan.name
@@ -330,12 +341,7 @@ def _open_recording(plan: Plan, bench: Bench, out_dir: Path,
     rec.add_metadata("hil.plan", {"name": plan.name, "file": plan.path,
                                   "description": plan.description, "steps": len(plan.steps),
                                   "tags": json.dumps(plan.tags)})
-    rec.add_metadata("hil.bench", {"name": bench.name, "file": bench.path,
-                                   "virtual": bench.virtual, "drives": list(bench.drives),
-                                   "motion_allowed": bench.motion_allowed})
-    clk = clock.current()
-    rec.add_metadata("hil.clock", {"clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
-                                   "started_wall_ns": str(time.time_ns())})
+    record_bench(rec, bench)
     checked = sorted({s.args.spec for s in plan.steps if s.kind == "check_timing"})
     if checked:  # the live checks read each message once (LiveSource)
         rec.keep_messages()

@@ -328,6 +328,14 @@ def not_hil(metadata: dict[str, Any], schemas: Iterable[str], topics: list[str])
             f"(channels: {found})")
 
 
+def not_hil_file(rec: Recording) -> str | None:
+    """`not_hil` of a surveyed recording (`Recording.survey`); None for one whose damage hides
+    what it is (a corrupt chunk: judged as incomplete, not as foreign)."""
+    if rec.corrupt:
+        return None
+    return not_hil(rec.metadata(), [c.schema for c in rec.channels()], rec.topics())
+
+
 def incomplete(path: str | os.PathLike, *, corrupt: bool, truncated: bool,
                error: str | None) -> str | None:
     """Why what a reader judged of a recording is incomplete (exit 4), or None."""

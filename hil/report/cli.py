@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from hil.fileio import FileProblem, refuse_input, same_file
-from hil.record.reader import Recording, RecordingError, not_hil
+from hil.record.reader import Recording, RecordingError, not_hil_file
 from hil.report.html import write_html
 from hil.report.index import write_index
 from hil.report.junit import write_junit
@@ -51,9 +51,8 @@ def main(args: argparse.Namespace) -> int:
         return 2
     try:
         for r in args.recording:  # a readable MCAP that is no hil recording: bad input, as
-            rec = Recording.survey(r)  # `hil check` and `hil diff` say (a cut one is read)
-            why = not_hil(rec.metadata(), [c.schema for c in rec.channels()], rec.topics())
-            if why and not rec.corrupt:
+            why = not_hil_file(Recording.survey(r))  # `hil check` and `hil diff` say
+            if why:
                 print(f"hil report: {r}: {why}", file=sys.stderr)
                 return 2
         for r in args.recording:

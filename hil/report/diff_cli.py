@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from hil.fileio import FileProblem, refuse_input, same_file
-from hil.record.reader import Recording, RecordingError, incomplete, not_hil
+from hil.record.reader import Recording, RecordingError, incomplete, not_hil_file
 from hil.report.diff import write_diff
 
 
@@ -30,9 +30,8 @@ def _check_inputs(paths: list[str]) -> tuple[str | None, list[str]]:
     partial = []
     for p in paths:
         rec = Recording.survey(p)  # channels and state, no message kept
-        chans = rec.channels()
-        why = not_hil(rec.metadata(), [c.schema for c in chans], rec.topics())
-        if why and not rec.corrupt:
+        why = not_hil_file(rec)
+        if why:
             return f"{p}: {why}", []
         cut = incomplete(p, corrupt=rec.corrupt, truncated=rec.truncated, error=rec.error)
         if cut:

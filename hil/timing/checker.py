@@ -429,7 +429,7 @@ class Context:
                 v = op(v)
             if thresholds:
                 if not lo <= t < hi:
-                    lim, lo, hi = thresholds.span(t)
+                    lim, lo, hi = thresholds(t)
                     lim_v = lim[cmp] if cmp else None
                 if cmp == "below":
                     v = v < lim_v
@@ -464,8 +464,9 @@ class Context:
         return _compress(tr.name, pts, tr.res, lags)
 
     def _thresholds(self, tf: dict[str, Any]) -> Any:
-        """`below`/`above` in force at t (`.constant`: one value throughout); None without
-        them. Evaluated once per transform and context."""
+        """`span(t)`: the `below`/`above` limits in force at t and the times [lo, hi) they hold
+        over (`.constant`: one value throughout); None without them. Evaluated once per
+        transform and context."""
         keys = [k for k in ("below", "above") if k in tf]  # `held` is applied after
         if not keys:
             return None
@@ -474,11 +475,7 @@ class Context:
         times = self.params.change_times() or [0]
         vals = [{k: tf[k].eval(self.env(t)) for k in keys} for t in times]
 
-        def at(t: int) -> dict[str, float]:
-            return vals[max(0, bisect.bisect_right(times, t) - 1)]
-
         def span(t: int) -> tuple[dict[str, float], int, int]:
-            """The limits in force at t, and the times [lo, hi) they hold over."""
             k = bisect.bisect_right(times, t) - 1
             lo = times[k] if k >= 0 else NEG_INF
             hi = times[k + 1] if k + 1 < len(times) else POS_INF
@@ -487,10 +484,9 @@ class Context:
         constant = all(v == vals[0] for v in vals)  # the usual case: one value throughout
         if constant:
             times, vals = times[:1], vals[:1]  # no search per sample
-        at.constant = constant  # type: ignore[attr-defined]
-        at.span = span  # type: ignore[attr-defined]
-        self._thr[id(tf)] = at
-        return at
+        span.constant = constant  # type: ignore[attr-defined]
+        self._thr[id(tf)] = span
+        return span
 
     # --- events -----------------------------------------------------------------------
     def occurrences(self, name: str) -> list[Occ]:

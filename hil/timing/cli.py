@@ -366,6 +366,17 @@ def read_plan(specs: list[Spec], bindings: list[dict[str, str]]
     return wanted, columns
 
 
+def _write_svg(args: argparse.Namespace, target: Path, text: str) -> bool:
+    """One `--svg` diagram; False (said on stderr) when it cannot be written."""
+    try:
+        target.write_text(text, encoding="utf-8")
+    except OSError as e:
+        print(f"hil check: --svg {args.svg}: cannot write {target}: {e.strerror or e}",
+              file=sys.stderr)
+        return False
+    return True
+
+
 def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: dict,
             consts: dict, res: dict) -> int:
     """Re-judge every `check_timing` step of a plan recording on what the run had seen by then,
@@ -395,20 +406,14 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
         src = cache.get(until) or cache.setdefault(
             until, RecordingSource(args.recording, time=args.time, until_log_ns=until,
                                    topics=read[0], columns=read[1]))
-        vs = check(spec, src, params=(run["params"] | params) or None,
-                   binding=dict(run["binding"]) | binding,
+        step_params, step_bind = (run["params"] | params) or None, dict(run["binding"]) | binding
+        vs = check(spec, src, params=step_params, binding=step_bind,
                    constants=(run["constants"] | consts) or None, resolution=res)
         vs = occurrences_since(vs, run["since_ns"])
         verdicts.extend(vs)
-        if out_dir is not None:
-            target = out_dir / f"{stem}.svg"
-            try:
-                target.write_text(svg(spec, src, vs, (run["params"] | params) or None,
-                                      dict(run["binding"]) | binding), encoding="utf-8")
-            except OSError as e:
-                print(f"hil check: --svg {args.svg}: cannot write {target}: "
-                      f"{e.strerror or e}", file=sys.stderr)
-                return 2
+        if out_dir is not None and not _write_svg(
+                args, out_dir / f"{stem}.svg", svg(spec, src, vs, step_params, step_bind)):
+            return 2
     if args.json:
         print_json(verdicts)
     else:
@@ -473,14 +478,9 @@ def main(args: argparse.Namespace) -> int:
         verdicts.extend(vs)
         if args.spec and not _judged(vs):  # a spec the user asked for must judge something
             incomplete.append(_why_nothing(spec, vs, source, bind))
-        if out_dir is not None:
-            target = out_dir / f"{spec.id}.svg"
-            try:
-                target.write_text(svg(spec, source, vs, params, bind), encoding="utf-8")
-            except OSError as e:
-                print(f"hil check: --svg {args.svg}: cannot write {target}: "
-                      f"{e.strerror or e}", file=sys.stderr)
-                return 2
+        if out_dir is not None and not _write_svg(
+                args, out_dir / f"{spec.id}.svg", svg(spec, source, vs, params, bind)):
+            return 2
     if args.json:
         print_json(verdicts)
     else:
