@@ -10,8 +10,11 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Hashable, Iterable, Iterator
 from pathlib import Path
+from typing import TypeVar
+
+T = TypeVar("T")
 
 
 class FileProblem(ValueError):
@@ -111,9 +114,30 @@ def write_text_atomic(path: str | os.PathLike, text: str, encoding: str = "utf-8
     return Path(path)
 
 
+_PARSED: dict[tuple, object] = {}
+
+
+def parsed_once(kind: str, path: str | os.PathLike, parse: Callable[[], T],
+                *key: Hashable) -> T:
+    """`parse()` of the file at `path` as `kind`, done once per file version (path, mtime,
+    size) and `key` in this process: a run parses the same EDS, tables and specs for
+    every plan. What it returns is shared, so only for what nobody changes. A file that
+    cannot be stat'ed is parsed every time (its own error is then `parse`'s)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return parse()
+    k = (kind, os.path.realpath(path), st.st_mtime_ns, st.st_size, *key)
+    hit = _PARSED.get(k, _PARSED)
+    if hit is _PARSED:
+        hit = _PARSED[k] = parse()
+    return hit  # type: ignore[return-value]
+
+
 __all__ = [
     "FileProblem",
     "atomic_path",
+    "parsed_once",
     "read_limited",
     "refuse_input",
     "require_regular",

@@ -20,6 +20,7 @@ from canopen.profiles.p402 import State402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from hil import clock
+from hil.fileio import parsed_once
 from hil.profile.od import EDS_PATH
 from hil.protocol.canopen import abort_text
 from hil.protocol.cia402 import (
@@ -126,19 +127,11 @@ class SdoError(Cia402Error):
         super().__init__(f"node {node}: SDO {op} {index:04X}h sub {sub}: {why}")
 
 
-_ODS: dict[tuple[str, int, int, int], canopen.ObjectDictionary] = {}
-
-
 def object_dictionary(eds: str | Path, node_id: int) -> canopen.ObjectDictionary:
     """The EDS as canopen reads it, parsed once per file version and node id in a process
-    (a session per plan would parse it again each time; nodes only read it)."""
-    path = Path(eds)
-    st = path.stat()
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size, node_id)
-    od = _ODS.get(key)
-    if od is None:
-        od = _ODS[key] = canopen.import_od(str(path), node_id)
-    return od
+    (`fileio.parsed_once`: a session per plan would parse it again each time; nodes only
+    read it)."""
+    return parsed_once("EDS", eds, lambda: canopen.import_od(str(eds), node_id), node_id)
 
 
 def od_variable(od: canopen.ObjectDictionary, index: int, sub: int

@@ -11,6 +11,7 @@ import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from hil.fileio import parsed_once
 from hil.paths import fixture
 from hil.profile.errors import ModelError
 
@@ -67,8 +68,14 @@ class AlarmTable:
 
     @classmethod
     def load(cls, path: str | os.PathLike[str] | None = None) -> AlarmTable:
+        """The alarm table (default: fixtures/drive/a3_alarms.csv), parsed once per file
+        version (`fileio.parsed_once`)."""
         if path is None:
             path = fixture("drive", "a3_alarms.csv")
+        return parsed_once("alarm table", path, lambda: cls._read(path))
+
+    @classmethod
+    def _read(cls, path: str | os.PathLike[str]) -> AlarmTable:
         with open(path, newline="", encoding="utf-8") as f:
             return cls([AlarmSpec.from_row(r) for r in csv.DictReader(f)])
 

@@ -12,6 +12,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from hil.fileio import parsed_once
 from hil.paths import fixture
 from hil.profile.canopen_init import CANOPEN_INIT_VALUES
 from hil.profile.errors import ObjectError
@@ -222,8 +223,11 @@ class ObjectDictionary:
         parameters_csv: Path = PARAMETERS_CSV,
         extra: list[Entry] | None = None,
     ) -> ObjectDictionary:
-        """The A3 dictionary: 1xxx + 6xxx from the objects table, 2xxx from the parameters."""
-        entries = load_objects(objects_csv) + load_parameter_objects(parameters_csv)
+        """The A3 dictionary: 1xxx + 6xxx from the objects table, 2xxx from the parameters.
+        The two tables are parsed once per file version (`fileio.parsed_once`)."""
+        entries = (parsed_once("objects table", objects_csv, lambda: load_objects(objects_csv))
+                   + parsed_once("parameter objects", parameters_csv,
+                                 lambda: load_parameter_objects(parameters_csv)))
         return cls(entries + list(extra or []))
 
     def __contains__(self, key: tuple[int, int]) -> bool:

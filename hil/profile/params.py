@@ -19,6 +19,7 @@ import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
+from hil.fileio import parsed_once
 from hil.paths import fixture
 from hil.profile.errors import UnknownParameter
 
@@ -161,6 +162,10 @@ class ParamTable:
         """Load the CSV (default: fixtures/drive/a3_parameters.csv)."""
         if path is None:
             path = fixture("drive", "a3_parameters.csv")
+        return parsed_once("parameter table", path, lambda: cls._read(path))
+
+    @classmethod
+    def _read(cls, path: str | os.PathLike[str]) -> ParamTable:
         with open(path, newline="", encoding="utf-8") as f:
             return cls(ParamSpec.from_row(row) for row in csv.DictReader(f))
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
+from hil.fileio import parsed_once
 from hil.timing.spec import Spec, SpecError, load_spec, shipped_specs
 
 __all__ = ["SpecRegistry", "load_specs"]
@@ -59,18 +60,7 @@ def load_specs(extra_dirs: Iterable[Path | str] | None = None) -> SpecRegistry:
     return SpecRegistry(specs, broken)
 
 
-_cache: dict[tuple[str, int, int], Spec] = {}
-
-
 def load_spec_cached(path: Path) -> Spec:
-    """`load_spec`, parsed once per file version (path, mtime, size) in this process: each
+    """`load_spec`, parsed once per file version in this process (`fileio.parsed_once`): each
     plan of a run asks for every spec."""
-    try:
-        st = path.stat()
-    except OSError:
-        return load_spec(path)
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
-    spec = _cache.get(key)
-    if spec is None:
-        spec = _cache[key] = load_spec(path)
-    return spec
+    return parsed_once("timing spec", path, lambda: load_spec(path))
