@@ -8,7 +8,7 @@ from functools import cache
 from hil.bench.yamlio import Checker, PlanFileError
 from hil.profile.dio import DI_PARAMS, DO_PARAMS
 from hil.profile.errors import ParamError
-from hil.profile.params import WRITE_ZERO_ONLY, ParamTable
+from hil.profile.params import WRITE_ZERO_ONLY, ParamTable, digit_problem
 
 
 @cache
@@ -34,6 +34,9 @@ def check_param(v: Checker, line: int, field: str, name: str, value: int | None,
     if write and value is not None and not spec.min <= value <= spec.max:
         raise v.err(line, field, f"{value} outside {spec.param}'s range {spec.min}..{spec.max} "
                     "(chapter 8): the drive refuses the write")
+    if write and value is not None and (why := digit_problem(spec.param, value)) is not None:
+        raise v.err(line, field, f"{spec.param} = 0x{value:04X}: {why}: the drive refuses the "
+                    "write")
     if write and value not in (None, 0) and spec.param in WRITE_ZERO_ONLY:
         raise v.err(line, field, f"{spec.param} = {value}: only 0 (alarm reset) may be "
                     "written (L7079-7083): the drive refuses the write")

@@ -32,6 +32,7 @@ from typing import Any, Literal, Protocol
 
 from hil.faces.last_resort import LastResort
 from hil.model import errors
+from hil.profile.params import ParamTable
 from hil.protocol import modbus as mb
 from hil.units import S
 
@@ -74,8 +75,10 @@ class ModbusFaceOptions:
     # Discard an RTU frame with an inter-character gap > t1.5 (std). Off: the manual does
     # not state it and host jitter on a pty exceeds 750 µs.
     enforce_t15: bool = False
-    # Find a valid frame after garbage / split two frames glued in one burst (by function
-    # length and CRC). Off: strictly one frame per silence-delimited burst.
+    # At a burst's silence, find the valid request it ends with after leading garbage (by
+    # function length and CRC). Frames glued without a silence are split by the first one's
+    # length either way; bytes inside a frame are never taken for one (L15621, L15703). Off:
+    # strictly one frame per silence-delimited burst.
     resync: bool = True
     # Station 0 (not in the manual): "execute" writes silently (std Modbus) or "ignore".
     broadcast: Literal["execute", "ignore"] = "execute"
@@ -88,6 +91,11 @@ class ModbusFaceOptions:
     exception_codes: dict[type, int] = field(default_factory=_default_exception_codes)
     max_read_words: int = mb.MAX_READ_WORDS  # L15634
     max_write_words: int = mb.MAX_WRITE_WORDS  # L15781
+    # Parameters communication may not write although chapter 8 lets them be set: ch.9.4
+    # excludes P5.010, P5.016 and P5.076 from "writable by communication" (L16025), while
+    # P5.016's own entry says any value may be written (L11286). The comms chapter is
+    # followed: a write is refused with exception 02h, as a read-only parameter's.
+    comm_write_refused: frozenset[str] = frozenset({"P5.016", "P5.076"})
 
 
 @dataclass(frozen=True)
@@ -271,36 +279,41 @@ class ModbusSlave:
             self._rtu_try_complete(t)
 
     def _rtu_try_complete(self, t: int) -> None:
-        """Complete a request as soon as its length (by function) and CRC say so; with
-        `resync`, also one that ends here after leading garbage or a glued-on frame (the
-        longest such frame wins, as in a scan from the first byte)."""
+        """Complete a request as soon as its length (by function) and CRC say so, counted
+        from the burst's first byte: a frame runs from one silence to the next (L15621,
+        L15628, L15703), so two frames glued without one are taken in turn, but bytes inside
+        a frame are never taken for a frame of their own (another station's data may hold a
+        valid request to this one)."""
         buf = self._buf
         n = len(buf)
-        if n < 8:
-            return
-        if not self.options.resync:
-            candidates = [0] if _request_length(buf, 0) == n else []
-        else:
-            first = max(0, n - mb.MAX_RTU_ADU)
-            candidates = [] if buf[n - 7] not in (mb.READ_HOLDING, mb.WRITE_SINGLE) else [n - 8]
-            # 10h at k: 9 + byte count (buf[k + 6]) bytes end here; found at C speed
-            at = buf.find(mb.WRITE_MULTIPLE, first + 1, n - 6)
-            while at >= 0:
-                if 9 + buf[at + 5] == n - at + 1:
-                    candidates.append(at - 1)
-                at = buf.find(mb.WRITE_MULTIPLE, at + 1, n - 6)
-            candidates.sort()
-        for k in candidates:
-            if _crc_ok(bytes(buf[k:])):
-                frame = bytes(buf[k:])
-                if k:
-                    self._note(f"skipped {k} bytes before a frame: {buf[:k].hex(' ')}")
-                self._buf.clear()
-                self._dispatch(frame, t)
-                return
+        if n >= 8 and _request_length(buf, 0) == n and _crc_ok(bytes(buf)):
+            frame = bytes(buf)
+            self._buf.clear()
+            self._dispatch(frame, t)
+
+    def _resync_frame(self, buf: bytes) -> tuple[int, bytes] | None:
+        """With `resync`: the longest request that ends the burst after leading garbage
+        (a frame cut short before it, line noise), as (bytes skipped, frame), or None."""
+        n = len(buf)
+        if not self.options.resync or n < 9:
+            return None
+        first = max(1, n - mb.MAX_RTU_ADU)
+        candidates = [n - 8] if n - 8 >= first and buf[n - 7] in (
+            mb.READ_HOLDING, mb.WRITE_SINGLE) else []
+        # 10h at k + 1: 9 + byte count (buf[k + 6]) bytes end the burst; found at C speed
+        at = buf.find(mb.WRITE_MULTIPLE, first + 1, n - 6)
+        while at >= 0:
+            if 9 + buf[at + 5] == n - at + 1:
+                candidates.append(at - 1)
+            at = buf.find(mb.WRITE_MULTIPLE, at + 1, n - 6)
+        for k in sorted(candidates):
+            if _crc_ok(buf[k:]):
+                return k, buf[k:]
+        return None
 
     def _end_rtu_frame(self) -> None:
-        """A silence ended the burst in the buffer: dispatch it if it is a valid frame."""
+        """A silence ended the burst in the buffer: dispatch it if it is a valid frame (with
+        `resync`, the valid request it ends with after leading garbage)."""
         buf = bytes(self._buf)
         t = self._now if self._last_t is None else self._last_t
         self._buf.clear()
@@ -311,6 +324,12 @@ class ModbusSlave:
             return
         if _crc_ok(buf):  # e.g. an unknown function: only the silence ends it
             self._dispatch(buf, t)
+            return
+        found = self._resync_frame(buf)
+        if found is not None:
+            k, frame = found
+            self._note(f"skipped {k} bytes before a frame: {buf[:k].hex(' ')}")
+            self._dispatch(frame, t)
             return
         self.stats["bad_check"] += 1
         self._note(f"RTU burst without a valid CRC: {buf[:32].hex(' ')}")
@@ -391,6 +410,7 @@ class ModbusSlave:
                     raise errors.ModelError(f"store returned {len(values)} of {req.count} words")
                 reply = mb.read_response([v & 0xFFFF for v in values])
             else:
+                self._refuse_comm_write(req.address, req.count)
                 with self._lock:
                     self.registers.modbus_write(req.address, list(req.values))
                 self._after_write(req.address, req.count)
@@ -409,6 +429,14 @@ class ModbusSlave:
             return None
         self.stats["replies"] += 1
         return reply
+
+    def _refuse_comm_write(self, address: int, count: int) -> None:
+        """ReadOnly if the words touch a parameter ch.9.4 keeps from communication writes
+        (`ModbusFaceOptions.comm_write_refused`, L16025)."""
+        for name in self.options.comm_write_refused:
+            low = ParamTable.load().spec(name).modbus_address
+            if address <= low + 1 and low < address + count:
+                raise errors.ReadOnly(name, "not writable by communication (ch.9.4, L16025)")
 
     def _code_for(self, exc: Exception) -> int:
         for cls in type(exc).__mro__:

@@ -21,15 +21,21 @@ from pathlib import Path
 from typing import Any
 
 from hil.model.errors import OutOfRange, ProtectedParameter, ReadOnly, ServoOnLocked
-from hil.profile.params import WRITE_ZERO_ONLY, ParamSpec, ParamTable
+from hil.profile.params import WRITE_ZERO_ONLY, ParamSpec, ParamTable, digit_problem
 
 WriteHook = Callable[[str, int, int], None]
 ReadHook = Callable[[], int]
 ChangeListener = Callable[[str, int], None]
 Validator = Callable[[str, int], None]
 
-# P2.071 (absolute position reset) is writable only after P2.008 = 271 (L10081, L16454).
-PROTECTED_KEYS: dict[str, tuple[str, int]] = {"P2.071": ("P2.008", 271)}
+# Parameters writable only after a P2.008 key (L9212-L9227): P2.071 (absolute position reset)
+# after 271 (L10081, L16454); P4.010 (calibration) after 20 (L10938, L16043); P4.011-P4.021
+# (hardware offsets) after 22 (L10947, L16045). Each entry: (key parameter, value, lines).
+PROTECTED_KEYS: dict[str, tuple[str, int, str]] = {
+    "P2.071": ("P2.008", 271, "L10081, L16454"),
+    "P4.010": ("P2.008", 20, "L10938, L16043"),
+    **{f"P4.{n:03d}": ("P2.008", 22, "L10947, L16045") for n in range(11, 22)},
+}
 
 
 class ParameterStore:
@@ -108,13 +114,13 @@ class ParameterStore:
                 f"{spec.format(value)} outside {spec.format(spec.min)}..{spec.format(spec.max)}"
                 f" (min {spec.min}, max {spec.max})",
             )
+        if (why := digit_problem(spec.param, value)) is not None:
+            raise OutOfRange(spec.param, why)
         if spec.servo_off_only and self.servo_on():
             raise ServoOnLocked(spec.param, "not writable while Servo On (▲, L6720)")
         key = PROTECTED_KEYS.get(spec.param)
         if key is not None and self._stored[key[0]] != key[1]:
-            raise ProtectedParameter(
-                spec.param, f"write {key[0]} = {key[1]} first (L10081, L16454)"
-            )
+            raise ProtectedParameter(spec.param, f"write {key[0]} = {key[1]} first ({key[2]})")
         for validate in self._validators.get(spec.param, ()):
             validate(spec.param, value)
         return spec

@@ -26,6 +26,26 @@ from hil.profile.errors import UnknownParameter
 # P0.001: writing 0 clears the alarm (= DI.ARST); 0x0001-0xFFFF are display only (L7079-7083).
 WRITE_ZERO_ONLY = frozenset({"P0.001"})
 
+# Parameters set digit by digit (hex digits X, Y, Z, U from the lowest) where each digit has
+# a range of its own, narrower than the table's whole range: (manual lines, ((digit name,
+# shift, low, high), ...)). P3.001: X (RS-485 baud) 0-5, Y 0, Z (CANopen rate) 0-4, U (DMCNET)
+# 0-3 (L10519-L10522).
+DIGIT_RANGES: dict[str, tuple[str, tuple[tuple[str, int, int, int], ...]]] = {
+    "P3.001": ("L10519-L10522", (("X", 0, 0, 5), ("Y", 4, 0, 0), ("Z", 8, 0, 4),
+                                 ("U", 12, 0, 3))),
+}
+
+
+def digit_problem(param: str, value: int) -> str | None:
+    """Why `value` is refused for `param` digit by digit (DIGIT_RANGES), or None."""
+    lines, digits = DIGIT_RANGES.get(param, ("", ()))
+    for digit, shift, lo, hi in digits:
+        d = (value >> shift) & 0xF
+        if not lo <= d <= hi:
+            rng = f"{lo}" if lo == hi else f"{lo}-{hi}"
+            return f"digit {digit} = {d:X} of 0x{value:04X}: it must be {rng} ({lines})"
+    return None
+
 _NAME_RE = re.compile(r"^\s*P([0-7])[.\-]([0-9]{1,3})\s*$", re.IGNORECASE)
 
 

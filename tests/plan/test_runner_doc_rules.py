@@ -200,3 +200,15 @@ def test_a_hil_drive_process_whose_model_fails_exits(monkeypatch, capsys):
             signal.signal(sig, handler)
     assert "the model failed (ValueError" in capsys.readouterr().err
 
+
+
+def test_a_p3001_digit_the_drive_refuses_is_refused_by_check(tmp_path, capsys):
+    """P3.001's digits have ranges of their own (X 0-5, Y 0, Z 0-4, U 0-3, L10519-L10522):
+    0x0006 is inside the table's 0x0000-0x3405 but its X is not, so --check refuses it at its
+    line, as the drive would (exception 03h)."""
+    bad = _plan(tmp_path, "b", "name: b\nsteps:\n  - write: {P3.001: 0x0006}\n")
+    good = _plan(tmp_path, "g", "name: g\nsteps:\n  - write: {P3.001: 0x0203}\n")
+    assert hil(["run", "--check", bad]) == 2
+    err = capsys.readouterr().err
+    assert "b.yaml:3: " in err and "digit X = 6" in err and "L10519" in err
+    assert hil(["run", "--check", good]) == 0
