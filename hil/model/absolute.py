@@ -40,6 +40,7 @@ STATUS_NOT_ESTABLISHED = 0x10  # bit4 coordinate not yet established
 BATTERY_LOW_V = 3.1  # AL061 below 3.1 V, clears by itself (L16379, L19769-19773)
 BATTERY_LOSS_V = 2.45  # data lost below 2.45 V (L16381, L19761)
 BATTERY_OVER_V = 3.8  # AL028 above 3.8 V (L19639-19640)
+BATTERY_MONITOR = 38  # monitor 038 (26h): battery voltage (L15477)
 
 # Checksum constants (L16476-16486)
 _CS_K = (0xA700, 0x605A, 0x30A5, 0x5A06)
@@ -388,6 +389,11 @@ class AbsoluteEncoder:
 
     # -- battery and power ------------------------------------------------------------------
 
+    def battery_monitor(self) -> int:
+        """Monitor 038 (26h): the battery in 0.1 V (P0.002 shows 31 below 3.1 V, L16379),
+        with the absolute function on (P2.069), else 0 (L15477)."""
+        return round(self.mem.battery_v * 10) if self.enabled else 0
+
     def set_battery_voltage(self, volts: float) -> None:
         """Battery voltage (0 = removed). < 3.1 V AL061; > 3.8 V AL028; loss at power-off."""
         self.mem.battery_v = float(volts)
@@ -479,8 +485,11 @@ class AbsoluteEncoder:
         m.al07c = m.al07d = False
         self._evaluate()
         if self._clear_alarm is not None:
-            # AL060's clearing procedure is rebuilding the origin (L19767, L16397).
-            self._clear_alarm("AL060")
+            # AL060's clearing procedure is rebuilding the origin (L19767, L16397); a normal
+            # clear of the absolute position "releases AL07C by itself" (L19857), and AL07D
+            # with it (docs/manual-choices.md)
+            for code in ("AL060", "AL07C", "AL07D"):
+                self._clear_alarm(code)
 
     # -- parameters -------------------------------------------------------------------------
 
@@ -550,7 +559,11 @@ class AbsoluteEncoder:
             return
         self._absc = active
         if active and self._armed:
-            hold = self._delay(self.options.origin_hold_margin_ms)
+            # a duration, not a reaction: both edges come through the P2.009 filter, so the
+            # pulse the drive sees is as long as the one at the terminals, and must itself
+            # last P2.009 + margin (L16448-16450); a shorter one that passes the filter does
+            # nothing
+            hold = self._p2009_ns() + ms(self.options.origin_hold_margin_ms)
             self._origin_timer = self.scheduler.after(hold, self._on_absc_held)
         elif not active and self._origin_timer is not None:
             self._origin_timer.cancel()  # released before T_Q: nothing happens
@@ -562,11 +575,15 @@ class AbsoluteEncoder:
             self._clear_command("DI.ABSC")
 
     def on_absq(self, active: bool) -> None:
-        """DI.ABSQ (DI4 while the overlay is on; both edges, L15145)."""
+        """DI.ABSQ (DI4 while the overlay is on; both edges, L15145). Without the overlay
+        there is no ABSQ: DI4 going back to its own function when the handshake ends is no
+        request."""
         active = bool(active)
         if active == self._absq:
             return
         self._absq = active
+        if not self._overlay:
+            return
         st = self.state
         if st == READY and not active:  # read request (L16505)
             self.state = PREP
@@ -637,6 +654,9 @@ class AbsoluteEncoder:
         self._evaluate()
 
     def _end_handshake(self) -> None:
+        """ABSE off: the cycle ends, ABSR/ABSD off, the pins back to their functions (L16515,
+        L16519). Nothing the pins' return does is read as a handshake step."""
+        self.state = IDLE
         self._cancel_timer()
         if self._overlay:
             self._output("ABSR", False)

@@ -34,6 +34,8 @@ class Hooks:
         self.servo_on: list[Callable[[], None]] = []  # after the servo turned on
         self.servo_off: list[Callable[[], None]] = []  # after the servo turned off
         self.boot: list[Callable[[], None]] = []  # at power-up, before outputs settle
+        # monitor codes (table L15440-L15483) a part computes, read through P0.009-P0.013
+        self.monitors: dict[int, Callable[[], int]] = {}
 
 
 def new_data_array() -> list[int]:

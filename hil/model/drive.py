@@ -25,7 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from hil.model.absolute import AbsoluteEncoder, AbsoluteOptions
+from hil.model.absolute import BATTERY_MONITOR, AbsoluteEncoder, AbsoluteOptions
 from hil.model.alarms import AlarmManager, AlarmOptions
 from hil.model.brake import Brake, HoldingBrake
 from hil.model.canopen_init import HOME_OFFSET_INIT, load_canopen_init
@@ -227,6 +227,7 @@ class Drive:
         self.absolute.on_origin = self._follow_absolute
         self._follow_absolute()  # a restart keeps the absolute coordinate (L16391-16397)
         self.hooks.step.append(self.absolute.refresh)
+        self.hooks.monitors[BATTERY_MONITOR] = self.absolute.battery_monitor
         for fn in ("ABSE", "ABSC", "ABSQ"):
             self.dio.on_function(fn, getattr(self.absolute, f"on_{fn.lower()}"))
 

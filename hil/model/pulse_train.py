@@ -712,10 +712,14 @@ def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
 def _monitor(d: DriveCore, pt: PulseTrain, select: str, stored: Callable[[], int]
              ) -> Callable[[], int]:
     """P0.009-P0.013 read the monitor code their P0.017-P0.021 select (L7147-7237): the
-    position codes 000-006 of the monitor table (L15440-15446) and 049, the CN1 pulse count
-    (L15483); other codes keep the stored value (not modelled)."""
+    position codes 000-006 of the monitor table (L15440-15446), 049, the CN1 pulse count
+    (L15483), and the codes other parts register (`Hooks.monitors`, e.g. 038 the battery);
+    other codes keep the stored value (not modelled)."""
     def read() -> int:
         code = d.params.get(select)
+        part = d.hooks.monitors.get(code)
+        if part is not None:
+            return part()
         if code == 49:  # pulse command count at CN1 (L15483), = P5.018
             return pt.cn1_count()
         if code > 6:

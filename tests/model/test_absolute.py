@@ -305,11 +305,11 @@ def test_origin_by_abse_absc():
     r = Rig(P6_001=-1000)
     r.enc.on_motor_position(3 * REV + 5)
     _abse_on(r)
-    r.enc.on_absc(True)
-    r.advance(2 * MS - 1)
+    r.enc.on_absc(True)  # the edge as the P2.009 filter passes it on
+    r.advance(4 * MS - 1)
     assert "AL06A" in r.active()
-    r.advance(1)  # held P2.009 + 2 ms at the terminals (L16448)
-    assert r.active() == set()
+    r.advance(1)  # held P2.009 + 2 ms (L16448): the filtered pulse is as long as the pressed
+    assert r.active() == set()  # one, so the hold is counted in full after the filter
     assert (r.enc.turns, r.enc.single_turn, r.enc.puu) == (0, 0, -1000)  # L16441
 
 
