@@ -119,6 +119,9 @@ _OPTION_CODES = {  # model-only option-code objects (absent from the A3 object l
 
 _BLOCKED_STATES = ("switch_on_disabled", "switched_on", "operation_enabled")
 
+# position demand (PUU), actual (counts), actual (PUU): 32-bit counters that wrap
+_COUNTERS = frozenset({0x6062, 0x6063, 0x6064})
+
 
 @dataclass
 class Cia402Options:
@@ -236,6 +239,7 @@ class Cia402:
         self._fault_reset_hook = fault_reset
         self.start_homing = start_homing
         self.stop_homing = stop_homing
+        self.refuse_setpoint: Callable[[], bool] | None = None  # AL235 (counters.py)
         self._servo_hook = on_servo_request
         self.on_write = on_write
         self._defs = _objects(round(axis.mech.rated_speed))
@@ -470,7 +474,10 @@ class Cia402:
             if index == 0x6093:
                 return self._num if sub == 1 else self._den
             return self._v[(index, sub)]
-        return _clip(self._actual(index, sub, d), d.dtype)
+        value = self._actual(index, sub, d)
+        if index in _COUNTERS:  # 32-bit counters wrap (L15290, counters.py)
+            return (value + 0x80000000) % 0x100000000 - 0x80000000
+        return _clip(value, d.dtype)
 
     def _actual(self, index: int, sub: int, d: _Obj) -> int:
         ax = self.axis
@@ -820,7 +827,10 @@ class Cia402:
                 self.start_homing()
 
     def _new_setpoint(self, cw: int) -> None:
-        """PP bit 4 rising edge (L17143-17206, L18235-18241)."""
+        """PP bit 4 rising edge (L17143-17206, L18235-18241). Refused, unacknowledged, while
+        `refuse_setpoint()` says so (the position counters overflowed: AL235, counters.py)."""
+        if self.refuse_setpoint is not None and self.refuse_setpoint():
+            return
         v = self._v
         num, den = self._num, self._den
         delta = puu_to_counts(v[(0x607A, 0)], num, den)

@@ -34,6 +34,7 @@ from hil.model.cia402 import Cia402, Cia402Options
 from hil.model.comm_supervision import CommSupervision
 from hil.model.compare import attach_compare
 from hil.model.core import Hooks, new_data_array
+from hil.model.counters import attach_counters
 from hil.model.di_functions import attach_di_functions
 from hil.model.dio import DigitalIO
 from hil.model.errors import (
@@ -122,7 +123,11 @@ class Drive:
             self.dio.set_input(n, closed, settled=True)  # present before power-up
         self._update_sensors(force=True)
         self.homing = attach_homing(self, absolute=self.absolute)  # homing methods (docs/homing.md)
-        self.pr = attach_pr(self, homing=self.homing)  # PR#1-#99 (chapter 7, docs/pr.md)
+        # the 32-bit PUU counters: overflow -> HOME off, OVF, AL235 (counters.py)
+        self.counters = attach_counters(self, self.homing.lose_home)
+        self.homing.on_homed = self.counters.clear
+        self.cia402.refuse_setpoint = self.counters.refuse
+        self.pr = attach_pr(self, homing=self.homing, counters=self.counters)  # PR#1-#99 (ch. 7)
         self.capture = attach_capture(self, pr=self.pr)  # CAPTURE on DI7 (§7.2.2, docs/capture.md)
         # COMPARE on DO4 (§7.2.3, docs/capture.md)
         self.compare = attach_compare(self, capture=self.capture, pr=self.pr)

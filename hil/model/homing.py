@@ -101,6 +101,7 @@ class Homing:
         self._phase = ""  # "" idle | search | exit | cross | index | torque | stop | return
         self.plan: Plan | None = None
         self.homed = False  # coordinate established since power-up
+        self.on_homed: Callable[[], None] | None = None  # HOME came on (counters.py clears)
         self.last_error = ""
         self.reference: float | None = None  # physical counts of the reference (edge / Z)
         self.home_counts: float | None = None  # physical counts of the home point
@@ -215,6 +216,7 @@ class Homing:
         self.homed = False
         self._boot_armed = True
         self._set_home(False)
+        self.drive.dio.set_do_function("IDXD", False)
 
     @property
     def active(self) -> bool:
@@ -267,6 +269,9 @@ class Homing:
             self._move("exit", -plan.cross, self._v2, want=False)
 
     def _move(self, phase: str, direction: int, rpm: float, want: bool = False) -> None:
+        # the ramp out of the first stage (the high-speed search) is DEC1, "the first homing
+        # deceleration"; later slowdowns are DEC2 (P6.000 U / A, L4267-4269, L12627-12630)
+        first = self.phase in ("search", "torque") or phase in ("search", "torque")
         self.phase = phase
         self._dir = direction
         self._want = want
@@ -275,8 +280,7 @@ class Homing:
         if self._limit_ahead():
             self._on_limit_ahead()
             return
-        dec = self._dec1 if phase in ("search", "torque") else self._dec2
-        d.axis.run_velocity(direction * rpm, self._acc, dec)
+        d.axis.run_velocity(direction * rpm, self._acc, self._dec1 if first else self._dec2)
 
     def _limit_ahead(self) -> bool:
         """The limit switch in the travel direction is active (and is not the reference)."""
@@ -458,7 +462,19 @@ class Homing:
             self._pending = None
 
     def _set_home(self, on: bool) -> None:
-        self.drive.dio.set_do_function("HOME", on)
+        dio = self.drive.dio
+        dio.set_do_function("HOME", on)
+        if on:  # IDXD: "the index coordinate is defined once homing completes" (L15298)
+            dio.set_do_function("IDXD", True)
+            if self.on_homed is not None:
+                self.on_homed()
+
+    def lose_home(self) -> None:
+        """The position counters overflowed: the coordinate means nothing any more, HOME and
+        IDXD off (L15290, L15298)."""
+        self.homed = False
+        self._set_home(False)
+        self.drive.dio.set_do_function("IDXD", False)
 
 
 def _accel_ms(get: Any, index: int) -> float:

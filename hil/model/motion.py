@@ -190,6 +190,10 @@ class Axis:
         self._ext = mech.load_torque + mech.gravity_torque
         self._fric = mech.friction_torque
         self._hs_neg, self._hs_pos = mech.hard_stop_counts
+        # held against a hard stop (+1 / -1, 0 = free) and the speed loop's integral there:
+        # a PI loop winds its torque up at a stall until the limit (torque homing, L4368)
+        self._pressed = 0
+        self._stall_tq = 0.0
         # feedback state
         self.position = 0.0
         self.last_position = 0.0
@@ -247,6 +251,7 @@ class Axis:
             return
         self.power = on
         self.demand = self.position
+        self._stall_tq = 0.0
         profiling = on and self._mode in (_POS, _VEL, _STOP)
         self.demand_velocity = self.velocity if profiling else 0.0
         self._tq_dem = 0.0
@@ -646,6 +651,8 @@ class Axis:
         nv = v + (vcmd - v) * self._alpha
         f = fr if nv > 0.0 else (-fr if nv < 0.0 else 0.0)
         tq = (nv - v) / (k * dt) + ext + f
+        if self._pressed:  # stalled at a hard stop: the loop's integral winds up
+            tq = self._stall_wind(tq, dt)
         limited = True
         if tq > self._tmax:
             tq = self._tmax
@@ -675,18 +682,33 @@ class Axis:
         return 0.0 if nv * v < 0.0 else nv
 
     def _hard_stops(self, p: float, nv: float) -> tuple[float, float]:
-        """The mechanical end stops hold the axis (position, speed)."""
+        """The mechanical end stops hold the axis (position, speed); `_pressed` says whether
+        the loop is pushing into one (the next step's torque winds up)."""
+        pressed = 0
         hs = self._hs_neg
         if hs is not None and p < hs:
             p = hs
             if nv < 0.0:
-                nv = 0.0
+                nv, pressed = 0.0, -1
         hs = self._hs_pos
         if hs is not None and p > hs:
             p = hs
             if nv > 0.0:
-                nv = 0.0
+                nv, pressed = 0.0, 1
+        if pressed != self._pressed:
+            self._pressed, self._stall_tq = pressed, 0.0
         return p, nv
+
+    def _stall_wind(self, tq: float, dt: float) -> float:
+        """The speed loop's integral at a stall: a first-order loop alone holds a torque
+        proportional to the speed error, so pushing slowly into a stop would never reach the
+        torque limit; a PI loop keeps adding the error and does, within a few speed-loop time
+        constants. Only while the command still pushes into the stop."""
+        if (tq > 0.0) != (self._pressed > 0):
+            self._stall_tq = 0.0
+            return tq
+        self._stall_tq += tq * dt / self._tau_v
+        return tq + self._stall_tq
 
     def _settle(self, p: float, nv: float, pd: float, vd: float, mode: int,
                 done: bool) -> None:

@@ -70,6 +70,7 @@ from hil.units import MS
 
 if TYPE_CHECKING:
     from hil.model.core import DriveCore
+    from hil.model.counters import PositionCounters
     from hil.model.homing import Homing
 
 POS_BITS = ("POS0", "POS1", "POS2", "POS3", "POS4", "POS5", "POS6")  # L15123-15133
@@ -142,6 +143,7 @@ class PrEngine:
         self._limit_params = drive.params.cached("P5.008", "P5.009")  # read every step
         self.options = options or PrOptions.from_dict(drive.options.extra.get("pr"))
         self.homing = homing  # PR#0 (homing.py)
+        self.counters: PositionCounters | None = None  # AL235 after an overflow (counters.py)
         self.array = drive.array  # the data array (L5097), shared with CAPTURE/COMPARE
         self.capture_puu = 0  # last CAPTURE value, base of CAP commands (L4471)
         self.lead: int | None = None  # PR number of the last trigger (P5.007 read-back)
@@ -400,6 +402,9 @@ class PrEngine:
                 path.direction, fwd if fwd <= -rev else rev
             )
             return self.cmd_e + step
+        if self.counters is not None and self.counters.refuse():
+            self._fail("", f"PR#{path.number}: position counter overflowed (AL235, L20085)")
+            return None
         cmd = path.cmd
         if cmd == "ABS":
             return v
@@ -655,9 +660,11 @@ def _pos_number(dio: Any) -> int:
 
 
 def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
-              homing: Homing | None = None) -> PrEngine:
+              homing: Homing | None = None, counters: PositionCounters | None = None
+              ) -> PrEngine:
     """Create the PR engine of `drive` and wire triggers, hooks and parameters."""
     pr = PrEngine(drive, options, homing)
+    pr.counters = counters
     dio = drive.dio
     params = drive.params
 
