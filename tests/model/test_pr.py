@@ -421,3 +421,25 @@ def test_data_array_one_word_write_keeps_the_entry_other_half() -> None:
     p5100 = d.params.spec("P5.100").modbus_address
     d.params.modbus_write(p5100 + 2, [9])  # P5.101: #6, low word only
     assert d.pr.array[5:7] == [-1, 0x00020009]
+
+
+def test_a_position_pr_after_the_counter_overflowed_gives_al235() -> None:
+    """The PUU counters are 32-bit: a command that carries them past 2^31 - 1 overflows them
+    (HOME off, L15290); a positioning command after that gives AL235 and does not run
+    (L20083-20087); homing again clears it (L20091)."""
+    d = make(**{"P5.004": 0x008, "P6.001": 2147483000})  # PR homing X = 8: here = P6.001
+    d.params.write("P5.007", 0)
+    run(d, 0.2)
+    assert d.homing.homed and puu(d) == 2147483000
+    put(d, 1, type_="single", data=100000, cmd="INC", spd=4)
+    d.params.write("P5.007", 1)
+    run(d, 1.0)
+    assert d.counters.overflowed and not d.dio.do_function_state("HOME")
+    put(d, 2, type_="single", data=0, cmd="ABS", spd=4)
+    here = d.axis.position
+    d.params.write("P5.007", 2)
+    run(d, 0.5)
+    assert "AL235" in d.alarms.active and d.axis.position == here
+    d.params.write("P5.007", 0)  # homing again
+    run(d, 0.2)
+    assert "AL235" not in d.alarms.active and not d.counters.overflowed
