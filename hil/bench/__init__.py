@@ -20,7 +20,8 @@ def virtual_module(name: str) -> ModuleType:
 
 
 def virtual_rules() -> ModuleType:
-    """`hil.virtual.rules`: ModelOptions, Mechanics, INERT_DI_FUNCTIONS, inert_mapping."""
+    """`hil.virtual.rules`: ModelOptions, Mechanics, INERT_DI_FUNCTIONS,
+    INERT_DO_FUNCTIONS, inert_mapping."""
     return virtual_module("rules")
 
 

@@ -650,9 +650,11 @@ def _wiring(v: Checker, spec: DriveSpec, m: LDict, where: str, virtual: bool) ->
         if func not in table:
             raise v.err(m.kline(key), fw, f"unknown {kind} function {func!r} (manual table "
                         f"8.{1 if kind == 'DI' else 2}); known: {', '.join(sorted(table))}")
-        inert = virtual_rules().INERT_DI_FUNCTIONS if virtual and kind == "DI" else {}
-        if func in inert:  # a DI function the virtual drive does not model
-            raise v.err(m.kline(key), fw, f"DI function {func} is not modelled by the "
+        rules = virtual_rules() if virtual else None
+        inert = {} if rules is None else (
+            rules.INERT_DI_FUNCTIONS if kind == "DI" else rules.INERT_DO_FUNCTIONS)
+        if func in inert:  # a DI or DO function the virtual drive does not model
+            raise v.err(m.kline(key), fw, f"{kind} function {func} is not modelled by the "
                         f"virtual drive: {inert[func]}")
         limit = N_PHYSICAL_DI if kind == "DI" else N_DO
         if not 1 <= n <= limit:

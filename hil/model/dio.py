@@ -52,25 +52,53 @@ INERT_DI_FUNCTIONS: dict[str, str] = {
     "CAM": "the E-cam (P5.088) is not modelled (L15206)",
 }
 
+# The DO functions of table 8.2 nothing in the virtual drive drives: mapped, the output would
+# sit at its idle level for ever (a b-contact one conducting), so mapping one is refused too.
+INERT_DO_FUNCTIONS: dict[str, str] = {
+    "OLW": "the overload warning (P1.056, L8711-8719) needs a thermal model the virtual "
+           "drive has not (L15304)",
+    "SP_OK": "speed reached (P1.047/P1.049, L8576-8590) is not modelled (L15332)",
+    "CAM_AREA1": "the E-cam (P2.078-P2.079) is not modelled (L15329)",
+    "CAM_AREA2": "the E-cam (P2.078-P2.079) is not modelled (L15335)",
+    "Zon1": "the range comparisons of P0.009-P0.012 (P0.054-P0.061) are not modelled "
+            "(L15336-15347)",
+    "Zon2": "the range comparisons of P0.009-P0.012 (P0.054-P0.061) are not modelled "
+            "(L15336-15347)",
+    "Zon3": "the range comparisons of P0.009-P0.012 (P0.054-P0.061) are not modelled "
+            "(L15336-15347)",
+    "Zon4": "the range comparisons of P0.009-P0.012 (P0.054-P0.061) are not modelled "
+            "(L15336-15347)",
+}
+
 
 def inert_mapping(param: str, value: int) -> str | None:
-    """Why mapping `value` on DI parameter `param` is refused, or None (not a DI mapping or
-    a modelled function)."""
-    if param not in DI_PARAMS:
+    """Why mapping `value` on DI or DO parameter `param` is refused, or None (not a mapping
+    or a modelled function)."""
+    if param in DI_PARAMS:
+        kind, table, inert = "DI", DI_FUNCTIONS, INERT_DI_FUNCTIONS
+    elif param in DO_PARAMS:
+        kind, table, inert = "DO", DO_FUNCTIONS, INERT_DO_FUNCTIONS
+    else:
         return None
-    fn = DI_FUNCTIONS.get(value & 0xFF)
-    if fn is None or fn.symbol not in INERT_DI_FUNCTIONS:
+    fn = table.get(value & 0xFF)
+    if fn is None or fn.symbol not in inert:
         return None
-    return f"DI function {fn.symbol} (0x{fn.code:02X}): {INERT_DI_FUNCTIONS[fn.symbol]}"
+    return f"{kind} function {fn.symbol} (0x{fn.code:02X}): {inert[fn.symbol]}"
 
 
-def check_di_mapping_write(param: str, value: int) -> None:
-    """Validator of a DI mapping write: unknown codes and inert functions are refused."""
-    decode_mapping("DI", value, param)
+def check_mapping_write(param: str, value: int) -> None:
+    """Validator of a DI or DO mapping write: unknown codes and inert functions are
+    refused."""
+    decode_mapping("DI" if param in DI_PARAMS else "DO", value, param)
     why = inert_mapping(param, value)
     if why:
         raise InertFunction(param, why)
 
+
+# Functions whose trigger ("rising/level" in table 8.1) a parameter selects: level when it
+# holds this value, and then they act from power-up like any level function. CCLR: P2.050 = 1
+# (L9753).
+LEVEL_BY_PARAM: dict[str, tuple[str, int]] = {"CCLR": ("P2.050", 1)}
 
 # Functions that only exist through the absolute handshake overlay (L15145).
 OVERLAY_DI_SYMBOLS = ("ABSQ",)
@@ -137,9 +165,9 @@ class DigitalIO:
         self._forced_do: dict[int, bool] = {}  # DO4 while COMPARE runs (compare.py, L5188)
         self._raw_subs: list[Callable[[int, bool], None]] = []
         for p in DI_PARAMS:
-            params.on_validate(p, check_di_mapping_write)
+            params.on_validate(p, check_mapping_write)
         for p in DO_PARAMS:
-            params.on_validate(p, lambda n, v: decode_mapping("DO", v, n))
+            params.on_validate(p, check_mapping_write)
         params.on_write("P3.006", lambda *_: self._update_di())
         params.on_write("P4.007", self._on_sdi)
         params.on_write("P4.006", lambda *_: self._update_spo())
@@ -249,7 +277,11 @@ class DigitalIO:
         AL015, L2829-2831); edge-triggered functions (ARST, ABSC, ...) saw no edge."""
         for sym, active in list(self._di_state.items()):
             code = DI_SYMBOLS.get(sym)
-            if active and code is not None and DI_FUNCTIONS[code].trigger == "level":
+            if not active or code is None:
+                continue
+            trigger = DI_FUNCTIONS[code].trigger
+            by = LEVEL_BY_PARAM.get(sym)
+            if trigger == "level" or (by is not None and self.params.get(by[0]) == by[1]):
                 for fn in list(self._subs.get(sym, ())):
                     fn(True)
 

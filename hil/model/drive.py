@@ -12,8 +12,9 @@ Servo logic (choices in docs/manual-choices.md):
 * EMGS -> AL013 (WARN, servo off, clears itself when released: L15184, L19338, L19557);
   NL/PL -> AL014/AL015 (WARN, servo stays on; motion towards the limit stops with the
   P5.003 X/Y deceleration: L15188-15191, L8329, L11084-11100);
-* DO.SRDY while no ALM-class alarm (L15263), DO.SON while the servo is on (L15266),
-  ZSPD |v| < P1.038 (L15269), TSPD v > P1.039 (L15272), TPOS |error| < P1.054 (L15275),
+* DO.SRDY while no ALM-class alarm and the main circuit is in (L15263), DO.SON while the
+  servo is on (L15266), ZSPD |v| < P1.038 (L15269), TSPD |v| > P1.039 (L15272, L8426),
+  TPOS |error| < P1.054 in PT/PR only (L15275),
   TQL while the torque is held at a limit, not in T/Tz (L15278),
   ALRM/WARN from the alarm classes (L15282, L15307), BRKR from `brake.py`.
 """
@@ -78,6 +79,9 @@ from hil.protocol.canopen import (
 )
 from hil.protocol.cia402 import MODE_NAMES
 from hil.units import MS
+
+# WARN-class alarms that mean the main circuit is not powered: SRDY off (L15263, L19509, L19604)
+MAIN_POWER_ALARMS = frozenset({"AL003", "AL022"})
 
 # Physical wiring of the virtual bench's sensors: function -> (DI number, contact type).
 # Limit switches are normally closed (open at the limit), the home sensor normally open.
@@ -468,7 +472,7 @@ class Drive:
         self.powered = True
         self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
-        self._set_do("SRDY", not self.alarms.alrm)
+        self._set_do("SRDY", self._srdy())
         self._set_do("ALRM", self.alarms.alrm)
         self._set_do("WARN", self.alarms.warn)
         self._set_do("SON", False)
@@ -634,11 +638,18 @@ class Drive:
         if event is not None:
             self.emit(event)
 
+    def _srdy(self) -> bool:
+        """SRDY: control and main-circuit power in, and no fault (L15263). AL003 (undervoltage)
+        and AL022 (main-circuit power lost) are WARN-class but say the main circuit is not
+        in: SRDY is off with them, as with any ALM-class alarm."""
+        al = self.alarms
+        return not al.alrm and not any(c in MAIN_POWER_ALARMS for c in al.active)
+
     def _react_to_alarms(self) -> None:
         al = self.alarms
         self._set_do("ALRM", al.alrm)
         self._set_do("WARN", al.warn)
-        self._set_do("SRDY", not al.alrm)
+        self._set_do("SRDY", self._srdy())
         specs = [al.table.spec(c) for c in al.active]
         fault = any(sp.kind == "ALM" and sp.servo_off for sp in specs)
         cur = al.current
@@ -742,7 +753,7 @@ class Drive:
         last = self._dout_cache.get  # each output is set only when it changes (`_set_do`)
         if last("ZSPD") != (on := abs(rpm) < p1038 / 10.0):
             self._set_do("ZSPD", on)
-        if last("TSPD") != (on := rpm > p1039):
+        if last("TSPD") != (on := abs(rpm) > p1039):  # either direction (L8426)
             self._set_do("TSPD", on)
         if last("TPOS") != (on := self.tpos()):
             self._set_do("TPOS", on)
@@ -762,14 +773,19 @@ class Drive:
         ax = self.axis
         err = ax.following_error
         _p2035, _p1038, _p1039, p1054, p1001 = self._step_params()
-        # PR control mode by P1.001 (a dual mode only while its PR side is the one in effect)
         if self.pulse.used and self.pulse.in_pt_cached():  # PT: pulse command minus feedback
             err = self.pulse.error()
-        elif p1001 & 0xFF in PR_MODES and self.difunc.control_mode() == "PR":
-            if self.pr.tpos_off:
+        else:
+            mode = self.difunc.control_mode()
+            if mode != "PR" and mode != "PT":  # TPOS is a PT / PR output (L15275)
                 return False
-            if ax.mode == "position":
-                err = ax.target - ax.position
+            # the PR rule for PR by P1.001 (a dual mode only while its PR side is in effect)
+            # and for the CiA 402 position modes the drive runs as PR (PP, HM, IP)
+            if mode == "PR":
+                if p1001 & 0xFF in PR_MODES and self.pr.tpos_off:
+                    return False
+                if ax.mode == "position":
+                    err = ax.target - ax.position
         return abs(err) < p1054
 
     def _update_sensors(self, force: bool = False) -> None:

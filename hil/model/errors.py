@@ -17,10 +17,10 @@ __all__ = ["ModelError", "ObjectError", "OutOfRange", "ParamError", "UnknownFunc
 
 
 class InertFunction(OutOfRange):
-    """A DI function of table 8.1 the virtual drive does not model: mapping it is refused
-    (SDO abort 0609 0030, Modbus exception 03) instead of silently doing nothing."""
+    """A DI or DO function of table 8.1 / 8.2 the virtual drive does not model: mapping it is
+    refused (SDO abort 0609 0030, Modbus exception 03) instead of silently doing nothing."""
 
-    rule = "DI function not modelled"
+    rule = "DI/DO function not modelled"
 
 
 class ReadOnly(ParamError):

@@ -7,8 +7,9 @@ and `hil.plan` never import the model (docs/architecture.md).
 
 from __future__ import annotations
 
-from hil.model.dio import INERT_DI_FUNCTIONS, inert_mapping
+from hil.model.dio import INERT_DI_FUNCTIONS, INERT_DO_FUNCTIONS, inert_mapping
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
 
-__all__ = ["INERT_DI_FUNCTIONS", "Mechanics", "ModelOptions", "inert_mapping"]
+__all__ = ["INERT_DI_FUNCTIONS", "INERT_DO_FUNCTIONS", "Mechanics", "ModelOptions",
+           "inert_mapping"]
