@@ -129,9 +129,9 @@ class Brake:
             self._set(False)
 
     def reset(self) -> None:
-        """Power cycle: BRKR off."""
+        """Power off: no timer survives, BRKR off (the brake engages)."""
         self._cancel()
-        self.brkr = False
+        self._set(False)
 
     # -- internals -------------------------------------------------------------------------
     def _below_zspd(self) -> bool:

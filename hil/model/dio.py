@@ -164,6 +164,7 @@ class DigitalIO:
         self._reserved_di: set[int] = set()  # DI7 while CAPTURE runs (capture.py, L5150)
         self._forced_do: dict[int, bool] = {}  # DO4 while COMPARE runs (compare.py, L5188)
         self._raw_subs: list[Callable[[int, bool], None]] = []
+        self._off = False  # control power off: no DO conducts (power_off)
         for p in DI_PARAMS:
             params.on_validate(p, check_mapping_write)
         for p in DO_PARAMS:
@@ -183,8 +184,14 @@ class DigitalIO:
         self._update_spo()
         self._update_do()
 
+    def power_off(self) -> None:
+        """Control power off: no output transistor conducts until `power_cycle()`."""
+        self._off = True
+        self._update_do()
+
     def power_cycle(self) -> None:
         """Re-read the mapping (L9256, L9339), P4.006/P4.007 after their ■ revert."""
+        self._off = False
         self._sdi = self.params.stored("P4.007")
         self.clear_overlay()
         self._apply_mapping()
@@ -361,7 +368,9 @@ class DigitalIO:
     def _update_do(self) -> None:
         for i, (code, a_contact) in enumerate(self._do_map):
             n = i + 1
-            if n in self._forced_do:
+            if self._off:
+                sym, level = "", False
+            elif n in self._forced_do:
                 sym, level = "", self._forced_do[n]
             elif n in self._overlay_do:
                 sym = self._overlay_do[n]

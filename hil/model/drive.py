@@ -399,9 +399,16 @@ class Drive:
             self._update_servo(source="cia402")
 
     def power_cycle(self, *, battery: bool = True, off_for: int = 0) -> None:
-        """Switch the drive off (for `off_for` ns) and on again."""
+        """Switch the drive off (for `off_for` ns) and on again. While it is off nothing of
+        the firmware runs: no torque (a P1.043 hold ends), no BRKR (a pending P1.042 release
+        is dropped), no DO conducts, no STO timer runs."""
         self._servo_off("normal", None, immediate=True)
+        self._end_torque_hold()
+        self.axis.set_power(False)
+        self.brake.reset()
+        self.sto.power_off()
         self.powered = False
+        self.dio.power_off()
         self.holding_brake.coil(False)  # no control power: no DO conducts, the brake engages
         self.advance(off_for)
         self.params.power_cycle()
@@ -553,6 +560,12 @@ class Drive:
             # when it acknowledges the loss with AL500 / AL501 / AL502 (L2478, L2482)
             sto_lost = False
         blocked = self.alarms.servo_off_required or sto_lost
+        if self._hold_timer and self.alarms.servo_off_required and not self.servo_on and (
+                self.alarms.current != "AL022"):
+            # EMGS or an alarm during a negative-P1.043 hold: P1.043 acts as 0 for them
+            # (L8516), so the torque held after a normal servo off ends now
+            self._end_torque_hold()
+            self.axis.set_power(False)
         want = self._requested() and not blocked
         if want and not self.servo_on:
             self._servo_on()
@@ -571,11 +584,15 @@ class Drive:
             return self.cia402.shutdown_stop_mode
         return (self.params.get("P1.032") >> 4) & 0xF
 
-    def _servo_on(self) -> None:
-        self.servo_on = True
+    def _end_torque_hold(self) -> None:
+        """The negative-P1.043 torque hold ends now (its timer is dropped)."""
         if self._hold_timer:
             self._hold_timer.cancel()
             self._hold_timer = None
+
+    def _servo_on(self) -> None:
+        self.servo_on = True
+        self._end_torque_hold()
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
         self.axis.set_power(not self.sto.torque_cut)
         self.axis.hold()

@@ -4,8 +4,10 @@
   `ModelOptions.sto_torque_cut_ms` (default 1 ms) is when the model's power stage drops.
 * Both channels lost for 10 ms: servo off + AL500 (L2478). Clearable by ARST / P0.001 = 0 /
   6040h fault reset once both channels are back (L2493, L20199).
-* One channel lost (or A and B out of step) for 1 s: servo off + AL501 (A lost) or AL502
-  (B lost) (L2482, L2487, L20203, L20209); cleared only by a power cycle (L20205, L20211).
+* One channel lost for 1 s: servo off + AL501 (A lost) or AL502 (B lost) (L2482, L2487,
+  L20203, L20209), counted from that channel's own loss whatever the other does meanwhile
+  (a brief dip of the other channel does not restart it); cleared only by a power cycle
+  (L20205, L20211).
 * Restored signals never clear an alarm by themselves (L2493).
 * Before the 10 ms / 1 s acknowledgement the firmware is still Servo On (DO.SON, BRKR and the
   CiA 402 state stay): only the hardware has cut the torque (`ModelOptions.sto_servo_off`,
@@ -13,7 +15,8 @@
 
 The printed state table (L2454-2468) maps the alarms the other way round; the notes and
 chapter 13 agree with the mapping above (see docs/manual-choices.md). When both channels
-drop with a skew, the 1 s discrepancy timer stops once both are low: AL500 takes over.
+are lost long enough for AL500 (10 ms), AL500 has taken over: a channel's 1 s timer that
+ends while both are still lost and AL500 came raises nothing more.
 """
 
 from __future__ import annotations
@@ -50,7 +53,9 @@ class Sto:
         self.fdbk = options.fdbk_table[(True, True)]
         self._cut_timer: Timer | None = None
         self._both_timer: Timer | None = None
-        self._one_timer: Timer | None = None
+        self._one_timers: dict[str, Timer | None] = {"A": None, "B": None}
+        self._al500_raised = False  # in this loss of both channels
+        self._off = False  # control power off (power_off): nothing is judged
 
     @property
     def ok(self) -> bool:
@@ -70,18 +75,32 @@ class Sto:
             self.b = on
         self._update()
 
-    def reset(self) -> None:
-        """Power cycle: timers gone, state from the current inputs."""
-        for t in (self._cut_timer, self._both_timer, self._one_timer):
+    def power_off(self) -> None:
+        """Control power off: the firmware's timers stop (`reset()` judges the inputs
+        afresh at power-up)."""
+        for t in (self._cut_timer, self._both_timer, *self._one_timers.values()):
             if t:
                 t.cancel()
-        self._cut_timer = self._both_timer = self._one_timer = None
+        self._cut_timer = self._both_timer = None
+        self._one_timers = {"A": None, "B": None}
+        self._off = True
+
+    def reset(self) -> None:
+        """Power cycle: timers gone, state from the current inputs."""
+        self._off = False
+        for t in (self._cut_timer, self._both_timer, *self._one_timers.values()):
+            if t:
+                t.cancel()
+        self._cut_timer = self._both_timer = None
+        self._one_timers = {"A": None, "B": None}
         self.torque_cut = False
         self._on_cut(False)
         self._update()
 
     # -- internals -------------------------------------------------------------------------
     def _update(self) -> None:
+        if self._off:  # inputs change while the drive is off: judged at power-up
+            return
         a, b = self.a, self.b
         fdbk = self._opt.fdbk_table[(a, b)]
         if fdbk != self.fdbk:
@@ -108,18 +127,22 @@ class Sto:
             if self._both_timer is None:
                 both = self._opt.dev_sto_both_lost_ms or self._opt.sto_both_lost_ms
                 self._both_timer = self._sched.after(ms(both), lambda: self._alarm("AL500"))
-        elif self._both_timer:
-            self._both_timer.cancel()
-            self._both_timer = None
-        # exactly one lost for 1 s -> AL501 (A) / AL502 (B) (L2482, L2487)
-        if a != b:
-            if self._one_timer is None:
+        else:
+            self._al500_raised = False
+            if self._both_timer:
+                self._both_timer.cancel()
+                self._both_timer = None
+        # a channel lost for 1 s -> AL501 (A) / AL502 (B) (L2482, L2487), from its own loss
+        for ch, present in (("A", a), ("B", b)):
+            timer = self._one_timers[ch]
+            if not present and timer is None:
                 one = self._opt.dev_sto_one_lost_ms or self._opt.sto_one_lost_ms
-                code = "AL501" if not a else "AL502"
-                self._one_timer = self._sched.after(ms(one), lambda: self._alarm(code))
-        elif self._one_timer:
-            self._one_timer.cancel()
-            self._one_timer = None
+                code = "AL501" if ch == "A" else "AL502"
+                self._one_timers[ch] = self._sched.after(
+                    ms(one), lambda c=ch, k=code: self._one_lost(c, k))
+            elif present and timer is not None:
+                timer.cancel()
+                self._one_timers[ch] = None
 
     def _cut(self) -> None:
         self._cut_timer = None
@@ -127,8 +150,12 @@ class Sto:
         self._on_cut(True)
 
     def _alarm(self, code: str) -> None:
-        if code == "AL500":
-            self._both_timer = None
-        else:
-            self._one_timer = None
+        self._both_timer = None
+        self._al500_raised = True
         self._set_cause(code, True)  # raises the alarm; the cause is present now
+
+    def _one_lost(self, channel: str, code: str) -> None:
+        self._one_timers[channel] = None
+        if self._al500_raised and not (self.a or self.b):
+            return  # both lost: AL500 has taken over
+        self._set_cause(code, True)
