@@ -124,6 +124,7 @@ class _Cmd:
     dly_ns: int
     done: int | None = None  # time the command output finished (or its decel began: OVLP)
     dly_from_start: bool = False  # OVLP: the DLY counts from the command start (L5051)
+    overlaps: bool = False  # OVLP with a next motion PR: done once the decel begins
 
     def end(self) -> int | None:
         """When the command and its DLY are over (None: still running)."""
@@ -331,7 +332,12 @@ class PrEngine:
             self._prev_dly = 0
         self._prev_motion = path.is_motion
         if path.type == JUMP:  # DLY counts from the jump's read (L4505)
-            self.cursor = path.number + 1 if o.dev_jump_falls_through else path.data
+            target = path.number + 1 if o.dev_jump_falls_through else path.data
+            if target == 0 and self.homing is not None:  # PR#0 is homing (L4505, L4516)
+                self.cursor = None
+                self.homing.trigger_pr("jump")
+            else:
+                self.cursor = target
         elif path.continues:
             self.cursor = path.number + 1
             if self.cursor > 99:
@@ -375,7 +381,19 @@ class PrEngine:
         self._limit_inhibit(direction)
         ovlp = path.ovlp and not self.options.dev_ovlp_ignored
         from_start = ovlp or self.options.dev_dly_from_start
-        self.cmd = _Cmd(path, d.now, self._dly_ns(path.dly), dly_from_start=from_start)
+        self.cmd = _Cmd(path, d.now, self._dly_ns(path.dly), dly_from_start=from_start,
+                        overlaps=ovlp and self._next_is_motion(path))
+
+    def _next_is_motion(self, path: PrPath) -> bool:
+        """OVLP overlaps the next PR's motion (L5051-5057): there must be one, the PR this
+        one continues to. Without it the command completes as any other (Cmd_OK at its end,
+        L15319)."""
+        if not path.continues or path.number >= 99:
+            return False
+        try:
+            return read_path(self.drive.params.get, path.number + 1).is_motion
+        except PrError:
+            return False
 
     def _limit_inhibit(self, direction: float) -> None:
         """PL/NL already active: "正向/反向運轉禁止極限" in every mode (L15188-15191) - a PR
@@ -425,9 +443,15 @@ class PrEngine:
         except ModelError as exc:
             self._fail("AL209", str(exc))
             return False
+        # a constant is the PR's 32-bit data word (L4585): a parameter whose range is the
+        # unsigned 0x00000000~0xFFFFFFFF (P5.003, L11085) reads it unsigned, a data-array
+        # entry (signed 32-bit, P5.012) signed
         if path.dest_array:
-            self.array[path.dest] = value
+            self.array[path.dest] = (value + 0x80000000) % 0x100000000 - 0x80000000
         else:
+            spec = d.params.table.spec(path.dest_param)
+            if value < 0 and spec.min >= 0 and spec.max > 0x7FFFFFFF:
+                value &= 0xFFFFFFFF
             try:
                 d.params.write(path.dest_param, value)
             except ReadOnly as exc:
@@ -495,11 +519,13 @@ class PrEngine:
 
     def _command_done(self, c: _Cmd) -> bool:
         ax = self.drive.axis
-        if c.path is None or c.path.type == SPEED:
-            return ax.at_target if c.path is not None else not ax.moving
+        if c.path is None:  # a stop (STP, a software limit): done when its ramp ended
+            return ax.demand_velocity == 0.0 or not ax.moving  # (docs/manual-choices.md)
+        if c.path.type == SPEED:
+            return ax.at_target
         if ax.mode != "position":
             return True  # replaced by a stop / another mode
-        if c.path.ovlp and not self.options.dev_ovlp_ignored:  # the decel began (L5051)
+        if c.overlaps:  # OVLP into the next motion: the decel began (L5051)
             r = abs(ax.target - ax.demand)
             v = abs(ax.demand_velocity)
             return ax.at_target or (v > 0 and r <= v * v / (2.0 * ax._dec) + v * 1e-3)

@@ -33,6 +33,10 @@ WRITE_ZERO_ONLY = frozenset({"P0.001"})
 DIGIT_RANGES: dict[str, tuple[str, tuple[tuple[str, int, int, int], ...]]] = {
     "P3.001": ("L10519-L10522", (("X", 0, 0, 5), ("Y", 4, 0, 0), ("Z", 8, 0, 4),
                                  ("U", 12, 0, 3))),
+    # P5.098 / P5.099: each digit (EV1-EV4) 0 = nothing or 1-D = PR#51-#63 (L12509-L12523,
+    # L12526-L12551)
+    "P5.098": ("L12509-L12523", tuple((d, 4 * i, 0, 0xD) for i, d in enumerate("XYZU"))),
+    "P5.099": ("L12526-L12551", tuple((d, 4 * i, 0, 0xD) for i, d in enumerate("XYZU"))),
 }
 
 
@@ -42,7 +46,7 @@ def digit_problem(param: str, value: int) -> str | None:
     for digit, shift, lo, hi in digits:
         d = (value >> shift) & 0xF
         if not lo <= d <= hi:
-            rng = f"{lo}" if lo == hi else f"{lo}-{hi}"
+            rng = f"{lo:X}" if lo == hi else f"{lo:X}-{hi:X}"
             return f"digit {digit} = {d:X} of 0x{value:04X}: it must be {rng} ({lines})"
     return None
 

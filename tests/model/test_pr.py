@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from hil.model.drive import Drive
-from hil.model.errors import ModelError
+from hil.model.errors import ModelError, OutOfRange
 from hil.model.options import ModelOptions
 from hil.profile.pr import PrError, check_table, decode, encode, pr_params
 from hil.units import MS
@@ -443,3 +443,75 @@ def test_a_position_pr_after_the_counter_overflowed_gives_al235() -> None:
     d.params.write("P5.007", 0)  # homing again
     run(d, 0.2)
     assert "AL235" not in d.alarms.active and not d.counters.overflowed
+
+
+def test_a_jump_to_pr0_runs_homing() -> None:
+    """A jump's target is PR#00-PR#99 (L4505, L4516), and PR#0 is homing: a jump to 0 homes
+    the axis (P5.004 X = 8: here, at P6.001, L4336)."""
+    d = make(**{"P5.004": 0x8, "P6.001": 777})
+    d.params.write("P6.002", 0x7)  # PR#1: jump
+    d.params.write("P6.003", 0)  # to PR#0
+    d.params.write("P5.007", 1)
+    run(d, 0.3)
+    assert d.homing.homed and puu(d) == 777 and not d.alarms.active
+
+
+def test_ovlp_without_a_next_motion_completes_at_its_end() -> None:
+    """OVLP overlaps the *next* PR's motion (L5051-5057); a single position PR with OVLP has
+    none, so Cmd_OK (the command done, L15319) comes when the command reaches its target,
+    not when its deceleration begins."""
+    d = make()
+    put(d, 1, type_="single", data=50000, spd=4, dec=3, ovlp=True)
+    d.params.write("P5.007", 1)
+    while not d.pr.cmd_ok:
+        d.advance(MS)
+        assert d.now < 2_000 * MS
+    assert d.pr.monitor(1) == 50000  # Cmd_O at the target
+    assert d.params.read("P5.007") in (10001, 20001)  # done (L11185), not running
+
+
+def test_a_write_pr_constant_is_the_32_bit_word() -> None:
+    """A write PR's constant is its 32-bit data word (L4585): into P5.003 (range
+    0x00000000~0xFFFFFFFF, L11085) 0xEEEFEEFF is that value, not a refused negative number;
+    into the data array it is the signed entry the array holds (P5.012)."""
+    d = make()
+    put(d, 1, type_="write", data=0xEEEFEEFF, dest="P5.003", auto=True)
+    put(d, 2, type_="write", data=0xEEEFEEFF, dest=5, dest_array=True)
+    d.params.write("P5.007", 1)
+    run(d, 0.05)
+    assert not d.alarms.active and d.params.read("P5.003") == 0xEEEFEEFF
+    assert d.pr.array[5] == 0xEEEFEEFF - 0x100000000
+
+
+@pytest.mark.parametrize("param", ["P5.098", "P5.099"])
+def test_event_digits_e_and_f_are_refused(param: str) -> None:
+    """P5.098 / P5.099: each digit is 0 or 1-D = PR#51-#63 (L12509-L12551); E and F are not
+    digits of it (they would start PR#64 / PR#65)."""
+    d = make()
+    for bad in (0x000E, 0x00F0, 0x0F00, 0xD0E0):
+        with pytest.raises(OutOfRange, match="must be 0-D"):
+            d.params.write(param, bad)
+    d.params.write(param, 0xDDDD)
+    assert d.params.read(param) == 0xDDDD
+
+
+def test_cmd_ok_after_stp_comes_when_the_stop_ramp_ends() -> None:
+    """Cmd_OK says the command is done (L15319), not that the motor has settled: after STP
+    (P5.007 = 1000) with a 20 ms stop ramp from 300 rpm (P5.003.D = E: P5.034 = 20 ms per
+    3000 rpm... here the whole ramp) it comes when the command stops changing."""
+    d = make(**{"P5.003": 0x0EEFEEFF})
+    put(d, 1, type_="single", data=300000, spd=4)
+    d.params.write("P5.007", 1)
+    run(d, 0.2)
+    t0 = d.now
+    d.params.write("P5.007", 1000)
+    last = d.pr.monitor(1)
+    settled = None
+    while not d.pr.cmd_ok:
+        d.advance(MS)
+        cmd_o = d.pr.monitor(1)
+        settled = d.now if cmd_o != last else settled
+        last = cmd_o
+        assert d.now - t0 < 200 * MS
+    assert (d.now - t0) // MS <= 25  # the ramp, not the motor's settling (~90 ms)
+    assert settled is None or d.now - settled <= MS
