@@ -19,6 +19,9 @@ class NmtErrorControl:
                 run.last_data = None
                 run.last_sent = None
                 run.pending = None
+            # SYNC supervision starts anew: the SYNCs outside OPERATIONAL were not watched, so
+            # the last one seen before is no measure of the period (no stale AL3E3 / AL301)
+            self.comm.sync_reset()
         self.state = state
 
     def _on_nmt(self, data: bytes) -> None:

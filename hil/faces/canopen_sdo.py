@@ -205,6 +205,10 @@ class SdoServer:
                 raise ObjectError(index, sub, cop.ABORT_VALUE_RANGE, "only 0 clears 1003h")
             self._history_cleared = tuple(self._history())  # the drive keeps its P4.000 list
             return
+        if index == 0x1016 and sub >= 1 and not (value >> 16) & 0xFF <= 0x7F:
+            # bits 23..16 are a node-ID (L17742), 1..127 in CiA 301 (0: not used)
+            raise ObjectError(index, sub, cop.ABORT_VALUE_RANGE,
+                              f"node-ID {(value >> 16) & 0xFF} is not 1..127")
         if 0x1400 <= index <= 0x1403 or 0x1800 <= index <= 0x1803:
             self._write_pdo_comm(index, sub, value)
         elif 0x1600 <= index <= 0x1603 or 0x1A00 <= index <= 0x1A03:

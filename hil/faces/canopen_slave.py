@@ -314,7 +314,7 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
                     self.comm.sdo_answered(clock.time_ns())
             return
         if cid == self._values.get((0x1005, 0), 0x80) & 0x7FF:
-            if self.state == "OPERATIONAL":
+            if self.state == "OPERATIONAL" and not msg.is_remote_frame:  # SYNC: a data frame
                 period = self._values.get((0x1006, 0), 0) * US
                 ip = int(self.drive.read_object(0x6061, 0)) == IP_MODE
                 if ip and period <= 0:
@@ -375,6 +375,8 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
         """Drive events (delivered under the host lock)."""
         try:
             if isinstance(ev, AlarmChanged):
+                if ev.code == "AL185" and not ev.active:
+                    self.comm.bus_error_cleared()  # raised again by the next error frame
                 self._emcy(ev)
             elif isinstance(ev, PowerCycled):
                 self._reset("power cycle")

@@ -101,11 +101,19 @@ class CommSupervision:
             self._alarm("AL185")
 
     def valid_frame(self) -> None:
-        """A valid frame lowers the counter (ISO 11898-1 fault confinement)."""
-        if self.rx_error_counter:
-            self.rx_error_counter -= 1
-            if not self.rx_error_counter:
+        """A valid frame lowers the counter (ISO 11898-1 fault confinement: by 1, and from
+        above 127 to 127, within the standard's 119..127)."""
+        c = self.rx_error_counter
+        if c:
+            self.rx_error_counter = 127 if c > 127 else c - 1
+            limit = self.options.dev_bus_error_limit or ERROR_PASSIVE
+            if self.rx_error_counter <= limit:
                 self._bus_error_raised = False
+
+    def bus_error_cleared(self) -> None:
+        """AL185 was cleared (NMT reset, 6040h, L20031): the next error frame that finds the
+        counter above 128 raises it again."""
+        self._bus_error_raised = False
 
     # ---------------------------------------------------------------- error control
     def _late(self) -> int:
