@@ -9,8 +9,9 @@ default of `run_plans`). The live progress display is `hil/plan/progress.py`.
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from hil.plan.events import Listener, Note, PlanEnded, PlanStarted, StepEnded, StepStarted
 from hil.report.html import write_html
@@ -39,15 +40,22 @@ class Reports(Listener):
 
     def __init__(self, out_dir: Path, stem: str) -> None:
         self.out_dir, self.stem = out_dir, stem
+        self._rec: Any = None
+
+    def plan_started(self, e: PlanStarted) -> None:
+        self._rec = e.recorder
 
     def plan_ended(self, e: PlanEnded) -> None:
         res = e.result
         # the HTML first: it reads the recording whole (ground truth too), and the JUnit then
-        # finds that read in `load_run`'s cache rather than reading the file again
+        # finds that read in `load_run`'s cache rather than reading the file again. The
+        # messages come from the recorder's mirror when it kept one (`written`), not from the
+        # file again
         html_error = junit_error = ""
         try:
             res.html = str(write_html(res.recording, self.out_dir / f"{self.stem}.html",
-                                      index=True))  # the run writes index.html beside it
+                                      index=True,  # the run writes index.html beside it
+                                      messages=written(self._rec)))
         except Exception as exc:
             html_error = f"HTML report failed: {exc}"
         try:
@@ -55,6 +63,18 @@ class Reports(Listener):
         except Exception as exc:
             junit_error = f"JUnit report failed: {exc}"
         res.error = res.error or junit_error or html_error
+
+
+def written(rec: Any) -> Iterator[tuple[str, int, int, bytes | dict]] | None:
+    """What `rec` wrote, from its mirror (`Recorder.keep_messages`), as (topic, log time,
+    publish time, the decoded payload where the mirror has it, else the bytes); None without
+    a mirror."""
+    mirror = getattr(rec, "mirror", None)
+    if mirror is None:
+        return None
+    names = rec.topic_of
+    return ((names.get(cid) or f"?{cid}", lt, pt, data if obj is None else obj)
+            for cid, lt, pt, data, obj in mirror)
 
 
 class StepLines(Listener):

@@ -157,7 +157,10 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
     file's; `output_stems` makes them unique within a run)."""
     specs = specs if specs is not None else timing_specs()
     check_plan(plan, bench, specs)
-    res, rec, stem = _open_recording(plan, bench, out_dir, stem)
+    # in virtual time (short runs, messages in memory anyway for the checks) the reports
+    # take the recorder's mirror; a real-time run's reports read the file
+    res, rec, stem = _open_recording(plan, bench, out_dir, stem,
+                                     mirror=reports and bench.clock == "virtual")
     events = Notifier([StepRecords(), *(listeners or [])]
                       + ([Reports(out_dir, stem)] if reports else []))
     events.emit(PlanStarted(plan, bench, index, total, rec))
@@ -327,10 +330,11 @@ def output_stems(plans: list[Plan]) -> list[str]:
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
 
 
-def _open_recording(plan: Plan, bench: Bench, out_dir: Path,
-                    stem: str | None = None) -> tuple[PlanResult, Recorder, str]:
+def _open_recording(plan: Plan, bench: Bench, out_dir: Path, stem: str | None = None, *,
+                    mirror: bool = False) -> tuple[PlanResult, Recorder, str]:
     """The plan's result skeleton and its recording, with the plan, bench and timing
-    metadata `hil check` and `hil report` read back."""
+    metadata `hil check` and `hil report` read back. `mirror`: keep every message written
+    in memory too (the reports read them there, not from the file again)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = stem or plan_stem(plan)
     res = PlanResult(plan.name, plan.path, bench.name, recording=str(out_dir / f"{stem}.mcap"))
@@ -343,7 +347,7 @@ def _open_recording(plan: Plan, bench: Bench, out_dir: Path,
                                   "tags": json.dumps(plan.tags)})
     record_bench(rec, bench)
     checked = sorted({s.args.spec for s in plan.steps if s.kind == "check_timing"})
-    if checked:  # the live checks read each message once (LiveSource)
+    if checked or mirror:  # the live checks read each message once (LiveSource)
         rec.keep_messages()
     if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding
         dspec = plan_spec(plan, bench.drives[plan.drive or bench.default_drive])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime
 import json
 from bisect import bisect_left, bisect_right
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from sys import intern
@@ -110,7 +111,8 @@ def forget(path: str | Path) -> None:
             del cache[key]
 
 
-def load_run(path: str | Path, *, truth: bool = True) -> RunData:
+def load_run(path: str | Path, *, truth: bool = True,
+             messages: Iterable[tuple[str, int, int, bytes | dict]] | None = None) -> RunData:
     """The report's view of a recording; the last two files read are kept (by path, size and
     mtime), so a plan's JUnit and HTML report read its recording once. `truth=False`: without
     the ground-truth samples (`truth` stays empty), for what shows no plot (the run's JUnit and
@@ -127,7 +129,7 @@ def load_run(path: str | Path, *, truth: bool = True) -> RunData:
             return _RUNS[key]
         if not truth and key in _SUMMARIES:
             return _SUMMARIES[key]
-    data = _load_run(path, truth=truth)
+    data = _load_run(path, truth=truth, messages=messages)
     if key is not None:
         if truth:
             while len(_RUNS) >= 2:
@@ -139,13 +141,18 @@ def load_run(path: str | Path, *, truth: bool = True) -> RunData:
     return data
 
 
-def _load_run(path: str | Path, *, truth: bool = True) -> RunData:
+def _load_run(path: str | Path, *, truth: bool = True,
+              messages: Iterable[tuple[str, int, int, bytes | dict]] | None = None) -> RunData:
     """Read `path` twice, neither time holding the file or its chunks: first its metadata
     outside the chunks (which fields of the ground truth to keep), then each message as it
     comes (a recording of any length costs what the report keeps of it). What the report
     says of the file (metadata, attachments, cut or whole) is what that second, full read
-    found, as `Recording.open` would."""
-    keep = truth_fields(_spec_ids(Recording.head(path).metadata()))
+    found, as `Recording.open` would. `messages`: the recording's messages as its recorder
+    wrote them ((topic, log time, publish time, bytes or their decoded dict), in file
+    order), taken instead of the second read when the file's head says it is whole (the
+    runner's own report of a recording it has just closed)."""
+    head = Recording.head(path)
+    keep = truth_fields(_spec_ids(head.metadata()))
     data = RunData(str(path), Path(path).stem, "?", "", truth_fields=keep)
     steps: dict[int, StepData] = {}
     t_first: int | None = None
@@ -192,7 +199,12 @@ def _load_run(path: str | Path, *, truth: bool = True) -> RunData:
             d = topic.split("/")[2]
             data.params.setdefault(d, {}).update(msg.get("values") or {})
 
-    rec = Recording.stream(path, None, take)
+    if messages is not None and not head.truncated and not head.error:
+        for topic, lt, pt, raw in messages:
+            take(topic, lt, pt, raw)
+        rec = head
+    else:
+        rec = Recording.stream(path, None, take)
     data.truncated = rec.truncated
     data.metadata = meta = rec.metadata()
     run_meta = meta.get("hil.run", {})

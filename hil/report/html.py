@@ -475,9 +475,10 @@ def _files_html(run: RunData) -> list[str]:
 
 
 def write_html(recording: str | Path, out: str | Path | None = None,
-               index: bool | None = None) -> Path:
-    """The plan page of `recording` to `out` (default: beside it); `index` as `_nav`."""
-    run = load_run(recording)
+               index: bool | None = None, messages: Any = None) -> Path:
+    """The plan page of `recording` to `out` (default: beside it); `index` as `_nav`;
+    `messages` as `load_run`'s (the recorder's own, instead of reading the file again)."""
+    run = load_run(recording, messages=messages)
     out = Path(out) if out is not None else Path(recording).with_suffix(".html")
     write_text_atomic(out, render_html(run, out, index))
     return out

@@ -9,6 +9,8 @@ import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import pytest
+
 from hil.report.html import _verdict_rows
 from hil.timing.checker import Trace
 from hil.timing.render import _boxes, _plot_lane, main_lanes, nice_ticks
@@ -157,8 +159,8 @@ def test_a_runs_junit_and_index_read_no_recording_again(tmp_path, monkeypatch) -
     reads: list[tuple[str, bool]] = []
     real = report_data._load_run
     monkeypatch.setattr(report_data, "_load_run",
-                        lambda p, *, truth=True: (reads.append((str(p), truth)),
-                                                  real(p, truth=truth))[1])
+                        lambda p, *, truth=True, **kw: (reads.append((str(p), truth)),
+                                                        real(p, truth=truth, **kw))[1])
     write_junit(recs, tmp_path / "junit.xml")
     write_index(recs, tmp_path / "index.html")
     assert reads == []
@@ -264,3 +266,23 @@ def test_report_and_diff_read_a_recording_a_message_at_a_time(tmp_path, monkeypa
         assert run.truncated
         partial.append(0 < len(run.truth.get("drive1", [])) < len(state))
     assert any(partial)
+
+
+@pytest.mark.parametrize("plan_name", ["servo_on_off_brake", "emgs", "homing_pr"])
+def test_the_runs_page_from_the_recorders_messages_is_the_page_from_the_file(
+        tmp_path, plan_name) -> None:
+    """In virtual time the runner's report takes the messages its recorder wrote (its
+    mirror) instead of reading the file again: the page must be the one `hil report` writes
+    from the file, byte for byte (plans with and without checks)."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, load_plan
+    from hil.plan.runner import run_plan
+    from hil.report import data as report_data
+    from hil.report.html import write_html
+
+    res = run_plan(load_plan(find_plans([plan_name])[0]), load_bench(None), tmp_path)
+    assert res.html
+    live = Path(res.html).read_text()
+    report_data.forget(res.recording)
+    from_file = write_html(res.recording, tmp_path / "again.html", index=True).read_text()
+    assert live == from_file
