@@ -119,6 +119,9 @@ _OPTION_CODES = {  # model-only option-code objects (absent from the A3 object l
 
 _BLOCKED_STATES = ("switch_on_disabled", "switched_on", "operation_enabled")
 
+# 607Fh / 6080h are P1.055 (L18713-18718, L18730-18735), whose range starts at 10 rpm (L8702)
+MIN_SPEED_LIMIT_RPM = 10
+
 # position demand (PUU), actual (counts), actual (PUU): 32-bit counters that wrap
 _COUNTERS = frozenset({0x6062, 0x6063, 0x6064})
 
@@ -544,6 +547,9 @@ class Cia402:
                 self._den = value
         elif index in (0x607F, 0x6080):
             rpm = value / 10 if index == 0x607F else value
+            if rpm < MIN_SPEED_LIMIT_RPM:  # they are P1.055, 10 ~ max (L8700-8702)
+                raise ObjectError(index, sub, ABORT_VALUE_LOW,
+                                  f"{d.name}: P1.055 is at least {MIN_SPEED_LIMIT_RPM} rpm")
             if rpm > self.axis.mech.max_speed:
                 raise ObjectError(
                     index,
@@ -926,10 +932,12 @@ class Cia402:
         mode = self._mode
         ax = self.axis
         if mode == PP and self._pp_active is not None:
-            if self._pp_queue is not None or not self._pp_done():
-                return False
+            if self._pp_queue is not None:
+                return False  # a buffered set-point still to run: its target is not reached
+            # the target (607Ah) minus the feedback inside 6067h, whether or not the profile
+            # has ended (L18469)
             err = abs(self._pp_active[0] - ax.position) * self._den / self._num
-            return err < self._v[(0x6067, 0)]  # L18469
+            return err < self._v[(0x6067, 0)]
         if mode == IP and self._ip_target is not None:
             err = abs(self._ip_target - ax.position) * self._den / self._num
             return err < self._v[(0x6067, 0)]

@@ -256,6 +256,9 @@ class Drive:
         for name_ in ("P1.068", "P1.036"):  # IP smoothing (L17232)
             self.params.on_write(name_, lambda *_: self._ip_filters())
         self._ip_filters()
+        # P1.055 (no power-cycle mark, L8700) limits every mode at once (L4034), and 607Fh /
+        # 6080h read it (L18713-18735)
+        self.params.on_write("P1.055", lambda _n, _o, new: self.cia402.set_max_speed(new))
 
     # ------------------------------------------------------------------ public API
     @property
@@ -529,6 +532,10 @@ class Drive:
             name = "P1.044" if sub == 1 else "P1.045"
             if self.params.read(name) != value:
                 self.params.set_internal(name, value)
+        if index in (0x607F, 0x6080):  # 6080h "is P1.055", 607Fh = P1.055 x 10 (L18713-18735)
+            rpm = round(value / 10) if index == 0x607F else value
+            if self.params.read("P1.055") != rpm:
+                self.params.set_internal("P1.055", rpm)
 
     def _param_of(self, index: int, sub: int) -> str:
         try:
@@ -667,6 +674,8 @@ class Drive:
         self._set_do("ALRM", al.alrm)
         self._set_do("WARN", al.warn)
         self._set_do("SRDY", self._srdy())
+        # statusword bit 4 "voltage enabled": the main circuit is in (L18307)
+        self.cia402.set_voltage(not any(c in MAIN_POWER_ALARMS for c in al.active))
         specs = [al.table.spec(c) for c in al.active]
         fault = any(sp.kind == "ALM" and sp.servo_off for sp in specs)
         cur = al.current
