@@ -181,6 +181,8 @@ class Capture:
         if reload:
             if d.params.stored("P5.038") <= 0:  # ended at 0: the previous count
                 d.params.set_internal("P5.038", self.count_set)
+            if d.params.stored("P5.036") + d.params.stored("P5.038") > ARRAY_SIZE:
+                return  # P5.038 <= P5.010 - P5.036 (L11491): not started, as a write is refused
             d.params.set_internal("P5.039", d.params.stored("P5.039") | 1)
         self.count_set = max(1, d.params.stored("P5.038"))
         self.running = self.source != 0  # Y = 0: "抓取功能不作用" (L11525)

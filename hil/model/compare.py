@@ -138,6 +138,8 @@ class Compare:
         if reload:  # started by CAPTURE bit2 with the previous count (L5157)
             if d.params.stored("P5.058") <= 0:  # ended at 0: the previous count
                 d.params.set_internal("P5.058", self.count_set)
+            if d.params.stored("P5.056") + d.params.stored("P5.058") > ARRAY_SIZE:
+                return  # P5.058 <= P5.010 - P5.056 (L11719): not started, as a write is refused
             d.params.set_internal("P5.059", d.params.stored("P5.059") | 1)
         self.count_set = max(1, d.params.stored("P5.058"))
         self.index = 0
@@ -179,10 +181,13 @@ class Compare:
             if exact and not hit:  # the predicted instant: rounding may leave p a hair short
                 hit = abs(p - goal) <= max(1e-6, abs(self.velocity()) * 2e-9) and (
                     not self.options.dev_compare_positive_only or direction > 0)
+                if hit:  # the point counts as passed: the next step must not cross it again
+                    self._last = goal
             if not hit:
                 return
             self._fire(tgt)
             last = goal
+            exact = False  # a point at the same place fires when the axis passes it again
 
     def _predict(self) -> None:
         self._cancel_wake()
@@ -194,6 +199,8 @@ class Compare:
             return
         p = self.position()
         goal = self.target() + self.options.dev_compare_late * (1 if v > 0 else -1)
+        if goal == self._last:
+            return  # the point just passed (a cyclic single point, equal points): not again
         dt = (goal - p) / v
         if 0 < dt * 1e9 <= 2 * d.step_ns:
             self._wake = d.sched.at(d.now + max(1, round(dt * 1e9)), self._on_wake)

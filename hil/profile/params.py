@@ -37,6 +37,14 @@ DIGIT_RANGES: dict[str, tuple[str, tuple[tuple[str, int, int, int], ...]]] = {
     # L12526-L12551)
     "P5.098": ("L12509-L12523", tuple((d, 4 * i, 0, 0xD) for i, d in enumerate("XYZU"))),
     "P5.099": ("L12526-L12551", tuple((d, 4 * i, 0, 0xD) for i, d in enumerate("XYZU"))),
+    # CAPTURE: Y source 0-3, Z trigger 0-1 (L11500-L11531, range 0x0000-0xF13F)
+    "P5.039": ("L11500-L11531", (("Y", 4, 0, 3), ("Z", 8, 0, 1))),
+    # COMPARE, low word U Z Y X: Y source 0-3, Z output 0-1, U 0-3 (L11726-L11770, range
+    # 0x00010000-0x0FFF313F)
+    "P5.059": ("L11726-L11770", (("Y", 4, 0, 3), ("Z", 8, 0, 1), ("U", 12, 0, 3))),
+    # X (CAPTURE) 0-1, Y reserved, Z (COMPARE) 0-1, U reserved (L8122-L8132, 0x0000-0x0101)
+    "P1.019": ("L8122-L8132", (("X", 0, 0, 1), ("Y", 4, 0, 0), ("Z", 8, 0, 1),
+                               ("U", 12, 0, 0))),
 }
 
 

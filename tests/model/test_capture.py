@@ -8,7 +8,7 @@ import itertools
 import pytest
 
 from hil.model.drive import Drive
-from hil.model.errors import ParamError
+from hil.model.errors import OutOfRange, ParamError
 from hil.model.options import ModelOptions
 from hil.profile.pr import encode
 from hil.units import MS
@@ -360,3 +360,47 @@ def test_capture_starts_pr50_cap_move() -> None:
     cap = d.capture.values[0][2]
     assert round(fb_puu(d)) == cap + 30000
     assert d.params.read("P5.007") == 20050  # PR#50 done (n + 20000, L11185)
+
+
+def test_a_cyclic_compare_of_one_point_fires_once_per_passage() -> None:
+    """Cyclic COMPARE (P5.059 bit1): P5.058 goes back to its count after the last point and
+    comparing starts again (L5194, L11751). One point: it fires when the axis passes it, and
+    again only when it passes it again (the model looped at the same instant for ever)."""
+    d = make_cmp()
+    d.params.write("P5.059", 0x00010010)  # capture axis, stopped
+    d.params.write("P5.057", 0)
+    arm_compare(d, [500], ctrl=0x00040013)  # 4 ms, cyclic, start
+    pv(d, 6.0)
+    assert len(d.compare.fired) == 1 and d.compare.running
+    assert d.params.read("P5.058") == 1  # reloaded
+
+
+def test_a_capture_started_by_compare_past_the_array_does_not_start() -> None:
+    """P5.038 may be at most P5.010 - P5.036 (L11491); COMPARE bit2 starts CAPTURE with the
+    previous count (L5195). 799 + 4 is past the 800 entries: CAPTURE is not started (as a
+    bit0 write with them is refused), and nothing raises."""
+    d = make_cmp()
+    d.params.write("P5.039", 0x10)
+    d.params.write("P5.038", 4)
+    d.params.write("P5.036", 799)
+    d.params.write("P5.059", 0x10010)
+    d.params.write("P5.057", 0)
+    arm_compare(d, [100], ctrl=0x10015)  # bit2: start CAPTURE at the end
+    pv(d, 6.0)
+    for _ in range(2):
+        d.set_di(7, False)
+        d.advance(5 * MS)
+        d.set_di(7, True)
+        d.advance(5 * MS)
+    assert not d.capture.running and not d.params.read("P5.039") & 1
+
+
+@pytest.mark.parametrize("param,value", [("P5.039", 0x0041), ("P5.039", 0x0200),
+                                         ("P5.059", 0x00010040), ("P5.059", 0x00014010),
+                                         ("P1.019", 0x0010)])
+def test_capture_and_compare_digits_outside_their_ranges_are_refused(param, value) -> None:
+    """P5.039: Y 0-3, Z 0-1 (L11500-L11531); P5.059: Y 0-3, Z 0-1, U 0-3 (L11726-L11770);
+    P1.019: X, Z 0-1, Y and U 0 (L8122-L8132): inside the table's range, outside a digit's."""
+    d = make()
+    with pytest.raises(OutOfRange, match="digit"):
+        d.params.write(param, value)
