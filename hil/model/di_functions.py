@@ -68,11 +68,12 @@ class DiFunctions:
         self.gain_switched = False
         self.torque_limit_pct: float | None = None  # TRQLM limit in effect (%)
         self.speed_limit_rpm: float | None = None  # SPDLM limit in effect (rpm)
+        self._p1001 = drive.params.cached("P1.001")  # read every motion step (TPOS, TQL)
 
     # -- the table 8.1 control mode ----------------------------------------------------
     def control_mode(self) -> str:
         """"PT" "PR" "S" "T" "Sz" "Tz", or "" (CANopen mode without a CiA 402 mode)."""
-        yx = self.d.params.get("P1.001") & 0xFF
+        yx = self._p1001()[0] & 0xFF
         if yx in (0x0D, 0x0E, 0x0F):  # PT-PR: off PT, on PR (L15200)
             return "PR" if self.d.dio.function_active("PT-PR") else "PT"
         if yx in (0, 0x0C) and self.d.options.di_modes_follow_cia402:
