@@ -78,26 +78,25 @@ class Sto:
     def power_off(self) -> None:
         """Control power off: the firmware's timers stop (`reset()` judges the inputs
         afresh at power-up)."""
-        for t in (self._cut_timer, self._both_timer, *self._one_timers.values()):
-            if t:
-                t.cancel()
-        self._cut_timer = self._both_timer = None
-        self._one_timers = {"A": None, "B": None}
+        self._cancel_timers()
         self._off = True
 
     def reset(self) -> None:
         """Power cycle: timers gone, state from the current inputs."""
         self._off = False
-        for t in (self._cut_timer, self._both_timer, *self._one_timers.values()):
-            if t:
-                t.cancel()
-        self._cut_timer = self._both_timer = None
-        self._one_timers = {"A": None, "B": None}
+        self._cancel_timers()
         self.torque_cut = False
         self._on_cut(False)
         self._update()
 
     # -- internals -------------------------------------------------------------------------
+    def _cancel_timers(self) -> None:
+        for t in (self._cut_timer, self._both_timer, *self._one_timers.values()):
+            if t:
+                t.cancel()
+        self._cut_timer = self._both_timer = None
+        self._one_timers = {"A": None, "B": None}
+
     def _update(self) -> None:
         if self._off:  # inputs change while the drive is off: judged at power-up
             return
