@@ -691,6 +691,8 @@ def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
     """Create the PR engine of `drive` and wire triggers, hooks and parameters."""
     pr = PrEngine(drive, options, homing)
     pr.counters = counters
+    # AL237 (index coordinate undefined) "can also be cleared at Servo On" (L20096)
+    drive.hooks.servo_on.append(lambda: drive.alarms.clear("AL237"))
     dio = drive.dio
     params = drive.params
 

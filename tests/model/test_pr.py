@@ -515,3 +515,26 @@ def test_cmd_ok_after_stp_comes_when_the_stop_ramp_ends() -> None:
         assert d.now - t0 < 200 * MS
     assert (d.now - t0) // MS <= 25  # the ramp, not the motor's settling (~90 ms)
     assert settled is None or d.now - settled <= MS
+
+
+def test_al237_clears_at_servo_on_and_al217_by_an_alarm_reset() -> None:
+    """AL237 "can also be cleared at Servo On" (L20096); AL217 (a write PR refused) clears
+    once the PR is corrected (L20069): the refused write leaves no cause, so an alarm reset
+    (P0.001 = 0, L7079) clears it."""
+    d = make()
+    put(d, 1, type_="index", data=100, spd=4)  # index PR before homing: AL237 (L4593)
+    d.params.write("P5.007", 1)
+    run(d, 0.1)
+    assert "AL237" in d.alarms.active
+    d.set_di(1, False)
+    run(d, 0.1)
+    d.set_di(1, True)
+    run(d, 0.1)
+    assert d.servo_on and "AL237" not in d.alarms.active
+    put(d, 2, type_="write", data=2, dest="P1.002")  # ▲ with the servo on: AL217 (L20067)
+    d.params.write("P5.007", 2)
+    run(d, 0.05)
+    assert "AL217" in d.alarms.active
+    d.params.write("P0.001", 0)
+    run(d, 0.01)
+    assert "AL217" not in d.alarms.active
