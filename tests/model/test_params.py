@@ -173,3 +173,18 @@ def test_hooks(store: ParameterStore) -> None:
     assert store.modbus_read(0x0012, 2) == [1234, 0]
     store.reset_defaults()
     assert store.read("P1.042") == 0
+
+
+def test_p2030_returns_to_0_at_power_up_and_p1053_stops_at_6000() -> None:
+    """P2.030 = 1 forces a software servo on; "its value goes back to 0 when the power comes
+    back" (L9505). P1.053's range is 0 ~ 6000 W (L8667)."""
+    from hil.model.errors import OutOfRange
+    from hil.model.params import ParameterStore
+
+    s = ParameterStore(autosave=False)
+    s.write("P2.030", 1)
+    s.power_cycle()
+    assert s.read("P2.030") == 0 and s.get("P2.030") == 0
+    s.write("P1.053", 6000)
+    with pytest.raises(OutOfRange):
+        s.write("P1.053", 6001)
