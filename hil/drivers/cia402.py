@@ -10,6 +10,7 @@ statusword is polled over SDO, so the same code works on a real A3 that ships wi
 
 from __future__ import annotations
 
+import struct
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -114,6 +115,13 @@ class ObjectValueError(Cia402Error):
         super().__init__(f"node {node}: {why}: {value} not sent")
 
 
+# what an SDO access can raise on a drive's bad answer: aborts and silence, and the errors the
+# client raises on a frame it cannot take (a short frame: struct.error; an expedited size
+# that does not fit the object's type: ObjectDictionaryError)
+_SDO_FAILURES = (SdoAbortedError, SdoCommunicationError, struct.error,
+                 canopen.objectdictionary.ObjectDictionaryError)
+
+
 class SdoError(Cia402Error):
     """An SDO access aborted or timed out (abort code and its CiA 301 text)."""
 
@@ -122,8 +130,10 @@ class SdoError(Cia402Error):
         self.abort_code = getattr(exc, "code", None)
         if self.abort_code is not None:
             why = f"abort 0x{self.abort_code:08X} ({abort_text(self.abort_code)})"
-        else:
+        elif isinstance(exc, SdoCommunicationError):
             why = f"no answer ({exc})"
+        else:  # an answer the SDO client could not take (too short, wrong size for the type)
+            why = f"malformed answer ({type(exc).__name__}: {exc})"
         super().__init__(f"node {node}: SDO {op} {index:04X}h sub {sub}: {why}")
 
 
@@ -235,7 +245,7 @@ class Cia402Driver:
                 # canopen's `Variable.raw` without its debug text, which it formats even
                 # when nothing logs it: the statusword poll is the busiest call here
                 return var.decode_raw(self.node.sdo.upload(var.index, var.subindex))
-        except (SdoAbortedError, SdoCommunicationError) as exc:
+        except _SDO_FAILURES as exc:
             raise SdoError(self.node_id, index, sub, "upload", exc) from None
 
     def write(self, index: int, sub: int, value: int) -> None:
@@ -252,7 +262,7 @@ class Cia402Driver:
         try:
             with self.lock:
                 self.node.sdo.download(index, sub, data)
-        except (SdoAbortedError, SdoCommunicationError) as exc:
+        except _SDO_FAILURES as exc:
             raise SdoError(self.node_id, index, sub, "download", exc) from None
 
     @property
