@@ -136,7 +136,6 @@ class DeltaModbus:
         self.port = self._open(line_or_port) if self._owns_port else line_or_port
         self._line_style = _takes_timeout(self.port)
         self._last_io = 0.0
-        self._suspect_line = False  # a reply may still be on the line (_await_quiet)
         self.last_round_trip_s: float | None = None
 
     # ------------------------------------------------------------------ port
@@ -194,8 +193,6 @@ class DeltaModbus:
         ModbusReplyError on a bad CRC/LRC or a reply that does not match the request."""
         station = self.station if station is None else station
         adu = mb.encode_adu(station, pdu, self.mode)
-        if self._suspect_line:
-            self._await_quiet()
         wait = self._last_io + self.silence_s - clock.monotonic()
         if wait > 0:
             clock.sleep(wait)
@@ -221,29 +218,9 @@ class DeltaModbus:
             got = bytes(raw or b"")
             if got:
                 self._record(got, "rx")
-            self._suspect_line = True  # the reply may still come: not the next one's answer
             raise ModbusTimeoutError(adu, got, self.timeout_s, self.mode)
         self._record(raw, "rx")
-        try:
-            return self._check_reply(pdu, station, raw)
-        except ModbusReplyError:
-            self._suspect_line = True  # the rest of a garbled reply may still be on the line
-            raise
-
-    def _await_quiet(self) -> None:
-        """After a timeout or a garbled reply: read and drop what the line still carries until
-        it has been quiet for `timeout_s` (at most 3 x `timeout_s`), so a late reply is never
-        taken as the next request's answer (docs/faults.md)."""
-        self._suspect_line = False
-        end = clock.monotonic() + 3 * self.timeout_s
-        while clock.monotonic() < end:
-            quiet_until = min(end, clock.monotonic() + self.timeout_s)
-            dropped = self._read(256, quiet_until)
-            if dropped:
-                self._record(dropped, "rx")
-                continue
-            if clock.monotonic() >= quiet_until:
-                return
+        return self._check_reply(pdu, station, raw)
 
     def _read_rtu(self, deadline: float) -> bytes | bytearray:
         got = bytearray()
