@@ -133,6 +133,11 @@ class ModbusSlave:
         `lock` (e.g. `DriveHost.lock`) is held around every store access."""
         self.registers = registers
         self.options = options or ModbusFaceOptions()
+        # the low-word address of each parameter communication may not write (L16025), worked
+        # out once: every write request is checked against them
+        table = ParamTable.load()
+        self._refused_at = {table.spec(n).modbus_address: n
+                            for n in self.options.comm_write_refused}
         self.send = send
         self.on_timeout = on_timeout
         self.on_comm_error = on_comm_error
@@ -433,8 +438,7 @@ class ModbusSlave:
     def _refuse_comm_write(self, address: int, count: int) -> None:
         """ReadOnly if the words touch a parameter ch.9.4 keeps from communication writes
         (`ModbusFaceOptions.comm_write_refused`, L16025)."""
-        for name in self.options.comm_write_refused:
-            low = ParamTable.load().spec(name).modbus_address
+        for low, name in self._refused_at.items():
             if address <= low + 1 and low < address + count:
                 raise errors.ReadOnly(name, "not writable by communication (ch.9.4, L16025)")
 

@@ -662,12 +662,15 @@ class Drive:
         if event is not None:
             self.emit(event)
 
+    def _main_circuit_in(self) -> bool:
+        """No AL003 (undervoltage) or AL022 (main-circuit power lost): WARN-class alarms that
+        say the main circuit is not in (SRDY L15263, statusword bit 4 L18307)."""
+        return not any(c in MAIN_POWER_ALARMS for c in self.alarms.active)
+
     def _srdy(self) -> bool:
-        """SRDY: control and main-circuit power in, and no fault (L15263). AL003 (undervoltage)
-        and AL022 (main-circuit power lost) are WARN-class but say the main circuit is not
-        in: SRDY is off with them, as with any ALM-class alarm."""
-        al = self.alarms
-        return not al.alrm and not any(c in MAIN_POWER_ALARMS for c in al.active)
+        """SRDY: control and main-circuit power in, and no fault (L15263): off with any
+        ALM-class alarm and without the main circuit."""
+        return not self.alarms.alrm and self._main_circuit_in()
 
     def _react_to_alarms(self) -> None:
         al = self.alarms
@@ -675,7 +678,7 @@ class Drive:
         self._set_do("WARN", al.warn)
         self._set_do("SRDY", self._srdy())
         # statusword bit 4 "voltage enabled": the main circuit is in (L18307)
-        self.cia402.set_voltage(not any(c in MAIN_POWER_ALARMS for c in al.active))
+        self.cia402.set_voltage(self._main_circuit_in())
         specs = [al.table.spec(c) for c in al.active]
         fault = any(sp.kind == "ALM" and sp.servo_off for sp in specs)
         cur = al.current

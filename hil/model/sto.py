@@ -125,7 +125,7 @@ class Sto:
         if not a and not b:
             if self._both_timer is None:
                 both = self._opt.dev_sto_both_lost_ms or self._opt.sto_both_lost_ms
-                self._both_timer = self._sched.after(ms(both), lambda: self._alarm("AL500"))
+                self._both_timer = self._sched.after(ms(both), self._both_lost)
         else:
             self._al500_raised = False
             if self._both_timer:
@@ -148,10 +148,11 @@ class Sto:
         self.torque_cut = True
         self._on_cut(True)
 
-    def _alarm(self, code: str) -> None:
+    def _both_lost(self) -> None:
+        """Both channels lost for the 10 ms (L2478): AL500."""
         self._both_timer = None
         self._al500_raised = True
-        self._set_cause(code, True)  # raises the alarm; the cause is present now
+        self._set_cause("AL500", True)  # raises the alarm; the cause is present now
 
     def _one_lost(self, channel: str, code: str) -> None:
         self._one_timers[channel] = None
