@@ -21,6 +21,8 @@ from canopen.profiles.p402 import State402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from hil import clock
+from hil.drivers import sdo_transfer
+from hil.drivers.sdo_transfer import SdoMalformedError
 from hil.fileio import parsed_once
 from hil.profile.od import EDS_PATH
 from hil.protocol.canopen import abort_text
@@ -130,7 +132,7 @@ class SdoError(Cia402Error):
         self.abort_code = getattr(exc, "code", None)
         if self.abort_code is not None:
             why = f"abort 0x{self.abort_code:08X} ({abort_text(self.abort_code)})"
-        elif isinstance(exc, SdoCommunicationError):
+        elif isinstance(exc, SdoCommunicationError) and not isinstance(exc, SdoMalformedError):
             why = f"no answer ({exc})"
         else:  # an answer the SDO client could not take (too short, wrong size for the type)
             why = f"malformed answer ({type(exc).__name__}: {exc})"
@@ -240,11 +242,12 @@ class Cia402Driver:
         try:
             with self.lock:
                 var = od_variable(self.node.object_dictionary, index, sub)
+                data = sdo_transfer.upload(self.node.sdo, index, sub)
                 if var is None:  # not in the EDS: the bytes the drive gives, little-endian
-                    return int.from_bytes(self.node.sdo.upload(index, sub), "little")
-                # canopen's `Variable.raw` without its debug text, which it formats even
-                # when nothing logs it: the statusword poll is the busiest call here
-                return var.decode_raw(self.node.sdo.upload(var.index, var.subindex))
+                    return int.from_bytes(data, "little")
+                if var.fixed_size and len(data) > len(var) // 8:
+                    data = data[:len(var) // 8]  # a U32 answer for a U16 (canopen's rule)
+                return var.decode_raw(data)
         except _SDO_FAILURES as exc:
             raise SdoError(self.node_id, index, sub, "upload", exc) from None
 
@@ -261,7 +264,7 @@ class Cia402Driver:
         self._step("sdo_write", index=index, sub=sub, value=value)
         try:
             with self.lock:
-                self.node.sdo.download(index, sub, data)
+                sdo_transfer.download(self.node.sdo, index, sub, data)
         except _SDO_FAILURES as exc:
             raise SdoError(self.node_id, index, sub, "download", exc) from None
 

@@ -136,6 +136,8 @@ class DeltaModbus:
         self.port = self._open(line_or_port) if self._owns_port else line_or_port
         self._line_style = _takes_timeout(self.port)
         self._last_io = 0.0
+        self._suspect = False  # the last transaction failed: its reply may still be coming
+        self._pushback = bytearray()  # bytes read ahead by _more_follows
         self.last_round_trip_s: float | None = None
 
     # ------------------------------------------------------------------ port
@@ -163,6 +165,10 @@ class DeltaModbus:
         self.close()
 
     def _read(self, n: int, deadline: float) -> bytes:
+        if self._pushback:
+            out = bytes(self._pushback[:n])
+            del self._pushback[:n]
+            return out
         remaining = deadline - clock.monotonic()
         if remaining <= 0:
             return b""
@@ -193,6 +199,8 @@ class DeltaModbus:
         ModbusReplyError on a bad CRC/LRC or a reply that does not match the request."""
         station = self.station if station is None else station
         adu = mb.encode_adu(station, pdu, self.mode)
+        if self._suspect:
+            self._drain()
         wait = self._last_io + self.silence_s - clock.monotonic()
         if wait > 0:
             clock.sleep(wait)
@@ -201,6 +209,7 @@ class DeltaModbus:
         reset = getattr(self.port, "reset_input_buffer", None)
         if reset is not None:
             reset()
+        self._pushback.clear()
         t0 = clock.monotonic()
         self.port.write(adu)
         flush = getattr(self.port, "flush", None)
@@ -211,16 +220,55 @@ class DeltaModbus:
             self._last_io = clock.monotonic()
             return None
         deadline = t0 + self.timeout_s
-        raw = self._read_rtu(deadline) if self.mode == "rtu" else self._read_ascii(deadline)
+        raw = self._read_frame(deadline)
+        while self._suspect and isinstance(raw, bytes) and self._more_follows(deadline):
+            self._record(raw, "rx")  # a late reply to the failed request: not this answer
+            raw = self._read_frame(deadline)
         self._last_io = clock.monotonic()
         self.last_round_trip_s = self._last_io - t0
         if raw is None or isinstance(raw, bytearray):
             got = bytes(raw or b"")
             if got:
                 self._record(got, "rx")
+            self._suspect = True
             raise ModbusTimeoutError(adu, got, self.timeout_s, self.mode)
         self._record(raw, "rx")
-        return self._check_reply(pdu, station, raw)
+        try:
+            reply = self._check_reply(pdu, station, raw)
+        except ModbusReplyError:
+            self._suspect = True  # the rest of a garbled reply may still be on the line
+            raise
+        self._suspect = False
+        return reply
+
+    def _read_frame(self, deadline: float) -> bytes | bytearray:
+        return self._read_rtu(deadline) if self.mode == "rtu" else self._read_ascii(deadline)
+
+    def _drain(self) -> None:
+        """After a failed transaction: drop what the line still carries (the rest of a garbled
+        reply) until it has been quiet for the RTU silence (L15703), at most `timeout_s`, so it
+        is not read as the next answer. Short, so the drive still hears the master well
+        within P3.004 (a long wait here raised AL020 in fault_rs485_line)."""
+        end = clock.monotonic() + self.timeout_s
+        while True:
+            now = clock.monotonic()
+            if now >= end:
+                return
+            dropped = self._read(mb.MAX_RTU_ADU, min(end, now + self.silence_s))
+            if not dropped:
+                return
+            self._record(dropped, "rx")
+            self._last_io = clock.monotonic()
+
+    def _more_follows(self, deadline: float) -> bool:
+        """After a failed transaction, a complete frame followed by more bytes within the
+        silence that ends a frame (L15703) was a late reply to the failed request, with this
+        request's answer behind it. The bytes read are put back for the next frame."""
+        nxt = self._read(1, min(deadline, clock.monotonic() + self.silence_s))
+        if not nxt:
+            return False
+        self._pushback += nxt
+        return True
 
     def _read_rtu(self, deadline: float) -> bytes | bytearray:
         got = bytearray()
