@@ -31,6 +31,10 @@ from hil.profile.errors import UnknownParameter
 from hil.profile.params import ParamTable
 from hil.protocol import modbus as mb
 
+# After a failed transaction its reply may still come for this many `timeout_s`: until then a
+# frame followed by another within the RTU silence is taken as that late reply (_more_follows)
+LATE_REPLIES = 3
+
 _NAME_RE = re.compile(r"^\s*P([0-7M])[.\-]([0-9]{1,3})\s*$", re.IGNORECASE)
 
 
@@ -136,7 +140,8 @@ class DeltaModbus:
         self.port = self._open(line_or_port) if self._owns_port else line_or_port
         self._line_style = _takes_timeout(self.port)
         self._last_io = 0.0
-        self._suspect = False  # the last transaction failed: its reply may still be coming
+        self._drain_next = False  # the last transaction failed: drain before the next
+        self._late_until = 0.0  # a failed request's reply may still come until then
         self._pushback = bytearray()  # bytes read ahead by _more_follows
         self.last_round_trip_s: float | None = None
 
@@ -199,7 +204,7 @@ class DeltaModbus:
         ModbusReplyError on a bad CRC/LRC or a reply that does not match the request."""
         station = self.station if station is None else station
         adu = mb.encode_adu(station, pdu, self.mode)
-        if self._suspect:
+        if self._drain_next:
             self._drain()
         wait = self._last_io + self.silence_s - clock.monotonic()
         if wait > 0:
@@ -221,8 +226,11 @@ class DeltaModbus:
             return None
         deadline = t0 + self.timeout_s
         raw = self._read_frame(deadline)
-        while self._suspect and isinstance(raw, bytes) and self._more_follows(deadline):
+        suspect = t0 < self._late_until
+        last = t0 + 2 * self.timeout_s  # late replies may stretch the wait this far
+        while suspect and isinstance(raw, bytes) and self._more_follows(last):
             self._record(raw, "rx")  # a late reply to the failed request: not this answer
+            deadline = min(last, max(deadline, clock.monotonic() + self.timeout_s))
             raw = self._read_frame(deadline)
         self._last_io = clock.monotonic()
         self.last_round_trip_s = self._last_io - t0
@@ -230,16 +238,20 @@ class DeltaModbus:
             got = bytes(raw or b"")
             if got:
                 self._record(got, "rx")
-            self._suspect = True
+            self._failed()
             raise ModbusTimeoutError(adu, got, self.timeout_s, self.mode)
         self._record(raw, "rx")
         try:
             reply = self._check_reply(pdu, station, raw)
         except ModbusReplyError:
-            self._suspect = True  # the rest of a garbled reply may still be on the line
+            self._failed()  # the rest of a garbled reply may still be on the line
             raise
-        self._suspect = False
+        self._drain_next = False
         return reply
+
+    def _failed(self) -> None:
+        self._drain_next = True
+        self._late_until = clock.monotonic() + LATE_REPLIES * self.timeout_s
 
     def _read_frame(self, deadline: float) -> bytes | bytearray:
         return self._read_rtu(deadline) if self.mode == "rtu" else self._read_ascii(deadline)
@@ -249,6 +261,7 @@ class DeltaModbus:
         reply) until it has been quiet for the RTU silence (L15703), at most `timeout_s`, so it
         is not read as the next answer. Short, so the drive still hears the master well
         within P3.004 (a long wait here raised AL020 in fault_rs485_line)."""
+        self._drain_next = False
         end = clock.monotonic() + self.timeout_s
         while True:
             now = clock.monotonic()
@@ -261,9 +274,10 @@ class DeltaModbus:
             self._last_io = clock.monotonic()
 
     def _more_follows(self, deadline: float) -> bool:
-        """After a failed transaction, a complete frame followed by more bytes within the
-        silence that ends a frame (L15703) was a late reply to the failed request, with this
-        request's answer behind it. The bytes read are put back for the next frame."""
+        """Within `LATE_REPLIES` x `timeout_s` of a failed transaction, a complete frame
+        followed by more bytes within the silence that ends a frame (L15703) was a late reply
+        to the failed request, with this request's answer behind it. The bytes read are put
+        back for the next frame."""
         nxt = self._read(1, min(deadline, clock.monotonic() + self.silence_s))
         if not nxt:
             return False
