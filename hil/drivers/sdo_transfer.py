@@ -39,7 +39,7 @@ def download(sdo: Any, index: int, sub: int, data: bytes) -> None:
         sdo.download(index, sub, data)
         return
     command = 0x23 | ((4 - len(data)) << 2)  # initiate, expedited, size indicated
-    answer = _initiate(sdo, _MUX.pack(command, index, sub) + data.ljust(4, b"\0"), index, sub)
+    answer = _exchange(sdo, _MUX.pack(command, index, sub) + data.ljust(4, b"\0"), (index, sub))
     if answer[0] != 0x60:
         sdo.abort(_ABORT_COMMAND)
         raise SdoMalformedError(f"answer {answer.hex(' ')} to an initiate download")
@@ -47,7 +47,7 @@ def download(sdo: Any, index: int, sub: int, data: bytes) -> None:
 
 def upload(sdo: Any, index: int, sub: int) -> bytes:
     """Expedited or segmented upload of at most `MAX_UPLOAD` bytes."""
-    answer = _initiate(sdo, _MUX.pack(0x40, index, sub) + bytes(4), index, sub)
+    answer = _exchange(sdo, _MUX.pack(0x40, index, sub) + bytes(4), (index, sub))
     command = answer[0]
     if command & 0xE0 != 0x40:
         sdo.abort(_ABORT_COMMAND)
@@ -83,10 +83,6 @@ def _segments(sdo: Any) -> bytes:
             sdo.abort(_ABORT_MEMORY)
             raise SdoMalformedError(f"segmented upload past {MAX_UPLOAD} bytes without an end")
         toggle ^= 0x10
-
-
-def _initiate(sdo: Any, request: bytes, index: int, sub: int) -> bytes:
-    return _exchange(sdo, request, (index, sub))
 
 
 def _exchange(sdo: Any, request: bytes, mux: tuple[int, int] | None) -> bytes:
