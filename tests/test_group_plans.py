@@ -368,3 +368,118 @@ steps:
     assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
     last = _cycles(res.recording)[-1]
     assert last["correction"] == {"axis1": 1500} and last["mode"] == {"axis1": 4}
+
+
+def _bad_steps(tmp_path, steps: str) -> list:
+    plan = loads_plan("name: p\nsteps:\n  - group: {axes: [axis1, axis2, axis3], cycle: 2ms}\n"
+                      + steps, "p.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    return [s for s in res.steps if s.status != "pass"]
+
+
+def test_a_gear_cycle_is_refused_before_it_runs_away(tmp_path) -> None:
+    """An outside test geared axis2 to axis3 and axis3 to axis2: both ran away at 500 000
+    inc/s and the plan passed. Each would follow the other's travel: the step closing the
+    cycle fails, by group_gear, group_cam or COMMAND 6 (Par0 the axis itself, too)."""
+    bad = _bad_steps(tmp_path, """  - group_gear: {axis: axis2, master: axis3}
+  - group_gear: {axis: axis3, master: axis2}
+  - group_stop: {}
+""")
+    assert bad and bad[0].index == 2 and "a gear cycle axis3 <- axis2 <- axis3" in bad[0].message
+    bad = _bad_steps(tmp_path, """  - group_gear: {axis: axis2, master: axis1}
+  - group_gear: {axis: axis3, master: axis2}
+  - group_cam: {axis: axis1, master: axis3, table: [0, 100, 200]}
+  - group_stop: {}
+""")
+    assert bad and bad[0].index == 3 and "axis1 <- axis3 <- axis2 <- axis1" in bad[0].message
+    bad = _bad_steps(tmp_path, """  - group_gear: {axis: axis3, master: axis2}
+  - group_command: {axis: axis2, code: 6, par: {0: 2, 1: 1, 2: 1, 3: 1, 4: 1}}
+  - group_stop: {}
+""")
+    assert bad and "COMMAND 6 refused: Par0 2: a gear cycle axis2 <- axis3 <- axis2" in \
+        bad[0].message, bad[0].message
+    bad = _bad_steps(tmp_path, "  - group_command: {axis: axis2, code: 6, "
+                               "par: {0: 1, 1: 1, 2: 1, 3: 1, 4: 1}}\n  - group_stop: {}\n")
+    assert bad and "Par0 1: an axis cannot be its own master" in bad[0].message
+    # a chain is no cycle, nor a cycle through a gear on ServoTick (it reads no axis)
+    assert not _bad_steps(tmp_path, """  - group_gear: {axis: axis2, master: axis1}
+  - group_gear: {axis: axis3, master: axis2}
+  - group_gear: {axis: axis1, master: axis3, source: time}
+  - group_stop: {}
+""")
+
+
+def test_negative_acc_dec_or_pos_speed_are_refused(tmp_path) -> None:
+    """PG.Acc, PG.Dec and PG.PosSpeed are maxima (004:220): a negative one made an outside
+    test's set-point jump 10^8 increments in one cycle. Refused with file and line; at run
+    time the group refuses it too (Control stays, the step says why)."""
+    bench = load_bench(GROUP_BENCH)
+    for code, i in ((2, 0), (2, 1), (2, 2), (3, 0), (1, 0), (5, 1)):
+        plan = ("name: p\nsteps:\n  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
+                f"  - group_command: {{axis: axis1, code: {code}, par: {{{i}: -1, 3: 1000}}}}\n")
+        with pytest.raises(PlanFileError, match=rf"p\.yaml:4: steps\[1\]\.group_command\.par\."
+                                                rf"{i}: -1: PG\.\w+ is a maximum"):
+            check_plan(loads_plan(plan, "p.yaml"), bench)
+    # code 1's Par2 is a signed speed: running backwards is allowed
+    check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms}\n"
+                          "  - group_command: {axis: axis1, code: 1, par: {0: 1000, 2: -500}}\n",
+                          "p.yaml"), bench)
+    from hil.drivers.axis_group import CommandError, ServoAxis
+
+    ax = ServoAxis("a", 1)
+    ax.par = [-1.0, 0.0, 0.0, 1e8] + [0.0] * 11
+    ax.command = 2
+    with pytest.raises(CommandError, match=r"Par0 -1: PG\.Acc is a maximum"):
+        ax.accept_command({"a": ax})
+    assert ax.pg.rdy and ax.pg.apos == 0  # nothing started
+
+
+def test_group_wait_fails_on_a_faulted_or_lost_axis(tmp_path) -> None:
+    """PG.Rdy is the generator's flag; an axis whose drive is in fault (Status 1) or lost
+    (-1, 004:254) has not reached anything: the wait fails naming it."""
+    plan = loads_plan("""name: p
+steps:
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_move: {axis: axis1, by: 1000, speed: 50000, acc: 200000, dec: 200000}
+  - inject: {alarm: AL009}
+    drive: axis1
+  - wait: 20ms
+  - group_wait: {rdy: [axis1, axis2], timeout: 1s}
+""", "p.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    bad = [s for s in res.steps if s.status != "pass"]
+    assert bad and bad[0].kind == "group_wait", [(s.kind, s.message) for s in res.steps]
+    assert "axis1: Status 1 (the drive is in fault" in bad[0].message
+    assert "axis2" not in bad[0].message
+
+
+def test_group_steps_outside_their_group_are_refused_at_check() -> None:
+    """An outside test found a group step before `group:`, after `group_stop:` or on an axis
+    outside the group passing `--check` and failing only at run; `rdy: []` waited for
+    nothing."""
+    bench = load_bench(GROUP_BENCH)
+    head = "name: p\nsteps:\n"
+    for steps, where, want in (
+            ("  - group_move: {axis: axis1, by: 10}\n", "steps[0].group_move",
+             "no axis group: a `group:` step must come first"),
+            ("  - group: {axes: [axis1], cycle: 2ms}\n  - group_stop: {}\n"
+             "  - group_expect: {axis: axis1, status: 3}\n", "steps[2].group_expect",
+             "no axis group"),
+            ("  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
+             "  - group_gear: {axis: axis2, master: axis3}\n", "steps[1].group_gear.axis",
+             "not in the axis group (axis1, axis2): axis3"),
+            ("  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
+             "  - group_move: {axis: axis4, by: 10}\n", "steps[1].group_move.axes",
+             "not in the axis group (axis1, axis2): axis4"),
+            ("  - group: {axes: [axis1], cycle: 2ms}\n  - group_wait: {rdy: []}\n",
+             "steps[1].group_wait.rdy", "an empty one would wait for nothing"),
+            ("  - group_cam_table: {values: [0, 1]}\n", "steps[0].group_cam_table",
+             "no axis group")):
+        with pytest.raises(PlanFileError) as ei:
+            check_plan(loads_plan(head + steps, "p.yaml"), bench)
+        assert f"{where}: " in str(ei.value) and want in str(ei.value), str(ei.value)
+    # a second group after a group_stop is in force for the steps after it
+    check_plan(loads_plan(head + "  - group: {axes: [axis1], cycle: 2ms}\n  - group_stop: {}\n"
+                          "  - group: {axes: [axis2], cycle: 2ms}\n"
+                          "  - group_move: {axis: axis2, by: 10}\n  - group_stop: {}\n",
+                          "p.yaml"), bench)

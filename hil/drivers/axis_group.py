@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 import struct
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -234,6 +234,30 @@ CAM_MEMORY = {0: 1048576 // 8, 1: 524288 // 8}
 
 class CommandError(ValueError):
     """A COMMAND the group cannot accept (Control stays set; the step names why)."""
+
+
+# PG magnitudes per COMMAND code (004:220 "maximální akcelerace / decelerace / rychlost"):
+# Par0 Acc, Par1 Dec, Par2 PosSpeed (code 1's Par2 is a signed speed); 0 keeps the register
+MAGNITUDES = {1: ((0, "Acc"),), 2: ((0, "Acc"), (1, "Dec"), (2, "PosSpeed")),
+              3: ((0, "Acc"), (1, "Dec"), (2, "PosSpeed")), 5: ((1, "Dec"),)}
+
+
+def gear_cycle(axes: Mapping[str, Any], follower: str, master: str,
+               source: int) -> list[str] | None:
+    """The chain `follower <- master <- ... <- follower` that taking `master` by position
+    (source 1 WritePosition, 2 Position) would close, else None: each would follow the other's
+    travel and run away. Source 3 (ServoTick) reads no axis (004:230)."""
+    if source == 3:
+        return None
+    chain, seen, m = [follower, master], {follower}, master
+    while m not in seen:
+        seen.add(m)
+        a = axes.get(m)
+        if a is None or not a.gea.mode or a.gea.source == 3:
+            return None
+        m = a.gea.master
+        chain.append(m)
+    return chain if m == follower else None
 
 
 @dataclass
@@ -461,6 +485,10 @@ class ServoAxis:
         if code in (1, 2, 3, 5):
             if int(p[5]) not in RAMP_TYPES or p[5] != int(p[5]):
                 raise CommandError(f"Par5 {p[5]:g}: a ramp type 0-3 (004:222)")
+            for i, what in MAGNITUDES[code]:
+                if p[i] < 0:
+                    raise CommandError(f"Par{i} {p[i]:g}: PG.{what} is a maximum, not "
+                                       "negative (004:220; 0 keeps the register)")
             pg.type = int(p[5])
         if code == 1:  # run speed: Par0 Acc, Par2 Speed, Par4 0 cancel GEA / 1 superimpose
             pg.acc = p[0] or pg.acc
@@ -506,6 +534,12 @@ class ServoAxis:
                                    f"{len(names) - 1} of the group")
             if not p[4]:
                 raise CommandError("Par4 Out 0: the ratio In/Out needs Out != 0")
+            if names[idx] == self.name:
+                raise CommandError(f"Par0 {idx}: an axis cannot be its own master")
+            chain = gear_cycle(axes, self.name, names[idx], src)
+            if chain is not None:
+                raise CommandError(f"Par0 {idx}: a gear cycle {' <- '.join(chain)} (each "
+                                   "would follow the other's travel and run away)")
             table = self._cam_table(cams or {}, p) if kind >= 2 else None
             g.master = names[idx]
             g.source = src

@@ -45,6 +45,7 @@ OUTPUT_MAX_HZ = {"single": 200_000, "differential": 920_000}  # 001:14
 AB_MAX_HZ = 460_000  # two-phase (A/B) maximum (001:14)
 MD1_WAIT_NS = 500 * MS  # "wait 0.5 s" (001:112)
 CLR_MIN_MS = 20.0  # "> 20 ms" (001:124)
+CLR_MAX_MS = 10_000.0  # not in the seed: a CLR pulse of 10 s is already no pulse
 DRVZ_MODES = ("MD0", "MD1", "MD2")
 # Register operands (001:38-44): data registers R0-R3839, R5000-R8071 and D0-D3999 (the
 # register map of FUN141's operand table, 001:50), and Ps0's status registers (001:28-34)
@@ -211,14 +212,26 @@ class AxisParams:
         if self.pg0_edge not in ("leading", "trailing"):
             raise PlcError(52, f"pg0_edge {self.pg0_edge!r}: leading or trailing",
                            field="pg0_edge")
-        for name, prefix, top, code in (("dog", "X", 15, 51), ("clr", "Y", 23, 53)):
-            val = getattr(self, name)  # host points only (001:58-60: X0~X15, Y0~Y23)
-            if val and not (len(val) > 1 and val[0] == prefix and val[1:].isdigit()
-                            and int(val[1:]) <= top):
+        # host points only (001:58-60: X0~X15, Y0~Y23); the seed gives no error code of its
+        # own for the stroke limit (P15-1): 51, DOG's, the other homing input
+        for name, prefix, top, code in (("dog", "X", 15, 51), ("limit", "X", 15, 51),
+                                        ("clr", "Y", 23, 53)):
+            val = getattr(self, name)
+            if val and not (re.fullmatch(rf"{prefix}[0-9]{{1,2}}", val) and int(val[1:]) <= top):
                 raise PlcError(code, f"{name} {val!r}: {prefix}0 ~ {prefix}{top}", field=name)
-        if self.clr and self.clr_ms <= CLR_MIN_MS:
+        if self.pg0 not in ("", "OZ"):
+            raise PlcError(52, f"pg0 {self.pg0!r}: OZ (the drive's Z output) or empty",
+                           field="pg0")
+        if self.run_direction not in (0, 1):  # P9-0, error 10 (P9's)
+            raise PlcError(10, f"run_direction {self.run_direction}: 0 or 1", field="run_direction")
+        if self.logic not in (0, 1):
+            raise PlcError(1, f"logic {self.logic}: 0 normal ON or 1 normal OFF (001:28)",
+                           field="logic")
+        if not -2**31 <= self.origin < 2**31:  # P16 into DR4088, 32 bits (001:122)
+            raise PlcError(17, f"origin {self.origin}: a 32-bit value", field="origin")
+        if self.clr and not CLR_MIN_MS < self.clr_ms <= CLR_MAX_MS:  # NaN fails too
             raise PlcError(53, f"clr_ms {self.clr_ms:g}: the CLR pulse must be > 20 ms "
-                               "(001:124)", field="clr_ms")
+                               f"(001:124), at most {CLR_MAX_MS:g} here", field="clr_ms")
 
     # -- units -----------------------------------------------------------------------------
     def pulses(self, value: float, unit: str = "Ps") -> int:
@@ -359,8 +372,15 @@ class Program:
 
     @staticmethod
     def check_stroke(p: AxisParams, d: Drv, value: float, i: int, via: str = "") -> None:
+        what = f"stroke {via + ' = ' if via else ''}{value:g}"
         if abs(p.pulses(value, d.unit)) >= 2**31:
-            raise PlcError(33, f"stroke {via + ' = ' if via else ''}{value:g}: beyond 32 bits",
+            raise PlcError(33, f"{what}: beyond 32 bits", step=i, field="DRV")
+        if value and p.pulses(value, d.unit) == 0:  # stroke 0 means "until the transition"
+            raise PlcError(33, f"{what} {d.unit}: less than one pulse", step=i, field="DRV")
+        if d.unit == "Ps" and value != int(value):
+            raise PlcError(33, f"{what} Ps: a whole number of pulses", step=i, field="DRV")
+        if d.direction and value < 0 and not via:
+            raise PlcError(33, f"{what}: a direction {d.direction} and a negative stroke",
                            step=i, field="DRV")
 
     def check_goto(self, goto: int, i: int, via: str = "") -> None:

@@ -183,7 +183,12 @@ def main(args: argparse.Namespace) -> int:
         if bench_path and not args.bench:
             print(f"bench: {bench_path} (from ${BENCH_ENV})", file=sys.stderr)
     try:
-        bench = with_clock(load_bench(bench_path), args.clock)
+        bench = load_bench(bench_path)
+        try:
+            bench = with_clock(bench, args.clock)
+        except ValueError as e:  # --clock virtual on a bench that cannot
+            print(f"hil run: --clock: {e}", file=sys.stderr)
+            return 2
         loaded, bad = [], []
         for path in find_plans(args.plans, plans_dir):
             try:
@@ -200,9 +205,6 @@ def main(args: argparse.Namespace) -> int:
         return 2
     except ExprError as e:
         print(f"hil run: -k/-m: {e}", file=sys.stderr)
-        return 2
-    except ValueError as e:  # --clock virtual on a bench that cannot
-        print(f"hil run: --clock: {e}", file=sys.stderr)
         return 2
     if args.last_failed:
         plans = _last_failed(plans, Path(args.out), quiet=args.quiet)

@@ -102,6 +102,17 @@ FAST = dict(max_speed=100_000, start_speed=500, accel_ms=100)
     ({"backlash": 32768}, 8),
     # DOG and CLR are host points X0~X15 / Y0~Y23 (001:58-60): errors 51 / 53
     ({"dog": "X16"}, 51), ({"dog": "Q7"}, 51), ({"clr": "Y24"}, 53),
+    # look-alike digits an outside test found accepted (a superscript 2 crashed `int`, a
+    # fullwidth 0 passed the check and was never seen at run time)
+    ({"dog": "X\u00b2"}, 51), ({"dog": "X\uff10"}, 51), ({"clr": "Y\u00b2"}, 53),
+    # the stroke limit is a host input too (P15-1); PG0 is the drive's OZ (P15-2)
+    ({"limit": "banana"}, 51), ({"limit": "X999"}, 51), ({"pg0": "foo"}, 52),
+    # P9-0 is a bit (error 10, P9's); the output logic normal ON / OFF (001:28)
+    ({"run_direction": 7}, 10), ({"logic": 5}, 1),
+    # P16 goes into DR4088, 32 bits (001:122; "parameter number + 1")
+    ({"origin": 2**31}, 17), ({"origin": -2**31 - 1}, 17),
+    # NaN or inf CLR pulses passed `<= 20` and failed at run time
+    ({"clr": "Y8", "clr_ms": float("nan")}, 53), ({"clr": "Y8", "clr_ms": float("inf")}, 53),
 ])
 def test_fun141_refuses_with_its_error_code(kw, code):
     with pytest.raises(PlcError) as e:
@@ -125,6 +136,12 @@ def test_fun140_refusals():
         # the chain's direction is the first DRVC's + or - (001:40); blank is refused
         (prog(Step(spd=1000, drive=Drv("ADR", "", 10, chained=True)),
               Step(spd=1000, drive=Drv("ADR", "+", 10))), 43),
+        # a stroke that is no whole number of pulses: 0.4 Ps was taken as stroke 0 ("until
+        # the transition") and ran for 60 s (33: stroke value error, 001:34)
+        (prog(Step(spd=1000, drive=Drv("ADR", "+", 0.4))), 33),
+        (prog(Step(spd=1000, drive=Drv("ADR", "+", 1.5))), 33),
+        # a direction and a negative stroke contradict each other
+        (prog(Step(spd=1000, drive=Drv("ADR", "+", -500))), 33),
     ]
     for program, code in cases:
         with pytest.raises(PlcError) as e:
@@ -132,6 +149,12 @@ def test_fun140_refusals():
         assert e.value.code == code, (program, e.value)
     prog(*[Step(spd=1000, drive=Drv("ADR", "+", 1, chained=True)) for _ in range(7)],
          Step(spd=1000, drive=Drv("ADR", "+", 1))).check(p)  # 7 DRVC + the DRV: allowed
+    prog(Step(spd=1000, drive=Drv("ADR", "", -500))).check(p)  # the sign gives the direction
+    mech = AxisParams(dog="X0", unit=2, decimals=2)  # mm with 2 decimals, 2000 Ps per 2000 um
+    prog(Step(spd=1000, drive=Drv("ADR", "+", 0.5, "Ut"))).check(mech)  # 500 Ps
+    with pytest.raises(PlcError) as e:  # 0.0001 mm is less than a pulse here
+        prog(Step(spd=1000, drive=Drv("ADR", "+", 0.0001, "Ut"))).check(mech)
+    assert e.value.code == 33
 
 
 # -- profile ---------------------------------------------------------------------------------

@@ -23,9 +23,13 @@ from hil.drivers.axis_group import (
     CAPTURE_FALLING,
     CAPTURE_RISING,
     CAPTURE_ZERO,
+    MAGNITUDES,
     RAMP_TYPES,
+    STATUS_FAULT,
+    STATUS_LOST,
     AxisGroup,
     ServoAxis,
+    gear_cycle,
     worst_case_bits,
 )
 from hil.plan.context import Outcome, StepFailed
@@ -132,6 +136,18 @@ def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
 _SOURCES = {"write": 1, "actual": 2, "time": 3}  # GEA.SourcePosition (004:230)
 
 
+_STATUS_TEXT = {STATUS_FAULT: "the drive is in fault", STATUS_LOST: "no communication"}
+
+
+def _no_cycle(g: AxisGroup, a: _Coupling) -> None:
+    """A gear or cam that would close a cycle of masters is refused (each axis would follow
+    the other's travel and run away)."""
+    chain = gear_cycle(g.by_name, a.axis, a.master, a.source)
+    if chain is not None:
+        raise StepFailed(f"a gear cycle {' <- '.join(chain)}: each axis would follow the "
+                         "other's travel and run away")
+
+
 def _members(g: AxisGroup, names: list[str]) -> list[ServoAxis]:
     missing = [n for n in names if n not in g.by_name]
     if missing:
@@ -139,7 +155,23 @@ def _members(g: AxisGroup, names: list[str]) -> list[ServoAxis]:
     return [g.by_name[n] for n in names]
 
 
+def _group_in_force(cc: CheckContext) -> list[str] | None:
+    """The axes of the `group:` before this step, None when there is none (or a
+    `group_stop:` ended it)."""
+    axes = None
+    for s in cc.plan.steps:
+        if s is cc.step:
+            break
+        if s.kind == "group":
+            axes = s.args.axes
+        elif s.kind == "group_stop":
+            axes = None
+    return axes
+
+
 def _check_axes(cc: CheckContext, names: list[str], field: str) -> None:
+    """Each name a drive of the bench on a CAN bus and, but for `group:` itself, an axis of
+    the group in force at this step."""
     for n in names:
         d = cc.bench.drives.get(n)
         if d is None:
@@ -148,6 +180,15 @@ def _check_axes(cc: CheckContext, names: list[str], field: str) -> None:
         if not d.can:
             raise cc.err(f"axis {n!r} has no CAN bus (an axis group streams set-points "
                          "over CANopen)", field)
+    if cc.step.kind == "group":
+        return
+    group = _group_in_force(cc)
+    if group is None:
+        raise cc.err("no axis group: a `group:` step must come first (and no `group_stop:` "
+                     "since)")
+    outside = [n for n in names if n not in group]
+    if outside:
+        raise cc.err(f"not in the axis group ({', '.join(group)}): {', '.join(outside)}", field)
 
 
 @dataclass(frozen=True)
@@ -443,6 +484,7 @@ class GroupGear(StepKind):
         if ax is None or master is None:
             raise StepFailed("axis or master not in the group")
         with g._lock:
+            _no_cycle(g, a)
             gea = ax.gea
             gea.master, gea.source = a.master, a.source
             gea.gin, gea.gout, gea.inc_in = a.gin, a.gout, a.inc_in
@@ -496,6 +538,7 @@ class GroupCam(StepKind):
         g = _group(ctx)
         ax, _master = _members(g, [a.axis, a.master])
         with g._lock:
+            _no_cycle(g, a)
             gea = ax.gea
             gea.master, gea.source = a.master, a.source
             gea.gin = gea.actual_in = a.gin
@@ -555,6 +598,9 @@ class GroupCamTable(StepKind):
                         f"{CAM_MEMORY[tab]} doubles")
         return GroupCamTableArgs(tab, start, [float(x) for x in vals])
 
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [], "")
+
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g = _group(ctx)
@@ -604,6 +650,11 @@ class GroupCommand(_OneAxis):
                 if code == 6 and i in (0, 1, 2, 6, 7, 10, 12) and val != int(val):
                     raise v.err(pm.kline(k), join(where, f"par.{k}"),
                                 f"{val!r}: a whole number (an index or a code, 004:244)")
+                what = dict(MAGNITUDES.get(code, ())).get(i)
+                if what is not None and val < 0:
+                    raise v.err(pm.kline(k), join(where, f"par.{k}"),
+                                f"{val!r}: PG.{what} is a maximum, not negative (004:220; 0 "
+                                "keeps the register)")
                 par[i] = float(val)
         if code == 6 and par[2] not in (0.0, 1.0, 2.0, 3.0):
             raise v.err(m.kline("par"), join(where, "par.2"),
@@ -709,6 +760,9 @@ class GroupWait(StepKind):
         out: dict[str, Any] = {"timeout": v.duration(m, "timeout", where, 5 * S)}
         for k in ("rdy", "captured"):
             seq = v.seq(m[k], m.kline(k), join(where, k)) if k in m else []
+            if k in m and (not seq or not all(isinstance(x, str) and x for x in seq)):
+                raise v.err(m.kline(k), join(where, k), "a list of the group's axes (an empty "
+                            "one would wait for nothing)")
             out[k] = [str(x) for x in seq]
         return GroupWaitArgs(**out)
 
@@ -724,6 +778,8 @@ class GroupWait(StepKind):
             raise StepFailed("PG not ready: " + ", ".join(a.name for a in axes
                                                           if not a.pg.rdy))
         bad = [f"{a.name}: {a.setpoint_error}" for a in axes if a.setpoint_error]
+        bad += [f"{a.name}: Status {a.status} ({_STATUS_TEXT[a.status]}, 004:254)"
+                for a in axes if a.status in _STATUS_TEXT]
         if bad:
             raise StepFailed("; ".join(bad))
         text = [f"{a.name} at {a.write_position:.0f}" for a in axes]
@@ -865,6 +921,9 @@ class GroupExpect(StepKind):
                 out[k] = _flag(v, m, k, where)
         return GroupExpectArgs(**out)
 
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, self.args.axes, "axes")
+
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         g = _group(ctx)
@@ -973,6 +1032,9 @@ class GroupStop(StepKind):
         if obj not in (None, {}):
             raise v.err(line, where, f"{obj!r}: takes nothing (`group_stop: {{}}`)")
         return NoArgs()
+
+    def check(self, cc: CheckContext) -> None:
+        _check_axes(cc, [], "")
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         g = _group(ctx)
