@@ -319,9 +319,15 @@ class AbsoluteEncoder:
     # -- position ---------------------------------------------------------------------------
 
     def on_motor_position(self, counts: int) -> None:
-        """Motor position in encoder counts (CCW positive); the encoder counts the difference."""
+        """Motor position in encoder counts, positive in the drive's positive direction. The
+        encoder counts the difference CCW positive (L16404-16406): with P1.001.Z = CW positive
+        (L16413, "馬達的正旋轉方向是由 P1.001.Z 定義") a positive move is CW and counts down, so
+        the PUU formula's -1 (L16410) gives the same sign as 6064h."""
         if self._last_counts is not None:
-            self.mem.pulse_value += counts - self._last_counts
+            d = counts - self._last_counts
+            if (self._puu_params()[2] >> 8) & 0xF == self.options.cw_positive_z:
+                d = -d
+            self.mem.pulse_value += d
         self._last_counts = counts
         self._check_overflow()
 

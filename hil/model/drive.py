@@ -65,7 +65,7 @@ from hil.model.motion import Axis, counts_to_puu, puu_to_counts
 from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
 from hil.model.pr_engine import PR_MODES, attach_pr
-from hil.model.pulse_train import attach_pulse_train
+from hil.model.pulse_train import attach_pulse_train, gear_problem
 from hil.model.sto import Sto
 from hil.model.timebase import Scheduler, ms
 from hil.protocol.canopen import (
@@ -475,6 +475,10 @@ class Drive:
         for hook in self.hooks.boot:
             hook()
         canopen_init = load_canopen_init(self.params)  # P3.012.Z = 0 (L10731-10745)
+        # AL045: an e-gear ratio out of range appears at power-up and goes only with a power
+        # cycle once it is right (L19699-19703; alarms.power_cycle cleared it before this)
+        if gear_problem(self) is not None:
+            self.alarms.raise_alarm("AL045")
         # Level-triggered DI functions act from power-up (EMGS/NL/PL -> AL013-AL015,
         # L2829-2831, L15184-15191), before anything may switch the servo on.
         if not self.options.dev_di_levels_ignored_at_power_up:

@@ -152,8 +152,9 @@ class ModelOptions:
     # The CN1 pulse input wired to the PLC: "line_driver" 4 Mpps or "open_collector"
     # 200 kpps (L7700-7707); above it AL008 (L19535) and the pulses are not counted.
     pulse_interface: str = "line_driver"
-    # 1/4 < Nx/M < 262144 (L8547) gives no alarm: "refuse" refuses a write that leaves the
-    # range (SDO abort / Modbus exception); "off" accepts it.
+    # 1/4 < Nx/M < 262144 (L8547): the manual raises AL045 at the next power-up (L19699-19703,
+    # modelled whatever this says); in a PT mode "refuse" also refuses a write that leaves the
+    # range (SDO abort / Modbus exception); "off" accepts it, as the manual's drive does.
     pt_gear_check: str = "refuse"
     # OCZ (C11, L1851): the manual gives no pulse width.
     ocz_width_us: float = 100.0

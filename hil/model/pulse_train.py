@@ -59,6 +59,9 @@ FORMS = ("ab", "cw_ccw", "pulse_sign")  # P1.000.X = 0, 1, 2 (L7670-7674)
 LIMIT_PPS = {"line_driver": 4_000_000, "open_collector": 200_000}  # L7700-7707
 OUTPUT_MAX_HZ = 19.8e6  # L8569
 GEAR_MIN, GEAR_MAX = 0.25, 262144.0  # 1/4 < Nx/M < 262144 (L8547)
+# not in the manual: a segment slower than a pulse in 1000 s is no train (its end time would
+# overflow); 0 Hz is the line at rest
+MIN_FREQ_HZ = 1e-3
 PT_YX = (0x00, 0x06, 0x07, 0x0D, 0x0E, 0x0F)  # P1.001.YX with a PT side (L7749-7800)
 CRUISE_NS = 200_000_000  # the longest cruise before an exact resync
 # the parameters `_Config` reads: a write of one ends a cruise (P0.046, P4.009 ... do not)
@@ -249,15 +252,18 @@ class PulseTrain:
         `total`: the signed pulses the master output before it; the count is reconciled
         with it (a segment that came late over a network ran on too long here)."""
         d = self.d
-        if freq < 0 or count < 0 or direction not in (1, -1) or not math.isfinite(freq):
-            raise ValueError(f"pulse segment: freq {freq!r}, direction {direction!r}, "
-                             f"count {count!r}")
+        if (not math.isfinite(freq) or not (freq == 0 or freq >= MIN_FREQ_HZ) or count < 0
+                or direction not in (1, -1)):
+            raise ValueError(f"pulse segment: freq {freq!r} (0 or {MIN_FREQ_HZ:g} Hz and up), "
+                             f"direction {direction!r}, count {count!r}")
         if form not in FORMS:
             raise ValueError(f"pulse segment: form {form!r} not one of {', '.join(FORMS)}")
         d.commit_cycle()
         if self._cruise_end:
             self._resync()
         self._take(d.now)
+        if not self._active and d.servo_on and self.in_pt():
+            self._follow()  # before the reconciliation: its pulses move the motor too
         if total is not None and total != self.line_total:
             old = self.seg or Segment(d.now, float(freq), direction, 0, form, int(logic) & 1)
             diff = total - self.line_total
@@ -689,6 +695,19 @@ def _gnum_wired(d: DriveCore) -> bool:
     """GNUM0 or GNUM1 on a DI: N2-N4 can be selected (without them Nx is P1.044, L9850)."""
     dio = d.dio
     return any(dio.di_function(n) in ("GNUM0", "GNUM1") for n in range(1, N_DI + 1))
+
+
+def gear_problem(d: DriveCore) -> str | None:
+    """AL045 (L19699-19703): an e-gear ratio outside 1/4 ~ 262144 found at power-up, in any
+    mode (Nx: P1.044, and P2.060-P2.062 when GNUM0/GNUM1 can select them, L9850)."""
+    p = d.params
+    m = p.get("P1.045")
+    nums = [p.get("P1.044")] + ([p.get(n) for n in ("P2.060", "P2.061", "P2.062")]
+                                if _gnum_wired(d) else [])
+    for nx in nums:
+        if not m or not GEAR_MIN < nx / m < GEAR_MAX:
+            return f"{nx}/{m}"
+    return None
 
 
 def _check_gear(d: DriveCore) -> Callable[[str, int], None]:

@@ -180,10 +180,16 @@ def test_puu_formula_and_direction():
 
 
 def test_direction_option():
+    """With Z = CW positive (here Z = 0 by the option) a positive move is CW: the encoder
+    counts down (turns negative, L16404) and the PUU still goes up with the motion (L16413)."""
     r = Rig(options=AbsoluteOptions(cw_positive_z=0))
     r.origin()
     r.enc.on_motor_position(REV)
-    assert r.enc.puu == -100000
+    assert r.enc.puu == 100000 and r.enc.turns == -1
+    r = Rig()
+    r.origin()
+    r.enc.on_motor_position(REV)
+    assert r.enc.puu == 100000 and r.enc.turns == 1
 
 
 # -- start-up, alarms ------------------------------------------------------------------------
