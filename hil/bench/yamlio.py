@@ -175,9 +175,12 @@ class Checker:
                 raise self.err(d.line, join(field, key), "missing (required)")
             return default
         try:
-            return parse_duration(d[key])
+            ns = parse_duration(d[key])
         except ValueError as e:
             raise self.err(d.kline(key), join(field, key), str(e)) from None
+        if key == "timeout" and ns <= 0:  # every step kind's `timeout:`: 0 would fail at once
+            raise self.err(d.kline(key), join(field, key), "must be > 0")
+        return ns
 
 
 def _kind(v: Any) -> str:
