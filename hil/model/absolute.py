@@ -494,8 +494,16 @@ class AbsoluteEncoder:
             # AL060's clearing procedure is rebuilding the origin (L19767, L16397); a normal
             # clear of the absolute position "releases AL07C by itself" (L19857), and AL07D
             # with it (docs/manual-choices.md)
-            for code in ("AL060", "AL07C", "AL07D"):
+            # AL3F1, the communication-type absolute coordinate undefined, is cleared by
+            # building the absolute origin (L20175)
+            for code in ("AL060", "AL07C", "AL07D", "AL3F1"):
                 self._clear_alarm(code)
+
+    def on_arst(self) -> None:
+        """DI.ARST clears AL07D, after which AL07C is there again (L19864): its cause goes."""
+        if self.mem.al07d:
+            self.mem.al07d = False
+            self._evaluate()
 
     # -- parameters -------------------------------------------------------------------------
 

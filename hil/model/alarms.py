@@ -32,6 +32,9 @@ class AlarmOptions:
     fault_reset_listed: bool = False
 
 
+POWER_CYCLE_KEEPS = frozenset({"AL3F1"})
+
+
 class AlarmManager:
     """Active alarms, their causes, resets, P0.001, P4.000-P4.004, 1001h and 1003h."""
 
@@ -194,9 +197,12 @@ class AlarmManager:
         return self.servo_off_required
 
     def power_cycle(self) -> None:
-        """Clear every alarm whose cause is gone (any rule); history is kept (P4.000-P4.004)."""
+        """Clear every alarm whose cause is gone, but a `service` one (a repair, L19877,
+        L19893, L20217; AL555 "無", L20227) and AL3F1 (its clear is the absolute origin,
+        L20175); history is kept (P4.000-P4.004)."""
         for code in list(self._active):
-            if code not in self._causes:
+            if (code not in self._causes and code not in POWER_CYCLE_KEEPS
+                    and self.clear_rule(code) != "service"):
                 self._clear(code)
         self._update_p0001()
 

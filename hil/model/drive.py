@@ -565,6 +565,8 @@ class Drive:
         """Switch the servo to what is requested; `source` "cia402": the state machine asked."""
         if not self.powered:
             return
+        if "AL053" in self.alarms.active and not self._requested():
+            self.alarms.clear("AL053")  # "將伺服切至 Servo Off 狀態即可解除此異警" (L19725)
         sto_lost = not (self.sto.a and self.sto.b)
         if sto_lost and self.servo_on and self.options.sto_servo_off == "acknowledged":
             # the hardware has cut the current (L2474); the firmware enters Servo Off only
@@ -657,6 +659,7 @@ class Drive:
     def _on_arst(self, active: bool) -> None:
         # ARST acts on the rising edge (L15082); deviation knob: the falling edge.
         if active != self.options.dev_arst_on_falling_edge:
+            self.absolute.on_arst()
             self.alarms.reset("di")
             self._update_servo()
 
