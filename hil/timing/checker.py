@@ -37,6 +37,20 @@ NEG_INF = -(2**62)
 POS_INF = 2**62
 
 
+def _short(x: Any, n: int = 40) -> str:
+    text = repr(x)
+    return text if len(text) <= n else text[:n] + "..."
+
+
+def _duration_ns(e: Any, env: dict[str, Any], what: str) -> int:
+    """A duration the spec gives (within, held, resolution) in ns; negative by a parameter or
+    a --const is an ExprError (the load refuses a negative literal): cannot judge."""
+    ms = e.eval(env)
+    if check_number(ms, "a time in ms") < 0:
+        raise ExprError(f"{what} = {e.text} is {ms:g} ms: a duration cannot be negative")
+    return _ns(ms)
+
+
 def _ms(ns: float) -> float:
     return ns / MS
 
@@ -198,14 +212,14 @@ class Context:
             return int(src)
         env = self.env(None)
         if sig is not None and sig.resolution is not None:
-            return _ns(sig.resolution.eval(env))
+            return _duration_ns(sig.resolution, env, f"signals.{sig.name}.resolution")
         default = None
         for pat, e in self.spec.resolution.items():
             if pat == "default":
                 default = e
             elif fnmatch.fnmatchcase(topic, self.fmt(pat)):
-                return _ns(e.eval(env))
-        return _ns(default.eval(env)) if default is not None else 0
+                return _duration_ns(e, env, f"resolution.{pat}")
+        return _duration_ns(default, env, "resolution.default") if default is not None else 0
 
     def _lags(self, s: SignalDef, topic: str, raw: list[tuple[int, Any]]
               ) -> dict[int, tuple[int, int]]:
@@ -424,19 +438,30 @@ class Context:
         # samples come in time order; a parameter written mid-run moves it a few times)
         lim_v: Any = None
         lo, hi = POS_INF, NEG_INF
-        for t, v in pts:
-            for op in ops:
-                v = op(v)
-            if thresholds:
-                if not lo <= t < hi:
-                    lim, lo, hi = thresholds(t)
-                    lim_v = lim[cmp] if cmp else None
-                if cmp == "below":
-                    v = v < lim_v
-                elif cmp == "above":
-                    v = v > lim_v
-            t_append(t)
-            v_append(v)
+        t = v = raw = None
+        try:
+            for t, raw in pts:
+                v = raw
+                for op in ops:
+                    v = op(v)
+                if thresholds:
+                    if not lo <= t < hi:
+                        lim, lo, hi = thresholds(t)
+                        lim_v = lim[cmp] if cmp else None
+                    if cmp == "below":
+                        v = v < lim_v
+                    elif cmp == "above":
+                        v = v > lim_v
+                t_append(t)
+                v_append(v)
+        except (TypeError, ValueError) as e:  # a text, a list, a null where a number belongs
+            if isinstance(e, ExprError):
+                raise
+            ops_text = ", ".join(k for k in ("map", "bit", "mask", "abs", "equals", "in",
+                                             "nonempty", "below", "above") if k in tf)
+            at = _ms((t or 0) - self.start) if self.start is not None else 0.0
+            raise ExprError(f"signal {s.name}: the recorded value {_short(raw)} ({at:.1f} ms "
+                            f"into the recording) cannot take {ops_text}") from None
         return SampleList(ts, vs)  # 16 bytes a sample: a long recording's signal is long
 
     def _held(self, s: SignalDef, tr: Trace) -> Trace:
@@ -454,7 +479,7 @@ class Context:
                 continue
             if since is None:
                 since = t
-                due = t + _ns(s.transforms["held"].eval(self.env(t)))
+                due = t + _duration_ns(s.transforms["held"], self.env(t), f"signals.{s.name}.held")
             nxt = tr.times[i + 1] if i + 1 < len(tr.times) else POS_INF
             pts.append((t, due <= t))
             if t < due < nxt and due <= self.end:
@@ -515,7 +540,9 @@ class Context:
         lags = self._lags(s, topic, raw)
         return [Occ(t, res, *lags.get(t, (0, 0))) for t, v in self._transform(s, raw) if v]
 
-    def label(self, name: str) -> str:
+    def label(self, name: str, nested: bool = False) -> str:
+        """An event's text for verdicts; a composite inside a composite is named, not spelt
+        out (a spec of shared composites would otherwise grow its labels exponentially)."""
         ev = self.spec.events[name]
         if ev.label:
             return ev.label
@@ -526,9 +553,11 @@ class Context:
             return f"{sig} {verbs[ev.kind]}"
         if ev.kind == "becomes":
             return f"{sig} became {ev.value}"
+        if nested:
+            return name
         if ev.kind == "at":
-            return f"{self.label(ev.refs[0])} + {ev.plus}"
-        return f"{ev.kind.replace('_', ' ')} ({', '.join(self.label(r) for r in ev.refs)})"
+            return f"{self.label(ev.refs[0], True)} + {ev.plus}"
+        return f"{ev.kind.replace('_', ' ')} ({', '.join(self.label(r, True) for r in ev.refs)})"
 
     def expectation(self, name: str) -> str:
         ev = self.spec.events[name]
@@ -627,7 +656,7 @@ class Scope:
         within = ev.within or self.ctx.spec.horizon
         end = self.end
         if within is not None:
-            end = min(end, anchor_t + _ns(within.eval(self.ctx.env(anchor_t))) + 1)
+            end = min(end, anchor_t + _duration_ns(within, self.ctx.env(anchor_t), "within") + 1)
         return end
 
     def _resolve(self, ev: EventDef) -> Occ | Missing:
@@ -658,7 +687,8 @@ class Scope:
             b = self.resolve(ev.before)
             if isinstance(b, Missing):
                 return b
-            lo = NEG_INF if ev.within is None else b.t - _ns(ev.within.eval(ctx.env(b.t)))
+            lo = NEG_INF if ev.within is None else (
+                b.t - _duration_ns(ev.within, ctx.env(b.t), "within"))
             occs = self._candidates(ev, lo, b.t + 1, b, every=True)
             if occs:
                 return occs[-1]
@@ -856,6 +886,9 @@ def _window_values(ctx: Context, w: WindowDef, t: int) -> tuple[float | None, fl
     lo = float(w.min.number(env)) if w.min is not None else None
     hi = float(w.max.number(env)) if w.max is not None else None
     used = {n: env[n] for e in (w.min, w.max) if e for n in sorted(e.names)}
+    if lo is not None and hi is not None and lo > hi:  # by a parameter or a --const
+        ps = ", ".join(f"{n} = {v:g}" for n, v in used.items())
+        raise ExprError(f"window min {lo:g} ms > max {hi:g} ms ({ps}): no time can be inside")
     return lo, hi, used
 
 

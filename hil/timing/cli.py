@@ -214,12 +214,25 @@ def resolve_specs(names: list[str]) -> list[Spec]:
     return out
 
 
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+TEXT_MAX = 400  # characters of a spec's own text (a name, a label) shown in the table
+
+
+def terminal_text(text: str, limit: int = TEXT_MAX) -> str:
+    """A spec's text made safe for a terminal: control characters (an escape sequence would
+    clear or spoof the screen) shown as \\xNN, and at most `limit` characters (`--json`
+    gives it whole)."""
+    out = _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", str(text))
+    return out if len(out) <= limit else out[:limit] + f"... ({len(out)} characters)"
+
+
 def format_table(verdicts: list[Verdict], verbose: bool = False) -> str:
     rows = [v for v in verdicts if verbose or v.status != "skipped"]
     lines = [f"{'STATUS':<13}{'SPEC':<20}{'#':>3}  CONSTRAINT / EXPLANATION"]
     for v in rows:
-        lines.append(f"{v.status.upper():<13}{v.spec:<20}{v.occurrence:>3}  {v.constraint}")
-        lines.append(f"{'':<38}{v.message}")
+        lines.append(f"{v.status.upper():<13}{terminal_text(v.spec):<20}{v.occurrence:>3}  "
+                     f"{terminal_text(v.constraint)}")
+        lines.append(f"{'':<38}{terminal_text(v.message, 4 * TEXT_MAX)}")
     s = summary(verdicts)
     lines.append(", ".join(f"{n} {k}" for k, n in s.items()))
     return "\n".join(lines)
@@ -478,6 +491,12 @@ def main(args: argparse.Namespace) -> int:
         verdicts.extend(vs)
         if args.spec and not _judged(vs):  # a spec the user asked for must judge something
             incomplete.append(_why_nothing(spec, vs, source, bind))
+        elif args.spec and not why:  # judged, but a signal may read a topic never recorded
+            recorded = set(source.topics())
+            for m in missing_data(spec, source, bind):
+                if m.split(" on ", 1)[-1].split(" field ")[0] not in recorded:
+                    print(f"hil check: note: spec {spec.id}: signal {m} (a topic not in "
+                          "the recording: its verdicts read it as never true)", file=sys.stderr)
         if out_dir is not None and not _write_svg(
                 args, out_dir / f"{spec.id}.svg", svg(spec, source, vs, params, bind)):
             return 2

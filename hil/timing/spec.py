@@ -13,6 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from hil.paths import fixture
+from hil.record.messages import CLOSED
+from hil.record.schemas import SCHEMAS, schema_for_topic
 from hil.timing.expr import MAX_BIT, MAX_MAGNITUDE, Expr, ExprError, is_param
 from hil.yamlio import FileError, LDict, LList, join, load_yaml_file, load_yaml_text
 
@@ -346,6 +348,7 @@ def _constants(v: _V, top: LDict) -> dict[str, Expr]:
         raw[k] = v.expr(c, k, "constants", names=set(c))
     ordered: dict[str, Expr] = {}
     state: dict[str, int] = {}
+    height: dict[str, int] = {}  # the longest chain below each name
 
     def visit(k: str, path: list[str]) -> None:
         if state.get(k) == 2:
@@ -354,10 +357,13 @@ def _constants(v: _V, top: LDict) -> dict[str, Expr]:
             cycle = " -> ".join([*path[path.index(k):], k])
             raise v.err(c.key_lines[k], f"constants.{k}",
                         f"constant depends on itself ({cycle})")
+        _depth(v, c.key_lines[k], f"constants.{k}", len(path), "constants")
         state[k] = 1
-        for n in sorted(raw[k].names):
-            if n in raw:
-                visit(n, [*path, k])
+        below = [n for n in sorted(raw[k].names) if n in raw]
+        for n in below:
+            visit(n, [*path, k])
+        height[k] = 1 + max((height[n] for n in below), default=0)
+        _depth(v, c.key_lines[k], f"constants.{k}", height[k], "constants")
         state[k] = 2
         ordered[k] = raw[k]
 
@@ -394,6 +400,7 @@ def _signals(v: _V, top: LDict, binding: dict[str, str]) -> dict[str, SignalDef]
             s.field = v.text(d, "field", where)
             if "where" in d:
                 s.where = dict(v.mapping(d["where"], d.key_lines["where"], f"{where}.where"))
+            _known_fields(v, d, where, s)
         elif kind == "function":
             fn = v.text(d, "function", where)
             if fn not in binding:
@@ -459,24 +466,53 @@ def _signals(v: _V, top: LDict, binding: dict[str, str]) -> dict[str, SignalDef]
     return out
 
 
+def _known_fields(v: _V, d: LDict, where: str, s: SignalDef) -> None:
+    """A field (or a `where:` key) a hil topic of a closed schema never carries is a typo: a
+    signal that reads it would have no data and judge nothing (hil.record.messages)."""
+    name = schema_for_topic(s.topic or "")
+    if name not in CLOSED:
+        return
+    props = SCHEMAS[name].get("properties", {})
+    for key, line in [(s.field, d.key_lines["field"])] + [
+            (k, d["where"].key_lines.get(k, d.key_lines["where"])) for k in s.where]:
+        top = str(key).split(".")[0]
+        if top not in props:
+            raise v.err(line, f"{where}.field" if key == s.field else f"{where}.where.{key}",
+                        f"{top!r}: {s.topic} ({name}) has no such field; it has "
+                        f"{', '.join(sorted(props))}")
+
+
+MAX_CHAIN = 64  # names depending on names: no real spec comes near; Python's stack would
+
+
+def _depth(v: _V, line: int, field: str, depth: int, what: str) -> None:
+    if depth >= MAX_CHAIN:
+        raise v.err(line, field, f"a chain of more than {MAX_CHAIN} {what}, each depending "
+                    "on the next: too deep to judge")
+
+
 def _no_cycles(v: _V, sigs: dict[str, SignalDef]) -> None:
     def deps(s: SignalDef) -> list[str]:
         return ([s.source] if s.source else []) + s.parts
 
     state: dict[str, int] = {}
+    height: dict[str, int] = {}
 
-    def visit(n: str) -> None:
+    def visit(n: str, depth: int) -> None:
         if state.get(n) == 2:
             return
         if state.get(n) == 1:
             raise v.err(sigs[n].line, f"signals.{n}", "signal depends on itself")
+        _depth(v, sigs[n].line, f"signals.{n}", depth, "signals")
         state[n] = 1
         for d in deps(sigs[n]):
-            visit(d)
+            visit(d, depth + 1)
+        height[n] = 1 + max((height[d] for d in deps(sigs[n])), default=0)
+        _depth(v, sigs[n].line, f"signals.{n}", height[n], "signals")
         state[n] = 2
 
     for n in sigs:
-        visit(n)
+        visit(n, 0)
 
 
 def _ref(v: _V, d: LDict, key: str, where: str, events: dict, signals) -> str:
@@ -506,8 +542,8 @@ def _event(v: _V, name: str, d: LDict, line: int, where: str, signals, events) -
     kl = d.key_lines[kind]
     if kind in ("rise", "fall", "change", "becomes", "first_true", "message"):
         sig = d[kind]
-        if sig not in signals:
-            raise v.err(kl, f"{where}.{kind}", f"unknown signal {sig!r}")
+        if not isinstance(sig, str) or sig not in signals:
+            raise v.err(kl, f"{where}.{kind}", f"unknown signal {sig!r} (a signal's name)")
         if kind == "message" and signals[sig].kind != "topic":
             raise v.err(kl, f"{where}.{kind}", f"signal {sig!r} is not read from a topic: "
                         "`message` needs a {topic: ..., field: ...} signal")
@@ -531,7 +567,7 @@ def _event(v: _V, name: str, d: LDict, line: int, where: str, signals, events) -
         if not isinstance(lst, list) or len(lst) < 2:
             raise v.err(kl, f"{where}.{kind}", "must list two or more events")
         for i, r in enumerate(lst):
-            if r not in events:
+            if not isinstance(r, str) or r not in events:
                 raise v.err(lst.item_lines[i], f"{where}.{kind}[{i}]", f"unknown event {r!r}")
         ev.refs = list(lst)
     for mod in ("after", "before"):
@@ -560,21 +596,25 @@ def _events(v: _V, top: LDict, signals) -> dict[str, EventDef]:
 
 def _event_cycles(v: _V, events: dict[str, EventDef]) -> None:
     state: dict[str, int] = {}
+    height: dict[str, int] = {}
 
-    def visit(n: str) -> None:
+    def visit(n: str, depth: int) -> None:
         if state.get(n) == 2:
             return
         if state.get(n) == 1:
             raise v.err(events[n].line, f"events.{n}", "event depends on itself")
+        _depth(v, events[n].line, f"events.{n}", depth, "events")
         state[n] = 1
         e = events[n]
-        for r in [*e.refs, e.after, e.before]:
-            if r:
-                visit(r)
+        below = [r for r in [*e.refs, e.after, e.before] if r]
+        for r in below:
+            visit(r, depth + 1)
+        height[n] = 1 + max((height[r] for r in below), default=0)
+        _depth(v, events[n].line, f"events.{n}", height[n], "events")
         state[n] = 2
 
     for n in list(events):
-        visit(n)
+        visit(n, 0)
 
 
 def _constraints(v, top, events, signals, consts, spec_for_each) -> list[ConstraintDef]:
@@ -630,7 +670,7 @@ def _constraints(v, top, events, signals, consts, spec_for_each) -> list[Constra
                 raise v.err(line, where, "forbid needs `from:` and a `window:` or `until:`")
         else:
             c.target = d[kind]
-            if c.target not in signals:
+            if not isinstance(c.target, str) or c.target not in signals:
                 raise v.err(d.key_lines[kind], f"{where}.{kind}", f"unknown signal {c.target!r}")
             if "at" not in d and not ("from" in d and ("window" in d or "until" in d)):
                 raise v.err(line, where, f"{kind} needs `at:` or `from:` with `window:`/`until:`")

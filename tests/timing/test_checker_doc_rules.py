@@ -104,8 +104,8 @@ id: held
 title: an alarm code present for 10 ms
 source: "test"
 signals:
-  code: {topic: "/drive/{drive}/state", field: code, held: 10}
-  raw: {topic: "/drive/{drive}/state", field: code}
+  code: {topic: "/drive/{drive}/state", field: statusword, held: 10}
+  raw: {topic: "/drive/{drive}/state", field: statusword}
   code2: {signal: raw, held: 10}
 events:
   a: {rise: code}
@@ -117,7 +117,7 @@ constraints:
 def test_held_counts_from_when_the_value_became_true_not_from_its_last_change():
     """`held: D`: "true only once the value has been true for D ms". A code that goes 3, 4,
     5, 6 (true all along) from 5 ms has been true for 10 ms at 15 ms."""
-    src = MemorySource({STATE: [(round(t * MS), {"code": v}) for t, v in
+    src = MemorySource({STATE: [(round(t * MS), {"statusword": v}) for t, v in
                                 [(0, 0), (5, 3), (8, 4), (12, 5), (20, 6), (40, 0)]]})
     ctx = context(loads_spec(HELD), src, binding=BIND)
     for name in ("code", "code2"):
@@ -127,7 +127,7 @@ def test_held_counts_from_when_the_value_became_true_not_from_its_last_change():
 
 
 def test_held_is_not_true_when_the_value_drops_before_d():
-    src = MemorySource({STATE: [(round(t * MS), {"code": v}) for t, v in
+    src = MemorySource({STATE: [(round(t * MS), {"statusword": v}) for t, v in
                                 [(0, 0), (5, 3), (9, 4), (14, 0), (30, 0)]]})
     tr = context(loads_spec(HELD), src, binding=BIND).trace("code")
     assert list(zip(tr.times, tr.values, strict=True)) == [(0, False)]

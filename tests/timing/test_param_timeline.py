@@ -48,9 +48,9 @@ id: beyond
 title: the feedback passes P5.008 10 ms after the start
 source: "P5.008 L11191"
 signals:
-  pos: {topic: "/drive/{drive}/state", field: pos}
+  pos: {topic: "/drive/{drive}/state", field: position_puu}
   beyond: {signal: pos, above: P5.008}
-  go: {topic: "/drive/{drive}/state", field: go}
+  go: {topic: "/drive/{drive}/state", field: servo_on}
 events:
   start: {rise: go}
   past: {first_true: beyond, after: start}
@@ -66,8 +66,9 @@ def test_a_threshold_on_a_parameter_is_judged_after_an_early_change():
     """`above: P5.008` is evaluated at every parameter change, the first one included: with
     the subprocess bench's snapshot after an early change, P5.008 was "neither recorded nor
     given" there."""
-    state = [(0, {"pos": 0, "go": False}), (MS, {"pos": 0, "go": True}),
-             (11 * MS, {"pos": 200000, "go": True})]
+    state = [(0, {"position_puu": 0, "servo_on": False}),
+             (MS, {"position_puu": 0, "servo_on": True}),
+             (11 * MS, {"position_puu": 200000, "servo_on": True})]
     src = MemorySource({PARAMS: [(0, {"values": {"P5.011": 1}}),
                                  (MS, {"snapshot": True, "values": {"P5.008": 100000}})],
                         "/drive/drive1/state": state})
@@ -100,7 +101,7 @@ def test_a_threshold_that_changes_mid_recording_applies_from_each_change_on():
     assert want == [(0, False), (5 * MS, True), (8 * MS, False), (9 * MS, True),
                     (13 * MS, False)]
     for order in (sorted(pos.items()), sorted(pos.items(), reverse=True)):
-        state = [(t, {"pos": p, "go": True}) for t, p in order]
+        state = [(t, {"position_puu": p, "servo_on": True}) for t, p in order]
         src = MemorySource({PARAMS: [(t, {"values": {"P5.008": v}}) for t, v in writes],
                             "/drive/drive1/state": state})
         tr = context(loads_spec(BEYOND), src, binding={"drive": "drive1"}).trace("beyond")
