@@ -76,15 +76,26 @@ class NmtErrorControl:
         return int(self.drive.alarms.error_register) & 0xFF
 
     def _emcy(self, ev: AlarmChanged) -> None:
-        """EMCY (L17061-L17069): code, 1001h, Delta alarm code in bytes 3-4 (little-endian)."""
+        """EMCY (L17061-L17069): code, 1001h, Delta alarm code in bytes 3-4 (little-endian).
+        One alarm at a time (L17063, option `emcy_priority`): with "class" the alarm 603Fh
+        shows, sent when it changes, 0000h once no alarm is left."""
         cob = self._values.get((0x1014, 0), 0x80 + self.node_id)
         if cob & 0x80000000 or self.state not in ("PRE-OPERATIONAL", "OPERATIONAL"):
             return
-        code = ev.emcy_code if ev.active else 0
+        alarms = self.drive.alarms
+        opts = getattr(self.drive, "options", None)  # a drive without the option: "latest"
+        if getattr(opts, "emcy_priority", "latest") == "class":
+            shown = alarms.emcy_alarm
+            if shown == self._emcy_shown:
+                return  # a lower (or equal) priority alarm, or another one's clear
+            self._emcy_shown = shown
+            code, name = (alarms.table.spec(shown).emcy, shown) if shown else (0, "")
+        else:
+            code, name = (ev.emcy_code, ev.code) if ev.active else (0, "")
         alarm = 0
-        if ev.active and ev.code.upper().startswith("AL"):
+        if name.upper().startswith("AL"):
             try:
-                alarm = int(ev.code[2:], 16)
+                alarm = int(name[2:], 16)
             except ValueError:
                 alarm = 0
         data = bytes([code & 0xFF, code >> 8 & 0xFF, self._error_register()])

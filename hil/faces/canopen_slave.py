@@ -100,6 +100,7 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
         self.node_id = 0
         self.bitrate = 0
         self.state = "INITIALISING"
+        self._emcy_shown: str | None = None
         self._full_path_cobs: frozenset[int] | None = None  # see _passes_by
         self.stats = {"rx": 0, "tx": 0, "sdo_aborts": 0, "pdo_errors": 0, "tx_errors": 0}
         # anything no CiA 301 rule answers (a model bug, a failing callback): counted, logged
@@ -198,6 +199,7 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
     def _reset(self, kind: str) -> None:
         """Power-on / reset node / reset communication: reload 1xxx, boot-up, PRE-OP."""
         self.state = "INITIALISING"
+        self._emcy_shown = None  # the alarm the last EMCY carried (L17063)
         if self._fixed_node_id is not None:
             self.node_id = self._fixed_node_id
         else:

@@ -71,6 +71,17 @@ class AlarmManager:
         return self._active[-1] if self._active else None
 
     @property
+    def emcy_alarm(self) -> str | None:
+        """The alarm 603Fh and the EMCY object carry (L17063): an ALM-class alarm before a
+        WARN; of one class the first raised (only a higher priority overrides)."""
+        best, rank = None, 0
+        for code in self._active:
+            r = 2 if self.table.spec(code).kind == "ALM" else 1
+            if r > rank:
+                best, rank = code, r
+        return best
+
+    @property
     def servo_off_required(self) -> bool:
         return any(self.table.spec(c).servo_off for c in self._active)
 

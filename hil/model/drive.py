@@ -688,8 +688,8 @@ class Drive:
         self.cia402.set_voltage(self._main_circuit_in())
         specs = [al.table.spec(c) for c in al.active]
         fault = any(sp.kind == "ALM" and sp.servo_off for sp in specs)
-        cur = al.current
-        self.cia402.error_code = al.table.spec(cur).emcy if cur else 0  # 603Fh
+        cur = al.emcy_alarm if self.options.emcy_priority == "class" else al.current
+        self.cia402.error_code = al.table.spec(cur).emcy if cur else 0  # 603Fh (L17063)
         self.cia402.set_fault(fault)
         self.cia402.set_servo_blocked(al.servo_off_required and not fault)  # AL013 (L18326)
         self.cia402.set_warning(al.warn)

@@ -115,6 +115,11 @@ class ModelOptions:
     # clears (DI.ARST / P0.001 = 0) plus the "NMT or 6040h" alarms; "listed" = only the alarms
     # whose row names 0x6040 (AL180 ..., AL500), so AL020 ("異警重置" only, L19602) stays.
     fault_reset_clears: str = "alarm_reset"
+    # 603Fh and the EMCY object carry one alarm (L17063): "class" = the highest-priority one
+    # (ALM over WARN; of one class the first raised: only a higher priority overrides, ⚠ the
+    # manual ranks no further), an EMCY sent when that alarm changes and 0000h when none is
+    # left; "latest" = the alarm raised last, an EMCY per alarm raised and 0000h per clear.
+    emcy_priority: str = "class"
     # AL185 "Rx/Tx error counter > 128" (L20027-20031): an error frame adds this to the
     # receive error counter, a valid frame subtracts 1 (ISO 11898-1 fault confinement).
     can_error_frame_weight: int = 8
@@ -229,6 +234,7 @@ _CHOICES: dict[str, tuple[str, ...]] = {
     "fault_reset_clears": ("alarm_reset", "listed"),
     "pulse_interface": ("line_driver", "open_collector"),
     "pt_gear_check": ("refuse", "off"),
+    "emcy_priority": ("class", "latest"),
     "ip_smoothing": ("manual", "off"),
 }
 # Numeric options that may be negative (volts on V_REF / T_REF); every other is >= 0

@@ -168,3 +168,45 @@ def test_al020_rearm_in_a_drive_process_counts_from_the_reset(tmp_path) -> None:
             time.sleep(0.02)
         assert active()
         assert 0.9 <= time.monotonic() - t_reset <= 3.0
+
+
+def _emcy_code(frame: bytes) -> tuple[int, int]:
+    return int.from_bytes(frame[:2], "little"), int.from_bytes(frame[3:5], "little")
+
+
+@pytest.mark.parametrize("priority", ["class", "latest"])
+def test_emcy_carries_one_alarm_a_higher_priority_one_overrides(priority: str) -> None:
+    """"緊急物件每次僅能傳輸一個異警。當有優先權更高的異警時 ... 優先權較高的異警會覆蓋前次"
+    (L17063): with AL011 (ALM) active a later AL020 (WARN) neither replaces it in 603Fh nor
+    sends an EMCY; clearing AL020 sends nothing, clearing AL011 then announces AL020, and
+    0000h comes once none is left. `emcy_priority: latest` keeps the old reading."""
+    r = Rig(emcy_priority=priority)
+    try:
+        r.start()
+        r.run(5)
+        r.emcys()
+        r.drive.alarms.raise_alarm("AL011")
+        r.run(2)
+        assert [_emcy_code(f) for f in r.emcys()] == [(0x7305, 0x011)]
+        r.drive.alarms.raise_alarm("AL020")  # WARN, lower priority
+        r.run(2)
+        sent = [_emcy_code(f) for f in r.emcys()]
+        if priority == "latest":
+            assert sent == [(0x7510, 0x020)] and upload(r, 0x603F, 0) == 0x7510
+            return
+        assert sent == [] and upload(r, 0x603F, 0) == 0x7305
+        r.drive.alarms.clear("AL011")
+        r.run(2)
+        assert [_emcy_code(f) for f in r.emcys()] == [(0x7510, 0x020)]
+        assert upload(r, 0x603F, 0) == 0x7510
+        r.drive.alarms.raise_alarm("AL009")  # ALM: higher, overrides
+        r.run(2)
+        assert [_emcy_code(f) for f in r.emcys()][-1][1] == 0x009
+        r.drive.alarms.clear("AL020")  # the lower one goes: nothing to announce
+        r.run(2)
+        assert r.emcys() == []
+        r.drive.alarms.clear("AL009")
+        r.run(2)
+        assert [_emcy_code(f) for f in r.emcys()] == [(0, 0)]
+    finally:
+        r.close()
