@@ -700,14 +700,18 @@ def _gnum_wired(d: DriveCore) -> bool:
 def gear_problem(d: DriveCore) -> str | None:
     """AL045 (L19699-19703): an e-gear ratio outside 1/4 ~ 262144 found at power-up, in any
     mode (Nx: P1.044, and P2.060-P2.062 when GNUM0/GNUM1 can select them, L9850)."""
-    p = d.params
-    m = p.get("P1.045")
-    nums = [p.get("P1.044")] + ([p.get(n) for n in ("P2.060", "P2.061", "P2.062")]
-                                if _gnum_wired(d) else [])
-    for nx in nums:
+    m = d.params.get("P1.045")
+    for nx in _numerators(d):
         if not m or not GEAR_MIN < nx / m < GEAR_MAX:
             return f"{nx}/{m}"
     return None
+
+
+def _numerators(d: DriveCore) -> list[int]:
+    """The Nx a ratio may use: P1.044, and P2.060-P2.062 when GNUM0/GNUM1 can select them."""
+    p = d.params
+    return [p.get("P1.044")] + ([p.get(n) for n in ("P2.060", "P2.061", "P2.062")]
+                                if _gnum_wired(d) else [])
 
 
 def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
@@ -717,8 +721,7 @@ def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
             return
         p = d.params
         m = value if name == "P1.045" else p.get("P1.045")
-        nums = [value] if name != "P1.045" else [p.get("P1.044")] + (
-            [p.get(n) for n in ("P2.060", "P2.061", "P2.062")] if _gnum_wired(d) else [])
+        nums = [value] if name != "P1.045" else _numerators(d)
         for nx in nums:
             if not GEAR_MIN < nx / m < GEAR_MAX:
                 other = "numerator" if name == "P1.045" else "denominator P1.045"
