@@ -26,6 +26,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+# the commands that read recordings whole, a message at a time (`hil check` has its own bar)
+READERS = frozenset({"report", "diff", "inspect", "export"})
+
+
 def _load(name: str):
     return importlib.import_module(COMMANDS[name][0])
 
@@ -55,6 +59,11 @@ def main(argv: list[str] | None = None) -> int:
     if not args.command:
         parser.print_help()
         return 2
+    reads = args.command in READERS
+    if reads:  # a large recording shows a progress bar on a terminal
+        from hil.record.reader import progress_on_terminal
+
+        progress_on_terminal(f"hil {args.command}: reading the recording")
     try:
         code = int(_load(args.command).main(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
@@ -69,6 +78,9 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141  # 128 + SIGPIPE, what a shell reports for a command killed by it
+    finally:
+        if reads:
+            progress_on_terminal(None)  # a caller in this process (a test) reads bare again
 
 
 if __name__ == "__main__":

@@ -28,6 +28,16 @@ def decode(data: bytes) -> Any:
         return {"error": f"undecodable message: {exc}", "raw": bytes(data).hex()}
 
 
+_progress_text: str | None = None
+
+
+def progress_on_terminal(text: str | None) -> None:
+    """From now on in this process, `Recording.stream` of a large file shows a progress bar
+    saying `text` on a terminal (a command's main sets it; None: never)."""
+    global _progress_text
+    _progress_text = text
+
+
 class RecordingError(Exception):
     """A file that cannot be read as a recording (message names the file and the reason)."""
 
@@ -138,7 +148,16 @@ class Recording:
                 failed.append(exc)  # `scan` stops here; raised again below, as it was
                 raise
 
-        rec = cls._scan_file(path, sink, progress)
+        bar = None
+        if progress is None and _progress_text is not None:  # a CLI's reading, on a terminal
+            from hil.record.progress import ReadProgress
+
+            progress = bar = ReadProgress(str(path), _progress_text)
+        try:
+            rec = cls._scan_file(path, sink, progress)
+        finally:
+            if bar is not None:
+                bar.close()
         if failed:
             raise failed[0]
         sc = rec._scan

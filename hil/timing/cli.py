@@ -24,11 +24,11 @@ import json
 import math
 import re
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
 from hil.record import topics
+from hil.record.progress import ReadProgress
 from hil.record.reader import RecordingError
 from hil.record.reader import incomplete as reader_incomplete
 from hil.record.reader import not_hil as reader_not_hil
@@ -82,7 +82,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print verdicts as JSON")
     parser.add_argument("--whole", action="store_true",
                         help="check each spec once over the whole recording, even for a plan "
-                             "recording (default there: re-check every check_timing step as run)")
+                             "recording (default there: re-check every check_timing step as "
+                             "run; with --spec IDs the plan checked, only those steps; with a "
+                             "spec file or a spec the plan did not check, the whole recording)")
     parser.add_argument("--svg", metavar="DIR", help="also write one SVG diagram per spec")
     parser.add_argument("-v", "--verbose", action="store_true",
                         help="also list verdicts that are not applicable (skipped)")
@@ -293,59 +295,6 @@ def print_json(verdicts: list[Verdict]) -> None:
     out.write("\n]\n" if verdicts else "]\n")
 
 
-#: files at least this large show a progress bar while read (on a terminal)
-PROGRESS_MIN_BYTES = 32 * 1024 * 1024
-
-
-class ReadProgress:
-    """`hil check` reading a long recording: a transient bar on stderr when it is a terminal
-    and the file is large (an hour of a busy bus is about 1 GB), nothing otherwise."""
-
-    def __init__(self, path: str, text: str = "reading", stream: Any = None) -> None:
-        self.stream = stream or sys.stderr
-        self._text = text  # what is being read
-        try:
-            big = Path(path).stat().st_size >= PROGRESS_MIN_BYTES
-        except OSError:
-            big = False
-        self.on = big and self.stream.isatty()
-        self._bar: Any = None
-        self._task: Any = None
-        self._last = 0.0
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.on:
-            return
-        now = time.monotonic()
-        if now - self._last < 0.2 and done < total:
-            return
-        self._last = now
-        self._task_of(total)
-        self._bar.update(self._task, completed=done, total=total)
-
-    def _task_of(self, total: int) -> None:
-        if self._bar is None:
-            from rich.console import Console
-            from rich.progress import (
-                BarColumn,
-                DownloadColumn,
-                Progress,
-                TextColumn,
-                TimeRemainingColumn,
-            )
-
-            self._bar = Progress(TextColumn("{task.description}"), BarColumn(),
-                                 DownloadColumn(), TimeRemainingColumn(),
-                                 console=Console(file=self.stream), transient=True)
-            self._bar.start()
-            self._task = self._bar.add_task(self._text, total=total)
-
-    def close(self) -> None:
-        if self._bar is not None:
-            self._bar.stop()
-            self._bar = None
-
-
 def _read(args: argparse.Namespace, what: str, **kw: Any) -> RecordingSource | int:
     """The recording as `RecordingSource(**kw)`, with a progress bar saying `what` on a
     terminal; the exit code (said on stderr) when it cannot be read."""
@@ -457,7 +406,11 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)
         return EXIT_USAGE
     rec_specs, rec_binding = recorded_specs(source.meta)
-    runs = [] if (args.spec or args.whole) else recorded_checks(source)
+    runs = [] if args.whole else recorded_checks(source)
+    if runs and args.spec:  # the plan's own checks of these spec ids, as they were made
+        ids = set(args.spec)
+        runs = [r for r in runs if r["spec"] in ids] \
+            if ids <= {r["spec"] for r in runs} else []  # a file or another spec: whole
     if runs:  # a plan run: re-check each check step as it was made, with no bench
         return _as_run(args, runs, binding, params, consts, res)
     try:

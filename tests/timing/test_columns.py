@@ -230,7 +230,7 @@ def test_a_damaged_recording_judges_alike_as_columns(tmp_path, damage: str) -> N
 def test_reading_progress_shows_on_a_terminal_for_a_large_file_only(tmp_path) -> None:
     import io
 
-    from hil.timing import cli
+    from hil.record import progress as cli
 
     path = tmp_path / "mix.mcap"
     _bench_like(path, 2)
@@ -311,3 +311,31 @@ def test_a_field_that_changes_at_every_message_keeps_no_run_starts() -> None:
         range(1000))
     assert table.samples("v", None, runs=False) == samples(
         MemorySource({"/x": msgs[:1000]}), "/x", "v")
+
+
+def test_every_reading_command_can_show_the_bar(tmp_path, monkeypatch) -> None:
+    """`hil report`, `diff`, `inspect` and `export` read through `Recording.stream`: once a
+    command has turned the bar on, a large file shows it on a terminal (an outside audit
+    found only `hil run` and `hil check` with progress)."""
+    import io
+
+    from hil.record import progress, reader
+    from hil.record.reader import Recording
+
+    class Tty(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    path = tmp_path / "mix.mcap"
+    _bench_like(path, 2)
+    tty = Tty()
+    monkeypatch.setattr("sys.stderr", tty)
+    monkeypatch.setattr(progress, "PROGRESS_MIN_BYTES", 1)
+    Recording.stream(path, None, lambda *_m: None)
+    assert tty.getvalue() == ""  # off unless a command turns it on
+    reader.progress_on_terminal("hil inspect: reading")
+    try:
+        Recording.stream(path, None, lambda *_m: None)
+    finally:
+        reader.progress_on_terminal(None)
+    assert "hil inspect: reading" in tty.getvalue()

@@ -92,3 +92,28 @@ def test_hil_check_bad_input(tmp_path, capsys):
     assert run([str(path), "--spec", "no_such_spec"]) == 2
     assert run([str(path), "--param", "P1.042"]) == 2
     assert "no shipped spec" in capsys.readouterr().err
+
+
+@pytest.mark.virtual_time
+def test_spec_ids_the_plan_checked_are_re_judged_as_the_plan_judged_them(tmp_path, capsys):
+    """An outside audit: `hil check REC --spec homing_pr` on a passing homing_pr recording gave
+    7 fails (the spec over the whole file); a spec the plan checked is re-judged at its steps,
+    as the plan did, and --whole still judges it once over the whole file."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import load_plan
+    from hil.paths import plans_dir
+    from hil.plan.runner import run_plan
+
+    res = run_plan(load_plan(plans_dir() / "homing_pr.yaml"), load_bench(None), tmp_path)
+    assert res.passed
+
+    def verdicts(*extra: str) -> list[tuple]:
+        capsys.readouterr()
+        run([str(res.recording), "--json", *extra])
+        out = json.loads(capsys.readouterr().out)
+        return sorted((v["spec"], v["constraint"], v["status"], v["occurrence"]) for v in out)
+
+    as_run = [v for v in verdicts() if v[0] == "homing_pr"]
+    assert as_run and not [v for v in as_run if v[2] == "fail"]
+    assert verdicts("--spec", "homing_pr") == as_run
+    assert [v for v in verdicts("--spec", "homing_pr", "--whole") if v[2] == "fail"]
