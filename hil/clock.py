@@ -36,6 +36,18 @@ CLOCKS = ("virtual", "real")
 SETTLE_LIMIT_NS = 100_000_000
 
 
+# How long (wall s) a thread waits for the virtual clock while another holds it. An event
+# ends in microseconds and a cancelled wait at its next event, so only a step hung inside an
+# event holds it this long; then the clock is "hung" and every other thread fails at once
+# (the safe state records it, the recording is closed) instead of blocking for ever.
+HELD_WAIT_S = 10.0
+
+
+class ClockHung(RuntimeError):
+    """The virtual clock is held by a thread that does not let go (a step hung inside a clock
+    event): nothing else can run on it."""
+
+
 class Cancelled(Exception):
     """A wait ended because its step was cancelled (step timeout, Ctrl-C)."""
 
@@ -104,11 +116,15 @@ class VirtualClock:
         self._heap: list[Event] = []
         self._seq = itertools.count()
         self._lock = threading.RLock()
+        self.hung = False  # a thread held the clock past HELD_WAIT_S: see ClockHung
         self._running = 0  # > 0 while an event runs (events must not wait)
         self._watch: dict[int, tuple[threading.Event | None, int | None]] = {}
         self.media: dict[str, Any] = {}
         self.hold = 0  # > 0 inside `batch()`: settling waits for its end
         self.held: list[Callable[[], bool]] = []
+
+    def _held(self) -> _Held:
+        return _Held(self)
 
     # -- reading -------------------------------------------------------------------------
     def time_ns(self) -> int:
@@ -128,7 +144,7 @@ class VirtualClock:
     # -- scheduling ----------------------------------------------------------------------
     def at(self, t: int, fn: Callable[[], Any]) -> Event:
         """Run `fn()` at clock time `t` (never before now)."""
-        with self._lock:
+        with self._held():
             ev = Event(max(int(t), self._now), next(self._seq), fn)
             heapq.heappush(self._heap, ev)
             return ev
@@ -137,7 +153,7 @@ class VirtualClock:
         return self.at(self._now + int(dt), fn)
 
     def next_time(self) -> int | None:
-        with self._lock:
+        with self._held():
             heap = self._heap
             while heap and heap[0].cancelled:
                 heapq.heappop(heap)
@@ -164,12 +180,14 @@ class VirtualClock:
         """Fire the events due up to `t` in order, stopping early once `pred()` holds;
         returns whether it holds (True without `pred`). Time ends at `t` unless stopped.
         `watched=False`: no cancel or deadline (frames already on the wire still arrive)."""
+        if self.hung:
+            raise ClockHung("the virtual clock is held by a step hung inside a clock event")
         if self._running:
             raise RuntimeError("virtual clock: a wait inside a clock event (it would reorder "
                                "time); events must only schedule")
         cancel, deadline = (self._watch.get(threading.get_ident(), (None, None)) if watched
                             else (None, None))
-        with self._lock:
+        with self._held():
             while True:
                 if pred is not None and pred():
                     return True
@@ -213,12 +231,32 @@ class VirtualClock:
             self.held.append(busy)
             return
         end = self._now + SETTLE_LIMIT_NS  # an overloaded bus is never idle: give up then
-        with self._lock:  # not cancellable: what is on the wire arrives (one SDO at a time)
+        with self._held():  # not cancellable: what is on the wire arrives (one SDO at a time)
             while busy():
                 nxt = self.next_time()
                 if nxt is None or nxt > end:
                     return
                 self.run_until(nxt, watched=False)
+
+
+class _Held:
+    """`with clk._held():` the clock's lock, waited for at most HELD_WAIT_S (ClockHung)."""
+
+    __slots__ = ("clk",)
+
+    def __init__(self, clk: VirtualClock) -> None:
+        self.clk = clk
+
+    def __enter__(self) -> None:
+        clk = self.clk
+        if clk._lock.acquire(timeout=0 if clk.hung else HELD_WAIT_S):
+            return
+        clk.hung = True
+        raise ClockHung(f"the virtual clock has been held for more than {HELD_WAIT_S:g} s of "
+                        "wall time by another thread (a step hung inside a clock event)")
+
+    def __exit__(self, *exc: object) -> None:
+        self.clk._lock.release()
 
 
 REAL = RealClock()

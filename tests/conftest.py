@@ -47,6 +47,9 @@ def pytest_collection_modifyitems(config, items):
         return
     for item in items:
         if item.get_closest_marker("virtual_time"):
-            continue  # deterministic: a failure is a failure
+            # deterministic: a failure is a failure, even under `pytest --reruns N` (the
+            # marker overrides the command line in pytest-rerunfailures)
+            item.add_marker(pytest.mark.flaky(reruns=0))
+            continue
         if item.get_closest_marker("integration") and not item.get_closest_marker("flaky"):
             item.add_marker(pytest.mark.flaky(reruns=INTEGRATION_RERUNS, reruns_delay=1))

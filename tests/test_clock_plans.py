@@ -92,6 +92,44 @@ def test_the_wall_clock_watchdog_stops_a_step_that_never_waits(tmp_path, monkeyp
         stop.set()
 
 
+def test_a_step_hung_inside_a_clock_event_still_ends_the_plan_with_a_readable_recording(
+        tmp_path, monkeypatch) -> None:
+    """An outside audit: a clock event that never returns held the clock's lock, so after the
+    watchdog the safe state waited for it for ever and the recording was never closed. The
+    other threads now give up on the clock after HELD_WAIT_S: the safe state is recorded as
+    not confirmed, with why, the plan ends as an error and its recording is readable."""
+    import threading
+
+    from hil.plan import context
+    from hil.plan.kinds.waits import Wait
+    from hil.record.reader import Recording
+    from hil.units import MS
+
+    monkeypatch.setattr(context, "WATCHDOG_GRACE_NS", 300 * MS)
+    monkeypatch.setattr(clock, "HELD_WAIT_S", 0.5)
+    release = threading.Event()
+
+    def hang(self, ctx, step, d):
+        def forever() -> None:  # a model bug: an event that loops (released at the end)
+            while not release.is_set():
+                time.sleep(0.001)
+        clock.call_later(0.001, forever)
+        clock.sleep(0.5)
+
+    monkeypatch.setattr(Wait, "run", hang)
+    plan = loads_plan("name: wd\nsteps:\n  - state: OPERATION ENABLED\n  - wait: 1s\n"
+                      "    timeout: 1s\n", "wd.yaml")
+    try:
+        res = run_plan(plan, load_bench(None), tmp_path, reports=False)
+    finally:
+        release.set()
+    assert res.status == "error" and "wall-clock watchdog" in res.steps[1].message
+    assert res.safe is not None and not res.safe.ok
+    assert any("ClockHung" in a["detail"] for a in res.safe.actions if not a["ok"])
+    rec = Recording.open(res.recording)
+    assert not rec.truncated and "hil.close" in rec.metadata()
+
+
 def test_clock_virtual_is_refused_where_the_bench_cannot(tmp_path) -> None:
     zenoh = load_bench(fixture("benches", "virtual-zenoh.yaml"))
     assert zenoh.clock == "real"

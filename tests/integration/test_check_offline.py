@@ -14,7 +14,8 @@ from hil.plan.runner import run_plan
 from hil.record import topics
 from hil.record.reader import Recording
 
-pytestmark = pytest.mark.integration
+# the built-in virtual bench in virtual time: deterministic, never rerun (conftest.py)
+pytestmark = [pytest.mark.integration, pytest.mark.virtual_time]
 
 
 @pytest.mark.parametrize("plan_name", ["servo_on_off_brake", "sto_both", "emgs",

@@ -13,7 +13,8 @@ from hil.bench.bench import load_bench
 from hil.plan.plan import find_plans, load_plan
 from hil.plan.runner import run_plan
 
-pytestmark = pytest.mark.integration
+# the built-in virtual bench in virtual time: deterministic, never rerun (conftest.py)
+pytestmark = [pytest.mark.integration, pytest.mark.virtual_time]
 
 
 def test_one_recording_with_every_channel(tmp_path) -> None:

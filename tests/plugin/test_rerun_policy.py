@@ -57,6 +57,15 @@ def test_integration_tests_are_rerun_once_and_unit_tests_never(probe, monkeypatc
                               "*assert 1 > 1*", "PASSED *test_fails_once"])
 
 
+def test_virtual_time_tests_are_not_rerun_even_with_reruns_on_the_command_line(probe,
+                                                                               monkeypatch):
+    """An outside audit: `pytest --reruns 2` reran a virtual-time test."""
+    monkeypatch.delenv("HIL_BENCH", raising=False)
+    res = probe.runpytest("-p", "no:cacheprovider", "-ra", "--reruns", "2",
+                          "-k", "virtual_time")
+    assert res.parseoutcomes() == {"failed": 1, "deselected": 3}
+
+
 def test_nothing_is_rerun_against_a_bench_file(probe, monkeypatch):
     monkeypatch.setenv("HIL_BENCH", "my-bench.yaml")
     res = probe.runpytest("-p", "no:cacheprovider")

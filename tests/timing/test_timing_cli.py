@@ -100,8 +100,8 @@ def test_spec_ids_the_plan_checked_are_re_judged_as_the_plan_judged_them(tmp_pat
     7 fails (the spec over the whole file); a spec the plan checked is re-judged at its steps,
     as the plan did, and --whole still judges it once over the whole file."""
     from hil.bench.bench import load_bench
-    from hil.plan.plan import load_plan
     from hil.paths import plans_dir
+    from hil.plan.plan import load_plan
     from hil.plan.runner import run_plan
 
     res = run_plan(load_plan(plans_dir() / "homing_pr.yaml"), load_bench(None), tmp_path)
