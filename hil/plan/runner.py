@@ -438,6 +438,11 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
             r.status, r.message = ERROR, str(e)
         except Exception as e:
             r.status, r.message = ERROR, f"{type(e).__name__}: {e}"
+        except KeyboardInterrupt:  # this step ran and was cut: it ends on the record too
+            r.status, r.message = ERROR, "interrupted (Ctrl-C / SIGTERM) while it ran"
+            r.duration_ns = clock.monotonic_ns() - t0
+            events.emit(StepEnded(plan, s, r, d.name, rec))
+            raise
         r.duration_ns = clock.monotonic_ns() - t0
         events.emit(StepEnded(plan, s, r, d.name, rec))
         ok = r.status == PASS or (r.status == INCONCLUSIVE and allow_inconclusive)

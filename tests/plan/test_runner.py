@@ -7,6 +7,7 @@ import io
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import pytest
 from fakes import FAKE_BENCH, fake_session_factory
 
 from hil.bench.bench import loads_bench
@@ -150,3 +151,32 @@ def test_a_plan_only_inconclusive_says_so_and_a_failure_still_wins(tmp_path):
     res = run_plans([plan], bench, tmp_path / "b", quiet=True,
                     session_factory=fake_session_factory(tmp_path))[0]
     assert res.status == "fail"
+
+
+def test_a_step_interrupted_while_it_ran_ends_as_an_error_on_the_record(tmp_path, monkeypatch):
+    """An outside audit: the step Ctrl-C cut was recorded with a start and then as "skipped /
+    not run: interrupted" although it had run 246 s; it ends as an error saying so."""
+    from hil import clock
+    from hil.bench.bench import load_bench
+    from hil.plan.kinds.waits import Wait
+    from hil.plan.plan import loads_plan
+    from hil.plan.runner import run_plan
+    from hil.record import topics
+    from hil.record.reader import Recording
+
+    def cut(self, ctx, step, d):
+        clock.sleep(0.1)
+        raise KeyboardInterrupt("signal 2")
+
+    monkeypatch.setattr(Wait, "run", cut)
+    plan = loads_plan("name: p\nsteps:\n  - wait: 1s\n  - wait: 1s\n", "p.yaml")
+    with pytest.raises(KeyboardInterrupt) as ei:
+        run_plan(plan, load_bench(None), tmp_path, reports=False)
+    res = ei.value.plan_result
+    assert res.status == "aborted"
+    assert res.steps[0].status == "error" and "interrupted" in res.steps[0].message
+    assert res.steps[1].status == "skipped" and res.steps[1].message == "not run: interrupted"
+    ends = [m for *_x, m in Recording.open(res.recording).messages([topics.PLAN_STEPS])
+            if m.get("event") == "end"]
+    assert [(m["index"], m["status"]) for m in ends if m.get("index", -1) >= 0] == [
+        (0, "error"), (1, "skipped")]
