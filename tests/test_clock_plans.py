@@ -81,13 +81,19 @@ def test_the_wall_clock_watchdog_stops_a_step_that_never_waits(tmp_path, monkeyp
     from hil.units import MS
 
     monkeypatch.setattr(context, "WATCHDOG_GRACE_NS", 200 * MS)
+    monkeypatch.setattr(context, "WATCHDOG_FACTOR", 3)  # 300 ms: the grace is longer
     cancel = __import__("threading").Event()
     stop = __import__("threading").Event()
     with clock.use(clock.VirtualClock()):
         t0 = time.monotonic()
         with pytest.raises(TimeoutError, match="wall-clock watchdog"):
             StepThread().run(lambda: stop.wait(5), 100 * MS, cancel)
-        assert time.monotonic() - t0 < 2
+        assert 0.3 <= time.monotonic() - t0 < 2  # the grace, not 3 x the timeout
+        t0 = time.monotonic()
+        cancel.clear()
+        with pytest.raises(TimeoutError, match="wall-clock watchdog"):  # 3 x 200 ms > 400 ms
+            StepThread().run(lambda: stop.wait(5), 200 * MS, cancel)
+        assert 0.6 <= time.monotonic() - t0 < 2
         assert cancel.is_set()
         stop.set()
 
@@ -106,6 +112,7 @@ def test_a_step_hung_inside_a_clock_event_still_ends_the_plan_with_a_readable_re
     from hil.units import MS
 
     monkeypatch.setattr(context, "WATCHDOG_GRACE_NS", 300 * MS)
+    monkeypatch.setattr(context, "WATCHDOG_FACTOR", 1)
     monkeypatch.setattr(clock, "HELD_WAIT_S", 0.5)
     release = threading.Event()
 
