@@ -279,6 +279,7 @@ class Cia402:
         self._homing_active = False
         self._hm_attained = False
         self._hm_error = False
+        self._fe_latched = False  # PP bit 13: the following error AL009 came from, until reset
         self._qs_disable = False  # QUICK STOP ACTIVE ends in SWITCH ON DISABLED
         self._off_after_stop = False  # 605Ch = 1: ramp, then servo off
         self._tr_since: int | None = None
@@ -403,6 +404,13 @@ class Cia402:
         605Bh 1 = dynamic brake -> 0 (L18356-18358, L8323-8327)."""
         return 0 if self._v[(0x605B, 0)] == 1 else 1
 
+    def latch_following_error(self) -> None:
+        """AL009 from |60F4h| > 6065h in PP: statusword bit 13 (L18338) stays set with the
+        alarm until a fault reset (or a mode change), so a master polling after the servo
+        went off still reads why; the manual does not say how long it shows (⚠)."""
+        if self._mode == PP:
+            self._fe_latched = True
+
     @property
     def following_error_exceeded(self) -> bool:
         """|60F4h| > 6065h (AL009 in position modes, L18452)."""
@@ -433,7 +441,7 @@ class Cia402:
         if mode == PP:
             if self._ack:
                 sw |= 0x1000
-            if self.following_error_exceeded:
+            if self._fe_latched or self.following_error_exceeded:
                 sw |= 0x2000
         elif mode == HM:
             if self._hm_attained:
@@ -592,6 +600,7 @@ class Cia402:
             )
         self._leave_mode()
         self._mode = value
+        self._fe_latched = False
         if enabled:
             self._enter_mode(change=True)
 
@@ -670,6 +679,7 @@ class Cia402:
         ok = hook() if hook is not None else not self._fault
         if ok:
             self._fault = False
+            self._fe_latched = False
             if self.state == FAULT:
                 self._set_state(SWITCH_ON_DISABLED)  # 15
 

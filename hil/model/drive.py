@@ -774,6 +774,8 @@ class Drive:
             abs(ax.following_error) > self._step_params()[0]
             or self.cia402.following_error_exceeded
         ):
+            if self.cia402.following_error_exceeded:
+                self.cia402.latch_following_error()  # PP statusword bit 13 (L18338)
             self.alarms.raise_alarm("AL009")  # position error excessive (L19539-19542)
 
     def refresh_outputs(self) -> None:

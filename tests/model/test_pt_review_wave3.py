@@ -97,3 +97,29 @@ def test_cw_positive_keeps_the_absolute_puu_with_the_command():
         assert d.absolute.puu == pytest.approx(10_000, abs=1), z
         # one turn of the motor: +16777216 counts CCW, -16777216 CW (L16404-16406)
         assert d.absolute.mem.pulse_value == pytest.approx((-1 if z else 1) * 2**24, abs=4)
+
+
+def test_pp_bit13_is_still_set_when_a_master_reads_after_al009():
+    """L18338: bit 13 in PP is the following error; L18452: past 6065h the drive raises AL009
+    and goes off, so 60F4h falls to 0 in the same step. A master polling 6041h every ms never
+    saw bit 13 (an outside review); it is kept with the alarm until a fault reset."""
+    d = Drive(inputs={8: True}, params={"P1.001": 0x0B})  # CANopen mode
+    d.advance(10 * MS)
+    d.write_object(0x6060, 0, 1)
+    for cw in (0x06, 0x07, 0x0F):
+        d.write_object(0x6040, 0, cw)
+        d.advance(5 * MS)
+    d.write_object(0x6065, 0, 1000)  # a 1000 PUU window
+    d.write_object(0x607A, 0, 167772160)
+    d.write_object(0x6081, 0, 503316480)
+    d.write_object(0x6083, 0, 10)
+    d.write_object(0x6040, 0, 0x1F)
+    seen = []
+    for _ in range(20):
+        d.advance(MS)
+        seen.append(d.read_object(0x6041, 0))
+    assert "AL009" in d.alarms.active
+    assert seen[-1] & 0x2000 and seen[-1] & 0x000F == 0x0008  # FAULT, bit 13 set
+    d.write_object(0x6040, 0, 0x80)  # fault reset
+    d.advance(5 * MS)
+    assert not d.read_object(0x6041, 0) & 0x2000
