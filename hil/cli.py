@@ -59,11 +59,13 @@ def main(argv: list[str] | None = None) -> int:
     if not args.command:
         parser.print_help()
         return 2
-    reads = args.command in READERS
-    if reads:  # a large recording shows a progress bar on a terminal
-        from hil.record.reader import progress_on_terminal
+    reads = args.command in READERS or args.command == "check"
+    if reads:  # a file it did not write: a message of a wrong shape is skipped and counted
+        from hil.record.reader import progress_on_terminal, skip_bad_messages
 
-        progress_on_terminal(f"hil {args.command}: reading the recording")
+        skip_bad_messages(True)
+        if args.command in READERS:  # a large file shows a bar (`hil check` has its own)
+            progress_on_terminal(f"hil {args.command}: reading the recording")
     try:
         code = int(_load(args.command).main(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
@@ -79,8 +81,9 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         return 141  # 128 + SIGPIPE, what a shell reports for a command killed by it
     finally:
-        if reads:
-            progress_on_terminal(None)  # a caller in this process (a test) reads bare again
+        if reads:  # a caller in this process (a test) reads bare again
+            progress_on_terminal(None)
+            skip_bad_messages(False)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from hil.record.mcapio import McapWriter
 from hil.record.reader import Recording, RecordingError
+from hil.terminal import terminal_lines
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -51,7 +52,7 @@ def summarise(rec: Recording, gaps: int = 3,
     if times is None:
         times = {}
         for topic, lt, _pt, _d in rec.raw_messages():
-            times.setdefault(topic, array("q")).append(lt)
+            times.setdefault(topic, array("Q")).append(lt)
     n_all = sum(len(ts) for ts in times.values())
     if n_all:
         t0 = min(min(ts) for ts in times.values() if ts)
@@ -61,7 +62,7 @@ def summarise(rec: Recording, gaps: int = 3,
         lines.append("messages: 0")
     lines.append("channels:")
     for c in rec.channels():
-        ts = times.get(c.topic, array("q"))
+        ts = times.get(c.topic, array("Q"))
         src = c.metadata.get("publish_time_source", "?")
         lines.append(f"  {c.topic:<32} {len(ts):>9,}  {c.schema:<20} publish_time: {src}")
         if len(ts) > 1 and gaps > 0:
@@ -145,7 +146,7 @@ def main(args: argparse.Namespace) -> int:
     def take(topic: str, lt: int, _pt: int, _data: bytes) -> None:
         ts = times.get(topic)
         if ts is None:
-            ts = times[topic] = array("q")
+            ts = times[topic] = array("Q")
         ts.append(lt)
 
     if args.repair:  # said before the file is read, as every output that names an input
@@ -161,7 +162,7 @@ def main(args: argparse.Namespace) -> int:
     except RecordingError as exc:
         print(f"hil inspect: {exc}", file=sys.stderr)
         return 2
-    print(summarise(rec, args.gaps, times))
+    print(terminal_lines(summarise(rec, args.gaps, times)))  # names from the file: no escapes
     if args.repair:
         try:
             n = repair(rec, args.repair, stream=True)

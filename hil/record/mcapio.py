@@ -341,9 +341,17 @@ def _parse(cls: Any, body: bytes) -> Any:
     return cls.read(ReadDataStream(BytesIO(body)))
 
 
+# the most a chunk may hold, uncompressed: hil writes 64 KiB chunks, other writers a few MiB;
+# a chunk stating more is damaged or a bomb (one lz4 chunk of 1 GB of zeros fits in 4.7 MB)
+MAX_CHUNK_BYTES = 256 * 1024 * 1024
+
+
 def decompress(compression: str, data: bytes, size: int) -> bytes:
     if compression == "":
         return data
+    if size > MAX_CHUNK_BYTES:
+        raise ValueError(f"chunk states {size:,} bytes uncompressed, more than a reader takes "
+                         f"({MAX_CHUNK_BYTES:,})")
     if compression == "zstd":
         if zstandard is None:
             raise ValueError("chunk is zstd-compressed but zstandard is not installed")
@@ -351,7 +359,13 @@ def decompress(compression: str, data: bytes, size: int) -> bytes:
     if compression == "lz4":
         if lz4frame is None:
             raise ValueError("chunk is lz4-compressed but lz4 is not installed")
-        return lz4frame.decompress(data)
+        # never more than the chunk says it holds (a 4.7 MB file of one lz4 chunk of 1 GB
+        # of zeros took 2 GB): a chunk that decompresses past its size is damaged
+        dec = lz4frame.LZ4FrameDecompressor()
+        out = dec.decompress(data, max_length=size + 1)
+        if len(out) > size:
+            raise ValueError(f"lz4 chunk decompresses past its stated {size} bytes")
+        return out
     raise ValueError(f"unknown chunk compression {compression!r}")
 
 
@@ -491,7 +505,8 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                 break
         except Exception as exc:  # a broken record ends the readable part
             what = "chunk" if op == Opcode.CHUNK else f"record (opcode 0x{op:02x})"
-            out.error = f"{what} at offset {off} unreadable: {exc}"
+            why = str(exc) or type(exc).__name__  # a MemoryError says nothing of itself
+            out.error = f"{what} at offset {off} unreadable: {why}"
             out.error_offset = off
             out.corrupt = True
             out.cut_log_ns = c_min

@@ -7,6 +7,7 @@ run has no summary and may end mid-record): `truncated` and `error` say what hap
 from __future__ import annotations
 
 import json
+import logging
 import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ from typing import Any
 from hil.fileio import FileProblem, read_limited, require_regular
 from hil.record.mcapio import FileBytes, Scan, iter_chunk, scan
 
+log = logging.getLogger("hil.record")
 _loads = json.loads
 _UNSEEN: Any = object()
 
@@ -24,11 +26,28 @@ def decode(data: bytes) -> Any:
     """A message's JSON; an undecodable one as {"error": ..., "raw": hex} (never raises)."""
     try:
         return _loads(data)
-    except ValueError as exc:
-        return {"error": f"undecodable message: {exc}", "raw": bytes(data).hex()}
+    except (ValueError, RecursionError) as exc:  # RecursionError: nested past the stack
+        why = "nested too deep" if isinstance(exc, RecursionError) else str(exc)
+        return {"error": f"undecodable message: {why}", "raw": bytes(data[:64]).hex()}
+
+
+# what a reader raises on a message of the wrong shape (a text where a number belongs, NaN
+# for an integer, a list for an object, JSON nested past the stack): with skip_bad_messages
+# on, that message is skipped and counted (`Recording.bad_messages`), the read goes on
+BAD_MESSAGE = (ValueError, TypeError, KeyError, AttributeError, IndexError, OverflowError,
+               RecursionError)
 
 
 _progress_text: str | None = None
+_skip_bad = False
+
+
+def skip_bad_messages(on: bool) -> None:
+    """From now on in this process, `Recording.stream` skips and counts a message its
+    `on_message` cannot take (BAD_MESSAGE) instead of raising it: what a command reading a
+    recording it did not write does (`hil check`, `report`, `diff`, `export`, `inspect`)."""
+    global _skip_bad
+    _skip_bad = on
 
 
 def progress_on_terminal(text: str | None) -> None:
@@ -83,6 +102,7 @@ class Recording:
     def __init__(self, path: Path, sc: Scan) -> None:
         self.path = path
         self._scan = sc
+        self.bad_messages = 0  # messages a reader could not take (`stream`), skipped
         self.channel_info: dict[int, ChannelInfo] = {}
         for cid, ch in sc.channels.items():
             schema = sc.schemas.get(ch.schema_id)
@@ -121,6 +141,20 @@ class Recording:
         `progress(bytes read, file size)` is told as the reading goes. `by_channel`: the
         message's channel id is handed over instead of its topic."""
         want = None if topics is None else set(topics)
+        bad = {"n": 0, "first": ""}  # the messages `on_message` could not take (BAD_MESSAGE)
+        take = on_message
+
+        def skipping(topic: Any, lt: int, pt: int, data: bytes) -> None:
+            try:
+                take(topic, lt, pt, data)
+            except BAD_MESSAGE as exc:
+                if not bad["n"]:
+                    bad["first"] = f"{topic} at log time {lt}: {type(exc).__name__}: {exc}"[:200]
+                bad["n"] += 1
+
+        if _skip_bad:  # a command reading a file it did not write (else: the caller's error)
+            on_message = skipping
+
         topic_of: dict[int, str | None] = {}  # channel id -> its topic if wanted, else None
         seen: dict[int, str] = {}  # channel id -> topic, of each channel with a message
         kept: dict[int, bool] = {}  # channel id -> wanted (known channels only)
@@ -169,6 +203,10 @@ class Recording:
         sc.loose.clear()
         #: the topics with at least one message, wanted or not
         rec.message_topics = sorted(set(seen.values()))
+        rec.bad_messages = bad["n"]
+        if bad["n"]:
+            log.warning("%s: %d message(s) of a wrong shape skipped (the first: %s)", path,
+                        bad["n"], bad["first"])
         return rec
 
     @classmethod

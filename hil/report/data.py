@@ -66,9 +66,13 @@ def run_info(meta: dict[str, dict[str, str]], bench: str = "") -> dict[str, str]
 
     run, ver = meta.get("hil.run", {}), meta.get("hil.versions", {})
     date = "?"
-    if str(run.get("started_ns", "")).isdigit():
-        date = datetime.datetime.fromtimestamp(int(run["started_ns"]) / 1e9, datetime.UTC
-                                               ).strftime("%Y-%m-%d %H:%M:%S UTC")
+    started = str(run.get("started_ns", ""))
+    if started.isascii() and started.isdigit() and len(started) <= 20:
+        try:
+            date = datetime.datetime.fromtimestamp(int(started) / 1e9, datetime.UTC
+                                                   ).strftime("%Y-%m-%d %H:%M:%S UTC")
+        except (OverflowError, OSError, ValueError):  # past year 9999: a damaged record
+            date = "?"
     return {"date": date, "hil": ver.get("hil", "?"), "host": run.get("host", "?"),
             "bench": bench or run.get("bench", "?"), "git": ver.get("git_revision", "?"),
             "dut": dut_text(meta.get("hil.dut", {}))}
@@ -256,7 +260,7 @@ def truth_fields(spec_ids: list[str] | None) -> frozenset[str] | None:
 def _spec_ids(meta: dict[str, Any]) -> list[str] | None:
     try:
         ids = json.loads(meta.get("timing", {}).get("specs", "null"))
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, RecursionError):
         return None
     return [str(i) for i in ids] if isinstance(ids, list) else None
 

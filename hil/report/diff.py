@@ -26,13 +26,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from hil.fileio import write_text_atomic
 from hil.record import topics
 from hil.record.reader import Recording, decode
 from hil.report.html import CSS
 from hil.units import MS
+from hil.yamlio import load_yaml_text
 
 TRUTH_EDGES = ("servo_on", "brkr", "brake_released", "torque_enabled", "sto_a", "sto_b")
 MIN_DELTA_MS = 1.0  # smaller differences are jitter of an in-process bench
@@ -57,11 +56,19 @@ class Side:
 
 
 def _bench_drive(text: str) -> dict:
+    """The first drive of a recording's bench.yaml attachment, its parts the diff reads as
+    mappings ({} for anything else): read with the project's YAML limits (an alias bomb, a
+    huge or deep file is refused), since a recording is input like any other."""
     try:
-        data = yaml.safe_load(text) or {}
-        return next(iter((data.get("drives") or {}).values()), {}) or {}
+        data = load_yaml_text(text, "bench.yaml")
     except Exception:  # a foreign or broken attachment: no wiring known
         return {}
+    drives = data.get("drives") if isinstance(data, dict) else None
+    drive = next(iter(drives.values()), {}) if isinstance(drives, dict) and drives else {}
+    if not isinstance(drive, dict):
+        return {}
+    return {k: drive[k] for k in ("wiring", "options", "mechanics")
+            if isinstance(drive.get(k), dict)}
 
 
 def load_side(path: str | Path) -> Side:
@@ -77,10 +84,11 @@ def load_side(path: str | Path) -> Side:
             drive = _bench_drive(a.data.decode("utf-8", "replace"))
     wiring = dict(drive.get("wiring") or {})
     try:
-        wiring |= {k: v for k, v in json.loads(meta.get("timing", {}).get("binding", "{}")
-                                               ).items() if k not in ("drive", "dio")}
-    except ValueError:
-        pass
+        binding = json.loads(meta.get("timing", {}).get("binding", "{}"))
+    except (ValueError, RecursionError):
+        binding = {}
+    if isinstance(binding, dict):
+        wiring |= {k: v for k, v in binding.items() if k not in ("drive", "dio")}
     side.options = {**dict(drive.get("options") or {}),
                     **{f"mechanics.{k}": v for k, v in (drive.get("mechanics") or {}).items()}}
     line_func = {}

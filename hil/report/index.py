@@ -26,6 +26,12 @@ td.num{text-align:right;font-variant-numeric:tabular-nums}
 """
 
 
+
+def _started(text: object) -> int:
+    """`hil.run.started_ns` as ns, 0 when the record is damaged (text, huge)."""
+    t = str(text or "0")
+    return int(t) if t.isascii() and t.isdigit() and len(t) <= 20 else 0
+
 def _row(rec: Path, out_dir: Path) -> dict:
     """What the index shows of one recording (a row that says so if it is unreadable)."""
 
@@ -44,7 +50,7 @@ def _row(rec: Path, out_dir: Path) -> dict:
                reason=res.get("reason", "") if run.status != "pass" else "",
                description=run.metadata.get("hil.plan", {}).get("description", ""),
                tags=_tags(run.metadata.get("hil.plan", {}).get("tags", "[]")),
-               started=int(run.metadata.get("hil.run", {}).get("started_ns", "0") or 0))
+               started=_started(run.metadata.get("hil.run", {}).get("started_ns")))
     try:
         row["duration_ms"] = float(res["duration_ms"])
     except (KeyError, ValueError):

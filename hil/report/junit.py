@@ -10,6 +10,7 @@ from pathlib import Path
 
 from hil.fileio import write_text_atomic
 from hil.report.data import RunData, load_run
+from hil.terminal import xml_text
 
 NOT_PASSED = {"fail": "failure", "inconclusive": "failure", "error": "error",
               "aborted": "error"}
@@ -88,6 +89,11 @@ def junit_xml(recordings: list[str | Path], junit_dir: str | Path | None = None)
         el.set("errors", str(sum(c.find("error") is not None for c in cases)))
         el.set("skipped", str(sum(c.find("skipped") is not None for c in cases)))
         el.set("time", f"{total:.6f}")
+    for el in root.iter():  # text from the recording: only what XML 1.0 can carry
+        if el.text:
+            el.text = xml_text(el.text)
+        for k, v in el.attrib.items():
+            el.set(k, xml_text(v))
     ET.indent(root)
     return ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"
 

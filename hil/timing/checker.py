@@ -253,8 +253,11 @@ class Context:
             self._deliveries = {}
             drive = self.binding.get("drive")
             for _t, m in self.source.messages(topics.drive_inputs(drive)) if drive else []:
-                with_line = self._deliveries.setdefault(str(m.get("line")), [])
-                with_line.append((int(m["sent_ns"]), bool(m["level"]), int(m["delay_ns"])))
+                try:
+                    rec = (int(m["sent_ns"]), bool(m["level"]), int(m["delay_ns"]))
+                except (KeyError, TypeError, ValueError, OverflowError):
+                    continue  # a damaged record: no delivery known for it
+                self._deliveries.setdefault(str(m.get("line")), []).append(rec)
         return self._deliveries
 
     def _frame_lags(self, topic: str, raw: list[tuple[int, Any]]) -> dict[int, int]:

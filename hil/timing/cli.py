@@ -32,6 +32,7 @@ from hil.record.progress import ReadProgress
 from hil.record.reader import RecordingError
 from hil.record.reader import incomplete as reader_incomplete
 from hil.record.reader import not_hil as reader_not_hil
+from hil.terminal import TEXT_MAX, terminal_text
 from hil.timing.applicable import not_applicable
 from hil.timing.checker import (
     Verdict,
@@ -214,18 +215,6 @@ def resolve_specs(names: list[str]) -> list[Spec]:
                                     f"(shipped: {', '.join(sorted(shipped))})")
         out.append(load_spec(p))
     return out
-
-
-_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
-TEXT_MAX = 400  # characters of a spec's own text (a name, a label) shown in the table
-
-
-def terminal_text(text: str, limit: int = TEXT_MAX) -> str:
-    """A spec's text made safe for a terminal: control characters (an escape sequence would
-    clear or spoof the screen) shown as \\xNN, and at most `limit` characters (`--json`
-    gives it whole)."""
-    out = _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", str(text))
-    return out if len(out) <= limit else out[:limit] + f"... ({len(out)} characters)"
 
 
 def format_table(verdicts: list[Verdict], verbose: bool = False) -> str:

@@ -792,9 +792,22 @@ def recorded_specs(meta: Mapping[str, Mapping[str, str]]) -> tuple[list[str], di
     try:
         specs = list(json.loads(tm["specs"])) if tm.get("specs") else []
         binding = dict(json.loads(tm["binding"])) if tm.get("binding") else {}
-    except (ValueError, TypeError):
-        pass
+    except (ValueError, TypeError, RecursionError):  # a damaged record: none recorded
+        specs, binding = [], {}
     return [str(s) for s in specs], {str(k): str(v) for k, v in binding.items()}
+
+
+def _check_record(v: Any) -> bool:
+    """A `/timing/verdicts` message a re-check can use: the shapes its recorder writes."""
+    def whole(x: Any) -> bool:
+        return isinstance(x, int) and not isinstance(x, bool)
+
+    return (isinstance(v, dict) and whole(v.get("step")) and isinstance(v.get("spec"), str)
+            and whole(v.get("check_until_ns"))
+            and (v.get("check_since_ns") is None or whole(v.get("check_since_ns")))
+            and isinstance(v.get("plan"), str | None)
+            and all(isinstance(v.get(k) or {}, dict)
+                    for k in ("binding", "check_params", "check_constants")))
 
 
 def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
@@ -803,7 +816,7 @@ def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
     offline re-check needs."""
     seen: dict[tuple, dict[str, Any]] = {}
     for _t, v in source.messages(topics.TIMING_VERDICTS):
-        if "step" not in v or "spec" not in v or "check_until_ns" not in v:
+        if not _check_record(v):  # not a check step's verdict, or a damaged one: skipped
             continue
         key = (v.get("plan"), v["step"], v["spec"])
         if key not in seen:

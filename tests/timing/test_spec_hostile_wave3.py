@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
+from hil.terminal import terminal_text
 from hil.timing.checker import check
-from hil.timing.cli import terminal_text
 from hil.timing.spec import MAX_CHAIN, SpecError, loads_spec
 
 from .trace import STATE, source
