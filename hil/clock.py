@@ -117,14 +117,12 @@ class VirtualClock:
         self._seq = itertools.count()
         self._lock = threading.RLock()
         self.hung = False  # a thread held the clock past HELD_WAIT_S: see ClockHung
+        self._guard = _Held(self)  # `with self._guard:` the lock, waited for at most that
         self._running = 0  # > 0 while an event runs (events must not wait)
         self._watch: dict[int, tuple[threading.Event | None, int | None]] = {}
         self.media: dict[str, Any] = {}
         self.hold = 0  # > 0 inside `batch()`: settling waits for its end
         self.held: list[Callable[[], bool]] = []
-
-    def _held(self) -> _Held:
-        return _Held(self)
 
     # -- reading -------------------------------------------------------------------------
     def time_ns(self) -> int:
@@ -144,7 +142,7 @@ class VirtualClock:
     # -- scheduling ----------------------------------------------------------------------
     def at(self, t: int, fn: Callable[[], Any]) -> Event:
         """Run `fn()` at clock time `t` (never before now)."""
-        with self._held():
+        with self._guard:
             ev = Event(max(int(t), self._now), next(self._seq), fn)
             heapq.heappush(self._heap, ev)
             return ev
@@ -153,7 +151,7 @@ class VirtualClock:
         return self.at(self._now + int(dt), fn)
 
     def next_time(self) -> int | None:
-        with self._held():
+        with self._guard:
             heap = self._heap
             while heap and heap[0].cancelled:
                 heapq.heappop(heap)
@@ -187,7 +185,7 @@ class VirtualClock:
                                "time); events must only schedule")
         cancel, deadline = (self._watch.get(threading.get_ident(), (None, None)) if watched
                             else (None, None))
-        with self._held():
+        with self._guard:
             while True:
                 if pred is not None and pred():
                     return True
@@ -231,7 +229,7 @@ class VirtualClock:
             self.held.append(busy)
             return
         end = self._now + SETTLE_LIMIT_NS  # an overloaded bus is never idle: give up then
-        with self._held():  # not cancellable: what is on the wire arrives (one SDO at a time)
+        with self._guard:  # not cancellable: what is on the wire arrives (one SDO at a time)
             while busy():
                 nxt = self.next_time()
                 if nxt is None or nxt > end:
@@ -240,7 +238,8 @@ class VirtualClock:
 
 
 class _Held:
-    """`with clk._held():` the clock's lock, waited for at most HELD_WAIT_S (ClockHung)."""
+    """The clock's lock as a context, waited for at most HELD_WAIT_S (then ClockHung); it
+    keeps no state of its own, so one serves every (nested) use."""
 
     __slots__ = ("clk",)
 
