@@ -228,7 +228,7 @@ class DeltaModbus:
         raw = self._read_frame(deadline)
         suspect = t0 < self._late_until
         last = t0 + 2 * self.timeout_s  # late replies may stretch the wait this far
-        while suspect and isinstance(raw, bytes) and self._more_follows(last):
+        while suspect and isinstance(raw, bytes) and self._more_follows(last, station):
             self._record(raw, "rx")  # a late reply to the failed request: not this answer
             deadline = min(last, max(deadline, clock.monotonic() + self.timeout_s))
             raw = self._read_frame(deadline)
@@ -273,16 +273,23 @@ class DeltaModbus:
             self._record(dropped, "rx")
             self._last_io = clock.monotonic()
 
-    def _more_follows(self, deadline: float) -> bool:
+    def _more_follows(self, deadline: float, station: int) -> bool:
         """Within `LATE_REPLIES` x `timeout_s` of a failed transaction, a complete frame
         followed by more bytes within the silence that ends a frame (L15703) was a late reply
         to the failed request, with this request's answer behind it. The bytes read are put
         back for the next frame."""
-        nxt = self._read(1, min(deadline, clock.monotonic() + self.silence_s))
-        if not nxt:
-            return False
-        self._pushback += nxt
-        return True
+        # only a frame's start counts (the station's address, ":" in ASCII): a stray byte
+        # (a transceiver's glitch as it turns off) is dropped and does not make the answer
+        # a late one
+        start = b":" if self.mode == "ascii" else bytes([station & 0xFF])
+        while True:
+            nxt = self._read(1, min(deadline, clock.monotonic() + self.silence_s))
+            if not nxt:
+                return False
+            if station == mb.AUTO_REPLY or nxt == start:
+                self._pushback += nxt
+                return True
+            self._record(nxt, "rx")
 
     def _read_rtu(self, deadline: float) -> bytes | bytearray:
         got = bytearray()

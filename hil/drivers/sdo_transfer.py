@@ -4,7 +4,9 @@ canopen's client takes the first frame on 580h+node as the answer: a late downlo
 acknowledgement of an earlier write (one that timed out) is success for the next write, an
 abort for another object is this object's abort, and an upload whose segments never end is
 read for ever. Here an initiate answer or an abort counts only with this transfer's index and
-sub-index (a frame for another object is dropped and the wait goes on, within the timeout),
+sub-index and kind (a frame for another object, or a download ack while uploading, is dropped
+and the wait goes on, within the timeout; a late ack of an earlier write to the same object
+cannot be told from this one's: SDO answers carry no transaction id),
 and a segmented upload ends at `MAX_UPLOAD` bytes with abort 0504 0005h. Transfers longer
 than 4 bytes down are left to canopen's client (the A3's objects are at most 4 bytes).
 """
@@ -39,15 +41,16 @@ def download(sdo: Any, index: int, sub: int, data: bytes) -> None:
         sdo.download(index, sub, data)
         return
     command = 0x23 | ((4 - len(data)) << 2)  # initiate, expedited, size indicated
-    answer = _exchange(sdo, _MUX.pack(command, index, sub) + data.ljust(4, b"\0"), (index, sub))
-    if answer[0] != 0x60:
+    answer = _exchange(sdo, _MUX.pack(command, index, sub) + data.ljust(4, b"\0"), (index, sub),
+                       0x60)
+    if answer[0] & 0xE0 != 0x60:  # as canopen: the x bits of a download answer are free
         sdo.abort(_ABORT_COMMAND)
         raise SdoMalformedError(f"answer {answer.hex(' ')} to an initiate download")
 
 
 def upload(sdo: Any, index: int, sub: int) -> bytes:
     """Expedited or segmented upload of at most `MAX_UPLOAD` bytes."""
-    answer = _exchange(sdo, _MUX.pack(0x40, index, sub) + bytes(4), (index, sub))
+    answer = _exchange(sdo, _MUX.pack(0x40, index, sub) + bytes(4), (index, sub), 0x40)
     command = answer[0]
     if command & 0xE0 != 0x40:
         sdo.abort(_ABORT_COMMAND)
@@ -68,7 +71,7 @@ def _segments(sdo: Any) -> bytes:
     out = bytearray()
     toggle = 0
     while True:
-        answer = _exchange(sdo, bytes([0x60 | toggle]) + bytes(7), None)
+        answer = _exchange(sdo, bytes([0x60 | toggle]) + bytes(7), None, None)
         command = answer[0]
         if command & 0xE0 != 0x00:
             sdo.abort(_ABORT_COMMAND)
@@ -85,9 +88,12 @@ def _segments(sdo: Any) -> bytes:
         toggle ^= 0x10
 
 
-def _exchange(sdo: Any, request: bytes, mux: tuple[int, int] | None) -> bytes:
-    """Send `request`; the answer is the first frame for `mux` (any frame when None) within
-    the client's timeout. Frames for another object are dropped; an abort for this one raises."""
+def _exchange(sdo: Any, request: bytes, mux: tuple[int, int] | None,
+              scs: int | None) -> bytes:
+    """Send `request`; the answer is the first frame for `mux` (any frame when None) whose
+    server command is `scs` (or an abort) within the client's timeout. Frames for another
+    object, or of another kind for this one (a late download ack while uploading), are
+    dropped; an abort for this object raises."""
     if not sdo.responses.empty():
         sdo.responses = queue.Queue()  # canopen's own rule: stale answers before a request
     sdo.send_request(bytearray(request))
@@ -105,6 +111,8 @@ def _exchange(sdo: Any, request: bytes, mux: tuple[int, int] | None) -> bytes:
             _, a_index, a_sub = _MUX.unpack_from(answer)
             if (a_index, a_sub) != mux and not (answer[0] == _ABORT and (a_index, a_sub) == (0, 0)):
                 continue  # a late answer to an earlier transfer, or another client's
+            if scs is not None and answer[0] != _ABORT and answer[0] & 0xE0 != scs:
+                continue  # this object's, but of another transfer (a late write ack)
         if answer[0] == _ABORT:
             if len(answer) < 8:
                 raise SdoMalformedError(f"abort of {len(answer)} bytes")

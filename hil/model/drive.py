@@ -210,6 +210,7 @@ class Drive:
         self.hooks = Hooks()  # where the parts hook into the cycle (core.py)
         self.array = new_data_array()  # shared by PR, CAPTURE and COMPARE (L5097)
         self._hold_timer = None
+        self._was_requested = False  # Servo On asked at the last _update_servo (AL053)
         self._dout_cache: dict[str, bool] = {}
         self._sensor_state: dict[str, bool] = {}
         self._sensor_key: tuple[bool, bool, bool] | None = None  # (NL, PL, ORGP) last seen
@@ -565,8 +566,10 @@ class Drive:
         """Switch the servo to what is requested; `source` "cia402": the state machine asked."""
         if not self.powered:
             return
-        if "AL053" in self.alarms.active and not self._requested():
+        requested = self._requested()
+        if self._was_requested and not requested and "AL053" in self.alarms.active:
             self.alarms.clear("AL053")  # "將伺服切至 Servo Off 狀態即可解除此異警" (L19725)
+        self._was_requested = requested
         sto_lost = not (self.sto.a and self.sto.b)
         if sto_lost and self.servo_on and self.options.sto_servo_off == "acknowledged":
             # the hardware has cut the current (L2474); the firmware enters Servo Off only
@@ -579,7 +582,7 @@ class Drive:
             # (L8516), so the torque held after a normal servo off ends now
             self._end_torque_hold()
             self.axis.set_power(False)
-        want = self._requested() and not blocked
+        want = requested and not blocked
         if want and not self.servo_on:
             self._servo_on()
         elif not want and self.servo_on:

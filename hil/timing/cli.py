@@ -261,6 +261,10 @@ def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> i
                             truncated=getattr(source, "truncated", False))
     if why:  # what the run did after the cut is unknown
         incomplete = [why, *incomplete]
+    bad = getattr(source, "bad_messages", 0)
+    if bad:  # what those messages said is not in the verdicts
+        incomplete = [*incomplete, f"{source.path}: {bad} message(s) of a wrong shape were "
+                      "skipped (the warning above names the first)"]
     if not _judged(verdicts):
         incomplete = [*incomplete, "nothing was judged"]
     code = exit_code(verdicts)

@@ -657,6 +657,7 @@ class RecordingSource(_LazySource):
         self.error: str | None = rec.error
         self.corrupt: bool = rec.corrupt
         self.truncated: bool = rec.truncated  # no footer: a killed (or running) recorder
+        self.bad_messages: int = rec.bad_messages  # of a wrong shape, skipped (`hil check`)
         self.schemas: set[str] = {c.schema for c in rec.channels()}
         self._res = res
         self.path = str(path)

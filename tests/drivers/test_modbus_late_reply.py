@@ -130,3 +130,22 @@ def test_a_reply_later_than_the_next_answer_is_dropped_before_the_request_after(
     assert m.read_registers(0x0158, 2) == [1, 0]
     time.sleep(0.12)  # the late P1.009 reply lands
     assert m.read_registers(0x0158, 2) == [1, 0]
+
+
+def test_a_stray_byte_after_a_good_answer_does_not_make_it_a_late_one():
+    """An outside review: within the late-reply window, one glitch byte (0x00, a transceiver
+    turning off) after a correct answer made the master drop it and time out. Only a frame's
+    start (the station's address) behind an answer marks it as late."""
+    n = [0]
+
+    def respond(req: bytes):
+        n[0] += 1
+        if n[0] == 1:
+            return []  # lost: the window opens
+        good = mb.rtu_encode(1, mb.read_response(VALUES[0x0158]))
+        return [(0.003, good), (0.004, b"\x00")]
+
+    m = DeltaModbus(TimedSerial(respond), station=1, timeout_s=0.06, silence_s=None)
+    with pytest.raises(ModbusTimeoutError):
+        m.read_registers(0x0112, 2)
+    assert m.read_registers(0x0158, 2) == [1, 0]

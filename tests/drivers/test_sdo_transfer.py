@@ -166,3 +166,22 @@ def test_a_segmented_upload_is_read_whole_and_a_declared_size_too_big_is_refused
             drv.read(0x1009)
     finally:
         _close(srv, net)
+
+
+def test_a_late_download_ack_of_the_same_object_while_uploading_is_dropped():
+    """An outside review: a late `60h` ack for 6040h arriving while 6040h is uploaded raised
+    a malformed answer; it is of another transfer and is dropped. A `61h` ack (the x bits
+    set) is a download's answer, as canopen takes it."""
+    def respond(req: bytes) -> list[bytes]:
+        if req[0] == 0x40:
+            return [_ack(req), bytes([0x4B]) + req[1:4] + (0x000F).to_bytes(4, "little")]
+        if req[0] == 0x80:
+            return []
+        return [bytes([0x61]) + req[1:4] + bytes(4)]
+
+    srv, net, drv = _driver(respond)
+    try:
+        assert drv.read(0x6040) == 0x000F
+        drv.write(0x6040, 0, 0x0F)
+    finally:
+        _close(srv, net)

@@ -44,6 +44,9 @@ def test_al053_clears_at_servo_off():
     d.set_di(1, False)
     d.advance(20 * MS)
     assert "AL053" not in d.alarms.active
+    d.alarms.raise_alarm("AL053")  # raised while Servo On is not asked: no Servo Off clears it
+    d.advance(20 * MS)
+    assert "AL053" in d.alarms.active
 
 
 def test_al07d_clears_with_arst_and_al07c_stays_until_a_normal_origin():

@@ -113,3 +113,20 @@ def test_a_duration_or_window_made_impossible_by_a_parameter_cannot_judge():
 def test_spec_text_is_made_safe_for_a_terminal():
     assert terminal_text("c\x1b[2J\x1b[H") == "c\\x1b[2J\\x1b[H"
     assert terminal_text("x" * 1000).endswith("... (1000 characters)")
+
+
+def test_skipped_messages_make_a_passing_check_incomplete(capsys):
+    """An outside review: `hil check` could exit 0 after skipping messages it could not read;
+    what they said is not in the verdicts, so a pass is incomplete (exit 4)."""
+    from types import SimpleNamespace
+
+    from hil.timing.checker import Verdict
+    from hil.timing.cli import EXIT_INCOMPLETE, EXIT_PASS, final_code
+
+    v = [Verdict("m", "c", "pass", "ok")]
+    src = SimpleNamespace(path="r.mcap", corrupt=False, error=None, truncated=False,
+                          bad_messages=0)
+    assert final_code(v, src, []) == EXIT_PASS
+    src.bad_messages = 2
+    assert final_code(v, src, []) == EXIT_INCOMPLETE
+    assert "2 message(s) of a wrong shape were skipped" in capsys.readouterr().err
