@@ -62,6 +62,9 @@ HEALTH_TOPIC = "/gateway/health"
 SafeStateFn = Callable[["Gateway", str], list[dict] | None]
 
 
+HOLDER_MAX = 128  # characters of a lease holder's name (shown in /health and the logs)
+
+
 @dataclass
 class GatewayConfig:
     """How a gateway is reached and behaves (the `hil gateway` flags)."""
@@ -283,8 +286,9 @@ class Gateway:
             if not isinstance(req, dict):
                 raise ValueError("not a JSON object")
             reply = self._lease_op(req)
-        except (ValueError, TypeError) as e:
-            reply = {"granted": False, "reason": f"bad request: {e}"}
+        except (ValueError, TypeError, RecursionError) as e:  # RecursionError: nested JSON
+            why = "nested too deep" if isinstance(e, RecursionError) else str(e)[:200]
+            reply = {"granted": False, "reason": f"bad request: {why}"}
         query.reply(keys.lease(self.prefix), json.dumps(reply))
 
     def _lease_op(self, req: dict) -> dict:
@@ -293,7 +297,11 @@ class Gateway:
             return self.lease.status()
         token = bytes.fromhex(str(req.get("token", "")))
         if op == "acquire":
-            holder = str(req.get("holder", ""))
+            holder = req.get("holder", "")
+            if not isinstance(holder, str) or len(holder) > HOLDER_MAX \
+                    or not holder.isprintable():
+                raise ValueError(f"holder: a printable text of at most {HOLDER_MAX} "
+                                 "characters (it is shown in /health and the logs)")
             before = self.lease.current
             granted, info = self.lease.acquire(holder, token, str(req.get("alive", "")))
             if granted and (before is None or before.token != token):

@@ -63,6 +63,11 @@ class LeaseTable:
                 return False, {"reason": "safing", "holder": f"gateway (safe state after "
                                f"{self.safing})", "since_ns": self._wall(),
                                "since": iso(self._wall())}
+            if cur is not None and (holder, alive_id) != (cur.holder, cur.alive_id):
+                # the holder's own token with another name or liveliness id: a new acquire
+                # must not move the lease off the token whose loss ends it at once
+                return False, {"reason": "bad request: the lease is held under another "
+                                         "holder name or alive id", **cur.public()}
             since = cur.since_ns if cur is not None else self._wall()
             self.current = LeaseInfo(holder, bytes(token), alive_id, since, self._mono(),
                                      self.timeout_ns)

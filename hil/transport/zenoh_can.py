@@ -62,12 +62,37 @@ def pack(msg: Message, sender_time_ns: int) -> bytes:
     return HEADER.pack(msg.arbitration_id, flags, msg.dlc, sender_time_ns) + bytes(msg.data)
 
 
+FD_LENGTHS = frozenset((*range(9), 12, 16, 20, 24, 32, 48, 64))  # ISO 11898-1 FD payloads
+
+
+def _check_frame(can_id: int, flags: int, dlc: int, data: bytes) -> None:
+    """A frame a CAN controller could put on the wire (ValueError otherwise: a bad sample is
+    dropped and counted, never forwarded to a bus): 11-bit id unless extended (29-bit), a
+    classic frame 0-8 bytes matching its DLC (a remote frame: no data, DLC 0-8), an FD frame
+    one of the FD lengths."""
+    if can_id > (0x1FFFFFFF if flags & EXT else 0x7FF):
+        raise ValueError(f"CAN id 0x{can_id:X} beyond {'29' if flags & EXT else '11'} bits")
+    if flags & ERR:
+        if len(data) > 8:
+            raise ValueError(f"error frame with {len(data)} data bytes")
+        return
+    if flags & FD:
+        if len(data) not in FD_LENGTHS or dlc != len(data):
+            raise ValueError(f"FD frame of {len(data)} bytes, DLC {dlc}")
+    elif flags & RTR:
+        if data or dlc > 8:
+            raise ValueError(f"remote frame with {len(data)} data bytes, DLC {dlc}")
+    elif len(data) > 8 or dlc != len(data):
+        raise ValueError(f"classic frame of {len(data)} bytes, DLC {dlc}")
+
+
 def unpack(payload: bytes, timestamp: float, channel: str | None = None) -> ZenohMessage:
     if len(payload) < HEADER.size:
         raise ValueError(f"zenoh CAN sample of {len(payload)} bytes is shorter than the "
                          f"{HEADER.size}-byte header")
     can_id, flags, dlc, sender_ns = HEADER.unpack_from(payload)
     data = payload[HEADER.size:]
+    _check_frame(can_id, flags, dlc, data)
     msg = ZenohMessage(
         timestamp=timestamp, arbitration_id=can_id, is_extended_id=bool(flags & EXT),
         is_remote_frame=bool(flags & RTR), is_error_frame=bool(flags & ERR),

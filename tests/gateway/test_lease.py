@@ -83,3 +83,29 @@ def test_release_needs_the_token_and_bad_requests_are_refused(table):
     assert not ok and "holder" in info["reason"]
     with pytest.raises(ValueError, match="lease timeout"):
         LeaseTable(0)
+
+
+def test_the_holder_cannot_move_its_lease_to_another_alive_id(table):
+    """An outside fuzz: `acquire` again with the holder's own token and another alive id was
+    granted, so the lease no longer ended when the holder's liveliness token went away."""
+    t, _c = table
+    assert t.acquire("alice", A, "a1")[0]
+    ok, info = t.acquire("alice2", A, "other")
+    assert not ok and info["holder"] == "alice" and "another" in info["reason"]
+    assert t.gone("a1") is not None  # the original token's loss still ends it
+
+
+@pytest.mark.parametrize("holder", ["x" * 5_000_000, 1e999, "evil\n\x1b[31m", ["a"]])
+def test_a_holder_name_is_a_short_printable_text(holder):
+    """An outside fuzz: a 5 MB holder was granted (and /health carried it every period, the
+    gateway's RSS +100 MB), `1e999` became "inf", and a newline and escapes went raw into the
+    log. The gateway refuses them as a bad request, before the lease table."""
+    from types import SimpleNamespace
+
+    from hil.gateway.gateway import Gateway, GatewayConfig
+
+    gw = Gateway(SimpleNamespace(name="b", drives={}, can={}, rs485={}, dio={}),
+                 GatewayConfig(listen=["tcp/127.0.0.1:1"]))
+    with pytest.raises(ValueError, match="holder"):
+        gw._lease_op({"op": "acquire", "holder": holder, "token": "ab" * 16, "alive": "a"})
+    assert gw.lease.current is None

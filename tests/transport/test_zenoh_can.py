@@ -164,3 +164,22 @@ def test_inline_receiver_gets_each_frame_in_zenohs_thread_in_order(port):
     assert [k for k, _ in got] == list(range(50))
     assert threading.get_ident() not in {t for _, t in got}
     assert late is not None and late.arbitration_id == 0x182
+
+
+@pytest.mark.parametrize("can_id, flags, dlc, data, why", [
+    (0x800, 0, 0, b"", "beyond 11 bits"),                 # an 11-bit id of 12 bits
+    (0x2000_0000, 1, 0, b"", "beyond 29 bits"),           # an extended id of 30 bits
+    (0x123, 0, 15, b"\0" * 8, "classic frame"),           # DLC 15 on a classic frame
+    (0x123, 0, 8, b"\0" * 28, "classic frame"),           # 28 bytes with DLC 8
+    (0x123, 8, 65, b"\0" * 65, "FD frame"),               # no FD length
+    (0x123, 0, 8, b"\0" * 10_000_000, "classic frame"),   # 10 MB
+    (0x123, 2, 3, b"\1\2", "remote frame"),               # a remote frame with data
+])
+def test_a_frame_no_controller_could_send_is_a_bad_sample(can_id, flags, dlc, data, why):
+    """An outside fuzz of the gateway: a lease holder's frames with DLC 255, 10 MB of data or
+    a 32-bit id without the extended flag were forwarded to the bench's bus (and recorded
+    whole). `unpack` now refuses them, so the gateway drops and counts them."""
+    from hil.transport.zenoh_can import HEADER
+
+    with pytest.raises(ValueError, match=why):
+        unpack(HEADER.pack(can_id, flags, dlc, 0) + data, 0.0)
