@@ -90,7 +90,7 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
         try:
             detail = fn()
             ok = detail is not False
-            msg = detail if isinstance(detail, str) else ""
+            msg = detail if isinstance(detail, str) else "" if ok else "not confirmed"
         except DriveGone as e:
             ok, msg = False, str(e)
         except Exception as e:

@@ -6,6 +6,8 @@ from __future__ import annotations
 from types import SimpleNamespace
 from typing import Any
 
+import pytest
+
 import hil.gateway.safe_state as gateway_mod
 import hil.plan.safety as plan_safety
 from hil.bench.bench import SafeState
@@ -72,8 +74,21 @@ def test_a_failed_action_does_not_stop_the_others_and_is_not_confirmed():
     assert d.log[1:] == ["SON False", "STO A False", "brake 500000000"]
     assert not rep.ok
     bad = {a["action"]: a["detail"] for a in rep.actions if not a["ok"]}
+    # a False answer says "not confirmed" (an outside audit found an empty detail)
     assert bad == {"controlword disable_voltage (0x00)": "TimeoutError: no SDO answer",
-                   "wait BRKR off (brake engaged)": ""}
+                   "wait BRKR off (brake engaged)": "not confirmed"}
+
+
+def test_the_brake_not_engaging_says_so_on_the_record():
+    """The session's brake wait names what it saw: BRKR still on after the timeout."""
+    from types import SimpleNamespace
+
+    from hil.plan.safety import _SessionDrive
+
+    d = SimpleNamespace(spec=SimpleNamespace(do={"BRKR": "DO6"}), dio=object(),
+                        do_active=lambda f: True)
+    with pytest.raises(TimeoutError, match="BRKR still on after 20 ms"):
+        _SessionDrive("d", d, None).brake_engaged(20_000_000)
 
 
 def test_a_dead_drive_is_reported_and_nothing_is_claimed_for_it():

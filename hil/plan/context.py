@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 # A virtual-time step that has not ended after its timeout plus this much wall time hangs
 # the host (docs/clock.md): the runner gives up on it as on a real-time step timeout.
 WATCHDOG_GRACE_NS = 60 * S
+WATCH_S = 0.25  # how often a running step's bench is looked at (a drive process died?)
 # ... or this many times the step timeout, whichever is longer: a heavy bench (many axes at a
 # short SYNC) may run slower than real time, and a legitimate long step must not trip it
 WATCHDOG_FACTOR = 10
@@ -58,9 +59,12 @@ class StepThread:
     def __init__(self) -> None:
         self.thread: threading.Thread | None = None
 
-    def run(self, fn: Callable[[], Any], timeout_ns: int, cancel: threading.Event) -> Any:
+    def run(self, fn: Callable[[], Any], timeout_ns: int, cancel: threading.Event,
+            watch: Callable[[], None] | None = None) -> Any:
         """`fn()` or, at `timeout_ns`, TimeoutError at once (the step is cancelled and left
-        to `join`). A KeyboardInterrupt cancels the step and joins it before propagating."""
+        to `join`). A KeyboardInterrupt cancels the step and joins it before propagating.
+        `watch()` is called every WATCH_S of wall time while the step runs; what it raises
+        (a drive process that died) cancels the step and is raised at once."""
         box: dict[str, Any] = {}
         clk = clock.current()
         virtual = isinstance(clk, clock.VirtualClock)
@@ -85,12 +89,27 @@ class StepThread:
         # on a virtual clock, a wall-clock watchdog stops a step that hangs the host
         wall_ns = (max(timeout_ns + WATCHDOG_GRACE_NS, timeout_ns * WATCHDOG_FACTOR)
                    if virtual else timeout_ns)
+        end = t0 + wall_ns
+        seen: Exception | None = None  # what `watch` raised
         try:
-            t.join(wall_ns / 1e9)
-        except BaseException:
+            while t.is_alive() and seen is None:
+                left = end - time.monotonic_ns()
+                if left <= 0:
+                    break
+                t.join(min(left / 1e9, WATCH_S) if watch is not None else left / 1e9)
+                if watch is not None and t.is_alive():
+                    try:
+                        watch()
+                    except Exception as e:
+                        seen = e
+        except BaseException:  # Ctrl-C: the step is cancelled and joined first
             cancel.set()
             self.join()
             raise
+        if seen is not None:  # the bench is gone: the step is cancelled and left to `join`
+            cancel.set()
+            t.join(0.05)
+            raise seen
         if t.is_alive():
             cancel.set()
             t.join(0.05)  # a step that honours `cancel` ends now; the others are joined later

@@ -214,6 +214,11 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                 if session is not None:
                     _go_safe(session, reason, rec, res, events, plan)
                     _tail(session)
+                elif reason != "end of plan":  # stopped or failed before the bench was up
+                    rec.safety("safe_state_not_confirmed", reason, ok=False,
+                               detail="the bench was not up yet: no safe state was driven")
+                    events.emit(Note(plan, "SAFE STATE NOT CONFIRMED: the bench was not up "
+                                     f"yet ({reason})"))
         finally:
             intr.shield = True
             if session is not None:
@@ -423,7 +428,7 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
             ctx.session.check_lease()  # a bench behind a gateway: only while the lease holds
             ctx.session.check_alive()  # a virtual bench: only while its drive processes live
             outcome = ctx.steps.run(lambda s=s, d=d: s.action.run(ctx, s, d), timeout,
-                                    ctx.cancel)
+                                    ctx.cancel, watch=ctx.session.check_alive)
             r.message, r.verdicts = outcome.text, outcome.verdicts
             ctx.session.check_lease()
             ctx.session.check_alive()

@@ -52,7 +52,8 @@ class _SessionDrive:
             if not self.d.do_active("BRKR"):
                 return "BRKR off: brake engaged"
             clock.sleep(0.002)
-        return False
+        raise TimeoutError(f"BRKR still on after {timeout_ns / 1e6:g} ms: the brake may be "
+                           "released")
 
 
 def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:
@@ -81,8 +82,11 @@ def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:
 
     rep = run_safe_state(drives, session.bench.safe_state, reason, record)
     if recorder is not None:
+        failed = "; ".join(f"{a['drive']}: {a['action']}: {a['detail']}"
+                           for a in rep.actions if not a["ok"])
         recorder.safety("safe_state_reached" if rep.ok else "safe_state_not_confirmed", reason,
-                        ok=rep.ok, duration_ms=rep.duration_ns / 1e6)
+                        ok=rep.ok, duration_ms=rep.duration_ns / 1e6,
+                        **({"detail": failed} if failed else {}))
     return rep
 
 

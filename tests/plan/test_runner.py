@@ -180,3 +180,46 @@ def test_a_step_interrupted_while_it_ran_ends_as_an_error_on_the_record(tmp_path
             if m.get("event") == "end"]
     assert [(m["index"], m["status"]) for m in ends if m.get("index", -1) >= 0] == [
         (0, "error"), (1, "skipped")]
+
+
+def test_a_drive_that_dies_during_a_step_ends_it_at_once():
+    """An outside audit: a `hil drive` killed 3 s into a 30 s wait went unnoticed until the
+    step ended. The runner looks at the bench while a step runs (`watch`): what it raises
+    cancels the step and is raised at once."""
+    import threading
+    import time
+
+    from hil.plan.context import StepThread
+    from hil.plan.session import BenchError
+
+    cancel, stop = threading.Event(), threading.Event()
+    t0 = time.monotonic()
+    dead_at = t0 + 0.3
+
+    def watch() -> None:
+        if time.monotonic() >= dead_at:
+            raise BenchError("virtual drive process 'drive1' died: killed by signal 9")
+
+    with pytest.raises(BenchError, match="died"):
+        StepThread().run(lambda: stop.wait(10), 30_000_000_000, cancel, watch=watch)
+    assert time.monotonic() - t0 < 3 and cancel.is_set()
+    stop.set()
+
+
+def test_a_plan_stopped_before_its_bench_was_up_says_no_safe_state_was_driven(tmp_path):
+    """An outside audit: Ctrl-C while the bench started left nothing on /safety."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import loads_plan
+    from hil.plan.runner import run_plan
+    from hil.record import topics
+
+    def broken(bench, truth):
+        raise KeyboardInterrupt("signal 2")
+
+    plan = loads_plan("name: p\nsteps:\n  - wait: 1s\n", "p.yaml")
+    with pytest.raises(KeyboardInterrupt) as ei:
+        run_plan(plan, load_bench(None), tmp_path, reports=False, session_factory=broken)
+    rec = Recording.open(ei.value.plan_result.recording)
+    safety = [m for *_x, m in rec.messages([topics.SAFETY])]
+    assert [m["action"] for m in safety] == ["safe_state_not_confirmed"]
+    assert "not up yet" in safety[0]["detail"]
