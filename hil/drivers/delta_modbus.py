@@ -246,7 +246,6 @@ class DeltaModbus:
         except ModbusReplyError:
             self._failed()  # the rest of a garbled reply may still be on the line
             raise
-        self._drain_next = False
         return reply
 
     def _failed(self) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime
 import json
 from bisect import bisect_left, bisect_right
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from sys import intern
@@ -61,15 +61,21 @@ class RunData:
         return run_info(self.metadata, self.bench)
 
 
+def started_ns(run: Mapping[str, Any]) -> int:
+    """`hil.run.started_ns` as ns; 0 when missing or damaged (text, more than 20 digits)."""
+    t = str(run.get("started_ns") or "0")
+    return int(t) if t.isascii() and t.isdigit() and len(t) <= 20 else 0
+
+
 def run_info(meta: dict[str, dict[str, str]], bench: str = "") -> dict[str, str]:
     """The run's identity from a recording's metadata (`hil.run`, `hil.versions`)."""
 
     run, ver = meta.get("hil.run", {}), meta.get("hil.versions", {})
     date = "?"
-    started = str(run.get("started_ns", ""))
-    if started.isascii() and started.isdigit() and len(started) <= 20:
+    started = started_ns(run)
+    if started:
         try:
-            date = datetime.datetime.fromtimestamp(int(started) / 1e9, datetime.UTC
+            date = datetime.datetime.fromtimestamp(started / 1e9, datetime.UTC
                                                    ).strftime("%Y-%m-%d %H:%M:%S UTC")
         except (OverflowError, OSError, ValueError):  # past year 9999: a damaged record
             date = "?"

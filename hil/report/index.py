@@ -15,7 +15,7 @@ from pathlib import Path
 
 from hil.fileio import write_text_atomic
 from hil.record.reader import RecordingError
-from hil.report.data import load_run
+from hil.report.data import load_run, started_ns
 from hil.report.html import CSS, run_info_table
 
 esc = html.escape
@@ -27,10 +27,6 @@ td.num{text-align:right;font-variant-numeric:tabular-nums}
 
 
 
-def _started(text: object) -> int:
-    """`hil.run.started_ns` as ns, 0 when the record is damaged (text, huge)."""
-    t = str(text or "0")
-    return int(t) if t.isascii() and t.isdigit() and len(t) <= 20 else 0
 
 def _row(rec: Path, out_dir: Path) -> dict:
     """What the index shows of one recording (a row that says so if it is unreadable)."""
@@ -50,7 +46,7 @@ def _row(rec: Path, out_dir: Path) -> dict:
                reason=res.get("reason", "") if run.status != "pass" else "",
                description=run.metadata.get("hil.plan", {}).get("description", ""),
                tags=_tags(run.metadata.get("hil.plan", {}).get("tags", "[]")),
-               started=_started(run.metadata.get("hil.run", {}).get("started_ns")))
+               started=started_ns(run.metadata.get("hil.run", {})))
     try:
         row["duration_ms"] = float(res["duration_ms"])
     except (KeyError, ValueError):
