@@ -165,6 +165,11 @@ class StepContext:
             self._live = LiveSource()
         return self._live.refresh(self.rec)
 
+    @property
+    def live(self) -> Any:
+        """The `LiveSource` the plan's checks kept, if any (None before a check ran)."""
+        return self._live
+
     def written(self, drive: str, values: dict[str, int]) -> None:
         """Record parameter values the plan wrote; only on a bench that is not virtual (a
         virtual drive records its own changes, a real one has no ground truth)."""

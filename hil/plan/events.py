@@ -63,6 +63,9 @@ class PlanEnded:
     result: PlanResult
     index: int = 1
     total: int = 1
+    #: the plan's recording as a timing source, when its checks kept one (`LiveSource`):
+    #: a report draws from it instead of reading the file again
+    source: Any = None
 
 
 Event = PlanStarted | StepStarted | StepEnded | Note | PlanEnded

@@ -53,9 +53,12 @@ class Reports(Listener):
         # file again
         html_error = junit_error = ""
         try:
+            # the diagrams draw from the plan's live checks' source when it kept one: the
+            # same messages, decoded once, with what the checks derived from them
+            src = e.source.refresh(self._rec) if e.source is not None else None
             res.html = str(write_html(res.recording, self.out_dir / f"{self.stem}.html",
                                       index=True,  # the run writes index.html beside it
-                                      messages=written(self._rec)))
+                                      messages=written(self._rec), source=src))
         except Exception as exc:
             html_error = f"HTML report failed: {exc}"
         try:

@@ -229,7 +229,8 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                                             "duration_ms": res.duration_ns / 1e6,
                                             "safe_state_ok": res.safe.ok if res.safe else ""})
             rec.close()
-            events.emit(PlanEnded(plan, res, index, total))
+            events.emit(PlanEnded(plan, res, index, total,
+                                  ctx.live if ctx is not None else None))
     if interrupted is None and intr.requested:
         interrupted = KeyboardInterrupt("signal while the bench was made safe")
     if interrupted is not None:

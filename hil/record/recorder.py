@@ -92,35 +92,47 @@ _enc = json.JSONEncoder(separators=(",", ":"), default=_default, allow_nan=True,
 
 def dumps(obj: Any) -> bytes:
     """Compact JSON bytes; never raises (unencodable input becomes an `error` object)."""
+    return dumps_checked(obj)[0]
+
+
+def dumps_checked(obj: Any) -> tuple[bytes, bool]:
+    """`dumps(obj)`, and False where that is the `error` object instead of `obj`'s JSON."""
     try:
-        return _enc(obj).encode()
+        return _enc(obj).encode(), True
     except (ValueError, TypeError, RecursionError) as exc:
-        return _enc({"error": f"unencodable payload: {exc}"}).encode()
+        return _enc({"error": f"unencodable payload: {exc}"}).encode(), False
 
 
 _SCALARS = frozenset((str, int, float, bool, type(None)))
+_PLAIN = _SCALARS | {list}
+_STR = frozenset((str,))
 _BIG = 10**4000  # an int this long may exceed Python's int-to-str digit limit
 
 
-def json_plain(payload: dict) -> dict | None:
+def json_plain(payload: dict, encoded: bool = False) -> dict | None:
     """A copy of `payload` (its lists copied too) when decoding `dumps(payload)` gives back
     exactly that, types included: string keys, and values that are str, int, float, bool,
     None or lists of those (not an enum, a tuple or an int subclass, which JSON would turn
-    into something else, nor an int too long to encode). None otherwise."""
-    scalars = _SCALARS
-    out = {}
-    for k, v in payload.items():
-        tv = type(v)
-        if type(k) is not str:
-            return None
-        if tv is list:
-            for x in v:
-                if type(x) not in scalars or (type(x) is int and not -_BIG < x < _BIG):
+    into something else, nor an int too long to encode). None otherwise. `encoded`: `dumps`
+    gave `payload`'s own JSON (`dumps_checked`), so every int in it has a decimal form."""
+    if not set(map(type, payload)) <= _STR:
+        return None
+    types = set(map(type, payload.values()))
+    if not types <= _PLAIN:
+        return None
+    out = payload.copy()
+    if list in types:
+        for k, v in out.items():
+            if type(v) is list:
+                if not set(map(type, v)) <= _SCALARS:
                     return None
-            v = v.copy()
-        elif tv not in scalars or (tv is int and not -_BIG < v < _BIG):
-            return None
-        out[k] = v
+                out[k] = v = v.copy()
+                if not encoded and int in set(map(type, v)) and not all(
+                        -_BIG < x < _BIG for x in v if type(x) is int):
+                    return None
+    if not encoded and int in types and not all(
+            -_BIG < v < _BIG for v in out.values() if type(v) is int):
+        return None
     return out
 
 
@@ -419,8 +431,9 @@ class Recorder:
         if "state" in payload and not isinstance(payload["state"], str):
             s = payload["state"]
             payload["state"] = s.name if isinstance(s, enum.Enum) else str(s)
-        self._put(topics.drive_state(drive), "hil.DriveState", "model", dumps(payload), t, source_t,
-                  json_plain(payload) if self.mirror is not None else None)
+        data, encoded = dumps_checked(payload)
+        self._put(topics.drive_state(drive), "hil.DriveState", "model", data, t, source_t,
+                  json_plain(payload, True) if encoded and self.mirror is not None else None)
 
     def drive_event(
         self, drive: str, event: Any, *, t: int | None = None, source_t: int | None = None

@@ -168,18 +168,34 @@ def _load_run(path: str | Path, *, truth: bool = True,
     t_first: int | None = None
     t_plan: int | None = None
 
+    kinds: dict[str, str] = {}  # topic -> what `take` does with it, worked out once
+
+    def kind_of(topic: str) -> str:
+        if topic.startswith("/can/"):
+            return "skip"  # raw frames: /canopen/<bus> has them decoded
+        if _is_bus(topic):  # read again when shown: only failing checks and steps show them
+            return "bus"
+        if topic in (topics.PLAN_STEPS, topics.TIMING_VERDICTS, topics.SAFETY, topics.LOG):
+            return topic
+        if topic.startswith("/drive/") and topic.endswith("/state"):
+            return "state" if truth else "skip"  # a summary: no ground truth, not decoded
+        if topic.startswith("/drive/") and topic.endswith("/params"):
+            return "params"
+        return "skip"  # nothing on the page reads it: never decoded
+
     def take(topic: str, lt: int, pt: int, raw: bytes) -> None:
         nonlocal t_first, t_plan
         t_first = lt if t_first is None else min(t_first, lt)
-        if topic.startswith("/can/"):
-            return  # raw frames: /canopen/<bus> has them decoded
-        if _is_bus(topic):  # read again when shown: only failing checks and steps show them
+        kind = kinds.get(topic)
+        if kind is None:
+            kind = kinds[topic] = kind_of(topic)
+        if kind == "skip":
+            return
+        if kind == "bus":
             data.bus_pending = True
             return
-        if not truth and topic.startswith("/drive/") and topic.endswith("/state"):
-            return  # a summary: no ground truth, not even decoded
         msg = _decode(raw)
-        if topic == topics.PLAN_STEPS:
+        if kind == topics.PLAN_STEPS:
             t_plan = lt if t_plan is None else min(t_plan, lt)
             idx = int(msg.get("index") if msg.get("index") is not None else -1)
             sd = steps.setdefault(idx, StepData(idx, str(msg.get("step", ""))))
@@ -194,18 +210,18 @@ def _load_run(path: str | Path, *, truth: bool = True,
                 sd.status = msg.get("status") or sd.status
                 sd.message = msg.get("message") or ""
                 sd.duration_ns = int(msg.get("duration_ns") or 0)
-        elif topic == topics.TIMING_VERDICTS:
+        elif kind == topics.TIMING_VERDICTS:
             data.verdicts.append({**msg, "_t": lt})
-        elif topic == topics.SAFETY:
+        elif kind == topics.SAFETY:
             data.safety.append({**msg, "_t": lt})
-        elif topic == topics.LOG:
+        elif kind == topics.LOG:
             data.logs.append({**msg, "_t": lt})
-        elif topic.startswith("/drive/") and topic.endswith("/state"):
+        elif kind == "state":
             # thousands of samples: keep the fields the report draws and the recording's specs
             # read (truth_fields), each key string once
             msg = {intern(k): v for k, v in msg.items() if keep is None or k in keep}
             data.truth.setdefault(topic.split("/")[2], []).append((pt or lt, msg))
-        elif topic.startswith("/drive/") and topic.endswith("/params"):
+        else:  # params
             d = topic.split("/")[2]
             data.params.setdefault(d, {}).update(msg.get("values") or {})
 

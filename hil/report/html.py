@@ -125,10 +125,12 @@ def _spec_by_id(ids: set[str] | None = None) -> Mapping[str, object]:
     return load_specs()
 
 
-def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
+def timing_diagrams(run: RunData, source: Any = None) -> list[tuple[str, str]]:
     """(title, svg) per checked spec and occurrence: the observed signals with the expected
     windows drawn on them (`hil.timing.render.svg`), from the recording alone. A spec that
-    cannot be redrawn (unknown id, unreadable recording) gives a note instead of a diagram."""
+    cannot be redrawn (unknown id, unreadable recording) gives a note instead of a diagram.
+    `source`: the recording as a timing source already (the plan's `LiveSource`, over the
+    recorder's messages of the whole file), instead of reading the file for it."""
 
     groups: dict[tuple[str, object], list[dict]] = {}
     for v in run.verdicts:
@@ -145,15 +147,18 @@ def timing_diagrams(run: RunData) -> list[tuple[str, str]]:
             spec = specs.get(sid)
             if spec is not None:
                 wanted |= spec_topics(spec, vds[0].get("binding") or None)
-        # the drive state the report already decoded is shared, not decoded twice, unless a
-        # spec reads a state field the report did not keep (truth_fields)
-        kept = run.truth_fields
-        full = kept is not None and any(not state_fields(s) <= kept for s in specs.values())
-        shared = {} if full else {topics.drive_state(d): msgs for d, msgs in run.truth.items()}
-        source = RecordingSource(run.path, topics=sorted(wanted - set(shared)))
-        for topic, msgs in shared.items():
-            if topic in wanted:
-                source.put_topic(topic, msgs)
+        if source is None:
+            # the drive state the report already decoded is shared, not decoded twice,
+            # unless a spec reads a state field the report did not keep (truth_fields)
+            kept = run.truth_fields
+            full = kept is not None and any(not state_fields(s) <= kept
+                                            for s in specs.values())
+            shared = ({} if full else
+                      {topics.drive_state(d): msgs for d, msgs in run.truth.items()})
+            source = RecordingSource(run.path, topics=sorted(wanted - set(shared)))
+            for topic, msgs in shared.items():
+                if topic in wanted:
+                    source.put_topic(topic, msgs)
     except Exception as e:  # a truncated or foreign recording: the table still stands
         return [("timing diagrams", f"<p>Diagrams not drawn: {esc(str(e))}</p>")]
     names = {f.name for f in fields(Verdict)}
@@ -285,10 +290,12 @@ def _nav(run: RunData, out: Path | None, index: bool | None = None) -> str:
     return "<p class='nav'>" + " · ".join(links) + "</p>"
 
 
-def render_html(run: RunData, out: Path | None = None, index: bool | None = None) -> str:
+def render_html(run: RunData, out: Path | None = None, index: bool | None = None,
+                source: Any = None) -> str:
     """One plan's report: steps, timing verdicts and diagrams, motion, safe state, bus logs
     around failures, parameters, the plan and bench files and the log. `out`: where the page
-    goes (its links to the index and the recording are relative to it); `index` as `_nav`."""
+    goes (its links to the index and the recording are relative to it); `index` as `_nav`;
+    `source` as `timing_diagrams`'."""
     st = run.status or "unknown"
     h: list[str] = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
@@ -301,8 +308,9 @@ def render_html(run: RunData, out: Path | None = None, index: bool | None = None
         + (" · <b>recording truncated (killed run)</b>" if run.truncated else "")
         + " · times are ms from the plan start</p>",
     ]
-    for section in (_steps_html, _verdicts_html, latch_html, _motion_html, _safety_html,
-                    _bus_html, _files_html):
+    h += _steps_html(run)
+    h += _verdicts_html(run, source)
+    for section in (latch_html, _motion_html, _safety_html, _bus_html, _files_html):
         h += section(run)
     h.append("</body></html>\n")
     return "\n".join(h)
@@ -323,7 +331,7 @@ def _steps_html(run: RunData) -> list[str]:
     return h
 
 
-def _verdicts_html(run: RunData) -> list[str]:
+def _verdicts_html(run: RunData, source: Any = None) -> list[str]:
     h = ["<h2>Timing verdicts: expected vs observed</h2>"]
     if not run.verdicts:
         return [*h, "<p>No timing verdicts in this run.</p>"]
@@ -367,7 +375,7 @@ def _verdicts_html(run: RunData) -> list[str]:
     h.append("<h2>Timing diagrams: observed signals and expected windows</h2>"
              "<p class='filter'>The manual's signals; a spec's helper signals are folded "
              "under each diagram. Click a diagram to zoom it.</p>")
-    for title, pic in timing_diagrams(run):
+    for title, pic in timing_diagrams(run, source):
         h.append(f"<figure><figcaption>{esc(title)}</figcaption>"
                  f"<div class='diagram'>{pic}</div></figure>")
     return h
@@ -475,12 +483,13 @@ def _files_html(run: RunData) -> list[str]:
 
 
 def write_html(recording: str | Path, out: str | Path | None = None,
-               index: bool | None = None, messages: Any = None) -> Path:
+               index: bool | None = None, messages: Any = None, source: Any = None) -> Path:
     """The plan page of `recording` to `out` (default: beside it); `index` as `_nav`;
-    `messages` as `load_run`'s (the recorder's own, instead of reading the file again)."""
+    `messages` as `load_run`'s (the recorder's own, instead of reading the file again);
+    `source` as `timing_diagrams`'."""
     run = load_run(recording, messages=messages)
     out = Path(out) if out is not None else Path(recording).with_suffix(".html")
-    write_text_atomic(out, render_html(run, out, index))
+    write_text_atomic(out, render_html(run, out, index, source))
     return out
 
 
