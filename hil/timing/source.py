@@ -8,6 +8,7 @@ timestamp granularity). Fields are read with dotted paths (`a.b`).
 from __future__ import annotations
 
 import bisect
+import copy
 import fnmatch
 import heapq
 import itertools
@@ -890,8 +891,25 @@ class ParamTimeline:
     @classmethod
     def from_source(cls, source: SignalSource, topic: str,
                     overrides: Mapping[str, Any] | None = None) -> ParamTimeline:
+        """The timeline of `topic`'s records. Built once per source and number of records
+        (a plan's checks ask for it again and again while its recording grows): the records
+        make the timeline, the overrides only what `at` answers."""
+        msgs = source.messages(topic)
+        cache = getattr(source, "_samples_cache", None)
+        key = (topic, "_param_timeline")
+        got = cache.get(key) if cache is not None else None
+        if got is None or got[0] != len(msgs):
+            got = (len(msgs), cls._from_messages(msgs))
+            if cache is not None:
+                cache[key] = got
+        out = copy.copy(got[1])
+        out.overrides = dict(overrides or {})
+        return out
+
+    @classmethod
+    def _from_messages(cls, msgs: list[tuple[int, Any]]) -> ParamTimeline:
         changes, held = [], []
-        for t, msg in source.messages(topic):
+        for t, msg in msgs:
             # recorder payload: {"snapshot": bool, "values": {name: value}, "source": "read"}
             d = msg.get("values", msg.get("params", msg)) if isinstance(msg, Mapping) else {}
             if isinstance(d, Mapping):
@@ -900,7 +918,7 @@ class ParamTimeline:
                 if isinstance(msg, Mapping) and (msg.get("snapshot")
                                                  or msg.get("source") == "read"):
                     held.append((t, vals))
-        return cls(changes, overrides, held)
+        return cls(changes, None, held)
 
     def names(self) -> set[str]:
         """Every parameter with a recorded value (overrides not included)."""
