@@ -492,3 +492,93 @@ def test_group_steps_outside_their_group_are_refused_at_check() -> None:
                           "  - group: {axes: [axis2], cycle: 2ms}\n"
                           "  - group_move: {axis: axis2, by: 10}\n  - group_stop: {}\n",
                           "p.yaml"), bench)
+
+
+def _states(path) -> list[dict]:
+    with open(path, "rb") as f:
+        return [json.loads(m.data) for _, _, m in
+                make_reader(f).iter_messages(topics=["/drive/axis1/state"])]
+
+
+def _no_jump(cycles: list[dict], axis: str, limit: float) -> float:
+    """The largest set-point change of `axis` from one cycle to the next."""
+    steps = [abs(b["write_position"][axis] - a["write_position"][axis])
+             for a, b in itertools.pairwise(cycles)]
+    assert steps
+    return max(steps) if max(steps) > limit else 0.0
+
+
+def test_a_new_gear_or_a_pg_move_on_a_cam_starts_where_the_axis_stands(tmp_path) -> None:
+    """004:236: a gear engages with GEA.Position = 0 and GEA.Offset = WritePosition - Offset -
+    GEA.Position, so the follower stays; 004:218: the PG superimposed on a cam (Servo.Mode 4)
+    joins where the axis stands. An outside review found group_gear after a sync off jump by
+    the old gear's travel (20000) and group_move on a cam jump by the PG's position (10000)."""
+    plan = loads_plan("""name: p
+steps:
+  - group: {axes: [axis1, axis2, axis3], cycle: 2ms}
+  - group_gear: {axis: axis2, master: axis1}
+  - group_move: {axis: axis1, to: 20000, speed: 50000, acc: 500000, dec: 500000}
+  - group_wait: {rdy: [axis1]}
+  - wait: 20ms
+  - group_command: {axis: axis2, code: 7, par: {5: 1}}
+  - group_gear: {axis: axis2, master: axis1}
+  - wait: 40ms
+  - group_move: {axis: axis1, to: 10000, speed: 50000, acc: 500000, dec: 500000}
+  - group_wait: {rdy: [axis1]}
+  - group_move: {axis: axis3, to: 10000, speed: 50000, acc: 500000, dec: 500000}
+  - group_wait: {rdy: [axis3]}
+  - group_cam: {axis: axis3, master: axis1, table: [0, 100, 200]}
+  - wait: 20ms
+  - group_move: {axis: axis3, by: 1000, speed: 50000, acc: 500000, dec: 500000}
+  - group_wait: {rdy: [axis3]}
+  - group_stop: {}
+""", "p.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
+    cycles = _cycles(res.recording)
+    # nothing moves faster than 50000 inc/s x 2 ms (+1 for rounding): no set-point jumps
+    assert _no_jump(cycles, "axis1", 101) == 0.0
+    assert _no_jump(cycles, "axis2", 101) == 0.0
+    assert _no_jump(cycles, "axis3", 101) == 0.0
+    assert cycles[-1]["write_position"]["axis3"] == pytest.approx(11000, abs=1)
+
+
+def test_group_wait_fails_when_an_axis_is_not_under_torque(tmp_path) -> None:
+    """Status 2 "ready without torque" (004:254): its PG reaches the target while the motor
+    follows nothing (an outside review: after a limit switch's quick stop the plan passed,
+    the axis 4852 increments short)."""
+    plan = loads_plan("""name: p
+steps:
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_control: {axis: axis1, torque: false}
+  - wait: 20ms
+  - group_move: {axis: axis1, by: 1000, speed: 50000, acc: 200000, dec: 200000}
+  - group_wait: {rdy: [axis1], timeout: 1s}
+""", "p.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    bad = [s for s in res.steps if s.status != "pass"]
+    assert bad and bad[0].kind == "group_wait", [(s.kind, s.message) for s in res.steps]
+    assert "axis1: Status 2 (ready without torque" in bad[0].message
+
+
+def test_a_cycle_60c2h_cannot_state_is_refused_and_2_5_ms_is_written_exactly(tmp_path) -> None:
+    """60C2h (u x 10^i s) must equal 1006h (L17218, L19089-19113): a 2.5 ms cycle was
+    written as 2 ms and the drive interpolated over the wrong period."""
+    bench = load_bench(GROUP_BENCH)
+    with pytest.raises(PlanFileError, match=r"p\.yaml:3: steps\[0\]\.group\.cycle"):
+        check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 1.001ms}\n",
+                              "p.yaml"), bench)
+    plan = loads_plan("""name: p
+steps:
+  - group: {axes: [axis1], cycle: 2.5ms}
+  - group_move: {axis: axis1, run: 100000, acc: 10000000}
+  - wait: 200ms
+  - group_stop: {}
+""", "p.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
+    # the drive interpolates each set-point over the cycle: at a steady 100000 inc/s its
+    # speed is flat (with 60C2h at 2 ms it rippled 57-67 rpm, an outside review)
+    moving = [m["speed_rpm"] for m in _states(res.recording) if m["speed_rpm"] > 1]
+    rpm = moving[len(moving) // 3: 2 * len(moving) // 3]  # the steady middle of the run
+    assert max(rpm) - min(rpm) < 1.0, rpm

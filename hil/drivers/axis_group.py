@@ -439,6 +439,7 @@ class ServoAxis:
     write_position: float = 0.0
     position: float = 0.0
     speed: float = 0.0
+    write_speed: float = 0.0  # WriteSpeed: d/dt WritePosition (004 appendix, offset 520)
     status: int = STATUS_NEVER
     statusword: int = 0
     missed: int = 0
@@ -492,29 +493,32 @@ class ServoAxis:
             pg.type = int(p[5])
         if code == 1:  # run speed: Par0 Acc, Par2 Speed, Par4 0 cancel GEA / 1 superimpose
             pg.acc = p[0] or pg.acc
-            if not p[4]:
-                self._connect_pg()
+            if not p[4] and self.gea.mode:  # Par4 0: an active GEA is cancelled (004:240);
+                self._connect_pg(self.write_speed)  # with none, the PG runs on as it is
                 self.gea.mode = 0
                 self.mode = 1
-            elif self.gea.mode:
-                self._superimpose()
+            elif p[4] and self.gea.mode:
+                self.superimpose()
             else:
                 self.mode = 1
             pg.start_speed(p[2])
         elif code in (2, 3):  # absolute / relative: Par0 Acc, Par1 Dec, Par2 Speed, Par3
             pg.acc, pg.dec, pg.pos_speed = p[0] or pg.acc, p[1] or pg.dec, p[2] or pg.pos_speed
             if not p[4] and self.gea.mode:  # Par4 0: an active GEA is cancelled, the PG
-                self._connect_pg()          # takes over where the axis stands (004:242)
+                self._connect_pg(self.write_speed)  # takes over where and as fast as the
+                # axis goes (004:242): the move starts on the fly, nothing jumps
                 self.gea.mode = 0
                 self.mode = 1
             elif self.mode == 3:
-                self._superimpose()
+                self.superimpose()
             pg.start_position(p[3] if code == 2 else pg.apos + p[3])
         elif code == 4:  # set reference: the PG's position is declared Par3; Offset takes
             # the difference, so the set-point (and the motor) stays where it is (004:226):
             # WritePosition = [PG.APos] + [GEA part] + Offset + Correction, by Servo.Mode
             pg.apos = p[3]
-            self.offset = self.write_position - self.correction - self._base()
+            if pg._plan is not None and pg._plan[0] == "pos":  # a move running: on from
+                pg._plan_to(pg.dpos)  # here to DPos in the new frame, at its speed
+            self.offset = self.write_position - self.correction - self.base()
         elif code == 5:  # abort: Par1 Dec (PG.Acc stays for the next move)
             pg.abort(p[1] or pg.acc)
         elif code == 6:  # sync on: Par0 master, Par1 source, Par2 1 gear / 2 + CamType cam,
@@ -541,6 +545,9 @@ class ServoAxis:
                 raise CommandError(f"Par0 {idx}: a gear cycle {' <- '.join(chain)} (each "
                                    "would follow the other's travel and run away)")
             table = self._cam_table(cams or {}, p) if kind >= 2 else None
+            if self.gea.mode:  # 004:244: not called again on a synchronised axis
+                raise CommandError("sync on of an axis already synchronised: sync off "
+                                   "(COMMAND 7) first (004:244)")
             g.master = names[idx]
             g.source = src
             g.gin, g.gout, g.inc_in = p[3], p[4], p[5]
@@ -562,7 +569,7 @@ class ServoAxis:
                 self.mode = int(p[12]) if int(p[12]) in (3, 4) else 3
             # the gear or cam starts where the axis stands: 004:216 holds at the switch (with
             # the PG's position in it for ServoMode 4), the Offset takes the difference
-            self.offset = self.write_position - self.correction - self._base()
+            self.offset = self.write_position - self.correction - self.base()
         elif code == 7:  # sync off: the ratio ramps to 0 by Par5 a cycle, then GEA idles
             g = self.gea
             if not g.mode:  # no gear or cam on: nothing to switch off
@@ -597,25 +604,26 @@ class ServoAxis:
                                f"{len(mem)} values written to CamTab {tab}")
         return list(mem[line:line + length])
 
-    def _superimpose(self) -> None:
+    def superimpose(self) -> None:
         """Servo.Mode 4: the PG's moves on top of the gear / cam (004:218). The PG joins
         with its position as it stands, so the Offset takes it out: nothing jumps."""
         if self.mode != 4:
-            before = self._base()
+            before = self.base()
             self.mode = 4
-            self.offset += before - self._base()
+            self.offset += before - self.base()
 
-    def _connect_pg(self) -> None:
+    def _connect_pg(self, speed: float = 0.0) -> None:
         """The PG takes over where the axis stands: PG.APos = WritePosition - Offset -
-        Correction (004:224), so leaving the gear moves nothing."""
+        Correction (004:224), so leaving the gear moves nothing; `speed`: PG.ASpeed, the
+        set-point's speed when a move or run starts at once from a moving gear."""
         self.pg.apos = self.write_position - self.offset - self.correction
-        self.pg.aspeed = 0.0
+        self.pg.aspeed = speed
 
     @property
     def position_error(self) -> float:
         return self.write_position - self.position
 
-    def _base(self) -> float:
+    def base(self) -> float:
         """The PG's and the GEA's parts of WritePosition in this Servo.Mode (004:216-218)."""
         base = 0.0
         if self.mode in (1, 4):
@@ -628,7 +636,7 @@ class ServoAxis:
         """WritePosition from the PG and/or GEA (004:216). An axis without torque (never
         enabled, faulted, ready without torque) follows itself: its Offset takes up what the
         PG or GEA moved, so the set-point is where the motor is when torque comes on."""
-        base = self._base()
+        base = self.base()
         if self.status in (STATUS_NEVER, STATUS_FAULT, STATUS_READY) and self._ever:
             self.offset = self.position - base - self.correction
         self.write_position = base + self.offset + self.correction
@@ -675,6 +683,17 @@ class ServoAxis:
             self.status = STATUS_TORQUE
         else:
             self.status = STATUS_READY
+
+
+def interpolation_period(cycle_s: float) -> tuple[int, int]:
+    """60C2h sub 1 (U8) and sub 2 (the power of ten) for a cycle of `cycle_s`: the period is
+    sub1 x 10^sub2 s (L19089-19113) and must equal 1006h (L17218), so the cycle exactly."""
+    us = round(cycle_s * 1e6)
+    for index in (-3, -4, -5, -6):
+        unit, rest = divmod(us, 10 ** (6 + index))
+        if not rest and 0 < unit <= 255:
+            return unit, index
+    raise ValueError(f"a cycle of {us} us has no 60C2h form u x 10^i s with u 1-255")
 
 
 def worst_case_bits(axes: int, *, heartbeat: bool = False) -> int:
@@ -754,8 +773,9 @@ class AxisGroup:
             w = lambda i, s, v, a=a: self._sdo_write(a.name, i, s, v)  # noqa: E731
             _map_pdo(w, 0x1400, 0x1600, 0x200 + a.node, (0x60C10120, 0x60400010))  # RPDO1
             _map_pdo(w, 0x1800, 0x1A00, 0x180 + a.node, (0x60410010, 0x60640020))  # TPDO1
-            w(0x60C2, 1, round(self.cycle_s * 1000))
-            w(0x60C2, 2, -3)
+            unit, index = interpolation_period(self.cycle_s)
+            w(0x60C2, 1, unit)  # must equal 1006h (L17218): 2.5 ms is 25 x 10^-4 s
+            w(0x60C2, 2, index)
             w(0x1006, 0, us)
             w(0x6060, 0, 7)
             if self.heartbeat_s:
@@ -907,6 +927,8 @@ class AxisGroup:
                     a.setpoint_error = (f"set-point {a.write_position!r} outside 60C1h's I32 "
                                         "range: the last one is held")
                     a.write_position = a._sent[-1] if a._sent else a.position
+                if a._sent and dt > 0:
+                    a.write_speed = (a.write_position - a._sent[-1]) / dt
                 a._sent = [*a._sent[-2:], a.write_position]
         bus = self.net.bus  # the bus itself: canopen's send lock may be held by an SDO
         for a in self.axes:

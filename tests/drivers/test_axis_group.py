@@ -474,3 +474,100 @@ def test_abort_uses_its_dec_and_leaves_acc_and_sync_off_of_nothing_is_done_at_on
     m.par, m.command = [0.0] * 5 + [9.0] + [0.0] * 9, 2
     with pytest.raises(CommandError, match="ramp type 0-3"):
         m.accept_command({"m": m, "f": f})
+
+
+def _steps(group, axis, cycles: int) -> list[float]:
+    """The set-point's change at each of `cycles` cycles."""
+    out = []
+    for _ in range(cycles):
+        last = axis.write_position
+        group.cycle()
+        out.append(axis.write_position - last)
+    return out
+
+
+def test_run_speed_with_par4_0_and_no_gear_changes_speed_with_acc_not_at_once() -> None:
+    # COMMAND 1 Par4 = 0 cancels a GEA that is active (004:240); with none, the speed goes
+    # from 20000 to 30000 with PG.Acc (004:222, 004:226c: a new speed while running), and
+    # never through 0 in one cycle (an outside review: 20 -> 0.2 inc a cycle)
+    group, m, _f = _pair()
+    _command(group, m, 1, {0: 100_000, 2: 20_000, 5: 3})
+    _steps(group, m, 400)
+    _command(group, m, 1, {0: 100_000, 2: 30_000, 5: 3})
+    steps = _steps(group, m, 200)
+    dv = [abs(b - a) / 0.001 / 0.001 for a, b in pairwise(steps)]  # inc/s² from cycle to cycle
+    assert min(steps) > 19.0 and max(dv) <= 100_000 * 1.01
+    assert steps[-1] == pytest.approx(30.0)
+
+
+def test_cancelling_a_moving_gear_keeps_the_set_points_speed() -> None:
+    # COMMAND 1 / 3 Par4 = 0 on a geared follower while its master runs (004:240-242): the
+    # PG takes over where and as fast as the axis goes, so the set-point does not stop dead
+    for code, par in ((1, {0: 100_000, 2: 20_000, 4: 0, 5: 3}),
+                      (3, {0: 100_000, 1: 100_000, 2: 50_000, 3: 100_000, 4: 0, 5: 3})):
+        group, m, f = _pair()
+        _command(group, f, 6, {0: 0, 1: 1, 2: 1, 3: 1, 4: 1, 12: 3})
+        _command(group, m, 1, {0: 100_000, 2: 20_000, 5: 3})
+        _steps(group, m, 400)
+        assert _steps(group, f, 5)[-1] == pytest.approx(20.0)
+        _command(group, f, code, par)
+        assert f.gea.mode == 0
+        steps = _steps(group, f, 50)
+        assert min(steps) > 19.0, (code, steps[:5])
+
+
+def test_set_reference_during_a_move_moves_nothing_and_the_move_goes_on_in_the_new_frame() -> None:
+    # COMMAND 4: "the current position is declared Par3" (004:242); WritePosition = PG.APos
+    # + Offset + Correction (004:216) holds, so the set-point does not jump; DPos is in the
+    # new frame: the move ends on it
+    group, m, _f = _pair()
+    _command(group, m, 2, {0: 100_000, 1: 100_000, 2: 50_000, 3: 100_000, 5: 3})
+    _steps(group, m, 300)
+    before = m.write_position
+    _command(group, m, 4, {3: 50_000})  # accepted at a cycle, which moves on by a step
+    steps = [m.write_position - before, *_steps(group, m, 4000)]
+    assert max(abs(s) for s in steps) <= 50.0 + 1e-6  # PosSpeed x cycle
+    assert m.pg.rdy and m.pg.apos == pytest.approx(100_000)
+    moved = m.write_position - m.offset - m.correction
+    assert moved == pytest.approx(100_000)
+
+
+def test_a_second_sync_on_without_sync_off_is_refused() -> None:
+    # "sync on must not be called again; desync first" (004:244)
+    from hil.drivers.axis_group import CommandError
+
+    group, m, f = _pair()
+    _command(group, f, 6, {0: 0, 1: 1, 2: 1, 3: 1, 4: 1})
+    f.par = [0.0, 1.0, 1.0, 2.0, 1.0] + [0.0] * 10
+    f.command = 6
+    with pytest.raises(CommandError, match="already synchronised"):
+        f.accept_command({"m": m, "f": f})
+
+
+@pytest.mark.parametrize(("cycle_s", "want"), [(0.001, (1, -3)), (0.002, (2, -3)),
+                                               (0.0025, (25, -4)), (0.01, (10, -3)),
+                                               (0.00125, (125, -5))])
+def test_60c2h_states_the_cycle_exactly(cycle_s: float, want: tuple[int, int]) -> None:
+    # 60C2h = sub1 x 10^sub2 s (L19089-19113) must equal 1006h (L17218)
+    from hil.drivers.axis_group import interpolation_period
+
+    assert interpolation_period(cycle_s) == want
+    unit, index = want
+    assert unit * 10.0 ** index == pytest.approx(cycle_s)
+    with pytest.raises(ValueError):
+        interpolation_period(0.001001)
+
+
+def test_the_group_writes_60c2h_equal_to_1006h() -> None:
+    from hil.drivers.axis_group import AxisGroup, ServoAxis
+
+    class Net(_Net):
+        def subscribe(self, *_a) -> None:
+            return None
+
+    written = {}
+    group = AxisGroup(Net(), [ServoAxis("a", 1)], 0.0025,
+                      sdo_write=lambda _n, i, s, v: written.__setitem__((i, s), v))
+    group.configure()
+    assert written[(0x60C2, 1)] == 25 and written[(0x60C2, 2)] == -4  # 25 x 10^-4 s
+    assert written[(0x1006, 0)] == 2500  # us

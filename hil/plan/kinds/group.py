@@ -27,9 +27,12 @@ from hil.drivers.axis_group import (
     RAMP_TYPES,
     STATUS_FAULT,
     STATUS_LOST,
+    STATUS_NEVER,
+    STATUS_READY,
     AxisGroup,
     ServoAxis,
     gear_cycle,
+    interpolation_period,
     worst_case_bits,
 )
 from hil.plan.context import Outcome, StepFailed
@@ -136,7 +139,10 @@ def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
 _SOURCES = {"write": 1, "actual": 2, "time": 3}  # GEA.SourcePosition (004:230)
 
 
-_STATUS_TEXT = {STATUS_FAULT: "the drive is in fault", STATUS_LOST: "no communication"}
+_STATUS_TEXT = {STATUS_FAULT: "the drive is in fault", STATUS_LOST: "no communication",
+                # its PG reached the target but the motor did not follow it
+                STATUS_READY: "ready without torque: the axis did not follow its PG",
+                STATUS_NEVER: "never communicated"}
 
 
 def _no_cycle(g: AxisGroup, a: _Coupling) -> None:
@@ -323,6 +329,15 @@ class Group(StepKind):
         if not MS <= cycle <= 10 * MS:
             raise v.err(m.kline("cycle"), join(where, "cycle"),
                         "SYNC 1-10 ms (A3 IP mode, L17211-17244)")
+        try:  # 1006h in us and 60C2h = u x 10^i s must state the same period (L17218)
+            if cycle % 1000:
+                raise ValueError
+            interpolation_period(cycle / S)
+        except ValueError:
+            raise v.err(m.kline("cycle"), join(where, "cycle"),
+                        "a period 1006h (whole us) and 60C2h (u x 10^i s, u 1-255) both "
+                        "state exactly (L17218, L19089-19113): 2ms and 2.5ms can, 1.001ms "
+                        "cannot") from None
         hb = v.duration(m, "heartbeat", where, 0) if "heartbeat" in m else 0
         if "heartbeat" in m and (not MS <= hb <= 65535 * MS or hb % MS):
             raise v.err(m.kline("heartbeat"), join(where, "heartbeat"),
@@ -444,8 +459,8 @@ class GroupMove(StepKind):
                 pg = ax.pg
                 pg.acc, pg.dec, pg.pos_speed, pg.type = (a.acc, a.dec, a.speed,
                                                          a.ramp)
-                if ax.mode == 3:
-                    ax.mode = 4
+                if ax.mode == 3:  # the PG joins the gear or cam where it stands (004:218)
+                    ax.superimpose()
                 if a.what == "to":
                     pg.start_position(a.value)
                 elif a.what == "by":
@@ -488,10 +503,15 @@ class GroupGear(StepKind):
             gea = ax.gea
             gea.master, gea.source = a.master, a.source
             gea.gin, gea.gout, gea.inc_in = a.gin, a.gout, a.inc_in
-            if gea.mode == 0:
-                gea.actual_in = 0.0 if a.inc_in else a.gin
+            if gea.mode == 1:  # geared already: a new ratio, ramped by inc_in (004:236)
+                return Outcome(f"{a.axis} geared to {a.master} {a.gin:g}/{a.gout:g}")
+            # a new engagement: GEA.Position = 0 and the Offset so the axis stays where it
+            # stands (004:236: GEA.Offset = WritePosition - Offset - GEA.Position)
+            gea.actual_in = 0.0 if a.inc_in else a.gin
+            gea.position = 0.0
             gea.mode = 1
             ax.mode = 4 if ax.mode in (1, 4) else 3
+            ax.offset = ax.write_position - ax.correction - ax.base()
         return Outcome(f"{a.axis} geared to {a.master} {a.gin:g}/{a.gout:g}")
 
     def describe(self) -> str:
