@@ -520,7 +520,7 @@ class ServoAxis:
                 pg._plan_to(pg.dpos)  # here to DPos in the new frame, at its speed
             self.offset = self.write_position - self.correction - self.base()
         elif code == 5:  # abort: Par1 Dec (PG.Acc stays for the next move)
-            pg.abort(p[1] or pg.acc)
+            pg.abort(p[1] or pg.dec)  # Par1 0 keeps PG.Dec (004:242)
         elif code == 6:  # sync on: Par0 master, Par1 source, Par2 1 gear / 2 + CamType cam,
             g = self.gea  # Par3/4 In/Out, Par5 IncIn; cams: Par6 CamLine, Par7 CamLen, Par8
             names = list(axes)  # CamScale, Par9 IniPosition, Par10 CamTab, Par12 ServoMode,

@@ -571,3 +571,17 @@ def test_the_group_writes_60c2h_equal_to_1006h() -> None:
     group.configure()
     assert written[(0x60C2, 1)] == 25 and written[(0x60C2, 2)] == -4  # 25 x 10^-4 s
     assert written[(0x1006, 0)] == 2500  # us
+
+
+def test_abort_with_par1_0_brakes_with_the_pg_s_dec() -> None:
+    # COMMAND 5 Par1 = Dec (004:242); 0 keeps the register, as for every Par of 1-5: PG.Dec
+    group, m, _f = _pair()
+    _command(group, m, 2, {0: 100_000, 1: 400_000, 2: 20_000, 3: 10**7, 5: 3})
+    for _ in range(300):
+        group.cycle()
+    _command(group, m, 5, {1: 0})
+    n = 0
+    while m.pg.aspeed and n < 1000:
+        group.cycle()
+        n += 1
+    assert 45 <= n <= 55  # 20000 / 400000 = 50 ms at 1 ms cycles (with Acc it took 200)
