@@ -38,7 +38,7 @@ from typing import Any
 from hil.bench.bench import Bench, load_bench, with_clock
 from hil.plan.events import Listener, Note, Notifier, PlanEnded, PlanStarted, StepEnded
 from hil.plan.plan import Plan, check_plan, load_plan
-from hil.plan.runner import PlanResult, output_stems, run_plan, timing_specs
+from hil.plan.runner import PlanResult, output_stems, run_plan, signal_text, timing_specs
 
 __all__ = ["jobs_from_arg", "parallel_blocker", "run_parallel"]
 
@@ -257,7 +257,7 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
 
 
 def _as_interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt(f"signal {signum}")
+    raise KeyboardInterrupt(signal_text(signum))
 
 
 def _stop_workers(pool: cf.ProcessPoolExecutor, running: dict[cf.Future, _Job]

@@ -96,6 +96,21 @@ def timing_specs(extra_dirs: list[Path] | None = None) -> SpecRegistry:
 # --- the runner ---------------------------------------------------------------------------
 
 
+def signal_text(signum: int) -> str:
+    """How a stop by `signum` is named on the record: "SIGINT (Ctrl-C)", "SIGTERM"."""
+    try:
+        name = signal.Signals(signum).name
+    except ValueError:
+        name = f"signal {signum}"
+    return f"{name} (Ctrl-C)" if signum == signal.SIGINT else name
+
+
+def interrupt_cause(e: BaseException) -> str:
+    """The signal a KeyboardInterrupt names (`signal_text`), else "Ctrl-C / SIGTERM"."""
+    text = str(e)
+    return text if text.startswith("SIG") else "Ctrl-C / SIGTERM"
+
+
 class _Interrupts:
     """SIGINT / SIGTERM while a plan runs (main thread only).
 
@@ -119,7 +134,7 @@ class _Interrupts:
     def _handler(self, signum: int, frame: Any) -> None:
         self.count += 1
         if self.count == 1 and not self.shield:
-            raise KeyboardInterrupt(f"signal {signum}")
+            raise KeyboardInterrupt(signal_text(signum))
         with contextlib.suppress(OSError):
             os.write(2, self.NOTICE)
 
@@ -193,7 +208,7 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                 reason = _steps(ctx, plan, res, events, allow_inconclusive)
             except KeyboardInterrupt as e:
                 intr.shield = True
-                interrupted, reason = e, "interrupted (Ctrl-C / SIGTERM)"
+                interrupted, reason = e, f"interrupted ({interrupt_cause(e)})"
                 res.status = ABORTED
                 for r in res.steps:
                     if r.status == SKIPPED and not r.message:
@@ -444,8 +459,8 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
             r.status, r.message = ERROR, str(e)
         except Exception as e:
             r.status, r.message = ERROR, f"{type(e).__name__}: {e}"
-        except KeyboardInterrupt:  # this step ran and was cut: it ends on the record too
-            r.status, r.message = ERROR, "interrupted (Ctrl-C / SIGTERM) while it ran"
+        except KeyboardInterrupt as e:  # this step ran and was cut: it ends on the record too
+            r.status, r.message = ERROR, f"interrupted ({interrupt_cause(e)}) while it ran"
             r.duration_ns = clock.monotonic_ns() - t0
             events.emit(StepEnded(plan, s, r, d.name, rec))
             raise

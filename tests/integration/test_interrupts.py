@@ -95,6 +95,8 @@ def test_second_ctrl_c_does_not_cut_the_safe_state_or_the_recording(tmp_path, ga
     assert summary is not None  # summary section and footer written
     assert meta["hil.result"]["status"] == "aborted", meta.get("hil.result")
     assert meta["hil.result"]["safe_state_ok"] == "true", meta["hil.result"]
+    # the record names the signal that stopped the run
+    assert meta["hil.result"]["reason"] == "interrupted (SIGINT (Ctrl-C))", meta["hil.result"]
     actions = [s["action"] for s in safety]
     assert actions[-1] == "safe_state_reached", actions
     assert any(a.startswith("controlword") for a in actions), actions

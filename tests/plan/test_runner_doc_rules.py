@@ -212,3 +212,16 @@ def test_a_p3001_digit_the_drive_refuses_is_refused_by_check(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "b.yaml:3: " in err and "digit X = 6" in err and "L10519" in err
     assert hil(["run", "--check", good]) == 0
+
+
+def test_an_interrupt_is_recorded_with_the_signal_that_made_it() -> None:
+    """hil.result's reason and the cut step's message name SIGINT or SIGTERM (a supervisor's
+    SIGTERM and an operator's Ctrl-C read the same before)."""
+    import signal
+
+    from hil.plan.runner import interrupt_cause, signal_text
+
+    assert signal_text(signal.SIGINT) == "SIGINT (Ctrl-C)"
+    assert signal_text(signal.SIGTERM) == "SIGTERM"
+    assert interrupt_cause(KeyboardInterrupt(signal_text(signal.SIGTERM))) == "SIGTERM"
+    assert interrupt_cause(KeyboardInterrupt()) == "Ctrl-C / SIGTERM"  # raised elsewhere
