@@ -159,7 +159,8 @@ class AxisParams:
     backlash: int = 0  # P7, 0 ~ 32767
     accel_ms: int = 5000  # P8, 0 ~ 30000
     run_direction: int = 0  # P9-0: 0 forward pulses count up
-    home_direction: int = -1  # P9-1 = 1: towards decreasing count, "origin on the left"
+    home_direction: int = 1  # P9-1 (001:58): 0 towards increasing count ("origin on the
+    # right"), 1 (the default) towards decreasing count ("origin on the left")
     decel_ms: int = 0  # P12, 0 = P8
     dog: str = ""  # P15-0, X<n> (with dog_nc for a b contact)
     dog_nc: bool = False
@@ -174,6 +175,15 @@ class AxisParams:
     output: str = "P/R"  # U/D, P/R, A/B (001:14, 28)
     logic: int = 0  # normal ON / normal OFF (001:28)
     hardware: str = "single"  # single-ended transistor 200 kHz / differential 920 kHz
+    # DRV ABS with a stroke of 0: 001:38 says a stroke of 0 runs on "whether ADR or ABS";
+    # 001:10 writes "DRV ABS,,0,Ut" to go from 300 mm to 0 mm. "continuous" (001:38) or
+    # "position" (001:10): docs/manual-choices.md
+    abs_zero: str = "continuous"
+
+    @property
+    def home_sign(self) -> int:
+        """P9-1 as a count direction: +1 towards increasing count, -1 decreasing."""
+        return 1 if self.home_direction == 0 else -1
 
     def check(self) -> None:
         """Refuse what FUN141 refuses (codes 1-15, 37-39, 001:34)."""
@@ -185,7 +195,8 @@ class AxisParams:
             (5, "max_speed", self.max_speed >= 1, ">= 1 Ps/s"),
             (7, "creep_speed", 1 <= self.creep_speed <= 65535, "1 ~ 65535 Ps/s"),
             (9, "accel_ms", 0 <= self.accel_ms <= 30000, "0 ~ 30000 ms"),
-            (10, "home_direction", self.home_direction in (1, -1), "1 or -1"),
+            (10, "home_direction", self.home_direction in (0, 1),
+             "0 towards increasing count, 1 towards decreasing (001:58)"),
             (13, "decel_ms", 0 <= self.decel_ms <= 30000, "0 ~ 30000 ms"),
         ]
         for code, name, ok, want in rules:
@@ -207,17 +218,21 @@ class AxisParams:
         if not 1 <= self.start_speed_pps <= self.max_speed_pps:  # 38: start/stop frequency
             raise PlcError(38, f"start_speed {self.start_speed} not within 1 ~ max_speed",
                            field="start_speed")
-        if not 0 <= self.zero_count <= 255:
-            raise PlcError(15, f"zero_count {self.zero_count}: 0 ~ 255", field="zero_count")
+        if not 0 <= self.zero_count <= 255:  # P17: 18 by the seed's "parameter N + 1" rule
+            raise PlcError(18, f"zero_count {self.zero_count}: 0 ~ 255", field="zero_count")
+        if self.abs_zero not in ("continuous", "position"):
+            raise PlcError(33, f"abs_zero {self.abs_zero!r}: continuous (001:38) or position "
+                               "(001:10)", field="abs_zero")
         if self.pg0_edge not in ("leading", "trailing"):
             raise PlcError(52, f"pg0_edge {self.pg0_edge!r}: leading or trailing",
                            field="pg0_edge")
-        # host points only (001:58-60: X0~X15, Y0~Y23); the seed gives no error code of its
-        # own for the stroke limit (P15-1): 51, DOG's, the other homing input
-        for name, prefix, top, code in (("dog", "X", 15, 51), ("limit", "X", 15, 51),
+        # DOG a host point X0~X15, the stroke limit X0~X125 (P15-0 b6~b0, P15-1 b14~b8,
+        # 001:58), CLR Y0~Y23 (001:60); the seed gives no error code of its own for the
+        # stroke limit (P15-1): 51, DOG's, the other homing input
+        for name, prefix, top, code in (("dog", "X", 15, 51), ("limit", "X", 125, 51),
                                         ("clr", "Y", 23, 53)):
             val = getattr(self, name)
-            if val and not (re.fullmatch(rf"{prefix}[0-9]{{1,2}}", val) and int(val[1:]) <= top):
+            if val and not (re.fullmatch(rf"{prefix}[0-9]{{1,3}}", val) and int(val[1:]) <= top):
                 raise PlcError(code, f"{name} {val!r}: {prefix}0 ~ {prefix}{top}", field=name)
         if self.pg0 not in ("", "OZ"):
             raise PlcError(52, f"pg0 {self.pg0!r}: OZ (the drive's Z output) or empty",
@@ -662,7 +677,7 @@ class PulseMaster:
         """DRVZ MD0 / MD1 / MD2 (001:108-124). Raises TimeoutError when no zero is found."""
         p = self.p
         # P9-1 names the count's direction (001:58): P9-0 = 1 reverses the pulses for it
-        hd = -p.home_direction if p.run_direction else p.home_direction
+        hd = -p.home_sign if p.run_direction else p.home_sign
         v0 = min(p.start_speed_pps, speed)
         creep = p.speed(p.creep_speed)
         self.status.homed, self.status.drvz = False, mode
@@ -678,7 +693,7 @@ class PulseMaster:
 
         # start on or in front of DOG (001:118): to the stroke limit, back through DOG
         if self.dog() or (p.limit and self.at_limit()):
-            self._front_of_dog(speed, v0, left)
+            self._front_of_dog(hd, speed, v0, left)
             self.ramp_run(v0, speed, hd, self.dog, left())
         else:
             hit = self.ramp_run(v0, speed, hd, lambda: self.dog() or self.at_limit(), left())
@@ -686,13 +701,15 @@ class PulseMaster:
                 left()
             if not self.dog():  # the stroke limit came first: we started in front of DOG
                 self.stop()
-                self._front_of_dog(speed, v0, left)
+                self._front_of_dog(hd, speed, v0, left)
                 self.ramp_run(v0, speed, hd, self.dog, left())
         # DOG is on, moving in the homing direction at `speed`
         if mode == "MD0":  # at DOG at once to the creep speed (001:110, 122)
             self._run(creep, hd, 0, lambda: not self.dog(), round(left() * S))
         elif mode == "MD1":  # "以加減速時間設定 (參數 8) 之斜率減速停止" (001:112): P8, not P12
-            self.ramp_stop(speed, hd, p.accel)
+            # "由目前速度": from the speed it has when DOG comes, which may be part-way up
+            # its ramp, not the homing speed
+            self.ramp_stop(self.status.freq or speed, hd, p.accel)
             clock.sleep(MD1_WAIT_NS / S)
             if not self.dog():  # the P8 stop ran past DOG: back into it first (a choice)
                 self._run(creep, -hd, 0, self.dog, round(left() * S))
@@ -719,15 +736,20 @@ class PulseMaster:
         self.status.homed = True
         self._report("homed")
 
-    def _front_of_dog(self, speed: float, v0: float, left: Callable[[], float]) -> None:
-        """To the stroke limit at homing speed, then back until DOG goes 1 -> 0 (001:118)."""
+    def _front_of_dog(self, hd: int, speed: float, v0: float,
+                      left: Callable[[], float]) -> None:
+        """To the stroke limit at homing speed in the homing direction `hd` (P9-1, with P9-0
+        applied), then back until DOG goes 1 -> 0 (001:118); the ramp goes on through DOG
+        (the speed never jumps to the homing speed)."""
         p = self.p
-        hd = p.home_direction
         if p.limit and not self.at_limit():
             self.ramp_run(v0, speed, hd, self.at_limit, left())
         self.stop()
-        self.ramp_run(v0, speed, -hd, self.dog, left())
-        self._run(speed, -hd, 0, lambda: not self.dog(), round(left() * S))
+        if not self.dog():
+            self.ramp_run(v0, speed, -hd, self.dog, left())
+        if not self.ramp_run(self.status.freq or v0, speed, -hd, lambda: not self.dog(),
+                             left()):
+            left()
         self.stop()
 
     # -- the program ---------------------------------------------------------------------
@@ -866,7 +888,8 @@ class PulseMaster:
             until = lambda: clock.monotonic_ns() - t0 >= act_ns  # noqa: E731 - ACT
         else:
             until = None
-        if len(chain) == 1 and self.p.pulses(values[0], first.unit) == 0:
+        if len(chain) == 1 and self.p.pulses(values[0], first.unit) == 0 and not (
+                first.mode == "ABS" and self.p.abs_zero == "position"):
             # stroke 0: run until the transition (001:38)
             v = chain[0][1] or self.p.max_speed_pps
             direction = -1 if first.direction == "-" else 1

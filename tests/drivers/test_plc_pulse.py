@@ -96,7 +96,11 @@ FAST = dict(max_speed=100_000, start_speed=500, accel_ms=100)
     ({"pulses_per_rev": 0}, 2), ({"creep_speed": 70000}, 7), ({"accel_ms": 30001}, 9),
     ({"max_speed": 250_000}, 37), ({"max_speed": 500_000, "hardware": "differential",
                                      "output": "A/B"}, 37),
-    ({"start_speed": 300_000}, 38), ({"zero_count": 256}, 15),
+    ({"start_speed": 300_000}, 38),
+    # P17: 18 by the seed's "parameter N + 1" rule (15 is P14's, 001:34)
+    ({"zero_count": 256}, 18),
+    # P9-1 is 0 or 1 (001:58); DRV ABS with 0 is one of two readings (001:10 / 001:38)
+    ({"home_direction": -1}, 10), ({"home_direction": 2}, 10), ({"abs_zero": "x"}, 33),
     ({"clr": "Y8", "clr_ms": 20.0}, 53),
     # P7 is parameter 7: error 8 (39 is the travel compensation of P10/P11, 001:34)
     ({"backlash": 32768}, 8),
@@ -105,8 +109,9 @@ FAST = dict(max_speed=100_000, start_speed=500, accel_ms=100)
     # look-alike digits an outside test found accepted (a superscript 2 crashed `int`, a
     # fullwidth 0 passed the check and was never seen at run time)
     ({"dog": "X\u00b2"}, 51), ({"dog": "X\uff10"}, 51), ({"clr": "Y\u00b2"}, 53),
-    # the stroke limit is a host input too (P15-1); PG0 is the drive's OZ (P15-2)
-    ({"limit": "banana"}, 51), ({"limit": "X999"}, 51), ({"pg0": "foo"}, 52),
+    # the stroke limit is an input X0~X125 (P15-1, 001:58); PG0 is the drive's OZ (P15-2)
+    ({"limit": "banana"}, 51), ({"limit": "X999"}, 51), ({"limit": "X126"}, 51),
+    ({"pg0": "foo"}, 52),
     # P9-0 is a bit (error 10, P9's); the output logic normal ON / OFF (001:28)
     ({"run_direction": 7}, 10), ({"logic": 5}, 1),
     # P16 goes into DR4088, 32 bits (001:122; "parameter number + 1")
@@ -535,3 +540,69 @@ def test_a_wait_longer_than_the_program_time_fails_at_that_time():
             r.plc.run(prog(Step(wait_time="R500"), Step(end=True)), timeout_s=2.0,
                       registers={"R500": -1})  # 65535 x 0.01 s
         assert 1.99 * S <= clock.monotonic_ns() - t0 <= 2.01 * S
+
+
+def test_the_stroke_limit_may_be_any_input_x0_to_x125():
+    # P15-1 b14~b8: 0~125, X0~X125 (001:58); only DOG is a host point X0~X15
+    AxisParams(limit="X125").check()
+    AxisParams(limit="X20").check()
+
+
+def test_p9_1_is_the_seeds_0_up_1_down():
+    # 001:58: 0 = towards increasing count ("origin on the right"), 1 (default) decreasing
+    assert AxisParams().home_direction == 1 and AxisParams().home_sign == -1
+    assert AxisParams(home_direction=0).home_sign == 1
+
+
+def test_md1_decelerates_from_the_speed_it_has_when_dog_comes():
+    # MD1: at DOG "由目前速度以加減速時間設定(參數8)之斜率減速停止" (001:112): from the current
+    # speed with the P8 slope. With P8 = 5 s and DOG 0.5 rev away the axis is still low on
+    # its ramp at DOG: no segment may jump above the speed it had (an outside review saw
+    # 14 kHz -> 50 kHz at DOG)
+    with rig(AxisParams(**HOME | {"accel_ms": 5000})) as r:
+        r.plc.run(prog(Step(spd=50_000, drive=Drv("ABS", "", 10_000), wait_time=0.1)))
+        n0 = len(r.segs)
+        r.plc.run(prog(Step(spd=50_000, drive="MD1")))
+        toward = [s["freq"] for _, s in r.segs[n0:] if s["freq"] > 0 and s["direction"] == -1]
+        peak = max(toward)
+        assert peak < 20_000, peak  # 1.5 rev from DOG at the P8 slope: far below 50 kHz
+        assert r.plc.status.homed
+
+
+@pytest.mark.parametrize("run_direction", [0, 1])
+def test_a_start_on_dog_seeks_the_limit_in_the_homing_direction_whatever_p9_0(run_direction):
+    # 001:118: first towards the homing direction (P9-1) to the stroke limit. P9-0 = 1
+    # reverses the pulses for the count (001:56), so the motor turns the other way for the
+    # same P9-1: the limit must then be on that side. An outside review found P9-0 = 1 ran
+    # away from the limit (the start-on-DOG path ignored P9-0)
+    mech = (Mechanics(nl_rev=-2.0, hard_stop_neg_rev=-3.0) if not run_direction
+            else Mechanics(pl_rev=2.0, hard_stop_pos_rev=3.0))
+    params = AxisParams(**HOME | {"run_direction": run_direction,
+                                  "limit": "X1" if not run_direction else "X2"})
+    with rig(params, mech=mech) as r:
+        assert r.plc.dog()
+        r.plc.run(prog(Step(spd=20_000, drive="MD0")), timeout_s=8)
+        first = next(s["direction"] for _, s in r.segs if s["freq"] > 0)
+        assert first == (-1 if not run_direction else 1)
+        assert r.plc.status.homed
+        far_edge = -0.5 if not run_direction else 0.5
+        assert r.rev() == pytest.approx(far_edge, abs=10 / PER_REV)
+
+
+@pytest.mark.parametrize("abs_zero, moves", [("continuous", False), ("position", True)])
+def test_drv_abs_0_is_the_configured_reading(abs_zero, moves):
+    # 001:38: a stroke of 0 runs on "whether ADR or ABS"; 001:10: "DRV ABS,,0,Ut" goes from
+    # 300 mm to 0 mm. Option abs_zero (docs/manual-choices.md)
+    with rig(AxisParams(**FAST, abs_zero=abs_zero)) as r:
+        r.plc.run(prog(Step(spd=50_000, drive=Drv("ABS", "", 30_000), wait_time=0.1)))
+        if moves:  # a move to 0 and its WAIT
+            r.plc.run(prog(Step(spd=20_000, drive=Drv("ABS", "", 0), wait_time=0.1)))
+            assert r.plc.status.position == 0
+        else:  # runs on until its ACT
+            r.plc.run(prog(Step(spd=20_000, drive=Drv("ABS", "", 0), act=1.0), Step(end=True)))
+        if moves:
+            assert r.plc.status.position == 0
+            clock.sleep(0.2)
+            assert r.rev() == pytest.approx(0.0, abs=2 / PER_REV)
+        else:  # ran on, forwards, until ACT
+            assert r.plc.status.position > 30_000
