@@ -919,7 +919,8 @@ class PulseMaster:
             clock.sleep(wait)
         line = s.wait_line or s.ext
         if line and not clock.wait_for(lambda: self.port.get(line), left):
-            raise TimeoutError(f"WAIT {line}: not on within the program's time")
+            raise TimeoutError(f"{'WAIT' if s.wait_line else 'EXT'} {line}: not on within "
+                               "the program's time")
 
     def _report(self, what: str) -> None:
         if self.on_status is not None:

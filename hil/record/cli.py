@@ -24,11 +24,22 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--gaps",
-        type=int,
+        type=_count,
         default=3,
         metavar="N",
-        help="largest gaps to show per topic (default 3)",
+        help="largest gaps to show per topic (default 3; 0: none)",
     )
+
+
+def _count(text: str) -> int:
+    """A whole number >= 0 (argparse type)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: a whole number >= 0") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"{text}: a whole number >= 0")
+    return n
 
 
 def _fmt_ns(ns: int) -> str:

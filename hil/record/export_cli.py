@@ -49,7 +49,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--time",
         choices=("log", "publish"),
         default="log",
-        help="timestamps from log_time (harness) or publish_time (source)",
+        help="timestamps from log_time (the harness's, the default) or publish_time (the "
+             "source's; hil check judges on publish_time)",
     )
 
 

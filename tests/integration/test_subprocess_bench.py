@@ -137,3 +137,14 @@ def test_bus_mesh_gives_each_drive_its_own_port_linked_to_the_earlier_ones():
     assert all(d.startswith("zenoh:hil/1-1/can?") and d.endswith("&mode=peer") for d in drives)
     assert harness_side(harness) == f"zenoh:hil/1-1/can?connect={','.join(ports)}&mode=peer"
     assert bus_mesh(url, 1) == ([url], url)  # one drive: the bus as it is
+
+
+def test_a_plc_plan_on_the_zenoh_bench(tmp_path):
+    """The pulse line over zenoh to the `hil drive` process: a PLC DRVZ MD1 homing with its
+    DOG/limit inputs and CLR output crossing the same hop, on the wall clock."""
+    bench = load_bench(fixture("benches", "virtual-zenoh.yaml"))
+    [r] = run_plans([load_plan(p) for p in find_plans(["plc_home_md1"])], bench,
+                    tmp_path, stream=io.StringIO())
+    assert r.passed, [(s.label, s.status, s.message) for s in r.steps if s.status != "pass"]
+    counts = Recording.open(r.recording).counts()
+    assert counts.get("/pulse/drive1/seg", 0) > 5

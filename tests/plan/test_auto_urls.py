@@ -26,3 +26,16 @@ def test_harness_connects_where_the_drive_listens():
     assert harness_side(url) == "zenoh:hil/1-0/can?connect=tcp/127.0.0.1:7447&mode=peer"
     assert harness_side("pty:/tmp/x?baud=38400") == "serial:/tmp/x?baud=38400"
     assert harness_side("zenoh:k?connect=tcp/127.0.0.1:1") == "zenoh:k?connect=tcp/127.0.0.1:1"
+
+
+def test_every_shipped_plan_checks_on_every_shipped_virtual_bench():
+    """docs/plans.md: every plan runs on virtual.yaml, virtual-zenoh.yaml (the nightly
+    fallback) and virtual-vcan.yaml; an outside review found the PLC plans refused by the
+    last two (no `pulse:` line), so the nightly workflow's `--check` failed before any run."""
+    from hil.plan.plan import check_plan, find_plans, load_plan
+
+    plans = [load_plan(p) for p in find_plans(None)]
+    for name in ("virtual.yaml", "virtual-zenoh.yaml", "virtual-vcan.yaml"):
+        bench = load_bench(fixture("benches", name))
+        for plan in plans:
+            check_plan(plan, bench)  # raises PlanFileError naming the plan's line

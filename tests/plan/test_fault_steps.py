@@ -141,3 +141,16 @@ def test_in_virtual_time_a_burst_over_1ms_says_the_bus_is_full_not_the_host(tmp_
     [step] = r.steps
     assert step.status == "error" and "send fewer" in step.message, step.message
     assert "host under load" not in step.message
+
+
+def test_produce_off_stops_every_cyclic_frame():
+    """docs/faults.md lists `produce: off`; YAML reads `off` as false, and the step refused
+    it ("must be a mapping", an outside review)."""
+    from hil.plan.plan import loads_plan
+
+    for text in ("off", "'off'"):
+        plan = loads_plan(f"name: p\nsteps:\n  - produce: {{sync: 10ms}}\n  - produce: {text}\n",
+                          "p.yaml")
+        a = plan.steps[1].args
+        assert (a.heartbeat, a.sync, a.guard) == (0, 0, 0)
+        assert plan.steps[1].label == "produce heartbeat off, sync off, guard off"
