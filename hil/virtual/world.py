@@ -18,6 +18,7 @@ import contextlib
 import itertools
 import json
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -288,13 +289,42 @@ def idle_inputs(spec: DriveSpec) -> dict[int, bool]:
             if w.contact == "b" and w.line.startswith("DI")}
 
 
+TMP_PREFIX = "hil-bench-"
+
+
+def bench_tmpdir() -> tempfile.TemporaryDirectory:
+    """The run's scratch folder for its ptys and sockets, `hil-bench-<pid>-...` in the temp
+    folder. A run killed by SIGKILL cannot remove its own: the folders of this user whose
+    process is gone are removed first."""
+    root = Path(tempfile.gettempdir())
+    with contextlib.suppress(OSError):
+        for d in root.glob(f"{TMP_PREFIX}*-*"):
+            pid = d.name[len(TMP_PREFIX):].split("-", 1)[0]
+            if not pid.isdigit() or int(pid) == os.getpid() or _alive(int(pid)):
+                continue
+            with contextlib.suppress(OSError):
+                if d.is_dir() and not d.is_symlink() and d.stat().st_uid == os.getuid():
+                    shutil.rmtree(d, ignore_errors=True)
+    return tempfile.TemporaryDirectory(prefix=f"{TMP_PREFIX}{os.getpid()}-")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 class VirtualWorld:
     """Drive side of a virtual bench, in process."""
 
     def __init__(self, bench: Bench, recorder: Any, *,
                  drive_factory: DriveFactory | None = None) -> None:
         self.bench = bench
-        self._tmp = tempfile.TemporaryDirectory(prefix="hil-bench-")
+        self._tmp = bench_tmpdir()
         self.urls = resolve_auto(bench, Path(self._tmp.name))
         self.drives: dict[str, VirtualDrive] = {}
         factory = drive_factory
@@ -466,7 +496,7 @@ class SubprocessWorld:
         self.bench, self.rec = bench, recorder
         self.reply_timeout_s = reply_timeout_s
         ready = ready_timeout_s or bench.timeouts["ready"] / 1e9
-        self._tmp = tempfile.TemporaryDirectory(prefix="hil-bench-")
+        self._tmp = bench_tmpdir()
         self.urls = resolve_auto(bench, Path(self._tmp.name))
         # a CAN bus several drive processes share: each its own port, linked to each other
         self.can_urls: dict[str, str] = {}

@@ -39,3 +39,30 @@ def test_every_shipped_plan_checks_on_every_shipped_virtual_bench():
         bench = load_bench(fixture("benches", name))
         for plan in plans:
             check_plan(plan, bench)  # raises PlanFileError naming the plan's line
+
+
+def test_a_killed_runs_scratch_folder_is_removed_by_the_next_run(tmp_path, monkeypatch):
+    """`kill -9` of a runner leaves its `hil-bench-<pid>-*` folder (ptys, sockets): the next
+    run removes the folders of processes that are gone, not those of live ones."""
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    from hil.virtual.world import bench_tmpdir
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    dead = tmp_path / f"hil-bench-{gone}-abc"
+    (dead / "sub").mkdir(parents=True)
+    live = tmp_path / f"hil-bench-{os.getppid()}-def"
+    live.mkdir()
+    other = tmp_path / "hil-bench-xyz"  # an older name without a pid: left alone
+    other.mkdir()
+    t = bench_tmpdir()
+    try:
+        assert not dead.exists() and live.exists() and other.exists()
+        assert os.path.basename(t.name).startswith(f"hil-bench-{os.getpid()}-")
+    finally:
+        t.cleanup()
