@@ -116,10 +116,11 @@ class _Interrupts:
 
     The first signal raises KeyboardInterrupt: the plan stops and the bench goes safe. From
     then on, and at any time while `shield` is set (the safe state, closing the recording),
-    a signal only prints a notice: the safe-state sequence and the recording's close always
-    run to their end. A signal that arrives while shielded is remembered (`requested`)."""
+    a signal only prints a notice (on a line of its own: a progress line may be half written):
+    the safe-state sequence and the recording's close always run to their end. A signal
+    that arrives while shielded is remembered (`requested`)."""
 
-    NOTICE = (b"hil: making the bench safe and closing the recording; further Ctrl-C is "
+    NOTICE = (b"\nhil: making the bench safe and closing the recording; further Ctrl-C is "
               b"ignored until that is done\n")
 
     def __init__(self) -> None:
