@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -90,8 +91,14 @@ class _KeepOpen(io.TextIOWrapper):
         self.flush()
 
 
+_IFNAME = re.compile(r"[^A-Za-z0-9_.:@-]")
+
+
 def candump_line(bus: str, msg: can.Message) -> str:
-    """One `candump -L` line: `(1700000000.123456) can0 123#DEADBEEF`."""
+    """One `candump -L` line: `(1700000000.123456) can0 123#DEADBEEF`. The bus name is an
+    interface token there: a character outside `A-Za-z0-9_.:@-` (a space would split the
+    line, an escape sequence would reach a terminal) becomes `_`."""
+    bus = _IFNAME.sub("_", bus) or "_"
     cid = msg.arbitration_id
     if msg.is_error_frame:
         ident = f"{cid | CAN_ERR_FLAG:08X}"

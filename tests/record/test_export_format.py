@@ -95,3 +95,17 @@ def test_a_frame_at_time_zero_keeps_its_time(tmp_path):
         log.on_message_received(can.Message(arbitration_id=0x181, data=b"\x02", timestamp=1.5))
     stamps = [m.timestamp for m in can.LogReader(str(out))]
     assert stamps == [0.0, 1.5]
+
+
+def test_a_hostile_bus_name_stays_one_candump_token():
+    """A recording's bus name reaches `candump -L` lines (and a terminal with `-o -`): a
+    space would split the line, an escape sequence would act on the terminal."""
+    import can
+
+    from hil.record.export_cli import candump_line
+
+    msg = can.Message(timestamp=1.5, arbitration_id=0x123, data=b"\x01", is_extended_id=False)
+    assert candump_line("can0", msg) == "(1.500000) can0 123#01"
+    line = candump_line("a b\x1b[2J\n", msg)
+    assert line == "(1.500000) a_b__2J_ 123#01" and "\x1b" not in line
+    assert candump_line("", msg) == "(1.500000) _ 123#01"
