@@ -39,7 +39,7 @@ def test_explicit_ports_inject_and_power_cycle(tmp_path, free_port_factory):
     """A bench with explicit loopback ports (from the test's free ports); `inject` reaches
     the drive process: an injected AL009 is what P0.001 shows over Modbus."""
     text = fixture("benches", "virtual-zenoh.yaml").read_text()
-    for _ in range(2):  # CAN, then DI/DO
+    for _ in range(3):  # CAN, DI/DO, the pulse line
         text = text.replace("tcp/127.0.0.1:auto", f"tcp/127.0.0.1:{free_port_factory()}", 1)
     assert "127.0.0.1:auto" not in text
     bench_file = tmp_path / "bench.yaml"
