@@ -366,12 +366,16 @@ class Cia402:
             self._quick_stop(limit=True)
 
     def set_homing_status(self, attained: bool, error: bool) -> None:
-        """Homing result for HM statusword bits 12/13; either flag ends the run."""
+        """Homing result for HM statusword bits 12/13; either flag ends the run. An error
+        with a limit switch active (one the method does not use, or a second one) is then the
+        limit's quick stop, as in every other mode (transition 11, L18260)."""
         self._hm_attained = bool(attained)
         self._hm_error = bool(error)
         if attained or error:
             self._homing_active = False
         self._update_window()
+        if error and (self._nl or self._pl) and self.state == OPERATION_ENABLED:
+            self._quick_stop(limit=True)
 
     def drop_setpoints(self) -> None:
         """The drive took the axis (DI JOG, PFQS, CCLR): the PP set-points are gone, so the
@@ -837,6 +841,8 @@ class Cia402:
         if mode == PP:
             self._new_setpoint(cw)
         elif mode == HM:
+            if self._halted:  # bit 8 "interrupt homing operation" (L18232): a start edge
+                return        # while halted starts nothing (PP waits the same way)
             self._hm_attained = self._hm_error = False
             self._homing_active = True
             if self.start_homing is not None:

@@ -14,7 +14,6 @@ import pytest
 
 from hil.model.drive import Drive
 from hil.model.errors import OutOfRange
-from hil.model.homing import attach_homing
 from hil.model.mechanics import Mechanics
 from hil.model.motion import counts_to_puu
 from hil.model.options import ModelOptions
@@ -39,7 +38,7 @@ def mech(s: float, **kw: float | None) -> Mechanics:
 def make(s: float = 0.0, homing: dict | None = None, m: Mechanics | None = None, **params: int):
     opts = ModelOptions(extra={"homing": homing or {}})
     drive = Drive(options=opts, mechanics=m or mech(s), inputs={8: True}, params=BENCH | params)
-    return drive, attach_homing(drive, absolute=drive.absolute)
+    return drive, drive.homing  # the drive's own engine (a second one ran beside it before)
 
 
 def home_rev(h, s: float) -> float:
@@ -149,6 +148,37 @@ def test_canopen_bit4_falling_edge_aborts() -> None:
     assert not h.active and not sw & 0x3000 and not drive.axis.moving and not drive.do(3)
 
 
+def test_canopen_start_edge_while_halted_moves_nothing() -> None:
+    # controlword bit 8 Halt (L18232): a halted axis does not move; the homing start edge
+    # with Halt set starts nothing (an outside review: the axis ran at 120 rpm to PL)
+    drive, h = make(2.0)
+    for idx, sub, v in ((0x6060, 0, 6), (0x6098, 0, 7), (0x6099, 1, 1200), (0x6099, 2, 300)):
+        drive.write_object(idx, sub, v)
+    for cw in (0x06, 0x07, 0x0F, 0x10F):
+        drive.write_object(0x6040, 0, cw)
+    drive.advance(100 * MS)
+    drive.write_object(0x6040, 0, 0x11F)  # bit 4 rises while halted
+    drive.advance(1500 * MS)
+    assert not h.active and not drive.axis.moving
+    assert drive.axis.position == 0.0  
+    drive.write_object(0x6040, 0, 0x10F)
+    drive.write_object(0x6040, 0, 0x00F)  # halt released, then a new start edge homes
+    drive.write_object(0x6040, 0, 0x01F)
+    run_until_done(drive, h)
+    assert drive.read_object(0x6041) & 0x1000
+
+
+@pytest.mark.parametrize("method", [3, 34])
+def test_a_homing_error_at_a_limit_is_the_limits_quick_stop(method: int) -> None:
+    # transition 11 (L18260): a positive/negative limit switch is a quick stop, in every
+    # mode; a method that meets a limit it does not use ends in a homing error (bit 13) and
+    # the limit's quick stop, as PV does there (an outside review: OPERATION ENABLED)
+    drive, _ = canopen_home(method, 2.0 if method == 3 else 3.9)
+    sw = drive.read_object(0x6041)
+    assert sw & 0x2000 and not sw & 0x1000  # homing error
+    assert sw & 0x6F == 0x07, hex(sw)  # QUICK STOP ACTIVE
+
+
 def test_canopen_home_offset_sign_option() -> None:
     drive, _ = canopen_home(35, 0.0, offset=300, homing={"offset_sign": -1})
     assert drive.read_object(0x6064) == -300
@@ -227,7 +257,7 @@ def test_torque_homing_into_the_hard_stop(y: int, expected: float) -> None:
         options=ModelOptions(), mechanics=mech(s), inputs={6: True, 7: True, 8: True},
         sensors={"ORGP": (9, "no")}, params=BENCH | p,
     )  # fmt: skip
-    h = attach_homing(drive, absolute=drive.absolute)
+    h = drive.homing
     drive.set_di(1, True)
     drive.advance(100 * MS)
     drive.set_di(10, True)
