@@ -160,7 +160,7 @@ def test_canopen_start_edge_while_halted_moves_nothing() -> None:
     drive.write_object(0x6040, 0, 0x11F)  # bit 4 rises while halted
     drive.advance(1500 * MS)
     assert not h.active and not drive.axis.moving
-    assert drive.axis.position == 0.0  
+    assert drive.axis.position == 0.0
     drive.write_object(0x6040, 0, 0x10F)
     drive.write_object(0x6040, 0, 0x00F)  # halt released, then a new start edge homes
     drive.write_object(0x6040, 0, 0x01F)
