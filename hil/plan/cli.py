@@ -234,17 +234,32 @@ def main(args: argparse.Namespace) -> int:
                 print(f"{p.path}: ok ({len(p.steps)} steps)")
             return 2 if failed else 0
         jobs = _jobs(args, bench, len(plans))
-        if jobs > 1:
-            results = run_parallel(plans, bench, out, jobs=jobs,
-                                   allow_inconclusive=args.allow_inconclusive,
-                                   listeners=_listeners(args, plans))
-        else:
-            results = run_plans(plans, bench, out, allow_inconclusive=args.allow_inconclusive,
-                                listeners=_listeners(args, plans))
+        try:
+            if jobs > 1:
+                results = run_parallel(plans, bench, out, jobs=jobs,
+                                       allow_inconclusive=args.allow_inconclusive,
+                                       listeners=_listeners(args, plans))
+            else:
+                results = run_plans(plans, bench, out,
+                                    allow_inconclusive=args.allow_inconclusive,
+                                    listeners=_listeners(args, plans))
+        except KeyboardInterrupt as e:  # the run's junit.xml and index.html say what ran,
+            # the stopped plan aborted: a previous run's files must not stand for this one
+            _summarise(getattr(e, "results", []), out, len(plans))
+            raise
     except PlanFileError as e:
         print(f"hil run: {e}", file=sys.stderr)
         return 2
-    write_junit([r.recording for r in results], out / "junit.xml")
-    print(summary_table(results))
-    print(f"index: {write_index([r.recording for r in results], out / 'index.html')}")
+    _summarise(results, out, len(plans))
     return 0 if all(r.passed for r in results) else 1
+
+
+def _summarise(results: list, out: Path, selected: int) -> None:
+    """The run's junit.xml, summary table and index.html from `results`."""
+    recordings = [r.recording for r in results if r.recording and Path(r.recording).exists()]
+    write_junit(recordings, out / "junit.xml")
+    if results:
+        print(summary_table(results))
+    if len(results) < selected:
+        print(f"interrupted: {len(results)} of {selected} plans ran", file=sys.stderr)
+    print(f"index: {write_index(recordings, out / 'index.html')}")

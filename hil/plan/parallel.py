@@ -252,7 +252,9 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
             signal.signal(sig, handler)
         pool.shutdown(wait=True, cancel_futures=True)
     if interrupted:
-        raise KeyboardInterrupt("interrupted (Ctrl-C / SIGTERM)")
+        stop = KeyboardInterrupt("interrupted (Ctrl-C / SIGTERM)")
+        stop.results = [results[i] for i in sorted(results)]  # type: ignore[attr-defined]
+        raise stop
     return [results[i] for i in range(1, len(plans) + 1)]
 
 

@@ -516,7 +516,15 @@ def run_plans(plans: list[Plan], bench: Bench, out_dir: Path, *, quiet: bool = F
     if listeners is None:
         listeners = [] if quiet else [StepLines(stream)]
     stems = output_stems(plans)
-    return [run_plan(p, bench, out_dir, specs=specs, listeners=listeners,
-                     session_factory=session_factory, allow_inconclusive=allow_inconclusive,
-                     index=i, total=len(plans), stem=stem)
-            for i, (p, stem) in enumerate(zip(plans, stems, strict=True), 1)]
+    results: list[PlanResult] = []
+    try:
+        for i, (p, stem) in enumerate(zip(plans, stems, strict=True), 1):
+            results.append(run_plan(p, bench, out_dir, specs=specs, listeners=listeners,
+                                    session_factory=session_factory,
+                                    allow_inconclusive=allow_inconclusive, index=i,
+                                    total=len(plans), stem=stem))
+    except KeyboardInterrupt as e:  # the results so far, the stopped plan's last: the run's
+        cut = getattr(e, "plan_result", None)  # summary files are written from them
+        e.results = results + ([cut] if cut is not None else [])  # type: ignore[attr-defined]
+        raise
+    return results

@@ -170,6 +170,10 @@ def _start_two_holds(tmp_path: Path, **popen: Any) -> tuple[subprocess.Popen, Pa
 
 
 def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
+    stale = tmp_path / "out"  # a previous run's summary must not stand for this one
+    stale.mkdir()
+    (stale / "junit.xml").write_text("<testsuites tests='2' failures='0'/>")
+    (stale / "index.html").write_text("2/2 plans passed")
     proc, out = _start_two_holds(tmp_path, stdout=subprocess.PIPE,
                                  stderr=subprocess.STDOUT, text=True)
     try:
@@ -192,6 +196,13 @@ def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
         safety = [m for *_t, m in rec.messages("/safety")]
         assert safety, f"{name}: no safe-state record"
         assert (out / f"{name}.html").exists() and (out / f"{name}.junit.xml").exists()
+    # the run's own summary files say what ran and that it was stopped (an outside review
+    # found the previous run's "2/2 plans passed" left in place)
+    import xml.etree.ElementTree as ET
+
+    suites = ET.parse(out / "junit.xml").getroot()
+    assert suites.get("tests") == "2" and suites.get("errors") == "2", ET.tostring(suites)[:300]
+    assert "2/2 plans passed" not in (out / "index.html").read_text()
 
 
 def _children(pid: int) -> list[int]:
