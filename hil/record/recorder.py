@@ -163,6 +163,13 @@ def versions() -> dict[str, str]:
             check=False,
         )
         out["git_revision"] = rev.stdout.strip() if rev.returncode == 0 else "unknown"
+        if rev.returncode == 0:  # the code, drive data and plans differ from that revision
+            dirty = subprocess.run(
+                ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no",
+                 "--", "hil", "fixtures", "plans"],
+                capture_output=True, text=True, timeout=2, check=False)
+            if dirty.returncode == 0 and dirty.stdout.strip():
+                out["git_revision"] += "+dirty"
     except (OSError, subprocess.SubprocessError):
         out["git_revision"] = "unknown"
     return out

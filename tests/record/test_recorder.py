@@ -341,3 +341,26 @@ def test_an_unencodable_or_self_containing_payload_is_an_error_object(tmp_path):
     assert state[1]["error"].startswith("unencodable payload: maximum recursion depth")
     [event] = [m for _topic, _lt, _pt, m in got.messages() if _topic == "/drive/drive1/events"]
     assert event["error"].startswith("unencodable payload:")
+
+
+def test_the_git_revision_says_when_the_checkout_differs_from_it(tmp_path, monkeypatch):
+    """A report's revision must not look clean when hil/, fixtures/ or plans/ were edited
+    since the commit (an outside review)."""
+    import subprocess
+
+    from hil.record import recorder
+
+    calls = []
+
+    def fake_run(cmd, **kw):
+        calls.append(cmd)
+        out = "abc123\n" if "rev-parse" in cmd else " M hil/model/cia402.py\n"
+        return subprocess.CompletedProcess(cmd, 0, out, "")
+
+    monkeypatch.setattr(recorder.subprocess, "run", fake_run)
+    recorder.versions.cache_clear()
+    try:
+        assert recorder.versions()["git_revision"] == "abc123+dirty"
+        assert any("status" in c for c in calls)
+    finally:
+        recorder.versions.cache_clear()
