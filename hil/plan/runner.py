@@ -471,9 +471,11 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
         if not ok:
             if res.status in (PASS, INCONCLUSIVE):  # a plan only inconclusive says so
                 res.status = {FAIL: FAIL, INCONCLUSIVE: INCONCLUSIVE}.get(r.status, ERROR)
+            # on /log too (Foxglove's Log panel), a judging step's failure as well, though
+            # the plan goes on after it
+            rec.log("error", f"step {s.index + 1} ({r.label}) {r.status}: {r.message}",
+                    name="hil.runner", file=s.file, line=s.line)
             if not s.action.judge_only:
-                rec.log("error", f"step {s.index + 1} ({r.label}) {r.status}: {r.message}",
-                        name="hil.runner", file=s.file, line=s.line)
                 for later in res.steps[s.index + 1:]:
                     later.message = f"not run: step {s.index + 1} {r.status}"
                 _record_skipped(ctx, plan, res, events)

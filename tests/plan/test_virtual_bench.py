@@ -63,3 +63,18 @@ def test_the_drive_under_test_is_recorded_and_reported(tmp_path):
     assert "drive1 fw 100 1018h 000001DD/00006000" in html
     index = write_index([r.recording], tmp_path / "index.html").read_text()
     assert "drive1 fw 100" in index
+
+
+def test_a_failed_timing_check_is_an_error_on_the_log_with_its_line(tmp_path):
+    """A check_timing step's failure reaches /log (Foxglove's Log panel) at error level with
+    the plan's file and line, as a failing expect does, though the plan goes on after it
+    (an outside review found only safety lines there)."""
+    text = (find_plans(["servo_on_off_brake"])[0].read_text()
+            .replace("steps:\n", "options: {dev_brake_on_delay_ms: 5}\nsteps:\n", 1))
+    plan = loads_plan(text, str(tmp_path / "brake.yaml"))
+    [r] = run_plans([plan], load_bench(None), tmp_path, stream=io.StringIO())
+    assert not r.passed
+    errors = [m for *_t, m in Recording.open(r.recording).messages([T.LOG])
+              if m["level"] >= 4]
+    assert any("check_timing servo_on_brake" in m["message"] and m["line"] == 19
+               and m["file"].endswith("brake.yaml") for m in errors), errors
