@@ -375,8 +375,9 @@ def bus_around(run: RunData, v: dict, before: int = 12, after: int = 12,
     """The bus messages (CANopen, Modbus, DI/DO) around a judged constraint: every message
     between its reference and observed instants (+- `margin_ns`), and at least `before` /
     `after` messages either side. (t, topic, text, inside) with `inside` True for messages
-    within the judged interval itself, on the checker's clock (the source's publish time,
-    which for model-driven lines precedes the harness's log time)."""
+    within the judged interval itself. `t` is on the checker's clock too (the source's
+    publish time, which for model-driven lines precedes the harness's log time), so the
+    times shown are those the verdict and its diagram give; the rows are in that order."""
     span = verdict_times(v)
     if span is None or not bus_of(run):
         return []
@@ -385,5 +386,7 @@ def bus_around(run: RunData, v: dict, before: int = 12, after: int = 12,
     i = min(bisect_left(times, lo - margin_ns), max(0, bisect_left(times, lo) - before))
     j = max(bisect_right(times, hi + margin_ns), bisect_right(times, hi) + after)
     src = run.bus_source_t or times
-    return [(t, topic, _brief(_decode(msg)), lo <= src[k] <= hi)
-            for k, (t, topic, msg) in enumerate(run.bus[i:j][:limit], start=i)]
+    rows = [(src[k], topic, _brief(_decode(msg)), lo <= src[k] <= hi)
+            for k, (_t, topic, msg) in enumerate(run.bus[i:j][:limit], start=i)]
+    rows.sort(key=lambda r: r[0])  # stable: frames of one instant keep the wire's order
+    return rows

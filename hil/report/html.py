@@ -435,7 +435,8 @@ def _bus_html(run: RunData) -> list[str]:
     if bad:
         h.append("<h2>Bus log around failing checks</h2>"
                  "<p>Frames between the reference and the observed instant of each failing "
-                 "constraint (highlighted), with the frames just before and after.</p>")
+                 "constraint (highlighted), with the frames just before and after; times on "
+                 "the checker's clock (each source's own stamp), as in the verdicts.</p>")
     for v in bad:
         rows = bus_around(run, v)
         h.append(f"<h3>{_step_name(run, v.get('step'))}: {esc(str(v.get('spec', '')))}: "

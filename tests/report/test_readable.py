@@ -286,3 +286,25 @@ def test_the_runs_page_from_the_recorders_messages_is_the_page_from_the_file(
     report_data.forget(res.recording)
     from_file = write_html(res.recording, tmp_path / "again.html", index=True).read_text()
     assert live == from_file
+
+
+def test_the_bus_log_around_a_failing_check_shows_the_checkers_times(tmp_path) -> None:
+    """The highlighted DO edge in 'Bus log around failing checks' was printed at its log
+    time (138.983 ms) while the verdict and its diagram give the source's stamp (138.697
+    ms): a reviewer subtracting lines got 105.29 ms for a 105.0 ms verdict (helper-52)."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, loads_plan
+    from hil.plan.runner import run_plan
+    from hil.report import data as report_data
+    from hil.report.data import bus_around, load_run
+
+    text = (find_plans(["servo_on_off_brake"])[0].read_text()
+            .replace("steps:\n", "options: {dev_brake_on_delay_ms: 5}\nsteps:\n", 1))
+    res = run_plan(loads_plan(text, str(tmp_path / "b.yaml")), load_bench(None), tmp_path)
+    report_data.forget(res.recording)
+    run = load_run(res.recording)
+    bad = next(v for v in run.verdicts if v.get("status") == "fail")
+    rows = bus_around(run, bad)
+    edge = [t for t, topic, _text, inside in rows if inside and topic.endswith("/DO6")]
+    assert edge and edge[-1] == bad["to_ns"], (edge, bad)  # the verdict's observed instant
+    assert [r[0] for r in rows] == sorted(r[0] for r in rows)
