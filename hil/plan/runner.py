@@ -302,12 +302,18 @@ def _record_dut(ctx: StepContext, bench: Bench) -> None:
     ctx.rec.add_metadata("hil.dut", meta)
 
 
-def record_bench(rec: Recorder, bench: Bench) -> None:
+def record_bench(rec: Recorder, bench: Bench, options: dict[str, Any] | None = None) -> None:
     """The `hil.bench` and `hil.clock` metadata of a recording made on `bench`, on the clock
-    in use (a plan's, and a pytest test's through `hil_session`)."""
+    in use (a plan's, and a pytest test's through `hil_session`). `deviations`: the model's
+    deliberate deviation knobs (`dev_*`) in effect, the bench's and the plan's `options`."""
+    deviations = sorted({f"{name}.{k}={v}" for name, d in bench.drives.items()
+                         for k, v in (dict(d.options) | dict(options or {})).items()
+                         if k.startswith("dev_") and v not in (0, False, None, "")}
+                        if bench.virtual else ())
     rec.add_metadata("hil.bench", {"name": bench.name, "file": bench.path,
                                    "virtual": bench.virtual, "drives": list(bench.drives),
-                                   "motion_allowed": bench.motion_allowed})
+                                   "motion_allowed": bench.motion_allowed,
+                                   "deviations": json.dumps(deviations)})
     clk = clock.current()
     rec.add_metadata("hil.clock", {"clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
                                    "started_wall_ns": str(time.time_ns())})
@@ -367,7 +373,7 @@ def _open_recording(plan: Plan, bench: Bench, out_dir: Path, stem: str | None = 
     rec.add_metadata("hil.plan", {"name": plan.name, "file": plan.path,
                                   "description": plan.description, "steps": len(plan.steps),
                                   "tags": json.dumps(plan.tags)})
-    record_bench(rec, bench)
+    record_bench(rec, bench, plan.options)
     checked = sorted({s.args.spec for s in plan.steps if s.kind == "check_timing"})
     if checked or mirror:  # the live checks read each message once (LiveSource)
         rec.keep_messages()

@@ -79,9 +79,16 @@ def run_info(meta: dict[str, dict[str, str]], bench: str = "") -> dict[str, str]
                                                    ).strftime("%Y-%m-%d %H:%M:%S UTC")
         except (OverflowError, OSError, ValueError):  # past year 9999: a damaged record
             date = "?"
-    return {"date": date, "hil": ver.get("hil", "?"), "host": run.get("host", "?"),
-            "bench": bench or run.get("bench", "?"), "git": ver.get("git_revision", "?"),
-            "dut": dut_text(meta.get("hil.dut", {}))}
+    out = {"date": date, "hil": ver.get("hil", "?"), "host": run.get("host", "?"),
+           "bench": bench or run.get("bench", "?"), "git": ver.get("git_revision", "?"),
+           "dut": dut_text(meta.get("hil.dut", {}))}
+    try:  # the model's deviation knobs in effect: a reviewer must see them at once
+        dev = json.loads(str(meta.get("hil.bench", {}).get("deviations") or "[]"))
+    except (ValueError, RecursionError):
+        dev = []
+    if isinstance(dev, list) and dev:
+        out["deviations"] = ", ".join(str(x) for x in dev)
+    return out
 
 
 def dut_text(dut: dict[str, str]) -> str:

@@ -260,9 +260,12 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
 
 def run_info_table(info: dict[str, str]) -> str:
     """Run date, hil version, host, bench, git revision and the drives under test."""
+    dev = info.get("deviations")
     return ("<table class='runinfo' style='width:auto'><tr>" + "".join(
         f"<td><small>{esc(k)}</small><br><b>{esc(info.get(k, '?'))}</b></td>"
-        for k in ("date", "hil", "host", "bench", "git", "dut")) + "</tr></table>")
+        for k in ("date", "hil", "host", "bench", "git", "dut"))
+        + (f"<td class='fail'><small>deviation knobs (a deliberately wrong drive)</small><br>"
+           f"<b>{esc(dev)}</b></td>" if dev else "") + "</tr></table>")
 
 
 def _step_name(run: RunData, index: object) -> str:
@@ -304,6 +307,7 @@ def render_html(run: RunData, out: Path | None = None, index: bool | None = None
         _nav(run, out, index),
         f"<h1>{esc(run.plan)} <span class='badge b-{esc(st)}'>{esc(st.upper())}</span></h1>",
         run_info_table(run.info()),
+        _first_failure(run),
         f"<p>Recording <code>{esc(run.path)}</code>"
         + (" · <b>recording truncated (killed run)</b>" if run.truncated else "")
         + " · times are ms from the plan start</p>",
@@ -314,6 +318,19 @@ def render_html(run: RunData, out: Path | None = None, index: bool | None = None
         h += section(run)
     h.append("</body></html>\n")
     return "\n".join(h)
+
+
+def _first_failure(run: RunData) -> str:
+    """The first step that did not pass, where it is in its plan file and why: the line a
+    reviewer needs before scrolling (empty for a passing run)."""
+    bad = next((s for s in run.steps if s.status not in ("pass", "skipped")), None)
+    if bad is None:
+        return ""
+    where = f"{Path(bad.file).name}:{bad.line}" if bad.file and bad.line else (
+        f"line {bad.line}" if bad.line else "")
+    return (f"<p class='first'><b>First failure</b>: <a href='#step-{bad.index + 1}'>step "
+            f"{bad.index + 1}</a> {esc(bad.label)} {_status(bad.status)}"
+            + (f" ({esc(where)})" if where else "") + f": {esc(bad.message)}</p>")
 
 
 def _steps_html(run: RunData) -> list[str]:

@@ -308,3 +308,25 @@ def test_the_bus_log_around_a_failing_check_shows_the_checkers_times(tmp_path) -
     edge = [t for t, topic, _text, inside in rows if inside and topic.endswith("/DO6")]
     assert edge and edge[-1] == bad["to_ns"], (edge, bad)  # the verdict's observed instant
     assert [r[0] for r in rows] == sorted(r[0] for r in rows)
+
+
+def test_a_failing_page_says_its_first_failure_and_the_deviation_knobs_first(tmp_path) -> None:
+    """The first screen of a failing plan's page: which step failed, at which line of which
+    file, and why; and a drive made wrong on purpose (`dev_*` options) says so next to the
+    bench's name (an outside review: both were below the fold or only in bench.yaml)."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, loads_plan
+    from hil.plan.runner import run_plan
+
+    text = (find_plans(["servo_on_off_brake"])[0].read_text()
+            .replace("steps:\n", "options: {dev_brake_on_delay_ms: 5}\nsteps:\n", 1))
+    res = run_plan(loads_plan(text, str(tmp_path / "b.yaml")), load_bench(None), tmp_path)
+    page = Path(res.html).read_text()
+    head = page[:page.index("<h2>")]  # before the first section
+    assert "First failure" in head and "step 8</a>" in head and "(b.yaml:19)" in head
+    assert "5.0 ms late" in head or "4.0 ms late" in head
+    assert "drive1.dev_brake_on_delay_ms=5" in head
+    ok = run_plan(loads_plan(find_plans(["servo_on_off_brake"])[0].read_text(),
+                             str(tmp_path / "ok.yaml")), load_bench(None), tmp_path / "ok")
+    ok_head = Path(ok.html).read_text().split("<h2>")[0]
+    assert "First failure" not in ok_head and "deviation" not in ok_head
