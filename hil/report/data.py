@@ -250,6 +250,18 @@ def _load_run(path: str | Path, *, truth: bool = True,
         except UnicodeDecodeError:
             data.attachments[a.name] = f"<{len(a.data)} bytes>"
     data.t0 = t_plan or t_first or 0
+    if data.truncated and not meta.get("hil.result"):  # killed: the file just ends
+        for sd in steps.values():  # the step that was running when the file ends
+            if sd.t_start is not None and sd.t_end is None and sd.status == "skipped":
+                sd.status = "error"
+                sd.message = "cut short: the recording ends while it ran (the run was killed)"
+        try:  # the plan's steps never reached are said, not left out
+            total = int(meta.get("hil.plan", {}).get("steps", 0))
+        except (TypeError, ValueError):
+            total = 0
+        for k in range(min(total, 10_000)):
+            steps.setdefault(k, StepData(k, "(not reached)", message="not reached: the "
+                                         "recording ends before it"))
     data.steps = [steps[k] for k in sorted(steps)]
     if not data.status:
         bad = [s for s in data.steps if s.status not in ("pass", "skipped")]

@@ -433,6 +433,9 @@ def _motion_html(run: RunData) -> list[str]:
 def _safety_html(run: RunData) -> list[str]:
     h = ["<h2>Safe state</h2>"]
     if not run.safety:
+        if run.truncated and not run.metadata.get("hil.result"):
+            return [*h, "<p class='fail'>Safe state not confirmed: the recording ends before "
+                        "the run drove one (the run was killed). Check the bench.</p>"]
         return [*h, "<p>No safe-state actions recorded.</p>"]
     h.append("<table><tr><th>drive</th><th>action</th><th>ok</th><th>reason</th>"
              "<th>detail</th></tr>")

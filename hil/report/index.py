@@ -47,11 +47,10 @@ def _row(rec: Path, out_dir: Path) -> dict:
                description=run.metadata.get("hil.plan", {}).get("description", ""),
                tags=_tags(run.metadata.get("hil.plan", {}).get("tags", "[]")),
                started=started_ns(run.metadata.get("hil.run", {})))
-    try:
-        row["duration_ms"] = float(res["duration_ms"])
+    try:  # the plan's wall time; a killed run has none ("–"), not its recorded span, which
+        row["duration_ms"] = float(res["duration_ms"])  # is virtual time on that clock
     except (KeyError, ValueError):
-        ends = [s.t_end for s in run.steps if s.t_end is not None]
-        row["duration_ms"] = (max(ends) - run.t0) / 1e6 if ends else None
+        row["duration_ms"] = None
     return row
 
 

@@ -330,3 +330,37 @@ def test_a_failing_page_says_its_first_failure_and_the_deviation_knobs_first(tmp
                              str(tmp_path / "ok.yaml")), load_bench(None), tmp_path / "ok")
     ok_head = Path(ok.html).read_text().split("<h2>")[0]
     assert "First failure" not in ok_head and "deviation" not in ok_head
+
+
+def test_a_killed_runs_page_says_where_it_was_cut_and_that_no_safe_state_was_seen(
+        tmp_path) -> None:
+    """A run killed by SIGKILL leaves a file that just ends: the step that was running is
+    'cut short', not SKIPPED; the steps never reached are listed; the safe-state section says
+    none was confirmed; the JUnit error names the cut step (an outside review)."""
+    import xml.etree.ElementTree as ET
+
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, load_plan
+    from hil.plan.runner import run_plan
+    from hil.report import data as report_data
+    from hil.report.html import write_html
+    from hil.report.junit import junit_xml
+
+    res = run_plan(load_plan(find_plans(["homing_pr"])[0]), load_bench(None), tmp_path)
+    data = Path(res.recording).read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    report_data.forget(cut)
+    run = report_data.load_run(cut)
+    assert run.truncated and not run.metadata.get("hil.result")
+    total = int(run.metadata["hil.plan"]["steps"])
+    assert len([s for s in run.steps if s.index >= 0]) == total  # (the `params` step is -1)
+    cut_steps = [s for s in run.steps if s.message.startswith("cut short")]
+    assert len(cut_steps) == 1 and cut_steps[0].status == "error", [
+        (s.index, s.status, s.message) for s in run.steps]
+    assert run.steps[-1].message.startswith("not reached")
+    page = write_html(cut, tmp_path / "cut.html").read_text()
+    assert "Safe state not confirmed: the recording ends" in page
+    case = ET.fromstring(junit_xml([cut])).find(".//testcase")
+    err = case.find("error")
+    assert err is not None and "cut short" in err.get("message"), ET.tostring(case)[:400]
