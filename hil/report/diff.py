@@ -21,6 +21,7 @@ from __future__ import annotations
 import difflib
 import html
 import json
+import re
 import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -218,6 +219,24 @@ def intervals(side: Side, sig: Signature) -> list[float]:
     return out
 
 
+def _is_param(name: str) -> bool:
+    return re.match(r"P\d\.\d{3}\b", name) is not None
+
+
+def _param_moves(a: Side, b: Side, sig: Signature) -> tuple[str, float, float] | None:
+    """The first parameter among `sig`'s knobs (or its estimate's) whose recorded value
+    differs between A and B, with both values; None when none does."""
+    names = [o.split(" ", 1)[0] for o in sig.options if _is_param(o)]
+    if sig.estimate.startswith("param:"):
+        names.insert(0, sig.estimate.split(":", 1)[1])
+    for p in names:
+        pa, pb = a.params.get(p), b.params.get(p)
+        if (isinstance(pa, int | float) and isinstance(pb, int | float)
+                and not isinstance(pa, bool) and not isinstance(pb, bool) and pa != pb):
+            return p, pa, pb
+    return None
+
+
 def explain(a: Side, b: Side) -> list[dict]:
     """Model options that would explain the differences, with an estimate of their size."""
     out = []
@@ -229,7 +248,21 @@ def explain(a: Side, b: Side) -> list[dict]:
         delta = mb - ma
         if abs(delta) < max(MIN_DELTA_MS, 0.05 * abs(ma)):
             continue
-        if sig.estimate == "absolute":
+        option = sig.options[0]
+        moved = _param_moves(a, b, sig)  # a parameter of this interval differs: its part
+        if moved is not None:
+            p, pa, pb = moved
+            rest = delta - (pb - pa)  # the parameters are ms (P1.042, P1.043, P2.009)
+            if abs(rest) < max(MIN_DELTA_MS, 0.05 * abs(ma)):
+                out.append({"signature": sig.key, "what": sig.what, "options": list(sig.options),
+                            "option": p, "a_ms": round(ma, 3), "b_ms": round(mb, 3),
+                            "delta_ms": round(delta, 3), "estimate": pb,
+                            "basis": f"{p} differs ({pa} in A, {pb} in B): the whole difference",
+                            "n": [len(ia), len(ib)]})
+                continue
+            est, basis = rest, f"delta less {p}'s change ({pa} in A, {pb} in B)"
+            option = next((o for o in sig.options if o != p and not _is_param(o)), option)
+        elif sig.estimate == "absolute":
             est, basis = mb, "B's measured interval"
         elif sig.estimate.startswith("param:"):
             p = sig.estimate.split(":", 1)[1]
@@ -239,7 +272,7 @@ def explain(a: Side, b: Side) -> list[dict]:
         else:
             est, basis = delta, "delta (the option is 0 / as in A)"
         out.append({"signature": sig.key, "what": sig.what, "options": list(sig.options),
-                    "option": sig.options[0], "a_ms": round(ma, 3), "b_ms": round(mb, 3),
+                    "option": option, "a_ms": round(ma, 3), "b_ms": round(mb, 3),
                     "delta_ms": round(delta, 3), "estimate": round(est, 3), "basis": basis,
                     "n": [len(ia), len(ib)]})
     out += _constant_shift(a, b, {e["signature"] for e in out})

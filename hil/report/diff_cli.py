@@ -58,9 +58,14 @@ def main(args: argparse.Namespace) -> int:
     except OSError as e:
         print(f"hil diff: cannot write: {e}", file=sys.stderr)
         return 2
+    if not d["same_plan"]:  # the estimates compare different scenarios: say it first
+        print(f"hil diff: A ran plan {d['a']['plan']!r} and B {d['b']['plan']!r}: the "
+              "differences below may come from the plans, not the drive", file=sys.stderr)
+    for p, (pa, pb) in d["params"].items():
+        print(f"parameter {p}: A {pa}, B {pb}")
     for e in d["explanations"]:
         print(f"{e['what']}: A {e['a_ms']} ms, B {e['b_ms']} ms (delta {e['delta_ms']} ms) "
-              f"-> {e['option']} ~ {e['estimate']} ms")
+              f"-> {e['option']} ~ {e['estimate']} ms ({e['basis']})")
     moved = sum(s["differs"] for s in d["signals"])
     print(f"{moved} signal(s) with edges that differ, "
           f"{sum(v['delta_ms'] not in (None, 0) for v in d['verdicts'])} verdict(s) measured "

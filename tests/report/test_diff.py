@@ -119,3 +119,28 @@ def test_real_bench_constant_shift_and_state_sequence(tmp_path):
     [s] = d["states"]
     assert s["a"] == ["592", "561", "563", "567"] and s["b"] == ["592", "561", "567"]
     assert any("563" in x for x in s["differences"])
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("knob", "option", "size"), [(0, "P1.042", 80),
+                                                       (5, "dev_brake_on_delay_ms", 5)])
+def test_a_parameter_that_differs_is_taken_out_before_a_knob_is_blamed(runs, tmp_path, capsys,
+                                                                       knob, option, size):
+    """B's plan writes P1.042 = 80 (A's 100): BRKR comes 20 ms earlier by the parameter alone.
+    The diff named dev_brake_on_delay_ms ~ -15 ms (an impossible negative delay) although it
+    listed the parameter; it now gives P1.042 its part and the knob only the rest."""
+    plan = (ROOT / "plans/servo_on_off_brake.yaml").read_text()
+    assert "P1.042: 100" in plan
+    (tmp_path / "plans").mkdir()
+    (tmp_path / "plans/servo_on_off_brake.yaml").write_text(
+        plan.replace("P1.042: 100", "P1.042: 80", 1))
+    data = yaml.safe_load((ROOT / "fixtures/benches/virtual.yaml").read_text())
+    data["drives"]["drive1"]["options"] = {"dev_brake_on_delay_ms": knob} if knob else {}
+    bench = tmp_path / "b.yaml"
+    bench.write_text(yaml.safe_dump(data, sort_keys=False))
+    main(["run", "servo_on_off_brake", "--bench", str(bench), "--out", str(tmp_path / "o"),
+          "-q", "--plans", str(tmp_path / "plans")])
+    d = diff(runs["base"], tmp_path / "o/servo_on_off_brake.mcap")
+    assert d["params"]["P1.042"] == [100, 80]
+    [e] = [e for e in d["explanations"] if e["signature"] == "brake_on"]
+    assert e["option"] == option and abs(e["estimate"] - size) <= 0.1 * size, e
