@@ -45,6 +45,11 @@ def _range(verdicts: list[Verdict], ctx: Context, occurrence: int | None) -> tup
         pts += [t for t in (v.from_ns, v.to_ns) if t is not None]
         if v.window_ms[1] is not None and v.from_ns is not None:
             pts.append(v.from_ns + int(v.window_ms[1] * MS))
+    # the occurrence's trigger and the other references of its constraints stay in view: a
+    # failing constraint timed from a later event must not cut off the cause (STO lost)
+    occs = {v.occurrence for v in chosen}
+    pts += [t for v in verdicts if v.occurrence in occs and v.status != "skipped"
+            for t in (v.t_ns, v.from_ns) if t is not None]
     if not pts:
         ts = [t for n in ctx.spec.signals for t in _safe(ctx, n).times]
         pts = ts or [0, 1]

@@ -42,3 +42,20 @@ def test_wavejson_structure():
         m = re.match(r"(\w)<->(\w) ", edge)
         assert m and m[1] in nodes and m[2] in nodes and " ms " in edge
     assert any("150.0 ms ✓" in e for e in wj["edge"])
+
+
+def test_a_failing_constraint_does_not_cut_its_occurrences_trigger_out_of_the_diagram():
+    """sto: the failing constraint is timed from 'both lost' (16 ms) while the occurrence
+    began with STO_A falling at 8 ms; the diagram zoomed on 16-20 ms and hid the cause (an
+    outside review)."""
+    from hil.timing.checker import Verdict
+    from hil.timing.render import _range
+
+    ms = 1_000_000
+    ok = Verdict("sto", "torque off", "pass", "", occurrence=1, t_ns=8 * ms, from_ns=8 * ms,
+                 to_ns=12 * ms, window_ms=(0.0, 20.0))
+    bad = Verdict("sto", "AL500", "fail", "", occurrence=1, t_ns=16 * ms, from_ns=16 * ms,
+                  to_ns=20 * ms, window_ms=(10.0, 12.0))
+    other = Verdict("sto", "AL500", "pass", "", occurrence=2, t_ns=900 * ms, from_ns=900 * ms)
+    lo, hi = _range([ok, bad, other], None, None)  # type: ignore[arg-type]
+    assert lo < 8 * ms < 28 * ms <= hi < 900 * ms
