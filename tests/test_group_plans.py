@@ -40,6 +40,13 @@ def test_group_plans_pass_with_every_cycle_on_the_record(path, tmp_path) -> None
     assert len(first) == len(second)
     diff = next((i for i, (a, b) in enumerate(zip(first, second, strict=True)) if a != b), None)
     assert diff is None, f"message {diff} differs: {first[diff]} vs {second[diff]}"
+    # every message as its channel's schema declares it (hil.GroupCycle, hil.GroupCapture...)
+    from hil.record.schemas import message_problems
+
+    with open(res.recording, "rb") as f:
+        bad = {p for sch, _ch, m in make_reader(f).iter_messages()
+               for p in message_problems(sch.name, json.loads(m.data))}
+    assert not bad, sorted(bad)[:10]
     cycles = _cycles(res.recording)
     if "fault" in plan.tags:  # an axis lost on purpose: its cycles are missed, the others not
         assert all(c["missed"] in ([], ["axis1"]) for c in cycles)

@@ -281,6 +281,62 @@ class Json(TypedDict):
     """Any JSON object (a topic without its own schema)."""
 
 
+PerAxis = Annotated[dict[str, Any], F("per axis name")]
+
+
+class GroupCycle(TypedDict):
+    """One axis-group cycle (docs/group.md): the set-points sent and the feedback judged."""
+
+    cycle: Annotated[int, F("the cycle's number, from 1")]
+    missed: Annotated[list[str], F("axes whose TPDO of the last cycle did not come")]
+    held: Annotated[list[str], F("followers holding their gear input (master lost/faulted)")]
+    heartbeat_lost: Annotated[list[str], F("axes whose heartbeat is older than the consumer time")]
+    status: Annotated[dict[str, Any], F("Servo.Status per axis (004:254): -1 lost, 0 never, "
+                                        "1 fault, 2 ready without torque, 3 under torque")]
+    bus_load_pct: Annotated[float, F("the cycle's frames over the bit rate, %")]
+    write_position: PerAxis
+    position: PerAxis
+    position_error: Annotated[dict[str, Any], F("WritePosition - Position per axis (004:254)")]
+    speed: PerAxis
+    mode: Annotated[dict[str, Any], F("Servo.Mode per axis: 1 PG, 3 GEA, 4 PG + GEA")]
+    offset: PerAxis
+    correction: PerAxis
+    follow_error: Annotated[dict[str, Any], F("the set-point the feedback answers minus the "
+                                              "feedback, per axis")]
+    max_follow_error: int
+    cam_follow_error: int
+    gear_phase_error: Annotated[dict[str, Any], F("a geared follower's drift from its master")]
+    max_gear_phase_error: int
+    max_gear_ratio_error: float
+
+
+class GroupCapture(TypedDict):
+    """A CAPTURE interface's registers (004:252) when they were taken."""
+
+    axis: str
+    cycle: int
+    typ_ext_capture: Annotated[int, F("Typ_ExtCapture bits")]
+    p_position: Annotated[int, F("PPosition")]
+    n_position: Annotated[int, F("NPosition")]
+    zero_position: int
+    write_position: Annotated[int, F("Write_Position")]
+    captures: Annotated[int, F("captures taken so far")]
+
+
+class PlcStatus(TypedDict):
+    """The PLC program's status registers at an event (docs/pulse.md)."""
+
+    event: Annotated[str, F("step, done, drvz, zero, homed, ext, error, end")]
+    step: Annotated[int, F("R4064: the step running")]
+    ready: Annotated[bool, F("M1992: the axis is ready")]
+    done: Annotated[bool, F("M1996: the last step finished")]
+    position: Annotated[int, F("DR4088: the current position, pulses")]
+    remaining: Annotated[int, F("DR4072: the pulses left")]
+    error: Annotated[int, F("R4060: the latest error code")]
+    homed: bool
+    drvz: Annotated[str, F("the DRVZ mode running, or empty")]
+
+
 MESSAGES: dict[str, type] = {
     "hil.CanFrame": CanFrame,
     "hil.CanOpenFrame": CanOpenFrame,
@@ -297,6 +353,9 @@ MESSAGES: dict[str, type] = {
     "hil.TimingVerdict": TimingVerdict,
     "hil.SafetyAction": SafetyAction,
     "hil.Fault": Fault,
+    "hil.GroupCycle": GroupCycle,
+    "hil.GroupCapture": GroupCapture,
+    "hil.PlcStatus": PlcStatus,
     "hil.Json": Json,
 }
 # their schemas forbid any field the definition does not name

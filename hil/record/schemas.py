@@ -160,6 +160,10 @@ def schema_for_topic(topic: str) -> str:
         return "hil.DioLevel"
     if topic.startswith("/pulse/") and len(parts) == 4:
         return "hil.PulseSegment"
+    if topic in ("/group/axes/cycle", "/group/axes/capture"):
+        return "hil.GroupCycle" if parts[-1] == "cycle" else "hil.GroupCapture"
+    if topic.startswith("/plc/") and len(parts) == 4 and parts[-1] == "status":
+        return "hil.PlcStatus"
     if topic.startswith("/drive/"):
         return {
             "state": "hil.DriveState",
