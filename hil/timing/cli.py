@@ -6,8 +6,9 @@ shipped spec in fixtures/timing/.
 Exit codes: 0 every judged verdict passed; 1 any failed; 2 bad input (usage, no such file, not
 an MCAP file, not a hil recording, bad spec); 3 none failed but some were inconclusive; 4
 incomplete: nothing was judged at all, a spec named with --spec found no data, or the recording
-is damaged mid-file (a corrupt chunk: everything after it is unreadable) or cut (no footer: a
-killed run). Nothing judged is not
+is damaged mid-file (a corrupt chunk: everything after it is unreadable), cut (no footer: a
+killed run) or of a run that was aborted (Ctrl-C: `hil.result` status aborted). Nothing
+judged is not
 a pass, so 4 always comes with the reason on stderr.
 
 Flags are checked before anything is judged; a bad one is exit 2 naming it: `--const` must be
@@ -267,6 +268,11 @@ def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> i
                       "skipped (the warning above names the first)"]
     if not _judged(verdicts):
         incomplete = [*incomplete, "nothing was judged"]
+    result = (getattr(source, "meta", None) or {}).get("hil.result", {})
+    if result.get("status") == "aborted":  # a whole file of a run that stopped early: what
+        incomplete = [*incomplete, f"{source.path}: the run was aborted ("  # it never did
+                      f"{result.get('reason') or 'no reason recorded'}): the steps after it "
+                      "never ran"]
     code = exit_code(verdicts)
     if incomplete and code != EXIT_FAIL:
         for line in incomplete:

@@ -117,3 +117,15 @@ def test_spec_ids_the_plan_checked_are_re_judged_as_the_plan_judged_them(tmp_pat
     assert as_run and not [v for v in as_run if v[2] == "fail"]
     assert verdicts("--spec", "homing_pr") == as_run
     assert [v for v in verdicts("--spec", "homing_pr", "--whole") if v[2] == "fail"]
+
+
+def test_hil_check_of_an_aborted_run_is_incomplete(tmp_path, capsys):
+    """A run stopped by Ctrl-C leaves a whole file whose later checks never ran: `hil check`
+    passed it silently (exit 0), so a CI gate passed an aborted run (an outside review)."""
+    path = tmp_path / "run.mcap"
+    write_mcap(path, 150, meta={"hil.result": {"status": "aborted",
+                                               "reason": "interrupted (SIGINT (Ctrl-C))"}})
+    assert run([str(path), "--spec", "servo_on_brake"]) == 4
+    assert "the run was aborted (interrupted (SIGINT (Ctrl-C)))" in capsys.readouterr().err
+    write_mcap(path, 150, meta={"hil.result": {"status": "pass", "reason": "end of plan"}})
+    assert run([str(path), "--spec", "servo_on_brake"]) == 0
