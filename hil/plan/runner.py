@@ -425,12 +425,13 @@ def _idle_inputs(ctx: StepContext) -> None:
 def _initial_params(ctx: StepContext, plan: Plan) -> None:
     d = ctx.drive(None)
     line = plan.key_line("params")  # the plan's `params:` line, as a step's own
+    t0 = clock.monotonic_ns()
     ctx.rec.plan_step("params", "start", plan=plan.name, index=-1, line=line)
     for p, v in plan.params.items():
         d.write_param(p, v)
         ctx.written(d.name, {p: v})
     ctx.rec.plan_step("params", "end", plan=plan.name, index=-1, status=PASS, line=line,
-                      file=plan.path,
+                      file=plan.path, duration_ns=clock.monotonic_ns() - t0,
                       message=", ".join(f"{p}={v}" for p, v in plan.params.items()))
 
 

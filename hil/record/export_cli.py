@@ -2,7 +2,7 @@
 
 The format comes from OUT's extension, the one python-can's `LogReader` reads it by: `.log`
 candump (`candump -L`), `.asc`, `.blf`, `.csv`, `.trc` (PCAN), `.mf4` (ASAM MDF, with
-`python-can[mf4]`). `-f` names it where the extension says nothing (`-o traffic.txt -f
+`hil[mf4]`). `-f` names it where the extension says nothing (`-o traffic.txt -f
 candump`) and must agree with a known extension. `-o -` writes a text format to stdout
 (default candump); BLF and MF4 are binary and are refused there.
 Exit 0 written, 2 bad input (usage, unreadable recording, unknown bus, format) or write error.
@@ -41,7 +41,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         choices=FORMATS,
         default=None,
         help="output format (default: from the -o extension: .log candump, .asc, .blf, .csv, "
-        ".trc (PCAN), .mf4 (ASAM MDF, needs `pip install 'python-can[mf4]'`); candump for -o -)",
+        ".trc (PCAN), .mf4 (ASAM MDF, needs `pip install 'hil[mf4]'`); candump for -o -)",
     )
     parser.add_argument("-o", "--output", required=True, metavar="OUT",
                         help="output file, or - for stdout (text formats only)")
@@ -80,7 +80,7 @@ def output_format(output: str, fmt: str | None) -> str:
             import asammdf  # noqa: F401  (python-can's MF4Writer needs it)
         except ImportError:
             raise ValueError(f"-o {output}: MF4 needs the asammdf package: "
-                             "pip install 'python-can[mf4]'") from None
+                             "pip install 'hil[mf4]'") from None
     return fmt
 
 

@@ -81,7 +81,7 @@ def test_mf4_names_its_missing_package_or_is_written(tmp_path, capsys):
         import asammdf  # noqa: F401
     except ImportError:
         assert code == 2
-        assert "pip install 'python-can[mf4]'" in capsys.readouterr().err
+        assert "pip install 'hil[mf4]'" in capsys.readouterr().err
     else:
         assert code == 0
     assert hil(["export", str(p), "-f", "mf4", "-o", "-"]) == 2
