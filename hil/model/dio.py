@@ -139,6 +139,7 @@ class DigitalIO:
         *,
         filter_mode: str = "stable",
         extra_delay_ns: int = 0,
+        mapping_on_write: bool = True,
     ) -> None:
         if filter_mode not in FILTER_MODES:
             raise ValueError(f"filter_mode {filter_mode!r} not one of {FILTER_MODES}")
@@ -169,6 +170,9 @@ class DigitalIO:
             params.on_validate(p, check_mapping_write)
         for p in DO_PARAMS:
             params.on_validate(p, check_mapping_write)
+        if mapping_on_write:  # option mapping_effect (docs/manual-choices.md)
+            for p in (*DI_PARAMS, *DO_PARAMS):
+                params.on_write(p, lambda *_: self._apply_mapping())
         params.on_write("P3.006", lambda *_: self._update_di())
         params.on_write("P4.007", self._on_sdi)
         params.on_write("P4.006", lambda *_: self._update_spo())

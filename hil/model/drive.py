@@ -173,7 +173,8 @@ class Drive:
         filter_mode = "delay" if self.options.dev_di_filter_delay_only else "stable"
         self.dio = DigitalIO(self.params, self.sched, self._on_dio_event, name=self.name,
                              filter_mode=filter_mode,
-                             extra_delay_ns=round(self.options.dev_di_filter_extra_ms * MS))
+                             extra_delay_ns=round(self.options.dev_di_filter_extra_ms * MS),
+                             mapping_on_write=self.options.mapping_effect == "write")
         self.axis = Axis(self.mech)
         self.brake = Brake(
             self.sched,

@@ -120,6 +120,11 @@ class ModelOptions:
     # manual ranks no further), an EMCY sent when that alarm changes and 0000h when none is
     # left; "latest" = the alarm raised last, an EMCY per alarm raised and 0000h per clear.
     emcy_priority: str = "class"
+    # A DI/DO mapping write (P2.010-P2.022, P2.036-P2.041): the parameter table marks none of
+    # them "power cycle" and L2979-2981 clears the alarms of an unmapped EMGS/NL/PL by an
+    # alarm reset, so "write" = in effect at once; L9256 / L9339 advise a restart after a
+    # change: "power_cycle" = read at power-up only.
+    mapping_effect: str = "write"
     # AL185 "Rx/Tx error counter > 128" (L20027-20031): an error frame adds this to the
     # receive error counter, a valid frame subtracts 1 (ISO 11898-1 fault confinement).
     can_error_frame_weight: int = 8
@@ -235,6 +240,7 @@ _CHOICES: dict[str, tuple[str, ...]] = {
     "pulse_interface": ("line_driver", "open_collector"),
     "pt_gear_check": ("refuse", "off"),
     "emcy_priority": ("class", "latest"),
+    "mapping_effect": ("write", "power_cycle"),
     "ip_smoothing": ("manual", "off"),
 }
 # Numeric options that may be negative (volts on V_REF / T_REF); every other is >= 0

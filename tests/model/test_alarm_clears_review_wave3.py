@@ -3,6 +3,8 @@ rule written from its manual line and seen failing on the model before its fix."
 
 from __future__ import annotations
 
+import pytest
+
 from hil.model.drive import Drive
 from hil.units import MS, S
 
@@ -96,3 +98,23 @@ def test_al3f1_is_cleared_by_the_absolute_origin_not_a_power_cycle():
     d.params.write("P2.008", 271)
     d.params.write("P2.071", 1)
     assert "AL3F1" not in d.alarms.active
+
+
+@pytest.mark.parametrize(("param", "line", "alarm"), [("P2.017", 8, "AL013"),
+                                                        ("P2.015", 6, "AL014")])
+def test_an_unmapped_emgs_or_limit_alarm_clears_with_an_alarm_reset(param, line, alarm):
+    # L2979-2981: P2.015-P2.017 set to 0 cancels NL/PL/EMGS; "if the drive then shows an
+    # abnormal signal (the factory defaults include NL, PL and EMGS), restart the power or
+    # close DI5 (alarm reset) to clear it"
+    from hil.model.drive import Drive
+    from hil.units import MS
+
+    inputs = {6: True, 7: True, 8: True}
+    inputs[line] = False  # that switch open at power-up: its alarm
+    d = Drive(inputs=inputs, sensors={})  # the switches are the test's, not the mechanics'
+    d.advance(10 * MS)
+    assert alarm in d.alarms.active
+    d.params.write(param, 0)
+    d.set_di(5, True)  # ARST
+    d.advance(10 * MS)
+    assert alarm not in d.alarms.active

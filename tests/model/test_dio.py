@@ -19,11 +19,12 @@ def ptable() -> ParamTable:
 
 
 class Rig:
-    def __init__(self, ptable: ParamTable) -> None:
+    def __init__(self, ptable: ParamTable, mapping_on_write: bool = True) -> None:
         self.params = ParameterStore(ptable)
         self.sched = Scheduler()
         self.events: list[DoChanged] = []
-        self.dio = DigitalIO(self.params, self.sched, self.events.append)
+        self.dio = DigitalIO(self.params, self.sched, self.events.append,
+                             mapping_on_write=mapping_on_write)
 
     def advance(self, dt: int) -> None:
         self.sched.now += dt
@@ -81,7 +82,8 @@ def test_b_contact_emgs_on_di8(rig: Rig) -> None:
     assert seen == [False, True]
 
 
-def test_software_di(rig: Rig) -> None:
+def test_software_di(ptable) -> None:
+    rig = Rig(ptable, mapping_on_write=False)  # option mapping_effect: power_cycle
     d, p = rig.dio, rig.params
     p.write("P4.007", 0x0001)  # SDI1 on
     assert not d.function_active("SON")  # P3.006 bit0 = 0: terminal is the source
@@ -119,11 +121,16 @@ def test_do5_alrm_b_contact_and_p0046(rig: Rig) -> None:
     assert rig.params.read("P0.046") == (1 << 0) | (1 << 6) | (1 << 7)  # L7460-7475
 
 
-def test_mapping_needs_power_cycle(rig: Rig) -> None:
+@pytest.mark.parametrize("on_write", [True, False])
+def test_a_mapping_write_takes_effect_as_the_option_says(ptable, on_write: bool) -> None:
+    # the parameter table marks no P2.010-P2.022 / P2.036-P2.041 "power cycle" and L2981
+    # clears an unmapped EMGS's alarm with ARST: at once (default); L9339 advises a restart
+    # after a change: option mapping_effect = power_cycle reads the mapping at power-up only
+    rig = Rig(ptable, mapping_on_write=on_write)
     d, p = rig.dio, rig.params
     p.write("P2.041", 0x0108)  # DO6 = BRKR (a)
     d.set_do_function("BRKR", True)
-    assert not d.do_level(6)  # L9339: takes effect after power cycle
+    assert d.do_level(6) is on_write
     d.power_cycle()
     assert d.do_level(6)
 
