@@ -119,6 +119,9 @@ class VirtualClock:
         self.hung = False  # a thread held the clock past HELD_WAIT_S: see ClockHung
         self._guard = _Held(self)  # `with self._guard:` the lock, waited for at most that
         self._running = 0  # > 0 while an event runs (events must not wait)
+        # a Ctrl-C / SIGTERM that came while an event ran, raised once it has ended (see
+        # `defer_interrupt`)
+        self._interrupt: BaseException | None = None
         self._watch: dict[int, tuple[threading.Event | None, int | None]] = {}
         self.media: dict[str, Any] = {}
         self.hold = 0  # > 0 inside `batch()`: settling waits for its end
@@ -209,6 +212,19 @@ class VirtualClock:
                     ev.fn()
                 finally:
                     self._running -= 1
+                if self._interrupt is not None and not self._running:
+                    exc, self._interrupt = self._interrupt, None
+                    raise exc
+
+    def defer_interrupt(self, exc: BaseException) -> bool:
+        """A signal handler's exception while an event runs: raised in the thread running
+        the events once that event has ended, not inside it (an event cut in the middle,
+        say a host tick before it scheduled the next, would stop the model, and the safe
+        state after the interrupt could not run). False outside an event: raise it now."""
+        if not self._running:
+            return False
+        self._interrupt = exc
+        return True
 
     def sleep(self, seconds: float) -> None:
         self.run_until(self._now + max(0, round(seconds * S)))

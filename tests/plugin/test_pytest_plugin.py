@@ -146,3 +146,59 @@ def test_a_bad_hil_out_is_one_usage_error(pytester: pytest.Pytester) -> None:
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     assert "--hil-out afile: not a directory" in result.stderr.str()
     assert (pytester.path / "afile").read_text() == "x"
+
+
+LONG = '''
+import pytest
+from hil import clock
+
+@pytest.mark.hil
+def test_long(hil_drive):
+    hil_drive.set_function("SON", True)
+    assert clock.wait_for(lambda: hil_drive.do_active("BRKR"), 2.0)
+    print("MOVING", flush=True)
+    clock.sleep(900)
+'''
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("clk", "sig"), [("virtual", "SIGINT"), ("virtual", "SIGTERM"),
+                                          ("real", "SIGTERM")])
+def test_a_fixture_test_stopped_by_a_signal_leaves_the_bench_safe(tmp_path, clk, sig) -> None:
+    """Ctrl-C in a fixture test on the virtual clock landed inside a clock event (a host
+    tick that had not scheduled the next): the model stopped, BRKR never went off and the
+    safe state was not confirmed; SIGTERM killed pytest with no safe state at all and a
+    truncated recording (an outside review). Both now stop the test as `hil run` does."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from hil.record.reader import Recording
+
+    (tmp_path / "test_long.py").write_text(LONG)
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "pytest", "-q", "-s", "-p", "no:cacheprovider",
+                             "-p", "no:randomly", f"--hil-out={out}", f"--hil-clock={clk}",
+                             "test_long.py"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            if "MOVING" in line:
+                break
+        time.sleep(0.5)
+        proc.send_signal(getattr(signal, sig))
+        proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    [path] = out.glob("*.mcap")
+    rec = Recording.open(path)
+    assert not rec.truncated, rec.error
+    result = rec.metadata()["hil.result"]
+    assert result["status"] == "aborted" and sig in result["reason"], result
+    assert result["safe_state_ok"] in ("true", "True"), result
+    actions = [m["action"] for *_t, m in rec.messages(["/safety"])]
+    assert actions and actions[-1] == "safe_state_reached", actions
