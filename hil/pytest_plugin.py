@@ -77,7 +77,31 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "hil: runs against a bench (virtual by default)")
     for d in _plan_dirs(config):  # plan tags are markers: `pytest -m brake` stays strict-clean
         for tag in sorted(_tags_in(d)):
-            config.addinivalue_line("markers", f"{tag}: plans tagged {tag} (hil_plans)")
+            if _markable(tag):
+                config.addinivalue_line("markers", f"{tag}: plans tagged {tag} (hil_plans)")
+
+
+# pytest's own markers and common plugins': a plan tag of that name would skip, xfail, rerun
+# or time out the plan instead of selecting it, so it is not applied as a marker
+PYTEST_MARKERS = frozenset({"skip", "skipif", "xfail", "parametrize", "usefixtures",
+                            "filterwarnings", "tryfirst", "trylast", "flaky", "timeout",
+                            "asyncio", "anyio", "xdist_group", "order", "dependency",
+                            "benchmark", "django_db", "hil"})
+
+
+def _markable(tag: str) -> bool:
+    """A tag that can be a marker of its own: a Python name, not a marker with a meaning."""
+    return tag.isidentifier() and tag not in PYTEST_MARKERS
+
+
+def _foreign_markers(config: pytest.Config) -> set[str]:
+    """Marker names registered by pytest or another plugin (not only as a plan tag)."""
+    out = set()
+    for line in config.getini("markers"):
+        name = line.split(":", 1)[0].split("(", 1)[0].strip()
+        if "(hil_plans)" not in line:
+            out.add(name)
+    return out
 
 
 def _junit_dir(config: pytest.Config) -> Path | None:
@@ -166,8 +190,15 @@ class PlanFile(pytest.File):
             raise self.CollectError(str(e)) from None
         item = PlanItem.from_parent(self, name=plan.name, plan=plan)
         item.add_marker("hil")
+        foreign = _foreign_markers(self.config)
         for tag in plan.tags:
-            item.add_marker(tag)
+            if _markable(tag) and tag not in foreign:
+                item.add_marker(tag)
+            else:  # it would change how the plan runs, or is no marker name: said, not applied
+                item.warn(pytest.PytestConfigWarning(
+                    f"{plan.path}: tag {tag!r} is not applied as a marker (a pytest or plugin "
+                    "marker of that name would change how the plan runs, or it is no Python "
+                    "name); select the plan by name with -k"))
         yield item
 
 

@@ -202,3 +202,23 @@ def test_a_fixture_test_stopped_by_a_signal_leaves_the_bench_safe(tmp_path, clk,
     assert result["safe_state_ok"] in ("true", "True"), result
     actions = [m["action"] for *_t, m in rec.messages(["/safety"])]
     assert actions and actions[-1] == "safe_state_reached", actions
+
+
+def test_a_plan_tag_that_is_a_pytest_marker_does_not_change_how_it_runs(
+        pytester: pytest.Pytester) -> None:
+    """Plan tags become markers; a tag `skip`, `xfail`, `flaky` or `timeout` skipped the
+    plan, made its failure XFAIL, reran it on the bench or crashed the session, and `axis:x`
+    broke --strict-markers (an outside review). Such tags are not applied, with a warning."""
+    plans = pytester.mkdir("plans")
+    text = _shipped("emgs").read_text()
+    assert "tags: [emgs, alarm, brake, safety]" in text
+    for i, tag in enumerate(("skip", "xfail", "flaky", "timeout", "'axis:x'")):
+        (plans / f"p{i}.yaml").write_text(
+            text.replace("name: emgs", f"name: p{i}")
+            .replace("tags: [emgs, alarm, brake, safety]", f"tags: [brake, {tag}]")
+            .rstrip("\n") + "\n  - expect: {alarm: AL013}\n")  # released: AL013 is gone
+    pytester.makeini("[pytest]\nhil_plans = plans\n")
+    result = pytester.runpytest_subprocess("-m", "brake", "-q", "-p", "no:cacheprovider",
+                                           "--strict-markers", "-W", "default")
+    result.assert_outcomes(failed=5)  # every plan ran, and failed at its last step
+    assert "is not applied as a marker" in result.stdout.str()
