@@ -128,7 +128,8 @@ def _load_bench(config: pytest.Config) -> Any:
 
 
 def _plan_dirs(config: pytest.Config) -> list[Path]:
-    return [Path(p).resolve() for p in config.getini("hil_plans")]
+    """`hil_plans`, relative to the project's rootdir (not to where pytest was started)."""
+    return [(config.rootpath / p).resolve() for p in config.getini("hil_plans")]
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -397,15 +398,26 @@ def hil_drive(hil_session: Any) -> Any:
 @pytest.fixture
 def hil_run_plan(hil_bench: Any, request: pytest.FixtureRequest) -> Callable[[str | Path], Any]:
     """Run a plan (name or path) on the bench; returns the `PlanResult`."""
+    from hil.bench.yamlio import PlanFileError
     from hil.plan.plan import find_plans, load_plan
     from hil.plan.runner import plan_stem, run_plan
 
     runs: list[str] = []
 
     def run(plan: str | Path) -> Any:
+        # a path (from where pytest runs, else from the rootdir), else a name in the
+        # project's `hil_plans` directories, else in hil's plans directory
         path = Path(plan)
+        if not path.exists() and (request.config.rootpath / path).exists():
+            path = request.config.rootpath / path
         if not path.exists():
-            path = find_plans([str(plan)])[0]
+            for d in [*_plan_dirs(request.config), None]:
+                try:
+                    path = find_plans([str(plan)], d)[0]
+                    break
+                except (FileNotFoundError, PlanFileError, IndexError):
+                    if d is None:
+                        raise
         loaded = load_plan(path)
         # named after the test and the plan: never the name of a plan collected as a test
         # (`hil_plans`) or of this plan run by another test

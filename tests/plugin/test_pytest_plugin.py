@@ -222,3 +222,26 @@ def test_a_plan_tag_that_is_a_pytest_marker_does_not_change_how_it_runs(
                                            "--strict-markers", "-W", "default")
     result.assert_outcomes(failed=5)  # every plan ran, and failed at its last step
     assert "is not applied as a marker" in result.stdout.str()
+
+
+def test_hil_run_plan_takes_a_name_from_the_projects_plans_first(pytester: pytest.Pytester
+                                                                 ) -> None:
+    """`hil_run_plan("servo_on_off_brake")` ran hil's own plan even when the project's
+    `hil_plans` holds its own of that name, and a plan only the project has was not found
+    (an outside review)."""
+    plans = pytester.mkdir("plans")
+    text = _shipped("servo_on_off_brake").read_text()
+    (plans / "servo_on_off_brake.yaml").write_text(
+        text.rstrip("\n") + "\n  - expect: {alarm: AL999}\n")  # the project's own: fails
+    (plans / "only_here.yaml").write_text(text.replace("name: servo_on_off_brake",
+                                                       "name: only_here"))
+    pytester.makeini("[pytest]\nhil_plans = plans\n")
+    pytester.makepyfile(test_runs='''
+def test_project_plan(hil_run_plan):
+    assert not hil_run_plan("servo_on_off_brake").passed
+
+def test_only_here(hil_run_plan):
+    assert hil_run_plan("only_here").passed
+''')
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "test_runs.py")
+    result.assert_outcomes(passed=2)
