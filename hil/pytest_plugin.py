@@ -272,6 +272,20 @@ def _safe_name(nodeid: str) -> str:
     return safe
 
 
+_STEMS = pytest.StashKey[dict[str, str]]()
+
+
+def _unique_stem(config: pytest.Config, stem: str, nodeid: str) -> str:
+    """`stem`, or `stem-<hash of the test id>` when another test of this session took it
+    (`tests/a/test_b.py::t` and `tests/a_test_b.py::t` both read `tests_a_test_b.py_t`)."""
+    taken = config.stash.setdefault(_STEMS, {})
+    key = stem.casefold()
+    if taken.setdefault(key, nodeid) != nodeid:
+        stem = f"{stem}-{hashlib.sha1(nodeid.encode()).hexdigest()[:8]}"
+        taken[stem.casefold()] = nodeid
+    return stem
+
+
 @pytest.fixture(scope="session")
 def hil_bench(pytestconfig: pytest.Config) -> Any:
     """The bench of this pytest run (`--hil-bench FILE`, default: the virtual bench), on its
@@ -285,7 +299,9 @@ def hil_recorder(request: pytest.FixtureRequest) -> Iterator[Any]:
     (relative to the JUnit file), as `hil run` names it."""
     from hil.record.recorder import Recorder
 
-    path = _out_dir(request.config) / f"{_safe_name(request.node.nodeid)}.mcap"
+    nodeid = request.node.nodeid
+    path = _out_dir(request.config) / (
+        _unique_stem(request.config, _safe_name(nodeid), nodeid) + ".mcap")
     request.node.user_properties.append(("recording", _recording_property(request.config,
                                                                          path)))
     rec = Recorder(path, metadata={"pytest_nodeid": request.node.nodeid})
@@ -421,10 +437,12 @@ def hil_run_plan(hil_bench: Any, request: pytest.FixtureRequest) -> Callable[[st
         loaded = load_plan(path)
         # named after the test and the plan: never the name of a plan collected as a test
         # (`hil_plans`) or of this plan run by another test
-        stem = f"{_safe_name(request.node.nodeid)}-{plan_stem(loaded)}"
+        nodeid = request.node.nodeid
+        stem = f"{_safe_name(nodeid)}-{plan_stem(loaded)}"
         runs.append(stem)
         if runs.count(stem) > 1:
             stem = f"{stem}-{runs.count(stem)}"
+        stem = _unique_stem(request.config, stem, nodeid)
         result = run_plan(loaded, hil_bench, _out_dir(request.config), stem=stem)
         request.node.user_properties.append(
             ("recording", _recording_property(request.config, result.recording)))

@@ -245,3 +245,21 @@ def test_only_here(hil_run_plan):
 ''')
     result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "test_runs.py")
     result.assert_outcomes(passed=2)
+
+
+def test_two_test_ids_that_read_alike_keep_a_recording_each(pytester: pytest.Pytester,
+                                                            tmp_path) -> None:
+    """`test_move[fast]` and `test_move_fast`, `a/test_b.py::t` and `a_test_b.py::t` wrote
+    one file, the later test over the earlier (an outside review)."""
+    body = ("import pytest\n@pytest.mark.parametrize('p', ['fast'])\n"
+            "def test_move(hil_recorder, p):\n    pass\n"
+            "def test_move_fast(hil_recorder):\n    pass\n")
+    pytester.makepyfile(test_one=body)
+    pytester.mkdir("a")
+    (pytester.path / "a" / "test_b.py").write_text("def test_t(hil_recorder):\n    pass\n")
+    (pytester.path / "a_test_b.py").write_text("def test_t(hil_recorder):\n    pass\n")
+    out = tmp_path / "out"
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", f"--hil-out={out}",
+                                           "test_one.py", "a/test_b.py", "a_test_b.py")
+    result.assert_outcomes(passed=4)
+    assert len(list(out.glob("*.mcap"))) == 4, sorted(p.name for p in out.glob("*"))
