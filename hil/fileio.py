@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
+import tempfile
 from collections.abc import Callable, Hashable, Iterable, Iterator
 from pathlib import Path
 from typing import TypeVar
@@ -38,11 +39,24 @@ def dir_problem(path: str | os.PathLike) -> str | None:
     where the directory belongs, or a file among its parents."""
     out = Path(path)
     if out.exists():
-        return None if out.is_dir() else "not a directory"
+        if not out.is_dir():
+            return "not a directory"
+        return None if _writable(out) else "not writable"
     for parent in out.parents:
         if parent.exists():
-            return None if parent.is_dir() else f"{parent} is not a directory"
+            if not parent.is_dir():
+                return f"{parent} is not a directory"
+            return None if _writable(parent) else f"{parent} is not writable"
     return None
+
+
+def _writable(directory: Path) -> bool:
+    """A file can be made in `directory` (tried: permissions, a read-only mount, sysfs)."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=directory, prefix=".hil-write-test-"):
+            return True
+    except OSError:
+        return False
 
 
 def read_limited(path: str | os.PathLike, max_bytes: int | None, what: str = "file") -> bytes:

@@ -263,3 +263,22 @@ def test_two_test_ids_that_read_alike_keep_a_recording_each(pytester: pytest.Pyt
                                            "test_one.py", "a/test_b.py", "a_test_b.py")
     result.assert_outcomes(passed=4)
     assert len(list(out.glob("*.mcap"))) == 4, sorted(p.name for p in out.glob("*"))
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/proc/self"), reason="needs /proc")
+def test_an_output_directory_nothing_can_be_written_to_is_a_usage_error(
+        pytester: pytest.Pytester, tmp_path) -> None:
+    """`--hil-out` / `hil run --out` on a directory nothing can be made in (a read-only
+    mount, /proc) failed every test with a PermissionError traceback (an outside review);
+    it is one usage error before anything runs, as a file there is."""
+    from hil.cli import main
+    from hil.fileio import dir_problem
+
+    assert dir_problem("/proc") == "not writable"
+    assert dir_problem("/proc/hil-out") == "/proc is not writable"
+    assert dir_problem(tmp_path / "new" / "dir") is None
+    assert main(["run", "emgs", "--out", "/proc/hil-out", "-q"]) == 2
+    pytester.makepyfile(test_one="def test_a(hil_recorder):\n    pass\n")
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "--hil-out=/proc")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "--hil-out /proc: not writable" in result.stderr.str()
