@@ -217,13 +217,14 @@ class PlanItem(pytest.Item):
         bench = _load_bench(self.config)
         result = run_plan(self.plan, bench, _out_dir(self.config), stem=self.stem)
         from hil.report.data import load_run
-        from hil.report.junit import case_properties
+        from hil.report.junit import case_properties, failure_text
 
         # `hil run`'s JUnit shape: recording (relative to the JUnit file), steps, verdicts
-        self.user_properties.extend(case_properties(load_run(result.recording),
-                                                    _junit_dir(self.config)))
-        if not result.passed:
-            raise PlanFailed(explain(result))
+        run = load_run(result.recording)
+        self.user_properties.extend(case_properties(run, _junit_dir(self.config)))
+        if not result.passed:  # the failure text `hil run`'s JUnit gives, and where it is
+            raise PlanFailed(f"plan {result.plan}: {result.status}\n{failure_text(run)[1]}\n"
+                             f"recording: {result.recording}")
 
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None
                      ) -> str:

@@ -123,3 +123,23 @@ def test_pytest_and_hil_run_write_one_junit_shape(tmp_path):
     assert list(py) == list(hr)
     assert py["recording"] == "out/brake_ok.mcap" and hr["recording"] == "brake_ok.mcap"
     assert run_case.get("name") == "brake_ok"
+
+
+def test_a_collected_plans_failure_reads_as_hil_runs_junit(tmp_path) -> None:
+    """README: under pytest a plan's testcase carries "the same failure text" as `hil run`'s
+    JUnit: step number, status, time, plan file and line, message (an outside review found
+    no file:line under pytest)."""
+    from hil.report.data import load_run
+    from hil.report.junit import failure_text
+
+    proj = tmp_path / "proj"
+    (proj / "plans").mkdir(parents=True)
+    (proj / "plans" / "never_on.yaml").write_text(
+        "name: never_on\nsteps:\n  - expect: {do: {BRKR: on}}\n")
+    (proj / "pytest.ini").write_text("[pytest]\nhil_plans = plans\n")
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                        f"--hil-out={proj / 'out'}"], cwd=proj, capture_output=True, text=True,
+                       timeout=120)
+    first, _all = failure_text(load_run(proj / "out" / "never_on.mcap"))
+    assert "(" in first and "never_on.yaml:3)" in first, first
+    assert first in r.stdout, r.stdout

@@ -42,6 +42,15 @@ def _lines(run: RunData) -> list[tuple[str, str, str]]:
     return out
 
 
+def failure_text(run: RunData) -> tuple[str, str]:
+    """(first, all) of what did not pass in a plan run, as the JUnit failure gives it (and
+    pytest's report of a collected plan): `step 03 wait_until ...: fail 300.0 ms
+    (plans/x.yaml:13): message`, a line per step or verdict."""
+    bad = [(n, t) for n, s, t in _lines(run) if s not in ("pass", "skipped")]
+    first = f"{bad[0][0]}: {bad[0][1]}" if bad else (run.status or "not passed")
+    return first, "\n".join(f"{n}: {t}" for n, t in bad) or first
+
+
 def case_properties(run: RunData, junit_dir: str | Path | None) -> list[tuple[str, str]]:
     """The properties of a plan's testcase, the same from `hil run` and from pytest: the
     recording (relative to the JUnit file), bench, status, and one per step and verdict."""
@@ -63,15 +72,14 @@ def plan_case(run: RunData, junit_dir: str | Path | None) -> ET.Element:
     for k, v in case_properties(run, junit_dir):
         ET.SubElement(props, "property", name=k, value=v)
     lines = _lines(run)
-    bad = [(n, s, t) for n, s, t in lines if s not in ("pass", "skipped")]
     status = run.status  # the plan's own verdict (an allowed inconclusive still passes)
     if status == "skipped":
         ET.SubElement(tc, "skipped", message="not run")
     elif status in NOT_PASSED:
         tag = NOT_PASSED[status]
-        first = f"{bad[0][0]}: {bad[0][2]}" if bad else status
+        first, text = failure_text(run)
         el = ET.SubElement(tc, tag, message=first, type=status)
-        el.text = "\n".join(f"{n}: {t}" for n, _s, t in bad) or first
+        el.text = text
     out = ET.SubElement(tc, "system-out")
     out.text = "\n".join(f"{n}: {t}" for n, _s, t in lines)
     return tc
