@@ -75,6 +75,10 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 @pytest.hookimpl(tryfirst=True)
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "hil: runs against a bench (virtual by default)")
+    for d in _plan_dirs(config):
+        if not d.is_dir():  # a typo collects nothing, silently: say it
+            config.issue_config_time_warning(pytest.PytestConfigWarning(
+                f"hil_plans: {d} is not a directory: no plans collected from it"), stacklevel=2)
     for d in _plan_dirs(config):  # plan tags are markers: `pytest -m brake` stays strict-clean
         for tag in sorted(_tags_in(d)):
             if _markable(tag):

@@ -282,3 +282,12 @@ def test_an_output_directory_nothing_can_be_written_to_is_a_usage_error(
     result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "--hil-out=/proc")
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     assert "--hil-out /proc: not writable" in result.stderr.str()
+
+
+def test_a_hil_plans_directory_that_is_not_there_is_said(pytester: pytest.Pytester) -> None:
+    """`hil_plans = plan` (a typo) collected nothing without a word (an outside review)."""
+    pytester.makeini("[pytest]\nhil_plans = plan\n")
+    pytester.makepyfile(test_one="def test_a():\n    pass\n")
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1, warnings=1)
+    assert "hil_plans:" in result.stdout.str() and "is not a directory" in result.stdout.str()
