@@ -156,6 +156,15 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             _load_bench(config)
         except ValueError as e:
             raise pytest.UsageError(f"--hil-clock: {e}") from None
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+    if uses_bench and workers > 1:  # xdist: each worker would open the bench at once
+        from hil.plan.parallel import parallel_blocker
+
+        why = parallel_blocker(_load_bench(config))
+        if why is not None:  # what `hil run -j` refuses: two runs on one set of drives;
+            # every test that opens the bench errors with it (a worker cannot stop the run)
+            config.stash[_SHARED] = (f"pytest-xdist with {workers} workers: {why}; run it "
+                                     "without -n (each worker would drive it at once)")
     out = config.getoption("--hil-out")
     if out is not None and any(isinstance(i, PlanItem) or "hil_recorder" in getattr(
             i, "fixturenames", ()) or "hil_run_plan" in getattr(i, "fixturenames", ())
@@ -218,6 +227,8 @@ class PlanItem(pytest.Item):
     def runtest(self) -> None:
         from hil.plan.runner import run_plan
 
+        if _SHARED in self.config.stash:
+            pytest.fail(self.config.stash[_SHARED], pytrace=False)
         bench = _load_bench(self.config)
         result = run_plan(self.plan, bench, _out_dir(self.config), stem=self.stem)
         from hil.report.data import load_run
@@ -278,6 +289,7 @@ def _safe_name(nodeid: str) -> str:
 
 
 _STEMS = pytest.StashKey[dict[str, str]]()
+_SHARED = pytest.StashKey[str]()  # why xdist workers must not open this bench
 
 
 def _unique_stem(config: pytest.Config, stem: str, nodeid: str) -> str:
@@ -295,6 +307,8 @@ def _unique_stem(config: pytest.Config, stem: str, nodeid: str) -> str:
 def hil_bench(pytestconfig: pytest.Config) -> Any:
     """The bench of this pytest run (`--hil-bench FILE`, default: the virtual bench), on its
     clock (`--hil-clock`)."""
+    if _SHARED in pytestconfig.stash:
+        pytest.fail(pytestconfig.stash[_SHARED], pytrace=False)
     return _load_bench(pytestconfig)
 
 

@@ -291,3 +291,22 @@ def test_a_hil_plans_directory_that_is_not_there_is_said(pytester: pytest.Pytest
     result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider")
     result.assert_outcomes(passed=1, warnings=1)
     assert "hil_plans:" in result.stdout.str() and "is not a directory" in result.stdout.str()
+
+
+def test_xdist_workers_never_share_one_bench(pytester: pytest.Pytester) -> None:
+    """`hil run -j` runs a real bench (or one on fixed transports) one plan at a time; under
+    pytest -n 2 both workers would have driven it at once (an outside review)."""
+    from hil.paths import fixture
+
+    text = fixture("benches", "virtual-zenoh.yaml").read_text()
+    for _ in range(3):
+        text = text.replace("tcp/127.0.0.1:auto", "tcp/127.0.0.1:17447", 1)
+    (pytester.path / "fixed.yaml").write_text(text)
+    pytester.makepyfile(test_one="def test_a(hil_bench):\n    pass\n"
+                                 "def test_b(hil_bench):\n    pass\n")
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-n", "2",
+                                           "--hil-bench=fixed.yaml")
+    assert result.ret != 0
+    assert "pytest-xdist with 2 workers" in (result.stdout.str() + result.stderr.str())
+    ok = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-n", "2")
+    ok.assert_outcomes(passed=2)  # the built-in virtual bench: private to each worker
