@@ -122,6 +122,7 @@ class VirtualClock:
         # a Ctrl-C / SIGTERM that came while an event ran, raised once it has ended (see
         # `defer_interrupt`)
         self._interrupt: BaseException | None = None
+        self._loops = 0  # > 0 while `run_until` fires events (signals are deferred then)
         self._watch: dict[int, tuple[threading.Event | None, int | None]] = {}
         self.media: dict[str, Any] = {}
         self.hold = 0  # > 0 inside `batch()`: settling waits for its end
@@ -189,42 +190,59 @@ class VirtualClock:
         cancel, deadline = (self._watch.get(threading.get_ident(), (None, None)) if watched
                             else (None, None))
         with self._guard:
-            while True:
-                if pred is not None and pred():
-                    return True
-                if cancel is not None and cancel.is_set():
-                    raise Cancelled()
-                heap = self._heap
-                while heap and heap[0].cancelled:
-                    heapq.heappop(heap)
-                nxt = heap[0].t if heap else None
-                if deadline is not None and min(t, nxt if nxt is not None else t) > deadline:
-                    self._now = max(self._now, deadline)  # the wait would pass the deadline
-                    raise VirtualTimeout(f"step deadline at {self.elapsed_ns / S:.3f} s of "
-                                         "virtual time")
-                if nxt is None or nxt > t:
-                    self._now = max(self._now, t)
-                    return True if pred is None else bool(pred())
-                ev = heapq.heappop(heap)
-                self._now = max(self._now, ev.t)
-                self._running += 1
-                try:
-                    ev.fn()
-                finally:
-                    self._running -= 1
-                if self._interrupt is not None and not self._running:
-                    exc, self._interrupt = self._interrupt, None
-                    raise exc
+            self._loops += 1  # a signal now is deferred to the top of a pass (defer_interrupt)
+            try:
+                return self._run_events(t, pred, cancel, deadline)
+            except BaseException as exc:
+                pending, self._interrupt = self._interrupt, None
+                if pending is not None and pending is not exc:
+                    raise pending from exc  # the stop the user asked for, not a later error
+                raise
+            finally:
+                self._loops -= 1
+
+    def _run_events(self, t: int, pred: Callable[[], Any] | None, cancel: Any,
+                    deadline: int | None) -> bool:
+        heap = self._heap
+        while True:
+            if self._interrupt is not None:  # taken between two events, never inside
+                exc, self._interrupt = self._interrupt, None
+                raise exc
+            if pred is not None and pred():
+                return True
+            if cancel is not None and cancel.is_set():
+                raise Cancelled()
+            while heap and heap[0].cancelled:
+                heapq.heappop(heap)
+            nxt = heap[0].t if heap else None
+            if deadline is not None and min(t, nxt if nxt is not None else t) > deadline:
+                self._now = max(self._now, deadline)  # the wait would pass the deadline
+                raise VirtualTimeout(f"step deadline at {self.elapsed_ns / S:.3f} s of "
+                                     "virtual time")
+            if nxt is None or nxt > t:
+                self._now = max(self._now, t)
+                return True if pred is None else bool(pred())
+            ev = heapq.heappop(heap)
+            self._now = max(self._now, ev.t)
+            self._running += 1
+            try:
+                ev.fn()
+            finally:
+                self._running -= 1
 
     def defer_interrupt(self, exc: BaseException) -> bool:
         """A signal handler's exception while an event runs: raised in the thread running
         the events once that event has ended, not inside it (an event cut in the middle,
         say a host tick before it scheduled the next, would stop the model, and the safe
         state after the interrupt could not run). False outside an event: raise it now."""
-        if not self._running:
+        if not (self._running or self._loops):
             return False
         self._interrupt = exc
         return True
+
+    def drop_interrupt(self) -> None:
+        """Forget a deferred interrupt not yet raised (the safe state after it must run)."""
+        self._interrupt = None
 
     def sleep(self, seconds: float) -> None:
         self.run_until(self._now + max(0, round(seconds * S)))

@@ -372,6 +372,8 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
             yield session
         finally:
             signals.shield = True  # the safe state and the recording's close run to the end
+            if hasattr(clk, "drop_interrupt"):
+                clk.drop_interrupt()  # one deferred but not yet raised must not cut it
             status, reason = _outcome(request.node)
             if signals.cause:
                 status, reason = "aborted", f"interrupted ({signals.cause})"

@@ -175,3 +175,47 @@ def test_a_stale_sdo_reply_does_not_put_the_client_back_on_the_wall_clock() -> N
         assert c.time_ns() - t0 >= 300 * MS  # the 0.3 s reply timeout passed in bench time
         assert time.monotonic() - w0 < 0.25  # not in wall time
         bus.shutdown()
+
+
+def test_a_signal_while_events_run_never_cuts_one_and_never_outlives_its_wait():
+    """A Ctrl-C handler raising inside `run_until` (after an event was taken, or inside one)
+    lost that event: a host tick that reschedules itself never ran again and the model
+    stopped (13 of 300 real SIGINTs in an outside probe). `defer_interrupt` defers it to
+    the top of the next pass; one deferred while an event then raises is raised in place
+    of that error, not left to cut the safe state's later wait."""
+    import os
+    import random
+    import signal
+    import threading
+
+    from hil.pytest_plugin import _Signals
+
+    lost = 0
+    for _ in range(120):
+        clk = VirtualClock()
+
+        def tick(clk=clk):
+            sum(range(150))  # a host tick's work, then its next tick
+            clk.after(1_000_000, tick)
+
+        clk.after(0, tick)
+        threading.Timer(random.uniform(0.0005, 0.003), os.kill,
+                        (os.getpid(), signal.SIGINT)).start()
+        with _Signals(clk):
+            with pytest.raises(KeyboardInterrupt):
+                clk.run_until(clk.time_ns() + 10**15)
+        lost += not any(not e.cancelled for e in clk._heap)
+    assert lost == 0
+
+    clk = VirtualClock()
+
+    def fails():
+        assert clk.defer_interrupt(KeyboardInterrupt("SIGINT (Ctrl-C)"))
+        raise ValueError("the event's own error")
+
+    clk.after(0, fails)
+    with pytest.raises(KeyboardInterrupt):
+        clk.run_until(clk.time_ns() + 10)
+    ran = []
+    clk.after(5, lambda: ran.append(1))
+    assert clk.run_until(clk.time_ns() + 10) and ran  # nothing left over for this wait

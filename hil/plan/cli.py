@@ -92,13 +92,26 @@ def _last_failed(plans: list, out: Path, *, quiet: bool) -> list:
     # name in different folders are told apart by the recording, as the run named them
     stems = output_stems(plans)
     chosen_ix: set[int] = set()
+    ran: set[str] = set()  # the recordings the previous run made
     for c in cases:
-        if c.find("failure") is None and c.find("error") is None:
-            continue
         rec = next((Path(pr.get("value") or "").stem for pr in c.iter("property")
                     if pr.get("name") == "recording"), None)
+        if rec is not None:
+            ran.add(rec)
+        if c.find("failure") is None and c.find("error") is None:
+            continue
         same = [i for i, st in enumerate(stems) if rec is not None and st == rec]
         chosen_ix.update(same or (i for i, p in enumerate(plans) if p.name == c.get("name")))
+    for i, st in enumerate(stems):  # not reached by an interrupted previous run: its own
+        if st in ran or i in chosen_ix:  # JUnit file, from the last run that ran it, says
+            continue
+        try:
+            own = ET.parse(out / f"{st}.junit.xml").getroot()
+        except (OSError, ET.ParseError):
+            continue
+        if any(c.find("failure") is not None or c.find("error") is not None
+               for c in own.iter("testcase")):
+            chosen_ix.add(i)
     chosen = [p for i, p in enumerate(plans) if i in chosen_ix]
     if not chosen:
         if not quiet:

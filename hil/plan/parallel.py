@@ -216,6 +216,8 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
                                   initargs=(logging.getLogger().getEffectiveLevel(),))
     running: dict[cf.Future, _Job] = {}
     main = threading.current_thread() is threading.main_thread()
+    global _received
+    _received = signal.SIGINT
     old_handlers = {sig: signal.signal(sig, _as_interrupt)  # as run_plan does with -j 1
                     for sig in (signal.SIGINT, signal.SIGTERM)} if main else {}
     interrupted = False
@@ -258,7 +260,12 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
     return [results[i] for i in range(1, len(plans) + 1)]
 
 
+_received = signal.SIGINT  # the signal that stopped the run, passed on to the workers
+
+
 def _as_interrupt(signum: int, frame: Any) -> None:
+    global _received
+    _received = signal.Signals(signum)
     raise KeyboardInterrupt(signal_text(signum))
 
 
@@ -272,8 +279,8 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, running: dict[cf.Future, _Job]
         for sig in (signal.SIGINT, signal.SIGTERM)} if main else {}
     try:
         for pid in list(getattr(pool, "_processes", {}) or {}):
-            with contextlib.suppress(OSError):
-                os.kill(pid, signal.SIGINT)
+            with contextlib.suppress(OSError):  # the same signal: the record names it
+                os.kill(pid, _received)
         return cf.wait(running, timeout=STOP_GRACE_S)[0]
     finally:
         for sig, h in old.items():

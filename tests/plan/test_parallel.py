@@ -169,7 +169,8 @@ def _start_two_holds(tmp_path: Path, **popen: Any) -> tuple[subprocess.Popen, Pa
     return proc, out
 
 
-def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path, sig):
     stale = tmp_path / "out"  # a previous run's summary must not stand for this one
     stale.mkdir()
     (stale / "junit.xml").write_text("<testsuites tests='2' failures='0'/>")
@@ -179,7 +180,7 @@ def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
     try:
         time.sleep(1.5)  # both plans are in their 20 s wait
         t0 = time.monotonic()
-        proc.send_signal(signal.SIGINT)  # to the parent only: it stops its workers
+        proc.send_signal(getattr(signal, sig))  # to the parent only: it stops its workers
         output, _ = proc.communicate(timeout=60)
         assert time.monotonic() - t0 < 20, "the plans ran on instead of stopping"
     finally:
@@ -192,7 +193,7 @@ def test_ctrl_c_stops_the_workers_and_every_recording_stays_readable(tmp_path):
         assert not rec.corrupt, rec.error
         result = rec.metadata()["hil.result"]
         assert result["status"] == "aborted"
-        assert "interrupted" in result["reason"]
+        assert "interrupted" in result["reason"] and sig in result["reason"], result
         safety = [m for *_t, m in rec.messages("/safety")]
         assert safety, f"{name}: no safe-state record"
         assert (out / f"{name}.html").exists() and (out / f"{name}.junit.xml").exists()

@@ -166,3 +166,24 @@ def test_last_failed_tells_two_plans_of_one_name_apart_by_their_recording(tmp_pa
     cap = capsys.readouterr()
     assert "1 of 2 plan(s) failed last time" in cap.err
     assert [line.split()[-1] for line in cap.out.splitlines()] == [files[1]]
+
+
+def test_last_failed_remembers_a_failure_an_interrupted_run_never_reached(tmp_path, capsys):
+    """An interrupted run writes junit.xml for the plans it ran; a plan it never reached
+    keeps its own JUnit file from the last run that ran it, and `--lf` still picks it when
+    it failed there (as pytest's --lf remembers; an outside review found it forgotten)."""
+    from hil.cli import main as hil
+
+    plans = tmp_path / "plans"
+    plans.mkdir()
+    (plans / "ok.yaml").write_text("name: ok\nsteps:\n  - expect: {do: {SRDY: on}}\n")
+    (plans / "bad.yaml").write_text("name: bad\nsteps:\n  - expect: {do: {BRKR: on}}\n")
+    out = tmp_path / "out"
+    base = ["run", "-q", "--plans", str(plans), "--out", str(out)]
+    assert hil([*base, "bad", "ok"]) == 1
+    assert hil([*base, "ok"]) == 0  # as a run stopped before `bad`: junit.xml has ok alone
+    capsys.readouterr()
+    assert hil([*base[:1], *base[2:], "--lf", "--list"]) == 0
+    captured = capsys.readouterr()
+    assert "1 of 2 plan(s) failed last time" in captured.err
+    assert "bad" in captured.out and "ok " not in captured.out
