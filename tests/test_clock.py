@@ -201,9 +201,8 @@ def test_a_signal_while_events_run_never_cuts_one_and_never_outlives_its_wait():
         clk.after(0, tick)
         threading.Timer(random.uniform(0.0005, 0.003), os.kill,
                         (os.getpid(), signal.SIGINT)).start()
-        with _Signals(clk):
-            with pytest.raises(KeyboardInterrupt):
-                clk.run_until(clk.time_ns() + 10**15)
+        with _Signals(clk), pytest.raises(KeyboardInterrupt):
+            clk.run_until(clk.time_ns() + 10**15)
         lost += not any(not e.cancelled for e in clk._heap)
     assert lost == 0
 
