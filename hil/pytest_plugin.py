@@ -98,14 +98,18 @@ def _markable(tag: str) -> bool:
     return tag.isidentifier() and tag not in PYTEST_MARKERS
 
 
+def _marker_name(line: str) -> str:
+    return line.split(":", 1)[0].split("(", 1)[0].strip()
+
+
 def _foreign_markers(config: pytest.Config) -> set[str]:
-    """Marker names registered by pytest or another plugin (not only as a plan tag)."""
-    out = set()
-    for line in config.getini("markers"):
-        name = line.split(":", 1)[0].split("(", 1)[0].strip()
-        if "(hil_plans)" not in line:
-            out.add(name)
-    return out
+    """Marker names registered by pytest or another plugin: not a plan tag's, and not one
+    the project declares itself in its ini `markers` (a project may declare `brake`)."""
+    raw = config.inicfg.get("markers", "") if hasattr(config, "inicfg") else ""
+    lines = raw.splitlines() if isinstance(raw, str) else [str(x) for x in raw or ()]
+    own = {_marker_name(x) for x in lines if x.strip()}
+    return {_marker_name(line) for line in config.getini("markers")
+            if "(hil_plans)" not in line} - own
 
 
 def _junit_dir(config: pytest.Config) -> Path | None:
@@ -132,8 +136,9 @@ def _load_bench(config: pytest.Config) -> Any:
 
 
 def _plan_dirs(config: pytest.Config) -> list[Path]:
-    """`hil_plans`, relative to the project's rootdir (not to where pytest was started)."""
-    return [(config.rootpath / p).resolve() for p in config.getini("hil_plans")]
+    """`hil_plans` (an ini `paths` value: pytest makes each relative to the ini file's
+    directory, not to where pytest was started)."""
+    return [Path(p).resolve() for p in config.getini("hil_plans")]
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -278,11 +283,12 @@ def _tags_in(directory: Path) -> set[str]:
 
 def _safe_name(nodeid: str) -> str:
     """A file name for a test id: its path and name with `_` for what a file name should not
-    hold. Parameters (`[...]`) that had to be changed also get a short hash of the exact id, so
-    `test_q[x y]` and `test_q[x_y]` keep one recording each (on any xdist worker)."""
+    hold. A parametrized id (`[...]`) also gets a short hash of the exact id, so
+    `test_q[x y]`, `test_q[x_y]` and `test_q_x_y` keep one recording each, on any xdist
+    worker (the name depends on the id alone)."""
     safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", nodeid).strip("_")
-    _head, bracket, params = nodeid.partition("[")
-    if len(safe) > 150 or (bracket and re.search(r"[^A-Za-z0-9_.-]", params.rstrip("]"))):
+    _head, bracket, _params = nodeid.partition("[")
+    if len(safe) > 150 or bracket:
         digest = hashlib.sha1(nodeid.encode()).hexdigest()[:8]
         safe = f"{safe[:141]}-{digest}"
     return safe

@@ -163,15 +163,18 @@ def versions() -> dict[str, str]:
             check=False,
         )
         out["git_revision"] = rev.stdout.strip() if rev.returncode == 0 else "unknown"
-        if rev.returncode == 0:  # the code, drive data and plans differ from that revision
+    except (OSError, subprocess.SubprocessError):
+        out["git_revision"] = "unknown"
+    if out["git_revision"] != "unknown":  # the code, drive data or plans differ from it
+        try:  # (new files too; no index lock taken: several runs may ask at once)
             dirty = subprocess.run(
-                ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no",
-                 "--", "hil", "fixtures", "plans"],
+                ["git", "--no-optional-locks", "-C", str(root), "status", "--porcelain",
+                 "--untracked-files=normal", "--", "hil", "fixtures", "plans"],
                 capture_output=True, text=True, timeout=2, check=False)
             if dirty.returncode == 0 and dirty.stdout.strip():
                 out["git_revision"] += "+dirty"
-    except (OSError, subprocess.SubprocessError):
-        out["git_revision"] = "unknown"
+        except (OSError, subprocess.SubprocessError):
+            pass  # the revision stands; whether it is clean is unknown
     return out
 
 

@@ -263,6 +263,11 @@ def test_two_test_ids_that_read_alike_keep_a_recording_each(pytester: pytest.Pyt
                                            "test_one.py", "a/test_b.py", "a_test_b.py")
     result.assert_outcomes(passed=4)
     assert len(list(out.glob("*.mcap"))) == 4, sorted(p.name for p in out.glob("*"))
+    out2 = tmp_path / "out2"  # a parametrized id's name depends on the id alone: xdist too
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", f"--hil-out={out2}",
+                                           "-n", "2", "test_one.py")
+    result.assert_outcomes(passed=2)
+    assert len(list(out2.glob("*.mcap"))) == 2, sorted(p.name for p in out2.glob("*"))
 
 
 @pytest.mark.skipif(not __import__("os").path.isdir("/proc/self"), reason="needs /proc")
@@ -310,3 +315,17 @@ def test_xdist_workers_never_share_one_bench(pytester: pytest.Pytester) -> None:
     assert "pytest-xdist with 2 workers" in (result.stdout.str() + result.stderr.str())
     ok = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-n", "2")
     ok.assert_outcomes(passed=2)  # the built-in virtual bench: private to each worker
+
+
+def test_a_tag_the_project_declares_as_a_marker_is_still_applied(pytester: pytest.Pytester
+                                                                 ) -> None:
+    """A project that declares `brake` in its own ini `markers` (as --strict-markers asks)
+    lost the tag on its plans: `-m brake` selected nothing (a review of the change)."""
+    plans = pytester.mkdir("plans")
+    (plans / "emgs.yaml").write_text(_shipped("emgs").read_text())
+    pytester.makeini("[pytest]\nhil_plans = plans\nmarkers =\n    brake: brake tests\n")
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-m", "brake",
+                                           "--collect-only")
+    assert "1 test collected" in result.stdout.str() or "emgs" in result.stdout.str(), \
+        result.stdout.str()
+    assert "not applied" not in result.stdout.str()
