@@ -4,10 +4,12 @@
     pytest -m hil --hil-bench bench.yaml   # a real bench (or HIL_BENCH=bench.yaml)
 
 Plan files as tests: with the ini option `hil_plans = plans` (a directory, relative to the
-rootdir; several may be given) every `*.yaml` plan in it is collected as a test item, marked
-`hil` and with each of its `tags:` as a marker (`pytest -m "hil and brake"`), `-k` selects
-by name. It runs through the same runner as `hil run`; a failing plan shows its failing steps
-and verdicts. Works with pytest-xdist (`-n 2`): each item runs its own virtual bench.
+ini file; several may be given) every `*.yaml` plan in it is collected as a test item, marked
+`hil` and with its `tags:` as markers (`pytest -m "hil and brake"`; not a tag that is no
+Python name or a marker pytest or a plugin gives a meaning), `-k` selects by name. It runs
+through the same runner as `hil run`; a failing plan shows its failing steps and verdicts.
+Works with pytest-xdist (`-n 2`) on a bench private to each worker (the virtual one); a
+bench the workers would share errors each test that opens it.
 
 Marker `hil`: the test uses a bench. Fixtures:
 
