@@ -86,11 +86,25 @@ def _drv(v: Checker, text: Any, line: int, where: str, chained: bool) -> Drv:
         raise v.err(line, where, f"{text!r}: write it as the PLC does, e.g. \"ABS,,300000,Ps\" "
                     "or \"ADR,+,200,Ut\" (mode ABS/ADR, direction +/-/blank, stroke, unit "
                     "Ut/Ps; error 43)")
+    if m.group(1) == "ABS" and m.group(2):  # 001:38 lists ABS only with a blank direction:
+        raise v.err(line, where, f"{text!r}: ABS takes no direction (the target's sign and "
+                    "the current position give it, 001:38; error 43)")
     value = m.group(3)
     if _REG.match(value):
         reg = _register(v, value, line, where, 32, 32)
         return Drv(m.group(1), m.group(2), reg, m.group(4), chained)
     return Drv(m.group(1), m.group(2), float(value), m.group(4), chained)
+
+
+TIME_UNIT_NS = 10 * 1_000_000  # TIME counts 0.01 s (001:42)
+TIME_MAX = 65535  # a 16-bit count of them (a register operand holds one word, 001:42)
+
+
+def _plc_time(ns: int) -> float:
+    """A WAIT / ACT constant in s: whole 0.01 s counts of 0-65535 (001:42)."""
+    if ns % TIME_UNIT_NS or not 0 <= ns // TIME_UNIT_NS <= TIME_MAX:
+        raise ValueError(f"{ns / 1e6:g} ms: TIME counts 0.01 s, 0-655.35 s (001:42)")
+    return ns / S
 
 
 def _register(v: Checker, val: Any, line: int, where: str, code: int, bits: int = 16
@@ -200,7 +214,7 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
             s.wait_line = _line_name(v, val, m.kline("WAIT"), join(where, "WAIT"))
         else:
             try:
-                s.wait_time = parse_duration(val) / S
+                s.wait_time = _plc_time(parse_duration(val))
             except ValueError as e:
                 raise v.err(m.kline("WAIT"), join(where, "WAIT"),
                             f"a time (e.g. 500ms) or a line (X3): {e}") from None
@@ -210,7 +224,7 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
             s.act = reg
         else:
             try:
-                s.act = parse_duration(m["ACT"]) / S
+                s.act = _plc_time(parse_duration(m["ACT"]))
             except ValueError as e:
                 raise v.err(m.kline("ACT"), join(where, "ACT"), str(e)) from None
     if "EXT" in m:
