@@ -27,12 +27,9 @@ Marker `hil`: the test uses a bench. Fixtures:
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
 import re
-import signal
-import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -367,12 +364,12 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
     state afterwards, and the recording says why (the test's failure, or its end) and how
     the test ended (`hil.result`), as a plan's does."""
     from hil import clock
-    from hil.plan.runner import record_bench
+    from hil.plan.runner import Interrupts, record_bench
     from hil.plan.safety import go_safe
     from hil.plan.session import open_session
 
     clk = clock.VirtualClock() if hil_bench.clock == "virtual" else clock.REAL
-    with clock.use(clk), _Signals(clk) as signals:
+    with clock.use(clk), Interrupts(clk) as signals:
         record_bench(hil_recorder, hil_bench)
         session = open_session(hil_bench, hil_recorder)
         try:
@@ -393,45 +390,6 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
                 hil_recorder.add_metadata("hil.result", {
                     "status": status, "reason": reason,
                     "safe_state_ok": safe.ok if safe is not None else ""})
-
-
-class _Signals:
-    """SIGINT / SIGTERM during a fixture test (main thread), as `hil run` takes them: the
-    first stops the test as a KeyboardInterrupt (SIGTERM too: pytest alone would die there
-    and leave the bench as it was) and the bench goes safe in the fixture's teardown; on the
-    virtual clock it is raised between two events, not inside one (a host tick cut in the
-    middle would stop the model, and the safe state with it). Once `shield` is set (the
-    teardown), a signal only prints a notice."""
-
-    NOTICE = (b"\nhil: making the bench safe and closing the recording; further signals are "
-              b"ignored until that is done\n")
-
-    def __init__(self, clk: Any) -> None:
-        self.clk, self.shield, self.cause = clk, False, ""
-        self._old: dict[int, Any] = {}
-
-    def _handler(self, signum: int, frame: Any) -> None:
-        from hil.plan.runner import signal_text
-
-        if self.shield or self.cause:
-            with contextlib.suppress(OSError):
-                os.write(2, self.NOTICE)
-            return
-        self.cause = signal_text(signum)
-        exc = KeyboardInterrupt(self.cause)
-        defer = getattr(self.clk, "defer_interrupt", None)
-        if defer is None or not defer(exc):
-            raise exc
-
-    def __enter__(self) -> _Signals:
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handler)
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
 
 
 @pytest.fixture

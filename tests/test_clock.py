@@ -188,7 +188,7 @@ def test_a_signal_while_events_run_never_cuts_one_and_never_outlives_its_wait():
     import signal
     import threading
 
-    from hil.pytest_plugin import _Signals
+    from hil.plan.runner import Interrupts
 
     lost = 0
     for _ in range(120):
@@ -201,7 +201,7 @@ def test_a_signal_while_events_run_never_cuts_one_and_never_outlives_its_wait():
         clk.after(0, tick)
         threading.Timer(random.uniform(0.0005, 0.003), os.kill,
                         (os.getpid(), signal.SIGINT)).start()
-        with _Signals(clk), pytest.raises(KeyboardInterrupt):
+        with Interrupts(clk), pytest.raises(KeyboardInterrupt):
             clk.run_until(clk.time_ns() + 10**15)
         lost += not any(not e.cancelled for e in clk._heap)
     assert lost == 0

@@ -111,21 +111,25 @@ def interrupt_cause(e: BaseException) -> str:
     return text if text.startswith("SIG") else "Ctrl-C / SIGTERM"
 
 
-class _Interrupts:
-    """SIGINT / SIGTERM while a plan runs (main thread only).
+class Interrupts:
+    """SIGINT / SIGTERM while a plan or a fixture test runs (main thread only).
 
-    The first signal raises KeyboardInterrupt: the plan stops and the bench goes safe. From
-    then on, and at any time while `shield` is set (the safe state, closing the recording),
-    a signal only prints a notice (on a line of its own: a progress line may be half written):
-    the safe-state sequence and the recording's close always run to their end. A signal
-    that arrives while shielded is remembered (`requested`)."""
+    The first signal raises KeyboardInterrupt naming it (`cause`): the plan or test stops and
+    the bench goes safe. With `clk` a virtual clock whose events this thread runs (a pytest
+    fixture test), it is raised between two events, never inside one (`defer_interrupt`).
+    From then on, and at any time while `shield` is set (the safe state, closing the
+    recording), a signal only prints a notice (on a line of its own: a progress line may be
+    half written): the safe-state sequence and the recording's close always run to their
+    end. A signal that arrives while shielded is remembered (`requested`)."""
 
     NOTICE = (b"\nhil: making the bench safe and closing the recording; further Ctrl-C is "
               b"ignored until that is done\n")
 
-    def __init__(self) -> None:
+    def __init__(self, clk: Any = None) -> None:
         self.count = 0
         self.shield = False
+        self.cause = ""  # the signal that stopped the run ("SIGINT (Ctrl-C)", "SIGTERM")
+        self.clk = clk
         self._old: dict[int, Any] = {}
 
     @property
@@ -135,11 +139,16 @@ class _Interrupts:
     def _handler(self, signum: int, frame: Any) -> None:
         self.count += 1
         if self.count == 1 and not self.shield:
-            raise KeyboardInterrupt(signal_text(signum))
+            self.cause = signal_text(signum)
+            exc = KeyboardInterrupt(self.cause)
+            defer = getattr(self.clk, "defer_interrupt", None)
+            if defer is None or not defer(exc):
+                raise exc
+            return
         with contextlib.suppress(OSError):
             os.write(2, self.NOTICE)
 
-    def __enter__(self) -> _Interrupts:
+    def __enter__(self) -> Interrupts:
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 self._old[sig] = signal.signal(sig, self._handler)
@@ -188,7 +197,7 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
     ctx: StepContext | None = None
     interrupted: BaseException | None = None
     reason = "end of plan"
-    with _Interrupts() as intr:
+    with Interrupts() as intr:
         try:
             try:
                 if stop is not None and stop():
