@@ -378,9 +378,15 @@ def _timing(v: Checker, top: LDict) -> dict[str, float]:
     c = v.mapping(m["constants"], m.kline("constants"), "timing.constants")
     out = {}
     for k, x in c.items():
-        if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+        try:
+            ok = (not isinstance(x, bool) and isinstance(x, int | float) and math.isfinite(x)
+                  and abs(x) <= 1e12)
+        except OverflowError:  # an int too long for a float
+            ok = False
+        if not ok:
             raise v.err(c.kline(k), join("timing.constants", k),
-                        f"{x!r}: a number of ms (finite, as `hil check --const`)")
+                        f"{str(x)[:40]!r}: a number of ms (finite, within ±1e12, as "
+                        "`hil check --const`)")
         out[str(k)] = float(x)
     return out
 
@@ -591,9 +597,13 @@ def _drive_model(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
                         if isinstance(val, str) and _exponent_text(val) else "")
                 raise v.err(m.kline(key), join(join(where, "mechanics"), key),
                             f"{val!r} is not a number{hint}")
-            if not math.isfinite(val):
+            try:
+                finite = math.isfinite(val) and abs(val) <= 1e12
+            except OverflowError:  # an int too long for a float
+                finite = False
+            if not finite:
                 raise v.err(m.kline(key), join(join(where, "mechanics"), key),
-                            f"{val} is not a finite number")
+                            f"{str(val)[:40]} is not a finite number within ±1e12")
         try:
             rules.Mechanics.from_dict(dict(m))
         except (ValueError, TypeError) as e:

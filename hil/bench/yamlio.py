@@ -120,6 +120,11 @@ class Checker:
         v = d[key]
         if not isinstance(v, str) or not v.strip():
             raise self.err(d.kline(key), join(field, key), f"must be text, got {_kind(v)}")
+        try:  # a "\ud800" escape: no file, recording or terminal can carry it
+            v.encode("utf-8")
+        except UnicodeEncodeError:
+            raise self.err(d.kline(key), join(field, key),
+                           "not valid text (a lone surrogate such as \\ud800)") from None
         return v
 
     def integer(self, d: LDict, key: str, field: str, lo: int, hi: int,

@@ -255,8 +255,12 @@ def _check_type(key: str, value: Any, default: Any, where: str) -> None:
     true/false, a count an integer, a time a finite number, a choice text, a list of the
     default's element type) and a sane range (no negative times, no 0 ms motion step)."""
     def number(x: Any) -> bool:
-        return (isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-                and abs(x) <= 1e12)
+        if not isinstance(x, int | float) or isinstance(x, bool):
+            return False
+        try:  # an int too long for a float (a 400-digit count) is no sane value either
+            return math.isfinite(x) and abs(x) <= 1e12
+        except OverflowError:
+            return False
 
     if key == "fdbk_table":
         ok, want = isinstance(value, dict | str), "a mapping or a table name"

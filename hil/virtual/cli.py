@@ -115,10 +115,12 @@ def _load_mapping(path: Path) -> dict[str, int]:
         raise ParamsFileError(f"{path}: expected a mapping of parameter names to values")
     out = {}
     for k, v in data.items():
-        try:
+        try:  # a whole number as written: not 1.7 (-> 1), true (-> 1) or infinity
+            if isinstance(v, bool) or (isinstance(v, float) and not v.is_integer()):
+                raise ValueError
             out[str(k)] = int(v, 0) if isinstance(v, str) else int(v)
-        except (TypeError, ValueError):
-            raise ParamsFileError(f"{where(k)}: {v!r} is not an integer") from None
+        except (TypeError, ValueError, OverflowError):
+            raise ParamsFileError(f"{where(k)}: {str(v)[:40]!r} is not an integer") from None
     return out
 
 

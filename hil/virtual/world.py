@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import json
+import math
 import os
 import shutil
 import socket
@@ -411,6 +412,17 @@ class _LineRecorder:
         return call
 
 
+MAX_OFF_NS = 60 * 1_000_000_000  # a control power cycle's off time
+
+
+def _reply_id(cmd: Any) -> Any:
+    """The id a reply carries: the command's own if it is a JSON-safe number or text."""
+    rid = cmd.get("id") if isinstance(cmd, dict) else None
+    if isinstance(rid, float) and not math.isfinite(rid):
+        return None
+    return rid if isinstance(rid, int | float | str) or rid is None else None
+
+
 class StdioControl:
     """Drive side of a subprocess bench's control channel (`hil drive --control stdio`).
 
@@ -444,17 +456,21 @@ class StdioControl:
         self._thread.start()
 
     def _serve(self) -> None:
-        for line in self._in:
-            line = line.strip()
+        # bytes, decoded line by line: an invalid UTF-8 byte is one bad command, not the
+        # end of the channel (a strict text stream raised in the loop itself)
+        src = getattr(self._in, "buffer", None) or self._in
+        for raw in src:
+            line = (raw.decode("utf-8", "replace") if isinstance(raw, bytes) else raw).strip()
             if not line:
                 continue
+            cmd: Any = None
             try:
                 cmd = json.loads(line)
                 result = self.execute(cmd)
-                self.write({"reply": cmd.get("id"), "ok": True, "result": _jsonable(result)})
+                self.write({"reply": _reply_id(cmd), "ok": True, "result": _jsonable(result)})
             except Exception as e:  # a bad command must not kill the drive
-                rid = cmd.get("id") if isinstance(locals().get("cmd"), dict) else None
-                self.write({"reply": rid, "ok": False, "error": f"{type(e).__name__}: {e}"})
+                self.write({"reply": _reply_id(cmd), "ok": False,
+                            "error": f"{type(e).__name__}: {e}"[:2000]})
         self.stop.set()
 
     def execute(self, cmd: dict) -> Any:
@@ -462,14 +478,20 @@ class StdioControl:
         op = cmd.get("op")
         if op == "power_cycle":
             off = int(cmd.get("off_ns") or 0)
+            if not 0 <= off <= MAX_OFF_NS:  # the channel waits it out: bounded
+                raise ValueError(f"off_ns {off}: 0 ~ {MAX_OFF_NS} (60 s)")
             if off:
                 clock.sleep(off / 1e9)
             host.call(drive.power_cycle, battery=bool(cmd.get("battery", True)))
             return None
         if op == "inject":
+            given = cmd.get("options") or {}
+            if not isinstance(given, dict):
+                raise ValueError("options: a mapping of model options")
+            checked = ModelOptions.from_dict(given, where="inject.options")  # as a bench's
             with host.lock:
-                for k, x in (cmd.get("options") or {}).items():
-                    setattr(drive.options, k, x)
+                for k in given:
+                    setattr(drive.options, k, getattr(checked, k))
                 if cmd.get("alarm"):
                     drive.alarms.raise_alarm(cmd["alarm"])
             return None

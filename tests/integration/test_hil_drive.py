@@ -177,3 +177,52 @@ def test_mbpoll_reads_and_writes_parameters(drive_process, tmp_path: Path) -> No
     assert "[340]: \t150" in read.stdout or "150" in read.stdout.split("[340]:")[-1]
     bad = subprocess.run([*base, str(link), "5000"], capture_output=True, text=True, timeout=20)
     assert bad.returncode != 0  # out of range -> exception 03 (illegal data value)
+
+
+def test_the_control_channel_answers_every_bad_line_and_keeps_serving(tmp_path) -> None:
+    """`hil drive --control stdio`: an invalid UTF-8 line killed the channel under a strict
+    locale; a huge off_ns blocked it for an hour; inject set any attribute with any value
+    (an unknown option, a text where a time belongs) and the drive failed later; an
+    unparseable line after a good one carried that one's id (an outside fuzz)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, PYTHONIOENCODING="utf-8:strict")
+    p = subprocess.Popen([sys.executable, "-m", "hil.cli", "drive", "--dio",
+                          f"virtual:ctl-{os.getpid()}", "--control", "stdio"],
+                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+    assert p.stdin is not None and p.stdout is not None
+
+    def ask(raw: bytes) -> dict:
+        p.stdin.write(raw + b"\n")
+        p.stdin.flush()
+        while True:
+            line = p.stdout.readline().decode()
+            assert line, "the drive stopped answering"
+            if line.startswith("hil-ctl ") and '"reply"' in line:
+                return json.loads(line[len("hil-ctl "):])
+
+    try:
+        for line in iter(p.stdout.readline, b""):
+            if b"ready" in line:
+                break
+        assert ask(b"\xff\xfe not utf-8")["ok"] is False
+        assert ask(b'{"id": 1, "op": "snapshot"}')["ok"] is True
+        bad = ask(b"{not json")
+        assert bad["ok"] is False and bad["reply"] is None  # not the previous command's id
+        r = ask(b'{"id": 2, "op": "power_cycle", "off_ns": 3600000000000}')
+        assert r["ok"] is False and "off_ns" in r["error"]
+        r = ask(b'{"id": 3, "op": "inject", "options": {"nonexistent_opt": 5}}')
+        assert r["ok"] is False and "unknown model option" in r["error"]
+        r = ask(b'{"id": 4, "op": "inject", "options": {"sto_torque_cut_ms": "abc"}}')
+        assert r["ok"] is False
+        assert ask(b'{"id": 5, "op": "inject", "options": {"sto_torque_cut_ms": 2}}')["ok"]
+        assert ask(b'{"id": 6, "op": "snapshot"}')["reply"] == 6
+        p.stdin.close()
+        assert p.wait(timeout=20) == 0  # closing stdin still stops it
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(10)

@@ -1,0 +1,52 @@
+"""Hostile bench, plan and `hil drive --params` values an outside fuzz found crashing or
+misread (wave 3, session 15): each is an error naming the file, line and field, exit 2."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hil.cli import main as hil
+from hil.paths import fixture
+
+BIG = "9" * 400  # an int no float can hold: math.isfinite raised OverflowError
+
+
+@pytest.mark.parametrize(("old", "new", "field"), [
+    ("    options: {}", f"    options: {{sto_both_lost_ms: {BIG}}}", "sto_both_lost_ms"),
+    ("      load_inertia: 1.0e-4", f"      load_inertia: {BIG}", "mechanics.load_inertia"),
+    ("name: virtual", 'name: "\\ud800"', "name: not valid text"),
+])
+def test_a_bench_value_that_crashed_is_an_error_at_its_line(tmp_path, capsys, old, new, field):
+    text = fixture("benches", "virtual.yaml").read_text()
+    assert old in text, old
+    bench = tmp_path / "b.yaml"
+    bench.write_text(text.replace(old, new, 1))
+    assert hil(["run", "--check", "--bench", str(bench), "emgs"]) == 2
+    err = capsys.readouterr().err
+    assert "b.yaml:" in err and field in err and "Traceback" not in err, err
+
+
+def test_timing_constants_take_no_int_too_long_for_a_float(tmp_path, capsys):
+    text = fixture("benches", "virtual.yaml").read_text()
+    assert "\ntiming:" not in text
+    bench = tmp_path / "b.yaml"
+    bench.write_text(text + f"\ntiming:\n  constants: {{huge: {BIG}}}\n")
+    assert hil(["run", "--check", "--bench", str(bench), "emgs"]) == 2
+    assert "timing.constants.huge" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", ["Infinity", "1.7", "true"])
+def test_a_params_file_value_that_is_no_whole_number_is_refused(tmp_path, capsys, value):
+    """`hil drive --params`: Infinity crashed (OverflowError), 1.7 became 1, true became 1."""
+    from pathlib import Path
+
+    from hil.virtual.cli import ParamsFileError, _load_mapping
+
+    path = tmp_path / "p.json"
+    path.write_text(f'{{"P1.042": {value}}}')
+    with pytest.raises(ParamsFileError, match=r"P1\.042.*is not an integer"):
+        _load_mapping(Path(path))
+    path.write_text(json.dumps({"P1.042": 100}))
+    assert _load_mapping(Path(path)) == {"P1.042": 100}
