@@ -50,3 +50,23 @@ def test_a_params_file_value_that_is_no_whole_number_is_refused(tmp_path, capsys
         _load_mapping(Path(path))
     path.write_text(json.dumps({"P1.042": 100}))
     assert _load_mapping(Path(path)) == {"P1.042": 100}
+
+
+@pytest.mark.parametrize(("option", "value"), [("state_publish_ms", 1.0e-9),
+                                               ("motion_step_ms", 1.0e-6)])
+def test_a_time_option_too_fine_to_finish_is_refused(option, value):
+    """state_publish_ms 1e-9 or motion_step_ms 1e-6 passed --check and the plan never ended."""
+    from hil.model.options import ModelOptions
+
+    with pytest.raises(ValueError, match=rf"{option}.*at least"):
+        ModelOptions.from_dict({option: value})
+    ModelOptions.from_dict({option: 1.0})
+
+
+@pytest.mark.parametrize("di", ["99=1", "0=1"])
+def test_hil_drive_di_outside_the_terminals_is_a_usage_error(di, capsys):
+    """README: a bad `--di` exits 2; DI99 exited 1."""
+    with pytest.raises(SystemExit) as e:  # as argparse exits on a usage error
+        hil(["drive", "--dio", "virtual:s15-di", "--di", di])
+    assert e.value.code == 2
+    assert "DI1 ~ DI10" in capsys.readouterr().err

@@ -250,6 +250,11 @@ _POSITIVE = {"output_window_ms", "motion_step_ms", "state_publish_ms", "sync_fai
              "sync_timeout_cycles"}
 
 
+# the least a time option may be: a finer motion step or state sample would make a plan of
+# seconds run for hours (an outside fuzz: 1e-9 ms never finished)
+_FLOOR_MS = {"motion_step_ms": 0.01, "state_publish_ms": 0.1}
+
+
 def _check_type(key: str, value: Any, default: Any, where: str) -> None:
     """A bench's (or an `inject:`) option value has the type of the option's default (a flag
     true/false, a count an integer, a time a finite number, a choice text, a list of the
@@ -286,6 +291,8 @@ def _check_type(key: str, value: Any, default: Any, where: str) -> None:
             ok, want = False, "> 0" if key in _POSITIVE else ">= 0"
         elif key == "motion_step_ms" and value > 1:
             ok, want = False, "at most 1 (ms): the drive's command cycle"
+        elif key in _FLOOR_MS and value < _FLOOR_MS[key]:  # a run of 10^9 steps never ends
+            ok, want = False, f"at least {_FLOOR_MS[key]:g} (ms)"
     if not ok:
         shown = repr(value)
         shown = shown if len(shown) <= 40 else shown[:35] + "..."

@@ -167,6 +167,9 @@ def _inputs(values: list[str]) -> dict[int, bool]:
         if not (n.isascii() and n.isdigit()) or level not in ("0", "1"):
             print(f"hil drive: --di {item!r}: expected N=0 or N=1, e.g. 8=1", file=sys.stderr)
             raise SystemExit(2)  # a usage error, as argparse exits
+        if not 1 <= int(n) <= 10:  # the physical inputs (VDI11-13 are no terminals)
+            print(f"hil drive: --di {item!r}: DI1 ~ DI10", file=sys.stderr)
+            raise SystemExit(2)
         out[int(n)] = level == "1"
     return out
 
