@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -171,7 +172,17 @@ def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
             lst.item_lines.append(item.start_mark.line + 1)
             lst.append(_build(item, loader, file, join(where, i), error, budget, within))
         return lst
+    if (isinstance(node, yaml.ScalarNode) and not node.style
+            and node.tag in (_INT_TAG, _FLOAT_TAG) and _YAML11_ONLY.match(node.value)):
+        raise error(file, line, where or "(top)", f"{node.value!r}: YAML 1.1 reads this as an "
+                    "octal or base-60 number (010 is 8, 1:40 is 100); write it in decimal, "
+                    "0x.. for hex, or quote it for text")
     return loader.construct_object(node, deep=True)
+
+
+_INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
+# the number forms YAML 1.1 has and readers expect decimal: a leading 0 (octal) and ':' (60)
+_YAML11_ONLY = re.compile(r"^[-+]?(0[0-9_]+|[0-9][0-9_]*(:[0-5]?[0-9])+(\.[0-9_]*)?)$")
 
 
 def load_yaml_text(text: str, file: str, error: type[FileError] = FileError) -> Any:

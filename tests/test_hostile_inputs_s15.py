@@ -70,3 +70,17 @@ def test_hil_drive_di_outside_the_terminals_is_a_usage_error(di, capsys):
         hil(["drive", "--dio", "virtual:s15-di", "--di", di])
     assert e.value.code == 2
     assert "DI1 ~ DI10" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("text", "shown"), [("P1.042: 010", "'010'"), ("P1.042: 1:40", "'1:40'")])
+def test_a_yaml_1_1_octal_or_base_60_number_is_refused_not_misread(tmp_path, capsys, text,
+                                                                  shown):
+    """YAML 1.1 reads 010 as 8 and 1:40 as 100: a plan or bench meant something else and
+    the drive got that silently (an outside fuzz)."""
+    plan = tmp_path / "p.yaml"
+    plan.write_text(f"name: p\nparams: {{{text}}}\nsteps:\n  - wait: 1ms\n")
+    assert hil(["run", "--check", str(plan)]) == 2
+    err = capsys.readouterr().err
+    assert "p.yaml:2: params.P1.042: " + shown in err and "YAML 1.1" in err
+    plan.write_text("name: p\nparams: {P1.042: 0x0A}\nsteps:\n  - wait: 1ms\n")
+    assert hil(["run", "--check", str(plan)]) == 0  # hex stays a number

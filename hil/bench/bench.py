@@ -385,7 +385,7 @@ def _timing(v: Checker, top: LDict) -> dict[str, float]:
             ok = False
         if not ok:
             raise v.err(c.kline(k), join("timing.constants", k),
-                        f"{str(x)[:40]!r}: a number of ms (finite, within ±1e12, as "
+                        f"{repr(x)[:40]}: a number of ms (finite, within ±1e12, as "
                         "`hil check --const`)")
         out[str(k)] = float(x)
     return out
