@@ -84,3 +84,15 @@ def test_a_yaml_1_1_octal_or_base_60_number_is_refused_not_misread(tmp_path, cap
     assert "p.yaml:2: params.P1.042: " + shown in err and "YAML 1.1" in err
     plan.write_text("name: p\nparams: {P1.042: 0x0A}\nsteps:\n  - wait: 1ms\n")
     assert hil(["run", "--check", str(plan)]) == 0  # hex stays a number
+
+
+@pytest.mark.parametrize("values", [{"motor_inertia": -1e-4}, {"brake_release_ms": -5.0},
+                                    {"brake_engage_ms": -1.0}, {"rated_current": 0.0},
+                                    {"counts_per_rev": 1.5}, {"brake_holding_torque": -1.0}])
+def test_mechanics_that_make_no_physical_sense_are_refused(values):
+    """A negative inertia or brake time, a zero rated current, a fractional count per turn
+    passed --check and ran (an outside fuzz)."""
+    from hil.model.mechanics import Mechanics
+
+    with pytest.raises(ValueError, match="Mechanics"):
+        Mechanics.from_dict(values)

@@ -95,6 +95,15 @@ class Mechanics:
             raise ValueError(f"Mechanics.brake_do: 1-6, 'auto' or null, got {bdo!r}")
         if self.friction_torque < 0 or self.dynamic_brake_torque < 0:
             raise ValueError("Mechanics: friction_torque and dynamic_brake_torque must be >= 0")
+        for name in ("motor_inertia", "load_inertia", "brake_release_ms", "brake_engage_ms",
+                     "brake_holding_torque"):  # a negative one ran, with a meaningless motion
+            if getattr(self, name) < 0:
+                raise ValueError(f"Mechanics.{name}: must be >= 0, got {getattr(self, name)}")
+        if self.rated_current <= 0:
+            raise ValueError(f"Mechanics.rated_current: must be > 0, got {self.rated_current}")
+        if self.counts_per_rev != int(self.counts_per_rev):
+            raise ValueError(f"Mechanics.counts_per_rev: a whole number of counts, got "
+                             f"{self.counts_per_rev}")
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> Mechanics:
