@@ -96,3 +96,15 @@ def test_mechanics_that_make_no_physical_sense_are_refused(values):
 
     with pytest.raises(ValueError, match="Mechanics"):
         Mechanics.from_dict(values)
+
+
+def test_an_fdbk_table_mapping_from_a_file_is_refused_at_load():
+    """`fdbk_table: {a: b}` passed --check and the run failed with KeyError (True, True) and
+    'SAFE STATE NOT CONFIRMED' (an outside fuzz): a file names a table."""
+    from hil.model.options import ModelOptions
+
+    with pytest.raises(ValueError, match=r"fdbk_table.*table name"):
+        ModelOptions.from_dict({"fdbk_table": {"a": "b"}})
+    ModelOptions.from_dict({"fdbk_table": "sto_active"})
+    table = {(a, b): a and b for a in (True, False) for b in (True, False)}
+    assert ModelOptions.from_dict({"fdbk_table": table}).fdbk_table == table

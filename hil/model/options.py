@@ -267,8 +267,12 @@ def _check_type(key: str, value: Any, default: Any, where: str) -> None:
         except OverflowError:
             return False
 
-    if key == "fdbk_table":
-        ok, want = isinstance(value, dict | str), "a mapping or a table name"
+    if key == "fdbk_table":  # a table name; in code, the full table keyed (STO_A, STO_B)
+        pairs = {(a, b) for a in (True, False) for b in (True, False)}
+        ok = isinstance(value, str) or (
+            isinstance(value, dict) and set(value) == pairs
+            and all(isinstance(x, bool) for x in value.values()))
+        want = "a table name (as_printed, sto_active)"
     elif default is None:  # an optional number (the deviation knobs)
         ok, want = value is None or number(value), "a finite number or null"
     elif isinstance(default, bool):
