@@ -108,3 +108,16 @@ def test_an_fdbk_table_mapping_from_a_file_is_refused_at_load():
     ModelOptions.from_dict({"fdbk_table": "sto_active"})
     table = {(a, b): a and b for a in (True, False) for b in (True, False)}
     assert ModelOptions.from_dict({"fdbk_table": table}).fdbk_table == table
+
+
+@pytest.mark.parametrize(("extra", "why"), [({"cia402": {"bogus": 1}}, "bogus"),
+                                            ({"homing": [1]}, "a mapping"),
+                                            ({"homng": {}}, "unknown room 'homng'")])
+def test_extra_rooms_are_checked_at_load(extra, why):
+    """`extra: {cia402: {bogus: 1}}` or `{homing: [1]}` failed the run with a bare TypeError
+    and no line; a misspelled room was ignored (an outside fuzz)."""
+    from hil.model.options import ModelOptions
+
+    with pytest.raises(ValueError, match=why):
+        ModelOptions.from_dict({"extra": extra})
+    ModelOptions.from_dict({"extra": {"capture": {"trigger": "Z"}}})  # capture_z's

@@ -214,6 +214,8 @@ class ModelOptions:
         defaults = cls()
         for key, value in data.items():
             _check_type(key, value, getattr(defaults, key), where)
+        if "extra" in data:
+            _check_extra(data["extra"], f"{where}.extra")
         if "fdbk_table" in data and isinstance(data["fdbk_table"], str):
             tables = {"as_printed": FDBK_AS_PRINTED, "sto_active": FDBK_STO_ACTIVE}
             if data["fdbk_table"] not in tables:
@@ -253,6 +255,32 @@ _POSITIVE = {"output_window_ms", "motion_step_ms", "state_publish_ms", "sync_fai
 # the least a time option may be: a finer motion step or state sample would make a plan of
 # seconds run for hours (an outside fuzz: 1e-9 ms never finished)
 _FLOOR_MS = {"motion_step_ms": 0.01, "state_publish_ms": 0.1}
+
+
+def _check_extra(extra: Any, where: str) -> None:
+    """`extra:` holds the options of other rooms, each checked by its own options class
+    (a wrong one failed the run with a bare TypeError, a misspelled room was ignored)."""
+    from hil.model.absolute import AbsoluteOptions
+    from hil.model.capture import CaptureOptions
+    from hil.model.cia402 import Cia402Options
+    from hil.model.homing import HomingOptions
+    from hil.model.pr_engine import PrOptions
+
+    rooms: dict[str, Any] = {
+        "absolute": AbsoluteOptions.from_dict, "capture": CaptureOptions.from_dict,
+        "cia402": lambda d: Cia402Options(**d), "homing": HomingOptions.from_dict,
+        "pr": PrOptions.from_dict}
+    if not isinstance(extra, dict):
+        raise ValueError(f"{where}: a mapping of {', '.join(sorted(rooms))}")
+    for room, values in extra.items():
+        if room not in rooms:
+            raise ValueError(f"{where}: unknown room {room!r}; known: {', '.join(sorted(rooms))}")
+        if not isinstance(values, dict):
+            raise ValueError(f"{where}.{room}: a mapping of that room's options")
+        try:
+            rooms[room](dict(values))
+        except (TypeError, ValueError, KeyError) as e:
+            raise ValueError(f"{where}.{room}: {e}") from None
 
 
 def _check_type(key: str, value: Any, default: Any, where: str) -> None:
