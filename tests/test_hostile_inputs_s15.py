@@ -121,3 +121,13 @@ def test_extra_rooms_are_checked_at_load(extra, why):
     with pytest.raises(ValueError, match=why):
         ModelOptions.from_dict({"extra": extra})
     ModelOptions.from_dict({"extra": {"capture": {"trigger": "Z"}}})  # capture_z's
+
+
+@pytest.mark.parametrize("name", ["", "a\nready", "x" * 100, "a/b"])
+def test_hil_drive_name_is_a_topic_segment(name, capsys):
+    """`--name` took an empty name, a newline (which split the `ready` line), 100k
+    characters (an outside fuzz)."""
+    with pytest.raises(SystemExit) as e:
+        hil(["drive", "--dio", "virtual:s15-name", "--name", name])
+    assert e.value.code == 2
+    assert "--name" in capsys.readouterr().err

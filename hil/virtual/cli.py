@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import signal
 import sys
 import threading
@@ -27,7 +28,8 @@ from hil.yamlio import load_yaml_file
 
 
 def configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--name", default="drive1", help="drive name (default: drive1)")
+    p.add_argument("--name", default="drive1", type=_drive_name,
+                   help="drive name in its recording topics (default: drive1)")
     p.add_argument(
         "--can",
         metavar="URL",
@@ -79,6 +81,14 @@ def configure(p: argparse.ArgumentParser) -> None:
         "ground truth as 'hil-ctl' JSON lines on stdout (used by the runner's subprocess "
         "benches); stdin closing stops the drive",
     )
+
+
+def _drive_name(text: str) -> str:
+    """A drive's name: a topic segment (letters, digits, `_`, `-`, `.`; 1-64), not a newline
+    that splits the `ready` line nor a slash that adds topic levels."""
+    if not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", text):
+        raise argparse.ArgumentTypeError(f"{text[:40]!r}: letters, digits, _ - . (1-64)")
+    return text
 
 
 def _ranged(what: str, lo: int, hi: int) -> Callable[[str], int]:
