@@ -236,14 +236,13 @@ class PlanItem(pytest.Item):
         bench = _load_bench(self.config)
         result = run_plan(self.plan, bench, _out_dir(self.config), stem=self.stem)
         from hil.report.data import load_run
-        from hil.report.junit import case_properties, failure_text
+        from hil.report.junit import case_properties
 
         # `hil run`'s JUnit shape: recording (relative to the JUnit file), steps, verdicts
         run = load_run(result.recording)
         self.user_properties.extend(case_properties(run, _junit_dir(self.config)))
-        if not result.passed:  # the failure text `hil run`'s JUnit gives, and where it is
-            raise PlanFailed(f"plan {result.plan}: {result.status}\n{failure_text(run)[1]}\n"
-                             f"recording: {result.recording}")
+        if not result.passed:
+            raise PlanFailed(explain(result, run))
 
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None
                      ) -> str:
@@ -470,17 +469,19 @@ def hil_check(hil_recorder: Any) -> Callable[..., list]:
     return run
 
 
-def explain(result: Any) -> str:
-    """A plan result as lines a test failure can show: failing steps and verdicts."""
-    lines = [f"plan {result.plan}: {result.status} (recording {result.recording})"]
-    for step in result.steps:
-        if step.status not in ("pass", "skipped"):
-            lines.append(f"  step {step.index + 1} {step.label}: {step.status}: "
-                         f"{step.message}")
-        for v in step.verdicts:
-            if v.get("status") != "pass":
-                lines.append(f"    {v.get('spec')}: {v.get('constraint')}: {v.get('status')}: "
-                             f"{v.get('message')}")
+def explain(result: Any, run: Any = None) -> str:
+    """A plan result as lines a test failure can show: the failure text `hil run`'s JUnit
+    gives (every step and verdict that did not pass, with its plan file and line), and where
+    the recording is. `run`: the recording already read (`load_run`)."""
+    from hil.report.data import load_run
+    from hil.report.junit import failure_text
+
+    lines = [f"plan {result.plan}: {result.status}"]
+    try:
+        lines.append(failure_text(run if run is not None else load_run(result.recording))[1])
+    except Exception as e:  # an unreadable recording: the result's own error says more
+        lines.append(f"(recording not readable: {e})")
     if result.error:
-        lines.append(f"  error: {result.error}")
+        lines.append(f"error: {result.error}")
+    lines.append(f"recording: {result.recording}")
     return "\n".join(lines)
