@@ -360,9 +360,7 @@ class VirtualWorld:
         vd = self.drives[drive]
         with vd.host.lock:
             if options:
-                target = vd.drive.options
-                for k, x in options.items():
-                    setattr(target, k, x)
+                apply_options(vd.drive, options)
             if alarm:
                 vd.drive.alarms.raise_alarm(alarm)
 
@@ -413,6 +411,16 @@ class _LineRecorder:
 
 
 MAX_OFF_NS = 60 * 1_000_000_000  # a control power cycle's off time
+
+
+def apply_options(drive: Any, given: Any) -> None:
+    """Set model options on a running drive (`inject`), each checked as a bench's are
+    (a text where a time belongs, an unknown option: ValueError, nothing set)."""
+    if not isinstance(given, dict):
+        raise ValueError("options: a mapping of model options")
+    checked = ModelOptions.from_dict(given, where="inject.options")
+    for k in given:
+        setattr(drive.options, k, getattr(checked, k))
 
 
 def _reply_id(cmd: Any) -> Any:
@@ -485,13 +493,8 @@ class StdioControl:
             host.call(drive.power_cycle, battery=bool(cmd.get("battery", True)))
             return None
         if op == "inject":
-            given = cmd.get("options") or {}
-            if not isinstance(given, dict):
-                raise ValueError("options: a mapping of model options")
-            checked = ModelOptions.from_dict(given, where="inject.options")  # as a bench's
             with host.lock:
-                for k in given:
-                    setattr(drive.options, k, getattr(checked, k))
+                apply_options(drive, cmd.get("options") or {})
                 if cmd.get("alarm"):
                     drive.alarms.raise_alarm(cmd["alarm"])
             return None
