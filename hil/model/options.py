@@ -12,7 +12,6 @@ Two kinds of fields:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -288,12 +287,9 @@ def _check_type(key: str, value: Any, default: Any, where: str) -> None:
     true/false, a count an integer, a time a finite number, a choice text, a list of the
     default's element type) and a sane range (no negative times, no 0 ms motion step)."""
     def number(x: Any) -> bool:
-        if not isinstance(x, int | float) or isinstance(x, bool):
-            return False
-        try:  # an int too long for a float (a 400-digit count) is no sane value either
-            return math.isfinite(x) and abs(x) <= 1e12
-        except OverflowError:
-            return False
+        # abs(x) <= 1e12 is False for NaN and inf, and compares an int too long for a float
+        # exactly (math.isfinite raised OverflowError on a 400-digit one)
+        return isinstance(x, int | float) and not isinstance(x, bool) and abs(x) <= 1e12
 
     if key == "fdbk_table":  # a table name; in code, the full table keyed (STO_A, STO_B)
         pairs = {(a, b) for a in (True, False) for b in (True, False)}
