@@ -39,6 +39,7 @@ from hil.bench.bench import Bench, load_bench, with_clock
 from hil.plan.events import Listener, Note, Notifier, PlanEnded, PlanStarted, StepEnded
 from hil.plan.plan import Plan, check_plan, load_plan
 from hil.plan.runner import PlanResult, output_stems, run_plan, signal_text, timing_specs
+from hil.report.data import RunData, keep_summary, kept_summary
 
 __all__ = ["jobs_from_arg", "parallel_blocker", "run_parallel"]
 
@@ -151,13 +152,18 @@ class _Job:
     clock: str | None = None  # `--clock` (None: the bench file's)
 
 
-def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
-    """In a worker: (result, notes, interrupted). None when stopped before it began."""
+Summary = tuple[tuple[str, int, int], RunData] | None
+
+
+def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool, Summary]:
+    """In a worker: (result, notes, interrupted, the report's summary of the recording). None
+    when stopped before it began. The summary spares the parent reading each recording again
+    for the run's JUnit and index (`hil.report.data.keep_summary`)."""
     global _stop_requested
     _busy.set()  # before the check: the orphan watch either sees it or stops this plan
     try:
         if _stop_requested:
-            return None, [], True
+            return None, [], True, None
         plan = load_plan(job.plan_path)
         bench = with_clock(load_bench(job.bench_path), job.clock)
         notes = _Notes()
@@ -168,10 +174,17 @@ def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool]:
         except KeyboardInterrupt as e:
             _stop_requested = True
             res = getattr(e, "plan_result", None) or _interrupted_result(plan, bench, job)
-            return res, notes.texts, True
-        return res, notes.texts, False
+            return res, notes.texts, True, _summary(res)
+        return res, notes.texts, False, _summary(res)
     finally:
         _busy.clear()
+
+
+def _summary(res: PlanResult) -> Summary:
+    try:
+        return kept_summary(res.recording) if res.recording else None
+    except Exception:  # only a shortcut: the parent reads the file instead
+        return None
 
 
 def _interrupted_result(plan: Plan, bench: Bench, job: _Job) -> PlanResult:
@@ -227,12 +240,14 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
         for fut in finished:
             job = running.pop(fut)
             try:
-                res, notes, stopped = fut.result()
+                res, notes, stopped, summary = fut.result()
             except BrokenProcessPool:
                 if interrupted:  # killed while it started up: it ran nothing
                     continue
                 raise
             interrupted |= stopped
+            if summary is not None:
+                keep_summary(*summary)
             if res is not None:
                 results[job.index] = res
                 done += 1

@@ -128,6 +128,36 @@ def forget(path: str | Path) -> None:
             del cache[key]
 
 
+def _file_key(path: str | Path) -> tuple[str, int, int] | None:
+    """What a kept read of `path` is filed under: resolved path, mtime and size."""
+    try:
+        st = Path(path).stat()
+    except OSError:
+        return None
+    return str(Path(path).resolve()), st.st_mtime_ns, st.st_size
+
+
+def kept_summary(path: str | Path) -> tuple[tuple[str, int, int], RunData] | None:
+    """The summary (`truth=False` read) kept of `path` as it is on disk now, with its key;
+    None if none is kept. A `hil run` worker hands it to the parent with the plan's result."""
+    key = _file_key(path)
+    if key is None or key not in _SUMMARIES:
+        return None
+    return key, _SUMMARIES[key]
+
+
+def keep_summary(key: tuple[str, int, int], data: RunData) -> bool:
+    """Keep a summary read in another process (a worker's `kept_summary`), if the file is
+    still the one it was read from (same path, mtime and size); True if kept. The run's JUnit
+    and index then read no recording again."""
+    if _file_key(key[0]) != key:
+        return False
+    while len(_SUMMARIES) >= _SUMMARIES_KEPT:
+        del _SUMMARIES[next(iter(_SUMMARIES))]
+    _SUMMARIES[key] = data
+    return True
+
+
 def load_run(path: str | Path, *, truth: bool = True,
              messages: Iterable[tuple[str, int, int, bytes | dict]] | None = None) -> RunData:
     """The report's view of a recording; the last two files read are kept (by path, size and
@@ -135,12 +165,7 @@ def load_run(path: str | Path, *, truth: bool = True,
     the ground-truth samples (`truth` stays empty), for what shows no plot (the run's JUnit and
     index); those are kept for the last 256 recordings read, so a run's end reads no file
     again."""
-    try:
-        st = Path(path).stat()
-        key: tuple[str, int, int] | None = (str(Path(path).resolve()), st.st_mtime_ns,
-                                            st.st_size)
-    except OSError:
-        key = None
+    key = _file_key(path)
     if key is not None:
         if key in _RUNS:
             return _RUNS[key]

@@ -57,6 +57,43 @@ def test_j2_gives_the_same_verdicts_reports_and_exit_code_as_j1(tmp_path, capsys
     assert out1.count("PASS") == out2.count("PASS") == 3
 
 
+def test_the_j2_parent_reads_no_recording_for_the_runs_junit_and_index(tmp_path, capsys,
+                                                                        monkeypatch):
+    """Each worker hands back the summary its plan's reports read; the parent's run JUnit and
+    index use it (they had read every recording again at the run's end, serially) and say
+    what a fresh read of the files says."""
+    from hil.report import data as report_data
+    from hil.report.junit import junit_xml
+
+    report_data._RUNS.clear()
+    report_data._SUMMARIES.clear()
+    reads: list[str] = []
+    real = report_data._load_run
+    monkeypatch.setattr(report_data, "_load_run",
+                        lambda p, **kw: (reads.append(str(p)), real(p, **kw))[1])
+    assert hil(["run", *QUICK, "--out", str(tmp_path), "-q", "-j", "2"]) == 0
+    capsys.readouterr()
+    assert reads == []
+    report_data._SUMMARIES.clear()
+    recs = [tmp_path / f"{n}.mcap" for n in QUICK]
+    assert (tmp_path / "junit.xml").read_text() == junit_xml(recs, tmp_path)
+    assert len(reads) == len(QUICK)
+
+
+def test_a_summary_from_a_worker_is_kept_only_for_the_file_it_was_read_from(tmp_path):
+    from hil.report import data as report_data
+
+    rec = tmp_path / "r.mcap"
+    rec.write_bytes(b"x" * 10)
+    key = report_data._file_key(rec)
+    run = report_data.RunData(str(rec), "p", "b", "pass")
+    assert report_data.keep_summary(key, run) and report_data.kept_summary(rec) == (key, run)
+    rec.write_bytes(b"y" * 11)  # written again: another size
+    assert report_data.kept_summary(rec) is None
+    assert not report_data.keep_summary(key, run)
+    assert not report_data.keep_summary((str(tmp_path / "gone.mcap"), 1, 1), run)
+
+
 def test_a_failing_plan_under_j2_exits_1_and_its_neighbours_still_pass(tmp_path, capsys):
     plan = tmp_path / "fails.yaml"
     plan.write_text(FAILS)
