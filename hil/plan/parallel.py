@@ -180,6 +180,11 @@ def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool, Summary]:
         _busy.clear()
 
 
+def _warm_up() -> None:
+    """A new worker's first job, while the parent checks the plans: what every plan loads."""
+    timing_specs()
+
+
 def _summary(res: PlanResult) -> Summary:
     try:
         return kept_summary(res.recording) if res.recording else None
@@ -213,20 +218,27 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
                  allow_inconclusive: bool = False,
                  listeners: list[Listener] | None = None) -> list[PlanResult]:
     """Run `plans` at most `jobs` at a time in worker processes; results in plan order.
-    Every plan is checked against the bench first (nothing runs on a bad file)."""
-    specs = timing_specs()
-    for p in plans:
-        check_plan(p, bench, specs)
+    Every plan is checked against the bench first (nothing runs on a bad file); the workers
+    start meanwhile (`_warm_up`: their imports and the timing specs, nothing of a plan)."""
+    ctx = multiprocessing.get_context("spawn")
+    pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(plans)), mp_context=ctx,
+                                  initializer=_worker_init,
+                                  initargs=(logging.getLogger().getEffectiveLevel(),))
+    try:
+        for _ in range(min(jobs, len(plans))):  # one submit each starts a worker
+            pool.submit(_warm_up)
+        specs = timing_specs()
+        for p in plans:
+            check_plan(p, bench, specs)
+    except BaseException:
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
     events = Notifier(listeners)
     stems = output_stems(plans)
     todo = [_Job(str(p.path), bench.path or None, str(out_dir), allow_inconclusive, i,
                  len(plans), stems[i - 1], bench.clock) for i, p in enumerate(plans, 1)]
     results: dict[int, PlanResult] = {}
     done = 0
-    ctx = multiprocessing.get_context("spawn")
-    pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(plans)), mp_context=ctx,
-                                  initializer=_worker_init,
-                                  initargs=(logging.getLogger().getEffectiveLevel(),))
     running: dict[cf.Future, _Job] = {}
     main = threading.current_thread() is threading.main_thread()
     global _received

@@ -80,6 +80,21 @@ def test_the_j2_parent_reads_no_recording_for_the_runs_junit_and_index(tmp_path,
     assert len(reads) == len(QUICK)
 
 
+def test_a_plan_the_bench_refuses_under_j2_runs_nothing_and_leaves_no_worker(tmp_path, capsys):
+    """The workers start while the parent checks the plans; a refused plan stops them all
+    before anything runs."""
+    import multiprocessing
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\nsteps:\n  - check_timing: {spec: no_such_spec}\n")
+    out = tmp_path / "out"
+    assert hil(["run", "-q", "-j", "2", "--out", str(out), str(bad), "emgs"]) == 2
+    assert "bad.yaml:3: steps[0].check_timing: no timing spec 'no_such_spec'" in (
+        capsys.readouterr().err)
+    assert not out.exists() or not list(out.iterdir())
+    assert multiprocessing.active_children() == []
+
+
 def test_a_summary_from_a_worker_is_kept_only_for_the_file_it_was_read_from(tmp_path):
     from hil.report import data as report_data
 
