@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import signal
 import sys
@@ -187,6 +188,10 @@ def _inputs(values: list[str]) -> dict[int, bool]:
 def main(args: argparse.Namespace) -> int:
     if not (args.can or args.rs485 or args.dio or args.pulse):
         print("hil drive: give at least one of --can, --rs485, --dio, --pulse", file=sys.stderr)
+        return 2
+    if args.state and os.path.exists(args.state) and not os.path.isdir(args.state):
+        print(f"hil drive: --state {args.state}: not a directory (--state names the directory "
+              "that keeps retained parameters across runs)", file=sys.stderr)
         return 2
     try:
         params = _load_mapping(args.params) if args.params else {}
