@@ -25,11 +25,20 @@ HARNESS_PDOS: dict[tuple[int, int], int] = {
 }
 
 
-# An RPDO entry the drive refuses raises its PDO alarm (table 13, L19965-L19987): AL124 data
-# out of the object's range, AL125 object read-only, AL127 not writable while servo on.
+# An RPDO entry the drive refuses raises its PDO alarm (table 13, L19965-L20019): AL124 data
+# out of the object's range, AL125 object read-only, AL127 not writable while servo on, AL132
+# a parameter whose writing is restricted now (P4.016 without P2.008 = 22, say: the SDO's
+# abort 0800 0020h)
 _RPDO_ALARMS = {cop.ABORT_VALUE_RANGE: "AL124", cop.ABORT_VALUE_HIGH: "AL124",
                 cop.ABORT_VALUE_LOW: "AL124", cop.ABORT_READ_ONLY: "AL125",
-                cop.ABORT_DATA_STATE: "AL127"}
+                cop.ABORT_DATA_STATE: "AL127", cop.ABORT_DATA_STORE: "AL132"}
+
+
+def restricted_cob_id(cob: int) -> bool:
+    """A COB-ID no PDO may use (CiA 301 §7.3.5): NMT 000h, 001h-07Fh, 101h-180h, the SDOs
+    581h-5FFh and 601h-67Fh, 6E0h-6FFh, error control 701h-77Fh, 780h-7FFh."""
+    return (cob <= 0x07F or 0x101 <= cob <= 0x180 or 0x581 <= cob <= 0x5FF
+            or 0x601 <= cob <= 0x67F or 0x6E0 <= cob <= 0x6FF or cob >= 0x701)
 
 
 @dataclass
@@ -39,6 +48,7 @@ class PdoRun:
     last_data: bytes | None = None
     last_sent: int | None = None
     sync_count: int = 0
+    sampled: bytes | None = None  # a type 252 TPDO's data sampled at the last SYNC
     pending: bytes | None = None  # synchronous RPDO waiting for the next SYNC
 
 
@@ -124,6 +134,8 @@ class PdoEngine:
                 if run.sync_count >= tt:
                     run.sync_count = 0
                     self._send_tpdo(n, now)
+            elif tt == 252:  # synchronous, RTR only (L18075-L18083): sampled here, sent on
+                run.sampled = self._tpdo_data(n)  # the next RTR (CiA 301 §7.2.2.2)
         for n in range(4):  # RPDOs of the previous cycle apply at this SYNC (L17051-L17053)
             run = self._pdo[n]
             if run.pending is not None:
@@ -140,8 +152,11 @@ class PdoEngine:
 
     def _apply_rpdo(self, n: int, data: bytes) -> None:
         mapping = self._mapping(0x1600 + n)
-        if sum(m[2] for m in mapping) > 8 * len(data):
-            self.stats["pdo_errors"] += 1  # too short: not processed (CiA 301 EMCY 8210h)
+        if (sum(m[2] for m in mapping) + 7) // 8 != len(data):
+            # AL123 "the data length in the message does not match the objects" (L19959-
+            # L19963), shorter or longer: not processed (EMCY 8210h, a3_alarms.csv)
+            self.stats["pdo_errors"] += 1
+            self.drive.raise_alarm("AL123")
             return
         acc, bits = int.from_bytes(data, "little"), 0
         for index, sub, length in mapping:
@@ -174,6 +189,9 @@ class PdoEngine:
                 raise ObjectError(
                     index, sub, cop.ABORT_VALUE_RANGE, "COB-ID change while the PDO is valid"
                 )
+            if not value & 0x80000000 and restricted_cob_id(value & 0x7FF):
+                raise ObjectError(index, sub, cop.ABORT_VALUE_RANGE,
+                                  f"COB-ID {value & 0x7FF:03X}h is restricted (CiA 301 §7.3.5)")
             n = index & 3
             self._pdo[n if rx else 4 + n] = PdoRun()
         elif sub == 2:

@@ -337,7 +337,11 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
                 self.comm.rpdo_processed(cid, sent, clock.time_ns())
             tcob = self._values[(0x1800 + n, 1)]
             if msg.is_remote_frame and not tcob & 0xC0000000 and cid == tcob & 0x7FF:
-                self._send_tpdo(n, now, force=True)
+                run = self._pdo[4 + n]
+                if self._values[(0x1800 + n, 2)] == 252 and run.sampled is not None:
+                    self._send_tpdo(n, now, data=run.sampled)  # what the last SYNC sampled
+                else:
+                    self._send_tpdo(n, now, force=True)
 
 
     # ------------------------------------------------------------------ timers

@@ -145,13 +145,8 @@ class ModbusSlave:
         self._lock = lock if lock is not None else contextlib.nullcontext()
         self._explicit_station = station
         self.station = self._load_station()
-        p3002 = self._param(P3_002)
-        st_mode, st_fmt = mb.P3002_PROTOCOLS.get(p3002 if p3002 is not None else 6, ("rtu", None))
-        p3001 = self._param(P3_001)
-        st_baud = mb.P3001_BAUD.get((p3001 if p3001 is not None else 3) & 0xF, 38400)
-        self.line = LineSettings(
-            mode or st_mode, baud or st_baud, char_format or st_fmt or mb.CharFormat()
-        )
+        self._explicit_line = (mode, baud, char_format)
+        self.line = self._load_line()
         self._next_line: LineSettings | None = None
         self.stats: dict[str, int] = dict.fromkeys(
             ("bytes", "frames", "replies", "exceptions", "foreign", "broadcast", "bad_check",
@@ -188,10 +183,26 @@ class ModbusSlave:
         value = self._param(P3_000)
         return (value & 0xFF) if value else 0x7F  # only the low byte YX (L10504)
 
+    def _load_line(self) -> LineSettings:
+        """The line P3.002 (protocol) and P3.001 digit X (baud) set, where the face was not
+        given them explicitly."""
+        mode, baud, char_format = self._explicit_line
+        p3002 = self._param(P3_002)
+        st_mode, st_fmt = mb.P3002_PROTOCOLS.get(p3002 if p3002 is not None else 6, ("rtu", None))
+        p3001 = self._param(P3_001)
+        st_baud = mb.P3001_BAUD.get((p3001 if p3001 is not None else 3) & 0xF, 38400)
+        return LineSettings(mode or st_mode, baud or st_baud,
+                            char_format or st_fmt or mb.CharFormat())
+
     def power_cycle(self) -> None:
-        """Re-read P3.000 (● takes effect after a power cycle, L7014, L6722) and reset the
-        receiver. An explicit `station=` argument keeps winning."""
+        """Re-read P3.000 (● takes effect after a power cycle, L7014, L6722) and the line
+        P3.001/P3.002 set, however they were written (an SDO, say), and reset the receiver.
+        An explicit `station=` / `mode=` / `baud=` / `char_format=` argument keeps winning."""
         self.station = self._load_station()
+        self._next_line = self._load_line()
+        if self._next_line == self.line:
+            self._next_line = None
+        self._apply_line()
         self._buf.clear()
         self._outbox.clear()
         self._last_t = None
