@@ -26,7 +26,9 @@ from can import BusABC, Message
 from hil.clock import VirtualClock
 from hil.units import S
 
-DEFAULT_BITRATE = 1_000_000  # CiA 301 and the A3's default CAN rate (P3.001, L10523)
+# a virtual bus's rate unless its URL says `?bitrate=`: CiA 301's highest. The A3 ships at
+# 500 kbit/s (P3.001 = 0x0203, Z = 2: L10512, L16834); the model does not tie the two
+DEFAULT_BITRATE = 1_000_000
 
 
 def _crc15_table() -> tuple[int, ...]:
