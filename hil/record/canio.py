@@ -22,7 +22,10 @@ from hil.record.recorder import Recorder
 
 
 def frame_from_json(obj: dict, timestamp: float, channel: Any) -> can.Message:
-    """A `can.Message` from a `hil.CanFrame` JSON object."""
+    """A `can.Message` from a `hil.CanFrame` JSON object; ValueError for one no CAN bus
+    carries (an identifier past 11/29 bits or negative, more data than the DLC or the frame
+    type allows), which a reader skips and counts as a message of the wrong shape: a
+    candump line `-01#00`, say, or a BLF writer's struct.error."""
     return can.Message(
         timestamp=timestamp,
         arbitration_id=int(obj["id"]),
@@ -36,7 +39,7 @@ def frame_from_json(obj: dict, timestamp: float, channel: Any) -> can.Message:
         data=bytes.fromhex(obj.get("data", "")),
         channel=channel,
         is_rx=obj.get("dir", "rx") != "tx",
-        check=False,
+        check=True,
     )
 
 

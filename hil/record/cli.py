@@ -9,6 +9,7 @@ import sys
 from array import array
 from pathlib import Path
 
+from hil.fileio import atomic_path
 from hil.record.mcapio import McapWriter
 from hil.record.reader import Recording, RecordingError
 from hil.terminal import terminal_lines
@@ -109,7 +110,9 @@ def repair(rec: Recording, out: Path, *, stream: bool = False) -> int:
         raise ValueError(f"--repair {out}: must differ from the input file")
     n = 0
     out.parent.mkdir(parents=True, exist_ok=True)  # as report, diff and export make theirs
-    with open(out, "wb") as f:
+    # through a temporary file renamed at the end: a failed repair (a full disk, a file size
+    # limit) leaves an existing OUT as it was
+    with atomic_path(out) as tmp, open(tmp, "wb") as f:
         w = McapWriter(f, library="hil inspect --repair")
         schema_ids: dict[int, int] = {}
         chan_ids: dict[int, int] = {}

@@ -335,6 +335,8 @@ class Scan:
     # an unreadable chunk's first log time (its header was readable): every message logged
     # before it was read, none from it on
     cut_log_ns: int | None = None
+    chunk_count: int = 0  # chunk records met (read or stepped over)
+    stated_chunks: int | None = None  # what the summary's Statistics record says
 
 
 def _parse(cls: Any, body: bytes) -> Any:
@@ -347,26 +349,41 @@ MAX_CHUNK_BYTES = 256 * 1024 * 1024
 
 
 def decompress(compression: str, data: bytes, size: int) -> bytes:
+    """A chunk's records: exactly the `size` bytes it states, or ValueError (damage). Never
+    more than `size` + 1 bytes are made, whatever the compressed data declares (a 98 KB zstd
+    frame declaring 3 GiB had been decompressed whole)."""
     if compression == "":
-        return data
-    if size > MAX_CHUNK_BYTES:
+        out = data
+    elif size > MAX_CHUNK_BYTES:
         raise ValueError(f"chunk states {size:,} bytes uncompressed, more than a reader takes "
                          f"({MAX_CHUNK_BYTES:,})")
-    if compression == "zstd":
+    elif compression == "zstd":
         if zstandard is None:
             raise ValueError("chunk is zstd-compressed but zstandard is not installed")
-        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-    if compression == "lz4":
+        reader = zstandard.ZstdDecompressor().stream_reader(data)
+        parts, got = [], 0
+        while got <= size:
+            part = reader.read(size + 1 - got)
+            if not part:
+                break
+            parts.append(part)
+            got += len(part)
+        out = b"".join(parts)
+    elif compression == "lz4":
         if lz4frame is None:
             raise ValueError("chunk is lz4-compressed but lz4 is not installed")
         # never more than the chunk says it holds (a 4.7 MB file of one lz4 chunk of 1 GB
-        # of zeros took 2 GB): a chunk that decompresses past its size is damaged
-        dec = lz4frame.LZ4FrameDecompressor()
-        out = dec.decompress(data, max_length=size + 1)
-        if len(out) > size:
-            raise ValueError(f"lz4 chunk decompresses past its stated {size} bytes")
-        return out
-    raise ValueError(f"unknown chunk compression {compression!r}")
+        # of zeros took 2 GB)
+        out = lz4frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+    else:
+        raise ValueError(f"unknown chunk compression {compression!r}")
+    if len(out) > size:
+        raise ValueError(f"{compression or 'uncompressed'} chunk holds more than its stated "
+                         f"{size:,} bytes")
+    if len(out) < size:
+        raise ValueError(f"{compression or 'uncompressed'} chunk holds {len(out):,} bytes, "
+                         f"not its stated {size:,}")
+    return out
 
 
 def iter_chunk(buf: bytes, schemas: dict, channels: dict,
@@ -381,6 +398,8 @@ def iter_chunk(buf: bytes, schemas: dict, channels: dict,
     unpack_msg = _MSG_BODY.unpack_from
     while off + 9 <= n:
         op, ln = unpack_rec(buf, off)
+        if op == 0:  # no MCAP record has opcode 0 (a zeroed chunk was walked 9 bytes a step)
+            raise ValueError(f"record with opcode 0x00 (invalid) at chunk offset {off}")
         body = off + 9
         end = body + ln
         if end > n:
@@ -453,11 +472,20 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             out.error, out.error_offset = f"truncated record header at offset {off}", off
             break
         op, ln = _REC.unpack_from(head, 0)
+        if op == 0:  # no MCAP record has opcode 0: zeroed or foreign bytes
+            out.error = f"record with opcode 0x00 (invalid) at offset {off}"
+            out.error_offset = off
+            # zeros to the end (as far as looked) are a tail the file system never filled
+            # after a crash, a cut like a killed run's; anything else is damage
+            out.corrupt = any(data[off : off + 65536])
+            break
         end = off + 9 + ln
         if end > n:
             out.error = f"record (opcode 0x{op:02x}) at offset {off} truncated: needs {ln} bytes"
             out.error_offset = off
             break
+        if op == Opcode.CHUNK:
+            out.chunk_count += 1
         if not chunks and op in _IN_CHUNKS:
             off = end
             continue
@@ -472,6 +500,8 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                 comp = rec[p + 4 : p + 4 + clen].decode()
                 p += 4 + clen
                 (dlen,) = struct.unpack_from("<Q", rec, p)
+                if p + 8 + dlen > len(rec):
+                    raise ValueError(f"chunk's records ({dlen:,} bytes) run past its end")
                 raw = decompress(comp, rec[p + 8 : p + 8 + dlen], usize)
                 if ucrc and zlib.crc32(raw) != ucrc:
                     raise ValueError("chunk CRC mismatch")
@@ -497,6 +527,9 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                 out.attachments.append(_parse(Attachment, rec))
             elif op == Opcode.DATA_END:
                 out.has_data_end = True
+            elif op == Opcode.STATISTICS:  # chunk_count after message, schema, channel,
+                (out.stated_chunks,) = struct.unpack_from("<I", rec, 22)  # attachment and
+                # metadata counts (MCAP spec, Statistics)
             elif op == Opcode.FOOTER:
                 if data[end : end + 8] != MAGIC:
                     out.error = f"closing magic missing after the footer at offset {off}"
@@ -512,4 +545,10 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             out.cut_log_ns = c_min
             break
         off = end
+    if (out.error is None and out.has_footer and out.stated_chunks is not None
+            and out.stated_chunks != out.chunk_count):  # a chunk cut out of a whole file
+        out.error = (f"the summary counts {out.stated_chunks} chunk(s) but the file holds "
+                     f"{out.chunk_count}: part of the recording is missing")
+        out.error_offset = None
+        out.corrupt = True
     return out

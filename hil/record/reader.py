@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import logging
 import os
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -391,6 +391,20 @@ def not_hil_file(rec: Recording) -> str | None:
     if rec.corrupt:
         return None
     return not_hil(rec.metadata(), [c.schema for c in rec.channels()], rec.topics())
+
+
+def repaired_cut(metadata: Mapping[str, Any]) -> str | None:
+    """Why a file `hil inspect --repair` wrote holds only part of its run (its source was cut
+    or damaged: the repaired copy has a footer, but what came after the cut is unknown), or
+    None."""
+    rep = metadata.get("hil.repair")
+    if not isinstance(rep, Mapping):
+        return None
+    if rep.get("source_error"):
+        return f"repaired from a damaged or cut recording ({str(rep['source_error'])[:200]})"
+    if rep.get("source_truncated") == "true":
+        return "repaired from a cut recording (no footer: the run was killed)"
+    return None
 
 
 def incomplete(path: str | os.PathLike, *, corrupt: bool, truncated: bool,

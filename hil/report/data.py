@@ -12,7 +12,7 @@ from sys import intern
 from typing import Any
 
 from hil.record import topics
-from hil.record.reader import Recording, decode
+from hil.record.reader import Recording, decode, repaired_cut
 
 
 @dataclass
@@ -106,6 +106,50 @@ def dut_text(dut: dict[str, str]) -> str:
             text += " 1018h " + "/".join(ident)
         parts.append(text)
     return ", ".join(parts) or "?"
+
+
+_STEP_TEXT = ("step", "kind", "drive", "file", "status", "message", "event")
+_VERDICT_TEXT = ("spec", "constraint", "status")
+_VERDICT_PAIRS = ("window_ms", "uncertainty_ms")
+
+
+def _number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _step_shape(msg: dict) -> None:
+    """TypeError for a /plan/steps record the page cannot show (a reader skips and counts
+    it as a message of the wrong shape): a text field that is not text."""
+    for k in _STEP_TEXT:
+        if msg.get(k) is not None and not isinstance(msg[k], str):
+            raise TypeError(f"/plan/steps field {k!r} is {type(msg[k]).__name__}, not text")
+
+
+def _verdict_shape(msg: dict) -> None:
+    """TypeError for a /timing/verdicts record the page cannot show: spec, constraint and
+    status texts; occurrence and step whole numbers; a window and an uncertainty as two
+    numbers (a bound may be null); a measured value a number."""
+    for k in _VERDICT_TEXT:
+        if not isinstance(msg.get(k), str):
+            raise TypeError(f"verdict field {k!r} is missing or not text")
+    for k in ("message", "kind", "source"):
+        if msg.get(k) is not None and not isinstance(msg[k], str):
+            raise TypeError(f"verdict field {k!r} is not text")
+    for k in ("occurrence", "step"):
+        x = msg.get(k)
+        if x is not None and (type(x) is not int):
+            raise TypeError(f"verdict field {k!r} is not a whole number")
+    for k in _VERDICT_PAIRS:
+        x = msg.get(k)
+        if x is not None and not (isinstance(x, list) and len(x) == 2
+                                  and all(v is None or _number(v) for v in x)):
+            raise TypeError(f"verdict field {k!r} is not a pair of numbers")
+    for k in ("measured_ms", "t_ns", "from_ns"):
+        if msg.get(k) is not None and not _number(msg[k]):
+            raise TypeError(f"verdict field {k!r} is not a number")
+    for k in ("binding", "check_params", "check_constants"):
+        if msg.get(k) is not None and not isinstance(msg[k], dict):
+            raise TypeError(f"verdict field {k!r} is not an object")
 
 
 def _is_bus(topic: str) -> bool:
@@ -228,6 +272,7 @@ def _load_run(path: str | Path, *, truth: bool = True,
             return
         msg = _decode(raw)
         if kind == topics.PLAN_STEPS:
+            _step_shape(msg)
             t_plan = lt if t_plan is None else min(t_plan, lt)
             idx = int(msg.get("index") if msg.get("index") is not None else -1)
             sd = steps.setdefault(idx, StepData(idx, str(msg.get("step", ""))))
@@ -243,6 +288,7 @@ def _load_run(path: str | Path, *, truth: bool = True,
                 sd.message = msg.get("message") or ""
                 sd.duration_ns = int(msg.get("duration_ns") or 0)
         elif kind == topics.TIMING_VERDICTS:
+            _verdict_shape(msg)
             data.verdicts.append({**msg, "_t": lt})
         elif kind == topics.SAFETY:
             data.safety.append({**msg, "_t": lt})
@@ -263,8 +309,9 @@ def _load_run(path: str | Path, *, truth: bool = True,
         rec = head
     else:
         rec = Recording.stream(path, None, take)
-    data.truncated = rec.truncated
     data.metadata = meta = rec.metadata()
+    # a repaired copy of a cut or damaged run is as cut as its source (the footer is new)
+    data.truncated = rec.truncated or repaired_cut(meta) is not None
     run_meta = meta.get("hil.run", {})
     data.plan = run_meta.get("plan", data.plan)
     data.bench = run_meta.get("bench", data.bench)

@@ -119,7 +119,7 @@ def render_index(recordings: list[str | Path], out: str | Path) -> str:
 def _tags(text: str) -> list[str]:
     try:
         tags = json.loads(text)
-    except ValueError:
+    except (ValueError, RecursionError):  # nested past the stack: no tags
         return []
     return [str(t) for t in tags] if isinstance(tags, list) else []
 

@@ -37,12 +37,15 @@ def mapping_param(line: str) -> tuple[str, dict[str, int]] | None:
 def not_applicable(spec: Spec, source: SignalSource, binding: dict[str, str]) -> str | None:
     """Why `spec` does not apply to the recorded drive, or None (it applies, or unknown)."""
     bind = spec.binding(binding)
-    records = [msg.get("values") or {} for _t, msg in
-               source.messages(topics.drive_params(bind.get("drive", "drive1")))]
+    # a record whose values are not an object of whole numbers says nothing of the drive
+    records = [values for _t, msg in
+               source.messages(topics.drive_params(bind.get("drive", "drive1")))
+               if isinstance(values := msg.get("values") or {}, dict)
+               and all(type(v) is int for v in values.values())]
     recorded: dict[str, list[int]] = {}
     for values in records:
         for name, value in values.items():
-            recorded.setdefault(name, []).append(int(value))
+            recorded.setdefault(name, []).append(value)
     if not recorded:
         return None
     if spec.requires is not None and (why := _never_required(spec.requires, records)):

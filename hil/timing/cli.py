@@ -30,7 +30,7 @@ from typing import Any
 
 from hil.record import topics
 from hil.record.progress import ReadProgress
-from hil.record.reader import RecordingError
+from hil.record.reader import RecordingError, repaired_cut
 from hil.record.reader import incomplete as reader_incomplete
 from hil.record.reader import not_hil as reader_not_hil
 from hil.terminal import TEXT_MAX, terminal_text
@@ -203,11 +203,20 @@ def svg_dir(path: str, specs: list[Spec], names: list[str] | None = None) -> Pat
     return out
 
 
-def resolve_specs(names: list[str]) -> list[Spec]:
-    """Spec files or shipped ids -> loaded specs (raises SpecError / FileNotFoundError)."""
+def resolve_specs(names: list[str], *, recorded: bool = False) -> list[Spec]:
+    """Spec files or shipped ids -> loaded specs (raises SpecError / FileNotFoundError).
+    `recorded`: names a recording gives (its plan's spec ids): shipped ids only, never a
+    path, so a recording cannot make `hil check` open a file of its choosing."""
     shipped = {p.stem: p for p in shipped_specs()}
     out = []
     for n in names:
+        if recorded:
+            if n not in shipped:
+                raise FileNotFoundError(
+                    f"the recording names spec {terminal_text(n)[:80]!r}, which is not a "
+                    "shipped spec id: give its file with --spec FILE")
+            out.append(load_spec(shipped[n]))
+            continue
         p = Path(n)
         if not p.exists() and n in shipped:
             p = shipped[n]
@@ -262,6 +271,8 @@ def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> i
                             truncated=getattr(source, "truncated", False))
     if why:  # what the run did after the cut is unknown
         incomplete = [why, *incomplete]
+    if (cut := repaired_cut(getattr(source, "meta", {}) or {})) is not None:
+        incomplete = [f"{source.path}: {cut}; judged only what it holds", *incomplete]
     bad = getattr(source, "bad_messages", 0)
     if bad:  # what those messages said is not in the verdicts
         incomplete = [*incomplete, f"{source.path}: {bad} message(s) of a wrong shape were "
@@ -347,7 +358,7 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
     specs: list[Spec] = []
     for run in runs:
         try:
-            specs += resolve_specs([run["spec"]])
+            specs += resolve_specs([run["spec"]], recorded=True)
         except (SpecError, FileNotFoundError, ValueError) as e:
             print(f"hil check: step {run['step']}: {e}", file=sys.stderr)
             return 2
@@ -364,9 +375,11 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
     read = read_plan(specs, [dict(run["binding"]) | binding for run in runs])
     for run, spec, stem in zip(runs, specs, stems, strict=True):
         until = int(run["until_ns"])
-        src = cache.get(until) or cache.setdefault(
-            until, RecordingSource(args.recording, time=args.time, until_log_ns=until,
-                                   topics=read[0], columns=read[1]))
+        if until not in cache:  # only the latest read is kept: memory of one, not of each
+            cache.clear()  # step (the steps come in order; checks at one step share it)
+            cache[until] = RecordingSource(args.recording, time=args.time, until_log_ns=until,
+                                           topics=read[0], columns=read[1])
+        src = cache[until]
         step_params, step_bind = (run["params"] | params) or None, dict(run["binding"]) | binding
         vs = check(spec, src, params=step_params, binding=step_bind,
                    constants=(run["constants"] | consts) or None, resolution=res)
@@ -413,7 +426,8 @@ def main(args: argparse.Namespace) -> int:
     if runs:  # a plan run: re-check each check step as it was made, with no bench
         return _as_run(args, runs, binding, params, consts, res)
     try:
-        specs = resolve_specs(args.spec or rec_specs) if (args.spec or rec_specs) else [
+        specs = (resolve_specs(args.spec) if args.spec else
+                 resolve_specs(rec_specs, recorded=True)) if (args.spec or rec_specs) else [
             load_spec(p) for p in shipped_specs()]
     except (SpecError, FileNotFoundError) as e:
         print(f"hil check: {e}", file=sys.stderr)

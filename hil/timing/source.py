@@ -13,6 +13,7 @@ import fnmatch
 import heapq
 import itertools
 import json
+import math
 from array import array
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -792,8 +793,10 @@ def recorded_specs(meta: Mapping[str, Mapping[str, str]]) -> tuple[list[str], di
     tm = meta.get("timing", {})
     specs, binding = [], {}
     try:
-        specs = list(json.loads(tm["specs"])) if tm.get("specs") else []
-        binding = dict(json.loads(tm["binding"])) if tm.get("binding") else {}
+        specs = json.loads(tm["specs"]) if tm.get("specs") else []
+        binding = json.loads(tm["binding"]) if tm.get("binding") else {}
+        if not isinstance(specs, list) or not isinstance(binding, dict):
+            raise TypeError("not a list of ids and a binding object")  # "emgs" is no list
     except (ValueError, TypeError, RecursionError):  # a damaged record: none recorded
         specs, binding = [], {}
     return [str(s) for s in specs], {str(k): str(v) for k, v in binding.items()}
@@ -809,7 +812,8 @@ def _check_record(v: Any) -> bool:
             and (v.get("check_since_ns") is None or whole(v.get("check_since_ns")))
             and isinstance(v.get("plan"), str | None)
             and all(isinstance(v.get(k) or {}, dict)
-                    for k in ("binding", "check_params", "check_constants")))
+                    for k in ("binding", "check_params", "check_constants"))
+            and all(type(x) is str for kv in (v.get("binding") or {}).items() for x in kv))
 
 
 def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
@@ -833,8 +837,11 @@ def recorded_constants(meta: Mapping[str, Mapping[str, str]]) -> dict[str, float
     """Spec constants the bench of the run overrode (metadata `timing`: `constants` JSON)."""
     try:
         raw = json.loads(meta.get("timing", {}).get("constants") or "{}")
-        return {str(k): float(v) for k, v in dict(raw).items()}
-    except (ValueError, TypeError):
+        out = {str(k): float(v) for k, v in dict(raw).items()}
+        if not all(map(math.isfinite, out.values())):
+            raise ValueError("not a finite number")
+        return out
+    except (ValueError, TypeError, OverflowError, RecursionError):  # damaged: none recorded
         return {}
 
 
