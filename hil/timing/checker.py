@@ -351,6 +351,7 @@ class Context:
             raw = samples(self.source, topic, fld, s.where, runs=self._runs_suffice(s))
             res = self._resolution(topic, s)
             if s.kind == "function" or s.kind == "line":
+                self._want(s, raw, bool, "a level (true or false)")
                 pts = [(t, bool(v) != invert) for t, v in raw]
             elif s.kind == "alarm":
                 codes = [self.fmt(c) for c in s.alarm or []]
@@ -366,6 +367,8 @@ class Context:
                         last = v if type(v) is list else None
                     append((t, active))
             else:
+                if not s.transforms:  # read as it is: a level, a number or a name
+                    self._want(s, raw, (bool, int, float, str, type(None)), "a single value")
                 pts = raw
             pts = self._transform(s, pts)
             return self._held(s, _compress(s.name, pts, res, self._lags(s, topic, raw)))
@@ -375,6 +378,18 @@ class Context:
             return self._held(s, _compress(s.name, pts, parent.res, parent.lags))
         parents = [self.trace(p) for p in s.parts]
         return _combine(s.name, s.kind, parents)
+
+    def _want(self, s: SignalDef, raw: Sequence[tuple[int, Any]], types: Any,
+              what: str) -> None:
+        """ExprError (the check cannot judge) for a recorded value not of `types`: a level
+        recorded as the text "false" would read as true, a list as false."""
+        if isinstance(raw, SampleList) and type(raw.values) is array:
+            return  # numbers from a typed column
+        for t, v in raw:
+            if not isinstance(v, types):
+                at = _ms(t - self.start) if self.start is not None else 0.0
+                raise ExprError(f"signal {s.name}: the recorded value {_short(v)} ({at:.1f} ms "
+                                f"into the recording) is not {what}")
 
     def _with_limit_changes(self, s: SignalDef, parent: Trace) -> SampleList:
         """The parent's change points, and where a `below`/`above` limit changes between two

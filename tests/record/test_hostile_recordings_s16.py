@@ -288,3 +288,23 @@ def test_export_skips_frames_no_can_bus_carries(emgs, tmp_path, caplog):
         ident = line.split()[2].split("#")[0]
         assert len(ident) in (3, 8) and int(ident, 16) < 2**29, line
     assert hil(["export", str(bad), "-o", str(tmp_path / "x.blf")]) == 0
+
+
+@pytest.mark.parametrize(("topic_end", "field", "value", "what"), [
+    ("/DO6", "level", "false", "is not a level"),        # BRKR: the text read as true
+    ("/state", "servo_on", [], "is not a single value"),  # a list read as false
+])
+def test_a_signal_recorded_with_the_wrong_type_cannot_be_judged(emgs, tmp_path, capsys,
+                                                                topic_end, field, value, what):
+    """Judged as it was, "false" had been a level that never fell (a fail) and [] a servo
+    that never switched (constraints skipped, exit 0)."""
+    def f(topic: str, obj: dict) -> dict | None:
+        if topic.endswith(topic_end) and field in obj:
+            obj[field] = value
+            return obj
+        return None
+
+    bad = _rewrite(emgs, tmp_path / "typed.mcap", f)
+    assert hil(["check", str(bad), "--whole", "--spec", "emgs", "-v"]) == 3
+    out = capsys.readouterr().out
+    assert "INCONCLUSIVE" in out and what in out and "FAIL " not in out
