@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hil.fileio import write_text_atomic
+from hil.fileio import dumps_strict, write_text_atomic
 from hil.record import topics
 from hil.record.reader import Recording, decode
 from hil.report.html import CSS
@@ -453,5 +453,5 @@ def write_diff(a: str | Path, b: str | Path, html_out: str | Path,
     html_out = Path(html_out)
     json_out = Path(json_out) if json_out else html_out.with_suffix(".json")
     write_text_atomic(html_out, render_html(d))
-    write_text_atomic(json_out, json.dumps(d, indent=1, default=str) + "\n")
+    write_text_atomic(json_out, dumps_strict(d, indent=1, default=str) + "\n")
     return d, html_out, json_out

@@ -21,13 +21,13 @@ resolutions are not negative, `--svg` is a directory that can be created and wri
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import re
 import sys
 from pathlib import Path
 from typing import Any
 
+from hil.fileio import dumps_strict
 from hil.record import topics
 from hil.record.progress import ReadProgress
 from hil.record.reader import RecordingError, repaired_cut
@@ -300,7 +300,7 @@ def print_json(verdicts: list[Verdict]) -> None:
     out = sys.stdout
     out.write("[")
     for i, v in enumerate(verdicts):
-        text = json.dumps(v.to_dict(), indent=2, default=str)
+        text = dumps_strict(v.to_dict(), indent=2, default=str)
         out.write(("," if i else "") + "\n  " + text.replace("\n", "\n  "))
     out.write("\n]\n" if verdicts else "]\n")
 

@@ -308,3 +308,25 @@ def test_a_signal_recorded_with_the_wrong_type_cannot_be_judged(emgs, tmp_path, 
     assert hil(["check", str(bad), "--whole", "--spec", "emgs", "-v"]) == 3
     out = capsys.readouterr().out
     assert "INCONCLUSIVE" in out and what in out and "FAIL " not in out
+
+
+def test_diff_json_is_strict_json_with_a_nan_parameter(emgs, tmp_path):
+    """A recorded parameter NaN or Infinity came out as a bare NaN token in `--json`, which
+    strict JSON readers refuse."""
+    def f(topic: str, obj: dict) -> dict | None:
+        if topic.endswith("/params") and isinstance(obj.get("values"), dict):
+            obj["values"] = {k: float("nan") for k in obj["values"]} | {"P9.999": float("inf")}
+            return obj
+        return None
+
+    bad = _rewrite(emgs, tmp_path / "nan.mcap", f)
+    out = tmp_path / "d.json"
+    assert hil(["diff", str(emgs), str(bad), "-o", str(tmp_path / "d.html"), "--json",
+                str(out)]) in (0, 1, 4)
+
+    def refuse(token: str) -> None:
+        raise ValueError(f"not strict JSON: {token}")
+
+    text = out.read_text()
+    json.loads(text, parse_constant=refuse)
+    assert '"NaN"' in text
