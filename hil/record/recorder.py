@@ -254,6 +254,11 @@ class Recorder:
         self._schema_ids: dict[str, int] = {}
         self.topic_of: dict[int, str] = {}  # channel id -> topic
         self.metadata_count = 0  # metadata records added (a live reader's cache key)
+        #: what the file holds outside its messages, as written (by the writer thread): the
+        #: metadata records in file order, and each channel's schema name and metadata; a
+        #: live reader takes them instead of reading the file's head again (`LiveSource`)
+        self.written_metadata: list[tuple[str, dict[str, str]]] = []
+        self.written_channels: dict[str, tuple[str, dict[str, str]]] = {}
         #: see keep_messages(): (channel id, log time, publish time, bytes, payload or None)
         self.mirror: list[tuple[int, int, int, bytes, Any]] | None = None
         self._channels: dict[str, int] = {}
@@ -283,6 +288,7 @@ class Recorder:
             start.update(_str_map(metadata))
         self._w.add_metadata("hil.run", start)
         self._w.add_metadata("hil.versions", v)
+        self.written_metadata += [("hil.run", start), ("hil.versions", dict(v))]
         self._w.flush()
         self._thread = threading.Thread(target=self._run, name="hil-recorder", daemon=True)
         self._thread.start()
@@ -556,6 +562,11 @@ class Recorder:
     def queued(self) -> int:
         return len(self._q)
 
+    @property
+    def closed(self) -> bool:
+        """`close()` has begun: no item is taken any more."""
+        return not self._open
+
     def close(self) -> None:
         """Drain the queue, close open transactions, write `hil.close` and the summary."""
         with self._lock:
@@ -704,6 +715,7 @@ class Recorder:
             )
         meta = {"publish_time_source": source, **self._chan_meta.get(topic, {})}
         cid = self._channels[topic] = self._w.add_channel(topic, "json", sid, meta)
+        self.written_channels[topic] = (schema, meta)
         self.topic_of[cid] = topic
         return cid
 
@@ -882,6 +894,7 @@ class Recorder:
 
     def _do_metadata(self, item: MetadataItem) -> None:
         self._w.add_metadata(item.name, item.data)
+        self.written_metadata.append((item.name, dict(item.data)))
 
     def _do_barrier(self, item: BarrierItem) -> None:
         self._w.flush()

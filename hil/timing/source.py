@@ -17,6 +17,7 @@ import math
 from array import array
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Protocol
 
 from hil.record import topics
@@ -722,12 +723,28 @@ class LiveSource(_LazySource):
         self.path = ""
 
     def refresh(self, rec: Any) -> LiveSource:
-        key = (len(rec.topic_of), getattr(rec, "metadata_count", None))
+        key = (len(rec.topic_of), getattr(rec, "metadata_count", None),
+               getattr(rec, "closed", None))  # closed: the file's footer is there to read
         if key != self._head_key or key[1] is None:  # a new channel or metadata record
-            head = RecordingSource(rec.path, topics=[])  # metadata, resolutions; no messages
-            self.meta, self._res = head.meta, head._res
-            self.error, self.corrupt, self.truncated = head.error, head.corrupt, head.truncated
-            self.schemas, self.path = head.schemas, head.path
+            written = getattr(rec, "written_metadata", None)
+            if written is not None and not getattr(rec, "closed", True):
+                # what the recorder wrote: the file's head, unread (once closed, the file
+                # is read: its footer and `hil.close` are written outside the queue)
+                meta: dict[str, dict[str, str]] = {}
+                for name, data in written:
+                    meta.setdefault(name, {}).update(data)
+                chans = [SimpleNamespace(topic=t, schema=sch, metadata=md)
+                         for t, (sch, md) in rec.written_channels.items()]
+                self.meta, self._res = meta, _resolutions(SimpleNamespace(channels=chans), meta)
+                # a recording being written has no footer yet, as the file read would say
+                self.error, self.corrupt, self.truncated = None, False, True
+                self.schemas, self.path = {c.schema for c in chans}, str(rec.path)
+            else:
+                head = RecordingSource(rec.path, topics=[])  # metadata, resolutions only
+                self.meta, self._res = head.meta, head._res
+                self.error, self.corrupt = head.error, head.corrupt
+                self.truncated = head.truncated
+                self.schemas, self.path = head.schemas, head.path
             self._head_key = key
         mirror = rec.keep_messages()
         n = len(mirror)

@@ -229,3 +229,41 @@ def test_the_mirror_holds_the_ground_truth_as_decoding_gives_it(tmp_path):
     got = live.messages("/drive/drive1/state")
     assert [m for _t, m in got[20:23]] == [{"mode": 1}, {"do": [True, False]}, {"pt": {"1": 2.0}}]
     rec.close()
+
+
+def test_a_live_source_takes_the_files_head_from_the_recorder_as_a_read_would_give_it(
+        tmp_path, monkeypatch):
+    """While the recorder is open, the metadata, resolutions and schemas come from what it
+    wrote (the file's head had been read again at every new channel or metadata record: 108
+    reads in the shipped plans); they equal a read of the file at every refresh."""
+    path = tmp_path / "head.mcap"
+    rec = Recorder(path, metadata={"plan": "p"})
+    rec.keep_messages()
+    live = LiveSource()
+    reads: list[object] = []
+    real = source_mod.RecordingSource.__init__
+    monkeypatch.setattr(source_mod.RecordingSource, "__init__",
+                        lambda self, *a, **k: (reads.append(a), real(self, *a, **k))[1])
+
+    def same() -> None:
+        rec.flush()
+        live.refresh(rec)
+        n = len(reads)
+        head = RecordingSource(path, topics=[])
+        del reads[n:]
+        assert (live.meta, live._res, live.schemas, live.path, live.error, live.corrupt,
+                live.truncated) == (head.meta, head._res, head.schemas, head.path,
+                                    head.error, head.corrupt, head.truncated)
+
+    _record(rec, 0, 5)
+    same()
+    rec.add_metadata("timing", {"resolution_ns": '{"/drive/drive1/state": 1000000}'})
+    rec.declare_source("/dio/drive1/DO3", "model", resolution_ns=250_000)
+    rec.dio("drive1", "DO3", True, 9 * MS)
+    same()
+    rec.add_metadata("timing", {"specs": '["emgs"]'})  # a name again: merged, later wins
+    same()
+    assert reads == []  # none of the refreshes read the file
+    rec.close()
+    live.refresh(rec)  # closed: the footer and hil.close are read from the file
+    assert "hil.close" in live.meta and not live.truncated and len(reads) == 1
