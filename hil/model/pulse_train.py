@@ -151,6 +151,7 @@ class PulseTrain:
         self.line_total = 0  # signed pulses seen on the line (before any filter)
         self._machine: dict[str, bool] = {}  # DOG / NL / PL as the PLC's inputs see them
         self.lost_format = self.lost_limit = self.lost_inhibit = self.lost_off = 0
+        self.lost_held = 0  # pulses that came while JOG, PFQS or a level CCLR held the axis
         self.lost_alarm = 0  # refused while AL060 / AL06A (P2.069.Y = 0)
         self.cn1 = 0  # decoded pulses at CN1 whatever the mode (P5.018, monitor 049)
         self._cn1_base = 0  # P5.018 as last written (the counter presets to it)
@@ -173,6 +174,7 @@ class PulseTrain:
         self._cruise_end = 0
         self._cruise_mode = 0
         self._cruise_gain = 0.0
+        self._cruise_gear: tuple[int, int] = (1, 1)
         self._rebuild: tuple[Segment, int, int, float, float] | None = None
         self._steady_since = 0
         for f in ("INHP", "GNUM0", "GNUM1", "PL", "NL", "PT-PR", "CCLR", "SON"):
@@ -272,7 +274,10 @@ class PulseTrain:
                                            old.form, old.logic))
         self.seg = (Segment(d.now, float(freq), direction, int(count), form, int(logic) & 1)
                     if freq > 0 else None)  # a 0 Hz segment: the line stops pulsing
-        self.freq_hz = 0.0 if self.seg is None else self.freq_hz
+        # monitor 006, "the frequency of the pulse command the drive receives" (L15446):
+        # the line's, in any servo state, once the input decodes its form
+        self.freq_hz = (float(freq) if self.seg is not None and form == self._config().form
+                        else 0.0)
         self._taken = 0
         self._steady_since = d.now
         self._check_limit()
@@ -310,10 +315,10 @@ class PulseTrain:
         d = self.d
         c = self._config()
         counts = s.counts(c.logic)
-        if force:  # a cruise's pulses: every condition held, as checked when it began
-            self.cn1 += n * counts
-            self._add(n, s, counts)
-            return
+        if force:  # a cruise's pulses: every condition held, as checked when it began, and
+            self.cn1 += n * counts  # the gear was the one it began with (a GNUM edge or a
+            self._add(n, s, counts, self._cruise_gear)  # P2.060 write that ends it acts on
+            return  # the pulses after it, L9843-9850)
         if s.form == c.form and s.freq <= c.max_hz:  # the input decodes them: CN1 counts
             self.cn1 += n * counts
         if s.form != c.form:
@@ -327,6 +332,9 @@ class PulseTrain:
             return
         if s.freq > c.max_hz:  # beyond the interface or the P1.000.UY filter
             self.lost_limit += n
+            return
+        if d.axis.locked:  # JOG, PFQS or a level CCLR holds the axis: dropped, not queued
+            self.lost_held += n  # (docs/manual-choices.md, JOGU / JOGD)
             return
         dio = d.dio
         if self._inhibited(c):
@@ -381,9 +389,10 @@ class PulseTrain:
         active = self.d.alarms.active
         return "AL060" in active or "AL06A" in active
 
-    def _add(self, n: int, s: Segment, counts: int) -> None:
+    def _add(self, n: int, s: Segment, counts: int,
+              gear: tuple[int, int] | None = None) -> None:
         self.accepted += n * counts
-        nx, m = self.gear()
+        nx, m = gear or self.gear()
         exact = n * counts * nx / m + self._frac
         whole = math.floor(exact)
         self._frac = exact - whole
@@ -467,6 +476,11 @@ class PulseTrain:
             if self.listeners:
                 self._machine_lines()
             return
+        # AL008 is a condition: an over-rate train still on the line raises it again after an
+        # alarm reset, or once the mode has a PT side (L19535-19538)
+        if (self.seg is not None and self.seg.freq > LIMIT_PPS[d.options.pulse_interface]
+                and "AL008" not in d.alarms.active):
+            self._check_limit()
         if self._cruise_end:
             ax = d.axis
             if (d.now < self._cruise_end and d.servo_on and ax._mode == _INTERP_MODE
@@ -482,8 +496,8 @@ class PulseTrain:
             if not self._active and pt and d.servo_on:
                 self._follow()  # a train already running as the servo came on / PT began
             self._take(d.now, pt)
-        if "CCLR" in d.axis.locks:  # a level CCLR keeps the error at 0 (L9753)
-            self.clear_error()
+        if d.axis.locked:  # a level CCLR keeps the error at 0 (L9753); while JOG or PFQS
+            self.clear_error()  # holds the axis the command follows it, and pulses drop
         if self._rebuild is not None:
             self._rebuild_window()
         if self._active:
@@ -548,6 +562,7 @@ class PulseTrain:
         self._cruise_end = t1
         self._cruise_gain = gain
         self._cruise_mode = d.cia402.mode
+        self._cruise_gear = self.gear()  # a cruise's pulses count at the gear it began with
 
     def _resync(self) -> None:
         """End a cruise: count its pulses up to the last 1 ms grid point (the per-step path
@@ -673,6 +688,7 @@ class PulseTrain:
         self._taken = 0
         self.accepted = self.line_total = 0
         self.lost_format = self.lost_limit = self.lost_inhibit = self.lost_off = 0
+        self.lost_held = 0  # pulses that came while JOG, PFQS or a level CCLR held the axis
         self.lost_alarm = 0
         self.cn1 = 0
         self._cn1_base = self.d.params.stored("P5.018")
@@ -719,6 +735,8 @@ def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
         # the range is of the command *pulse* input ratio (L8543-8547): PT modes only
         if d.options.pt_gear_check != "refuse" or (d.params.get("P1.001") & 0xFF) not in PT_YX:
             return
+        if name in ("P2.060", "P2.061", "P2.062") and not _gnum_wired(d):
+            return  # no GNUM0/GNUM1 on a DI: the numerator is P1.044 (L9850), as AL045 says
         p = d.params
         m = value if name == "P1.045" else p.get("P1.045")
         nums = [value] if name != "P1.045" else _numerators(d)
@@ -753,7 +771,7 @@ def _monitor(d: DriveCore, pt: PulseTrain, select: str, stored: Callable[[], int
             cmd = pt.live_command() - ax.origin
         if code == 6:  # pulse command frequency, kpps
             return round(pt.freq_hz / 1000.0)
-        if code == 1 and pt.used and pt.in_pt():  # PT: the pulses received (L15441)
+        if code == 1 and pt.in_pt():  # PT: the pulses received (L15441), none yet at first
             return int(pt.snapshot()["pt_count"])
         values = {0: fb * m / n, 1: cmd * m / n, 2: (cmd - fb) * m / n, 3: fb, 4: cmd,
                   5: cmd - fb}

@@ -31,6 +31,9 @@ WRITE_ZERO_ONLY = frozenset({"P0.001"})
 # shift, low, high), ...)). P3.001: X (RS-485 baud) 0-5, Y 0, Z (CANopen rate) 0-4, U (DMCNET)
 # 0-3 (L10519-L10522).
 DIGIT_RANGES: dict[str, tuple[str, tuple[tuple[str, int, int, int], ...]]] = {
+    # pulse input: X form 0-2 (others reserved), Z logic 0-1, UY filter width (U 0-1),
+    # range 0x0000-0x11F2 (L7662-L7674)
+    "P1.000": ("L7662-L7674", (("X", 0, 0, 2), ("Z", 8, 0, 1), ("U", 12, 0, 1))),
     "P3.001": ("L10519-L10522", (("X", 0, 0, 5), ("Y", 4, 0, 0), ("Z", 8, 0, 4),
                                  ("U", 12, 0, 3))),
     # P5.098 / P5.099: each digit (EV1-EV4) 0 = nothing or 1-D = PR#51-#63 (L12509-L12523,

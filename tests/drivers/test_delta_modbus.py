@@ -99,11 +99,14 @@ def infos(name: str) -> ParamInfo:
     return table[name]
 
 
-def loop(mode="rtu", corrupt=False, **words):
+def loop(mode="rtu", corrupt=False, timeout_s=2.0, **words):
+    """A master on a `LoopLine`: every answer is there at once, so the reply timeout (wall
+    clock) only ends a wait for a reply that never comes; it is long enough for a loaded
+    host (0.05 s failed once under two xdist workers)."""
     store = WordStore({0x0200: 0x00B1, 0x0201: 0x1F40, 0x0112: 0, 0x0113: 0, 0x0004: 0})
     slave = ModbusSlave(store, station=1, mode=mode)
     line = LoopLine(slave, corrupt=corrupt)
-    drive = DeltaModbus(line, station=1, mode=mode, timeout_s=0.05, silence_s=0,
+    drive = DeltaModbus(line, station=1, mode=mode, timeout_s=timeout_s, silence_s=0,
                         param_info=infos)  # fmt: skip
     return drive, line, store
 
@@ -167,7 +170,7 @@ def test_timeout_names_what_was_sent():
 
 
 def test_foreign_station_gets_no_answer_and_bad_crc_reply_is_reported():
-    drive, _, _ = loop()
+    drive, _, _ = loop(timeout_s=0.05)  # no answer comes: the wait is the timeout
     with pytest.raises(ModbusTimeoutError):
         drive.read_registers(0x0200, 2, station=2)
     drive, _, _ = loop(corrupt=True)
