@@ -56,7 +56,15 @@ def summarise(rec: Recording, gaps: int = 3,
     """The text `hil inspect` prints; `times`: each topic's log times, read already
     (`Recording.stream`), else read from `rec`."""
     lines = [f"file: {rec.path} ({rec.size:,} bytes)"]
-    if rec.truncated:
+    if rec.skipped:
+        lines.append(f"DAMAGED: {len(rec.skipped)} unreadable record(s) stepped over, the "
+                     "records around them read:")
+        lines += [f"  {why}" for _off, why, _lo, _hi in rec.skipped[:10]]
+        if len(rec.skipped) > 10:
+            lines.append(f"  ... and {len(rec.skipped) - 10} more")
+        if not rec._scan.has_footer:
+            lines.append("no footer/summary (the writer did not finish: killed run?)")
+    elif rec.truncated:
         why = rec.error or "no footer/summary (the writer did not finish: killed run?)"
         lines.append(f"TRUNCATED: {why}; everything before it is readable")
     else:
@@ -137,7 +145,8 @@ def repair(rec: Recording, out: Path, *, stream: bool = False) -> int:
                 n += 1
 
         if stream:
-            Recording.stream(rec.path, None, write, by_channel=True)
+            Recording.stream(rec.path, None, write, by_channel=True,
+                             past_damage=bool(rec.skipped))
         else:
             for cid, lt, pt, data in rec._raw(None):
                 write(cid, lt, pt, data)
@@ -148,6 +157,7 @@ def repair(rec: Recording, out: Path, *, stream: bool = False) -> int:
                 "source_truncated": str(rec.truncated).lower(),
                 "source_error": rec.error or "",
                 "messages": str(n),
+                "skipped_records": str(len(rec.skipped)),
             },
         )
         w.finish()
@@ -171,8 +181,9 @@ def main(args: argparse.Namespace) -> int:
         except FileProblem as exc:
             print(f"hil inspect: {exc}", file=sys.stderr)
             return 2
-    try:  # a message at a time: the file is never held whole
-        rec = Recording.stream(args.file, None, take)
+    try:  # a message at a time: the file is never held whole; past a damaged record (a
+        # chunk whose CRC fails): what lies after it is said and repaired too
+        rec = Recording.stream(args.file, None, take, past_damage=True)
     except RecordingError as exc:
         print(f"hil inspect: {exc}", file=sys.stderr)
         return 2

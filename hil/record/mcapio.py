@@ -15,7 +15,7 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from io import BytesIO
 from typing import IO, Any
 
@@ -336,6 +336,9 @@ class Scan:
     # before it was read, none from it on
     cut_log_ns: int | None = None
     chunk_count: int = 0  # chunk records met (read or stepped over)
+    #: whole records that could not be read and were stepped over (`past_damage`): offset,
+    #: why, and a chunk's log-time span (None when its header was unreadable)
+    skipped: list[tuple[int, str, int | None, int | None]] = field(default_factory=list)
     stated_chunks: int | None = None  # what the summary's Statistics record says
 
 
@@ -455,12 +458,15 @@ _IN_CHUNKS = frozenset((Opcode.CHUNK, Opcode.MESSAGE_INDEX))  # what `chunks=Fal
 
 
 def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
-         chunks: bool = True) -> Scan:
+         chunks: bool = True, past_damage: bool = False) -> Scan:
     """Read every complete record of `data`; stop at the first broken one and say where.
     With `sink`, each chunk goes to it (after its CRC check) and is not kept; the sink's
     walk is the chunk's structural check, so it must keep nothing of a chunk it could not
     walk to the end. `chunks=False`: chunks are stepped over unread (what the file says of
-    itself outside them: metadata, attachments, its end)."""
+    itself outside them: metadata, attachments, its end). `past_damage`: a whole record
+    that cannot be read (a chunk whose CRC fails, say) is stepped over and the scan goes on
+    with the next (`Scan.skipped`); `error`, `corrupt` and `cut_log_ns` still say the first
+    (what `hil inspect --repair` recovers; a checker stops at the first)."""
     out = Scan({}, {}, [], [], [], [], False, False, None, None, len(data))
     if data[:8] != MAGIC:
         raise ValueError("not an MCAP file (bad magic at offset 0)")
@@ -491,10 +497,11 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             continue
         rec = data[off + 9 : end]
         c_min: int | None = None
+        c_max: int | None = None
         try:
             if op == Opcode.CHUNK:
                 _c_min, _c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(rec, 0)
-                c_min = _c_min
+                c_min, c_max = _c_min, _c_max
                 p = 28
                 (clen,) = struct.unpack_from("<I", rec, p)
                 comp = rec[p + 4 : p + 4 + clen].decode()
@@ -539,11 +546,14 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
         except Exception as exc:  # a broken record ends the readable part
             what = "chunk" if op == Opcode.CHUNK else f"record (opcode 0x{op:02x})"
             why = str(exc) or type(exc).__name__  # a MemoryError says nothing of itself
-            out.error = f"{what} at offset {off} unreadable: {why}"
-            out.error_offset = off
-            out.corrupt = True
-            out.cut_log_ns = c_min
-            break
+            if out.error is None:
+                out.error = f"{what} at offset {off} unreadable: {why}"
+                out.error_offset = off
+                out.corrupt = True
+                out.cut_log_ns = c_min
+            if not past_damage:
+                break
+            out.skipped.append((off, f"{what} at offset {off} unreadable: {why}", c_min, c_max))
         off = end
     if (out.error is None and out.has_footer and out.stated_chunks is not None
             and out.stated_chunks != out.chunk_count):  # a chunk cut out of a whole file

@@ -132,14 +132,16 @@ class Recording:
     def stream(cls, path: str | os.PathLike, topics: Iterable[str] | None,
                on_message: Callable[[Any, int, int, bytes], None],
                progress: Callable[[int, int], None] | None = None, *,
-               by_channel: bool = False) -> Recording:
+               by_channel: bool = False, past_damage: bool = False) -> Recording:
         """Read `path` a record at a time and hand each message of `topics` (None: every
         topic) to `on_message(topic, log_time, publish_time, data)`, in file order, keeping
         no message and no chunk: a recording of any length is read in bounded memory. The
         Recording returned has the channels, metadata and the file's state, no messages.
         A chunk that cannot be read whole gives none of its messages (as `open`).
         `progress(bytes read, file size)` is told as the reading goes. `by_channel`: the
-        message's channel id is handed over instead of its topic."""
+        message's channel id is handed over instead of its topic. `past_damage`: a whole
+        record that cannot be read is stepped over and the messages after it are read too
+        (`skipped`; what a repair recovers); by default the read stops there."""
         want = None if topics is None else set(topics)
         bad = {"n": 0, "first": ""}  # the messages `on_message` could not take (BAD_MESSAGE)
         take = on_message
@@ -161,6 +163,9 @@ class Recording:
         failed: list[Exception] = []  # what `on_message` raised: the caller's, not damage
 
         def sink(raw: bytes, schemas: dict, channels: dict) -> None:
+            if failed:  # the caller's own error, read on past damage: raised at the end
+                return
+
             def keep(cid: int) -> bool:
                 got = topic_of.get(cid, _UNSEEN)
                 if got is _UNSEEN:
@@ -188,7 +193,7 @@ class Recording:
 
             progress = bar = ReadProgress(str(path), _progress_text)
         try:
-            rec = cls._scan_file(path, sink, progress)
+            rec = cls._scan_file(path, sink, progress, past_damage=past_damage)
         finally:
             if bar is not None:
                 bar.close()
@@ -225,7 +230,7 @@ class Recording:
     @classmethod
     def _scan_file(cls, path: str | os.PathLike, sink: Any,
                    progress: Callable[[int, int], None] | None, *,
-                   chunks: bool = True) -> Recording:
+                   chunks: bool = True, past_damage: bool = False) -> Recording:
         p = Path(path)
         try:
             require_regular(p, "recording")  # not a device: /dev/zero never ends
@@ -238,7 +243,8 @@ class Recording:
             try:
                 size = os.fstat(fd).st_size
                 on_read = (lambda off: progress(off, size)) if progress is not None else None
-                sc = scan(FileBytes(f, size, on_read), sink, chunks=chunks)
+                sc = scan(FileBytes(f, size, on_read), sink, chunks=chunks,
+                          past_damage=past_damage)
             except ValueError as exc:
                 raise RecordingError(f"{p}: {exc}") from exc
             except OSError as exc:  # the disk failed mid-way (EIO): not a broken record
@@ -250,6 +256,11 @@ class Recording:
     def truncated(self) -> bool:
         """True if the file has no footer (killed run) or ends in a broken record."""
         return not self._scan.has_footer or self._scan.error is not None
+
+    @property
+    def skipped(self) -> list[tuple[int, str, int | None, int | None]]:
+        """Whole records stepped over unread (`stream(past_damage=True)`)."""
+        return self._scan.skipped
 
     @property
     def error(self) -> str | None:

@@ -330,3 +330,29 @@ def test_diff_json_is_strict_json_with_a_nan_parameter(emgs, tmp_path):
     text = out.read_text()
     json.loads(text, parse_constant=refuse)
     assert '"NaN"' in text
+
+
+def test_inspect_and_repair_read_past_a_damaged_chunk(emgs, tmp_path, capsys):
+    """One flipped bit in the first chunk: `inspect` said nothing after it was readable and
+    `--repair` wrote 0 messages, though the later chunks were whole. Now both step over it;
+    `check` of the damaged file still stops there (exit 4), and of the repair too."""
+    data = bytearray(emgs.read_bytes())
+    chunks = [o for o, op, _ln in _records(bytes(data)) if op == 0x06]
+    assert len(chunks) >= 2
+    data[chunks[0] + 9 + 60] ^= 0x01  # inside the first chunk's compressed records
+    bad = tmp_path / "crc.mcap"
+    bad.write_bytes(bytes(data))
+    whole = sum(1 for _ in Recording.open(emgs).raw_messages())
+    assert hil(["inspect", str(bad)]) == 0
+    out = capsys.readouterr().out
+    assert "DAMAGED: 1 unreadable record(s) stepped over" in out
+    fixed = tmp_path / "fixed.mcap"
+    assert hil(["inspect", str(bad), "--repair", str(fixed)]) == 0
+    got = Recording.open(fixed)
+    n = sum(1 for _ in got.raw_messages())
+    assert 0 < n < whole
+    assert got.metadata()["hil.repair"]["skipped_records"] == "1"
+    capsys.readouterr()
+    assert hil(["check", str(bad)]) == 4
+    assert hil(["check", str(fixed)]) == 4
+    assert "repaired from a damaged" in capsys.readouterr().err
