@@ -140,6 +140,10 @@ class SdoServer:
             return
         n = (data[0] >> 1) & 7
         t.data += data[1 : 8 - n]
+        if t.size is not None and len(t.data) > t.size:  # past the size it indicated: at
+            self._transfer = None  # once, not at the last segment (CiA 301, 0607 0012h)
+            self._sdo_abort(e.index, e.sub, cop.ABORT_LENGTH_HIGH)
+            return
         if not data[0] & 1:
             self._sdo_send(bytes([0x20 | toggle << 4]) + bytes(7))
             return

@@ -108,6 +108,10 @@ def test_abort_codes(bench):
     # size indicated 4, 3 sent
     assert sdo(struct.pack("<BHBI", 0x21, 0x6081, 0, 4))[0] == 0x60
     assert abort_code(sdo(bytes([0x09, 1, 2, 3, 0, 0, 0, 0]))) == cop.ABORT_LENGTH
+    # size indicated 4, a first segment of 7 (not the last): past it at once, 0607 0012h
+    # (CiA 301; it had been taken and aborted only at the last segment)
+    assert sdo(struct.pack("<BHBI", 0x21, 0x6081, 0, 4))[0] == 0x60
+    assert abort_code(sdo(bytes([0x00, 1, 2, 3, 4, 5, 6, 7]))) == cop.ABORT_LENGTH_HIGH
     # mapping change while TPDO1 is valid (harness default) -> 08000022 (CiA 301)
     assert abort_code(sdo(struct.pack("<BHBI", 0x2F, 0x1A00, 0, 0))) == cop.ABORT_DATA_STATE
     # invalidate TPDO2, then map a non-mappable object, then too many bits
