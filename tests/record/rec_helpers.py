@@ -83,3 +83,41 @@ def make(path):
         rec.can("can0", frame(0x181, b""), "rx", T0 + 500_000_000, None)
         rec.dio("io", "DI1", True, T0, None)
     return path
+
+
+def copy_mcap(src, dst, message=None, *, metadata=None, attachment=None,
+              compression=None):
+    """`src` copied to `dst` with the `mcap` library's writer (another writer than hil's):
+    each message through `message(topic, data, log_time) -> (data, log_time)` (None: as it
+    is), the metadata `metadata` added (a name given replaces the original's record), and
+    `attachment` (name, bytes) as a YAML attachment."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        r = make_reader(f)
+        w = Writer(g, compression=compression or CompressionType.ZSTD)
+        w.start(profile="", library="test")
+        ids: dict[int, int] = {}
+        sids: dict[int, int] = {}
+        for schema, ch, msg in r.iter_messages(log_time_order=False):
+            if schema is not None and schema.id not in sids:
+                sids[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+            if ch.id not in ids:
+                ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding,
+                                                sids.get(schema.id, 0) if schema else 0,
+                                                dict(ch.metadata))
+            data, lt = msg.data, msg.log_time
+            if message is not None:
+                data, lt = message(ch.topic, data, lt)
+            w.add_message(ids[ch.id], log_time=lt, publish_time=msg.publish_time, data=data)
+        f.seek(0)
+        for m in make_reader(f).iter_metadata():
+            if m.name not in (metadata or {}):
+                w.add_metadata(m.name, dict(m.metadata))
+        for name, values in (metadata or {}).items():
+            w.add_metadata(name, values)
+        if attachment:
+            w.add_attachment(0, 0, attachment[0], "application/yaml", attachment[1])
+        w.finish()
+    return dst

@@ -11,8 +11,8 @@ import struct
 from pathlib import Path
 
 import pytest
-from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
+from rec_helpers import copy_mcap
 
 from hil.bench.bench import load_bench
 from hil.cli import main as hil
@@ -41,32 +41,15 @@ def _rewrite(src: Path, dst: Path, payload, every: int = 7, *, log_time=None,
              compression: CompressionType = CompressionType.ZSTD) -> Path:
     """`src` again with every `every`-th message of each topic replaced by `payload`."""
     seen: dict[str, int] = {}
-    with open(src, "rb") as f, open(dst, "wb") as g:
-        r = make_reader(f)
-        w = Writer(g, compression=compression)
-        w.start(profile="", library="test")
-        ids: dict[int, int] = {}
-        sids: dict[int, int] = {}
-        for schema, ch, msg in r.iter_messages(log_time_order=False):
-            if schema is not None and schema.id not in sids:
-                sids[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
-            if ch.id not in ids:
-                ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding,
-                                                sids.get(schema.id, 0) if schema else 0,
-                                                dict(ch.metadata))
-            n = seen[ch.topic] = seen.get(ch.topic, 0) + 1
-            data, lt = msg.data, msg.log_time
-            if n % every == 0:
-                data = payload if isinstance(payload, bytes) else payload.encode()
-                lt = log_time if log_time is not None else lt
-            w.add_message(ids[ch.id], log_time=lt, publish_time=msg.publish_time, data=data)
-        f.seek(0)
-        for m in make_reader(f).iter_metadata():
-            w.add_metadata(m.name, dict(m.metadata))
-        if attachment:
-            w.add_attachment(0, 0, attachment[0], "application/yaml", attachment[1])
-        w.finish()
-    return dst
+
+    def message(topic: str, data: bytes, lt: int) -> tuple[bytes, int]:
+        n = seen[topic] = seen.get(topic, 0) + 1
+        if n % every:
+            return data, lt
+        return (payload if isinstance(payload, bytes) else payload.encode(),
+                log_time if log_time is not None else lt)
+
+    return copy_mcap(src, dst, message, attachment=attachment, compression=compression)
 
 
 HOSTILE = {

@@ -15,8 +15,7 @@ from pathlib import Path
 
 import pytest
 import zstandard
-from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
+from rec_helpers import copy_mcap
 
 from hil.bench.bench import load_bench
 from hil.cli import main as hil
@@ -43,34 +42,11 @@ def _rewrite(src: Path, dst: Path, change: Callable[[str, dict], dict | None] | 
              meta: dict[str, dict[str, str]] | None = None) -> Path:
     """`src` again, each JSON message passed through `change(topic, obj)` (None: unchanged),
     the metadata `meta` added (a name given replaces the original's record)."""
-    with open(src, "rb") as f, open(dst, "wb") as g:
-        r = make_reader(f)
-        w = Writer(g, compression=CompressionType.ZSTD)
-        w.start(profile="", library="test")
-        ids: dict[int, int] = {}
-        sids: dict[int, int] = {}
-        for schema, ch, msg in r.iter_messages(log_time_order=False):
-            if schema is not None and schema.id not in sids:
-                sids[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
-            if ch.id not in ids:
-                ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding,
-                                                sids.get(schema.id, 0) if schema else 0,
-                                                dict(ch.metadata))
-            data = msg.data
-            if change is not None:
-                new = change(ch.topic, json.loads(data))
-                if new is not None:
-                    data = json.dumps(new).encode()
-            w.add_message(ids[ch.id], log_time=msg.log_time, publish_time=msg.publish_time,
-                          data=data)
-        f.seek(0)
-        for m in make_reader(f).iter_metadata():
-            if m.name not in (meta or {}):
-                w.add_metadata(m.name, dict(m.metadata))
-        for name, values in (meta or {}).items():
-            w.add_metadata(name, values)
-        w.finish()
-    return dst
+    def message(topic: str, data: bytes, lt: int) -> tuple[bytes, int]:
+        new = change(topic, json.loads(data)) if change is not None else None
+        return (data if new is None else json.dumps(new).encode()), lt
+
+    return copy_mcap(src, dst, message, metadata=meta)
 
 
 def _records(data: bytes) -> list[tuple[int, int, int]]:
