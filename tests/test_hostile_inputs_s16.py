@@ -14,3 +14,27 @@ def test_hil_drive_state_naming_a_file_is_a_usage_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"--state {f}: not a directory" in err and "Errno" not in err
     assert f.read_text() == "{}"  # nothing lost
+
+
+def test_a_subprocess_drive_that_dies_at_start_is_said_with_its_own_words():
+    """`hil drive` ending before "ready": the runner had gone on and reported a timeout or
+    "no zenoh peer" later; it now says the exit code and the drive's last lines at once."""
+    import subprocess
+    import sys
+
+    import pytest
+
+    from hil.virtual.world import SubprocessWorld
+
+    w = SubprocessWorld.__new__(SubprocessWorld)  # only its start-up wait
+    w._out = {}
+    p = subprocess.Popen([sys.executable, "-c", "print('hil drive: --can x: refused'); "
+                          "raise SystemExit(2)"], stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        with pytest.raises(RuntimeError, match=r"exited with code 2; output: hil drive: "
+                                                r"--can x: refused"):
+            w._wait_ready("drive1", p, 20.0)
+    finally:
+        p.kill()
+        p.wait()

@@ -565,6 +565,7 @@ class SubprocessWorld:
     def _wait_ready(self, name: str, p: subprocess.Popen, timeout_s: float) -> None:
         seen = self._out.setdefault(name, [])
         done = threading.Event()
+        ready = threading.Event()
 
         def pump() -> None:
             assert p.stdout is not None
@@ -575,13 +576,19 @@ class SubprocessWorld:
                 seen.append(line.rstrip())
                 del seen[:-50]
                 if "ready" in line:
+                    ready.set()
                     done.set()
-            done.set()
+            done.set()  # its output ended: the process is ending
 
         threading.Thread(target=pump, name=f"hil-drive-{name}-out", daemon=True).start()
-        if not done.wait(timeout_s) or p.poll() is not None:
-            raise RuntimeError(f"virtual drive {name}: `hil drive` not ready within "
-                               f"{timeout_s:g} s; output: {' | '.join(seen[-5:]) or 'none'}")
+        done.wait(timeout_s)
+        if not ready.is_set() or p.poll() is not None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                p.wait(timeout=2)  # ended at start: its exit code and its own words
+            end = (f"exited with code {p.returncode}" if p.returncode is not None
+                   else f"not ready within {timeout_s:g} s")
+            raise RuntimeError(f"virtual drive {name}: `hil drive` {end}; output: "
+                               f"{' | '.join(seen[-5:]) or 'none'}")
 
     def _control_line(self, name: str, text: str) -> None:
         try:
