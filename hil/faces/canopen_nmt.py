@@ -19,6 +19,7 @@ class NmtErrorControl:
                 run.last_data = None
                 run.last_sent = None
                 run.pending = None
+                run.sampled = None  # a type 252 TPDO samples again at the next SYNC
             # SYNC supervision starts anew: the SYNCs outside OPERATIONAL were not watched, so
             # the last one seen before is no measure of the period (no stale AL3E3 / AL301)
             self.comm.sync_reset()

@@ -199,6 +199,8 @@ class PdoEngine:
                 raise ObjectError(
                     index, sub, cop.ABORT_VALUE_RANGE, f"transmission type {value}"
                 )
+            if not rx:  # a type 252 sample belongs to the type it was taken under
+                self._pdo[4 + (index & 3)].sampled = None
         elif sub == 3 and valid and not rx:
             raise ObjectError(index, sub, cop.ABORT_DATA_STATE, "inhibit time while PDO valid")
 

@@ -475,6 +475,9 @@ class ModbusSlave:
             new = LineSettings(mode, baud or self.line.baud, fmt)
             if new != self.line:
                 self._next_line = new  # applied once the reply to this write is sent
+                # written over the line itself: from now on the parameters set it, also at
+                # a power cycle (the line the face was built with was where it began)
+                self._explicit_line = (None, None, None)
 
     def _apply_line(self) -> None:
         if self._next_line is not None:

@@ -333,7 +333,8 @@ class Drive:
         if 0x2000 <= index <= 0x2FFF:
             name = self._param_of(index, sub)
             if name == "P3.001":  # over CANopen only digit Z is set, the others stay (L10542)
-                value = (self.params.get(name) & ~0x0F00) | (value & 0x0F00)
+                # (of the value stored: a digit written before, waiting for the power cycle)
+                value = (self.params.stored(name) & ~0x0F00) | (value & 0x0F00)
             try:
                 self.params.write(name, value)
             except ObjectError:

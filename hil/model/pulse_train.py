@@ -735,8 +735,6 @@ def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
         # the range is of the command *pulse* input ratio (L8543-8547): PT modes only
         if d.options.pt_gear_check != "refuse" or (d.params.get("P1.001") & 0xFF) not in PT_YX:
             return
-        if name in ("P2.060", "P2.061", "P2.062") and not _gnum_wired(d):
-            return  # no GNUM0/GNUM1 on a DI: the numerator is P1.044 (L9850), as AL045 says
         p = d.params
         m = value if name == "P1.045" else p.get("P1.045")
         nums = [value] if name != "P1.045" else _numerators(d)

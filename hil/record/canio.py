@@ -26,17 +26,22 @@ def frame_from_json(obj: dict, timestamp: float, channel: Any) -> can.Message:
     carries (an identifier past 11/29 bits or negative, more data than the DLC or the frame
     type allows), which a reader skips and counts as a message of the wrong shape: a
     candump line `-01#00`, say, or a BLF writer's struct.error."""
+    data = bytes.fromhex(obj.get("data", ""))
+    fd = bool(obj.get("fd", False))
+    dlc = int(obj.get("dlc", len(data)))
+    if not fd and dlc > 8 and len(data) == 8:  # a classic frame's raw DLC 9-15 (SocketCAN's
+        dlc = 8  # CC_LEN8_DLC) carries 8 bytes: kept as such
     return can.Message(
         timestamp=timestamp,
         arbitration_id=int(obj["id"]),
         is_extended_id=bool(obj.get("ext", False)),
         is_remote_frame=bool(obj.get("rtr", False)),
         is_error_frame=bool(obj.get("err", False)),
-        is_fd=bool(obj.get("fd", False)),
+        is_fd=fd,
         bitrate_switch=bool(obj.get("brs", False)),
         error_state_indicator=bool(obj.get("esi", False)),
-        dlc=int(obj.get("dlc", len(obj.get("data", "")) // 2)),
-        data=bytes.fromhex(obj.get("data", "")),
+        dlc=dlc,
+        data=data,
         channel=channel,
         is_rx=obj.get("dir", "rx") != "tx",
         check=True,
@@ -74,7 +79,10 @@ def can_messages(
     names = bus_topics(rec, bus)
     for topic, lt, pt, obj in rec.messages(list(names)):
         b = names[topic]
-        yield b, frame_from_json(obj, (lt if time == "log" else pt) / 1e9, b)
+        try:
+            yield b, frame_from_json(obj, (lt if time == "log" else pt) / 1e9, b)
+        except (ValueError, TypeError, KeyError):  # no frame a CAN bus carries: skipped
+            continue
 
 
 def stream_can(path: str | Path, bus: str | None, on_frame: Callable[[str, can.Message], None],

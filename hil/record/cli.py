@@ -150,12 +150,15 @@ def repair(rec: Recording, out: Path, *, stream: bool = False) -> int:
         else:
             for cid, lt, pt, data in rec._raw(None):
                 write(cid, lt, pt, data)
+        before = rec.metadata().get("hil.repair", {})  # a repair of a repaired copy: the
+        # first source's cut stays said (a later record of the name wins)
         w.add_metadata(
             "hil.repair",
             {
                 "source": str(rec.path),
-                "source_truncated": str(rec.truncated).lower(),
-                "source_error": rec.error or "",
+                "source_truncated": str(rec.truncated
+                                        or before.get("source_truncated") == "true").lower(),
+                "source_error": rec.error or before.get("source_error", ""),
                 "messages": str(n),
                 "skipped_records": str(len(rec.skipped)),
             },

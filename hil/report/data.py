@@ -109,7 +109,7 @@ def dut_text(dut: dict[str, str]) -> str:
 
 
 _STEP_TEXT = ("step", "kind", "drive", "file", "status", "message", "event")
-_VERDICT_TEXT = ("spec", "constraint", "status")
+_VERDICT_TEXT = ("status",)  # required (hil.TimingVerdict); spec and constraint may be absent
 _VERDICT_PAIRS = ("window_ms", "uncertainty_ms")
 
 
@@ -126,13 +126,13 @@ def _step_shape(msg: dict) -> None:
 
 
 def _verdict_shape(msg: dict) -> None:
-    """TypeError for a /timing/verdicts record the page cannot show: spec, constraint and
-    status texts; occurrence and step whole numbers; a window and an uncertainty as two
-    numbers (a bound may be null); a measured value a number."""
+    """TypeError for a /timing/verdicts record the page cannot show: a status text, spec
+    and constraint texts where given; occurrence and step whole numbers; a window and an
+    uncertainty as two numbers (a bound may be null); a measured value a number."""
     for k in _VERDICT_TEXT:
         if not isinstance(msg.get(k), str):
             raise TypeError(f"verdict field {k!r} is missing or not text")
-    for k in ("message", "kind", "source"):
+    for k in ("spec", "constraint", "message", "kind", "source"):
         if msg.get(k) is not None and not isinstance(msg[k], str):
             raise TypeError(f"verdict field {k!r} is not text")
     for k in ("occurrence", "step"):
@@ -359,9 +359,10 @@ def truth_fields(spec_ids: list[str] | None) -> frozenset[str] | None:
     from hil.timing.checker import state_fields
     from hil.timing.registry import load_spec_cached
     out = set(_BASE_FIELDS)
+    shipped = {p.stem: p for p in fixture("timing").glob("*.yaml")}
     for sid in spec_ids:
-        path = fixture("timing", f"{sid}.yaml")
-        if not path.is_file():
+        path = shipped.get(sid)  # a shipped id only, never a path the recording names
+        if path is None:
             return None
         try:
             out |= state_fields(load_spec_cached(path))

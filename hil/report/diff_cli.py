@@ -13,7 +13,13 @@ import sys
 from pathlib import Path
 
 from hil.fileio import FileProblem, refuse_input, same_file
-from hil.record.reader import Recording, RecordingError, incomplete, not_hil_file
+from hil.record.reader import (
+    Recording,
+    RecordingError,
+    incomplete,
+    not_hil_file,
+    repaired_cut,
+)
 from hil.report.diff import write_diff
 
 
@@ -36,6 +42,8 @@ def _check_inputs(paths: list[str]) -> tuple[str | None, list[str]]:
         cut = incomplete(p, corrupt=rec.corrupt, truncated=rec.truncated, error=rec.error)
         if cut:
             partial.append(cut)
+        elif (why := repaired_cut(rec.metadata())) is not None:  # cut before its repair
+            partial.append(f"{p}: {why}; compared as far as it goes")
     return None, partial
 
 

@@ -731,10 +731,10 @@ class LiveSource(_LazySource):
                 # what the recorder wrote: the file's head, unread (once closed, the file
                 # is read: its footer and `hil.close` are written outside the queue)
                 meta: dict[str, dict[str, str]] = {}
-                for name, data in written:
-                    meta.setdefault(name, {}).update(data)
+                for name, data in list(written):  # copies: the writer thread may add a
+                    meta.setdefault(name, {}).update(data)  # record or a channel now
                 chans = [SimpleNamespace(topic=t, schema=sch, metadata=md)
-                         for t, (sch, md) in rec.written_channels.items()]
+                         for t, (sch, md) in rec.written_channels.copy().items()]
                 self.meta, self._res = meta, _resolutions(SimpleNamespace(channels=chans), meta)
                 # a recording being written has no footer yet, as the file read would say
                 self.error, self.corrupt, self.truncated = None, False, True

@@ -200,3 +200,28 @@ def test_an_explicit_modbus_line_keeps_winning_over_a_power_cycle():
     d.write_object(0x2302, 0, 1)
     d.power_cycle()
     assert (face.line.mode, face.line.baud) == ("rtu", 115200)
+
+
+def test_review_p3_001_over_canopen_keeps_a_digit_written_before_the_power_cycle(rig):
+    """The other digits come from the value stored (a write of X waiting for the power
+    cycle), not the one in force: a pending X had been lost."""
+    rig.drive.params.write("P3.001", 0x0201)  # X = 1 (9600), ● power cycle
+    assert rig.write(0x2301, 0, 0x0400, 2) is None  # Z = 4 over CANopen
+    rig.drive.power_cycle()
+    assert rig.drive.params.get("P3.001") == 0x0401
+
+
+def test_review_a_line_written_over_modbus_stays_after_a_power_cycle():
+    """A face built with an explicit line (as every virtual drive's is: the port's rate)
+    that is then moved by a Modbus write of P3.001 had gone back to the old rate at the power
+    cycle, while P3.001 said the new one."""
+    d = Drive(inputs={8: True})
+    out: list[bytes] = []
+    face = ModbusSlave(d.params, mode="rtu", baud=38400, send=out.append)
+    d.subscribe(lambda ev: type(ev).__name__ == "PowerCycled" and face.power_cycle())
+    t = S
+    face.feed(mb.rtu_encode(0x7F, bytes([6, 0x03, 0x02, 0x02, 0x01])), t)  # P3.001 = 0x0201
+    face.tick(t + 100 * MS)
+    assert out and face.line.baud == 9600
+    d.power_cycle()
+    assert face.line.baud == 9600 and d.params.get("P3.001") == 0x0201

@@ -115,13 +115,12 @@ def test_monitor_001_in_pt_counts_pulses_from_power_up():
     assert d.params.read("P0.009") == 1000
 
 
-def test_p2_060_is_not_judged_while_no_gnum_input_can_select_it():
-    """L9850: without GNUM0/GNUM1 on a DI the numerator is P1.044, and AL045 already ignores
-    P2.060-P2.062 then (docs/manual-choices.md); a write of one had been refused."""
+def test_p2_060_is_judged_on_its_write_though_no_gnum_input_selects_it_yet():
+    """Our addition (`pt_gear_check`): a P2.060 write is judged even while no GNUM input can
+    select it, since a later DI mapping (P2.014 = GNUM0) would put it in use at once with
+    nothing left to judge it (an outside review of session 16 found that gap when the write
+    was let through)."""
     d = _pt()
-    d.params.write("P2.060", 1000)  # 1000/100000 < 1/4: not selectable, so not judged
-    assert d.params.read("P2.060") == 1000
-    d = _pt(**{"P2.014": 0x0143})  # DI5 = GNUM0: now it can be selected
     with pytest.raises(ModelError, match="1/4 < Nx/M"):
         d.params.write("P2.060", 1000)
 

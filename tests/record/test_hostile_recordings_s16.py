@@ -332,3 +332,54 @@ def test_inspect_and_repair_read_past_a_damaged_chunk(emgs, tmp_path, capsys):
     assert hil(["check", str(bad)]) == 4
     assert hil(["check", str(fixed)]) == 4
     assert "repaired from a damaged" in capsys.readouterr().err
+
+
+def test_review_a_repair_of_a_repair_and_diff_keep_the_cut(emgs, tmp_path, capsys):
+    """A second repair had written `source_truncated: false` over the first's record, and
+    `hil diff` took a repaired cut run as whole (a review of this session's change)."""
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(emgs.read_bytes()[: emgs.stat().st_size // 3])
+    once, twice = tmp_path / "once.mcap", tmp_path / "twice.mcap"
+    assert hil(["inspect", str(cut), "--repair", str(once)]) == 0
+    assert hil(["inspect", str(once), "--repair", str(twice)]) == 0
+    capsys.readouterr()
+    assert hil(["check", str(twice)]) == 4
+    assert "repaired from a" in capsys.readouterr().err
+    assert hil(["diff", str(emgs), str(once), "-o", str(tmp_path / "d.html")]) == 4
+    assert "repaired from a" in capsys.readouterr().err
+
+
+def test_review_a_verdict_without_spec_or_constraint_is_still_shown(emgs, tmp_path, caplog):
+    """hil.TimingVerdict makes spec and constraint optional; the shape check had dropped
+    such a verdict (a failing one disappeared from the page)."""
+    def f(v: dict) -> None:
+        v.pop("spec")
+        v.pop("constraint")
+
+    bad = _rewrite(emgs, tmp_path / "nospec.mcap", _verdict(f))
+    report_data._RUNS.clear()
+    report_data._SUMMARIES.clear()
+    run = report_data.load_run(bad)
+    assert run.verdicts and "wrong shape" not in caplog.text
+
+
+def test_review_recorded_spec_ids_never_reach_the_report_as_paths(emgs, tmp_path,
+                                                                  monkeypatch):
+    """`truth_fields` built fixture("timing", f"{id}.yaml") from the recording's ids: a
+    `../` id opened any YAML file."""
+    evil = tmp_path / "evil.yaml"
+    evil.write_text("id: evil\n")
+    meta = dict(Recording.open(emgs).metadata()["timing"])
+    rel = "../" * 12 + str(evil.with_suffix(""))[1:]
+    bad = _rewrite(emgs, tmp_path / "t.mcap", meta={"timing": meta | {
+        "specs": json.dumps([rel])}})
+    opened: list[str] = []
+    from hil.timing import registry
+
+    real = registry.load_spec_cached
+    monkeypatch.setattr(registry, "load_spec_cached",
+                        lambda p: (opened.append(str(p)), real(p))[1])
+    report_data._RUNS.clear()
+    report_data._SUMMARIES.clear()
+    report_data.load_run(bad)
+    assert not any("evil" in p for p in opened)
