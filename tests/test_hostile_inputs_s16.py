@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from hil.cli import main as hil
 
 
@@ -38,3 +40,63 @@ def test_a_subprocess_drive_that_dies_at_start_is_said_with_its_own_words():
     finally:
         p.kill()
         p.wait()
+
+
+BIG = "9" * 400  # no float holds it: float() raised OverflowError inside the check
+
+PLC = """name: t
+bench_requires: [virtual, motion, pulse, dio]
+steps:
+  - plc_program:
+      axis: {axis}
+      program:
+        - {{SPD: {spd}, DRV: "ADR,+,100,Ps", EXT: {ext}}}
+        - MD
+      expect: {{position: {pos}}}
+"""
+GOOD = {"axis": "{max_speed: 100000, dog: X0, clr: Y8}", "spd": "1000", "ext": "X1",
+        "pos": "100"}
+
+
+def _check(tmp_path, text: str, capsys, bench: str | None = None) -> tuple[int, str]:
+    plan = tmp_path / "p.yaml"
+    plan.write_text(text)
+    args = ["run", "--check", str(plan)] + (["--bench", bench] if bench else [])
+    code = hil(args)
+    return code, capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("field", "value", "said"), [
+    ("axis", f"{{max_speed: {BIG}}}", "plc_program.axis.max_speed: 9999"),
+    ("spd", BIG, "program[0].SPD: 9999"),
+    ("pos", BIG, "plc_program.expect.position: 9999"),
+    ("ext", "X00", "program[0].EXT: 'X00': a PLC line"),
+    ("axis", "{max_speed: 100000, dog: X00}", "plc_program.axis.dog: error 51"),
+    ("axis", "{max_speed: 100000, clr: Y08}", "plc_program.axis.clr: error 53"),
+])
+def test_hostile_plc_program_values_are_refused_by_the_check(tmp_path, capsys, field,
+                                                             value, said):
+    """An outside fuzz (session 16): a 400-digit number in a PLC program was a traceback
+    (exit 1) from `--check`; X00 / Y08 passed and then named no line the bench drives."""
+    assert _check(tmp_path, PLC.format(**GOOD), capsys)[0] == 0
+    code, err = _check(tmp_path, PLC.format(**(GOOD | {field: value})), capsys)
+    assert code == 2 and "p.yaml:" in err and said in err and "Traceback" not in err
+
+
+def test_a_mark_on_a_line_with_a_leading_zero_is_refused_by_the_check(tmp_path, capsys):
+    """`mark: {line: DI07}` passed the check and the step ended in a raw ValueError."""
+    text = ("name: t\nbench_requires: [virtual, motion]\nsteps:\n"
+            "  - mark: {width: 3ms, line: DI07}\n")
+    code, err = _check(tmp_path, text, capsys)
+    assert code == 2 and "p.yaml:4: steps[0].mark.line: 'DI07'" in err
+
+
+def test_a_gear_ratio_past_a_float_is_refused_by_the_check(tmp_path, capsys):
+    """In 1e9 / Out 1e-300 passed the check and the cycle loop raised OverflowError."""
+    from hil.paths import fixture
+
+    text = ("name: t\nbench_requires: [virtual, can, motion]\nsteps:\n"
+            "  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
+            "  - group_gear: {axis: axis2, master: axis1, in: 1000000000, out: 1.0e-300}\n")
+    code, err = _check(tmp_path, text, capsys, str(fixture("benches", "virtual-group.yaml")))
+    assert code == 2 and "p.yaml:5: steps[1].group_gear.out: ratio In/Out" in err

@@ -232,7 +232,9 @@ class AxisParams:
         for name, prefix, top, code in (("dog", "X", 15, 51), ("limit", "X", 125, 51),
                                         ("clr", "Y", 23, 53)):
             val = getattr(self, name)
-            if val and not (re.fullmatch(rf"{prefix}[0-9]{{1,3}}", val) and int(val[1:]) <= top):
+            # (X00 or Y08 would name no line the bench drives: refused, not read as X0 / Y8)
+            if val and not (re.fullmatch(rf"{prefix}(0|[1-9][0-9]{{0,2}})", val)
+                            and int(val[1:]) <= top):
                 raise PlcError(code, f"{name} {val!r}: {prefix}0 ~ {prefix}{top}", field=name)
         if self.pg0 not in ("", "OZ"):
             raise PlcError(52, f"pg0 {self.pg0!r}: OZ (the drive's Z output) or empty",

@@ -18,6 +18,7 @@ them against the recording's ground truth (hil/timing/latch.py).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -284,9 +285,7 @@ class Mark(StepKind):
         m = v.mapping(obj, line, where)
         v.keys(m, {"width", "line"}, where)
         ln = m.get("line", "DI7")
-        if not isinstance(ln, str) or not ln.startswith("DI") or not ln[2:].isascii() \
-                or not ln[2:].isdigit() \
-                or not 1 <= int(ln[2:]) <= 10:
+        if not isinstance(ln, str) or re.fullmatch(r"DI(10|[1-9])", ln) is None:  # DI07: no line
             raise v.err(m.kline("line"), join(where, "line"), f"{ln!r}: a DI line DI1..DI10")
         return MarkArgs(v.duration(m, "width", where, 2_000_000), ln)
 

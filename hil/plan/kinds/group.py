@@ -125,6 +125,10 @@ def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
     if out["gin"] == 0:
         raise v.err(m.kline("in"), join(where, "in"),
                     "ratio 0: nothing would move (group_command 7 ramps a gear out)")
+    if not 1e-9 <= abs(out["gin"] / out["gout"]) <= 1e9:  # 1e9 / 1e-300 overflowed the cycle
+        raise v.err(m.kline("out"), join(where, "out"),
+                    f"ratio In/Out = {out['gin']:g}/{out['gout']:g}: within 1e-9 ~ 1e9 "
+                    "(a slave moved 1e309 times the master would be no axis)")
     if out["axis"] == out["master"]:
         raise v.err(line, where, "an axis cannot be its own master")
     src = m.get("source", "write")

@@ -20,7 +20,6 @@ strokes, WAIT / ACT times and GOTO may name instead of a constant (001:38-44).
 from __future__ import annotations
 
 import dataclasses
-import math
 import re
 from typing import TYPE_CHECKING, Any
 
@@ -47,7 +46,7 @@ if TYPE_CHECKING:
     from hil.plan.steps import Step
 
 _STEP_KEYS = {"SPD", "DRV", "DRVC", "DRVZ", "WAIT", "ACT", "EXT", "GOTO"}
-_X = re.compile(r"^[XMY][0-9]{1,4}$")
+_X = re.compile(r"^[XMY](0|[1-9][0-9]{0,3})$")  # X00 / Y08 name no line: refused
 _DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?|[A-Za-z]{1,2}[0-9]+)"
                   r"\s*,\s*(Ut|Ps)\s*$")
 # meant as a register (R1000, r1000, DR1000, R10000, R0500): checked by operand_register
@@ -66,7 +65,13 @@ def _axis(v: Checker, obj: Any, line: int, where: str) -> AxisParams:
     for k, val in m.items():
         want = type(getattr(AxisParams(), k))
         ok = isinstance(val, want) and not (want is int and isinstance(val, bool))
+        if want in (int, float) and ok and not abs(val) <= 1e12:  # NaN, inf, 10**400
+            raise v.err(m.kline(k), join(where, k),
+                        f"{repr(val)[:40]}: a number (finite, within ±1e12)")
         if want is float and isinstance(val, int) and not isinstance(val, bool):
+            if not abs(val) <= 1e12:
+                raise v.err(m.kline(k), join(where, k),
+                            f"{repr(val)[:40]}: a number (finite, within ±1e12)")
             ok, val = True, float(val)
         if not ok:
             raise v.err(m.kline(k), join(where, k), f"{val!r}: {want.__name__} expected")
@@ -155,8 +160,8 @@ def _expect_value(v: Checker, val: Any, line: int, where: str, kind: str) -> Non
             raise v.err(line, where, f"{val!r}: true or false")
         return
     number = isinstance(val, int | float) and not isinstance(val, bool)
-    if not number or not math.isfinite(val):
-        raise v.err(line, where, f"{val!r}: a number")
+    if not number or not abs(val) <= 1e12:  # NaN, inf and a 400-digit int too
+        raise v.err(line, where, f"{repr(val)[:40]}: a number (finite, within ±1e12)")
     if kind == "int" and val != int(val):
         raise v.err(line, where, f"{val!r}: a whole number (the PLC counts pulses)")
     if kind == "tolerance" and val < 0:
@@ -186,9 +191,10 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
         reg = _register(v, val, m.kline("SPD"), join(where, "SPD"), 30, 32)
         if reg is not None:
             s.spd = reg
-        elif not isinstance(val, int | float) or isinstance(val, bool):
+        elif (not isinstance(val, int | float) or isinstance(val, bool)
+              or not abs(val) <= 1e12):
             raise v.err(m.kline("SPD"), join(where, "SPD"),
-                        f"{val!r}: a speed or a register (error 31)")
+                        f"{repr(val)[:40]}: a speed (within ±1e12) or a register (error 31)")
         else:
             s.spd = float(val)
     drives = [k for k in ("DRV", "DRVC", "DRVZ") if k in m]
