@@ -100,3 +100,31 @@ def test_a_gear_ratio_past_a_float_is_refused_by_the_check(tmp_path, capsys):
             "  - group_gear: {axis: axis2, master: axis1, in: 1000000000, out: 1.0e-300}\n")
     code, err = _check(tmp_path, text, capsys, str(fixture("benches", "virtual-group.yaml")))
     assert code == 2 and "p.yaml:5: steps[1].group_gear.out: ratio In/Out" in err
+
+
+def test_a_plc_programs_timeout_stops_a_move_that_runs_past_it(tmp_path, capsys):
+    """docs/pulse.md: the step fails when the program's time runs out. A 50 s DRV had
+    passed a `timeout: 5s` (the time was looked at only between steps)."""
+    text = """name: t
+bench_requires: [virtual, motion, pulse, dio]
+params:
+  P1.001: 0x0000
+steps:
+  - power_cycle: {battery: true}
+  - di: {SON: on}
+  - wait_until: {do: {BRKR: on}, timeout: 1s}
+  - plc_program:
+      axis: {max_speed: 100000, start_speed: 500, accel_ms: 50}
+      program:
+        - {SPD: 10000, DRV: "ADR,+,500000,Ps"}
+        - MD
+      timeout: 5s
+"""
+    plan = tmp_path / "p.yaml"
+    plan.write_text(text)
+    assert hil(["run", "-j", "1", "--out", str(tmp_path / "out"), str(plan)]) == 1
+    err = capsys.readouterr().err
+    assert "a move ran past the program's time (5 s left at its start)" in err
+    # a move inside its time still passes
+    plan.write_text(text.replace("500000", "20000"))
+    assert hil(["run", "-q", "-j", "1", "--out", str(tmp_path / "out"), str(plan)]) == 0

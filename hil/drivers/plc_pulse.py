@@ -904,7 +904,23 @@ class PulseMaster:
                 raise TimeoutError(f"a stroke-0 move ran {left:g} s without its EXT/ACT "
                                    "transition")
             return
-        cut = self.move(segs, direction, until)
+        # the program's time runs inside a move too: a DRV longer than it stops there (the
+        # deadline had been looked at only between steps, so a 50 s move passed a 5 s limit)
+        end = clock.monotonic_ns() + round(left * S)
+        cut_by = until
+        out_of_time = False
+
+        def stop_at() -> bool:
+            nonlocal out_of_time
+            if cut_by is not None and cut_by():
+                return True
+            out_of_time = clock.monotonic_ns() >= end
+            return out_of_time
+
+        cut = self.move(segs, direction, stop_at)
+        if out_of_time:
+            raise TimeoutError(f"program timeout: a move ran past the program's time ({left:g} "
+                               f"s left at its start), {self.status.remaining} pulses short")
         if cut and ext:
             self._report("ext")  # the remaining pulses are abandoned (001:42-44)
         if not cut:
