@@ -150,18 +150,6 @@ def parsed_once(kind: str, path: str | os.PathLike, parse: Callable[[], T],
     return hit  # type: ignore[return-value]
 
 
-__all__ = [
-    "FileProblem",
-    "atomic_path",
-    "parsed_once",
-    "read_limited",
-    "refuse_input",
-    "require_regular",
-    "same_file",
-    "write_text_atomic",
-]
-
-
 def _finite(obj: Any) -> Any:
     if isinstance(obj, float) and not math.isfinite(obj):
         return "NaN" if obj != obj else ("Infinity" if obj > 0 else "-Infinity")
@@ -180,3 +168,17 @@ def dumps_strict(obj: Any, **kw: Any) -> str:
         return json.dumps(obj, allow_nan=False, **kw)
     except ValueError:
         return json.dumps(_finite(obj), allow_nan=False, **kw)
+
+
+__all__ = [
+    "FileProblem",
+    "atomic_path",
+    "dumps_strict",
+    "parsed_once",
+    "read_limited",
+    "refuse_input",
+    "require_regular",
+    "same_file",
+    "write_text_atomic",
+]
+

@@ -907,12 +907,11 @@ class PulseMaster:
         # the program's time runs inside a move too: a DRV longer than it stops there (the
         # deadline had been looked at only between steps, so a 50 s move passed a 5 s limit)
         end = clock.monotonic_ns() + round(left * S)
-        cut_by = until
         out_of_time = False
 
         def stop_at() -> bool:
             nonlocal out_of_time
-            if cut_by is not None and cut_by():
+            if until is not None and until():
                 return True
             out_of_time = clock.monotonic_ns() >= end
             return out_of_time

@@ -59,7 +59,7 @@ def summarise(rec: Recording, gaps: int = 3,
     if rec.skipped:
         lines.append(f"DAMAGED: {len(rec.skipped)} unreadable record(s) stepped over, the "
                      "records around them read:")
-        lines += [f"  {why}" for _off, why, _lo, _hi in rec.skipped[:10]]
+        lines += [f"  {why}" for why in rec.skipped[:10]]
         if len(rec.skipped) > 10:
             lines.append(f"  ... and {len(rec.skipped) - 10} more")
         if not rec._scan.has_footer:

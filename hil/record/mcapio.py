@@ -336,9 +336,8 @@ class Scan:
     # before it was read, none from it on
     cut_log_ns: int | None = None
     chunk_count: int = 0  # chunk records met (read or stepped over)
-    #: whole records that could not be read and were stepped over (`past_damage`): offset,
-    #: why, and a chunk's log-time span (None when its header was unreadable)
-    skipped: list[tuple[int, str, int | None, int | None]] = field(default_factory=list)
+    #: why each whole record that could not be read was stepped over (`past_damage`)
+    skipped: list[str] = field(default_factory=list)
     stated_chunks: int | None = None  # what the summary's Statistics record says
 
 
@@ -497,11 +496,9 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             continue
         rec = data[off + 9 : end]
         c_min: int | None = None
-        c_max: int | None = None
         try:
             if op == Opcode.CHUNK:
-                _c_min, _c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(rec, 0)
-                c_min, c_max = _c_min, _c_max
+                c_min, _c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(rec, 0)
                 p = 28
                 (clen,) = struct.unpack_from("<I", rec, p)
                 comp = rec[p + 4 : p + 4 + clen].decode()
@@ -546,14 +543,14 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
         except Exception as exc:  # a broken record ends the readable part
             what = "chunk" if op == Opcode.CHUNK else f"record (opcode 0x{op:02x})"
             why = str(exc) or type(exc).__name__  # a MemoryError says nothing of itself
+            text = f"{what} at offset {off} unreadable: {why}"
             if out.error is None:
-                out.error = f"{what} at offset {off} unreadable: {why}"
-                out.error_offset = off
+                out.error, out.error_offset = text, off
                 out.corrupt = True
                 out.cut_log_ns = c_min
             if not past_damage:
                 break
-            out.skipped.append((off, f"{what} at offset {off} unreadable: {why}", c_min, c_max))
+            out.skipped.append(text)
         off = end
     if (out.error is None and out.has_footer and out.stated_chunks is not None
             and out.stated_chunks != out.chunk_count):  # a chunk cut out of a whole file

@@ -258,8 +258,8 @@ class Recording:
         return not self._scan.has_footer or self._scan.error is not None
 
     @property
-    def skipped(self) -> list[tuple[int, str, int | None, int | None]]:
-        """Whole records stepped over unread (`stream(past_damage=True)`)."""
+    def skipped(self) -> list[str]:
+        """Why each whole record was stepped over unread (`stream(past_damage=True)`)."""
         return self._scan.skipped
 
     @property

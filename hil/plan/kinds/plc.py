@@ -65,16 +65,15 @@ def _axis(v: Checker, obj: Any, line: int, where: str) -> AxisParams:
     for k, val in m.items():
         want = type(getattr(AxisParams(), k))
         ok = isinstance(val, want) and not (want is int and isinstance(val, bool))
-        if want in (int, float) and ok and not abs(val) <= 1e12:  # NaN, inf, 10**400
-            raise v.err(m.kline(k), join(where, k),
-                        f"{repr(val)[:40]}: a number (finite, within ±1e12)")
         if want is float and isinstance(val, int) and not isinstance(val, bool):
-            if not abs(val) <= 1e12:
-                raise v.err(m.kline(k), join(where, k),
-                            f"{repr(val)[:40]}: a number (finite, within ±1e12)")
-            ok, val = True, float(val)
+            ok = True  # an int where a float goes: converted once it is in range
         if not ok:
             raise v.err(m.kline(k), join(where, k), f"{val!r}: {want.__name__} expected")
+        if want in (int, float):
+            if not abs(val) <= 1e12:  # NaN, inf, 10**400 (float() of it overflows)
+                raise v.err(m.kline(k), join(where, k),
+                            f"{repr(val)[:40]}: a number (finite, within ±1e12)")
+            val = want(val)
         values[k] = val
     p = AxisParams(**values)
     try:
