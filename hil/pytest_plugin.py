@@ -28,6 +28,7 @@ Marker `hil`: the test uses a bench. Fixtures:
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import re
 from collections.abc import Callable, Iterator
@@ -329,10 +330,71 @@ def hil_recorder(request: pytest.FixtureRequest) -> Iterator[Any]:
                                                                          path)))
     rec = Recorder(path, metadata={"pytest_nodeid": request.node.nodeid})
     yield rec
-    rec.close()
+    # closed once every fixture of the test is torn down (`pytest_runtest_teardown`), so
+    # that a teardown error of a fixture torn down after this one still reaches `hil.result`
+    request.node.stash[_OPEN] = rec
+    request.config.stash.setdefault(_UNFINISHED, []).append(request.node)
 
 
 _REPORTS = pytest.StashKey[dict[str, pytest.TestReport]]()
+_OPEN = pytest.StashKey[Any]()  # the test's recorder, closed after its teardown
+_RESULT = pytest.StashKey[dict]()  # `hil.result` as `hil_session` left it
+_UNFINISHED = pytest.StashKey[list]()  # items whose recording is still open
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_sessionfinish(session: pytest.Session) -> Any:
+    """A run stopped inside a test (Ctrl-C) tears its fixtures down here, not in
+    `pytest_runtest_teardown`: close those recordings too."""
+    try:
+        return (yield)
+    finally:
+        for item in list(session.config.stash.get(_UNFINISHED, [])):
+            _finish_recording(item, None)
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Any:
+    """After every fixture of the test is torn down: write `hil.result` (a teardown error
+    makes a passing test's result `error`) and close the recording."""
+    error: BaseException | None = None
+    try:
+        return (yield)
+    except BaseException as e:
+        error = e
+        raise
+    finally:
+        _finish_recording(item, error)
+
+
+def _finish_recording(item: pytest.Item, error: BaseException | None) -> None:
+    rec = item.stash.get(_OPEN, None)
+    result = item.stash.get(_RESULT, None)
+    if rec is None:
+        return
+    unfinished = item.config.stash.get(_UNFINISHED, [])
+    if item in unfinished:
+        unfinished.remove(item)
+    try:
+        if result is not None:
+            if error is not None and result["status"] in ("pass", "skipped"):
+                result = {**result, **_teardown_outcome(error)}
+            rec.add_metadata("hil.result", result)
+    finally:
+        del item.stash[_OPEN]
+        rec.close()
+
+
+def _teardown_outcome(error: BaseException) -> dict[str, str]:
+    """`hil.result`'s status and reason for an error raised while the test's fixtures were
+    torn down (the first of several)."""
+    while isinstance(error, BaseExceptionGroup) and error.exceptions:
+        error = error.exceptions[0]
+    if isinstance(error, KeyboardInterrupt):
+        return {"status": "aborted", "reason": "interrupted (SIGINT) during teardown"}
+    what = str(error).splitlines()[0] if str(error) else ""
+    reason = f"teardown failed: {type(error).__name__}: {what}".rstrip(": ")
+    return {"status": "error", "reason": reason[:300]}
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)
@@ -386,9 +448,10 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
                 safe = go_safe(session, reason, hil_recorder)
             finally:
                 session.close()
-                hil_recorder.add_metadata("hil.result", {
+                # written when the recording closes, after the other fixtures' teardown
+                request.node.stash[_RESULT] = {
                     "status": status, "reason": reason,
-                    "safe_state_ok": safe.ok if safe is not None else ""})
+                    "safe_state_ok": safe.ok if safe is not None else ""}
 
 
 @pytest.fixture
@@ -445,6 +508,8 @@ def hil_check(hil_recorder: Any) -> Callable[..., list]:
     from hil.timing.source import RecordingSource
     from hil.timing.spec import load_spec
 
+    recorded: set[str] = set()  # a verdict judged again by a later call is recorded once
+
     def run(spec: str | Path, *, binding: dict | None = None, allow_inconclusive: bool = False,
             **kw: Any) -> list:
         path = Path(spec)
@@ -454,7 +519,9 @@ def hil_check(hil_recorder: Any) -> Callable[..., list]:
         loaded = load_spec(path)
         verdicts = check(loaded, RecordingSource(hil_recorder.path), binding=binding, **kw)
         for v in verdicts:  # on the recording, as a plan's check_timing records them
-            if v.status != "skipped":
+            key = json.dumps([v.to_dict(), binding or {}], sort_keys=True, default=str)
+            if v.status != "skipped" and key not in recorded:
+                recorded.add(key)
                 hil_recorder.verdict(v.to_dict(), binding=binding or {})
         if not any(v.status != "skipped" for v in verdicts):  # nothing judged is not a pass
             why = "; ".join(dict.fromkeys(v.message for v in verdicts)) or "no occurrence"

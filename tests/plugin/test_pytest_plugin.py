@@ -329,3 +329,68 @@ def test_a_tag_the_project_declares_as_a_marker_is_still_applied(pytester: pytes
     assert "1 test collected" in result.stdout.str() or "emgs" in result.stdout.str(), \
         result.stdout.str()
     assert "not applied" not in result.stdout.str()
+
+
+TEARDOWN = '''
+import pytest
+
+@pytest.fixture
+def axis(hil_drive):            # torn down before hil_session: its error came too late
+    yield hil_drive
+    raise RuntimeError("the axis fixture could not park")
+
+@pytest.fixture
+def late(hil_recorder):         # torn down after the recorder's own fixture
+    yield
+    raise ValueError("late fixture broke")
+
+@pytest.mark.hil
+def test_teardown_fails(axis):
+    axis.set_function("SON", True)
+
+@pytest.mark.hil
+def test_late_teardown_fails(late, hil_drive):
+    hil_drive.set_function("SON", True)
+
+@pytest.mark.hil
+def test_clean(hil_drive):
+    hil_drive.set_function("SON", True)
+
+@pytest.mark.hil
+def test_check_twice(hil_drive, hil_recorder, hil_check):
+    hil_drive.write_param("P1.042", 80)
+    hil_drive.set_function("SON", True)
+    hil_drive.dio.wait_for("DO6", True, 2.0)
+    first = hil_check("servo_on_brake", params={"P1.042": 80})
+    second = hil_check("servo_on_brake", params={"P1.042": 80})
+    assert [v.to_dict() for v in first] == [v.to_dict() for v in second]
+'''
+
+
+def test_a_fixture_teardown_error_is_the_recordings_result(pytester: pytest.Pytester,
+                                                           tmp_path) -> None:
+    """A fixture's teardown error is an error of the test in pytest, so its recording must
+    not say `pass` (an outside review found `hil.result` pass beside pytest's ERROR); a
+    `hil_check` of the same spec twice records each verdict once."""
+    from hil.record.reader import Recording
+
+    pytester.makepyfile(test_td=TEARDOWN)
+    out = tmp_path / "out"
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", f"--hil-out={out}")
+    result.assert_outcomes(passed=4, errors=2)
+
+    def rec_of(part: str) -> Recording:
+        [path] = [p for p in out.glob("*.mcap") if part in p.name]
+        return Recording.open(path)
+
+    for part, why in (("test_teardown_fails", "could not park"),
+                      ("test_late_teardown_fails", "late fixture broke")):
+        res = rec_of(part).metadata()["hil.result"]
+        assert res["status"] == "error" and why in res["reason"], res
+        assert res["safe_state_ok"] in (True, "True", "true"), res
+    assert rec_of("test_clean").metadata()["hil.result"]["status"] == "pass"
+    twice = rec_of("test_check_twice")
+    assert not twice.truncated
+    verdicts = [m for *_t, m in twice.messages(["/timing/verdicts"])]
+    keys = [(v["spec"], v["constraint"], v["occurrence"], v["t_ns"]) for v in verdicts]
+    assert verdicts and len(keys) == len(set(keys)), keys
