@@ -185,6 +185,11 @@ _INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
 _YAML11_ONLY = re.compile(r"^[-+]?(0[0-9_]+|[0-9][0-9_]*(:[0-5]?[0-9])+(\.[0-9_]*)?)$")
 
 
+_ODD_NAMES = {"\u2028": "LINE SEPARATOR", "\u2029": "PARAGRAPH SEPARATOR",
+              "\x85": "NEXT LINE"}
+_ODD_BREAKS = re.compile("[\u2028\u2029\x85]")
+
+
 def load_yaml_text(text: str, file: str, error: type[FileError] = FileError) -> Any:
     """Parse YAML keeping line numbers; problems raise `error(file, line, field, problem)`."""
     max_bytes = limit("HIL_YAML_MAX_BYTES", 1 << 20)
@@ -194,6 +199,12 @@ def load_yaml_text(text: str, file: str, error: type[FileError] = FileError) -> 
     if "\0" in text:
         raise error(file, text.count("\n", 0, text.index("\0")) + 1, "(file)",
                     "NUL byte: not a text file")
+    odd = _ODD_BREAKS.search(text)
+    if odd:  # YAML breaks a line there and editors do not: every later line would be off
+        raise error(file, text.count("\n", 0, odd.start()) + 1, "(file)",
+                    f"U+{ord(odd.group()):04X} ({_ODD_NAMES[odd.group()]}): YAML reads it as a "
+                    "line break, most editors do not; remove it, or write it as an escape "
+                    "in a double-quoted string")
     if _FAST is not None and _shipped(file):
         try:
             return _load(text, file, error, _FAST)

@@ -269,8 +269,9 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
 # the bench runs on this long (what closing a real-time run takes, and more than the drive
 # needs to cut torque after the brake engaged, P1.043): its reaction is on the record.
 SAFE_TAIL_NS = 200_000_000
-# a `wait_until` longer than the bench's step timeout: the step's watchdog waits this much past
-# the condition's own timeout, so the step fails saying what it saw (docs/plans.md)
+# a step whose own timeout (`wait_until`, `pr_wait`, ...) or `wait` is longer than the bench's
+# step timeout: the step's watchdog waits this much past it, so the step fails saying what it
+# saw, or ends (docs/plans.md)
 WAIT_UNTIL_GRACE_NS = 1_000_000_000
 
 
@@ -454,9 +455,9 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
         if s.name:
             ctx.started[s.name] = clock.time_ns()
         timeout = s.timeout_ns or ctx.bench.timeouts["step"]
-        if s.kind == "wait_until":  # its own timeout (a failure that says what it saw) comes
-            own = s.args.timeout or ctx.bench.timeouts["wait_until"]  # first: the step's
-            timeout = max(timeout, own + WAIT_UNTIL_GRACE_NS)  # watchdog waits longer
+        own = s.action.own_timeout_ns(ctx.bench)  # its own timeout (a failure that says
+        if own:  # what it saw) or a `wait` comes first: the step's watchdog waits longer
+            timeout = max(timeout, own + WAIT_UNTIL_GRACE_NS)
         try:
             ctx.session.check_lease()  # a bench behind a gateway: only while the lease holds
             ctx.session.check_alive()  # a virtual bench: only while its drive processes live

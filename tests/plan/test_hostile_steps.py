@@ -106,6 +106,14 @@ REFUSED = [
     ("fault: {can: duplicate_pdo, cob_id: 0x201, data: 12}", "data"),
     ("produce: {sync: 1ns}", "sync"),
     ("produce: {heartbeat: 999us}", "heartbeat"),
+    # two spellings of one key (an outside fuzz: the last one won unseen), a Par index in
+    # other digits, a NaN constant (every constraint reading it judged "cannot judge")
+    ("pr_table: {1: {type: single, data: 1}, '01': {type: single, data: 2}}", "named twice"),
+    ("group_command: {axis: x, code: 1, par: {3: 1, '03': 2}}", "Par3 is named twice"),
+    ("group_command: {axis: x, code: 1, par: {'+3': 1}}", "in digits"),
+    ("group_command: {axis: x, code: 1, par: {'٣': 1}}", "in digits"),
+    ("check_timing: {spec: servo_on_brake, constants: {tol: .nan}}", "finite"),
+    ("check_timing: {spec: servo_on_brake, constants: {tol: -.inf}}", "finite"),
     # raw SDO objects
     ("sdo: {'0x1017h:300': 20}", "sub-index"),
     ("sdo: {'1016:256': 1}", "sub-index"),

@@ -79,6 +79,17 @@ def test_nul_bytes_name_their_line(tmp_path):
     assert e.line == 3 and "NUL" in e.problem
 
 
+@pytest.mark.parametrize("char", ["\u2028", "\u2029", "\x85"])
+def test_a_break_only_yaml_sees_is_refused_on_its_own_line(tmp_path, char):
+    """YAML breaks a line at U+2028, U+2029 and U+0085 and editors do not, so every later
+    error named the line after the one it was on (an outside fuzz)."""
+    p = tmp_path / "odd.yaml"
+    p.write_text(f"name: x\ndescription: 'a{char}b'\nsteps:\n  - wait: 1 parsec\n",
+                 encoding="utf-8")
+    e = _refused(p)
+    assert e.line == 2 and f"U+{ord(char):04X}" in e.problem, e
+
+
 def test_random_bytes(tmp_path):
     rng = random.Random(12)
     for i in range(20):

@@ -84,6 +84,19 @@ def test_a_wait_until_longer_than_the_step_timeout_fails_at_its_own_timeout(tmp_
     assert "step timeout 60 s" not in err
 
 
+def test_a_wait_or_an_own_timeout_longer_than_the_step_timeout_is_kept(tmp_path, capsys):
+    """A `wait: 70s` (and a `pr_wait` whose own timeout is 70 s) on a bench whose step
+    timeout is 60 s: the plan said to wait that long, so the wait ends and the `pr_wait`
+    fails at its own timeout saying what it saw; neither is cut as a step error at 60 s (an
+    outside fuzz found `wait: 1000s` passing `--check` and erroring at the bench's 60 s)."""
+    plan = _plan(tmp_path, "longwait", "name: longwait\nsteps:\n  - wait: 70s\n"
+                 "  - pr_wait: {pr: 1, state: in_position, timeout: 70s}\n")
+    assert hil(["run", "-v", "-j", "1", "--out", str(tmp_path / "out"), plan]) == 1
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("  [")]
+    assert "PASS" in lines[0], lines
+    assert "FAIL" in lines[1] and "step timeout" not in lines[1], lines
+
+
 def test_verbose_prints_every_step_skipped_ones_too(tmp_path, capsys):
     """docs/plans.md: "`-v` prints one line per step with its status"."""
     plan = _plan(tmp_path, "f", """\

@@ -70,6 +70,13 @@ class StepKind:
         """The step's `args` from its YAML value; raises PlanFileError (file, line, field)."""
         raise NotImplementedError
 
+    def own_timeout_ns(self, bench: Bench) -> int | None:
+        """How long the step may take by its own arguments (a `timeout:` inside, a `wait`'s
+        duration): the step's watchdog gives it at least this long, so a long wait fails at
+        its own timeout saying what it saw, or ends, rather than at the bench's step timeout."""
+        own = getattr(self.args, "timeout", None)
+        return own if isinstance(own, int) and not isinstance(own, bool) and own > 0 else None
+
     def check(self, cc: CheckContext) -> None:
         """Refuse, before anything moves, what this bench cannot do for this step."""
 

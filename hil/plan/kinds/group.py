@@ -661,13 +661,23 @@ class GroupCommand(_OneAxis):
         par = [0.0] * 15
         if "par" in m:
             pm = v.mapping(m["par"], m.kline("par"), join(where, "par"))
+            seen: set[int] = set()
             for k, val in pm.items():
-                try:
+                # an index is written in ASCII digits: `+3`, ` 3` or `٣` read as 3 in
+                # Python, and beside a `3` the last one would win unseen
+                if isinstance(k, int) and not isinstance(k, bool):
+                    i = k
+                elif isinstance(k, str) and k.isascii() and k.isdigit():
                     i = int(k)
-                except ValueError:
+                else:
                     i = -1
                 if not 0 <= i <= 14:
-                    raise v.err(pm.kline(k), join(where, f"par.{k}"), "Par index 0-14")
+                    raise v.err(pm.kline(k), join(where, f"par.{k}"),
+                                "Par index 0-14, in digits")
+                if i in seen:
+                    raise v.err(pm.kline(k), join(where, f"par.{k}"),
+                                f"Par{i} is named twice")
+                seen.add(i)
                 if not _finite(val):
                     raise v.err(pm.kline(k), join(where, f"par.{k}"),
                                 f"{val!r}: a finite number within ±{_BIG:g}")

@@ -103,6 +103,8 @@ class PrTable(StepKind):
             n = int(k) if isinstance(k, str) and k.isascii() and k.isdigit() else k
             if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 99:
                 raise v.err(kl, fw, "a PR number 1..99 (PR#0 is homing: P5.004/P6.000)")
+            if n in table:  # `1` and `01` (or "1") name one path: one would be lost
+                raise v.err(kl, fw, f"PR#{n} is named twice in this table")
             pm = v.mapping(m[k], kl, fw)
             v.keys(pm, PATH_KEYS, fw, required=("type",))
             _field_types(v, pm, fw)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -16,6 +17,7 @@ from hil.plan.kinds.base import CheckContext, StepKind
 from hil.profile.dio import DI_SYMBOLS, DO_SYMBOLS
 from hil.record import topics
 from hil.timing.checker import check, constants_for, occurrences_since
+from hil.timing.expr import MAX_MAGNITUDE
 from hil.timing.registry import SpecRegistry
 from hil.timing.source import ParamTimeline, RecordingSource
 from hil.timing.spec import Spec, spec_params
@@ -124,9 +126,11 @@ class CheckTiming(StepKind):
             fw = join(where, "constants")
             cm = v.mapping(m["constants"], m.kline("constants"), fw)
             for k, x in cm.items():
-                if isinstance(x, bool) or not isinstance(x, int | float):
+                if isinstance(x, bool) or not isinstance(x, int | float) or not (
+                        math.isfinite(x) and abs(x) <= MAX_MAGNITUDE):
+                    # a NaN judged every constraint that reads it "cannot judge"
                     raise v.err(cm.kline(k), join(fw, str(k)),
-                                f"{x!r}: a number (ms, rpm, ...)")
+                                f"{x!r}: a finite number (ms, rpm, ...) within ±2**64")
                 constants[str(k)] = x
         return CheckTimingArgs(v.text(m, "spec", where), params, bind, constants, since)
 

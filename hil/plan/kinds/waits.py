@@ -14,6 +14,7 @@ from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.kinds.fields import Condition
 
 if TYPE_CHECKING:
+    from hil.bench.bench import Bench
     from hil.plan.context import StepContext
     from hil.plan.session import DriveIO
     from hil.plan.steps import Step
@@ -70,6 +71,9 @@ class Wait(StepKind):
     def describe(self) -> str:
         return f"wait {self.args.duration / 1e6:g}ms"
 
+    def own_timeout_ns(self, bench: Bench) -> int | None:
+        return self.args.duration or None
+
     def imposed_ns(self) -> int:
         return self.args.duration
 
@@ -108,6 +112,9 @@ class WaitUntil(_Conditions):
         if timeout is not None and timeout <= 0:  # 0 fell back to the bench's, unsaid
             raise v.err(m.kline("timeout"), f"{where}.timeout", "must be > 0")
         return ConditionArgs(conditions, timeout)
+
+    def own_timeout_ns(self, bench: Bench) -> int | None:
+        return self.args.timeout or bench.timeouts["wait_until"]
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         conds = self.args.conditions
