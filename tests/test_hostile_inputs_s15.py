@@ -37,6 +37,22 @@ def test_timing_constants_take_no_int_too_long_for_a_float(tmp_path, capsys):
     assert "timing.constants.huge" in capsys.readouterr().err
 
 
+def test_a_timing_constant_no_spec_defines_is_refused_at_its_line(tmp_path, capsys):
+    """A misspelt `fw_tl` was ignored: every verdict was judged with the spec's default
+    (wave 3 session 17; an outside review had listed it since session 13)."""
+    text = fixture("benches", "virtual.yaml").read_text()
+    bench = tmp_path / "b.yaml"
+    bench.write_text(text + "\ntiming:\n  constants:\n    tol: 3\n    fw_tl: 4\n")
+    line = len(text.splitlines()) + 5
+    for extra in (["--check"], ["-q", "--out", str(tmp_path / "out")]):
+        assert hil(["run", *extra, "--bench", str(bench), "emgs"]) == 2
+        err = capsys.readouterr().err
+        assert f"b.yaml:{line}: timing.constants.fw_tl" in err and "'fw_tol'" in err, err
+    assert not (tmp_path / "out").exists()
+    bench.write_text(text + "\ntiming:\n  constants: {tol: 3, fw_tol: 4}\n")
+    assert hil(["run", "--check", "--bench", str(bench), "emgs"]) == 0
+
+
 @pytest.mark.parametrize("value", ["Infinity", "1.7", "true"])
 def test_a_params_file_value_that_is_no_whole_number_is_refused(tmp_path, capsys, value):
     """`hil drive --params`: Infinity crashed (OverflowError), 1.7 became 1, true became 1."""

@@ -162,6 +162,7 @@ class Bench:
     # Timing-spec constants this bench overrides (e.g. a transport's input latency widens
     # `fw_tol`): the same as `hil check --const NAME=VALUE`, in ms.
     timing_constants: dict[str, float] = field(default_factory=dict)
+    timing_constant_lines: dict[str, int] = field(default_factory=dict)  # name -> file line
     gateway: GatewaySpec | None = None  # buses reached through a `hil gateway` (a lease)
     # "virtual": the run on the model's clock (docs/clock.md); "real": the wall clock
     clock: str = "real"
@@ -286,7 +287,8 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
         timeouts=timeouts, safe_state=safe,
         motion_allowed=v.boolean(top, "motion_allowed", "", True), features=features,
         faults_allowed=v.boolean(top, "faults_allowed", "", virtual),
-        timing_constants=_timing(v, top), gateway=gateway,
+        timing_constants=_timing(v, top), timing_constant_lines=_timing_lines(top),
+        gateway=gateway,
     )
 
 
@@ -385,6 +387,13 @@ def _timing(v: Checker, top: LDict) -> dict[str, float]:
                         "`hil check --const`)")
         out[str(k)] = float(x)
     return out
+
+
+def _timing_lines(top: LDict) -> dict[str, int]:
+    """The line of each `timing.constants` key (a name no spec defines is refused by the
+    plan check, which knows the specs: `hil.plan.plan.check_plan`)."""
+    c = top.get("timing", {}).get("constants", {})
+    return {str(k): c.kline(k) for k in c} if isinstance(c, LDict) else {}
 
 
 def _urls(v: Checker, top: LDict, key: str, kind: str, gateway: bool = False) -> dict[str, str]:
