@@ -130,7 +130,7 @@ class CheckTiming(StepKind):
                         math.isfinite(x) and abs(x) <= MAX_MAGNITUDE):
                     # a NaN judged every constraint that reads it "cannot judge"
                     raise v.err(cm.kline(k), join(fw, str(k)),
-                                f"{x!r}: a finite number (ms, rpm, ...) within ±2**64")
+                                f"{x!r}: a number (ms, rpm, ...), finite and within ±2**64")
                 constants[str(k)] = x
         return CheckTimingArgs(v.text(m, "spec", where), params, bind, constants, since)
 
