@@ -162,6 +162,14 @@ def cia402_enable(tap: ModelTap) -> None:
         tap.advance(20 * MS)
 
 
+def cia402_enable_under_emgs(tap: ModelTap) -> None:
+    """Enable operation written while EMGS holds the servo off (AL013, a warning: statusword
+    bit 7): the drive refuses transition 4 (L19338, L18326), which is no slow transition."""
+    tap.set_di(8, False)  # EMGS b-contact open
+    tap.advance(20 * MS)
+    cia402_enable(tap)
+
+
 # -- faithful drive: every shipped spec passes ----------------------------------------------
 FAITHFUL = [
     ("servo_on_brake", servo_on, {"P1.042": 150}, {}),
@@ -176,6 +184,7 @@ FAITHFUL = [
     ("alarm_reset", arst_pulse_after_emgs, {}, {"alarm": "AL500"}),
     ("emgs", emgs_stop, {"P1.043": -100}, {}),
     ("cia402_transitions", cia402_enable, {}, {}),
+    ("cia402_transitions", cia402_enable_under_emgs, {}, {}),
 ]
 
 
