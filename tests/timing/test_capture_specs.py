@@ -91,6 +91,26 @@ def test_capture_latency_is_not_judged_where_it_does_not_apply(tmp_path) -> None
         [(v.status, v.message) for v in vs]
 
 
+def test_a_three_point_capture_times_cap_ok_from_its_last_edge(tmp_path) -> None:
+    """L5156: each captured point decrements P5.038 and CAP_OK comes On only when it reaches
+    0, so the first two edges of a 3-point capture raise no CAP_OK (the spec had failed
+    them; an outside audit, helper-64); the last edge is timed."""
+    def three_point(tap) -> None:
+        pv(tap, 300)
+        tap.drive.params.write("P5.038", 3)
+        tap.drive.params.write("P5.039", 0x0131)  # CN2, NC, start
+        for _ in range(3):
+            tap.advance(7 * MS + 123_000)
+            tap.set_di(7, False)
+            tap.advance(3 * MS)
+            tap.set_di(7, True)
+            tap.advance(10 * MS)
+
+    vs = verdicts(run(tmp_path, three_point, options(), **PARAMS), "capture_latency")
+    assert [v.status for v in vs] == ["skipped", "skipped", "pass"], \
+        [(v.status, v.message) for v in vs]
+
+
 def test_capture_latency_fails_late(tmp_path) -> None:
     path = run(tmp_path, capture_scenario, options(dev_capture_delay_us=50), **PARAMS)
     assert_fails(verdicts(path, "capture_latency"), "CAP_OK rises 5 µs after the DI7 edge")
