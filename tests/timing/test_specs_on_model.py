@@ -109,6 +109,28 @@ def sto_one(tap: ModelTap) -> None:
     tap.advance(1100 * MS)
 
 
+def sto_one_other_dips(tap: ModelTap) -> None:
+    """STO_A lost; 500 ms later STO_B dips for 5 ms (less than AL500's 10 ms): AL501 comes
+    1 s after STO_A's own loss (L2482; docs/manual-choices.md "STO one lost"). The spec had
+    restarted the count at the dip and failed the drive (an outside audit, helper-64)."""
+    tap.set_sto("A", False)
+    tap.advance(500 * MS)
+    tap.set_sto("B", False)
+    tap.advance(5 * MS)
+    tap.set_sto("B", True)
+    tap.advance(1500 * MS)
+
+
+def sto_both_then_one_back(tap: ModelTap) -> None:
+    """Both lost (AL500 after 10 ms), B back at 300 ms: A's own second ends with B present,
+    so AL501 follows too; ARST then clears AL500 only."""
+    tap.set_sto("A", False)
+    tap.set_sto("B", False)
+    tap.advance(300 * MS)
+    tap.set_sto("B", True)
+    tap.advance(1200 * MS)
+
+
 def sto_glitch_then_loss(tap: ModelTap) -> None:
     """Glitches shorter than the firmware's acknowledgement, then a real loss (L2474-2482)."""
     for cw in (0x06, 0x07, 0x0F):  # servo on through CiA 402: OPERATION ENABLED
@@ -177,6 +199,8 @@ FAITHFUL = [
     ("sto", sto_both, {}, {}),
     ("sto", sto_one, {}, {}),
     ("sto", sto_glitch_then_loss, {}, {}),
+    ("sto", sto_one_other_dips, {}, {}),
+    ("sto", sto_both_then_one_back, {}, {}),
     ("sto_glitch", sto_glitch_then_loss, {}, {}),
     ("sto_glitch", sto_both, {}, {}),
     ("sto_reset", sto_one, {}, {}),
@@ -215,7 +239,7 @@ DEVIATIONS = [
         "BRKR at the earlier of P1.043 and speed < P1.038",
     ),
     ("sto", sto_both, {"dev_sto_both_lost_ms": 15}, {}, "AL500 when both channels lost for 10 ms"),
-    ("sto", sto_one, {"dev_sto_one_lost_ms": 500}, {}, "no AL501 before STO_A lost alone for 1 s"),
+    ("sto", sto_one, {"dev_sto_one_lost_ms": 500}, {}, "no AL501 before STO_A lost for 1 s"),
     (
         "sto_glitch",
         sto_glitch_then_loss,

@@ -16,7 +16,7 @@ from hil.timing import MemorySource, RecordingSource, check, load_spec
 MS = 1_000_000
 T0 = 1_000 * MS  # STO_A lost (the harness's stamp)
 BIND = {"drive": "drive1", "dio": "drive1"}
-AL501 = "AL501 when STO_A lost alone for 1 s"  # window 0 … fw_tol (1 ms), L2482, L20203
+AL501 = "AL501 when STO_A lost for 1 s"  # window 0 … fw_tol (1 ms), L2482, L20203
 
 
 def _sto_a_alone(al501_after_ms: float, delay_ms: float | None) -> dict:
@@ -77,7 +77,7 @@ def test_no_delay_leaves_pass_and_fail_unchanged():
 def test_a_forbidden_event_before_the_drive_saw_the_edge_is_inconclusive():
     # no AL501 within [0, 1000) ms of STO_A lost alone (L2482): AL501 0.5 ms after the
     # harness's edge, but the edge reached the drive only 0.8 ms after it
-    name = "no AL501 before STO_A lost alone for 1 s"
+    name = "no AL501 before STO_A lost for 1 s"
     msgs = _sto_a_alone(0.0, 0.8)
     state = msgs[topics.drive_state("drive1")]
     state.insert(2, (T0 + MS // 2, {"alarms": ["AL501"], "torque_enabled": False}))
