@@ -233,6 +233,30 @@ def test_deviation_knob_fails_the_matching_rule(tmp_path, route, mode, start, kn
     assert failed[rule]  # the message names what was seen (e.g. "rev was false at ...")
 
 
+def test_homing_pr_places_the_coordinate_at_the_reference_not_within_a_turn(tmp_path):
+    """P6.001 is the coordinate of the reference (L12641): judged against a P6.001 half a
+    turn away from what the drive set, the spec fails at the reference. It had checked only
+    "within a turn when HOME comes on", which that passes too (an outside audit, helper-64)."""
+    x, y = 2, 0
+    params = {"P5.004": 0x100 | y << 4 | x, "P5.005": V1 * 10, "P5.006": V2 * 10,
+              "P6.001": 2000}
+    path = record(tmp_path, STARTS["neg"], pr_scenario, None, **params)
+    d0, ref, z = pr_dirs(x, y)
+    spec = load_spec(fixture("timing", "homing_pr.yaml"))
+    b = {"drive": "drive1", "dio": "drive1", "bus": "can0", "REF": pr_ref_line(x)}
+    consts = {"d0": d0, "ref_dir": ref, "z_dir": z}
+    rule = "coordinate P6.001 at the reference"
+    good = {v.constraint: v.status for v in check(spec, RecordingSource(path), binding=b,
+                                                   constants=consts)}
+    assert good[rule] == "pass", good
+    off = {v.constraint: v.status for v in check(spec, RecordingSource(path), binding=b,
+                                                  constants=consts,
+                                                  params={"P6.001": 2000 + 50_000})}
+    assert off[rule] == "fail", off
+    assert off["coordinate P6.001 at the reference (within a turn when HOME comes on)"] \
+        == "pass", off
+
+
 def test_homing_canopen_starts_only_in_homing_mode():
     """6040h bit 4 is "new set-point" in PP and a homing start only in HM (6060h = 6): a PP
     move's bit 4 is no homing start (every constraint "not applicable"), in HM it is."""
