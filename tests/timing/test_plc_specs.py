@@ -158,3 +158,15 @@ def test_al009_when_the_error_passes_p2035():
     params = {"P2.035": 3_000_000}
     assert set(judge("plc_al009", al009_case(21), params).values()) == {"pass"}
     assert set(judge("plc_al009", al009_case(30), params).values()) == {"fail"}  # L9556
+
+
+def test_a_drive_that_never_raises_al009_fails():
+    """L9556: an error past P2.035 gives AL009. The spec had looped over the AL009s raised,
+    so a drive that never raised one was "nothing judged", never a failure (an outside
+    audit, helper-64)."""
+    never = {STATE: [(round(t * MS), {"following_error_counts": e, "alarms": [],
+                                      "pt_count": c})
+                     for t, e, c in ((0, 0, 0), (10, 2_000_000, 900), (20, 3_100_000, 1800),
+                                     (40, 3_300_000, 2000))]}
+    got = judge("plc_al009", never, {"P2.035": 3_000_000})
+    assert got["AL009 when the error passes P2.035"] == "fail", got
