@@ -84,11 +84,27 @@ def pg0_case(oz_ms: list[float], zero_ms: float) -> dict:
 
 
 def test_zero_point_at_a_pg0_pulse_counted_after_dog():
-    assert set(judge("plc_zero_pg0", pg0_case([30, 80], 80)).values()) == {"pass"}
+    assert set(judge("plc_zero_pg0", pg0_case([30, 80], 80)).values()) == {"pass", "skipped"}
     no_pulse = judge("plc_zero_pg0", pg0_case([30, 80], 90))  # stopped between pulses
     assert no_pulse["the zero point is a PG0 pulse"] == "fail"
     before_dog = judge("plc_zero_pg0", pg0_case([30], 30.5))
     assert before_dog["the Z pulse that ended the count came after DOG on"] == "fail"
+
+
+def test_a_trailing_edge_count_starts_at_dog_off():
+    """001:116: with a trailing-edge count the PG0 pulses are counted from DOG OFF; a PLC
+    that counted from DOG ON passed the spec (an outside audit, helper-64)."""
+    def case(zero_ms: float) -> dict:
+        c = pg0_case([30, 80, 130], zero_ms)
+        c["/dio/drive1/X0"] = [level(0, False), level(50, True), level(100, False)]
+        return c
+
+    ok = judge("plc_zero_pg0", case(130), constants={"trailing": 1})
+    assert set(ok.values()) == {"pass"}, ok
+    early = judge("plc_zero_pg0", case(80), constants={"trailing": 1})  # DOG still on
+    rule = "the Z pulse that ended the count came after DOG off (trailing-edge count)"
+    assert early[rule] == "fail", early
+    assert judge("plc_zero_pg0", case(80))[rule] == "skipped"  # a leading-edge count
 
 
 def drvc_case(freqs: list[float], stop_between: bool = False) -> dict:
