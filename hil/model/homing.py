@@ -123,7 +123,7 @@ class Homing:
 
     # ---------------------------------------------------------------- routes / triggers
     def start_canopen(self) -> None:
-        """6040h bit 4 rising edge in HM / OPERATION ENABLED (L17265, L18239)."""
+        """6040h bit 4 rising edge in HM / OPERATION ENABLED (L17267, L18239)."""
         cia = self.drive.cia402
         self._cancel_pending()
         try:

@@ -10,7 +10,7 @@ Rules, each from the manual (choices: docs/manual-choices.md#pr, `PrOptions`):
   (L11174), EV1-EV4 edges through P5.098/P5.099, nibble v -> PR#50+v (L12497-12551);
   DI.STP rising / P5.007 = 1000 stop (L11183, L15249). DI functions act after the P2.009
   filter (dio.py). A trigger acts on the next 1 ms tick (commands are updated every 1 ms,
-  L4914); of the triggers of one ms the highest priority runs, the next one a ms later and a
+  L4909); of the triggers of one ms the highest priority runs, the next one a ms later and a
   third is dropped: CTRG > P5.007 > Event rising > Event falling (L4916).
 * Executor (L4918-4924): a dispatched lead PR replaces the running group; jump and write PRs
   complete when read; at most `group_limit` PRs per ms (">= 20", L5022); of the motion PRs

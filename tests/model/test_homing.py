@@ -67,7 +67,7 @@ def canopen_home(method: int, s: float, offset: int = 1234, **kw):
     for cw in (0x06, 0x07, 0x0F):
         drive.write_object(0x6040, 0, cw)
     drive.advance(100 * MS)  # brake released
-    drive.write_object(0x6040, 0, 0x1F)  # bit 4 rising edge (L17265)
+    drive.write_object(0x6040, 0, 0x1F)  # bit 4 rising edge (L17267)
     run_until_done(drive, h)
     return drive, h
 

@@ -90,7 +90,7 @@ def test_check_rejects_what_the_drive_refuses() -> None:
 # ---------------------------------------------------------------- triggers
 def test_ctrg_with_pos_bits_after_the_p2009_filter() -> None:
     """CTRG rising with POS0+POS1 = PR#3 (L4834-4840); the DI passes the P2.009 filter (2 ms,
-    L9229) and the command starts on the next 1 ms tick (L4914)."""
+    L9229) and the command starts on the next 1 ms tick (L4909)."""
     d = make()
     put(d, 3, type_="single", data=20000, spd=4)
     d.set_di(3, True)
@@ -261,7 +261,7 @@ def test_speed_pr_ended_by_event() -> None:
 
 # ---------------------------------------------------------------- completion
 def test_cmd_ok_then_tpos_then_mc_ok_with_dly() -> None:
-    """Cmd_OK = command done + DLY (L15319); MC_OK = Cmd_OK and TPOS (L4196, L8624-8630)."""
+    """Cmd_OK = command done + DLY (L15319); MC_OK = Cmd_OK and TPOS (L4201, L8624-8630)."""
     d = make()
     put(d, 1, type_="single", data=50000, spd=4, dly=2)  # 200 ms
     d.params.write("P5.007", 1)

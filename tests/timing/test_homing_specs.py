@@ -121,7 +121,7 @@ def canopen_scenario(method: int):
         for cw in (0x06, 0x07, 0x0F):
             tap.write_object(0x6040, 0, cw)
         tap.advance(100 * MS)  # brake released
-        tap.write_object(0x6040, 0, 0x1F)  # bit 4 rising edge (L17265)
+        tap.write_object(0x6040, 0, 0x1F)  # bit 4 rising edge (L17267)
         run_until_home(tap)
 
     return scenario

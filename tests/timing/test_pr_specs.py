@@ -63,7 +63,7 @@ def pr_move(tap) -> None:
 
 
 def pr_move_no_dly(tap) -> None:
-    """No DLY and P1.054 = 1000 pulses: Cmd_OK before TPOS, MC_OK waits for TPOS (L4196)."""
+    """No DLY and P1.054 = 1000 pulses: Cmd_OK before TPOS, MC_OK waits for TPOS (L4201)."""
     tap.drive.params.write("P1.054", 1000)
     table(tap, {1: (("single", 50000), {"spd": 4})})
     servo_on(tap)
