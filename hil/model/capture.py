@@ -127,7 +127,10 @@ class Capture:
         return {3: v, 1: v * self.options.cn5_per_puu}.get(self.source, 0.0)
 
     def position(self, counts: float | None = None) -> float:
-        """Capture axis position (P5.037)."""
+        """Capture axis position (P5.037); on CN2 the motor feedback position, monitor 00h
+        (L11487), whatever offset another source left."""
+        if self.source == 3:
+            return self.source_position(counts)
         return self.source_position(counts) + self.offset
 
     def set_position(self, value: float) -> None:
@@ -160,7 +163,9 @@ class Capture:
             raise OutOfRange("P5.039", "P5.036 + P5.038 exceeds the 800-entry data array "
                              "(L11494)")
 
-    def on_p5039(self, _name: str, _old: int, new: int) -> None:
+    def on_p5039(self, _name: str, old: int, new: int) -> None:
+        if (old >> 4) & 0xF != (new >> 4) & 0xF:
+            self.offset = 0.0  # a new source starts without the old one's offset
         if new & 1 and not self.running:
             self.start()
         elif not new & 1 and self.running:

@@ -86,9 +86,24 @@ class Compare:
     def position(self) -> float:
         """Compare axis position (P5.057)."""
         d = self.drive
-        if self.source == 0:
-            return self.capture.position() + self.offset
+        src = self.source
+        if src == 0:
+            return self.capture.position() + self.offset  # offset: only bit3's zeroing
+        if src == 3:  # the encoder output counted from where P5.059.Y = 3 set it to monitor
+            # 00h; a later homing or CAPTURE redefinition of the feedback does not move it
+            # (L11712)
+            return d.feedback_counts() * self._scale() + self.offset
         return (d.feedback_counts() - d.axis.origin) * self._scale() + self.offset  # hardware
+
+    def reset_axis(self) -> None:
+        """A new compare source (P5.059.Y) starts without the old one's offset; CN2 starts at
+        the motor feedback position, monitor 00h (PUU, L11712)."""
+        d = self.drive
+        self.offset = 0.0
+        if self.source == 3:
+            fb_puu = counts_to_puu(d.feedback_counts() - d.axis.origin,
+                                   d.params.get("P1.044"), d.params.get("P1.045"))
+            self.offset = fb_puu - d.feedback_counts() * self._scale()
 
     def velocity(self) -> float:
         return self.drive.axis.velocity * self._scale()
@@ -113,7 +128,9 @@ class Compare:
             raise OutOfRange("P5.059", "P5.056 + P5.058 exceeds the 800-entry data array "
                              "(L11717)")
 
-    def on_p5059(self, _name: str, _old: int, new: int) -> None:
+    def on_p5059(self, _name: str, old: int, new: int) -> None:
+        if (old >> 4) & 0xF != (new >> 4) & 0xF:
+            self.reset_axis()
         if new & 1 and not self.running:
             self.start()
         elif not new & 1 and self.running:
@@ -279,6 +296,7 @@ def attach_compare(drive: DriveCore, options: CaptureOptions | None = None, *,
     params.on_read("P5.057", lambda: round(cmp_.position()))
     drive.hooks.step.append(cmp_.on_step)
     drive.hooks.boot.append(lambda: cmp_.running and cmp_.stop())
+    drive.hooks.boot.append(cmp_.reset_axis)  # the counters start afresh at power-up
     return cmp_
 
 

@@ -404,3 +404,59 @@ def test_capture_and_compare_digits_outside_their_ranges_are_refused(param, valu
     d = make()
     with pytest.raises(OutOfRange, match="digit"):
         d.params.write(param, value)
+
+
+def _moved_and_stopped(d: Drive) -> int:
+    """600 rpm for 1 s, then stopped: 6064h ~ 1 000 000 PUU."""
+    pv(d, 600.0)
+    d.advance(600 * MS)
+    d.write_object(0x60FF, 0, 0)
+    d.advance(400 * MS)
+    return d.read_object(0x6064, 0)
+
+
+def test_a_cn2_capture_axis_is_the_feedback_whatever_another_source_left() -> None:
+    """L11487: with P5.039.Y = CN2 the capture axis equals the motor feedback position
+    (monitor 00h). A P5.037 written while the source was CN5 had stayed as an offset: the
+    capture stored 5 for a feedback of 1 000 000 (an outside review, helper-63)."""
+    d = make_cmp()
+    fb = _moved_and_stopped(d)
+    d.params.write("P5.039", 0x0010)  # CN5, stopped
+    d.params.write("P5.037", 5)
+    d.params.write("P5.039", 0x0030)  # CN2
+    assert abs(d.params.read("P5.037") - fb) <= 1
+    arm(d, start=10)
+    d.set_di(7, False)  # NO: the closing edge (set_di True) latches
+    d.advance(5 * MS)
+    d.set_di(7, True)
+    d.advance(5 * MS)
+    assert abs(d.pr.array[10] - fb) <= 1
+
+
+def test_the_compare_axis_on_the_capture_axis_and_on_cn2() -> None:
+    """P5.059.Y = 0: the compare axis is the capture axis (L11708): a P5.057 written while
+    the source was CN5 is no offset there. Y = 3 (CN2): P5.057 is reset to the motor feedback
+    position, monitor 00h, when Y is set (L11712), and a later homing that redefines the
+    feedback leaves it (the two differ until Y is set again). Both had kept CN5's offset."""
+    d = make_cmp()
+    fb = _moved_and_stopped(d)
+    d.params.write("P5.039", 0x0030)  # capture axis on CN2
+    d.params.write("P5.059", 0x00640010)  # compare on CN5, stopped
+    d.params.write("P5.057", 123)
+    d.params.write("P5.059", 0x00640000)  # compare on the capture axis
+    assert d.params.read("P5.057") == d.params.read("P5.037")
+    d.params.write("P5.059", 0x00640010)
+    d.params.write("P5.057", 777)
+    d.params.write("P5.059", 0x00640030)  # compare on CN2
+    assert abs(d.params.read("P5.057") - fb) <= 1
+    d.write_object(0x607C, 0, 0)  # homing method 35: the feedback becomes 0 here
+    d.write_object(0x6098, 0, 35)
+    d.write_object(0x6060, 0, 6)
+    d.advance(5 * MS)
+    d.write_object(0x6040, 0, 0x1F)
+    d.advance(200 * MS)
+    assert abs(d.read_object(0x6064, 0)) <= 1
+    assert abs(d.params.read("P5.057") - fb) <= 1
+    d.params.write("P5.059", 0x00640000)
+    d.params.write("P5.059", 0x00640030)  # set again: monitor 00h now
+    assert abs(d.params.read("P5.057")) <= 1
