@@ -210,6 +210,9 @@ class Drive:
         self.comm = CommSupervision(options, self.raise_alarm, lambda: self.params.get("P3.009"))
         self.hooks = Hooks()  # where the parts hook into the cycle (core.py)
         self.array = new_data_array()  # shared by PR, CAPTURE and COMPARE (L5097)
+        # its EEPROM copy: written only by P2.008 = 30 / 35 (L9225); the array is RAM and
+        # comes back from this copy at power-up (L5097)
+        self.array_eeprom = new_data_array()
         self._hold_timer = None
         self._was_requested = False  # Servo On asked at the last _update_servo (AL053)
         self._dout_cache: dict[str, bool] = {}
@@ -251,6 +254,7 @@ class Drive:
         self.dio.on_function("ORGP", self.cia402.set_home_switch)
         self.dio.on_function("ARST", self._on_arst)
         self.params.on_write("P2.030", lambda *_: self._update_servo())
+        self.params.on_write("P2.008", self._special_write)
         # the DO functions follow their parameters at standstill too (ZSPD P1.038, TSPD
         # P1.039, TPOS P1.054, MC_OK hold / AL380 P1.048: L8608-8632, L15269-15275)
         for name_ in ("P1.038", "P1.039", "P1.048", "P1.054"):
@@ -420,6 +424,7 @@ class Drive:
         self.holding_brake.coil(False)  # no control power: no DO conducts, the brake engages
         self.advance(off_for)
         self.params.power_cycle()
+        self.array[:] = self.array_eeprom  # RAM: lost at power-off (L5097), in place (shared)
         self.dio.power_cycle()
         self.absolute.power_cycle(battery)
         self.absolute.on_abse(self.dio.function_active("ABSE"))
@@ -430,6 +435,12 @@ class Drive:
         self.axis.set_power(False)
         self.emit(PowerCycled(self.sched.now, battery))
         self._boot()
+
+    def _special_write(self, _name: str, _old: int, new: int) -> None:
+        """P2.008 = 30 or 35: store the data array (COMPARE, CAPTURE, E-Cam) in EEPROM
+        (L9225, L5097)."""
+        if new in (30, 35):
+            self.array_eeprom[:] = self.array
 
     def close(self) -> None:
         """Save retained state (the process is going away)."""

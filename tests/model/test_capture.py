@@ -460,3 +460,20 @@ def test_the_compare_axis_on_the_capture_axis_and_on_cn2() -> None:
     d.params.write("P5.059", 0x00640000)
     d.params.write("P5.059", 0x00640030)  # set again: monitor 00h now
     assert abs(d.params.read("P5.057")) <= 1
+
+
+@pytest.mark.parametrize(("key", "kept"), [(0, False), (30, True), (35, True)])
+def test_the_data_array_is_ram_unless_p2008_stores_it(key: int, kept: bool) -> None:
+    """L5097: the data array is kept in RAM and lost at power-off; only P2.008 = 30 or 35
+    (L9225) writes it to EEPROM too. It had survived every power cycle (helper-63)."""
+    d = make()
+    d.params.write("P5.011", 100)
+    d.params.write("P5.012", 4242)
+    if key:
+        d.params.write("P2.008", key)
+    d.pr.array[101] = 17  # written after the store: RAM only
+    d.power_cycle(off_for=100 * MS)
+    d.advance(20 * MS)
+    assert d.pr.array[100] == (4242 if kept else 0)
+    assert d.pr.array[101] == 0
+    assert d.pr.array is d.array  # PR, CAPTURE and COMPARE still share one array
