@@ -294,6 +294,7 @@ def attach_capture(drive: DriveCore, options: CaptureOptions | None = None, *,
     drive.dio.on_raw(cap.on_di)
     drive.hooks.step.append(cap.on_step)
     drive.hooks.boot.append(lambda: cap.running and cap.stop())
+    drive.hooks.monitors[43] = lambda: cap.last_value or 0  # CAP data, the last (L15481)
     return cap
 
 

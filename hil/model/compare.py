@@ -297,6 +297,7 @@ def attach_compare(drive: DriveCore, options: CaptureOptions | None = None, *,
     drive.hooks.step.append(cmp_.on_step)
     drive.hooks.boot.append(lambda: cmp_.running and cmp_.stop())
     drive.hooks.boot.append(cmp_.reset_axis)  # the counters start afresh at power-up
+    drive.hooks.monitors[37] = cmp_.target  # CMP_DATA of the next point (L15476, L8240)
     return cmp_
 
 

@@ -489,9 +489,12 @@ class PrEngine:
         fb = round(counts_to_puu(ax.user_position, g44, g45))
         cmd_o = round(counts_to_puu(ax.user_demand, g44, g45))
         values = {0: fb, 1: cmd_o, 2: cmd_o - fb, 64: self.cmd_e}
-        if code not in values:
+        if code in values:
+            return values[code]
+        part = d.hooks.monitors.get(code)  # the codes other parts model (037, 043, 038)
+        if part is None:
             raise PrError(f"monitor code {code} not available (AL231)", "AL231")
-        return values[code]
+        return part()
 
     # ---------------------------------------------------------------- every motion step
     def after_step(self) -> None:

@@ -477,3 +477,27 @@ def test_the_data_array_is_ram_unless_p2008_stores_it(key: int, kept: bool) -> N
     assert d.pr.array[100] == (4242 if kept else 0)
     assert d.pr.array[101] == 0
     assert d.pr.array is d.array  # PR, CAPTURE and COMPARE still share one array
+
+
+def test_monitors_037_and_043_read_the_compare_data_and_the_last_capture() -> None:
+    """Monitor 043 is the latest CAP value (L15481), 037 CMP_DATA = Array + P1.023 + P1.024
+    (L15476, L8240); both read through P0.009/P0.010 (P0.017/P0.018) and as a PR WRITE's
+    monitor source. They read 0 and raised AL231 (helper-63)."""
+    d = make_cmp()
+    pv(d, 300.0)
+    arm(d, start=0, count=1)
+    d.set_di(7, False)
+    d.advance(2 * MS)
+    d.set_di(7, True)
+    d.advance(2 * MS)
+    cap = d.pr.array[0]
+    assert cap != 0
+    d.params.write("P0.017", 43)
+    assert d.params.read("P0.009") == cap
+    assert d.pr.monitor(43) == cap
+    d.pr.array[5] = 123000
+    d.params.write("P5.056", 5)
+    d.params.write("P1.023", 400)
+    d.params.write("P1.024", 96)
+    d.params.write("P0.018", 37)
+    assert d.params.read("P0.010") == 123496
