@@ -428,6 +428,10 @@ class Drive:
         self.dio.power_cycle()
         self.absolute.power_cycle(battery)
         self.absolute.on_abse(self.dio.function_active("ABSE"))
+        if not (self.absolute.enabled and self.absolute.coordinate_valid):
+            # an incremental coordinate (P2.069 = 0, or the absolute one lost: AL060 /
+            # AL06A, L16123, L19796) starts at 0: nothing kept the position while off
+            self.axis.set_user_position(0)
         self._follow_absolute()
         self.alarms.power_cycle()
         self.brake.reset()

@@ -578,3 +578,20 @@ def test_bad_state_and_options_are_named():
     with pytest.raises(AbsoluteError, match="unknown absolute option"):
         AbsoluteOptions.from_dict({"t_x_ms": 1})
     assert AbsoluteOptions.from_dict({"t_q_margin_ms": 8}).t_q_margin_ms == 8
+
+
+def test_an_incremental_or_lost_coordinate_starts_at_zero_at_power_up() -> None:
+    """Without a valid absolute coordinate (P2.069 = 0, or AL060: no battery, L16123,
+    L19796) nothing keeps the position while the drive is off: 6064h starts at 0. It had
+    kept 500 000 PUU from before the power-off (an outside review, helper-63)."""
+    from hil.model.drive import Drive
+    from hil.units import MS
+
+    for params, battery in (({}, True), ({"P2.069": 1}, False)):
+        d = Drive(inputs={8: True, 6: True, 7: True}, params=params or None)
+        d.advance(10 * MS)
+        d.axis.set_user_position(d.axis.cpr * 5)  # 5 turns: 500 000 PUU
+        assert d.read_object(0x6064, 0) == 500000
+        d.power_cycle(battery=battery, off_for=100 * MS)
+        d.advance(10 * MS)
+        assert d.read_object(0x6064, 0) == 0, (params, battery)
