@@ -56,7 +56,17 @@ class NmtErrorControl:
         elif behaviour == 2:
             self._set_state("STOPPED")
 
+    def _guarding_off(self) -> bool:
+        """The heartbeat producer runs (1017h != 0) and the option says that ends guarding
+        (`guarding_with_heartbeat`, docs/manual-choices.md)."""
+        opts = getattr(self.drive, "options", None)
+        return bool(self._values.get((0x1017, 0), 0)) and \
+            getattr(opts, "guarding_with_heartbeat", "heartbeat") == "heartbeat"
+
     def _on_guard(self, now: int) -> None:
+        if self._guarding_off():  # the heartbeat protocol is in use: no answer, no life time
+            self.comm.life_deadline = None
+            return
         state = {"STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}.get(self.state, 0)
         self._send(cop.HEARTBEAT + self.node_id, bytes([self._guard_toggle << 7 | state]))
         self._guard_toggle ^= 1

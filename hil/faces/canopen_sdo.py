@@ -222,6 +222,8 @@ class SdoServer:
         now = self.clock()
         if index == 0x1017:
             self._restart_heartbeat(now)
+            if value and self._guarding_off():  # life guarding ends with a heartbeat
+                self.comm.life_deadline = None
         elif index == 0x1016:
             self.comm.consumer_deadline = None
         elif index in (0x100C, 0x100D):

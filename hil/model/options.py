@@ -119,6 +119,11 @@ class ModelOptions:
     # manual ranks no further), an EMCY sent when that alarm changes and 0000h when none is
     # left; "latest" = the alarm raised last, an EMCY per alarm raised and 0000h per clear.
     emcy_priority: str = "class"
+    # A node guarding request (RTR on 700h + node) while the heartbeat producer runs (1017h
+    # != 0): the A3 manual lists both protocols (L17097-L17126) and says nothing of the two
+    # together; CiA 301 uses the heartbeat then, as drives do ("heartbeat" = no answer and no
+    # life guarding while 1017h != 0); "both" = answered and watched as without heartbeat.
+    guarding_with_heartbeat: str = "heartbeat"
     # A DI/DO mapping write (P2.010-P2.022, P2.036-P2.041): the parameter table marks none of
     # them "power cycle" and L2979-2981 clears the alarms of an unmapped EMGS/NL/PL by an
     # alarm reset, so "write" = in effect at once; L9256 / L9339 advise a restart after a
@@ -241,6 +246,7 @@ _CHOICES: dict[str, tuple[str, ...]] = {
     "pulse_interface": ("line_driver", "open_collector"),
     "pt_gear_check": ("refuse", "off"),
     "emcy_priority": ("class", "latest"),
+    "guarding_with_heartbeat": ("heartbeat", "both"),
     "mapping_effect": ("write", "power_cycle"),
     "ip_smoothing": ("manual", "off"),
 }

@@ -144,6 +144,36 @@ def test_life_guarding_al180_and_1029h(rig, behaviour, state):
     assert "AL180" in rig.alarms and rig.slave.state == state
 
 
+@pytest.mark.parametrize("option", ["heartbeat", "both"])
+def test_guarding_while_the_heartbeat_runs(option):
+    """CiA 301 uses the heartbeat when 1017h != 0 (as drives do: both share 700h + node): no
+    guard answer and no life time then, so a master that guarded and then turned the
+    heartbeat on gets no AL180 when its guard requests stop. Option `both`: answered and
+    watched as before (the A3 manual, L17097-L17126, says nothing of the two together)."""
+    r = Rig(guarding_with_heartbeat=option)
+    try:
+        r.start()
+        r.sdo_write(0x100C, 0, 10, 2)
+        r.sdo_write(0x100D, 0, 3, 1)
+        r.feed(0x700 + NODE, remote=True)  # life guarding runs: 30 ms
+        r.run(5)
+        r.sdo_write(0x1017, 0, 100, 2)  # heartbeat producer 100 ms
+        while r.out.recv(0.01) is not None:
+            pass
+        r.feed(0x700 + NODE, remote=True)
+        answers = []
+        while (m := r.out.recv(0.05)) is not None:
+            if m.arbitration_id == 0x700 + NODE and not m.is_remote_frame:
+                answers.append(bytes(m.data))
+        r.run(60)  # past the 30 ms life time
+        if option == "heartbeat":
+            assert answers == [] and "AL180" not in r.alarms, (answers, r.alarms)
+        else:
+            assert answers and "AL180" in r.alarms, (answers, r.alarms)
+    finally:
+        r.close()
+
+
 def test_sdo_flood_al111(rig):
     """Two SDO requests sent 0.2 ms apart, before the drive answered the first: AL111
     (L19933-19937). EMCY 8110h."""
