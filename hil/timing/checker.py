@@ -872,15 +872,23 @@ def _judge(ctx: Context, c: ConstraintDef, sc: Scope) -> Verdict:
     t_ref = sc.trigger_occ.t if sc.trigger_occ else (ref.t if isinstance(ref, Occ) else None)
     if c.when is not None:
         env = ctx.env(t_ref)
+        unknown = []
         for n in c.when.names:
             if n in ctx.spec.signals:
                 val = ctx.trace(n).value_at(t_ref) if t_ref is not None else None
                 if val is None:
-                    return Verdict(**base, status="inconclusive", t_ns=t_ref,
-                                   message=f"cannot evaluate `when: {c.when}`: {n} unknown then")
+                    unknown.append(n)  # inconclusive only if its value decides (and/or
+                    continue           # stop at the first operand that does)
                 env[n] = val
-        if not c.when.eval(env):
-            used = ", ".join(f"{n} = {env[n]}" for n in sorted(c.when.names))
+        try:
+            applies = c.when.eval(env)
+        except KeyError as e:
+            if not (e.args and e.args[0] in unknown):
+                raise
+            return Verdict(**base, status="inconclusive", t_ns=t_ref,
+                           message=f"cannot evaluate `when: {c.when}`: {e.args[0]} unknown then")
+        if not applies:
+            used = ", ".join(f"{n} = {env.get(n, 'unknown')}" for n in sorted(c.when.names))
             return Verdict(**base, status="skipped", t_ns=t_ref,
                            message=f"not applicable: `{c.when}` is false ({used})")
     if isinstance(ref, Missing):

@@ -411,3 +411,19 @@ def test_a_brake_release_lost_with_a_damaged_chunk_is_inconclusive_not_a_fail():
     src.cut_ns = 150_000_000
     v = by_name(check(SPECS["servo_on_brake"], src), BRAKE_ON)[0]
     assert v.status == "inconclusive" and "could not be read" in v.message
+
+
+def test_a_when_is_judged_without_a_signal_it_does_not_need():
+    """`and`/`or` stop at the first operand that decides: cia402_transitions' transition 4
+    reads the ground truth's alarms only when statusword bit 7 warns, so a recording of the
+    wire alone is judged while no warning shows, and inconclusive when one does."""
+    def src(sw_enabled: int):
+        return source({
+            ("/canopen/can0", "controlword"): [(0, 0x00), (10, 0x06), (20, 0x07), (30, 0x0F)],
+            ("/canopen/can0", "statusword"): [(0, 0x0250), (14, 0x0231), (22, sw_enabled),
+                                              (35, 0x0237)],
+        })
+    rule = "transition 4 (3+4): Enable operation -> OPERATION ENABLED"
+    assert by_name(check(SPECS["cia402_transitions"], src(0x0233)), rule)[0].status == "pass"
+    v = by_name(check(SPECS["cia402_transitions"], src(0x02B3)), rule)[0]  # bit 7 set
+    assert v.status == "inconclusive" and "HOLD unknown" in v.message, v.message
