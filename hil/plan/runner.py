@@ -455,8 +455,11 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
         if s.name:
             ctx.started[s.name] = clock.time_ns()
         timeout = s.timeout_ns or ctx.bench.timeouts["step"]
-        own = s.action.own_timeout_ns(ctx.bench)  # its own timeout (a failure that says
-        if own:  # what it saw) or a `wait` comes first: the step's watchdog waits longer
+        # a step-level `timeout:` is the plan's word for the whole step; else the step's own
+        # timeout (a failure that says what it saw) or a `wait` comes first: the watchdog
+        # waits longer
+        own = None if s.timeout_ns else s.action.own_timeout_ns(s, ctx.bench)
+        if own:
             timeout = max(timeout, own + WAIT_UNTIL_GRACE_NS)
         try:
             ctx.session.check_lease()  # a bench behind a gateway: only while the lease holds

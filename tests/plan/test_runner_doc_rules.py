@@ -97,6 +97,21 @@ def test_a_wait_or_an_own_timeout_longer_than_the_step_timeout_is_kept(tmp_path,
     assert "FAIL" in lines[1] and "step timeout" not in lines[1], lines
 
 
+def test_a_step_level_timeout_still_bounds_a_step_with_its_own(tmp_path, capsys):
+    """A step-level `timeout:` is the plan's word for the whole step: a `pr_wait` (default
+    inner timeout 5 s) with `timeout: 300ms` ends at 300 ms as a step timeout, and a `wait:
+    2s` with `timeout: 500ms` too (a review found both run to their inner times)."""
+    plan = _plan(tmp_path, "bounded", "name: bounded\nsteps:\n"
+                 "  - pr_wait: {pr: 1, state: in_position}\n    timeout: 300ms\n")
+    assert hil(["run", "-v", "-j", "1", "--out", str(tmp_path / "out"), plan]) == 1
+    err = capsys.readouterr().err
+    assert "step timeout 0.3 s" in err, err
+    plan = _plan(tmp_path, "bounded2", "name: bounded2\nsteps:\n"
+                 "  - wait: 2s\n    timeout: 500ms\n")
+    assert hil(["run", "-v", "-j", "1", "--out", str(tmp_path / "out2"), plan]) == 1
+    assert "step timeout 0.5 s" in capsys.readouterr().err
+
+
 def test_verbose_prints_every_step_skipped_ones_too(tmp_path, capsys):
     """docs/plans.md: "`-v` prints one line per step with its status"."""
     plan = _plan(tmp_path, "f", """\

@@ -10,6 +10,7 @@ the group `hil.steps` add more, the way python-can finds interfaces).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -70,11 +71,16 @@ class StepKind:
         """The step's `args` from its YAML value; raises PlanFileError (file, line, field)."""
         raise NotImplementedError
 
-    def own_timeout_ns(self, bench: Bench) -> int | None:
-        """How long the step may take by its own arguments (a `timeout:` inside, a `wait`'s
-        duration): the step's watchdog gives it at least this long, so a long wait fails at
-        its own timeout saying what it saw, or ends, rather than at the bench's step timeout."""
+    def own_timeout_ns(self, step: Step, bench: Bench) -> int | None:
+        """How long the step may take by what the plan wrote inside it (a `timeout:` in its
+        arguments, a `wait`'s duration): with no step-level `timeout:` the step's watchdog
+        gives it at least this long, so a long wait fails at its own timeout saying what it
+        saw, or ends, rather than at the bench's step timeout. A kind's default inner
+        timeout, not written, does not count."""
+        raw = step.raw.get(step.kind)
         own = getattr(self.args, "timeout", None)
+        if not (isinstance(raw, Mapping) and "timeout" in raw):
+            return None
         return own if isinstance(own, int) and not isinstance(own, bool) and own > 0 else None
 
     def check(self, cc: CheckContext) -> None:

@@ -71,7 +71,7 @@ class Wait(StepKind):
     def describe(self) -> str:
         return f"wait {self.args.duration / 1e6:g}ms"
 
-    def own_timeout_ns(self, bench: Bench) -> int | None:
+    def own_timeout_ns(self, step: Step, bench: Bench) -> int | None:
         return self.args.duration or None
 
     def imposed_ns(self) -> int:
@@ -113,8 +113,8 @@ class WaitUntil(_Conditions):
             raise v.err(m.kline("timeout"), f"{where}.timeout", "must be > 0")
         return ConditionArgs(conditions, timeout)
 
-    def own_timeout_ns(self, bench: Bench) -> int | None:
-        return self.args.timeout or bench.timeouts["wait_until"]
+    def own_timeout_ns(self, step: Step, bench: Bench) -> int | None:
+        return self.args.timeout or bench.timeouts["wait_until"]  # its own, or the bench's
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         conds = self.args.conditions
