@@ -250,6 +250,14 @@ class PrEngine:
         self._prev_motion = False
         self._service()
 
+    def power_up(self) -> None:
+        """At power-up Cmd_E is where the motor is (the coordinate the drive starts with:
+        0 incremental, the absolute position): an INC path adds to it (L4180)."""
+        self.abort()
+        d = self.drive
+        self.cmd_e = round(counts_to_puu(d.axis.user_position, d.params.get("P1.044"),
+                                         d.params.get("P1.045")))
+
     def abort(self) -> None:
         """The program ends without finishing (servo off, homing started, alarm)."""
         self.cursor = None
@@ -756,7 +764,7 @@ def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
         homing.on_pr_done = pr.after_homing
         homing.on_pr_start = pr.abort
     drive.hooks.step.append(pr.after_step)
-    drive.hooks.boot.append(pr.abort)
+    drive.hooks.boot.append(pr.power_up)
     return pr
 
 

@@ -538,3 +538,29 @@ def test_al237_clears_at_servo_on_and_al217_by_an_alarm_reset() -> None:
     d.params.write("P0.001", 0)
     run(d, 0.01)
     assert "AL217" not in d.alarms.active
+
+
+def test_an_inc_path_after_a_power_cycle_adds_to_where_the_motor_starts() -> None:
+    """At power-up an incremental coordinate starts at 0, and Cmd_E (monitor 064, L4180)
+    with it: an INC +10 000 then moves 10 000 PUU. Cmd_E had kept the target from before
+    the power-off, and the INC path moved 2.1 turns (the session's review)."""
+    d = make()
+    put(d, 1, type_="single", data=200000, spd=4)  # ABS 200 000
+    put(d, 2, type_="single", data=10000, spd=4, cmd="INC")
+    d.set_di(3, True)
+    d.advance(10 * MS)
+    d.set_di(2, True)
+    run(d, 2.0)
+    d.set_di(2, False)
+    d.set_di(3, False)
+    assert puu(d) == 200000
+    d.power_cycle(battery=True, off_for=100 * MS)
+    d.advance(50 * MS)
+    assert puu(d) == 0 and d.pr.cmd_e == 0
+    d.set_di(1, True)
+    run(d, 0.5)
+    d.set_di(4, True)
+    d.advance(10 * MS)
+    d.set_di(2, True)
+    run(d, 5.0)
+    assert puu(d) == 10000
