@@ -114,6 +114,7 @@ REFUSED = [
     ("group_command: {axis: x, code: 1, par: {'٣': 1}}", "in digits"),
     ("check_timing: {spec: servo_on_brake, constants: {tol: .nan}}", "finite"),
     ("check_timing: {spec: servo_on_brake, constants: {tol: -.inf}}", "finite"),
+    ("check_timing: {spec: servo_on_brake, constants: {tol: 1" + "0" * 320 + "}}", "finite"),
     # raw SDO objects
     ("sdo: {'0x1017h:300': 20}", "sub-index"),
     ("sdo: {'1016:256': 1}", "sub-index"),
