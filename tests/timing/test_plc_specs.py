@@ -105,6 +105,12 @@ def test_a_trailing_edge_count_starts_at_dog_off():
     rule = "the Z pulse that ended the count came after DOG off (trailing-edge count)"
     assert early[rule] == "fail", early
     assert judge("plc_zero_pg0", case(80))[rule] == "skipped"  # a leading-edge count
+    # DOG off at 100 belongs to an earlier pass: DOG on again at 120, zero at 130 (still on)
+    again = case(130)
+    again["/dio/drive1/X0"] = [level(0, False), level(50, True), level(100, False),
+                               level(120, True)]
+    got = judge("plc_zero_pg0", again, constants={"trailing": 1})
+    assert got["DOG was off at the zero point (trailing-edge count)"] == "fail", got
 
 
 def drvc_case(freqs: list[float], stop_between: bool = False) -> dict:
