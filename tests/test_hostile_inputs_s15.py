@@ -37,20 +37,21 @@ def test_timing_constants_take_no_int_too_long_for_a_float(tmp_path, capsys):
     assert "timing.constants.huge" in capsys.readouterr().err
 
 
-def test_a_timing_constant_no_spec_defines_is_refused_at_its_line(tmp_path, capsys):
-    """A misspelt `fw_tl` was ignored: every verdict was judged with the spec's default
-    (wave 3 session 17; an outside review had listed it since session 13)."""
+def test_a_timing_constant_no_spec_defines_is_warned_of_at_its_line(tmp_path, capsys):
+    """A misspelt `fw_tl` was ignored without a word: every verdict was judged with the
+    spec's default. It is a warning naming the line (not an error: a constant may be for a
+    project's own spec that `hil check --spec FILE` reads from the recording)."""
     text = fixture("benches", "virtual.yaml").read_text()
     bench = tmp_path / "b.yaml"
     bench.write_text(text + "\ntiming:\n  constants:\n    tol: 3\n    fw_tl: 4\n")
     line = len(text.splitlines()) + 5
-    for extra in (["--check"], ["-q", "--out", str(tmp_path / "out")]):
-        assert hil(["run", *extra, "--bench", str(bench), "emgs"]) == 2
-        err = capsys.readouterr().err
-        assert f"b.yaml:{line}: timing.constants.fw_tl" in err and "'fw_tol'" in err, err
-    assert not (tmp_path / "out").exists()
+    assert hil(["run", "--check", "--bench", str(bench), "emgs"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {bench}:{line}: timing.constants.fw_tl" in err and "'fw_tol'" in err, err
+    assert err.count("warning:") == 1, err  # `tol`, a known name, is not warned of
     bench.write_text(text + "\ntiming:\n  constants: {tol: 3, fw_tol: 4}\n")
     assert hil(["run", "--check", "--bench", str(bench), "emgs"]) == 0
+    assert "warning" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("value", ["Infinity", "1.7", "true"])

@@ -16,7 +16,7 @@ from hil.fileio import dir_problem
 from hil.plan.events import Listener
 from hil.plan.listeners import StepLines
 from hil.plan.parallel import jobs_from_arg, parallel_blocker, run_parallel, usable_cpus
-from hil.plan.plan import Plan, check_plan, find_plans, load_plan
+from hil.plan.plan import Plan, bench_constant_warnings, check_plan, find_plans, load_plan
 from hil.plan.plansdir import choose_plans_dir
 from hil.plan.progress import RunProgress
 from hil.plan.runner import output_stems, run_plans, summary_table, timing_specs
@@ -233,6 +233,8 @@ def main(args: argparse.Namespace) -> int:
     if (why := dir_problem(out)) is not None:
         print(f"hil run: --out {args.out}: {why}", file=sys.stderr)
         return 2
+    for warning in bench_constant_warnings(bench, timing_specs()):
+        print(f"hil run: warning: {warning}", file=sys.stderr)
     try:
         if args.check:
             specs = timing_specs()

@@ -189,27 +189,30 @@ def check_plan(plan: Plan, bench: Bench, spec_ids: set[str] | None = None) -> No
                 raise v.err(plan._lines.get(f"params.{name}", plan.key_line("params")),
                             join("params", name),
                             f"0x{value:04X} maps {why} (bench {bench.name!r} is virtual)")
-    _check_bench_constants(bench, spec_ids)
     for s in plan.steps:
         _check_step(v, s, plan, bench, spec_ids)
 
 
-def _check_bench_constants(bench: Bench, specs: Any) -> None:
-    """A bench's `timing.constants` must name a constant of some timing spec: a misspelt
-    `fw_tl` would otherwise be ignored and every verdict judged with the default."""
+def bench_constant_warnings(bench: Bench, specs: Any) -> list[str]:
+    """`file:line: field: problem` for each of a bench's `timing.constants` that no spec of
+    `specs` defines: a misspelt `fw_tl` is otherwise ignored and every verdict judged with
+    the default. A warning, not an error: the constant may be for a project's own spec that
+    only `hil check --spec FILE` reads (the bench's constants are recorded for it)."""
     if not bench.timing_constants or not isinstance(specs, Mapping):
-        return
+        return []
     known: set[str] = set()
     for sid in specs:
         known |= set(getattr(specs[sid], "constants", None) or ())
+    out = []
     for name in bench.timing_constants:
         if name not in known:
             near = difflib.get_close_matches(name, sorted(known), n=1)
             hint = f"did you mean {near[0]!r}? " if near else ""
-            raise Checker(bench.path).err(
-                bench.timing_constant_lines.get(name, 0), join("timing.constants", name),
-                f"no timing spec has a constant {name!r} ({hint}known: "
-                f"{', '.join(sorted(known))})")
+            line = bench.timing_constant_lines.get(name, 0)
+            out.append(f"{bench.path}:{line}: {join('timing.constants', name)}: no shipped "
+                       f"timing spec has a constant {name!r} ({hint}it applies only to a "
+                       "spec of your own that defines it)")
+    return out
 
 
 def _check_step(v: Checker, s: Step, plan: Plan, bench: Bench, spec_ids: Any) -> None:
