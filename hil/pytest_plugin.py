@@ -370,6 +370,8 @@ def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> 
 def _finish_recording(item: pytest.Item, error: BaseException | None) -> None:
     rec = item.stash.get(_OPEN, None)
     result = item.stash.get(_RESULT, None)
+    if result is not None:
+        del item.stash[_RESULT]  # a rerun of this item starts without it
     if rec is None:
         return
     unfinished = item.config.stash.get(_UNFINISHED, [])
@@ -390,6 +392,8 @@ def _teardown_outcome(error: BaseException) -> dict[str, str]:
     torn down (the first of several)."""
     while isinstance(error, BaseExceptionGroup) and error.exceptions:
         error = error.exceptions[0]
+    if isinstance(error, pytest.skip.Exception):  # pytest reports the test skipped
+        return {"status": "skipped", "reason": f"skipped in teardown: {error}"[:300]}
     if isinstance(error, KeyboardInterrupt):
         return {"status": "aborted", "reason": "interrupted (SIGINT) during teardown"}
     what = str(error).splitlines()[0] if str(error) else ""

@@ -340,9 +340,14 @@ def axis(hil_drive):            # torn down before hil_session: its error came t
     raise RuntimeError("the axis fixture could not park")
 
 @pytest.fixture
-def late(hil_recorder):         # torn down after the recorder's own fixture
+def late():                     # set up first, so torn down after the recorder's fixture
     yield
     raise ValueError("late fixture broke")
+
+@pytest.fixture
+def skips_late():
+    yield
+    pytest.skip("nothing to park")
 
 @pytest.mark.hil
 def test_teardown_fails(axis):
@@ -350,6 +355,10 @@ def test_teardown_fails(axis):
 
 @pytest.mark.hil
 def test_late_teardown_fails(late, hil_drive):
+    hil_drive.set_function("SON", True)
+
+@pytest.mark.hil
+def test_late_skip(skips_late, hil_drive):
     hil_drive.set_function("SON", True)
 
 @pytest.mark.hil
@@ -377,7 +386,7 @@ def test_a_fixture_teardown_error_is_the_recordings_result(pytester: pytest.Pyte
     pytester.makepyfile(test_td=TEARDOWN)
     out = tmp_path / "out"
     result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", f"--hil-out={out}")
-    result.assert_outcomes(passed=4, errors=2)
+    result.assert_outcomes(passed=5, errors=2, skipped=1)  # the skipped teardown: a pass too
 
     def rec_of(part: str) -> Recording:
         [path] = [p for p in out.glob("*.mcap") if part in p.name]
@@ -389,6 +398,7 @@ def test_a_fixture_teardown_error_is_the_recordings_result(pytester: pytest.Pyte
         assert res["status"] == "error" and why in res["reason"], res
         assert res["safe_state_ok"] in (True, "True", "true"), res
     assert rec_of("test_clean").metadata()["hil.result"]["status"] == "pass"
+    assert rec_of("test_late_skip").metadata()["hil.result"]["status"] == "skipped"
     twice = rec_of("test_check_twice")
     assert not twice.truncated
     verdicts = [m for *_t, m in twice.messages(["/timing/verdicts"])]
