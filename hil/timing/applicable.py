@@ -38,14 +38,17 @@ def not_applicable(spec: Spec, source: SignalSource, binding: dict[str, str]) ->
     """Why `spec` does not apply to the recorded drive, or None (it applies, or unknown)."""
     bind = spec.binding(binding)
     # a record whose values are not an object of whole numbers says nothing of the drive
-    records = [values for _t, msg in
-               source.messages(topics.drive_params(bind.get("drive", "drive1")))
-               if isinstance(values := msg.get("values") or {}, dict)
-               and all(type(v) is int for v in values.values())]
+    timed = [(t, values) for t, msg in
+             source.messages(topics.drive_params(bind.get("drive", "drive1")))
+             if isinstance(values := msg.get("values") or {}, dict)
+             and all(type(v) is int for v in values.values())]
+    records = [values for _t, values in timed]
     recorded: dict[str, list[int]] = {}
-    for values in records:
+    history: dict[str, list[tuple[int, int]]] = {}
+    for t, values in timed:
         for name, value in values.items():
             recorded.setdefault(name, []).append(value)
+            history.setdefault(name, []).append((t, value))
     if not recorded:
         return None
     if spec.requires is not None and (why := _never_required(spec.requires, records)):
@@ -62,11 +65,28 @@ def not_applicable(spec: Spec, source: SignalSource, binding: dict[str, str]) ->
         values = recorded.get(param)
         if code is None or not values:  # a spec-local name (MARK), or mapping not recorded
             continue
+        shown = ", ".join(dict.fromkeys(f"0x{v:04X}" for v in values))
         if all(v & 0xFF != code for v in values):
-            shown = ", ".join(dict.fromkeys(f"0x{v:04X}" for v in values))
             return (f"{line} is not {sig.function} on this drive ({param} = {shown}; "
                     f"{sig.function} is 0x{code:02X})")
+        changes = [t for t, _m in source.messages(topics.dio(bind.get("dio", "drive1"), line))]
+        if changes[1:] and not any(_mapped_at(history[param], t) == code for t in changes[1:]):
+            # the line only changed while it was another function (a plan's own mapping,
+            # written after the factory one was recorded): no scenario of this function
+            return (f"{line} never changed while it was {sig.function} ({param} = {shown}; "
+                    f"{sig.function} is 0x{code:02X})")
     return None
+
+
+def _mapped_at(history: list[tuple[int, int]], t: int) -> int | None:
+    """The function code the mapping parameter selected at t (its last record at or before
+    t; the first record for an instant before it)."""
+    code = None
+    for when, value in history:
+        if when > t and code is not None:
+            break
+        code = value & 0xFF
+    return code
 
 
 def _never_required(requires: Expr, records: list[dict]) -> str | None:

@@ -57,6 +57,25 @@ def test_a_function_the_drive_never_maps_there_is_not_applicable():
                           {"BRKR": "DO4"}) is None
 
 
+def test_a_line_that_changed_only_while_it_was_another_function_is_not_applicable():
+    """The factory mapping is recorded before a plan's own (plc_inhp_cclr: DI8 = INHP, not
+    EMGS): `hil check` with every shipped spec judged `emgs` on DI8's INHP edges and failed a
+    passing plan. The mapping in force when the line changed decides."""
+    spec = loads_spec(SPEC)
+    di1 = topics.dio("drive1", "DI1")
+
+    def src(changes_ms: list[int]) -> MemorySource:
+        return MemorySource({
+            PARAMS: [(0, {"values": {"P2.010": 0x0101}}), (5 * MS, {"values": {"P2.010": 0x0145}})],
+            di1: [(0, {"level": False})] + [(t * MS, {"level": bool(i % 2 == 0)})
+                                            for i, t in enumerate(changes_ms)],
+        })
+
+    why = not_applicable(spec, src([10, 20]), {})
+    assert why == ("DI1 never changed while it was SON (P2.010 = 0x0101, 0x0145; SON is 0x01)")
+    assert not_applicable(spec, src([3, 10]), {}) is None  # one change while it was SON
+
+
 def test_requires_must_hold_at_some_time():
     spec = loads_spec(SPEC + 'requires: "bit(P5.059, 0) == 1"\n')
     assert "never held" in not_applicable(spec, _src({"P5.059": 0x0030}), {})
