@@ -198,6 +198,10 @@ class DiFunctions:
         d.clear_position_error()
         self._clear_pt_error()  # PT: the accumulated pulse error (L9749)
         d.cia402.drop_setpoints()  # the pending position command is gone
+        # a PR move cut short this way is not completed: TPOS is the target minus the
+        # position (L8694) and MC_OK a completed PR (L15326), so the program ends
+        # unfinished, as a JOG or PFQS ends it (Cmd_OK / MC_OK stay off, no AUTO path)
+        self._end_pr()
         if level:
             d.axis.lock("CCLR")
 

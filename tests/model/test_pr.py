@@ -564,3 +564,22 @@ def test_an_inc_path_after_a_power_cycle_adds_to_where_the_motor_starts() -> Non
     d.set_di(2, True)
     run(d, 5.0)
     assert puu(d) == 10000
+
+
+def test_cclr_cuts_a_pr_move_short_and_the_program_does_not_complete() -> None:
+    """CCLR clears the position error (L15088, L9749): a PR move it cuts short is not
+    completed, so Cmd_OK and MC_OK stay off (MC_OK = a completed PR, L15326) and an AUTO
+    path does not follow. They had come on, and PR#2 started (an outside review)."""
+    d = make()
+    d.params.write("P2.014", 0x0104)  # DI5 = CCLR
+    put(d, 1, type_="auto", data=200000, spd=4)
+    put(d, 2, type_="single", data=0, spd=4)
+    d.set_di(3, True)
+    d.advance(5 * MS)
+    d.set_di(2, True)
+    d.advance(100 * MS)
+    d.set_di(5, True)  # CCLR rising edge mid-move
+    run(d, 3.0)
+    assert not d.pr.cmd_ok and not d.dio.do_function_state("MC_OK")
+    assert not any(e.startswith("dispatch:2") for _t, e in d.pr.trace)
+    assert 0 < puu(d) < 200000
