@@ -166,10 +166,10 @@ class DigitalIO:
         self._forced_do: dict[int, bool] = {}  # DO4 while COMPARE runs (compare.py, L5188)
         self._raw_subs: list[Callable[[int, bool], None]] = []
         self._off = False  # control power off: no DO conducts (power_off)
-        for p in DI_PARAMS:
+        for p in (*DI_PARAMS, *DO_PARAMS):
             params.on_validate(p, check_mapping_write)
-        for p in DO_PARAMS:
-            params.on_validate(p, check_mapping_write)
+            # values written before this validator existed (`Drive(params=...)`) too
+            check_mapping_write(p, params.stored(p))
         if mapping_on_write:  # option mapping_effect (docs/manual-choices.md)
             for p in (*DI_PARAMS, *DO_PARAMS):
                 params.on_write(p, lambda *_: self._apply_mapping())

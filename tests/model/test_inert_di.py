@@ -81,3 +81,13 @@ def test_factory_default_cclr_is_modelled() -> None:
     drive = Drive(inputs={8: True})
     assert drive.dio.di_function(2) == "CCLR"
     assert inert_mapping("P2.011", 0x0104) is None
+
+
+@pytest.mark.parametrize(("param", "value"), [("P2.014", 0x0118), ("P2.014", 0x0106),
+                                              ("P2.018", 0x0010)])
+def test_a_drive_built_with_an_inert_mapping_is_refused(param, value) -> None:
+    """`Drive(params=...)` wrote the values before DI/DO registered its check, so S-P,
+    CMDINV or a b-contact OLW (which then conducted for ever) went through (an outside
+    review, helper-67); a parameter write of the same values is refused."""
+    with pytest.raises(InertFunction):
+        Drive(inputs={8: True}, params={param: value})
