@@ -166,6 +166,7 @@ class DigitalIO:
         self._forced_do: dict[int, bool] = {}  # DO4 while COMPARE runs (compare.py, L5188)
         self._raw_subs: list[Callable[[int, bool], None]] = []
         self._off = False  # control power off: no DO conducts (power_off)
+        self.forced_do_mode = False  # P2.008 = 406 (below)
         for p in (*DI_PARAMS, *DO_PARAMS):
             params.on_validate(p, check_mapping_write)
             # values written before this validator existed (`Drive(params=...)`) too
@@ -176,6 +177,9 @@ class DigitalIO:
         params.on_write("P3.006", lambda *_: self._update_di())
         params.on_write("P4.007", self._on_sdi)
         params.on_write("P4.006", lambda *_: self._update_spo())
+        # forced DO mode (L2769, L9226-9227): P2.008 = 406 enters it, 400 leaves it; in it
+        # P4.006 bit n-1 drives DOn, whatever its function (an output check on the bench)
+        params.on_write("P2.008", self._on_p2008)
         params.on_read("P4.007", self.di_word)
         self._apply_mapping()
 
@@ -193,8 +197,14 @@ class DigitalIO:
         self._off = True
         self._update_do()
 
+    def _on_p2008(self, _name: str, _old: int, new: int) -> None:
+        if new in (400, 406):
+            self.forced_do_mode = new == 406
+            self._update_do()
+
     def power_cycle(self) -> None:
         """Re-read the mapping (L9256, L9339), P4.006/P4.007 after their ■ revert."""
+        self.forced_do_mode = False  # a command, not a setting
         self._off = False
         self._sdi = self.params.stored("P4.007")
         self.clear_overlay()
@@ -374,6 +384,8 @@ class DigitalIO:
             n = i + 1
             if self._off:
                 sym, level = "", False
+            elif self.forced_do_mode:
+                sym, level = "", bool((self.params.get("P4.006") >> i) & 1)
             elif n in self._forced_do:
                 sym, level = "", self._forced_do[n]
             elif n in self._overlay_do:

@@ -91,3 +91,26 @@ def test_a_drive_built_with_an_inert_mapping_is_refused(param, value) -> None:
     review, helper-67); a parameter write of the same values is refused."""
     with pytest.raises(InertFunction):
         Drive(inputs={8: True}, params={param: value})
+
+
+def test_forced_do_mode_drives_the_outputs_from_p4006() -> None:
+    """L2769, L9226-9227: P2.008 = 406 enters forced DO mode, P4.006 = 2 forces DO2 on
+    alone, 5 DO1 and DO3; 400 (or a power cycle) goes back to the functions. Both writes had
+    been accepted and done nothing (helper-67)."""
+    from hil.units import MS
+
+    d = Drive(inputs={8: True})
+    d.advance(5 * MS)
+    normal = d.dio.do_levels()
+    d.params.write("P2.008", 406)
+    d.params.write("P4.006", 2)
+    assert d.dio.do_levels() == [False, True, False, False, False, False]
+    d.params.write("P4.006", 5)
+    assert d.dio.do_levels() == [True, False, True, False, False, False]
+    assert d.params.read("P4.009") == 5
+    d.params.write("P2.008", 400)
+    assert d.dio.do_levels() == normal
+    d.params.write("P2.008", 406)
+    d.power_cycle(off_for=100 * MS)
+    d.advance(10 * MS)
+    assert not d.dio.forced_do_mode  # not kept at power-off (L2769)
