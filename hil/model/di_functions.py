@@ -21,6 +21,12 @@
 * GAINUP (0x03, level, PT/PR/S, L15085): with P2.027.X = 1 (on) / 5 (off) the gains switch
   (L9423-9466): Y = 0 position gain x P2.001 %, speed gain x P2.005 %; Y = 1 (integrator
   switch) is recorded only. `gain_switched` and the snapshot show the state.
+* The S/Sz and T/Tz commands (P1.001.X = 2/4, 3/5; §6.3.1 L3709-3721, L15151-15168): with the
+  servo on the motor runs at the speed SPD0/SPD1 select (00: S the analog V_REF x P1.040 /
+  10 V, Sz 0; 01-11 P1.009-P1.011 x 0.1 rpm), ramped by P1.034 / P1.035 (ms from 0 to the
+  rated speed, L8334-8350), at once on a change (no CTRG); in T/Tz it gives the torque
+  TCM0/TCM1 select (00: T the analog T_REF x P1.041 / 10 V, Tz 0; 01-11 P1.012-P1.014 %).
+  Not modelled: the P1.036 S-curve and the P1.007 torque smoothing (a trapezoid, a step).
 
 The table's "控制模式" column is `control_mode()` (option `di_modes_follow_cia402`).
 Choices: docs/manual-choices.md#di-functions.
@@ -49,9 +55,14 @@ SPDLM_MODES = ("T", "Tz")  # L15121, "只在 T / Tz 模式有效" L7831
 ZCLAMP_MODES = ("S", "Sz")  # "在速度模式" L9906
 GAINUP_MODES = ("PT", "PR", "S", "Sz")  # L15085, P2.027 table "P / S" (L9458)
 
-_TRIGGERS = ("TRQLM", "SPDLM", "TCM0", "TCM1", "SPD0", "SPD1", "ZCLAMP", "GAINUP")
+SPEED_MODES = ("S", "Sz")  # §6.3.1, L3709-3721
+TORQUE_MODES = ("T", "Tz")  # L15162-15168, L7791-7795
+
+_TRIGGERS = ("TRQLM", "SPDLM", "TCM0", "TCM1", "SPD0", "SPD1", "ZCLAMP", "GAINUP", "PL",
+             "NL")
 _PARAMS = ("P1.001", "P1.002", "P1.009", "P1.010", "P1.011", "P1.012", "P1.013", "P1.014",
-           "P1.038", "P1.040", "P1.041", "P2.001", "P2.005", "P2.027", "P2.065")  # fmt: skip
+           "P1.034", "P1.035", "P1.038", "P1.040", "P1.041", "P2.001", "P2.005", "P2.027",
+           "P2.065")  # fmt: skip
 
 
 class DiFunctions:
@@ -66,6 +77,7 @@ class DiFunctions:
         self.comm_jog = 0  # P4.005 = 4998 / 4999: +1 / -1 (axis direction), 0 none
         self.jog_rpm = self._speed_of(drive.params.get("P4.005"), 20)
         self.gain_switched = False
+        self._mode_cmd: tuple | None = None  # the S/T command given to the axis
         self.torque_limit_pct: float | None = None  # TRQLM limit in effect (%)
         self.speed_limit_rpm: float | None = None  # SPDLM limit in effect (rpm)
         self._p1001 = drive.params.cached("P1.001")  # read every motion step (TPOS, TQL)
@@ -158,7 +170,10 @@ class DiFunctions:
         elif self.jog:
             self._release("JOG")
             d.axis.ramp_stop(ramp)
+            self._mode_cmd = None  # the S/T command takes the axis back
         self.jog = want
+        if not want:
+            self.mode_command()
 
     def _end_pr(self) -> None:
         """A PR program in progress ends without completing (Cmd_OK/MC_OK stay off)."""
@@ -182,6 +197,7 @@ class DiFunctions:
         self.refresh()
 
     def on_servo_off(self) -> None:
+        self._mode_cmd = None  # given again at the next servo on
         self._end_jog()  # the power stage is off: the jog ends (a held DI restarts it)
         self.comm_jog = 0
         if self.pfqs_stopping:  # another servo off cut the PFQS ramp short: it ends here
@@ -242,6 +258,42 @@ class DiFunctions:
         d.axis.zero_clamp = ("zero" if (get("P2.065") >> 10) & 1 else "lock") if clamp else ""
         d.axis.zero_clamp_rpm = get("P1.038") / 10.0
         self._gains(mode)
+        self.mode_command(mode)
+
+    def mode_command(self, mode: str | None = None) -> None:
+        """The S/Sz speed or T/Tz torque command the DIs select, given to the axis when it
+        changes (a JOG, PFQS or CCLR holding the axis refuses it; it is given again when
+        they let go)."""
+        d = self.d
+        mode = mode or self.control_mode()
+        if (mode not in SPEED_MODES and mode not in TORQUE_MODES) or not d.servo_on:
+            self._mode_cmd = None
+            return
+        on, get, opts = d.dio.function_active, d.params.get, d.options
+        if mode in SPEED_MODES:
+            sel = on("SPD0") + 2 * on("SPD1")
+            if sel:
+                rpm = get(f"P1.{8 + sel:03d}") / 10.0
+            else:  # S: V_REF x P1.040 / 10 V (L3712); Sz: 0 (L3713)
+                rpm = opts.analog_v_ref * get("P1.040") / 10.0 if mode == "S" else 0.0
+            if (rpm > 0 and on("PL")) or (rpm < 0 and on("NL")):
+                rpm = 0.0  # no running towards an active limit (L15188-15191)
+            cmd: tuple = ("speed", rpm, get("P1.034"), get("P1.035"))
+        else:
+            sel = on("TCM0") + 2 * on("TCM1")
+            if sel:
+                pct = float(get(f"P1.{11 + sel:03d}"))
+            else:  # T: T_REF x P1.041 / 10 V (L3955-3960); Tz: 0
+                pct = opts.analog_t_ref * get("P1.041") / 10.0 if mode == "T" else 0.0
+            cmd = ("torque", pct)
+        if cmd == self._mode_cmd or d.axis.locks:
+            return
+        self._mode_cmd = cmd
+        if cmd[0] == "speed":
+            to_3000 = 3000.0 / d.axis.mech.rated_speed  # P1.034/P1.035: 0 to rated speed
+            d.axis.run_velocity(cmd[1], cmd[2] * to_3000, cmd[3] * to_3000)
+        else:
+            d.axis.run_torque(cmd[1] * 10.0, 0.0)
 
     def _gains(self, mode: str) -> None:
         """P2.027 X = 1: switched while GAINUP is on, X = 5: while off (L9437-9447)."""
