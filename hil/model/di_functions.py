@@ -266,7 +266,11 @@ class DiFunctions:
         they let go)."""
         d = self.d
         mode = mode or self.control_mode()
-        if (mode not in SPEED_MODES and mode not in TORQUE_MODES) or not d.servo_on:
+        # P1.001 itself names the mode: a CiA 402 PV/PT mode (control_mode() "S"/"T" by
+        # 6061h) runs on its own objects (60FFh, 6071h), not on these
+        by_p1001 = P1001_MODES.get(self._p1001()[0] & 0xFF) == mode
+        if (mode not in SPEED_MODES and mode not in TORQUE_MODES) or not by_p1001 \
+                or not d.servo_on:
             self._mode_cmd = None
             return
         on, get, opts = d.dio.function_active, d.params.get, d.options

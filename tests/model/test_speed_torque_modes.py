@@ -100,3 +100,20 @@ def test_the_command_comes_back_after_a_servo_off_and_on() -> None:
     d.set_di(1, True)
     d.advance(1000 * MS)
     assert d.axis.velocity_rpm == pytest.approx(1000.0, abs=0.5)
+
+
+def test_a_cia402_velocity_mode_keeps_its_own_target() -> None:
+    """In CANopen mode a PV mode is "S" for the DI table (6061h decides), but it runs on
+    60FFh: a refresh of the DI functions (a P1.034 write here) must not replace its target
+    with the SPD0/SPD1 command (0 rpm)."""
+    d = Drive(inputs={8: True, 6: True, 7: True}, params={"P1.001": 0x0C})
+    d.write_object(0x6060, 0, 3)
+    for cw in (6, 7, 15):
+        d.write_object(0x6040, 0, cw)
+        d.advance(2 * MS)
+    d.write_object(0x60FF, 0, 6000)  # 600 rpm
+    d.advance(500 * MS)
+    assert d.control_mode() == "S"
+    d.params.write("P1.034", 100)
+    d.advance(500 * MS)
+    assert d.axis.velocity_rpm == pytest.approx(600.0, abs=0.5)
