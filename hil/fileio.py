@@ -181,4 +181,3 @@ __all__ = [
     "same_file",
     "write_text_atomic",
 ]
-

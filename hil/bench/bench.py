@@ -281,14 +281,14 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
                 raise v.err(lst.item_lines[i], f"features[{i}]", "must be a name")
             features.add(f)
     clock = _clock(v, top, virtual, process, can, rs485, drives)
+    constants, constant_lines = _timing(v, top)
     return Bench(
         name=name, path=file, text=text, virtual=virtual, drives=drives, clock=clock,
         description=str(top.get("description") or ""), process=process, can=can, rs485=rs485,
         timeouts=timeouts, safe_state=safe,
         motion_allowed=v.boolean(top, "motion_allowed", "", True), features=features,
         faults_allowed=v.boolean(top, "faults_allowed", "", virtual),
-        timing_constants=_timing(v, top), timing_constant_lines=_timing_lines(top),
-        gateway=gateway,
+        timing_constants=constants, timing_constant_lines=constant_lines, gateway=gateway,
     )
 
 
@@ -368,14 +368,16 @@ def _gateway(v: Checker, top: LDict) -> GatewaySpec | None:
                        holder=None if holder is None else str(holder))
 
 
-def _timing(v: Checker, top: LDict) -> dict[str, float]:
-    """`timing: {constants: {fw_tol: 3}}`: spec constants (ms) overridden on this bench."""
+def _timing(v: Checker, top: LDict) -> tuple[dict[str, float], dict[str, int]]:
+    """`timing: {constants: {fw_tol: 3}}`: spec constants (ms) overridden on this bench, and
+    the line of each (a name no shipped spec defines is warned of where the specs are known:
+    `hil.plan.plan.bench_constant_warnings`)."""
     if "timing" not in top:
-        return {}
+        return {}, {}
     m = v.mapping(top["timing"], top.kline("timing"), "timing")
     v.keys(m, {"constants"}, "timing")
     if "constants" not in m:
-        return {}
+        return {}, {}
     c = v.mapping(m["constants"], m.kline("constants"), "timing.constants")
     out = {}
     for k, x in c.items():
@@ -386,14 +388,7 @@ def _timing(v: Checker, top: LDict) -> dict[str, float]:
                         f"{repr(x)[:40]}: a number of ms (finite, within ±1e12, as "
                         "`hil check --const`)")
         out[str(k)] = float(x)
-    return out
-
-
-def _timing_lines(top: LDict) -> dict[str, int]:
-    """The line of each `timing.constants` key (a name no spec defines is refused by the
-    plan check, which knows the specs: `hil.plan.plan.check_plan`)."""
-    c = top.get("timing", {}).get("constants", {})
-    return {str(k): c.kline(k) for k in c} if isinstance(c, LDict) else {}
+    return out, {str(k): c.kline(k) for k in c}
 
 
 def _urls(v: Checker, top: LDict, key: str, kind: str, gateway: bool = False) -> dict[str, str]:

@@ -272,7 +272,7 @@ SAFE_TAIL_NS = 200_000_000
 # a step whose own timeout (`wait_until`, `pr_wait`, ...) or `wait` is longer than the bench's
 # step timeout: the step's watchdog waits this much past it, so the step fails saying what it
 # saw, or ends (docs/plans.md)
-WAIT_UNTIL_GRACE_NS = 1_000_000_000
+OWN_TIMEOUT_GRACE_NS = 1_000_000_000
 
 
 def _tail(session: Session) -> None:
@@ -460,7 +460,7 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
         # waits longer
         own = None if s.timeout_ns else s.action.own_timeout_ns(s, ctx.bench)
         if own:
-            timeout = max(timeout, own + WAIT_UNTIL_GRACE_NS)
+            timeout = max(timeout, own + OWN_TIMEOUT_GRACE_NS)
         try:
             ctx.session.check_lease()  # a bench behind a gateway: only while the lease holds
             ctx.session.check_alive()  # a virtual bench: only while its drive processes live

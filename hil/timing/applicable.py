@@ -42,15 +42,13 @@ def not_applicable(spec: Spec, source: SignalSource, binding: dict[str, str]) ->
              source.messages(topics.drive_params(bind.get("drive", "drive1")))
              if isinstance(values := msg.get("values") or {}, dict)
              and all(type(v) is int for v in values.values())]
-    records = [values for _t, values in timed]
-    recorded: dict[str, list[int]] = {}
-    history: dict[str, list[tuple[int, int]]] = {}
+    history: dict[str, list[tuple[int, int]]] = {}  # parameter -> (t, value) in time order
     for t, values in timed:
         for name, value in values.items():
-            recorded.setdefault(name, []).append(value)
             history.setdefault(name, []).append((t, value))
-    if not recorded:
+    if not history:
         return None
+    records = [values for _t, values in timed]
     if spec.requires is not None and (why := _never_required(spec.requires, records)):
         return why
     for sig in spec.signals.values():
@@ -62,7 +60,7 @@ def not_applicable(spec: Spec, source: SignalSource, binding: dict[str, str]) ->
             continue
         param, symbols = found
         code = symbols.get(sig.function)
-        values = recorded.get(param)
+        values = [value for _t, value in history.get(param, ())]
         if code is None or not values:  # a spec-local name (MARK), or mapping not recorded
             continue
         shown = ", ".join(dict.fromkeys(f"0x{v:04X}" for v in values))

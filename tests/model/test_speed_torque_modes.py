@@ -10,6 +10,7 @@ import pytest
 from hil.model.drive import Drive
 from hil.model.options import ModelOptions
 from hil.units import MS
+from tests.model.test_capture import pv
 
 # DI1 SON, DI3 SPD0 / TCM0, DI4 SPD1 / TCM1 (a-contacts), DI8 EMGS closed
 SPEED = {"P2.012": 0x0114, "P2.013": 0x0115}
@@ -107,12 +108,7 @@ def test_a_cia402_velocity_mode_keeps_its_own_target() -> None:
     60FFh: a refresh of the DI functions (a P1.034 write here) must not replace its target
     with the SPD0/SPD1 command (0 rpm)."""
     d = Drive(inputs={8: True, 6: True, 7: True}, params={"P1.001": 0x0C})
-    d.write_object(0x6060, 0, 3)
-    for cw in (6, 7, 15):
-        d.write_object(0x6040, 0, cw)
-        d.advance(2 * MS)
-    d.write_object(0x60FF, 0, 6000)  # 600 rpm
-    d.advance(500 * MS)
+    pv(d, 600.0)  # CiA 402 profile velocity, 60FFh = 600 rpm
     assert d.control_mode() == "S"
     d.params.write("P1.034", 100)
     d.advance(500 * MS)
