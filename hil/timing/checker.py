@@ -192,6 +192,21 @@ class Context:
         env.update(self.const_over)
         return env
 
+    def _param_deps(self, exprs: list[Any]) -> set[str]:
+        """The parameters `exprs` read, directly or through the spec's constants (one given
+        in `constants` is a number, not its expression)."""
+        out: set[str] = set()
+        todo, seen = list(exprs), set()
+        while todo:
+            e = todo.pop()
+            for n in e.names:
+                if is_param(n):
+                    out.add(n)
+                elif n in self.spec.constants and n not in self.const_over and n not in seen:
+                    seen.add(n)
+                    todo.append(self.spec.constants[n])
+        return out
+
     def fmt(self, text: str) -> str:
         """Fill {drive}/{dio}/{bus}/{alarm} placeholders from the binding."""
         def sub(m: re.Match) -> str:
@@ -401,7 +416,7 @@ class Context:
             return pts
         first = parent.times[0]
         have = set(parent.times)
-        extra = [t for t in self.params.change_times() if t > first and t not in have]
+        extra = [t for t in thresholds.times if t > first and t not in have]
         if not extra:
             return pts
         merged = sorted([*pts, *((t, parent.value_at(t)) for t in extra)], key=lambda p: p[0])
@@ -515,7 +530,8 @@ class Context:
             return None
         if id(tf) in self._thr:
             return self._thr[id(tf)]
-        times = self.params.change_times() or [0]
+        # only where a parameter the limits read (themselves or through a constant) changed
+        times = self.params.change_times(self._param_deps([tf[k] for k in keys])) or [0]
         vals = [{k: tf[k].eval(self.env(t)) for k in keys} for t in times]
 
         def span(t: int) -> tuple[dict[str, float], int, int]:
@@ -528,6 +544,7 @@ class Context:
         if constant:
             times, vals = times[:1], vals[:1]  # no search per sample
         span.constant = constant  # type: ignore[attr-defined]
+        span.times = times  # type: ignore[attr-defined]
         self._thr[id(tf)] = span
         return span
 

@@ -958,5 +958,15 @@ class ParamTimeline:
         i = bisect.bisect_right(self._times, t) - 1
         return (self._states[i] if i >= 0 else self._before) | self.overrides
 
-    def change_times(self) -> list[int]:
-        return list(self._times)
+    def change_times(self, names: Iterable[str] | None = None) -> list[int]:
+        """The times of the records; with `names`, only the first and those where one of
+        `names` changed (what an expression of those names can change at)."""
+        if names is None:
+            return list(self._times)
+        names = tuple(names)
+        states, out = self._states, self._times[:1]
+        for i in range(1, len(states)):
+            a, b = states[i - 1], states[i]
+            if any(a.get(n) != b.get(n) for n in names):
+                out.append(self._times[i])
+        return out

@@ -106,3 +106,43 @@ def test_a_threshold_that_changes_mid_recording_applies_from_each_change_on():
                             "/drive/drive1/state": state})
         tr = context(loads_spec(BEYOND), src, binding={"drive": "drive1"}).trace("beyond")
         assert list(zip(tr.times, tr.values, strict=True)) == want
+
+
+THROUGH = BEYOND.replace("above: P5.008}", "above: lim}").replace(
+    "signals:", "constants:\n  lim: \"P5.008 / 2\"\nsignals:")
+
+
+def test_a_limit_is_looked_up_again_only_where_a_parameter_it_reads_changed():
+    """A threshold through a constant (`lim: P5.008 / 2`) amid writes of parameters it does
+    not read (P1.038, P2.009 every millisecond): the trace is the one every write gives, and
+    the limit's own change times are the first record and the P5.008 writes only."""
+    from hil.timing.checker import context
+
+    writes = [(0, 600000), (5 * MS, 200000), (8 * MS, 500000), (12 * MS, 100000)]
+    noise = [(t * MS + 500_000, {"values": {"P1.038": t, "P2.009": 2 * t}}) for t in range(14)]
+    records = sorted([(t, {"values": {"P5.008": v}}) for t, v in writes] + noise,
+                     key=lambda r: r[0])
+    pos = {t * MS: p for t, p in [(0, 0), (2, 200000), (4, 200000), (5, 200000), (6, 200000),
+                                  (8, 200000), (9, 260000), (11, 260000), (12, 60000),
+                                  (13, 40000)]}
+    in_force = ParamTimeline.from_source(MemorySource({PARAMS: records}), PARAMS)
+    assert in_force.change_times(["P5.008"]) == [t for t, _v in writes]
+    assert in_force.change_times(["P1.038"]) == [0] + [t for t, _r in noise]
+    assert len(in_force.change_times()) == len(writes) + len(noise)
+    want = [(t, p > in_force.at(t)["P5.008"] / 2) for t, p in sorted(pos.items())]
+    want = [pt for i, pt in enumerate(want) if i == 0 or pt[1] != want[i - 1][1]]
+    assert want == [(0, False), (5 * MS, True), (8 * MS, False), (9 * MS, True),
+                    (13 * MS, False)]
+    state = [(t, {"position_puu": p, "servo_on": True}) for t, p in sorted(pos.items())]
+    ctx = context(loads_spec(THROUGH), MemorySource({PARAMS: records,
+                                                    "/drive/drive1/state": state}),
+                  binding={"drive": "drive1"})
+    tr = ctx.trace("beyond")
+    assert list(zip(tr.times, tr.values, strict=True)) == want
+    span = ctx._thresholds(ctx.spec.signals["beyond"].transforms)
+    assert span.times == [t for t, _v in writes]
+    # a constant given by the check reads no parameter: one value throughout
+    given = context(loads_spec(THROUGH), MemorySource({PARAMS: records,
+                                                      "/drive/drive1/state": state}),
+                    binding={"drive": "drive1"}, constants={"lim": 150000})
+    assert given._thresholds(given.spec.signals["beyond"].transforms).constant
