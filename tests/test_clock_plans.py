@@ -175,3 +175,58 @@ def test_a_bad_virtual_bitrate_is_named(rate, tmp_path) -> None:
     with pytest.raises(PlanFileError) as e:
         loads_bench(text, "b.yaml")
     assert "b.yaml:" in str(e.value) and f"bitrate={rate}" in str(e.value).replace("'", "")
+
+
+def test_a_virtual_time_plan_collects_the_older_gc_generations_seldom(tmp_path,
+                                                                      monkeypatch) -> None:
+    """While a plan runs in virtual time, the collector's older generations wait for
+    `VIRTUAL_GC_OLDER` collections of the younger; the thresholds come back after it, also
+    when it fails, and a wall-clock plan keeps them as they are (docs/performance.md)."""
+    import gc
+    import threading
+
+    from hil.plan import runner
+
+    seen: list[tuple[int, int, int]] = []
+
+    def fake(plan, bench, out_dir, **kw):
+        seen.append(gc.get_threshold())
+        if kw.get("boom"):
+            raise RuntimeError("boom")
+        return "done"
+
+    monkeypatch.setattr(runner, "_run_plan", fake)
+    before = gc.get_threshold()
+    try:
+        gc.set_threshold(700, 10, 10)
+        plan = load_plan(find_plans(["servo_on_off_brake"])[0])
+        assert run_plan(plan, BUILTIN, tmp_path) == "done"
+        assert seen[-1] == (700, *runner.VIRTUAL_GC_OLDER)
+        assert gc.get_threshold() == (700, 10, 10)
+        with pytest.raises(RuntimeError):
+            run_plan(plan, BUILTIN, tmp_path, boom=True)
+        assert gc.get_threshold() == (700, 10, 10)
+        assert run_plan(plan, with_clock(BUILTIN, "real"), tmp_path) == "done"
+        assert seen[-1] == (700, 10, 10)
+        # plans in threads at once: the thresholds come back once the last one ends
+        gate, started = threading.Event(), threading.Barrier(3)
+
+        def slow(plan, bench, out_dir, **kw):
+            started.wait()
+            gate.wait(5)
+            seen.append(gc.get_threshold())
+
+        monkeypatch.setattr(runner, "_run_plan", slow)
+        ts = [threading.Thread(target=run_plan, args=(plan, BUILTIN, tmp_path))
+              for _ in range(2)]
+        for t in ts:
+            t.start()
+        started.wait()
+        assert gc.get_threshold() == (700, *runner.VIRTUAL_GC_OLDER)
+        gate.set()
+        for t in ts:
+            t.join(5)
+        assert seen[-2:] == [(700, *runner.VIRTUAL_GC_OLDER)] * 2
+        assert gc.get_threshold() == (700, 10, 10)
+    finally:
+        gc.set_threshold(*before)
