@@ -128,3 +128,27 @@ steps:
     # a move inside its time still passes
     plan.write_text(text.replace("500000", "20000"))
     assert hil(["run", "-q", "-j", "1", "--out", str(tmp_path / "out"), str(plan)]) == 0
+
+
+def test_a_drive_process_line_reaches_only_the_ground_truth_records():
+    """`hil-ctl {"truth": ...}` lines from a `hil drive` process call the recorder's four
+    ground-truth methods only: a line naming `close` (or any other method) is dropped."""
+    import json
+    import threading
+
+    from hil.virtual.world import TRUTH_METHODS, SubprocessWorld
+
+    calls: list[tuple[str, tuple, dict]] = []
+
+    class Rec:
+        def __getattr__(self, name):
+            return lambda *a, **kw: calls.append((name, a, kw))
+
+    w = SubprocessWorld.__new__(SubprocessWorld)
+    w.rec, w._lock, w._waiting = Rec(), threading.Lock(), {}
+    for name in ("close", "flush", "keep_messages", "__class__", "log", "drive_state"):
+        w._control_line("drive1", json.dumps({"truth": name, "args": ["drive1", {"t": 1}],
+                                              "kw": {"source_t": 5}}))
+    assert [c[0] for c in calls] == ["drive_state"]
+    assert calls[0][1:] == (("drive1", {"t": 1}), {"source_t": 5})
+    assert TRUTH_METHODS == {"drive_state", "drive_event", "drive_params", "input_delivery"}

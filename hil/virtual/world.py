@@ -394,6 +394,9 @@ def _jsonable(x: Any) -> Any:
     return str(x)
 
 
+TRUTH_METHODS = frozenset(("drive_state", "drive_event", "drive_params", "input_delivery"))
+
+
 class _LineRecorder:
     """What `GroundTruth` records, as `hil-ctl` JSON lines (the parent records them)."""
 
@@ -401,7 +404,7 @@ class _LineRecorder:
         self._write = write
 
     def __getattr__(self, method: str) -> Callable[..., None]:
-        if method not in ("drive_state", "drive_event", "drive_params", "input_delivery"):
+        if method not in TRUTH_METHODS:
             raise AttributeError(method)
 
         def call(*args: Any, **kw: Any) -> None:
@@ -596,7 +599,10 @@ class SubprocessWorld:
         except ValueError:
             return
         if "truth" in msg:
-            fn = getattr(self.rec, str(msg["truth"]), None)
+            # the ground truth's own records only (`_LineRecorder`): a line cannot close the
+            # recorder or call any other of its methods
+            name = msg["truth"]
+            fn = getattr(self.rec, name, None) if name in TRUTH_METHODS else None
             if fn is not None:
                 with contextlib.suppress(Exception):
                     fn(*msg.get("args", []), **msg.get("kw", {}))
