@@ -127,6 +127,13 @@ class TappedBus(BusABC):
         raw = self._raw
         return raw is not None and courier_of(raw.channel_id) is not None
 
+    def recv(self, timeout: float | None = None) -> Message | None:
+        """python-can's `recv`; with no filter set here and a timeout, one read of the inner
+        bus, which waits that long itself (the virtual bus's pump reads every frame so)."""
+        if self._filters is None and timeout is not None:
+            return self._recv_internal(timeout)[0]
+        return super().recv(timeout)
+
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
         msg = self.bus.recv(timeout)
         if msg is not None:

@@ -28,6 +28,7 @@ class SensorTap:
         self._rec = rec
         self._lines = sorted(n for n, _kind in DEFAULT_SENSORS.values())
         self._last: dict[tuple[str, int], bool] = {}
+        self._last_di: dict[str, list] = {}  # per drive, the DI levels of its last sample
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._rec, name)
@@ -37,6 +38,9 @@ class SensorTap:
         di = state.get("di") if isinstance(state, dict) else None
         if not isinstance(di, list | tuple):
             return
+        if type(di) is list and self._last_di.get(drive) == di:
+            return  # no level changed since the last sample (nearly every one at 1 kHz)
+        self._last_di[drive] = list(di)
         for n in self._lines:
             if n > len(di):
                 continue

@@ -183,8 +183,9 @@ class GroundTruth:
 
     def sample(self) -> None:
         """One state sample now (call under the host lock): what a check reads is current."""
-        self.rec.drive_state(self.name, {**self.drive.snapshot(), "periodic": True},
-                             source_t=self.host.wall_ns(self.drive.now))
+        snap = self.drive.snapshot()  # a new dict each time
+        snap["periodic"] = True
+        self.rec.drive_state(self.name, snap, source_t=self.host.wall_ns(self.drive.now))
 
     def input_applied(self, line: str, level: bool, sent_ns: int, model_t: int) -> None:
         """An input edge the drive applied at `model_t`, stamped `sent_ns` by the harness."""
