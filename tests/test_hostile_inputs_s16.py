@@ -151,4 +151,4 @@ def test_a_drive_process_line_reaches_only_the_ground_truth_records():
                                               "kw": {"source_t": 5}}))
     assert [c[0] for c in calls] == ["drive_state"]
     assert calls[0][1:] == (("drive1", {"t": 1}), {"source_t": 5})
-    assert TRUTH_METHODS == {"drive_state", "drive_event", "drive_params", "input_delivery"}
+    assert {"drive_state", "drive_event", "drive_params", "input_delivery"} == TRUTH_METHODS
