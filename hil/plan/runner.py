@@ -166,26 +166,18 @@ class Interrupts:
 # homing plan 10-15 % of its time (docs/performance.md, session 18). The young generation
 # is collected as usual, so short-lived cycles still go at once.
 VIRTUAL_GC_OLDER = (1000, 1000)
-_gc_lock = threading.Lock()
-_gc_saved: list[tuple[int, int, int]] = []  # the thresholds before the outermost run
 
 
 @contextlib.contextmanager
 def _older_generations_seldom() -> Any:
-    with _gc_lock:
-        if not _gc_saved:
-            old = gc.get_threshold()
-            _gc_saved.append(old)
-            gc.set_threshold(old[0], *VIRTUAL_GC_OLDER)
-        else:  # runs in threads at once: the first one's thresholds come back at the end
-            _gc_saved.append(_gc_saved[0])
+    """The collector's thresholds for the block (one run at a time per process, as the
+    clock itself: `clock.use`)."""
+    old = gc.get_threshold()
+    gc.set_threshold(old[0], *VIRTUAL_GC_OLDER)
     try:
         yield
     finally:
-        with _gc_lock:
-            old = _gc_saved.pop()
-            if not _gc_saved:
-                gc.set_threshold(*old)
+        gc.set_threshold(*old)
 
 
 def run_plan(plan: Plan, bench: Bench, out_dir: Path, **kwargs: Any) -> PlanResult:
