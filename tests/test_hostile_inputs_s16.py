@@ -132,7 +132,9 @@ steps:
 
 def test_a_drive_process_line_reaches_only_the_ground_truth_records():
     """`hil-ctl {"truth": ...}` lines from a `hil drive` process call the recorder's four
-    ground-truth methods only: a line naming `close` (or any other method) is dropped."""
+    ground-truth methods only: a line naming `close` (or any other method, or not a name) is
+    dropped, and so is a line that is not a JSON object, without an exception that would end
+    the thread reading the process's output."""
     import json
     import threading
 
@@ -146,9 +148,14 @@ def test_a_drive_process_line_reaches_only_the_ground_truth_records():
 
     w = SubprocessWorld.__new__(SubprocessWorld)
     w.rec, w._lock, w._waiting = Rec(), threading.Lock(), {}
-    for name in ("close", "flush", "keep_messages", "__class__", "log", "drive_state"):
+    for name in ("close", "flush", "keep_messages", "__class__", "log", [], {"a": 1}, None,
+                 "drive_state"):
         w._control_line("drive1", json.dumps({"truth": name, "args": ["drive1", {"t": 1}],
                                               "kw": {"source_t": 5}}))
+    for line in ("[1]", "7", '"drive_state"', "null", '{"truth": "drive_state", "args": 5}',
+                 '{"truth": "drive_event", "kw": []}', '{"reply": [1]}'):
+        w._control_line("drive1", line)  # dropped, the reader goes on
     assert [c[0] for c in calls] == ["drive_state"]
     assert calls[0][1:] == (("drive1", {"t": 1}), {"source_t": 5})
-    assert {"drive_state", "drive_event", "drive_params", "input_delivery"} == TRUTH_METHODS
+    assert sorted(TRUTH_METHODS) == ["drive_event", "drive_params", "drive_state",
+                                     "input_delivery"]

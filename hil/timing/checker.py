@@ -181,10 +181,13 @@ class Context:
         self.start = start if start is not None else 0
 
     # --- names ------------------------------------------------------------------------
-    def env(self, t: int | None) -> dict[str, Any]:
-        """Parameters in force at t plus the spec's constants (overrides win)."""
+    def env(self, t: int | None, only: set[str] | None = None) -> dict[str, Any]:
+        """Parameters in force at t plus the spec's constants (overrides win); `only`: of
+        the constants, just these (what one expression reads: `_reads`)."""
         env: dict[str, Any] = dict(self.params.at(t))
         for name, e in self.spec.constants.items():
+            if only is not None and name not in only:
+                continue
             if name in self.const_over:
                 env[name] = self.const_over[name]
             else:
@@ -192,20 +195,22 @@ class Context:
         env.update(self.const_over)
         return env
 
-    def _param_deps(self, exprs: list[Any]) -> set[str]:
-        """The parameters `exprs` read, directly or through the spec's constants (one given
-        in `constants` is a number, not its expression)."""
-        out: set[str] = set()
-        todo, seen = list(exprs), set()
+    def _reads(self, exprs: list[Any]) -> tuple[set[str], set[str]]:
+        """The parameters and the spec constants `exprs` read, directly or through other
+        constants (one given in `constants` is a number: nothing read through it)."""
+        params: set[str] = set()
+        consts: set[str] = set()
+        todo = list(exprs)
         while todo:
             e = todo.pop()
             for n in e.names:
                 if is_param(n):
-                    out.add(n)
-                elif n in self.spec.constants and n not in self.const_over and n not in seen:
-                    seen.add(n)
-                    todo.append(self.spec.constants[n])
-        return out
+                    params.add(n)
+                elif n in self.spec.constants and n not in consts:
+                    consts.add(n)
+                    if n not in self.const_over:
+                        todo.append(self.spec.constants[n])
+        return params, consts
 
     def fmt(self, text: str) -> str:
         """Fill {drive}/{dio}/{bus}/{alarm} placeholders from the binding."""
@@ -530,9 +535,12 @@ class Context:
             return None
         if id(tf) in self._thr:
             return self._thr[id(tf)]
-        # only where a parameter the limits read (themselves or through a constant) changed
-        times = self.params.change_times(self._param_deps([tf[k] for k in keys])) or [0]
-        vals = [{k: tf[k].eval(self.env(t)) for k in keys} for t in times]
+        # the limits with what they read, where a parameter they read (themselves or through
+        # a constant) changed: a constant they do not read is not theirs to fail on
+        params, consts = self._reads([tf[k] for k in keys])
+        times = self.params.change_times(params) or [0]
+        vals = [{k: tf[k].eval(env) for k in keys}
+                for env in (self.env(t, consts) for t in times)]
 
         def span(t: int) -> tuple[dict[str, float], int, int]:
             k = bisect.bisect_right(times, t) - 1

@@ -599,11 +599,14 @@ class SubprocessWorld:
             msg = json.loads(text)
         except ValueError:
             return
+        if not isinstance(msg, dict):
+            return  # not a record or a reply: dropped, the reader goes on
         if "truth" in msg:
             # the ground truth's own records only (`_LineRecorder`): a line cannot close the
             # recorder or call any other of its methods
-            name = msg["truth"]
-            fn = getattr(self.rec, name, None) if name in TRUTH_METHODS else None
+            method = msg["truth"]
+            ok = isinstance(method, str) and method in TRUTH_METHODS
+            fn = getattr(self.rec, method, None) if ok else None
             if fn is not None:
                 with contextlib.suppress(Exception):
                     fn(*msg.get("args", []), **msg.get("kw", {}))

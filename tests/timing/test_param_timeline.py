@@ -3,6 +3,8 @@ times before it, a plain change does not; which parameters a spec reads."""
 
 from __future__ import annotations
 
+import pytest
+
 from hil.timing.checker import check
 from hil.timing.registry import load_specs
 from hil.timing.source import MemorySource, ParamTimeline
@@ -146,3 +148,29 @@ def test_a_limit_is_looked_up_again_only_where_a_parameter_it_reads_changed():
                                                       "/drive/drive1/state": state}),
                     binding={"drive": "drive1"}, constants={"lim": 150000})
     assert given._thresholds(given.spec.signals["beyond"].transforms).constant
+
+
+RATIO = THROUGH.replace('lim: "P5.008 / 2"', 'lim: "P5.008 / 2"\n  ratio: "1000 / P1.038"')
+
+
+@pytest.mark.parametrize(("above", "status"), [
+    ("lim", "pass"),                           # the limit does not read `ratio`
+    ("lim * ratio / 200", "inconclusive"),     # it does: 1000 / 0 once P1.038 = 0
+])
+def test_a_limit_is_judged_with_the_constants_it_reads_only(above, status):
+    """A constant the limit does not read (`ratio`, 1000 / P1.038) failing after the
+    constraint's reference time, where P1.038 is written 0: the limit is judged; one that
+    reads it cannot judge. (Every limit of the spec had been "cannot judge". A window is
+    still evaluated with every constant at its reference time.)"""
+    first = 5
+    spec = loads_spec(RATIO.replace("above: lim}", f"above: \"{above}\"}}"))
+    state = [(0, {"position_puu": 0, "servo_on": False}),
+             (MS, {"position_puu": 0, "servo_on": True}),
+             (11 * MS, {"position_puu": 200000, "servo_on": True})]
+    params = [(0, {"snapshot": True, "values": {"P5.008": 300000, "P1.038": first}}),
+              (20 * MS, {"values": {"P1.038": 0}})]
+    [v] = check(spec, MemorySource({PARAMS: params, "/drive/drive1/state": state}),
+                binding={"drive": "drive1"})
+    assert v.status == status, v.message
+    if status == "inconclusive":
+        assert "division by zero" in v.message
