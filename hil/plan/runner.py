@@ -183,10 +183,9 @@ def _older_generations_seldom() -> Any:
 def run_plan(plan: Plan, bench: Bench, out_dir: Path, **kwargs: Any) -> PlanResult:
     """`_run_plan` on the bench's clock: a fresh `VirtualClock` per plan for `clock:
     virtual` (docs/clock.md), the wall clock otherwise."""
-    if bench.clock != "virtual":
-        with clock.use(clock.REAL):
-            return _run_plan(plan, bench, out_dir, **kwargs)
-    with clock.use(clock.VirtualClock()), _older_generations_seldom():
+    virtual = bench.clock == "virtual"
+    with clock.use(clock.VirtualClock() if virtual else clock.REAL), (
+            _older_generations_seldom() if virtual else contextlib.nullcontext()):
         return _run_plan(plan, bench, out_dir, **kwargs)
 
 

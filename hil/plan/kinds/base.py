@@ -78,9 +78,9 @@ class StepKind:
         saw, or ends, rather than at the bench's step timeout. A kind's default inner
         timeout, not written, does not count."""
         raw = step.raw.get(step.kind)
-        own = getattr(self.args, "timeout", None)
         if not (isinstance(raw, Mapping) and "timeout" in raw):
             return None
+        own = getattr(self.args, "timeout", None)
         return own if isinstance(own, int) and not isinstance(own, bool) and own > 0 else None
 
     def check(self, cc: CheckContext) -> None:
