@@ -149,6 +149,10 @@ def test_clock_virtual_is_refused_where_the_bench_cannot(tmp_path) -> None:
         loads_bench("clock: virtual\n" + named, "b.yaml")
     with pytest.raises(PlanFileError, match="clock: 'fast'"):
         loads_bench("clock: fast\n" + text, "b.yaml")
+    with pytest.raises(PlanFileError, match=r"b.yaml:1: clock: must not be empty"):
+        loads_bench("clock: ''\n" + text, "b.yaml")  # said so, not "must be text, got text"
+    with pytest.raises(PlanFileError, match=r"b.yaml:1: clock: must be text, got a list"):
+        loads_bench("clock: [virtual]\n" + text, "b.yaml")
     assert loads_bench("clock: real\n" + text).clock == "real"
     assert dataclasses.replace(BUILTIN).clock == "virtual"
 

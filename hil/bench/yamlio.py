@@ -118,8 +118,10 @@ class Checker:
                 raise self.err(d.line, join(field, key), "missing (required)")
             return default
         v = d[key]
-        if not isinstance(v, str) or not v.strip():
+        if not isinstance(v, str):
             raise self.err(d.kline(key), join(field, key), f"must be text, got {_kind(v)}")
+        if not v.strip():
+            raise self.err(d.kline(key), join(field, key), "must not be empty")
         try:  # a "\ud800" escape: no file, recording or terminal can carry it
             v.encode("utf-8")
         except UnicodeEncodeError:
