@@ -367,6 +367,33 @@ class ClockQueue(queue.Queue):
         return super().get(block, timeout)
 
 
+class ClockCondition(threading.Condition):
+    """A `threading.Condition` whose `wait` runs on the current clock (for a library's
+    condition, e.g. canopen's heartbeat and PDO waits). On a virtual clock the waiting thread
+    runs the events itself, so a notify comes from inside one of them, in this thread, and the
+    lock (an RLock) is simply kept; `wait` returns True once a notify came, else False after
+    `timeout` of bench time. On the wall clock it is `threading.Condition`."""
+
+    def __init__(self, lock: Any = None) -> None:
+        super().__init__(lock)
+        self._notified = 0
+
+    def notify(self, n: int = 1) -> None:
+        self._notified += 1
+        super().notify(n)
+
+    def notify_all(self) -> None:
+        self._notified += 1
+        super().notify_all()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        clk = _current
+        if isinstance(clk, VirtualClock) and not clk.in_event:
+            seen = self._notified
+            return clk.wait_for(lambda: self._notified != seen, timeout)
+        return super().wait(timeout)
+
+
 @contextlib.contextmanager
 def batch() -> Iterator[None]:
     """Frames sent in the block are queued back to back, as a master's burst: a virtual
@@ -386,7 +413,7 @@ def batch() -> Iterator[None]:
                 clk.settle(busy)
 
 
-__all__ = ["CLOCKS", "REAL", "VIRTUAL_EPOCH_NS", "Cancelled", "ClockQueue", "RealClock",
-           "VirtualClock",
-           "VirtualTimeout", "batch", "call_later", "current", "is_virtual", "monotonic",
-           "monotonic_ns", "sleep", "time_ns", "use", "wait", "wait_for"]
+__all__ = ["CLOCKS", "REAL", "VIRTUAL_EPOCH_NS", "Cancelled", "ClockCondition", "ClockQueue",
+           "RealClock", "VirtualClock", "VirtualTimeout", "batch", "call_later", "current",
+           "is_virtual", "monotonic", "monotonic_ns", "sleep", "time_ns", "use", "wait",
+           "wait_for"]

@@ -153,7 +153,7 @@ def test_a_stale_sdo_reply_does_not_put_the_client_back_on_the_wall_clock() -> N
     import pytest as _pytest
     from canopen.sdo.exceptions import SdoCommunicationError
 
-    from hil.plan.session import on_clock
+    from hil.drivers.canopen_clock import sdo_on_clock
     from hil.transport.can_bus import open_can
 
     c = VirtualClock(epoch_ns=0)
@@ -165,7 +165,7 @@ def test_a_stale_sdo_reply_does_not_put_the_client_back_on_the_wall_clock() -> N
         net.notifier = ListenerPump(bus, net.listeners)
         node = canopen.RemoteNode(5, canopen.ObjectDictionary())
         net.add_node(node)
-        on_clock(node.sdo)
+        sdo_on_clock(node.sdo)
         node.sdo.MAX_RETRIES = 1  # one attempt (0 would retry for ever)
         node.sdo.responses.put(b"\x43\x00\x10\x00\0\0\0\0")  # a stale reply
         t0, w0 = c.time_ns(), time.monotonic()

@@ -14,11 +14,11 @@ from typing import Any
 
 import can
 import canopen
-from canopen.sdo import SdoClient
 
 from hil import clock
 from hil.bench import virtual_module
 from hil.bench.bench import CIA402_TIMEOUTS, Bench, DriveSpec
+from hil.drivers.canopen_clock import network_on_clock, node_on_clock
 from hil.drivers.cia402 import Cia402Driver, SdoError
 from hil.drivers.delta_modbus import (
     DeltaModbus,
@@ -334,6 +334,8 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
             from hil.transport.sim import ListenerPump, pump
             net.notifier = ListenerPump(bus, net.listeners,
                                         pump if clock.is_virtual() else inline_pump)
+            if clock.is_virtual():
+                network_on_clock(net)
         else:
             net.notifier = can.Notifier(bus, net.listeners, 0.05)
         nets[bname] = s.nets[bname] = net
@@ -372,42 +374,14 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
         if spec.can:
             cia = Cia402Driver(nets[spec.can], spec.node_id or 1,
                                timeouts={k: t[k] / 1e9 for k in CIA402_TIMEOUTS})
-            if clock.is_virtual():  # the SDO client's reply timeout passes in bench time
-                on_clock(cia.node.sdo)
+            if clock.is_virtual():  # canopen's waits (SDO replies, heartbeat, ...) in bench time
+                node_on_clock(cia.node)
         if spec.rs485:
             line = lines[spec.rs485]
             mb = DeltaModbus(line, station=spec.station or 1, mode=spec.modbus_mode,  # type: ignore[arg-type]
                              timeout_s=t["modbus"] / 1e9, baud=line.baudrate,
                              port_name=spec.rs485)
         s.drives[name] = DriveIO(spec, bench, dio=dio, cia=cia, modbus=mb, pulse=pulse)
-
-
-class _ClockSdoClient(SdoClient):
-    """canopen's SdoClient whose reply queue stays a `hil.clock.ClockQueue`: canopen replaces
-    `responses` with a fresh `queue.Queue` when it finds a stale reply; here that empties the
-    ClockQueue instead, so every later reply timeout still passes in bench time."""
-
-    @property  # type: ignore[override]
-    def responses(self) -> Any:
-        return self.__dict__["_clock_responses"]
-
-    @responses.setter
-    def responses(self, _fresh: Any) -> None:
-        q = self.__dict__.get("_clock_responses")
-        if q is None:
-            self.__dict__["_clock_responses"] = clock.ClockQueue()
-            return
-        with contextlib.suppress(Exception):
-            while True:
-                q.get_nowait()
-
-
-def on_clock(sdo: SdoClient) -> SdoClient:
-    """Put a canopen SDO client's reply waits on the current clock (a virtual bench)."""
-    sdo.__dict__.pop("responses", None)
-    sdo.__class__ = _ClockSdoClient
-    sdo.__dict__["_clock_responses"] = clock.ClockQueue()
-    return sdo
 
 
 def wait_for(pred: Callable[[], Any], timeout_ns: int, poll_s: float = 0.002) -> tuple[bool, Any]:

@@ -21,6 +21,7 @@ from can import BusABC, Message
 
 from hil import clock
 from hil.record.tap import Tap
+from hil.transport.cyclic import ClockPeriodic
 from hil.transport.inline import InlineBus, courier_of, raw_virtual
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 
@@ -97,7 +98,7 @@ def source_time_ns(msg: Message, interface: str) -> int | None:
     return int(msg.timestamp * 1e9)
 
 
-class TappedBus(BusABC):
+class TappedBus(ClockPeriodic, BusABC):
     """Wraps a bus: every frame sent ("tx") or received ("rx") goes to the tap.
 
     Received frames are tapped when read (recv / Notifier), before filtering, so the
@@ -132,6 +133,10 @@ class TappedBus(BusABC):
         bus, which waits that long itself (the virtual bus's pump reads every frame so)."""
         if self._filters is None and timeout is not None:
             return self._recv_internal(timeout)[0]
+        clk = clock.current()
+        if isinstance(clk, clock.VirtualClock):  # python-can's loop counts wall seconds
+            from hil.transport.sim import recv_on_clock
+            return recv_on_clock(self, clk, timeout)
         return super().recv(timeout)
 
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:

@@ -12,14 +12,17 @@ interval is then at least (1 - rephase) x period; a stall still makes one long i
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import can
 
 from hil import clock
 from hil.realtime import env_priority, set_fifo
+
+log = logging.getLogger(__name__)
 
 REPHASE = 0.25  # of the period: later than this, restart the cycle from the late frame
 
@@ -99,3 +102,82 @@ class CyclicSender(Cyclic):
             return False
         self.sent += 1
         return True
+
+
+class ClockCyclicSendTask(can.broadcastmanager.LimitedDurationCyclicSendTaskABC,
+                          can.broadcastmanager.ModifiableCyclicTaskABC,
+                          can.broadcastmanager.RestartableCyclicTaskABC):
+    """python-can's `send_periodic` task on a virtual clock: `ThreadBasedCyclicSendTask`'s
+    behaviour (the messages in turn, the first at once, `duration`, `modifier_callback`, a
+    send error stops it) as clock events, each frame exactly on period in bench time. A
+    thread on the wall clock would send at wall-clock instants the bench's time knows
+    nothing of."""
+
+    def __init__(self, bus: can.BusABC, clk: clock.VirtualClock,
+                 messages: Sequence[can.Message] | can.Message, period: float,
+                 duration: float | None = None, autostart: bool = True,
+                 modifier_callback: Callable[[can.Message], None] | None = None) -> None:
+        super().__init__(messages, period, duration)
+        if self.period_ns <= 0:
+            raise ValueError(f"period {period} s: must be > 0")
+        self.bus, self.clock = bus, clk
+        self.modifier_callback = modifier_callback
+        self.stopped = True
+        self.error: BaseException | None = None  # what stopped it, if a send failed
+        self._event: clock.Event | None = None
+        self._index = 0
+        self._end_ns: int | None = None
+        if autostart:
+            self.start()
+
+    def start(self) -> None:
+        if not self.stopped:
+            return
+        self.stopped, self._index = False, 0
+        self._end_ns = (None if not self.duration
+                        else self.clock.time_ns() + round(self.duration * 1e9))
+        self._event = self.clock.after(0, self._tick)
+
+    def stop(self) -> None:
+        self.stopped = True
+        if self._event is not None:
+            self._event.cancel()
+            self._event = None
+
+    def _tick(self) -> None:
+        if self.stopped:
+            return
+        if self._end_ns is not None and self.clock.time_ns() >= self._end_ns:
+            self.stop()
+            return
+        msg = self.messages[self._index]
+        try:
+            if self.modifier_callback is not None:
+                self.modifier_callback(msg)
+            self.bus.send(msg)
+        except Exception as exc:  # as python-can's task without `on_error`: it stops
+            self.error = exc
+            log.warning("cyclic send of %03Xh stopped: %s", self.arbitration_id, exc)
+            self.stop()
+            return
+        self._index = (self._index + 1) % len(self.messages)
+        self._event = self.clock.after(self.period_ns, self._tick)
+
+
+class ClockPeriodic:
+    """A bus mixin: `send_periodic` runs on the virtual clock when one is current (else
+    python-can's own thread-based task). First among the bases: `(ClockPeriodic, BusABC)`."""
+
+    def _send_periodic_internal(self, msgs: Sequence[can.Message] | can.Message,
+                                period: float, duration: float | None = None,
+                                autostart: bool = True,
+                                modifier_callback: Callable[[can.Message], None] | None = None,
+                                ) -> can.broadcastmanager.CyclicSendTaskABC:
+        clk = getattr(self, "clock", None)
+        if not isinstance(clk, clock.VirtualClock):
+            clk = clock.current()
+        if isinstance(clk, clock.VirtualClock):
+            return ClockCyclicSendTask(self, clk, msgs, period, duration, autostart,  # type: ignore[arg-type]
+                                       modifier_callback)
+        return super()._send_periodic_internal(  # type: ignore[misc]
+            msgs, period, duration, autostart, modifier_callback)

@@ -29,6 +29,7 @@ import can
 from hil import clock
 from hil.protocol.canopen import FUNCTION_SPANS, is_function
 from hil.transport import inline
+from hil.transport.cyclic import ClockPeriodic
 
 CAN_ACTIONS = ("drop", "delay", "corrupt", "duplicate")
 # CANopen functions a fault may match: the classification of hil.protocol.canopen
@@ -189,7 +190,7 @@ class _Faults:
             pass
 
 
-class FaultyCanBus(can.BusABC):
+class FaultyCanBus(ClockPeriodic, can.BusABC):
     """The harness's CAN bus with a fault layer; received frames pass untouched."""
 
     def __init__(self, bus: can.BusABC, name: str, *, sink: FaultSink | None = None,

@@ -24,6 +24,7 @@ import can
 from can import BusABC, Message
 
 from hil.clock import VirtualClock
+from hil.transport.cyclic import ClockPeriodic
 from hil.units import S
 
 # a virtual bus's rate unless its URL says `?bitrate=`: CiA 301's highest. The A3 ships at
@@ -221,7 +222,7 @@ class CanMedium:
         return self.in_flight == 0
 
 
-class SimCanBus(BusABC):
+class SimCanBus(ClockPeriodic, BusABC):
     """A python-can bus on a `CanMedium` (`virtual:<channel>` under a virtual clock)."""
 
     def __init__(self, channel: str, *, clock: VirtualClock, bitrate: int | None = None,
@@ -258,14 +259,14 @@ class SimCanBus(BusABC):
             self.on_rx()
 
     def recv(self, timeout: float | None = None) -> Message | None:
-        """python-can's `recv`, with a short way for a waiting frame and no filters set (the
-        pump's `recv(0)` for every frame on every node)."""
+        """python-can's `recv` on this bus's clock, with a short way for a waiting frame and
+        no filters set (the pump's `recv(0)` for every frame on every node)."""
         if self._rx and self._filters is None:
             return self._rx.popleft()
-        return super().recv(timeout)
+        return recv_on_clock(self, self.clock, timeout)
 
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
-        if not self._rx and timeout and not self.clock.in_event:
+        if not self._rx and (timeout is None or timeout > 0) and not self.clock.in_event:
             self.clock.wait_for(lambda: bool(self._rx) or self._is_shutdown, timeout)
         return (self._rx.popleft() if self._rx else None), False
 
@@ -279,6 +280,24 @@ class SimCanBus(BusABC):
         super().shutdown()
         if self in self.medium.nodes:
             self.medium.nodes.remove(self)
+
+
+def recv_on_clock(bus: BusABC, clk: VirtualClock, timeout: float | None) -> Message | None:
+    """`BusABC.recv` with its deadline on the virtual clock: python-can's own loop counts wall
+    seconds, so a filtered `recv(0.5)` that saw no match ran hours of bench time. Frames
+    already received are all read, matching or not, before it gives up (as at `timeout` 0);
+    `timeout=None` waits as long as `clock.wait_for` (an hour of bench time), then None."""
+    limit = 3600 * S if timeout is None else max(0, round(timeout * S))
+    end = clk.time_ns() + limit
+    while True:
+        left = max(0, end - clk.time_ns()) / S
+        msg, already_filtered = bus._recv_internal(timeout=left)
+        if msg is not None:
+            if already_filtered or bus._matches_filters(msg):
+                return msg
+            continue  # dropped by the filters (python-can's rule); read on
+        if clk.time_ns() >= end or clk.in_event or bus._is_shutdown:
+            return None
 
 
 def raw_bus(bus: Any) -> Any:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import xml.etree.ElementTree as ET
 
 import pytest
@@ -146,6 +147,45 @@ def test_a_bad_hil_out_is_one_usage_error(pytester: pytest.Pytester) -> None:
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     assert "--hil-out afile: not a directory" in result.stderr.str()
     assert (pytester.path / "afile").read_text() == "x"
+
+
+CANOPEN_WAITS = '''
+import pytest
+from hil import clock
+
+@pytest.mark.hil
+def test_canopen_waits(hil_session, hil_drive):
+    node = hil_drive.cia.node
+    node.sdo[0x1017].raw = 50  # the drive's heartbeat every 50 ms
+    t0 = clock.monotonic()
+    assert node.nmt.wait_for_heartbeat(1.0)
+    waited = clock.monotonic() - t0
+    assert 0 < waited <= 0.06, waited  # the heartbeat itself, in bench time
+    net = hil_session.nets["can0"]
+    net.sync.start(0.01)  # canopen's SYNC producer: python-can's send_periodic on the bus
+    clock.sleep(0.095)
+    net.sync.stop()
+'''
+
+
+def test_canopen_waits_and_send_periodic_run_on_the_virtual_clock(pytester: pytest.Pytester,
+                                                                   tmp_path) -> None:
+    """A stranger's test on the virtual bench using canopen's own API on `hil_drive.cia.node`
+    and the session's network: canopen's heartbeat wait and its SYNC producer (python-can's
+    `send_periodic`) ran on the wall clock, so no heartbeat came and SYNC came at wall
+    instants (docs/clock.md)."""
+    from hil.record.reader import Recording
+
+    pytester.makepyfile(test_cw=CANOPEN_WAITS)
+    out = tmp_path / "out"
+    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
+                                           f"--hil-out={out}")
+    result.assert_outcomes(passed=1)
+    (path,) = out.glob("*.mcap")
+    syncs = [lt for _t, lt, _p, m in Recording.open(path).messages("/can/can0/raw")
+             if m.get("id") == 0x80 and m.get("dir") == "tx"]
+    assert len(syncs) == 10  # at 0, 10, ... 90 ms of the 95 ms
+    assert {b - a for a, b in itertools.pairwise(syncs)} == {10_000_000}
 
 
 LONG = '''

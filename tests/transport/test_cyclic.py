@@ -69,3 +69,82 @@ def test_stop_ends_the_thread_and_a_closed_bus_ends_the_producer():
     assert not gone._thread.is_alive() and gone.sent == 0
     with pytest.raises(ValueError, match="must be > 0"):
         CyclicSender(bus, can.Message(arbitration_id=0x80), 0)
+
+
+def _virtual_stack(c, tapped_frames):
+    """A virtual bus as a session opens it: the sim bus, the fault layer, the recording tap."""
+    from hil.transport.can_bus import TappedBus, open_can
+    from hil.transport.faults import FaultyCanBus
+
+    class Tap:
+        def can(self, _bus, frame, direction, t, _source_t):
+            tapped_frames.append((frame.arbitration_id, direction, t))
+
+    raw = open_can("virtual:cyc-v")
+    return raw, TappedBus(FaultyCanBus(raw, "can0"), Tap(), "can0")
+
+
+@pytest.mark.parametrize("layer", ["sim", "session"])
+def test_send_periodic_on_the_virtual_clock_sends_on_period_in_bench_time(layer):
+    """python-can's `send_periodic` is a wall-clock thread: on the virtual bench its frames
+    came at wall instants (none in 0.1 s of bench time, all of them later at once)."""
+    from hil import clock
+    from hil.clock import VirtualClock
+    from hil.transport.can_bus import open_can
+    from hil.transport.sim import frame_bits, pump
+
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        tapped: list = []
+        raw, session_bus = _virtual_stack(c, tapped)
+        sender = raw if layer == "sim" else session_bus
+        peer = open_can("virtual:cyc-v")
+        got: list[tuple[int, bytes]] = []
+        pump(peer, lambda m: got.append((c.time_ns(), bytes(m.data))))
+        counter = [0]
+
+        def bump(msg: can.Message) -> None:  # the callback sets each frame's data
+            counter[0] += 1
+            msg.data = bytearray([counter[0]])
+
+        msgs = [can.Message(arbitration_id=0x80, data=b"\x00", is_extended_id=False),
+                can.Message(arbitration_id=0x80, data=b"\x00", is_extended_id=False)]
+        task = sender.send_periodic(msgs, 0.010, duration=0.095, modifier_callback=bump)
+        clock.sleep(0.2)
+        def wire(k: int) -> int:  # the k-th frame's bit time at 1 Mbit/s (its stuff bits)
+            return frame_bits(can.Message(arbitration_id=0x80, data=bytes([k + 1]),
+                                          is_extended_id=False)) * 1000
+
+        # the first at once, then every 10 ms of bench time, until 95 ms: 0..90 ms
+        assert [t for t, _ in got] == [k * 10_000_000 + wire(k) for k in range(10)]
+        assert [d for _, d in got] == [bytes([k + 1]) for k in range(10)]
+        assert task.stopped
+        if layer == "session":  # through the tap: on the recording, at the send's time
+            assert [t for i, d, t in tapped if d == "tx"] == [k * 10_000_000 for k in range(10)]
+        task.start()  # restartable, as python-can's
+        clock.sleep(0.025)
+        assert len(got) == 13
+        task.stop()
+        clock.sleep(0.1)
+        assert len(got) == 13
+        for bus in (session_bus, peer):
+            bus.shutdown()
+
+
+def test_send_periodic_on_the_wall_clock_is_python_cans_own():
+    from hil.transport.can_bus import TappedBus, open_can
+
+    class Tap:
+        def can(self, *_a):
+            pass
+
+    bus = TappedBus(open_can("virtual:cyc-real"), Tap(), "can0")
+    peer = open_can("virtual:cyc-real")
+    try:
+        task = bus.send_periodic(can.Message(arbitration_id=0x80, data=b""), 0.01)
+        assert isinstance(task, can.broadcastmanager.ThreadBasedCyclicSendTask)
+        assert peer.recv(1.0) is not None and peer.recv(1.0) is not None
+        task.stop()
+    finally:
+        bus.shutdown()
+        peer.shutdown()

@@ -205,3 +205,62 @@ def test_a_delivered_frame_is_what_python_can_makes_of_the_sent_one() -> None:
             assert rb.data is not rd.data  # canopen writes into a PDO's buffer: one each
         for bus in (a, b, d):
             bus.shutdown()
+
+
+@pytest.mark.parametrize("tapped", [False, True])
+def test_a_filtered_recv_waits_its_timeout_in_bench_time(tapped) -> None:
+    """python-can's `BusABC.recv` counts its timeout in wall seconds: on the virtual clock a
+    filtered `recv(0.5)` that saw no match ran on for hours of bench time."""
+    from hil.transport.can_bus import TappedBus
+
+    class Tap:  # what the recorder would get
+        def __init__(self) -> None:
+            self.frames: list[tuple[int, str]] = []
+
+        def can(self, _bus, frame, direction, _t, _source_t) -> None:
+            self.frames.append((frame.arbitration_id, direction))
+
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a = open_can("virtual:sim-r")
+        raw = open_can("virtual:sim-r")
+        tap = Tap()
+        b = TappedBus(raw, tap, "can0") if tapped else raw
+        b.set_filters([{"can_id": 0x181, "can_mask": 0x7FF}])
+        assert b.recv(0.5) is None
+        assert c.time_ns() == 500_000_000  # no traffic: the timeout, no more
+
+        heartbeat = can.Message(arbitration_id=0x701, data=b"\x05", is_extended_id=False)
+        tpdo = can.Message(arbitration_id=0x181, data=b"\x27\x06", is_extended_id=False)
+
+        def beat() -> None:  # other traffic every 10 ms: read and dropped by the filter
+            a.send(heartbeat)
+            clock.call_later(0.01, beat)
+
+        clock.call_later(0.01, beat)
+        assert b.recv(0.2) is None
+        assert c.time_ns() == 700_000_000
+        clock.call_later(0.035, a.send, tpdo)  # the match comes 35 ms on, after its wire time
+        got = b.recv(0.2)
+        assert got is not None and got.arbitration_id == 0x181 and bytes(got.data) == b"\x27\x06"
+        assert c.time_ns() == 735_000_000 + frame_bits(tpdo) * 1000  # 1 Mbit/s: 1000 ns a bit
+        if tapped:  # the recording has what arrived, the dropped frames too
+            assert tap.frames[-1] == (0x181, "rx") and (0x701, "rx") in tap.frames
+        for bus in (a, b):
+            bus.shutdown()
+
+
+def test_recv_0_reads_past_frames_the_filter_drops() -> None:
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b = open_can("virtual:sim-z"), open_can("virtual:sim-z")
+        b.set_filters([{"can_id": 0x181, "can_mask": 0x7FF}])
+        with clock.batch():
+            a.send(can.Message(arbitration_id=0x701, data=b"\x05", is_extended_id=False))
+            a.send(can.Message(arbitration_id=0x181, data=b"\x01", is_extended_id=False))
+        now = c.time_ns()
+        got = b.recv(0)
+        assert got is not None and got.arbitration_id == 0x181  # queued behind a dropped one
+        assert b.recv(0) is None and c.time_ns() == now
+        for bus in (a, b):
+            bus.shutdown()
