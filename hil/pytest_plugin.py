@@ -428,13 +428,11 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
     `hil.clock.sleep` / the drivers' waits, not `time.sleep`); the bench goes to its safe
     state afterwards, and the recording says why (the test's failure, or its end) and how
     the test ended (`hil.result`), as a plan's does."""
-    from hil import clock
-    from hil.plan.runner import Interrupts, record_bench
+    from hil.plan.runner import Interrupts, bench_clock, record_bench
     from hil.plan.safety import go_safe
     from hil.plan.session import open_session
 
-    clk = clock.VirtualClock() if hil_bench.clock == "virtual" else clock.REAL
-    with clock.use(clk), Interrupts(clk) as signals:
+    with bench_clock(hil_bench) as clk, Interrupts(clk) as signals:
         record_bench(hil_recorder, hil_bench)
         session = open_session(hil_bench, hil_recorder)
         try:

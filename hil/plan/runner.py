@@ -18,7 +18,7 @@ import re
 import signal
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -180,12 +180,22 @@ def _older_generations_seldom() -> Any:
         gc.set_threshold(*old)
 
 
+@contextlib.contextmanager
+def bench_clock(bench: Bench) -> Iterator[clock.RealClock | clock.VirtualClock]:
+    """The bench's clock for one run (a plan, a `hil_session` test): a fresh `VirtualClock`
+    for `clock: virtual` (docs/clock.md), with the collector's older generations collected
+    seldom while it runs; the wall clock otherwise."""
+    if bench.clock != "virtual":
+        with clock.use(clock.REAL) as clk:
+            yield clk
+        return
+    with clock.use(clock.VirtualClock()) as clk, _older_generations_seldom():
+        yield clk
+
+
 def run_plan(plan: Plan, bench: Bench, out_dir: Path, **kwargs: Any) -> PlanResult:
-    """`_run_plan` on the bench's clock: a fresh `VirtualClock` per plan for `clock:
-    virtual` (docs/clock.md), the wall clock otherwise."""
-    virtual = bench.clock == "virtual"
-    with clock.use(clock.VirtualClock() if virtual else clock.REAL), (
-            _older_generations_seldom() if virtual else contextlib.nullcontext()):
+    """`_run_plan` on the bench's clock (`bench_clock`)."""
+    with bench_clock(bench):
         return _run_plan(plan, bench, out_dir, **kwargs)
 
 

@@ -188,6 +188,35 @@ def test_canopen_waits_and_send_periodic_run_on_the_virtual_clock(pytester: pyte
     assert {b - a for a, b in itertools.pairwise(syncs)} == {10_000_000}
 
 
+SESSION_CLOCK = '''
+import gc
+import pytest
+from hil import clock
+from hil.plan.runner import VIRTUAL_GC_OLDER
+
+BEFORE = gc.get_threshold()
+
+@pytest.mark.hil
+def test_on_the_bench_clock(hil_session, hil_bench):
+    virtual = hil_bench.clock == "virtual"
+    assert clock.is_virtual() == virtual
+    assert gc.get_threshold()[1:] == (VIRTUAL_GC_OLDER if virtual else BEFORE[1:])
+
+def test_after():
+    assert gc.get_threshold() == BEFORE and not clock.is_virtual()
+'''
+
+
+@pytest.mark.parametrize("clk", ["virtual", "real"])
+def test_hil_session_runs_on_the_clock_a_plan_runs_on(pytester: pytest.Pytester, clk) -> None:
+    """`hil_session` sets its bench's clock up as `hil run` does (`bench_clock`): in virtual
+    time the older collector generations are collected seldom, as during a plan."""
+    pytester.makepyfile(test_sc=SESSION_CLOCK)
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-p", "no:randomly",
+                                           f"--hil-clock={clk}")
+    result.assert_outcomes(passed=2)
+
+
 LONG = '''
 import pytest
 from hil import clock
