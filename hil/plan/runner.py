@@ -357,6 +357,9 @@ def record_bench(rec: Recorder, bench: Bench, options: dict[str, Any] | None = N
                                    "motion_allowed": bench.motion_allowed,
                                    "deviations": json.dumps(deviations)})
     clk = clock.current()
+    bind = getattr(rec, "bind_clock", None)  # test doubles may lack it
+    if bind is not None:
+        bind(clk)
     rec.add_metadata("hil.clock", {"clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
                                    "started_wall_ns": str(time.time_ns())})
 

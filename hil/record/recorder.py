@@ -254,6 +254,7 @@ class Recorder:
         self._schema_ids: dict[str, int] = {}
         self.topic_of: dict[int, str] = {}  # channel id -> topic
         self.metadata_count = 0  # metadata records added (a live reader's cache key)
+        self.clock: Any = None  # the run's clock once bound (`bind_clock`); else the current
         #: what the file holds outside its messages, as written (by the writer thread): the
         #: metadata records in file order, and each channel's schema name and metadata; a
         #: live reader takes them instead of reading the file's head again (`LiveSource`)
@@ -381,7 +382,7 @@ class Recorder:
         false: `LogHandler` passes false, as the record came from Python logging already.
         """
         lvl = self._level(level)
-        t = clock.time_ns() if t is None else t
+        t = self._time_ns() if t is None else t
         payload = {
             "timestamp": {"sec": t // 1_000_000_000, "nsec": t % 1_000_000_000},
             "level": lvl,
@@ -522,7 +523,7 @@ class Recorder:
         t: int | None = None,
     ) -> None:
         """A file attachment (bench file, plan, EDS ...)."""
-        t = clock.time_ns() if t is None else t
+        t = self._time_ns() if t is None else t
         self._control(AttachItem(name, bytes(data), media_type, t))
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
@@ -567,6 +568,17 @@ class Recorder:
         """`close()` has begun: no item is taken any more."""
         return not self._open
 
+    def bind_clock(self, clk: Any) -> None:
+        """Stamp what the recorder stamps itself (a line or record without `t`, open
+        transactions at `close`) on `clk` from now on, the run's clock, also once the run has
+        ended: a pytest test's recording closes after `hil_session` put the wall clock back,
+        and its last SDO or Modbus request still unanswered then belongs on the bench's time."""
+        self.clock = clk
+
+    def _time_ns(self) -> int:
+        clk = self.clock
+        return clk.time_ns() if clk is not None else clock.time_ns()
+
     def close(self) -> None:
         """Drain the queue, close open transactions, write `hil.close` and the summary."""
         with self._lock:
@@ -578,10 +590,11 @@ class Recorder:
         with self._lock:
             self.drops += len(self._q)  # raced in after the writer stopped
             self._q.clear()
+        t_end = self._time_ns()
         for _raw, _dec, sdo_ch, pairing, _cache, _pdos in self._can_ch.values():
             for txn in pairing.pending():
                 self._safe(
-                    lambda txn=txn, c=sdo_ch: self._w.add_message(c, _now(), _now(), dumps(txn))
+                    lambda txn=txn, c=sdo_ch: self._w.add_message(c, t_end, t_end, dumps(txn))
                 )
         for port, ch in self._serial_ch.items():
             self._safe(lambda port=port, ch=ch: self._close_serial(port, *ch))
@@ -613,7 +626,7 @@ class Recorder:
         producer waits (wall time, at most 30 s) for the writer rather than dropping."""
         if len(self._q) < self._max_queue:
             return True
-        if not clock.is_virtual():
+        if not (self.clock or clock.current()).virtual:
             return False
         end = time.monotonic() + 30.0
         while len(self._q) >= self._max_queue and self._open and time.monotonic() < end:
@@ -635,7 +648,7 @@ class Recorder:
         obj: Any = None,
     ) -> None:
         if t is None:
-            t = clock.time_ns()
+            t = self._time_ns()
         if self._open and self._room():
             self._q.append(BytesItem(topic, schema, source, data, t, source_t, obj))
         else:
@@ -866,9 +879,11 @@ class Recorder:
         """End of recording: decode a half-received ADU, report unanswered requests."""
         mode = self._serial_modes.get(port, "")
         for adu, adir, apt in assembler.pending():
-            self._modbus(mb_ch, pairing, adu, adir, mode or guess_mode(adu), _now(), apt)
+            self._modbus(mb_ch, pairing, adu, adir, mode or guess_mode(adu), self._time_ns(),
+                        apt)
         for rec in pairing.pending():
-            self._w.add_message(mb_ch, _now(), _now(), dumps({"mode": mode, "raw": "", **rec}))
+            t = self._time_ns()
+            self._w.add_message(mb_ch, t, t, dumps({"mode": mode, "raw": "", **rec}))
 
     def _modbus(
         self, mb_cid: int, pairing: ModbusPairing, data: bytes, d: str, mode: str, t: int, pt: int
@@ -899,10 +914,6 @@ class Recorder:
     def _do_barrier(self, item: BarrierItem) -> None:
         self._w.flush()
         item.done.set()
-
-
-def _now() -> int:
-    return clock.time_ns()
 
 
 class LogHandler(logging.Handler):

@@ -217,6 +217,50 @@ def test_hil_session_runs_on_the_clock_a_plan_runs_on(pytester: pytest.Pytester,
     result.assert_outcomes(passed=2)
 
 
+OPEN_AT_CLOSE = '''
+import pytest
+from hil import clock
+from hil.protocol import modbus as mb
+
+@pytest.mark.hil
+def test_open_at_close(hil_session, hil_drive):
+    # requests nobody answers (node 5, station 5 are not on the bench): the recording writes
+    # them as unanswered when it closes, after hil_session has put the wall clock back
+    hil_session.nets["can0"].send_message(0x605, bytes([0x40, 0x00, 0x10, 0, 0, 0, 0, 0]))
+    hil_drive.modbus.port.write(mb.encode_adu(5, bytes([3, 0, 0, 0, 1]), "rtu"))
+    clock.sleep(0.05)
+'''
+
+
+def test_a_pytest_recording_in_virtual_time_keeps_its_clock_to_the_end(
+        pytester: pytest.Pytester, tmp_path) -> None:
+    """What the recorder stamps at close (open SDO and Modbus transactions) is on the run's
+    clock: it had the wall clock's 2026 among 2000's bench times."""
+    from hil.clock import VIRTUAL_EPOCH_NS
+    from hil.record.reader import Recording
+
+    pytester.makepyfile(test_oc=OPEN_AT_CLOSE)
+    out = tmp_path / "out"
+    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
+                                           f"--hil-out={out}")
+    result.assert_outcomes(passed=1)
+    (path,) = out.glob("*.mcap")
+    rec = Recording.open(path)
+    assert rec.metadata()["hil.clock"]["clock"] == "virtual"
+    times = {topic: [] for topic in rec.topics()}
+    for topic, lt, _pt, _m in rec.messages():
+        times[topic].append(lt)
+    late = {t: max(v) - VIRTUAL_EPOCH_NS for t, v in times.items()
+            if v and not VIRTUAL_EPOCH_NS <= max(v) < VIRTUAL_EPOCH_NS + 3600 * 10**9}
+    assert late == {}
+    # the two written at close are on the record, at the bench time the recording ended
+    end = max(max(v) for v in times.values() if v)
+    assert [(lt, m["status"]) for _t, lt, _pt, m in rec.messages("/canopen/can0/sdo")
+            if m["node"] == 5] == [(end, "timeout")]
+    assert [lt for _t, lt, _pt, m in rec.messages("/modbus/rs485")
+            if m.get("unanswered") and m["unit"] == 5] == [end]
+
+
 LONG = '''
 import pytest
 from hil import clock
