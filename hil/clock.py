@@ -127,6 +127,7 @@ class VirtualClock:
         self.media: dict[str, Any] = {}
         self.hold = 0  # > 0 inside `batch()`: settling waits for its end
         self.held: list[Callable[[], bool]] = []
+        self._owners: set[int] = set()  # threads that installed it (`use`): see `may_wait`
 
     # -- reading -------------------------------------------------------------------------
     def time_ns(self) -> int:
@@ -142,6 +143,17 @@ class VirtualClock:
     def in_event(self) -> bool:
         """True while an event runs (a wait there would reorder time)."""
         return self._running > 0
+
+    def may_wait(self) -> bool:
+        """Whether this thread may move bench time: the run's own threads, that is the one
+        that installed the clock (`use`) and a step thread inside `watch`; any thread while
+        none installed it. Another thread (a python-can `Notifier` a test started, a timer)
+        waiting on it would fire the run's events from there, at wall-clock moments."""
+        owners = self._owners
+        if not owners:
+            return True
+        me = threading.get_ident()
+        return me in owners or me in self._watch
 
     # -- scheduling ----------------------------------------------------------------------
     def at(self, t: int, fn: Callable[[], Any]) -> Event:
@@ -187,6 +199,11 @@ class VirtualClock:
         if self._running:
             raise RuntimeError("virtual clock: a wait inside a clock event (it would reorder "
                                "time); events must only schedule")
+        if not self.may_wait():
+            raise RuntimeError(
+                f"virtual clock: thread {threading.current_thread().name!r} is not the run's: "
+                "bench time moves only when the plan step or the hil_session test waits "
+                "(docs/clock.md, \"Other threads\")")
         cancel, deadline = (self._watch.get(threading.get_ident(), (None, None)) if watched
                             else (None, None))
         with self._guard:
@@ -257,8 +274,8 @@ class VirtualClock:
 
     def settle(self, busy: Callable[[], bool]) -> None:
         """Fire events while `busy()` (e.g. frames in flight); no-op inside an event."""
-        if self._running:
-            return
+        if self._running or not self.may_wait():  # another thread's send: the run's
+            return  # thread delivers it when it next waits
         if self.hold:
             self.held.append(busy)
             return
@@ -306,10 +323,17 @@ def use(clk: RealClock | VirtualClock) -> Iterator[RealClock | VirtualClock]:
     """Install `clk` as the current clock for the block (one run at a time per process)."""
     global _current
     old, _current = _current, clk
+    owners = clk._owners if isinstance(clk, VirtualClock) else None
+    me = threading.get_ident()
+    added = owners is not None and me not in owners
+    if added:
+        owners.add(me)  # type: ignore[union-attr]
     try:
         yield clk
     finally:
         _current = old
+        if added:
+            owners.discard(me)  # type: ignore[union-attr]
 
 
 def time_ns() -> int:
@@ -361,10 +385,10 @@ class ClockQueue(queue.Queue):
 
     def get(self, block: bool = True, timeout: float | None = None) -> Any:
         clk = _current
-        if block and isinstance(clk, VirtualClock) and not clk.in_event:
+        if block and isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
             clk.wait_for(lambda: self.qsize() > 0, timeout)
             return super().get(False)
-        return super().get(block, timeout)
+        return super().get(block, timeout)  # another thread: the run's thread fills it
 
 
 class ClockCondition(threading.Condition):
@@ -388,7 +412,7 @@ class ClockCondition(threading.Condition):
 
     def wait(self, timeout: float | None = None) -> bool:
         clk = _current
-        if isinstance(clk, VirtualClock) and not clk.in_event:
+        if isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
             seen = self._notified
             return clk.wait_for(lambda: self._notified != seen, timeout)
         return super().wait(timeout)

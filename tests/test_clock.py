@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 
@@ -224,3 +225,54 @@ print("lost", lost)
     ran = []
     clk.after(5, lambda: ran.append(1))
     assert clk.run_until(clk.time_ns() + 10) and ran  # nothing left over for this wait
+
+
+def test_only_the_runs_own_threads_move_bench_time() -> None:
+    """Bench time is the run's: the thread that installed the clock, a step thread inside
+    `watch`. Another thread's wait says so; its queue and condition waits wait in wall time
+    for what the run's events put there (docs/clock.md "Other threads")."""
+    c = VirtualClock(epoch_ns=0)
+    results: dict[str, object] = {}
+
+    def elsewhere(key, fn) -> threading.Thread:
+        def run() -> None:
+            try:
+                results[key] = fn()
+            except BaseException as exc:
+                results[key] = exc
+        th = threading.Thread(target=run)
+        th.start()
+        return th
+
+    th = elsewhere("free", lambda: c.sleep(0.001) or c.time_ns())
+    th.join(5)
+    assert results["free"] == 1 * MS  # before `use`, any thread may
+    with clock.use(c):
+        elsewhere("sleep", lambda: clock.sleep(0.5)).join(5)
+        assert isinstance(results["sleep"], RuntimeError) and "not the run's" in str(
+            results["sleep"])
+        assert c.time_ns() == 1 * MS
+        q, cond = ClockQueue(), clock.ClockCondition()
+        t_q = elsewhere("queue", lambda: q.get(timeout=5))
+        def cond_wait() -> bool:
+            with cond:
+                return cond.wait(5)
+        t_c = elsewhere("cond", cond_wait)
+        c.after(30 * MS, lambda: q.put("reply"))
+
+        def notify() -> None:
+            with cond:
+                cond.notify_all()
+        c.after(40 * MS, notify)
+        time.sleep(0.05)
+        assert c.time_ns() == 1 * MS and "queue" not in results  # the other thread waits
+        c.sleep(0.05)  # the run's thread moves time: the reply and the notify come
+        t_q.join(5)
+        t_c.join(5)
+        assert results["queue"] == "reply" and results["cond"] is True
+        def step() -> int:  # a step thread: inside `watch` it is the run's
+            with c.watch(None, None):
+                c.sleep(0.01)
+                return c.time_ns()
+        elsewhere("step", step).join(5)
+        assert results["step"] == 61 * MS

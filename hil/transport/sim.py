@@ -16,6 +16,7 @@ delivered (an SDO server answers at once).
 from __future__ import annotations
 
 import re
+import threading
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -240,6 +241,10 @@ class SimCanBus(ClockPeriodic, BusABC):
         self._rx: deque[Message] = deque()
         self.on_rx: Callable[[], None] | None = None
         self.errors: list[BaseException] = []  # raised by what this node's delivery fed
+        # another thread reading this bus (a test's python-can Notifier) waits in wall time
+        # for what the run's thread delivers: woken by this event while `_foreign` > 0
+        self._foreign = 0
+        self._arrived = threading.Event()
         medium.nodes.append(self)
         super().__init__(channel=channel)
 
@@ -257,6 +262,8 @@ class SimCanBus(ClockPeriodic, BusABC):
         self._rx.append(msg)
         if self.on_rx is not None:
             self.on_rx()
+        if self._foreign:
+            self._arrived.set()
 
     def recv(self, timeout: float | None = None) -> Message | None:
         """python-can's `recv` on this bus's clock, with a short way for a waiting frame and
@@ -267,7 +274,16 @@ class SimCanBus(ClockPeriodic, BusABC):
 
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
         if not self._rx and (timeout is None or timeout > 0) and not self.clock.in_event:
-            self.clock.wait_for(lambda: bool(self._rx) or self._is_shutdown, timeout)
+            if self.clock.may_wait():
+                self.clock.wait_for(lambda: bool(self._rx) or self._is_shutdown, timeout)
+            else:  # another thread: wall time, for what the run's own thread delivers
+                self._foreign += 1
+                try:
+                    self._arrived.clear()
+                    if not self._rx:
+                        self._arrived.wait(timeout)
+                finally:
+                    self._foreign -= 1
         return (self._rx.popleft() if self._rx else None), False
 
     def _check_open(self) -> None:
@@ -287,6 +303,8 @@ def recv_on_clock(bus: BusABC, clk: VirtualClock, timeout: float | None) -> Mess
     seconds, so a filtered `recv(0.5)` that saw no match ran hours of bench time. Frames
     already received are all read, matching or not, before it gives up (as at `timeout` 0);
     `timeout=None` waits as long as `clock.wait_for` (an hour of bench time), then None."""
+    if not clk.may_wait():  # another thread (a Notifier): python-can's own wall-time loop
+        return BusABC.recv(bus, timeout)
     limit = 3600 * S if timeout is None else max(0, round(timeout * S))
     end = clk.time_ns() + limit
     while True:
@@ -347,6 +365,14 @@ class ListenerPump:
                 listener.on_message_received(msg)
             except Exception as exc:  # as python-can's Notifier: canopen raises it later
                 self.exception = exc
+
+    def add_listener(self, listener: Any) -> None:
+        """python-can `Notifier.add_listener`: hear every frame this bus receives (a test's
+        `can.BufferedReader` on a session's network, `hil_session.nets[bus].notifier`)."""
+        self.listeners.append(listener)
+
+    def remove_listener(self, listener: Any) -> None:
+        self.listeners.remove(listener)
 
     def stop(self, timeout: float = 0) -> None:
         self._stop()

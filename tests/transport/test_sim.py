@@ -264,3 +264,76 @@ def test_recv_0_reads_past_frames_the_filter_drops() -> None:
         assert b.recv(0) is None and c.time_ns() == now
         for bus in (a, b):
             bus.shutdown()
+
+
+def test_another_thread_reading_or_sending_never_moves_bench_time() -> None:
+    """A test's own thread (a python-can Notifier) on a virtual bus: it waits in wall time for
+    what the run's thread delivers, and its sends go on the wire when the run next waits.
+    Before, its `recv(1.0)` fired the run's events from that thread: bench time moved by
+    some 60 s while the test slept half a second."""
+    import threading
+    import time
+
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b = open_can("virtual:sim-o"), open_can("virtual:sim-o")
+        ticks: list[int] = []
+
+        def tick() -> None:  # the run's own events: a heartbeat every 10 ms
+            ticks.append(c.time_ns())
+            a.send(can.Message(arbitration_id=0x701, data=b"\x05", is_extended_id=False))
+            clock.call_later(0.01, tick)
+
+        clock.call_later(0.0, tick)
+        got: list[tuple[int, int]] = []
+        sent = threading.Event()
+
+        def notifier() -> None:
+            for _ in range(3):
+                m = b.recv(2.0)  # wall seconds: the run's thread delivers
+                if m is not None:
+                    got.append((m.arbitration_id, c.time_ns()))
+            b.send(can.Message(arbitration_id=0x181, data=b"\x01", is_extended_id=False))
+            sent.set()
+            with pytest.raises(RuntimeError, match="not the run's"):
+                clock.sleep(0.1)  # bench time is the run's to move
+
+        th = threading.Thread(target=notifier, name="notifier")
+        th.start()
+        time.sleep(0.2)
+        assert c.time_ns() == 0 and ticks == []  # nothing moved while the run only slept
+        while len(got) < 3:
+            clock.sleep(0.01)
+            time.sleep(0.001)
+        assert sent.wait(5)
+        th.join(5)
+        mark = c.time_ns()
+        heard: list[int] = []
+        pump(a, lambda m: heard.append(m.arbitration_id))
+        clock.sleep(0.001)
+        assert 0x181 in heard  # the other thread's frame, delivered once the run waited
+        assert [cid for cid, _ in got] == [0x701] * 3
+        assert all(t <= mark for _, t in got)
+        for bus in (a, b):
+            bus.shutdown()
+
+
+def test_a_listener_added_to_the_pump_hears_the_bus() -> None:
+    """python-can's `Notifier.add_listener` on a session network's pump (`net.notifier`):
+    the way for a test to hear the frames the harness's bus receives."""
+    from hil.transport.sim import ListenerPump
+
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b = open_can("virtual:sim-l"), open_can("virtual:sim-l")
+        pump_b = ListenerPump(b, [])
+        reader = can.BufferedReader()
+        pump_b.add_listener(reader)
+        a.send(can.Message(arbitration_id=0x701, data=b"\x05", is_extended_id=False))
+        got = reader.get_message(0)
+        assert got is not None and got.arbitration_id == 0x701
+        pump_b.remove_listener(reader)
+        a.send(can.Message(arbitration_id=0x702, data=b"\x05", is_extended_id=False))
+        assert reader.get_message(0) is None
+        for bus in (a, b):
+            bus.shutdown()
