@@ -3,11 +3,12 @@
 canopen waits with `queue.Queue.get`, `threading.Condition.wait` and loops on `time.time()`.
 On a virtual bench nothing moves bench time while a thread waits so: a test's
 `hil_drive.cia.node.nmt.wait_for_heartbeat(1.0)` took a wall second, saw no bench time pass
-and no heartbeat. `node_on_clock` gives a `RemoteNode` clock-aware replies and conditions
-(`hil.clock.ClockQueue`, `ClockCondition`); `network_on_clock` does the same for the
-network's LSS master; both point the `time` that canopen's modules loop on at `hil.clock`,
-which is the `time` module itself unless a virtual run is current, so nothing changes on the
-wall clock. The library's code runs unchanged.
+and no heartbeat. A virtual session's networks are `ClockNetwork`s: each client that
+subscribes (SDO client, LSS master, NMT master, EMCY consumer, PDO map) gets clock-aware
+replies or conditions (`hil.clock.ClockQueue`, `ClockCondition`), and the `time` that
+canopen's modules loop on is `hil.clock`'s, which is the `time` module itself unless a
+virtual run is current, so nothing changes on the wall clock. The library's code runs
+unchanged.
 """
 
 from __future__ import annotations
@@ -17,14 +18,17 @@ import time
 from typing import Any
 
 import canopen
+from canopen.emcy import EmcyConsumer
 from canopen.lss import LssMaster
+from canopen.nmt import NmtMaster
+from canopen.pdo.base import PdoMap
 from canopen.sdo.client import SdoClient
 
 from hil import clock
 
 # the canopen modules that loop on `time.time()`/`monotonic()` or `time.sleep()`
 _TIMED_MODULES = ("canopen.nmt", "canopen.emcy", "canopen.lss", "canopen.sdo.client",
-                  "canopen.profiles.p402")
+                  "canopen.profiles.p402", "canopen.timestamp")
 
 
 class _ClockTime:
@@ -101,25 +105,61 @@ def _replies_on_clock(obj: Any, cls: type) -> Any:
 
 def sdo_on_clock(sdo: SdoClient) -> SdoClient:
     """Put a canopen SDO client's reply waits on the current clock (a virtual bench)."""
+    if isinstance(sdo, _ClockSdoClient):
+        return sdo
     return _replies_on_clock(sdo, _ClockSdoClient)
+
+
+def _condition_on_clock(obj: Any, name: str) -> None:
+    if not isinstance(getattr(obj, name, None), clock.ClockCondition):
+        setattr(obj, name, clock.ClockCondition())
+
+
+def on_clock(obj: Any) -> None:
+    """One canopen client object's waits on the current clock: an SDO client's or the LSS
+    master's reply queue, an NMT master's heartbeat and boot-up condition, an EMCY consumer's,
+    a PDO map's reception condition. Anything else is left as it is."""
+    _install_time()
+    if isinstance(obj, SdoClient):
+        sdo_on_clock(obj)
+    elif isinstance(obj, LssMaster):
+        if not isinstance(obj, _ClockLssMaster):
+            _replies_on_clock(obj, _ClockLssMaster)
+    elif isinstance(obj, NmtMaster):
+        _condition_on_clock(obj, "state_update")
+    elif isinstance(obj, EmcyConsumer):
+        _condition_on_clock(obj, "emcy_received")
+    elif isinstance(obj, PdoMap):
+        _condition_on_clock(obj, "receive_condition")
 
 
 def node_on_clock(node: canopen.RemoteNode) -> canopen.RemoteNode:
     """Every wait of a canopen `RemoteNode` on the current clock: SDO replies, heartbeat and
     boot-up (`nmt.wait_for_heartbeat`/`wait_for_bootup`), EMCY (`emcy.wait`) and each PDO's
-    `wait_for_reception`."""
-    _install_time()
-    sdo_on_clock(node.sdo)
-    node.nmt.state_update = clock.ClockCondition()
-    node.emcy.emcy_received = clock.ClockCondition()
+    `wait_for_reception`. A `ClockNetwork` does it for every node as the node subscribes."""
+    for sdo in node.sdo_channels:
+        on_clock(sdo)
+    on_clock(node.nmt)
+    on_clock(node.emcy)
     for pdo in (node.tpdo, node.rpdo):
         for m in pdo.map.values():
-            m.receive_condition = clock.ClockCondition()
+            on_clock(m)
     return node
 
 
-def network_on_clock(network: canopen.Network) -> canopen.Network:
-    """The network's LSS master's replies on the current clock."""
-    _install_time()
-    _replies_on_clock(network.lss, _ClockLssMaster)
-    return network
+class ClockNetwork(canopen.Network):
+    """A canopen `Network` whose clients wait on the current clock: each one gets its clock
+    queue or condition as it subscribes (`on_clock`), so the LSS master, the driver's node,
+    a node a test adds itself (`net.add_node`, `node.associate_network(net)`) and a PDO it
+    subscribes all wait in bench time. On the wall clock the same objects behave as canopen's."""
+
+    def subscribe(self, can_id: int, callback: Any) -> None:
+        on_clock(getattr(callback, "__self__", None))
+        super().subscribe(can_id, callback)
+
+    def __setitem__(self, node_id: int, node: Any) -> None:
+        """`add_node` / `net[id] = node`: the node's PDO maps too, subscribed or not (an
+        unsubscribed map's `wait_for_reception` then times out in bench time)."""
+        if isinstance(node, canopen.RemoteNode):
+            node_on_clock(node)
+        super().__setitem__(node_id, node)

@@ -18,7 +18,7 @@ import canopen
 from hil import clock
 from hil.bench import virtual_module
 from hil.bench.bench import CIA402_TIMEOUTS, Bench, DriveSpec
-from hil.drivers.canopen_clock import network_on_clock, node_on_clock
+from hil.drivers.canopen_clock import ClockNetwork
 from hil.drivers.cia402 import Cia402Driver, SdoError
 from hil.drivers.delta_modbus import (
     DeltaModbus,
@@ -327,15 +327,14 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
             raise BenchError(f"CAN bus {bname} ({url}): {e}") from e
         if faults:
             bus = s.fault_can[bname] = FaultyCanBus(bus, bname, sink=rec)
-        net = canopen.Network(bus)
+        # in virtual time canopen's own waits (SDO/LSS replies, heartbeat, EMCY, PDO) too
+        net = ClockNetwork(bus) if clock.is_virtual() else canopen.Network(bus)
         # frames handed to canopen inside the clock's delivery events (virtual clock), or in
         # the thread that delivers each (inline.py), instead of a Notifier thread
         if clock.is_virtual() or can_inline(bus):
             from hil.transport.sim import ListenerPump, pump
             net.notifier = ListenerPump(bus, net.listeners,
                                         pump if clock.is_virtual() else inline_pump)
-            if clock.is_virtual():
-                network_on_clock(net)
         else:
             net.notifier = can.Notifier(bus, net.listeners, 0.05)
         nets[bname] = s.nets[bname] = net
@@ -372,10 +371,8 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
             if faults:
                 dio = s.fault_dio[name] = FaultyDio(dio, name, sink=rec)
         if spec.can:
-            cia = Cia402Driver(nets[spec.can], spec.node_id or 1,
+            cia = Cia402Driver(nets[spec.can], spec.node_id or 1,  # on a ClockNetwork
                                timeouts={k: t[k] / 1e9 for k in CIA402_TIMEOUTS})
-            if clock.is_virtual():  # canopen's waits (SDO replies, heartbeat, ...) in bench time
-                node_on_clock(cia.node)
         if spec.rs485:
             line = lines[spec.rs485]
             mb = DeltaModbus(line, station=spec.station or 1, mode=spec.modbus_mode,  # type: ignore[arg-type]

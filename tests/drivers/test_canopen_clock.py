@@ -13,7 +13,7 @@ import pytest
 
 from hil import clock
 from hil.clock import VirtualClock
-from hil.drivers.canopen_clock import network_on_clock, node_on_clock
+from hil.drivers.canopen_clock import ClockNetwork, node_on_clock
 from hil.drivers.cia402 import EDS_PATH, object_dictionary
 from hil.transport.can_bus import open_can
 from hil.transport.sim import ListenerPump, frame_bits
@@ -28,12 +28,10 @@ def bench():
     c = VirtualClock(epoch_ns=0)
     with clock.use(c):
         bus, dev = open_can("virtual:cc"), open_can("virtual:cc")
-        net = canopen.Network(bus)
+        net = ClockNetwork(bus)  # what a virtual session opens
         net.notifier = ListenerPump(bus, net.listeners)
-        network_on_clock(net)
         node = canopen.RemoteNode(5, object_dictionary(EDS_PATH, 5))  # the A3's EDS: 4 TPDOs
-        net.add_node(node)
-        node_on_clock(node)
+        node.associate_network(net)  # as a test might, not through add_node
         wall = time.monotonic()
         yield c, net, node, dev
         assert time.monotonic() - wall < 5  # every wait was bench time, not wall time
@@ -105,3 +103,38 @@ def test_lss_reply_timeout_is_bench_time(bench) -> None:
     assert c.time_ns() - t0 == _arrival(round(net.lss.RESPONSE_TIMEOUT * 1e9), request)
     net.lss.responses = None  # canopen's own reset after a stale reply keeps the clock queue
     assert isinstance(net.lss.responses, clock.ClockQueue)
+
+
+def test_node_on_clock_on_a_plain_network() -> None:
+    """A node on a network that is not a `ClockNetwork` (a test's own): `node_on_clock`."""
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        bus, dev = open_can("virtual:cc2"), open_can("virtual:cc2")
+        net = canopen.Network(bus)
+        net.notifier = ListenerPump(bus, net.listeners)
+        node = node_on_clock(net.add_node(5, object_dictionary(EDS_PATH, 5)))
+        hb = _later(dev, 20 * MS, 0x705, b"\x05")
+        assert node.nmt.wait_for_heartbeat(1.0) == "OPERATIONAL"
+        assert c.time_ns() == _arrival(20 * MS, hb)
+        bus.shutdown()
+        dev.shutdown()
+
+
+def test_the_time_producer_sends_bench_time() -> None:
+    """canopen's TIME producer (`net.time.transmit()`) on a virtual bench: the bench's time of
+    day (days since 1984-01-01, ms after midnight; CiA 301 TIME_OF_DAY), not the host's."""
+    c = VirtualClock()  # bench time starts at 2000-01-01T00:00:00Z
+    with clock.use(c):
+        bus, dev = open_can("virtual:cc3"), open_can("virtual:cc3")
+        net = ClockNetwork(bus)
+        net.notifier = ListenerPump(bus, net.listeners)
+        got: list[bytes] = []
+        from hil.transport.sim import pump
+
+        pump(dev, lambda m: got.append(bytes(m.data)))
+        clock.sleep(1.5)
+        net.time.transmit()
+        days_1984_2000 = 16 * 365 + 4  # 1984, 1988, 1992 and 1996 are leap years
+        assert got == [(1500).to_bytes(4, "little") + days_1984_2000.to_bytes(2, "little")]
+        bus.shutdown()
+        dev.shutdown()

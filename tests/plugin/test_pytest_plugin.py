@@ -150,6 +150,7 @@ def test_a_bad_hil_out_is_one_usage_error(pytester: pytest.Pytester) -> None:
 
 
 CANOPEN_WAITS = '''
+import canopen
 import pytest
 from hil import clock
 
@@ -161,7 +162,15 @@ def test_canopen_waits(hil_session, hil_drive):
     assert node.nmt.wait_for_heartbeat(1.0)
     waited = clock.monotonic() - t0
     assert 0 < waited <= 0.06, waited  # the heartbeat itself, in bench time
+    t0 = clock.monotonic_ns()
+    assert node.tpdo[1].wait_for_reception(0.3) is None  # not subscribed: its timeout
+    assert clock.monotonic_ns() - t0 == 300_000_000
     net = hil_session.nets["can0"]
+    mine = net.add_node(99, node.object_dictionary)  # a node the test adds itself
+    t0 = clock.monotonic_ns()
+    with pytest.raises(canopen.nmt.NmtError):
+        mine.nmt.wait_for_heartbeat(0.25)  # nobody is node 99
+    assert clock.monotonic_ns() - t0 == 250_000_000
     net.sync.start(0.01)  # canopen's SYNC producer: python-can's send_periodic on the bus
     clock.sleep(0.095)
     net.sync.stop()
