@@ -32,6 +32,8 @@ from hil.units import S
 # Virtual recordings start here: 2000-01-01T00:00:00Z, so two runs carry the same log times.
 VIRTUAL_EPOCH_NS = 946_684_800 * S
 CLOCKS = ("virtual", "real")
+# Added to a late event's order: it runs after the other events of its time (`at`)
+LATE = 1 << 62
 # A send settles its bus at most this long (a bus carrying more than its bit rate never idles)
 SETTLE_LIMIT_NS = 100_000_000
 
@@ -156,10 +158,12 @@ class VirtualClock:
         return me in owners or me in self._watch
 
     # -- scheduling ----------------------------------------------------------------------
-    def at(self, t: int, fn: Callable[[], Any]) -> Event:
-        """Run `fn()` at clock time `t` (never before now)."""
+    def at(self, t: int, fn: Callable[[], Any], *, late: bool = False) -> Event:
+        """Run `fn()` at clock time `t` (never before now). `late`: after every event that
+        is not late at the same time, also those scheduled later (a CAN bus starts its next
+        frame once every node that has one at that instant has queued it: arbitration)."""
         with self._guard:
-            ev = Event(max(int(t), self._now), next(self._seq), fn)
+            ev = Event(max(int(t), self._now), next(self._seq) + (LATE if late else 0), fn)
             heapq.heappush(self._heap, ev)
             return ev
 

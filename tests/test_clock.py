@@ -276,3 +276,14 @@ def test_only_the_runs_own_threads_move_bench_time() -> None:
                 return c.time_ns()
         elsewhere("step", step).join(5)
         assert results["step"] == 61 * MS
+
+
+def test_a_late_event_runs_after_every_other_event_of_its_time() -> None:
+    c = VirtualClock(epoch_ns=0)
+    seen: list[str] = []
+    c.at(5 * MS, lambda: seen.append("late"), late=True)
+    c.at(5 * MS, lambda: (seen.append("a"), c.at(5 * MS, lambda: seen.append("b"))))
+    c.at(4 * MS, lambda: seen.append("earlier"))
+    c.at(6 * MS, lambda: seen.append("after"))
+    c.sleep(0.01)
+    assert seen == ["earlier", "a", "b", "late", "after"]

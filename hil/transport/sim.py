@@ -172,6 +172,7 @@ class CanMedium:
         self._seq = 0
         self.busy_until = 0
         self.in_flight = 0
+        self._starting = False  # a start of the next frame is scheduled (`_start_soon`)
 
     def bit_ns(self, bits: int) -> int:
         return bits * S // self.bitrate
@@ -182,14 +183,23 @@ class CanMedium:
         self._pending.append((prio, self._seq, sender, msg))
         self.in_flight += 1
         if self.busy_until <= self.clock.time_ns():
-            self._start_next()
+            self._start_soon()
+
+    def _start_soon(self) -> None:
+        """Start the next frame at this instant, once every node with a frame at it has
+        queued it: a late clock event (ISO 11898-1: every node with a frame pending at the
+        start of frame takes part in arbitration, whichever queued it first)."""
+        if not self._starting:
+            self._starting = True
+            self.clock.at(self.clock.time_ns(), self._start_next, late=True)
 
     def _start_next(self) -> None:
         """The next frame on the wire: each node's transmit queue is first in, first out (as
         a PC's SocketCAN queue, or a controller with one transmit buffer), and the heads of
         the nodes' queues go by arbitration, the lowest identifier first."""
+        self._starting = False
         pending = self._pending
-        if not pending:
+        if not pending or self.busy_until > self.clock.time_ns():
             return
         if len(pending) == 1:  # one frame waiting (a poll and its answer): no arbitration
             best = pending.pop()
@@ -216,8 +226,9 @@ class CanMedium:
                         node._deliver(SimMessage.frame(t / S, msg, data, self.channel, sent))
                     except Exception as exc:  # one receiver's bug: the others get the frame
                         node.errors.append(exc)
-        finally:
-            self._start_next()  # the next waiting frame goes on the wire whatever happened
+        finally:  # the next waiting frame goes on the wire whatever happened; one queued
+            if self._pending:  # later at this instant starts it itself (`transmit`)
+                self._start_soon()
 
     def idle(self) -> bool:
         return self.in_flight == 0

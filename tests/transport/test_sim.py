@@ -95,17 +95,17 @@ def test_a_frame_arrives_after_its_bit_time_and_arbitration_orders_waiting_frame
         high = can.Message(arbitration_id=0x601, data=bytes(8), is_extended_id=False)
         low = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
         other = can.Message(arbitration_id=0x181, data=b"\x01", is_extended_id=False)
-        with clock.batch():  # queued back to back while 0x700 holds the bus
+        with clock.batch():  # all queued at one instant on an idle bus
             a.send(first)
             a.send(high)
             a.send(low)  # a's queue is first in, first out: 601h leaves before 080h
-            d.send(other)  # another node: its head 181h wins against a's head 601h
+            d.send(other)  # another node: its head 181h wins against a's head, 700h
         bit = 1_000_000_000 // 500_000
-        t1 = frame_bits(first) * bit
-        t2 = t1 + frame_bits(other) * bit
+        t1 = frame_bits(other) * bit
+        t2 = t1 + frame_bits(first) * bit
         t3 = t2 + frame_bits(high) * bit
         t4 = t3 + frame_bits(low) * bit
-        assert got == [(0x700, t1), (0x181, t2), (0x601, t3), (0x080, t4)]
+        assert got == [(0x181, t1), (0x700, t2), (0x601, t3), (0x080, t4)]
         assert c.time_ns() == t4  # the send settled: nothing in flight
         stop()
         for bus in (a, b, d):
@@ -336,4 +336,28 @@ def test_a_listener_added_to_the_pump_hears_the_bus() -> None:
         a.send(can.Message(arbitration_id=0x702, data=b"\x05", is_extended_id=False))
         assert reader.get_message(0) is None
         for bus in (a, b):
+            bus.shutdown()
+
+
+def test_frames_queued_at_one_instant_on_an_idle_bus_go_by_arbitration() -> None:
+    """Every node with a frame pending at the start of frame arbitrates (ISO 11898-1),
+    whichever of them queued it first in the clock's order: 080h, then 300h, then 701h.
+    Before, the first one queued took the idle bus at once (300h first)."""
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b, d, s = (open_can("virtual:sim-i?bitrate=500000") for _ in range(4))
+        got: list[tuple[int, int]] = []
+        pump(s, lambda m: got.append((m.arbitration_id, c.time_ns())))
+        f300 = can.Message(arbitration_id=0x300, data=bytes(8), is_extended_id=False)
+        f701 = can.Message(arbitration_id=0x701, data=b"\x05", is_extended_id=False)
+        f080 = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
+        c.at(1_000_000, lambda: d.send(f300))
+        c.at(1_000_000, lambda: a.send(f701))
+        c.at(1_000_000, lambda: b.send(f080))
+        clock.sleep(0.01)
+        bit = 2000  # ns at 500 kbit/s
+        t1 = 1_000_000 + frame_bits(f080) * bit
+        t2 = t1 + frame_bits(f300) * bit
+        assert got == [(0x080, t1), (0x300, t2), (0x701, t2 + frame_bits(f701) * bit)]
+        for bus in (a, b, d, s):
             bus.shutdown()
