@@ -261,6 +261,11 @@ class SimCanBus(ClockPeriodic, BusABC):
 
     def send(self, msg: Message, timeout: float | None = None) -> None:
         self._check_open()
+        if msg.is_fd or len(msg.data) > 8:  # as SocketCAN on a classic interface refuses it
+            raise can.CanOperationError(
+                f"{self.channel_info}: a classic CAN bus carries at most 8 data bytes and no "
+                f"CAN FD frame (got {'an FD frame' if msg.is_fd else 'one'} with "
+                f"{len(msg.data)} bytes)")
         out = SimMessage.frame(0.0, msg, bytes(msg.data), self.channel_info,
                                self.clock.time_ns())
         self.medium.transmit(self, out)

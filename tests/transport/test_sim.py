@@ -361,3 +361,22 @@ def test_frames_queued_at_one_instant_on_an_idle_bus_go_by_arbitration() -> None
         assert got == [(0x080, t1), (0x300, t2), (0x701, t2 + frame_bits(f701) * bit)]
         for bus in (a, b, d, s):
             bus.shutdown()
+
+
+def test_a_classic_bus_refuses_can_fd_and_long_frames() -> None:
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b = open_can("virtual:sim-fd"), open_can("virtual:sim-fd")
+        for bad in (can.Message(arbitration_id=0x100, data=bytes(64), is_fd=True,
+                                is_extended_id=False),
+                    can.Message(arbitration_id=0x100, data=bytes(2), is_fd=True,
+                                is_extended_id=False),
+                    can.Message(arbitration_id=0x100, data=bytes(12), is_extended_id=False,
+                                check=False)):
+            with pytest.raises(can.CanOperationError, match="classic CAN"):
+                a.send(bad)
+        assert b.recv(0.01) is None and c.time_ns() == 10_000_000  # nothing went on the wire
+        a.send(can.Message(arbitration_id=0x100, data=bytes(8), is_extended_id=False))
+        assert b.recv(0.01) is not None  # the bus is still fine
+        for bus in (a, b):
+            bus.shutdown()
