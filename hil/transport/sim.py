@@ -175,7 +175,8 @@ class CanMedium:
         self._starting = False  # a start of the next frame is scheduled (`_start_soon`)
 
     def bit_ns(self, bits: int) -> int:
-        return bits * S // self.bitrate
+        """`bits` on the wire, in ns rounded up (never early): exact at CiA 301's rates."""
+        return -(-bits * S // self.bitrate)
 
     def transmit(self, sender: SimCanBus, msg: Message) -> None:
         prio = _arbitration_key(msg)

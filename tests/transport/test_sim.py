@@ -380,3 +380,17 @@ def test_a_classic_bus_refuses_can_fd_and_long_frames() -> None:
         assert b.recv(0.01) is not None  # the bus is still fine
         for bus in (a, b):
             bus.shutdown()
+
+
+def test_a_frame_is_never_early_at_a_rate_that_does_not_divide_a_second() -> None:
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b = open_can("virtual:sim-333?bitrate=333333"), open_can("virtual:sim-333")
+        msg = can.Message(arbitration_id=0x181, data=b"\x01\x02", is_extended_id=False)
+        a.send(msg)
+        got = b.recv(0)
+        assert got is not None
+        exact = frame_bits(msg) * 1e9 / 333333  # a fraction of a ns over a whole one
+        assert exact <= c.time_ns() < exact + 1
+        for bus in (a, b):
+            bus.shutdown()
