@@ -59,6 +59,16 @@ class VirtualTimeout(BaseException):
     step code's `except Exception` takes the runner's step timeout for its own failure."""
 
 
+def _timeout_s(timeout_s: float | None) -> float | None:
+    """A wait's timeout: None or +inf is "forever" (None); NaN is refused (a wait that
+    never ends on the wall clock, an error on a virtual one: neither is meant)."""
+    if timeout_s is None:
+        return None
+    if timeout_s != timeout_s:
+        raise ValueError("timeout nan: not a number of seconds")
+    return None if timeout_s == float("inf") else timeout_s
+
+
 class RealClock:
     """The wall clock (`time`): what real benches, zenoh and `hil drive` run on."""
 
@@ -77,6 +87,7 @@ class RealClock:
 
     def wait_for(self, pred: Callable[[], Any], timeout_s: float | None,
                  poll_s: float = 0.002) -> bool:
+        timeout_s = _timeout_s(timeout_s)
         end = None if timeout_s is None else time.monotonic() + timeout_s
         while True:
             if pred():
@@ -270,6 +281,7 @@ class VirtualClock:
 
     def wait_for(self, pred: Callable[[], Any], timeout_s: float | None,
                  poll_s: float = 0.0) -> bool:
+        timeout_s = _timeout_s(timeout_s)
         if timeout_s is None:
             end = self._now + 3600 * S  # "forever" is an hour of bench time
         else:
@@ -390,6 +402,8 @@ class ClockQueue(queue.Queue):
     def get(self, block: bool = True, timeout: float | None = None) -> Any:
         clk = _current
         if block and isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
+            if timeout is not None and timeout < 0:
+                raise ValueError("'timeout' must be a non-negative number")  # as queue.Queue
             clk.wait_for(lambda: self.qsize() > 0, timeout)
             return super().get(False)
         return super().get(block, timeout)  # another thread: the run's thread fills it

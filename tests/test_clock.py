@@ -287,3 +287,31 @@ def test_a_late_event_runs_after_every_other_event_of_its_time() -> None:
     c.at(6 * MS, lambda: seen.append("after"))
     c.sleep(0.01)
     assert seen == ["earlier", "a", "b", "late", "after"]
+
+
+@pytest.mark.parametrize("virtual", [True, False])
+def test_odd_timeouts_mean_the_same_on_both_clocks(virtual) -> None:
+    """inf waits as None does (forever: an hour of bench time on a virtual clock, where it
+    raised OverflowError); NaN is refused on both (it never returned on the wall clock);
+    a negative ClockQueue timeout is refused as queue.Queue refuses it."""
+    import queue as _queue
+
+    c = VirtualClock(epoch_ns=0) if virtual else clock.REAL
+    with clock.use(c):
+        if virtual:
+            assert clock.wait_for(lambda: False, float("inf")) is False
+            assert c.time_ns() == 3600 * S
+            c.after(5 * MS, lambda: None)
+            cond = clock.ClockCondition()
+            c.after(10 * MS, lambda: (cond.acquire(), cond.notify_all(), cond.release()))
+            with cond:
+                assert cond.wait(float("inf")) is True
+        with pytest.raises(ValueError, match="nan"):
+            clock.wait_for(lambda: False, float("nan"))
+        with pytest.raises(ValueError, match="nan"):
+            clock.wait(threading.Event(), float("nan")) if virtual else clock.wait_for(
+                threading.Event().is_set, float("nan"))
+        with pytest.raises(ValueError, match="non-negative"):
+            ClockQueue().get(timeout=-1)
+        with pytest.raises(_queue.Empty):
+            ClockQueue().get(timeout=0)
