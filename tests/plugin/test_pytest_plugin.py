@@ -149,6 +149,19 @@ def test_a_bad_hil_out_is_one_usage_error(pytester: pytest.Pytester) -> None:
     assert (pytester.path / "afile").read_text() == "x"
 
 
+def _one_passing_test(pytester: pytest.Pytester, tmp_path, source: str):
+    """Run a one-test file on the built-in bench; the test passes; its recording."""
+    from hil.record.reader import Recording
+
+    pytester.makepyfile(test_one=source)
+    out = tmp_path / "out"
+    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
+                                           f"--hil-out={out}")
+    result.assert_outcomes(passed=1)
+    (path,) = out.glob("*.mcap")
+    return Recording.open(path)
+
+
 CANOPEN_WAITS = '''
 import canopen
 import pytest
@@ -183,15 +196,8 @@ def test_canopen_waits_and_send_periodic_run_on_the_virtual_clock(pytester: pyte
     and the session's network: canopen's heartbeat wait and its SYNC producer (python-can's
     `send_periodic`) ran on the wall clock, so no heartbeat came and SYNC came at wall
     instants (docs/clock.md)."""
-    from hil.record.reader import Recording
-
-    pytester.makepyfile(test_cw=CANOPEN_WAITS)
-    out = tmp_path / "out"
-    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
-                                           f"--hil-out={out}")
-    result.assert_outcomes(passed=1)
-    (path,) = out.glob("*.mcap")
-    syncs = [lt for _t, lt, _p, m in Recording.open(path).messages("/can/can0/raw")
+    rec = _one_passing_test(pytester, tmp_path, CANOPEN_WAITS)
+    syncs = [lt for _t, lt, _p, m in rec.messages("/can/can0/raw")
              if m.get("id") == 0x80 and m.get("dir") == "tx"]
     assert len(syncs) == 10  # at 0, 10, ... 90 ms of the 95 ms
     assert {b - a for a, b in itertools.pairwise(syncs)} == {10_000_000}
@@ -246,15 +252,8 @@ def test_a_pytest_recording_in_virtual_time_keeps_its_clock_to_the_end(
     """What the recorder stamps at close (open SDO and Modbus transactions) is on the run's
     clock: it had the wall clock's 2026 among 2000's bench times."""
     from hil.clock import VIRTUAL_EPOCH_NS
-    from hil.record.reader import Recording
 
-    pytester.makepyfile(test_oc=OPEN_AT_CLOSE)
-    out = tmp_path / "out"
-    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
-                                           f"--hil-out={out}")
-    result.assert_outcomes(passed=1)
-    (path,) = out.glob("*.mcap")
-    rec = Recording.open(path)
+    rec = _one_passing_test(pytester, tmp_path, OPEN_AT_CLOSE)
     assert rec.metadata()["hil.clock"]["clock"] == "virtual"
     times = {topic: [] for topic in rec.topics()}
     for topic, lt, _pt, _m in rec.messages():
