@@ -18,6 +18,7 @@ is deterministic and as fast as the host computes it. Only one thread may wait o
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import heapq
 import itertools
@@ -140,7 +141,13 @@ class VirtualClock:
         self.media: dict[str, Any] = {}
         self.hold = 0  # > 0 inside `batch()`: settling waits for its end
         self.held: list[Callable[[], bool]] = []
-        self._owners: set[int] = set()  # threads that installed it (`use`): see `may_wait`
+        # threads that ever installed it (`use`): see `may_wait`. Kept after their `use`
+        # ends, so that a thread of a test's own left running never runs a finished run on
+        self._owners: set[int] = set()
+        self._runner = 0  # the thread running the events (`in_event` is that thread's)
+        # events other threads schedule (`at`): they never take the lock, which the run's
+        # thread holds while it waits; moved to the heap at the top of each pass
+        self._inbox: collections.deque[Event] = collections.deque()
 
     # -- reading -------------------------------------------------------------------------
     def time_ns(self) -> int:
@@ -154,14 +161,16 @@ class VirtualClock:
 
     @property
     def in_event(self) -> bool:
-        """True while an event runs (a wait there would reorder time)."""
-        return self._running > 0
+        """True in the thread running the events while one runs (a wait there would
+        reorder time); False in every other thread."""
+        return self._running > 0 and self._runner == threading.get_ident()
 
     def may_wait(self) -> bool:
-        """Whether this thread may move bench time: the run's own threads, that is the one
-        that installed the clock (`use`) and a step thread inside `watch`; any thread while
-        none installed it. Another thread (a python-can `Notifier` a test started, a timer)
-        waiting on it would fire the run's events from there, at wall-clock moments."""
+        """Whether this thread may move bench time: the run's own threads, that is one that
+        installed the clock (`use`, also after its block ended) and a step thread inside
+        `watch`; any thread while none ever installed it. Another thread (a python-can
+        `Notifier` a test started, a timer) waiting on it would fire the run's events from
+        there, at wall-clock moments."""
         owners = self._owners
         if not owners:
             return True
@@ -173,16 +182,29 @@ class VirtualClock:
         """Run `fn()` at clock time `t` (never before now). `late`: after every event that
         is not late at the same time, also those scheduled later (a CAN bus starts its next
         frame once every node that has one at that instant has queued it: arbitration)."""
+        ev = Event(max(int(t), self._now), next(self._seq) + (LATE if late else 0), fn)
+        if not self.may_wait():  # another thread: handed over, never waiting for the lock
+            self._inbox.append(ev)
+            return ev
         with self._guard:
-            ev = Event(max(int(t), self._now), next(self._seq) + (LATE if late else 0), fn)
             heapq.heappush(self._heap, ev)
             return ev
+
+    def _take_inbox(self) -> None:
+        """Other threads' events onto the heap (under the lock), none before now."""
+        inbox, heap, now = self._inbox, self._heap, self._now
+        while inbox:
+            ev = inbox.popleft()
+            ev.t = max(ev.t, now)
+            heapq.heappush(heap, ev)
 
     def after(self, dt: int, fn: Callable[[], Any]) -> Event:
         return self.at(self._now + int(dt), fn)
 
     def next_time(self) -> int | None:
         with self._guard:
+            if self._inbox:
+                self._take_inbox()
             heap = self._heap
             while heap and heap[0].cancelled:
                 heapq.heappop(heap)
@@ -236,10 +258,13 @@ class VirtualClock:
     def _run_events(self, t: int, pred: Callable[[], Any] | None, cancel: Any,
                     deadline: int | None) -> bool:
         heap = self._heap
+        self._runner = threading.get_ident()
         while True:
             if self._interrupt is not None:  # taken between two events, never inside
                 exc, self._interrupt = self._interrupt, None
                 raise exc
+            if self._inbox:
+                self._take_inbox()
             if pred is not None and pred():
                 return True
             if cancel is not None and cancel.is_set():
@@ -339,17 +364,12 @@ def use(clk: RealClock | VirtualClock) -> Iterator[RealClock | VirtualClock]:
     """Install `clk` as the current clock for the block (one run at a time per process)."""
     global _current
     old, _current = _current, clk
-    owners = clk._owners if isinstance(clk, VirtualClock) else None
-    me = threading.get_ident()
-    added = owners is not None and me not in owners
-    if added:
-        owners.add(me)  # type: ignore[union-attr]
+    if isinstance(clk, VirtualClock):
+        clk._owners.add(threading.get_ident())  # for good: see `may_wait`
     try:
         yield clk
     finally:
         _current = old
-        if added:
-            owners.discard(me)  # type: ignore[union-attr]
 
 
 def time_ns() -> int:
@@ -410,11 +430,12 @@ class ClockQueue(queue.Queue):
 
 
 class ClockCondition(threading.Condition):
-    """A `threading.Condition` whose `wait` runs on the current clock (for a library's
-    condition, e.g. canopen's heartbeat and PDO waits). On a virtual clock the waiting thread
-    runs the events itself, so a notify comes from inside one of them, in this thread, and the
-    lock (an RLock) is simply kept; `wait` returns True once a notify came, else False after
-    `timeout` of bench time. On the wall clock it is `threading.Condition`."""
+    """A `threading.Condition` whose `wait` and `wait_for` run on the current clock (for a
+    library's condition, e.g. canopen's heartbeat and PDO waits). On a virtual clock the
+    waiting thread, one of the run's, releases the lock and runs the events itself, so a
+    notify comes from inside one of them, in this thread; `wait` returns True once a notify
+    came, else False after `timeout` of bench time. Another thread, and the wall clock, get
+    `threading.Condition`'s own waits."""
 
     def __init__(self, lock: Any = None) -> None:
         super().__init__(lock)
@@ -432,8 +453,29 @@ class ClockCondition(threading.Condition):
         clk = _current
         if isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
             seen = self._notified
-            return clk.wait_for(lambda: self._notified != seen, timeout)
+            return self._on_clock(clk, lambda: self._notified != seen, timeout)
         return super().wait(timeout)
+
+    def wait_for(self, predicate: Callable[[], Any], timeout: float | None = None) -> Any:
+        """`threading.Condition.wait_for` on the current clock (threading's own loops on
+        wall seconds): `predicate`'s last value."""
+        clk = _current
+        if isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
+            self._on_clock(clk, predicate, timeout)
+            return predicate()
+        return super().wait_for(predicate, timeout)
+
+    def _on_clock(self, clk: VirtualClock, pred: Callable[[], Any],
+                  timeout: float | None) -> bool:
+        """Run the clock with the lock released, as `threading.Condition.wait` releases it:
+        the event that notifies takes it in this same thread (so a plain `Lock` works too)."""
+        if not self._is_owned():
+            raise RuntimeError("cannot wait on un-acquired lock")
+        saved = self._release_save()  # type: ignore[attr-defined]
+        try:
+            return clk.wait_for(pred, timeout)
+        finally:
+            self._acquire_restore(saved)  # type: ignore[attr-defined]
 
 
 @contextlib.contextmanager

@@ -315,3 +315,34 @@ def test_odd_timeouts_mean_the_same_on_both_clocks(virtual) -> None:
             ClockQueue().get(timeout=-1)
         with pytest.raises(_queue.Empty):
             ClockQueue().get(timeout=0)
+
+
+@pytest.mark.parametrize("lock", [None, threading.Lock()], ids=["rlock", "plain lock"])
+def test_a_clock_condition_waits_and_waits_for_in_bench_time(lock) -> None:
+    """`wait_for` is bench time too (threading's own loops on wall seconds: 0.5 s of it ran
+    20 h of bench time), and a plain `Lock` works (the notifying event takes it in the
+    waiting thread: it deadlocked)."""
+    c = VirtualClock(epoch_ns=0)
+    cond = clock.ClockCondition(lock)
+    box = {"v": 0}
+
+    def bump() -> None:
+        with cond:
+            box["v"] += 1
+            cond.notify_all()
+
+    with clock.use(c):
+        with cond:
+            assert cond.wait_for(lambda: False, 0.5) is False
+        assert c.time_ns() == 500 * MS
+        c.after(20 * MS, bump)
+        c.after(40 * MS, bump)
+        with cond:
+            assert cond.wait_for(lambda: box["v"] >= 2, 1.0) is True
+        assert c.time_ns() == 540 * MS
+        c.after(10 * MS, bump)
+        with cond:
+            assert cond.wait(1.0) is True
+        assert c.time_ns() == 550 * MS
+        with pytest.raises(RuntimeError, match="un-acquired"):
+            cond.wait(0.1)

@@ -20,37 +20,50 @@ from typing import Any
 import canopen
 from canopen.emcy import EmcyConsumer
 from canopen.lss import LssMaster
-from canopen.nmt import NmtMaster
+from canopen.nmt import NmtError, NmtMaster
 from canopen.pdo.base import PdoMap
 from canopen.sdo.client import SdoClient
 
 from hil import clock
 
 # the canopen modules that loop on `time.time()`/`monotonic()` or `time.sleep()`
-_TIMED_MODULES = ("canopen.nmt", "canopen.emcy", "canopen.lss", "canopen.sdo.client",
-                  "canopen.profiles.p402", "canopen.timestamp")
+# (NMT's boot-up wait and the EMCY wait loop on `time.time()` around a condition: their own
+# clock-aware versions below, so that a plain canopen network keeps canopen's behaviour)
+_TIMED_MODULES = ("canopen.lss", "canopen.sdo.client", "canopen.profiles.p402",
+                  "canopen.timestamp")
+
+
+def _bench() -> clock.VirtualClock | None:
+    """The virtual clock when this thread is the run's (`may_wait`), else None: canopen used
+    from a thread of a test's own keeps the wall clock, as its own waits there do."""
+    clk = clock.current()
+    return clk if isinstance(clk, clock.VirtualClock) and clk.may_wait() else None
 
 
 class _ClockTime:
-    """The `time` module as canopen's loops use it, on `hil.clock`'s current clock."""
+    """The `time` module as canopen's loops use it: bench time in the run's own thread while
+    a virtual run is current, the wall clock anywhere else."""
 
     def __getattr__(self, name: str) -> Any:
         return getattr(time, name)
 
     @staticmethod
     def time() -> float:
-        return clock.time_ns() / 1e9
+        clk = _bench()
+        return time.time() if clk is None else clk.time_ns() / 1e9
 
     @staticmethod
     def monotonic() -> float:
-        return clock.monotonic()
+        clk = _bench()
+        return time.monotonic() if clk is None else clk.time_ns() / 1e9
 
     @staticmethod
     def sleep(seconds: float) -> None:
-        clk = clock.current()
-        if isinstance(clk, clock.VirtualClock) and clk.in_event:
-            return  # a clock event never waits (a listener's callback runs in one)
-        clk.sleep(seconds)
+        clk = _bench()
+        if clk is None:
+            time.sleep(seconds)
+        elif not clk.in_event:  # a clock event never waits (a listener's callback runs in one)
+            clk.sleep(seconds)
 
 
 CLOCK_TIME = _ClockTime()
@@ -92,6 +105,33 @@ class _ClockSdoClient(SdoClient, _ClockResponses):
     pass
 
 
+class _ClockNmtMaster(NmtMaster):
+    """canopen's NMT master with `wait_for_bootup` on its clock condition: canopen's loops
+    on `time.time()` around the condition's wait."""
+
+    def wait_for_bootup(self, timeout: float = 10) -> None:
+        with self.state_update:
+            self._state_received = None
+            if not self.state_update.wait_for(lambda: self._state_received == 0, timeout):
+                raise NmtError("Timeout waiting for boot-up message")
+
+
+class _ClockEmcyConsumer(EmcyConsumer):
+    """canopen's EMCY consumer with `wait` on its clock condition (canopen's loops on
+    `time.time()`): the first EMCY with `emcy_code` (any, if None) that comes within
+    `timeout`, else None."""
+
+    def wait(self, emcy_code: int | None = None, timeout: float = 10) -> Any:
+        with self.emcy_received:
+            start = len(self.log)
+
+            def first() -> Any:
+                return next((e for e in self.log[start:]
+                             if emcy_code is None or e.code == emcy_code), None)
+            self.emcy_received.wait_for(lambda: first() is not None, timeout)
+            return first()
+
+
 class _ClockLssMaster(LssMaster, _ClockResponses):
     pass
 
@@ -127,8 +167,10 @@ def on_clock(obj: Any) -> None:
             _replies_on_clock(obj, _ClockLssMaster)
     elif isinstance(obj, NmtMaster):
         _condition_on_clock(obj, "state_update")
+        obj.__class__ = _ClockNmtMaster
     elif isinstance(obj, EmcyConsumer):
         _condition_on_clock(obj, "emcy_received")
+        obj.__class__ = _ClockEmcyConsumer
     elif isinstance(obj, PdoMap):
         _condition_on_clock(obj, "receive_condition")
 

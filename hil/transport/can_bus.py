@@ -113,10 +113,16 @@ class TappedBus(ClockPeriodic, BusABC):
         self.channel_info = f"{bus.channel_info} (tapped as {name})"
         self._can_protocol = bus.protocol
         self._raw = raw_virtual(bus)
+        from hil.transport.sim import SimCanBus, raw_bus
+
+        sim = raw_bus(bus)
+        self._sim = sim if isinstance(sim, SimCanBus) else None
         super().__init__(channel=getattr(bus, "channel", name))
 
     def send(self, msg: Message, timeout: float | None = None) -> None:
         if clock.is_virtual() or self._inline():  # the answers come inside send: tx first
+            if self._sim is not None:  # not on the record as sent if the bus refuses it
+                self._sim.check_frame(msg)
             self.tap.can(self.name, msg, "tx", clock.time_ns(), None)
             self.bus.send(msg, timeout)
             return

@@ -15,6 +15,7 @@ delivered (an SDO server answers at once).
 
 from __future__ import annotations
 
+import contextlib
 import re
 import threading
 from collections import deque
@@ -260,17 +261,25 @@ class SimCanBus(ClockPeriodic, BusABC):
         medium.nodes.append(self)
         super().__init__(channel=channel)
 
-    def send(self, msg: Message, timeout: float | None = None) -> None:
+    def check_frame(self, msg: Message) -> None:
+        """Raise `can.CanOperationError` where `send` would refuse `msg`: a closed bus, a
+        CAN FD frame or more than 8 data bytes (as SocketCAN on a classic interface)."""
         self._check_open()
-        if msg.is_fd or len(msg.data) > 8:  # as SocketCAN on a classic interface refuses it
+        if msg.is_fd or len(msg.data) > 8:
             raise can.CanOperationError(
                 f"{self.channel_info}: a classic CAN bus carries at most 8 data bytes and no "
                 f"CAN FD frame (got {'an FD frame' if msg.is_fd else 'one'} with "
                 f"{len(msg.data)} bytes)")
-        out = SimMessage.frame(0.0, msg, bytes(msg.data), self.channel_info,
-                               self.clock.time_ns())
+
+    def send(self, msg: Message, timeout: float | None = None) -> None:
+        self.check_frame(msg)
+        clk = self.clock
+        out = SimMessage.frame(0.0, msg, bytes(msg.data), self.channel_info, clk.time_ns())
+        if not clk.may_wait():  # another thread: the run's thread queues it, at its next wait
+            clk.at(clk.time_ns(), lambda: self.medium.transmit(self, out))
+            return
         self.medium.transmit(self, out)
-        self.clock.settle(lambda: not self.medium.idle())
+        clk.settle(lambda: not self.medium.idle())
 
     def _deliver(self, msg: Message) -> None:
         """Queue a received frame (this node's own copy)."""
@@ -286,7 +295,8 @@ class SimCanBus(ClockPeriodic, BusABC):
         """python-can's `recv` on this bus's clock, with a short way for a waiting frame and
         no filters set (the pump's `recv(0)` for every frame on every node)."""
         if self._rx and self._filters is None:
-            return self._rx.popleft()
+            with contextlib.suppress(IndexError):  # another thread may have taken it
+                return self._rx.popleft()
         return recv_on_clock(self, self.clock, timeout)
 
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
@@ -301,7 +311,10 @@ class SimCanBus(ClockPeriodic, BusABC):
                         self._arrived.wait(timeout)
                 finally:
                     self._foreign -= 1
-        return (self._rx.popleft() if self._rx else None), False
+        try:
+            return self._rx.popleft(), False
+        except IndexError:  # nothing came (or another thread took it)
+            return None, False
 
     def _check_open(self) -> None:
         if self._is_shutdown:

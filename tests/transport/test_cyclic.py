@@ -148,3 +148,31 @@ def test_send_periodic_on_the_wall_clock_is_python_cans_own():
     finally:
         bus.shutdown()
         peer.shutdown()
+
+
+def test_a_failing_periodic_send_stops_and_fails_the_runs_wait():
+    """python-can's task raises a send error in its own thread (pytest only warns); on the
+    virtual clock the error is raised where the run waits, and the task stops."""
+    from hil import clock
+    from hil.clock import VirtualClock
+    from hil.transport.can_bus import open_can
+
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        bus = open_can("virtual:cyc-err")
+        calls = [0]
+
+        def bug(_msg: can.Message) -> None:
+            calls[0] += 1
+            if calls[0] == 3:
+                raise ValueError("modifier bug")
+
+        task = bus.send_periodic(can.Message(arbitration_id=0x80, data=b""), 0.01,
+                                 modifier_callback=bug)
+        with pytest.raises(ValueError, match="modifier bug"):
+            clock.sleep(0.1)
+        assert c.time_ns() == 20_000_000 and task.stopped
+        assert isinstance(task.error, ValueError)
+        clock.sleep(0.1)
+        assert calls[0] == 3  # stopped: no more sends
+        bus.shutdown()

@@ -7,6 +7,7 @@ delimiter 1, ACK 2, EOF 7 and intermission 3: 47 + 8n bits unstuffed).
 
 from __future__ import annotations
 
+import itertools
 import random
 
 import can
@@ -17,6 +18,7 @@ from hil.clock import VirtualClock
 from hil.transport.can_bus import open_can
 from hil.transport.serial_line import open_serial
 from hil.transport.sim import frame_bits, pump
+from hil.units import MS
 
 
 def _stuffed_reference(bits: str) -> int:
@@ -364,9 +366,19 @@ def test_frames_queued_at_one_instant_on_an_idle_bus_go_by_arbitration() -> None
 
 
 def test_a_classic_bus_refuses_can_fd_and_long_frames() -> None:
+    """... and the recording tap does not record a refused frame as sent."""
+
+    class Tap:
+        def __init__(self) -> None:
+            self.rows: list[tuple[int, str]] = []
+
+        def can(self, _bus, frame, direction, _t, _source_t) -> None:
+            self.rows.append((frame.arbitration_id, direction))
+
     c = VirtualClock(epoch_ns=0)
     with clock.use(c):
-        a, b = open_can("virtual:sim-fd"), open_can("virtual:sim-fd")
+        tap = Tap()
+        a, b = open_can("virtual:sim-fd", tap=tap, name="can0"), open_can("virtual:sim-fd")
         for bad in (can.Message(arbitration_id=0x100, data=bytes(64), is_fd=True,
                                 is_extended_id=False),
                     can.Message(arbitration_id=0x100, data=bytes(2), is_fd=True,
@@ -376,8 +388,10 @@ def test_a_classic_bus_refuses_can_fd_and_long_frames() -> None:
             with pytest.raises(can.CanOperationError, match="classic CAN"):
                 a.send(bad)
         assert b.recv(0.01) is None and c.time_ns() == 10_000_000  # nothing went on the wire
+        assert tap.rows == []  # nor on the record
         a.send(can.Message(arbitration_id=0x100, data=bytes(8), is_extended_id=False))
         assert b.recv(0.01) is not None  # the bus is still fine
+        assert tap.rows == [(0x100, "tx")]
         for bus in (a, b):
             bus.shutdown()
 
@@ -394,3 +408,54 @@ def test_a_frame_is_never_early_at_a_rate_that_does_not_divide_a_second() -> Non
         assert exact <= c.time_ns() < exact + 1
         for bus in (a, b):
             bus.shutdown()
+
+
+def test_another_threads_send_while_the_run_waits_neither_stalls_the_bus_nor_hangs() -> None:
+    """Another thread's send while the run's thread waits: it is handed over (never waiting
+    for the clock's lock, which the run holds while it waits) and goes on the wire at the
+    run's next pass. Before, it set the bus's "starting" flag and then blocked on the lock:
+    the bus started no frame for the rest of the wait, and after 10 s of it the clock was
+    hung for good. After the run, another thread still moves no bench time."""
+    import threading
+    import time
+
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b, d = (open_can("virtual:sim-h") for _ in range(3))
+        got: list[tuple[int, int]] = []
+        pump(d, lambda m: got.append((m.arbitration_id, c.time_ns())))
+        task = a.send_periodic(can.Message(arbitration_id=0x181, data=b"\x01",
+                                           is_extended_id=False), 0.001)
+        started = threading.Event()
+
+        def other() -> None:
+            started.wait(5)
+            b.send(can.Message(arbitration_id=0x701, data=b"\x05", is_extended_id=False))
+
+        th = threading.Thread(target=other)
+        th.start()
+        c.at(1 * MS, started.set)  # the other thread sends while the run's wait goes on:
+        c.at(2 * MS, lambda: time.sleep(0.2))  # an event that gives it the wall time to
+        clock.sleep(2.0)
+        deadline = time.monotonic() + 5
+        while th.is_alive() and time.monotonic() < deadline:
+            clock.sleep(0.05)
+        th.join(5)
+        clock.sleep(0.05)
+        assert not th.is_alive() and not c.hung
+        pdos = [t for cid, t in got if cid == 0x181]
+        assert len(pdos) == round(c.time_ns() / MS)  # one every ms, none held back
+        assert {b_ - a_ for a_, b_ in itertools.pairwise(pdos)} == {MS}
+        assert [cid for cid, _ in got].count(0x701) == 1
+        task.stop()
+    ran = c.time_ns()
+
+    def late_reader() -> None:  # a thread of a test's own, left running after the run
+        d.recv(0.2)
+
+    th = threading.Thread(target=late_reader)
+    th.start()
+    th.join(5)
+    assert c.time_ns() == ran  # the finished run's time does not move
+    for bus in (a, b, d):
+        bus.shutdown()
