@@ -143,8 +143,9 @@ class VirtualClock:
         self.held: list[Callable[[], bool]] = []
         # threads that ever installed it (`use`): see `may_wait`. Kept after their `use`
         # ends, so that a thread of a test's own left running never runs a finished run on
-        self._owners: set[int] = set()
+        self._owners: set[threading.Thread] = set()  # (threads, not idents: those are reused)
         self._runner = 0  # the thread running the events (`in_event` is that thread's)
+        self._failure: BaseException | None = None  # an event's error for the run (`fail`)
         # events other threads schedule (`at`): they never take the lock, which the run's
         # thread holds while it waits; moved to the heap at the top of each pass
         self._inbox: collections.deque[Event] = collections.deque()
@@ -174,8 +175,7 @@ class VirtualClock:
         owners = self._owners
         if not owners:
             return True
-        me = threading.get_ident()
-        return me in owners or me in self._watch
+        return threading.current_thread() in owners or threading.get_ident() in self._watch
 
     # -- scheduling ----------------------------------------------------------------------
     def at(self, t: int, fn: Callable[[], Any], *, late: bool = False) -> Event:
@@ -234,6 +234,9 @@ class VirtualClock:
         if self.hung:
             raise ClockHung("the virtual clock is held by a step hung inside a clock event")
         if self._running:
+            if self._runner != threading.get_ident():  # a step hung inside an event
+                raise ClockHung("the virtual clock is held by another thread stuck inside a "
+                                "clock event (a step hung there)")
             raise RuntimeError("virtual clock: a wait inside a clock event (it would reorder "
                                "time); events must only schedule")
         if not self.may_wait():
@@ -246,7 +249,7 @@ class VirtualClock:
         with self._guard:
             self._loops += 1  # a signal now is deferred to the top of a pass (defer_interrupt)
             try:
-                return self._run_events(t, pred, cancel, deadline)
+                return self._run_events(t, pred, cancel, deadline, watched)
             except BaseException as exc:
                 pending, self._interrupt = self._interrupt, None
                 if pending is not None and pending is not exc:
@@ -256,12 +259,15 @@ class VirtualClock:
                 self._loops -= 1
 
     def _run_events(self, t: int, pred: Callable[[], Any] | None, cancel: Any,
-                    deadline: int | None) -> bool:
+                    deadline: int | None, watched: bool = True) -> bool:
         heap = self._heap
         self._runner = threading.get_ident()
         while True:
             if self._interrupt is not None:  # taken between two events, never inside
                 exc, self._interrupt = self._interrupt, None
+                raise exc
+            if watched and self._failure is not None:  # the run's wait, not a send's settle
+                exc, self._failure = self._failure, None
                 raise exc
             if self._inbox:
                 self._take_inbox()
@@ -286,6 +292,12 @@ class VirtualClock:
                 ev.fn()
             finally:
                 self._running -= 1
+
+    def fail(self, exc: BaseException) -> None:
+        """An event's error, raised at the run's next wait (not inside the settle of a send,
+        whose own frame went out: the sender would take it for its own failure)."""
+        if self._failure is None:
+            self._failure = exc
 
     def defer_interrupt(self, exc: BaseException) -> bool:
         """A signal handler's exception while an event runs: raised in the thread running
@@ -365,7 +377,7 @@ def use(clk: RealClock | VirtualClock) -> Iterator[RealClock | VirtualClock]:
     global _current
     old, _current = _current, clk
     if isinstance(clk, VirtualClock):
-        clk._owners.add(threading.get_ident())  # for good: see `may_wait`
+        clk._owners.add(threading.current_thread())  # for good: see `may_wait`
     try:
         yield clk
     finally:
@@ -461,8 +473,11 @@ class ClockCondition(threading.Condition):
         wall seconds): `predicate`'s last value."""
         clk = _current
         if isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
-            self._on_clock(clk, predicate, timeout)
-            return predicate()
+            result = predicate()
+            if not result:  # as threading's: no wait (nor lock check) when it holds already
+                self._on_clock(clk, predicate, timeout)
+                result = predicate()
+            return result
         return super().wait_for(predicate, timeout)
 
     def _on_clock(self, clk: VirtualClock, pred: Callable[[], Any],

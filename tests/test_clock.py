@@ -346,3 +346,55 @@ def test_a_clock_condition_waits_and_waits_for_in_bench_time(lock) -> None:
         assert c.time_ns() == 550 * MS
         with pytest.raises(RuntimeError, match="un-acquired"):
             cond.wait(0.1)
+
+
+def test_an_event_stuck_in_another_thread_is_clock_hung_for_the_next_wait() -> None:
+    """The safe state after a step hung inside an event: the main thread's wait says the
+    clock is hung (not "a wait inside a clock event", which blamed the waiting code)."""
+    c = VirtualClock(epoch_ns=0)
+    release, inside = threading.Event(), threading.Event()
+
+    def stuck() -> None:
+        inside.set()
+        release.wait(5)
+
+    with clock.use(c):
+        c.at(5 * MS, stuck)
+
+        def step() -> None:
+            with c.watch(None, None):
+                c.sleep(0.01)
+        th = threading.Thread(target=step)
+        th.start()
+        assert inside.wait(5)
+        with pytest.raises(clock.ClockHung, match="stuck inside a clock event"):
+            c.sleep(0.01)
+        release.set()
+        th.join(5)
+
+
+def test_a_thread_that_ran_a_clock_and_ended_leaves_no_owner_behind() -> None:
+    """Owners are threads, not idents: a later thread that gets the ended one's ident (Linux
+    reuses them) is not the run's."""
+    c = VirtualClock(epoch_ns=0)
+
+    def run() -> None:
+        with clock.use(c):
+            c.sleep(0.1)
+
+    first = threading.Thread(target=run)
+    first.start()
+    first.join(5)
+    seen: dict[str, object] = {}
+
+    def later() -> None:
+        seen["ident"] = threading.get_ident()
+        try:
+            c.sleep(0.1)
+        except RuntimeError as exc:
+            seen["error"] = exc
+
+    th = threading.Thread(target=later)
+    th.start()
+    th.join(5)
+    assert "not the run's" in str(seen.get("error")) and c.time_ns() == 100 * MS

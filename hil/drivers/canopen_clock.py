@@ -78,6 +78,10 @@ def _install_time() -> None:
             mod.time = CLOCK_TIME  # type: ignore[attr-defined]
 
 
+# canopen's `wait_for_bootup` passes 0.1 s over its timeout (canopen/nmt.py, 2.x)
+BOOTUP_SLACK_S = 0.1
+
+
 class _ClockResponses:
     """A canopen client whose reply queue stays a `hil.clock.ClockQueue`: canopen's SDO client
     and LSS master replace `responses` with a fresh `queue.Queue` when they find a stale reply;
@@ -110,9 +114,12 @@ class _ClockNmtMaster(NmtMaster):
     on `time.time()` around the condition's wait."""
 
     def wait_for_bootup(self, timeout: float = 10) -> None:
+        """A boot-up within `timeout` + 0.1 s, as canopen's own loop takes one (its last
+        pass waits 0.1 s past the timeout: what a real bench accepts)."""
         with self.state_update:
             self._state_received = None
-            if not self.state_update.wait_for(lambda: self._state_received == 0, timeout):
+            if not self.state_update.wait_for(lambda: self._state_received == 0,
+                                              timeout + BOOTUP_SLACK_S):
                 raise NmtError("Timeout waiting for boot-up message")
 
 

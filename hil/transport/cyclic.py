@@ -111,8 +111,8 @@ class ClockCyclicSendTask(can.broadcastmanager.LimitedDurationCyclicSendTaskABC,
     behaviour (the messages in turn, the first at once, `duration`, `modifier_callback`, a
     send error stops it) as clock events, each frame exactly on period in bench time. A
     thread on the wall clock would send at wall-clock instants the bench's time knows
-    nothing of. A send error (or the callback's) is kept in `error` and raised from the
-    run's wait: the test or the plan step fails with it."""
+    nothing of. A send error (or the callback's) is kept in `error` and raised at the run's
+    next wait, not inside another send's settle: the test or the plan step fails with it."""
 
     def __init__(self, bus: can.BusABC, clk: clock.VirtualClock,
                  messages: Sequence[can.Message] | can.Message, period: float,
@@ -157,10 +157,11 @@ class ClockCyclicSendTask(can.broadcastmanager.LimitedDurationCyclicSendTaskABC,
                 self.modifier_callback(msg)
             self.bus.send(msg)
         except Exception as exc:  # as python-can's task without `on_error`: it stops, and
-            self.error = exc  # the error is raised where the run waits (python-can raises it
+            self.error = exc  # the error is raised at the run's next wait (python-can raises
             log.error("cyclic send of %03Xh stopped: %s", self.arbitration_id, exc)
-            self.stop()  # in its own thread, where pytest only warns)
-            raise
+            self.stop()  # it in its own thread, where pytest only warns)
+            self.clock.fail(exc)
+            return
         self._index = (self._index + 1) % len(self.messages)
         self._event = self.clock.after(self.period_ns, self._tick)
 

@@ -176,3 +176,32 @@ def test_a_failing_periodic_send_stops_and_fails_the_runs_wait():
         clock.sleep(0.1)
         assert calls[0] == 3  # stopped: no more sends
         bus.shutdown()
+
+
+def test_a_periodic_failure_is_not_raised_by_another_send():
+    """The task's error comes out of the run's next wait, not out of a send whose settle ran
+    the failing tick: that send's frame went out, and canopen would take the error for its
+    own (an SDO request on the wire, the transfer failed)."""
+    from hil import clock
+    from hil.clock import VirtualClock
+    from hil.transport.can_bus import open_can
+    from hil.transport.sim import pump
+
+    c = VirtualClock(epoch_ns=0)
+    with clock.use(c):
+        a, b, d = (open_can("virtual:cyc-other") for _ in range(3))
+        heard: list[int] = []
+        pump(d, lambda m: heard.append(m.arbitration_id))
+
+        def bug(_msg: can.Message) -> None:
+            if c.time_ns() >= 10_000_000:
+                raise ValueError("modifier bug")
+
+        a.send_periodic(can.Message(arbitration_id=0x80, data=b""), 0.01, modifier_callback=bug)
+        clock.sleep(0.0099)
+        b.send(can.Message(arbitration_id=0x605, data=bytes(8)))  # its settle runs the tick
+        assert heard[-1] == 0x605
+        with pytest.raises(ValueError, match="modifier bug"):
+            clock.sleep(0.01)
+        for bus in (a, b, d):
+            bus.shutdown()
