@@ -497,8 +497,8 @@ class ClockCondition(threading.Condition):
 def batch() -> Iterator[None]:
     """Frames sent in the block are queued back to back, as a master's burst: a virtual
     bus settles once at the end, not after each frame."""
-    if not isinstance(_current, VirtualClock):
-        yield
+    if not isinstance(_current, VirtualClock) or not _current.may_wait():
+        yield  # (another thread's sends never settle: its batch would hold the run's)
         return
     clk = _current
     clk.hold += 1

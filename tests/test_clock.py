@@ -398,3 +398,26 @@ def test_a_thread_that_ran_a_clock_and_ended_leaves_no_owner_behind() -> None:
     th.start()
     th.join(5)
     assert "not the run's" in str(seen.get("error")) and c.time_ns() == 100 * MS
+
+
+def test_another_threads_batch_never_holds_the_runs_settling() -> None:
+    """`batch()` in a thread of a test's own is no batch: it held every send of the run's
+    until its end, then dropped their settling (that thread may not run the clock)."""
+    c = VirtualClock(epoch_ns=0)
+    settled: list[int] = []
+    inside, leave = threading.Event(), threading.Event()
+
+    def other() -> None:
+        with clock.batch():
+            inside.set()
+            leave.wait(5)
+
+    with clock.use(c):
+        th = threading.Thread(target=other)
+        th.start()
+        assert inside.wait(5)
+        c.after(3 * MS, lambda: settled.append(c.time_ns()))
+        c.settle(lambda: not settled)  # the run's send settling: not held for the batch
+        assert settled == [3 * MS]
+        leave.set()
+        th.join(5)
