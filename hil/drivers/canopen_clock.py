@@ -5,10 +5,11 @@ On a virtual bench nothing moves bench time while a thread waits so: a test's
 `hil_drive.cia.node.nmt.wait_for_heartbeat(1.0)` took a wall second, saw no bench time pass
 and no heartbeat. A virtual session's networks are `ClockNetwork`s: each client that
 subscribes (SDO client, LSS master, NMT master, EMCY consumer, PDO map) gets clock-aware
-replies or conditions (`hil.clock.ClockQueue`, `ClockCondition`), and the `time` that
-canopen's modules loop on is `hil.clock`'s, which is the `time` module itself unless a
-virtual run is current, so nothing changes on the wall clock. The library's code runs
-unchanged.
+replies or conditions (`hil.clock.ClockQueue`, `ClockCondition`); the NMT boot-up wait and
+the EMCY wait, which canopen loops on `time.time()`, are clock-condition waits of their own;
+and the `time` that canopen's other modules loop on reads bench time in the run's own
+thread while a virtual run is current, the `time` module itself anywhere else, so nothing
+changes on the wall clock. The rest of the library's code runs unchanged.
 """
 
 from __future__ import annotations
