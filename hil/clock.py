@@ -427,13 +427,22 @@ def call_later(seconds: float, fn: Callable[..., Any], *args: Any) -> Any:
     return timer
 
 
+def _waits_here() -> VirtualClock | None:
+    """The current clock if a wait in this thread runs it: virtual, this thread the run's
+    (`may_wait`) and not inside an event. Else None: the library's own wall-time wait."""
+    clk = _current
+    if isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
+        return clk
+    return None
+
+
 class ClockQueue(queue.Queue):
     """A `queue.Queue` whose blocking `get` waits on the current clock (for a library's reply
     queue, e.g. canopen's SDO client: its timeout then passes in bench time)."""
 
     def get(self, block: bool = True, timeout: float | None = None) -> Any:
-        clk = _current
-        if block and isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
+        clk = _waits_here()
+        if block and clk is not None:
             if timeout is not None and timeout < 0:
                 raise ValueError("'timeout' must be a non-negative number")  # as queue.Queue
             clk.wait_for(lambda: self.qsize() > 0, timeout)
@@ -462,8 +471,8 @@ class ClockCondition(threading.Condition):
         super().notify_all()
 
     def wait(self, timeout: float | None = None) -> bool:
-        clk = _current
-        if isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
+        clk = _waits_here()
+        if clk is not None:
             seen = self._notified
             return self._on_clock(clk, lambda: self._notified != seen, timeout)
         return super().wait(timeout)
@@ -471,8 +480,8 @@ class ClockCondition(threading.Condition):
     def wait_for(self, predicate: Callable[[], Any], timeout: float | None = None) -> Any:
         """`threading.Condition.wait_for` on the current clock (threading's own loops on
         wall seconds): `predicate`'s last value."""
-        clk = _current
-        if isinstance(clk, VirtualClock) and not clk.in_event and clk.may_wait():
+        clk = _waits_here()
+        if clk is not None:
             result = predicate()
             if not result:  # as threading's: no wait (nor lock check) when it holds already
                 self._on_clock(clk, predicate, timeout)

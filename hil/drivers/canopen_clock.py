@@ -70,13 +70,17 @@ class _ClockTime:
 CLOCK_TIME = _ClockTime()
 
 
+_installed: list[bool] = []  # `_install_time` ran (once per process)
+
+
 def _install_time() -> None:
+    if _installed:
+        return
     import importlib
 
     for name in _TIMED_MODULES:
-        mod = importlib.import_module(name)
-        if getattr(mod, "time", None) is not CLOCK_TIME:
-            mod.time = CLOCK_TIME  # type: ignore[attr-defined]
+        importlib.import_module(name).time = CLOCK_TIME  # type: ignore[attr-defined]
+    _installed.append(True)
 
 
 # canopen's `wait_for_bootup` passes 0.1 s over its timeout (canopen/nmt.py, 2.x)

@@ -597,7 +597,7 @@ class Recorder:
                     lambda txn=txn, c=sdo_ch: self._w.add_message(c, t_end, t_end, dumps(txn))
                 )
         for port, ch in self._serial_ch.items():
-            self._safe(lambda port=port, ch=ch: self._close_serial(port, *ch))
+            self._safe(lambda port=port, ch=ch: self._close_serial(port, t_end, *ch))
         closing = {
             "closed_ns": str(time.time_ns()),
             "drops": str(self.drops),
@@ -874,15 +874,15 @@ class Recorder:
             self._modbus(mb_cid, pairing, adu, adir, mode, t, apt)
 
     def _close_serial(
-        self, port: str, _raw: int, mb_ch: int, pairing: ModbusPairing, assembler: AduAssembler
+        self, port: str, t: int, _raw: int, mb_ch: int, pairing: ModbusPairing,
+        assembler: AduAssembler,
     ) -> None:
-        """End of recording: decode a half-received ADU, report unanswered requests."""
+        """End of recording (at `t`): decode a half-received ADU, report unanswered
+        requests."""
         mode = self._serial_modes.get(port, "")
         for adu, adir, apt in assembler.pending():
-            self._modbus(mb_ch, pairing, adu, adir, mode or guess_mode(adu), self._time_ns(),
-                        apt)
+            self._modbus(mb_ch, pairing, adu, adir, mode or guess_mode(adu), t, apt)
         for rec in pairing.pending():
-            t = self._time_ns()
             self._w.add_message(mb_ch, t, t, dumps({"mode": mode, "raw": "", **rec}))
 
     def _modbus(

@@ -201,7 +201,7 @@ class CanMedium:
         the nodes' queues go by arbitration, the lowest identifier first."""
         self._starting = False
         pending = self._pending
-        if not pending or self.busy_until > self.clock.time_ns():
+        if not pending:
             return
         if len(pending) == 1:  # one frame waiting (a poll and its answer): no arbitration
             best = pending.pop()
