@@ -70,6 +70,14 @@ def _timeout_s(timeout_s: float | None) -> float | None:
     return None if timeout_s == float("inf") else timeout_s
 
 
+def _sleep_s(seconds: float) -> float:
+    """A sleep's length: NaN and +inf are refused on both clocks (a sleep must end); a
+    negative one is no sleep."""
+    if seconds != seconds or seconds == float("inf"):
+        raise ValueError(f"sleep {seconds}: not a finite number of seconds")
+    return max(0.0, seconds)
+
+
 class RealClock:
     """The wall clock (`time`): what real benches, zenoh and `hil drive` run on."""
 
@@ -83,7 +91,7 @@ class RealClock:
         return time.monotonic_ns()
 
     def sleep(self, seconds: float) -> None:
-        if seconds > 0:
+        if (seconds := _sleep_s(seconds)) > 0:
             time.sleep(seconds)
 
     def wait_for(self, pred: Callable[[], Any], timeout_s: float | None,
@@ -314,7 +322,7 @@ class VirtualClock:
         self._interrupt = None
 
     def sleep(self, seconds: float) -> None:
-        self.run_until(self._now + max(0, round(seconds * S)))
+        self.run_until(self._now + round(_sleep_s(seconds) * S))
 
     def wait_for(self, pred: Callable[[], Any], timeout_s: float | None,
                  poll_s: float = 0.0) -> bool:
@@ -364,6 +372,9 @@ class _Held:
 
 REAL = RealClock()
 _current: RealClock | VirtualClock = REAL
+# how often each clock was installed in this process (`use`): the test suite's rerun policy
+# reads it (a test that ran only in virtual time is deterministic: never rerun)
+installs: collections.Counter[str] = collections.Counter()
 
 
 def current() -> RealClock | VirtualClock:
@@ -376,6 +387,7 @@ def use(clk: RealClock | VirtualClock) -> Iterator[RealClock | VirtualClock]:
     """Install `clk` as the current clock for the block (one run at a time per process)."""
     global _current
     old, _current = _current, clk
+    installs[clk.name] += 1
     if isinstance(clk, VirtualClock):
         clk._owners.add(threading.current_thread())  # for good: see `may_wait`
     try:
@@ -403,7 +415,7 @@ def sleep(seconds: float) -> None:
 def wait(event: threading.Event, timeout_s: float | None) -> bool:
     """`event.wait(timeout_s)` on the current clock."""
     if not _current.virtual:
-        return event.wait(timeout_s)
+        return event.wait(_timeout_s(timeout_s))  # inf: forever, NaN refused (as virtual)
     return _current.wait_for(event.is_set, timeout_s)
 
 

@@ -293,7 +293,8 @@ def test_a_late_event_runs_after_every_other_event_of_its_time() -> None:
 def test_odd_timeouts_mean_the_same_on_both_clocks(virtual) -> None:
     """inf waits as None does (forever: an hour of bench time on a virtual clock, where it
     raised OverflowError); NaN is refused on both (it never returned on the wall clock);
-    a negative ClockQueue timeout is refused as queue.Queue refuses it."""
+    a negative ClockQueue timeout is refused as queue.Queue refuses it; a sleep of NaN or inf
+    is refused on both (the wall clock raised OverflowError or slept not at all)."""
     import queue as _queue
 
     c = VirtualClock(epoch_ns=0) if virtual else clock.REAL
@@ -309,8 +310,16 @@ def test_odd_timeouts_mean_the_same_on_both_clocks(virtual) -> None:
         with pytest.raises(ValueError, match="nan"):
             clock.wait_for(lambda: False, float("nan"))
         with pytest.raises(ValueError, match="nan"):
-            clock.wait(threading.Event(), float("nan")) if virtual else clock.wait_for(
-                threading.Event().is_set, float("nan"))
+            clock.wait(threading.Event(), float("nan"))
+        set_event = threading.Event()
+        set_event.set()
+        assert clock.wait(set_event, float("inf")) is True  # wall clock: OverflowError before
+        for odd in (float("nan"), float("inf")):  # a sleep must end, on either clock
+            with pytest.raises(ValueError, match="not a finite number"):
+                clock.sleep(odd)
+        t0 = c.time_ns() if virtual else None
+        clock.sleep(-1.0)  # no sleep
+        assert t0 is None or c.time_ns() == t0
         with pytest.raises(ValueError, match="non-negative"):
             ClockQueue().get(timeout=-1)
         with pytest.raises(_queue.Empty):
