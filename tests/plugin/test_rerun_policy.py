@@ -31,6 +31,22 @@ def test_unit_fails():
 @pytest.mark.virtual_time
 def test_virtual_time_fails():
     assert False
+
+@pytest.mark.integration
+def test_unmarked_virtual_run_fails():  # a plan on the built-in bench, not marked
+    from hil import clock
+    with clock.use(clock.VirtualClock()):
+        pass
+    assert False
+
+@pytest.mark.integration
+def test_virtual_and_real_run_fails():  # a test that compares both clocks
+    from hil import clock
+    with clock.use(clock.VirtualClock()):
+        pass
+    with clock.use(clock.REAL):
+        pass
+    assert False
 """
 
 
@@ -46,12 +62,14 @@ def probe(pytester: pytest.Pytester) -> pytest.Pytester:
 def test_integration_tests_are_rerun_once_and_unit_tests_never(probe, monkeypatch):
     monkeypatch.delenv("HIL_BENCH", raising=False)
     res = probe.runpytest("-p", "no:cacheprovider", "-ra")
-    # once each; never a virtual-time test, even one marked integration (docs/clock.md)
-    assert res.parseoutcomes() == {"passed": 1, "failed": 3, "rerun": 2}
+    # once each; never a virtual-time test, even one marked integration (docs/clock.md), nor
+    # one that ran only in virtual time unmarked; one that also ran on the wall clock is
+    assert res.parseoutcomes() == {"passed": 1, "failed": 5, "rerun": 3}
     res.stdout.fnmatch_lines(["*FAILED*test_fails_always*", "*FAILED*test_unit_fails*"])
     res.stdout.fnmatch_lines(["*FAILED*test_virtual_time_fails*"])
-    assert not [ln for ln in res.stdout.lines
-                if ln.startswith("RERUN") and "test_virtual_time_fails" in ln]
+    reruns = [ln for ln in res.stdout.lines if ln.startswith("RERUN")]
+    assert not [ln for ln in reruns if "virtual_time_fails" in ln or "unmarked_virtual" in ln]
+    assert [ln for ln in reruns if "test_virtual_and_real_run_fails" in ln]
     # why each rerun happened is in the log: the first attempt's traceback
     res.stdout.fnmatch_lines(["*rerun test summary info*", "RERUN *test_fails_once",
                               "*assert 1 > 1*", "PASSED *test_fails_once"])
@@ -63,10 +81,10 @@ def test_virtual_time_tests_are_not_rerun_even_with_reruns_on_the_command_line(p
     monkeypatch.delenv("HIL_BENCH", raising=False)
     res = probe.runpytest("-p", "no:cacheprovider", "-ra", "--reruns", "2",
                           "-k", "virtual_time")
-    assert res.parseoutcomes() == {"failed": 1, "deselected": 3}
+    assert res.parseoutcomes() == {"failed": 1, "deselected": 5}
 
 
 def test_nothing_is_rerun_against_a_bench_file(probe, monkeypatch):
     monkeypatch.setenv("HIL_BENCH", "my-bench.yaml")
     res = probe.runpytest("-p", "no:cacheprovider")
-    assert res.parseoutcomes() == {"failed": 4}
+    assert res.parseoutcomes() == {"failed": 6}

@@ -17,6 +17,8 @@ from hil.record.reader import Recording
 
 LAYOUT = Path(__file__).resolve().parents[2] / "fixtures" / "foxglove" / "hil-drive-layout.json"
 PANELS = {"Plot", "StateTransitions", "RawMessages", "RosOut", "Table"}
+# the recording is the built-in bench's, in virtual time: never rerun (tests/conftest.py)
+pytestmark = pytest.mark.virtual_time
 
 
 def _leaves(node):

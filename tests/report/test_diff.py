@@ -19,6 +19,8 @@ from hil.record.recorder import Recorder
 from hil.report.diff import diff
 
 ROOT = Path(__file__).resolve().parents[2]
+# the runs are on the built-in bench's clock (virtual): never rerun (tests/conftest.py)
+pytestmark = pytest.mark.virtual_time
 KNOBS = {  # name -> (bench edit, option the diff must name, set size in ms)
     "on": (lambda d: d["options"].update(dev_brake_on_delay_ms=30), "dev_brake_on_delay_ms", 30),
     "scan": (lambda d: d["params"].update({"P2.009": 12}), "P2.009", 12),

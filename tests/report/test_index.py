@@ -19,7 +19,8 @@ import yaml
 from hil.record.recorder import versions
 from hil.report.index import write_index
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration,  # `hil run` in virtual time (a copy of the built-in
+              pytest.mark.virtual_time]  # bench): never rerun (tests/conftest.py)
 
 CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome")
                  if shutil.which(n)), None)
