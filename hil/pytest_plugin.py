@@ -428,7 +428,7 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
     `hil.clock.sleep` / the drivers' waits, not `time.sleep`); the bench goes to its safe
     state afterwards, and the recording says why (the test's failure, or its end) and how
     the test ended (`hil.result`), as a plan's does."""
-    from hil.plan.runner import Interrupts, bench_clock, record_bench
+    from hil.plan.runner import Interrupts, bench_clock, record_bench, safe_tail
     from hil.plan.safety import go_safe
     from hil.plan.session import open_session
 
@@ -448,6 +448,7 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
             safe = None
             try:
                 safe = go_safe(session, reason, hil_recorder)
+                safe_tail(session)  # the drive's reaction on the record, as after a plan
             finally:
                 session.close()
                 # written when the recording closes, after the other fixtures' teardown

@@ -270,7 +270,7 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                             "safe anyway (one SDO transaction at a time)", name="hil.runner")
                 if session is not None:
                     _go_safe(session, reason, rec, res, events, plan)
-                    _tail(session)
+                    safe_tail(session)
                 elif reason != "end of plan":  # stopped or failed before the bench was up
                     rec.safety("safe_state_not_confirmed", reason, ok=False,
                                detail="the bench was not up yet: no safe state was driven")
@@ -307,7 +307,9 @@ SAFE_TAIL_NS = 200_000_000
 OWN_TIMEOUT_GRACE_NS = 1_000_000_000
 
 
-def _tail(session: Session) -> None:
+def safe_tail(session: Session) -> None:
+    """On a virtual clock, run the bench on for `SAFE_TAIL_NS` after the safe state (a plan's
+    end, a `hil_session` test's teardown), then take a last ground-truth sample."""
     if not clock.is_virtual():
         return
     with contextlib.suppress(Exception):

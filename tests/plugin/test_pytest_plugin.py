@@ -252,6 +252,7 @@ def test_a_pytest_recording_in_virtual_time_keeps_its_clock_to_the_end(
     """What the recorder stamps at close (open SDO and Modbus transactions) is on the run's
     clock: it had the wall clock's 2026 among 2000's bench times."""
     from hil.clock import VIRTUAL_EPOCH_NS
+    from hil.plan.runner import SAFE_TAIL_NS
 
     rec = _one_passing_test(pytester, tmp_path, OPEN_AT_CLOSE)
     assert rec.metadata()["hil.clock"]["clock"] == "virtual"
@@ -267,6 +268,12 @@ def test_a_pytest_recording_in_virtual_time_keeps_its_clock_to_the_end(
             if m["node"] == 5] == [(end, "timeout")]
     assert [lt for _t, lt, _pt, m in rec.messages("/modbus/rs485")
             if m.get("unanswered") and m["unit"] == 5] == [end]
+    # after the safe state the bench ran on SAFE_TAIL_NS, as after a plan (docs/clock.md):
+    # the recording ended at the instant the safe state was reached
+    [safe_t] = [lt for _t, lt, _pt, m in rec.messages("/safety")
+                if m["action"] == "safe_state_reached"]
+    assert end >= safe_t + SAFE_TAIL_NS
+    assert max(times["/drive/drive1/state"]) >= safe_t + SAFE_TAIL_NS
 
 
 LONG = '''
