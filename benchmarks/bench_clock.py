@@ -37,11 +37,16 @@ def _run(plans: list, bench, out: Path) -> tuple[float, list]:
 
 
 def _verdicts(result) -> dict[tuple[int, str], str]:
+    """Each step's status and each of its verdicts, keyed by spec, constraint and the
+    constraint's n-th verdict in the step: a verdict only one clock gave shows as None."""
     out = {}
     for s in result.steps:
         out[(s.index, "step")] = s.status
+        seen: dict[tuple, int] = {}
         for v in s.verdicts:
-            out[(s.index, str(v.get("name")))] = str(v.get("status"))
+            key = (v.get("spec"), v.get("constraint"))
+            n = seen[key] = seen.get(key, -1) + 1
+            out[(s.index, f"{key[0]} / {key[1]} #{n}")] = str(v.get("status"))
     return out
 
 

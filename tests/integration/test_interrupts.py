@@ -102,9 +102,11 @@ def test_second_ctrl_c_does_not_cut_the_safe_state_or_the_recording(tmp_path, ga
     assert any(a.startswith("controlword") for a in actions), actions
 
 
-def test_step_timeout_ends_the_step_at_its_timeout(tmp_path):
-    """`timeout: 1s` on a move that takes minutes: the step ends at 1 s, not 2 s."""
-    p, mcap = _start(tmp_path, TIMED_MOVE)
+@pytest.mark.parametrize("clock", ["real", "virtual"])
+def test_step_timeout_ends_the_step_at_its_timeout(tmp_path, clock):
+    """`timeout: 1s` on a move that takes minutes: the step ends at 1 s, not 2 s (a
+    real-time regression: the wall clock is where it happened; virtual time, 1 s exactly)."""
+    p, mcap = _start(tmp_path, TIMED_MOVE, "--clock", clock)
     out, _ = p.communicate(timeout=60)
     assert p.returncode == 1, out
     _, _, safety = _read(mcap)
@@ -115,6 +117,8 @@ def test_step_timeout_ends_the_step_at_its_timeout(tmp_path):
     move = [e for e in ends if e.get("event") == "end" and e.get("kind") == "move"]
     assert move and move[0]["status"] == "error", move
     assert 1.0e9 <= move[0]["duration_ns"] < 1.3e9, move[0]  # was 2.0 s
+    if clock == "virtual":
+        assert move[0]["duration_ns"] == 1_000_000_000, move[0]
 
 
 def _children(pid: int) -> list[tuple[int, str]]:
