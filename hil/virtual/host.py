@@ -4,7 +4,8 @@
 that advances the model clock to the monotonic clock and then calls each face's
 `tick(now_ns)`. It wakes at every grid point of the model (`period_s`, 1 ms by default: the
 model's motion grid, so a motion step's outputs leave at their model time) and, between two,
-at the model's next timer (a brake delay, a DI filter, a capture latch): an edge a timer
+at the model's next timer (a brake delay, a DI filter, a capture latch; not a timer armed
+`wake=False`, such as the ground truth's sample, which only observes): an edge a timer
 makes reaches the faces as late as the host's wake-up, not up to a period later
 (`timer_wakeups=False` is the plain ticker, kept as the benchmark's baseline:
 benchmarks/bench_edges.py). With `rt_priority` (or the environment variable
@@ -158,7 +159,7 @@ class DriveHost:
             sched = getattr(self.drive, "sched", None)
             if sched is not None:
                 with self.lock:
-                    due = sched.next_deadline()
+                    due = _next_wake(sched)
                     if due is not None and due < nxt:  # due already: the next tick fires it
                         nxt = due
                     self._planned = nxt
@@ -171,7 +172,7 @@ class DriveHost:
             return
         try:
             sched = getattr(self.drive, "sched", None)
-            due = sched.next_deadline() if sched is not None else None
+            due = _next_wake(sched) if sched is not None else None
             if due is not None and due < self._planned:
                 self._planned = due
                 self._wake.set()
@@ -218,6 +219,13 @@ class DriveHost:
                 deadline = time.monotonic_ns()
 
 
+def _next_wake(sched: Any) -> int | None:
+    """The model's next timer that needs the host awake (`Scheduler.next_wake`: not a ground-
+    truth sample, which fires at its own time whenever the model is advanced past it)."""
+    nxt = getattr(sched, "next_wake", None)
+    return nxt() if nxt is not None else sched.next_deadline()
+
+
 class _SyncedLock:
     """Context manager (and lock-like object) over `DriveHost.lock` that advances the model."""
 
@@ -248,16 +256,20 @@ class _SyncedLock:
 
 
 class ClockHost(DriveHost):
-    """`DriveHost` on a `VirtualClock` (docs/clock.md): no thread; a clock event every
-    `period_s` advances the model and runs the faces' ticks, and a face that takes the lock
-    brings the model up to the clock's now, as on the real-time host. Model time 0 is the
-    clock's time when the host is made."""
+    """`DriveHost` on a `VirtualClock` (docs/clock.md): no thread; a clock event advances the
+    model and runs the faces' ticks at every point of the host's period and, between two, at
+    the model's next timer (a brake delay, a DI filter, a capture latch), as the real-time
+    host wakes (`_next_wake`); a face that takes the lock brings the model up to the clock's
+    now, as on the real-time host. Model time 0 is the clock's time when the host is made."""
 
     def __init__(self, drive: Any, clock: Any, *, period_s: float = 0.001) -> None:
         self.clock = clock
         super().__init__(drive, period_s=period_s)
         self._base = clock.time_ns() - drive.now
         self._event: Any = None
+        self._t0 = 0  # model time of the first tick: the period's grid
+        self._ticking = False  # inside `_tick`: it plans the next wake-up itself
+        self._armed: int | None = None  # the model's `Scheduler.armed` when it planned
 
     def model_now(self) -> int:
         return self.clock.time_ns() - self._base
@@ -267,6 +279,7 @@ class ClockHost(DriveHost):
 
     def start(self) -> ClockHost:
         if self._event is None:
+            self._t0 = self.model_now()  # the period's grid starts here
             self._event = self.clock.after(0, self._tick)
         return self
 
@@ -275,6 +288,52 @@ class ClockHost(DriveHost):
             self._event.cancel()
             self._event = None
 
+    def _advance(self) -> None:
+        now = self.model_now()
+        drive = self.drive
+        if now > drive.now:
+            drive.advance_to(now)
+        elif self._ticking and self.timer_wakeups:  # woken at a timer armed for this instant
+            sched = getattr(drive, "sched", None)
+            due = _next_wake(sched) if sched is not None else None
+            if due is not None and due <= now:
+                drive.advance_to(now)
+
     def _tick(self) -> None:
-        self.tick_once()
-        self._event = self.clock.after(int(self.period_s * 1e9), self._tick)
+        self._ticking = True
+        try:
+            self.tick_once()
+        finally:
+            self._ticking = False
+        period = int(self.period_s * 1e9)
+        now = self.model_now()
+        nxt = self._t0 + ((now - self._t0) // period + 1) * period  # the next period point
+        if self.timer_wakeups:
+            try:
+                sched = getattr(self.drive, "sched", None)
+                due = _next_wake(sched) if sched is not None else None
+                if due is not None and due < nxt:  # due already: at once, at this instant
+                    nxt = due
+            except Exception as exc:  # a broken drive must not stop the clock
+                self._note_error("next wake-up", exc)
+        self._planned = nxt
+        self._armed = getattr(getattr(self.drive, "sched", None), "armed", None)
+        self._event = self.clock.at(self.wall_ns(nxt), self._tick)
+
+    def poke(self) -> None:
+        """Wake at the model's next timer if a face armed one before the planned wake-up."""
+        if not self.timer_wakeups or self._ticking or self._event is None:
+            return
+        try:
+            sched = getattr(self.drive, "sched", None)
+            armed = getattr(sched, "armed", None)
+            if armed is not None and armed == self._armed:
+                return  # no timer armed since the wake-up was planned
+            self._armed = armed
+            due = _next_wake(sched) if sched is not None else None
+            if due is not None and due < self._planned:
+                self._event.cancel()
+                self._planned = due
+                self._event = self.clock.at(self.wall_ns(due), self._tick)
+        except Exception as exc:  # never in place of the caller's own result or error
+            self._note_error("poke", exc)

@@ -202,13 +202,15 @@ class GroundTruth:
                     self._next = now + self.period_ns
                     self.sample()
                 return
-            self._timer = sched.at(max(now, self._next), self._on_timer)
+            self._timer = sched.at(max(now, self._next), self._on_timer, wake=False)
 
     def _on_timer(self) -> None:
         now = self.drive.now
         self._next = now + self.period_ns
         self.sample()
-        self._timer = self.drive.sched.at(self._next, self._on_timer)
+        # observes only: a host is not woken for it (the sample is taken at its own time
+        # whenever the model is advanced past it)
+        self._timer = self.drive.sched.at(self._next, self._on_timer, wake=False)
 
     def _on_event(self, ev: Any) -> None:
         t = getattr(ev, "t", self.drive.now)

@@ -116,3 +116,100 @@ def test_hil_rt_priority_is_read_and_checked(monkeypatch) -> None:
     assert DriveHost(_Clocked()).rt_priority == 7
     assert DriveHost(_Clocked(), rt_priority=3).rt_priority == 3
 
+
+
+# -- the virtual-time host (ClockHost): the same wake-ups as clock events ---------------------
+
+
+def test_next_wake_leaves_out_observing_timers_and_cancelled_ones() -> None:
+    """`Scheduler.next_wake` is the earliest live timer not armed `wake=False` (a ground-truth
+    sample): checked against a plain minimum over random heaps."""
+    import random
+
+    rng = random.Random(7)
+    for _ in range(2000):
+        sched = Scheduler()
+        timers = [sched.at(rng.randint(0, 50), lambda: None, wake=rng.random() < 0.6)
+                  for _ in range(rng.randint(0, 12))]
+        for t in timers:
+            if rng.random() < 0.3:
+                t.cancel()
+        want = min((t.deadline for t in timers if t.wake and not t.cancelled), default=None)
+        assert sched.next_wake() == want
+
+
+def _clock_host(period_ms: float = 1.0):
+    from hil.clock import VirtualClock
+    from hil.virtual.host import ClockHost
+
+    clk = VirtualClock(epoch_ns=0)
+    host = ClockHost(_Clocked(), clk, period_s=period_ms / 1000)
+    host.drive.advance_to = lambda t: _run_to(host.drive, t)  # type: ignore[attr-defined]
+    ticks: list[int] = []
+    host.add_tick(ticks.append)
+    return clk, host, ticks
+
+
+def _run_to(drive: _Clocked, t: int) -> None:
+    drive.sched.advance_to(t)
+    drive.now = drive.sched.now
+
+
+def test_the_virtual_host_wakes_at_a_model_timer_between_its_ticks() -> None:
+    """A brake delay, a DI filter: the faces saw its edge at the next 1 ms tick in virtual
+    time, while the real-time host wakes at the timer (an outside review)."""
+    clk, host, ticks = _clock_host()
+    fired: list[int] = []
+    host.drive.sched.at(2_300 * US, lambda: fired.append(host.drive.sched.now))
+    host.start()
+    clk.run_until(3_500 * US)
+    assert fired == [2_300 * US]
+    assert ticks == [0, MS, 2 * MS, 2_300 * US, 3 * MS]  # the grid keeps its phase
+
+
+def test_an_observing_timer_wakes_no_virtual_host() -> None:
+    """A ground-truth sample (`wake=False`) fires at its own time when the model is next
+    advanced, and costs no host tick of its own."""
+    clk, host, ticks = _clock_host()
+    fired: list[int] = []
+    host.drive.sched.at(1_400 * US, lambda: fired.append(host.drive.sched.now), wake=False)
+    host.start()
+    clk.run_until(2_500 * US)
+    assert fired == [1_400 * US]
+    assert ticks == [0, MS, 2 * MS]
+
+
+def test_a_timer_a_face_arms_replans_the_virtual_host() -> None:
+    """A face that arms a timer under the host's lock (a frame that starts a delay) wakes the
+    host at it; one armed for the very instant fires at once."""
+    clk, host, ticks = _clock_host()
+    host.start()
+    clk.run_until(1_100 * US)
+    fired: list[int] = []
+    with host.synced:
+        host.drive.sched.at(1_700 * US, lambda: fired.append(host.drive.sched.now))
+    clk.run_until(1_200 * US)
+    with host.synced:
+        host.drive.sched.at(1_200 * US, lambda: fired.append(host.drive.sched.now))
+    clk.run_until(2_100 * US)
+    assert fired == [1_200 * US, 1_700 * US]
+    assert ticks == [0, MS, 1_200 * US, 1_700 * US, 2 * MS]
+
+
+def test_a_brake_edge_reaches_the_virtual_bench_lines_at_its_model_time(tmp_path) -> None:
+    """servo_on_off_brake in virtual time: each BRKR edge is on the DI/DO line (the log time
+    of /dio/drive1/DO6) at the model's own time of the change, not at the next 1 ms tick."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, load_plan
+    from hil.plan.runner import run_plan
+    from hil.record.reader import Recording
+
+    res = run_plan(load_plan(find_plans(["servo_on_off_brake"])[0]), load_bench(None), tmp_path,
+                   reports=False)
+    assert res.passed
+    rec = Recording.open(res.recording)
+    edges = [(lt, pt) for _t, lt, pt, _m in rec.messages("/dio/drive1/DO6")]
+    assert len(edges) >= 3  # the level at start, BRKR on, BRKR off
+    off_grid = [pt for _lt, pt in edges if (pt - edges[0][1]) % MS]
+    assert off_grid  # edges between two host ticks: the case this is about
+    assert all(lt == pt for lt, pt in edges), edges  # was up to 1 ms later than the model
