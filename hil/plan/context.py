@@ -54,10 +54,15 @@ class Outcome:
 
 
 class StepThread:
-    """Runs one step in a thread the runner can give up on, and join later."""
+    """Runs one step in a thread the runner can give up on, and join later.
+
+    It waits on the step's own `done` event, never `Thread.join`: a Ctrl-C that lands inside
+    Python 3.11's `join` marks a thread that is still running as stopped (its tstate-lock
+    recovery, bpo-45274), so the safe state would have run beside a live step."""
 
     def __init__(self) -> None:
         self.thread: threading.Thread | None = None
+        self.done = threading.Event()  # set as the last step's thread ends
 
     def run(self, fn: Callable[[], Any], timeout_ns: int, cancel: threading.Event,
             watch: Callable[[], None] | None = None) -> Any:
@@ -68,6 +73,7 @@ class StepThread:
         box: dict[str, Any] = {}
         clk = clock.current()
         virtual = isinstance(clk, clock.VirtualClock)
+        done = self.done = threading.Event()
 
         def target() -> None:
             try:
@@ -82,6 +88,8 @@ class StepThread:
                     "timeouts.step or the step's timeout)")
             except BaseException as e:
                 box["error"] = e
+            finally:
+                done.set()
 
         t = self.thread = threading.Thread(target=target, name="hil-step", daemon=True)
         t0 = time.monotonic_ns()
@@ -92,12 +100,12 @@ class StepThread:
         end = t0 + wall_ns
         seen: Exception | None = None  # what `watch` raised
         try:
-            while t.is_alive() and seen is None:
+            while not done.is_set() and seen is None:
                 left = end - time.monotonic_ns()
                 if left <= 0:
                     break
-                t.join(min(left / 1e9, WATCH_S) if watch is not None else left / 1e9)
-                if watch is not None and t.is_alive():
+                done.wait(min(left / 1e9, WATCH_S) if watch is not None else left / 1e9)
+                if watch is not None and not done.is_set():
                     try:
                         watch()
                     except Exception as e:
@@ -108,11 +116,11 @@ class StepThread:
             raise
         if seen is not None:  # the bench is gone: the step is cancelled and left to `join`
             cancel.set()
-            t.join(0.05)
+            done.wait(0.05)
             raise seen
-        if t.is_alive():
+        if not done.is_set():
             cancel.set()
-            t.join(0.05)  # a step that honours `cancel` ends now; the others are joined later
+            done.wait(0.05)  # a step that honours `cancel` ends now; the others are joined later
             what = (f"wall-clock watchdog {wall_ns / 1e9:g} s (the step timeout "
                     f"{timeout_ns / 1e9:g} s of virtual time + {WATCHDOG_GRACE_NS // S} s, "
                     f"or x {WATCHDOG_FACTOR:g})"
@@ -126,12 +134,12 @@ class StepThread:
 
     def join(self, timeout_s: float = 5.0) -> bool:
         """Wait for the last step to end (bounded); True if no step thread is left running."""
-        t = self.thread
-        if t is not None:
-            end = time.monotonic() + timeout_s
-            while t.is_alive() and time.monotonic() < end:
-                t.join(0.05)  # short joins: a signal handler still runs in between
-        return t is None or not t.is_alive()
+        if self.thread is None:
+            return True
+        end = time.monotonic() + timeout_s
+        while not self.done.is_set() and time.monotonic() < end:
+            self.done.wait(0.05)  # short waits: a signal handler still runs in between
+        return self.done.is_set()
 
 
 class StepContext:

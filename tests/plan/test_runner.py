@@ -223,3 +223,30 @@ def test_a_plan_stopped_before_its_bench_was_up_says_no_safe_state_was_driven(tm
     safety = [m for *_x, m in rec.messages([topics.SAFETY])]
     assert [m["action"] for m in safety] == ["safe_state_not_confirmed"]
     assert "not up yet" in safety[0]["detail"]
+
+
+def test_ctrl_c_during_a_step_waits_for_the_step_to_end_before_the_safe_state():
+    """An outside probe: a SIGINT that lands inside Python 3.11's `Thread.join` marks the
+    still-running step thread as stopped, so `join` said the step had ended and the safe
+    state ran beside it. The step here ignores its cancel for 0.4 s after the interrupt."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from hil.plan.context import StepThread
+
+    cancel, ended = threading.Event(), threading.Event()
+
+    def step() -> None:
+        cancel.wait(10)
+        time.sleep(0.4)  # a step that takes a while to honour its cancel
+        ended.set()
+
+    steps = StepThread()
+    threading.Timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+    with pytest.raises(KeyboardInterrupt):
+        steps.run(step, 30_000_000_000, cancel, watch=lambda: None)
+    assert cancel.is_set()
+    assert ended.is_set()  # `run` joined the step before it let the interrupt through
+    assert steps.join(0.1)
