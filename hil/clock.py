@@ -241,17 +241,17 @@ class VirtualClock:
         `watched=False`: no cancel or deadline (frames already on the wire still arrive)."""
         if self.hung:
             raise ClockHung("the virtual clock is held by a step hung inside a clock event")
+        if not self.may_wait():  # first: the run's own events running now hang nothing
+            raise RuntimeError(
+                f"virtual clock: thread {threading.current_thread().name!r} is not the run's: "
+                "bench time moves only when the plan step or the hil_session test waits "
+                "(docs/clock.md, \"Other threads\")")
         if self._running:
             if self._runner != threading.get_ident():  # a step hung inside an event
                 raise ClockHung("the virtual clock is held by another thread stuck inside a "
                                 "clock event (a step hung there)")
             raise RuntimeError("virtual clock: a wait inside a clock event (it would reorder "
                                "time); events must only schedule")
-        if not self.may_wait():
-            raise RuntimeError(
-                f"virtual clock: thread {threading.current_thread().name!r} is not the run's: "
-                "bench time moves only when the plan step or the hil_session test waits "
-                "(docs/clock.md, \"Other threads\")")
         cancel, deadline = (self._watch.get(threading.get_ident(), (None, None)) if watched
                             else (None, None))
         with self._guard:

@@ -430,3 +430,34 @@ def test_another_threads_batch_never_holds_the_runs_settling() -> None:
         assert settled == [3 * MS]
         leave.set()
         th.join(5)
+
+
+def test_another_threads_wait_while_the_run_is_inside_an_event_is_not_the_runs() -> None:
+    """An outside probe: a test's own thread that waited while the run's thread was inside
+    one of its events got `ClockHung` ("stuck inside a clock event"), though nothing hung."""
+    c = VirtualClock(epoch_ns=0)
+    inside, proceed = threading.Event(), threading.Event()
+    seen: dict[str, BaseException] = {}
+
+    def event() -> None:
+        inside.set()
+        proceed.wait(5)
+
+    def other() -> None:
+        inside.wait(5)
+        try:
+            c.sleep(0.1)
+        except BaseException as exc:  # which one is the point
+            seen["error"] = exc
+        finally:
+            proceed.set()
+
+    th = threading.Thread(target=other)
+    with clock.use(c):
+        c.at(10 * MS, event)
+        th.start()
+        c.sleep(0.05)
+    th.join(5)
+    err = seen.get("error")
+    assert type(err) is RuntimeError and "not the run's" in str(err), repr(err)
+    assert c.time_ns() == 50 * MS
