@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import os
 import select
 import struct
@@ -586,14 +587,17 @@ class SimLine(SerialLine):
         return next((e for e in self._ends if e is not self and not e._closed), None)
 
     def _transmit(self, data: bytes, ends_ns: tuple[int, ...]) -> None:
-        start = ends_ns[0] - self.char_time_ns
+        # the far UART hands each character over at its own end: a chunk handed over whole
+        # at its last character let the far end's t3.5 pass inside a frame written in two
+        # back-to-back chunks (1 + 7 bytes at 38400 baud), which the drive then dropped
+        c = self.char_time_ns
+        for i, end in enumerate(ends_ns):
+            self.clock.at(end, functools.partial(self._hand_over, data[i:i + 1], end - c))
 
-        def arrive() -> None:
-            peer = self._peer()
-            if peer is not None:
-                peer._arrive(data, start, [e - start for e in ends_ns])
-
-        self.clock.at(ends_ns[-1], arrive)  # the far UART hands the chunk over at its end
+    def _hand_over(self, char: bytes, start: int) -> None:
+        peer = self._peer()
+        if peer is not None:
+            peer._arrive(char, start, [self.char_time_ns])
 
     def _arrive(self, data: bytes, start: int, rel: list[int]) -> None:
         self._received(data, start, rel_ends_ns=rel)

@@ -1,0 +1,79 @@
+"""The RS-485 line on the virtual clock as a stranger uses it (an outside probe, docs/clock.md):
+a request written in back-to-back chunks is one frame (no silence between its characters),
+and a Modbus master whose line is closed under it stops waiting."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from hil import clock
+from hil.clock import VirtualClock
+from hil.drivers.delta_modbus import DeltaModbus, ModbusError
+from hil.protocol import modbus as mb
+from hil.transport.serial_line import open_serial
+from hil.virtual.stack import DriveSpec, VirtualDriveStack
+
+pytestmark = pytest.mark.virtual_time
+
+
+@pytest.fixture
+def bench(tmp_path):
+    """A virtual drive (station 1) on a virtual-time line at `baud`; the harness's end."""
+    def make(baud: int):
+        stack = VirtualDriveStack(DriveSpec(rs485=f"pty:{tmp_path}/l{baud}?baud={baud}",
+                                            station=1, modbus_baud=baud)).start()
+        line = open_serial(f"serial:{tmp_path}/l{baud}?baud={baud}")
+        made.append((stack, line))
+        return line
+    made: list = []
+    clk = VirtualClock()
+    with clock.use(clk):
+        yield make
+        for stack, line in made:
+            line.close()
+            stack.stop()
+
+
+@pytest.mark.parametrize("baud", [4800, 9600, 19200, 38400])
+@pytest.mark.parametrize("cut", [1, 2, 4, 6])
+def test_a_request_written_in_two_back_to_back_chunks_is_one_frame(bench, baud, cut) -> None:
+    """Modbus RTU: a frame ends only at t3.5 of idle line (L15703). Written as `cut` bytes and
+    then the rest at once, the characters follow each other with no gap; the drive answers.
+    Each chunk used to reach the drive whole at its last character, so t3.5 passed inside the
+    frame when the second chunk took longer than t3.5 (1+7 bytes at 38400 baud: no reply)."""
+    line = bench(baud)
+    req = mb.encode_adu(1, mb.read_request(0x0154, 1), "rtu")
+    clock.sleep(0.05)
+    first = line.write(req[:cut])
+    second = line.write(req[cut:])
+    assert second.t_start_ns == first.t_end_ns  # back to back on the wire
+    reply = line.read_frame(timeout=0.3)
+    assert reply is not None and reply.data[:3] == b"\x01\x03\x02", reply
+
+
+@pytest.mark.parametrize("baud", [9600, 38400])
+def test_characters_a_gap_of_t35_apart_are_two_frames(bench, baud) -> None:
+    """The other side of the rule: the same request with t3.5 of silence inside it is two
+    frames, neither a valid request, and the drive answers nothing."""
+    line = bench(baud)
+    req = mb.encode_adu(1, mb.read_request(0x0154, 1), "rtu")
+    clock.sleep(0.05)
+    first = line.write(req[:4])
+    line.write(req[4:], not_before_ns=first.t_end_ns + round(line.t35_s * 1e9) + 1000)
+    assert line.read_frame(timeout=0.3) is None
+
+
+def test_a_master_whose_line_closes_under_it_stops_waiting(bench) -> None:
+    """The line closed 100 ms into a transaction with an absent station: the master read an
+    empty line at once and looped without waiting, so bench time never reached its deadline
+    (100 % CPU for ever, no step timeout either). It now says the line closed."""
+    line = bench(38400)
+    master = DeltaModbus(line, station=9, timeout_s=0.5)
+    clock.call_later(0.1, line.close)
+    t0, w0 = clock.monotonic(), time.monotonic()
+    with pytest.raises(ModbusError, match="closed"):
+        master.read_registers(0x0154, 1)
+    assert clock.monotonic() - t0 < 0.2
+    assert time.monotonic() - w0 < 5
