@@ -178,10 +178,17 @@ class DeltaModbus:
         if remaining <= 0:
             return b""
         if self._line_style:
-            return self.port.read(n, remaining)
-        if self.port.timeout is None or self.port.timeout > remaining:
-            self.port.timeout = remaining  # pyserial reconfigures the port: only shrink it
-        return self.port.read(n)
+            data = self.port.read(n, remaining)
+        else:
+            if self.port.timeout is None or self.port.timeout > remaining:
+                self.port.timeout = remaining  # pyserial reconfigures the port: only shrink it
+            data = self.port.read(n)
+        if not data and getattr(self.port, "closed", False) is True:
+            # a closed line reads nothing at once: waiting for the deadline would spin (and
+            # on a virtual clock never reach it, no time passing)
+            raise ModbusError(f"Modbus {self.port_name}: the line was closed while waiting "
+                              "for a reply")
+        return data
 
     def _read_exact(self, n: int, deadline: float, got: bytearray) -> bool:
         while len(got) < n:
