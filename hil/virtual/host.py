@@ -307,8 +307,10 @@ class ClockHost(DriveHost):
             self._ticking = False
         period = int(self.period_s * 1e9)
         now = self.model_now()
-        nxt = self._t0 + ((now - self._t0) // period + 1) * period  # the next period point
-        if self.timer_wakeups:
+        # the next point of the period's grid, which starts at the host's start (the ground
+        # truth's samples fall on it: a recording's state samples keep their log times)
+        nxt = self._t0 + ((now - self._t0) // period + 1) * period
+        if self.timer_wakeups:  # or the model's next timer first, as the real-time host
             try:
                 sched = getattr(self.drive, "sched", None)
                 due = _next_wake(sched) if sched is not None else None
