@@ -439,6 +439,12 @@ def call_later(seconds: float, fn: Callable[..., Any], *args: Any) -> Any:
     return timer
 
 
+def waits_on_clock() -> bool:
+    """Whether a wait in this thread runs the virtual clock (the run's thread, outside an
+    event); otherwise a wait here is in wall time (another thread, or the wall clock)."""
+    return _waits_here() is not None
+
+
 def _waits_here() -> VirtualClock | None:
     """The current clock if a wait in this thread runs it: virtual, this thread the run's
     (`may_wait`) and not inside an event. Else None: the library's own wall-time wait."""

@@ -223,7 +223,7 @@ class DeltaModbus:
             reset()
         self._pushback.clear()
         t0 = clock.monotonic()
-        self.port.write(adu)
+        sent = self.port.write(adu)
         flush = getattr(self.port, "flush", None)
         if flush is not None and not self._line_style:
             flush()
@@ -231,10 +231,15 @@ class DeltaModbus:
         if station == mb.BROADCAST:
             self._last_io = clock.monotonic()
             return None
-        deadline = t0 + self.timeout_s
+        # the reply timeout counts from the request's last character on the wire (a line
+        # returns its schedule; a pyserial port was flushed above): a long request at a low
+        # baud rate used its own wire time up (51 characters at 4800 baud: 106 ms)
+        end_ns = getattr(sent, "t_end_ns", None)
+        t_sent = max(t0, end_ns / 1e9) if isinstance(end_ns, int) else clock.monotonic()
+        deadline = t_sent + self.timeout_s
         raw = self._read_frame(deadline)
         suspect = t0 < self._late_until
-        last = t0 + 2 * self.timeout_s  # late replies may stretch the wait this far
+        last = t_sent + 2 * self.timeout_s  # late replies may stretch the wait this far
         while suspect and isinstance(raw, bytes) and self._more_follows(last, station):
             self._record(raw, "rx")  # a late reply to the failed request: not this answer
             deadline = min(last, max(deadline, clock.monotonic() + self.timeout_s))

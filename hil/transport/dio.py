@@ -26,6 +26,7 @@ import contextlib
 import re
 import struct
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Literal
 
@@ -77,7 +78,9 @@ class DioPort:
         self.tap = tap
         self._levels: dict[str, tuple[bool, int]] = {}  # line -> (level, t_ns of change)
         self._listeners: list[tuple[Callable[..., None], bool]] = []
-        self._cond = threading.Condition()
+        # the run's thread waits on the virtual clock with the lock released (another
+        # thread's `get` is not held up), any other thread in wall time (docs/clock.md)
+        self._cond = clock.ClockCondition()
         self._closed = False
 
     def owns(self, line: str) -> bool:
@@ -144,7 +147,10 @@ class DioPort:
 
         Raises TimeoutError naming the line, the expected and the last seen level."""
         is_input(line)
-        deadline = clock.monotonic() + timeout_s
+        # bench time in the run's thread on a virtual clock (the events deliver levels to it),
+        # wall time in any other thread and on the wall clock
+        now = clock.monotonic if clock.waits_on_clock() else time.monotonic
+        deadline = now() + timeout_s
         if line not in self._levels and not self.owns(line):
             self._ask_levels()
         with self._cond:
@@ -152,16 +158,13 @@ class DioPort:
                 entry = self._levels.get(line)
                 if entry is not None and entry[0] == bool(level):
                     return entry[1]
-                left = deadline - clock.monotonic()
+                left = deadline - now()
                 if left <= 0 or self._closed:
                     seen = "never seen" if entry is None else f"last seen {int(entry[0])}"
                     raise TimeoutError(f"DI/DO {self.name}: {line} did not become "
                                        f"{int(bool(level))} within {timeout_s:g} s ({seen})")
-                if clock.is_virtual():  # the events deliver levels to this thread
-                    clock.wait_for(lambda e=entry: self._levels.get(line) != e or self._closed,
-                                   left)
-                else:
-                    self._cond.wait(left)
+                self._cond.wait_for(lambda e=entry: self._levels.get(line) != e or self._closed,
+                                    left)
 
     def _changed(self, line: str, level: bool, t: int | None = None,
                  source_t: int | None = None, *, if_unknown: bool = False) -> None:

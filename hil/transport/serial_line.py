@@ -581,7 +581,13 @@ class SimLine(SerialLine):
     def _block(self, until: int | None, now: int) -> None:
         n0 = self._count
         end = until if until is not None else now + 3600 * S
-        self.clock.run_until(end, lambda: self._count != n0 or self._closed)
+        # the line's lock is released while the clock runs, as a condition's wait releases
+        # it: another thread's close (a watchdog's) or write is not held up for the whole wait
+        saved = self._cond._release_save()  # type: ignore[attr-defined]
+        try:
+            self.clock.run_until(end, lambda: self._count != n0 or self._closed)
+        finally:
+            self._cond._acquire_restore(saved)  # type: ignore[attr-defined]
 
     def _peer(self) -> SimLine | None:
         return next((e for e in self._ends if e is not self and not e._closed), None)

@@ -77,3 +77,43 @@ def test_a_master_whose_line_closes_under_it_stops_waiting(bench) -> None:
         master.read_registers(0x0154, 1)
     assert clock.monotonic() - t0 < 0.2
     assert time.monotonic() - w0 < 5
+
+
+def test_the_reply_timeout_counts_from_the_end_of_the_request(tmp_path) -> None:
+    """Modbus over serial line: the response timeout runs once the request is sent. A write
+    of 8 registers in ASCII at 4800 baud 7E1 is 51 characters, 106 ms on the wire; with a
+    100 ms timeout the master gave up before its own request had left."""
+    url = f"pty:{tmp_path}/a?baud=4800&parity=E&bytesize=7&stopbits=1"
+    with clock.use(VirtualClock()):
+        stack = VirtualDriveStack(DriveSpec(rs485=url, station=1, modbus_mode="ascii",
+                                            modbus_baud=4800)).start()
+        line = open_serial(url.replace("pty:", "serial:"))
+        try:
+            master = DeltaModbus(line, station=1, mode="ascii", timeout_s=0.1, baud=4800,
+                                 char_format=mb.CharFormat(7, "E", 1))
+            t0 = clock.monotonic()
+            try:
+                master.write_registers(0x0154, [0] * 8)  # P1.042.. (any reply will do)
+            except ModbusError as exc:
+                assert not isinstance(exc, TimeoutError), exc  # an exception reply answers
+            assert clock.monotonic() - t0 > 0.106  # the request alone took this long
+        finally:
+            line.close()
+            stack.stop()
+
+
+def test_another_thread_closes_the_line_during_a_long_read(bench) -> None:
+    """A watchdog thread that closes the line ends a pending read (as on the wall clock). The
+    read held the line's lock while the clock ran, so the close waited for the whole read:
+    60 s of bench time, or about 23 s of wall time for an hour's read (an outside probe)."""
+    import threading
+
+    line = bench(38400)
+    closer = threading.Timer(0.05, line.close)
+    t0, w0 = clock.monotonic(), time.monotonic()
+    closer.start()
+    assert line.read(1, timeout=3600.0) == b""
+    closer.join(5)
+    assert line.closed
+    assert time.monotonic() - w0 < 5
+    assert clock.monotonic() - t0 < 3000
