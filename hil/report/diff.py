@@ -46,6 +46,11 @@ class Side:
     plan: str = ""
     bench: str = ""
     starts: dict[int, int] = field(default_factory=dict)  # step index -> start (ns)
+    start_order: list[int] = field(default_factory=list)  # step indices as their starts came
+    # (signal, t) -> how many step starts the recording held when the edge was recorded: an
+    # edge at the very instant a step started belongs to it only if recorded after its start
+    # (in virtual time a `wait_until`'s level and the next step's start share an instant)
+    seen: dict[tuple[str, int], int] = field(default_factory=dict)
     labels: dict[int, str] = field(default_factory=dict)
     t0: int = 0
     edges: dict[str, list[tuple[int, Any]]] = field(default_factory=dict)  # signal -> (t, v)
@@ -109,6 +114,8 @@ def load_side(path: str | Path) -> Side:
         if topic == topics.PLAN_STEPS:
             idx = msg.get("index")
             if msg.get("event") == "start" and isinstance(idx, int):
+                if idx not in side.starts:
+                    side.start_order.append(idx)
                 side.starts.setdefault(idx, lt)
                 side.labels[idx] = str(msg.get("step", ""))
         elif topic == topics.TIMING_VERDICTS:
@@ -152,20 +159,24 @@ def _change(side: Side, last: dict, name: str, t: int, value: Any) -> None:
     """Record `value` of signal `name` at `t` when it changed (the first sample is no edge)."""
     if name in last and last[name] != value:
         side.edges.setdefault(name, []).append((t, value))
+        side.seen.setdefault((name, t), len(side.start_order))
     last[name] = value
 
 
-def _place(side: Side, t: int) -> tuple[int, int]:
+def _place(side: Side, t: int, name: str | None = None) -> tuple[int, int]:
     """(step index, offset ns) of instant `t`: the step running then (of steps that began at
-    the same instant, as zero-time steps do in virtual time, the last one)."""
-    k = max((i for i, s in side.starts.items() if s <= t), key=lambda i: (side.starts[i], i),
+    the same instant, as zero-time steps do in virtual time, the last one). For signal
+    `name`'s edge, of the steps whose start was recorded before the edge."""
+    n = side.seen.get((name, t)) if name is not None else None
+    steps = side.start_order[:n] if n is not None else side.starts
+    k = max((i for i in steps if side.starts[i] <= t), key=lambda i: (side.starts[i], i),
             default=min(side.starts, default=0))
     return k, t - side.starts.get(k, side.t0)
 
 
-def _map(a: Side, b: Side, t_b: int) -> int:
+def _map(a: Side, b: Side, t_b: int, name: str | None = None) -> int:
     """B's instant on A's timeline: the same offset into the same step."""
-    k, off = _place(b, t_b)
+    k, off = _place(b, t_b, name)
     return a.starts.get(k, a.t0 + (t_b - b.t0)) + off
 
 
@@ -312,13 +323,13 @@ def edge_diffs(a: Side, b: Side) -> list[dict]:
                 r: dict[str, Any] = {"value": val, "n": i + 1, "step": None, "a_ms": None,
                                      "b_ms": None, "delta_ms": None}
                 if i < len(ta):
-                    k, _ = _place(a, ta[i])
+                    k, _ = _place(a, ta[i], name)
                     r.update(step=k, a_ms=round((ta[i] - a.t0) / MS, 3))
                 if i < len(tb):
-                    mb = _map(a, b, tb[i])
+                    mb = _map(a, b, tb[i], name)
                     r["b_ms"] = round((mb - a.t0) / MS, 3)
                     if r["step"] is None:
-                        r["step"] = _place(b, tb[i])[0]
+                        r["step"] = _place(b, tb[i], name)[0]
                 if i < len(ta) and i < len(tb):
                     r["delta_ms"] = round((mb - ta[i]) / MS, 3)
                 rows.append(r)
