@@ -6,4 +6,12 @@ US = 1_000  # ns per microsecond
 MS = 1_000_000  # ns per millisecond
 S = 1_000_000_000  # ns per second
 
-__all__ = ["MS", "NS", "US", "S"]
+
+
+def fmt_ms(ns: int | float) -> str:
+    """`ns` as milliseconds for a label: as short as `:g` but never in e-notation (a
+    `wait: 3000s` step read "wait 3e+06ms")."""
+    return f"{ns / MS:.12g}"
+
+
+__all__ = ["MS", "NS", "US", "S", "fmt_ms"]

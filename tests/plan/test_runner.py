@@ -250,3 +250,12 @@ def test_ctrl_c_during_a_step_waits_for_the_step_to_end_before_the_safe_state():
     assert cancel.is_set()
     assert ended.is_set()  # `run` joined the step before it let the interrupt through
     assert steps.join(0.1)
+
+
+def test_long_durations_in_step_labels_are_not_in_e_notation():
+    """An outside probe: `wait: 3000s` was labelled "wait 3e+06ms"."""
+    from hil.plan.plan import loads_plan
+    from hil.plan.steps import describe
+
+    plan = loads_plan("name: p\nsteps:\n  - wait: 3000s\n  - wait: 2.5ms\n", "p.yaml")
+    assert [describe(s) for s in plan.steps] == ["wait 3000000ms", "wait 2.5ms"]

@@ -52,6 +52,7 @@ from hil.transport.faults import (
 )
 from hil.transport.sim import frame_bits
 from hil.transport.urls import can_bitrate
+from hil.units import fmt_ms
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
@@ -366,7 +367,7 @@ class Fault(StepKind):
         a = self.args
         if a.transport == "off":
             return "fault off"
-        dur = f" for {a.duration / 1e6:g}ms" if a.duration else ""
+        dur = f" for {fmt_ms(a.duration)}ms" if a.duration else ""
         return f"fault {a.transport} {a.kind}{dur}"
 
 
@@ -430,13 +431,13 @@ class Produce(StepKind):
                                   is_extended_id=False)
             tasks[k] = CyclicSender(net.bus, msg, period / 1e9, on_late=_late_logger(ctx, k))
             ctx.session.on_close(tasks[k].stop)
-            out.append(f"{k} every {period / 1e6:g}ms")
+            out.append(f"{k} every {fmt_ms(period)}ms")
         return Outcome(", ".join(out))
 
     def describe(self) -> str:
         a = self.args
         given = [(k, getattr(a, k)) for k in ("heartbeat", "sync", "guard")]
-        return "produce " + ", ".join(f"{k} {'off' if not x else f'{x / 1e6:g}ms'}"
+        return "produce " + ", ".join(f"{k} {'off' if not x else f'{fmt_ms(x)}ms'}"
                                       for k, x in given if x is not None)
 
 

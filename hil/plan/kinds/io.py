@@ -12,6 +12,7 @@ from hil.plan.context import Outcome
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.profile.dio import DI_SYMBOLS
+from hil.units import fmt_ms
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
@@ -38,7 +39,7 @@ def _on_off(levels: dict[str, bool]) -> str:
 
 
 def _ms(widths: dict[str, int]) -> str:
-    return ", ".join(f"{f} {w / 1e6:g}ms" for f, w in widths.items())
+    return ", ".join(f"{f} {fmt_ms(w)}ms" for f, w in widths.items())
 
 
 def _check_wired(cc: CheckContext, names: dict) -> None:

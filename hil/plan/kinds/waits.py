@@ -12,6 +12,7 @@ from hil.plan.context import Outcome, StepFailed
 from hil.plan.kinds import fields
 from hil.plan.kinds.base import CheckContext, StepKind
 from hil.plan.kinds.fields import Condition
+from hil.units import fmt_ms
 
 if TYPE_CHECKING:
     from hil.bench.bench import Bench
@@ -69,7 +70,7 @@ class Wait(StepKind):
         return Outcome()
 
     def describe(self) -> str:
-        return f"wait {self.args.duration / 1e6:g}ms"
+        return f"wait {fmt_ms(self.args.duration)}ms"
 
     def own_timeout_ns(self, step: Step, bench: Bench) -> int | None:
         return self.args.duration or None
