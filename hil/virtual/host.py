@@ -145,6 +145,12 @@ class DriveHost:
         if len(self.errors) > 100:
             del self.errors[:50]
 
+    def next_grid(self, t: int) -> int:
+        """The first point of the host's period grid at or after model time `t` (the ground
+        truth samples on it, where the host wakes anyway)."""
+        period = int(self.period_s * 1e9)
+        return -(-t // period) * period
+
     def _next_wake(self, period: int) -> int:
         """Model time of the next wake-up: the next point of the host's period and of the
         model's motion grid, or the model's next timer if that comes first; a timer already
@@ -273,6 +279,10 @@ class ClockHost(DriveHost):
 
     def model_now(self) -> int:
         return self.clock.time_ns() - self._base
+
+    def next_grid(self, t: int) -> int:
+        period = int(self.period_s * 1e9)
+        return self._t0 + -(-(t - self._t0) // period) * period
 
     def wall_ns(self, t_model: int) -> int:
         return self._base + t_model

@@ -202,7 +202,14 @@ class GroundTruth:
                     self._next = now + self.period_ns
                     self.sample()
                 return
-            self._timer = sched.at(max(now, self._next), self._on_timer, wake=False)
+            first = max(now, self._next)
+            grid = getattr(self.host, "next_grid", None)
+            if grid is not None:  # on the host's grid: a sample's log time is its model time
+                first = grid(first)
+            if first <= self.drive.now:  # due at this tick: an observing timer armed now
+                self._on_timer()  # would fire only at the next one
+            else:
+                self._timer = sched.at(first, self._on_timer, wake=False)
 
     def _on_timer(self) -> None:
         now = self.drive.now

@@ -213,3 +213,39 @@ def test_a_brake_edge_reaches_the_virtual_bench_lines_at_its_model_time(tmp_path
     off_grid = [pt for _lt, pt in edges if (pt - edges[0][1]) % MS]
     assert off_grid  # edges between two host ticks: the case this is about
     assert all(lt == pt for lt, pt in edges), edges  # was up to 1 ms later than the model
+
+
+def test_the_ground_truth_samples_on_the_hosts_grid_even_when_it_starts_between_ticks() -> None:
+    """A ground truth that starts at a tick the host made for a timer (between two grid
+    points) still samples on the grid: its observing timer wakes no host, so a sample off
+    the grid would be taken, and logged, only at the next tick."""
+    from hil.clock import VirtualClock
+    from hil.virtual.host import ClockHost
+    from hil.virtual.world import GroundTruth
+
+    class Rec:
+        def __init__(self) -> None:
+            self.samples: list[tuple[int, int]] = []  # (model t, clock time when recorded)
+
+        def drive_state(self, _name, state, source_t=None) -> None:
+            if state.get("periodic"):
+                self.samples.append((state["t"], clk.time_ns()))
+
+        def drive_params(self, *a, **k) -> None: ...
+
+        def drive_event(self, *a, **k) -> None: ...
+
+    clk = VirtualClock(epoch_ns=0)
+    drive = Drive()
+    host = ClockHost(drive, clk)
+    host.start()
+    drive.sched.at(1_300 * US, lambda: None)  # a timer: the host ticks at 1.3 ms for it
+    with host.lock:
+        host.poke()
+    clk.run_until(1_300 * US)
+    rec = Rec()
+    truth = GroundTruth("d", drive, host, rec, period_ms=1)  # its first tick: 1.3 ms
+    clk.run_until(4_500 * US)
+    truth.close()
+    assert [t for t, _ in rec.samples] == [2 * MS, 3 * MS, 4 * MS]
+    assert all(t == logged for t, logged in rec.samples), rec.samples  # at its model time
