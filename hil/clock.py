@@ -439,6 +439,15 @@ def call_later(seconds: float, fn: Callable[..., Any], *args: Any) -> Any:
     return timer
 
 
+def refuse_in_event(what: str) -> None:
+    """Raise where a wait would run inside one of the run's clock events (no level or frame
+    can change while it waits, and it would hold the clock): as `VirtualClock.run_until`."""
+    clk = _current
+    if isinstance(clk, VirtualClock) and clk.in_event:
+        raise RuntimeError(f"virtual clock: {what} inside a clock event (it would reorder "
+                           "time); events must only schedule")
+
+
 def waits_on_clock() -> bool:
     """Whether a wait in this thread runs the virtual clock (the run's thread, outside an
     event); otherwise a wait here is in wall time (another thread, or the wall clock)."""

@@ -28,9 +28,6 @@ class Timer:
     seq: int
     callback: Callable[[], None] = field(compare=False)
     cancelled: bool = field(default=False, compare=False)
-    # False: the timer only observes (a ground-truth sample): it fires at its deadline
-    # whenever the model is advanced past it, but never wakes a host for itself
-    wake: bool = field(default=True, compare=False)
 
     def cancel(self) -> None:
         self.cancelled = True
@@ -45,10 +42,9 @@ class Scheduler:
         self._seq = itertools.count()
         self.armed = 0  # timers scheduled so far (a host re-plans its wake-up only when it grew)
 
-    def at(self, deadline: int, callback: Callable[[], None], *, wake: bool = True) -> Timer:
-        """Run `callback` when time reaches `deadline` (ns, absolute). `wake=False`: a timer
-        that observes only, which `next_wake` leaves out."""
-        timer = Timer(max(deadline, self.now), next(self._seq), callback, wake=wake)
+    def at(self, deadline: int, callback: Callable[[], None]) -> Timer:
+        """Run `callback` when time reaches `deadline` (ns, absolute)."""
+        timer = Timer(max(deadline, self.now), next(self._seq), callback)
         self.armed += 1
         heapq.heappush(self._heap, timer)
         return timer
@@ -63,21 +59,6 @@ class Scheduler:
         while heap and heap[0].cancelled:
             heapq.heappop(heap)
         return heap[0].deadline if heap else None
-
-    def next_wake(self) -> int | None:
-        """Deadline of the earliest live timer that may change what the drive shows (not a
-        `wake=False` one): when a host must advance the model next. None if none."""
-        heap = self._heap
-        while heap and heap[0].cancelled:
-            heapq.heappop(heap)
-        if not heap:
-            return None
-        if heap[0].wake:
-            return heap[0].deadline
-        kids = heap[1:3]  # the root's children hold the earliest of the rest, when live wakers
-        if kids and all(t.wake and not t.cancelled for t in kids):
-            return min(t.deadline for t in kids)
-        return min((t.deadline for t in heap if t.wake and not t.cancelled), default=None)
 
     def run_due(self) -> int:
         """Fire every live timer whose deadline is <= now; return how many fired."""

@@ -147,6 +147,7 @@ class DioPort:
 
         Raises TimeoutError naming the line, the expected and the last seen level."""
         is_input(line)
+        clock.refuse_in_event("DioPort.wait_for")
         # bench time in the run's thread on a virtual clock (the events deliver levels to it),
         # wall time in any other thread and on the wall clock
         now = clock.monotonic if clock.waits_on_clock() else time.monotonic

@@ -4,8 +4,7 @@
 that advances the model clock to the monotonic clock and then calls each face's
 `tick(now_ns)`. It wakes at every grid point of the model (`period_s`, 1 ms by default: the
 model's motion grid, so a motion step's outputs leave at their model time) and, between two,
-at the model's next timer (a brake delay, a DI filter, a capture latch; not a timer armed
-`wake=False`, such as the ground truth's sample, which only observes): an edge a timer
+at the model's next timer (a brake delay, a DI filter, a capture latch): an edge a timer
 makes reaches the faces as late as the host's wake-up, not up to a period later
 (`timer_wakeups=False` is the plain ticker, kept as the benchmark's baseline:
 benchmarks/bench_edges.py). With `rt_priority` (or the environment variable
@@ -165,7 +164,7 @@ class DriveHost:
             sched = getattr(self.drive, "sched", None)
             if sched is not None:
                 with self.lock:
-                    due = _next_wake(sched)
+                    due = sched.next_deadline()
                     if due is not None and due < nxt:  # due already: the next tick fires it
                         nxt = due
                     self._planned = nxt
@@ -178,7 +177,7 @@ class DriveHost:
             return
         try:
             sched = getattr(self.drive, "sched", None)
-            due = _next_wake(sched) if sched is not None else None
+            due = sched.next_deadline() if sched is not None else None
             if due is not None and due < self._planned:
                 self._planned = due
                 self._wake.set()
@@ -225,13 +224,6 @@ class DriveHost:
                 deadline = time.monotonic_ns()
 
 
-def _next_wake(sched: Any) -> int | None:
-    """The model's next timer that needs the host awake (`Scheduler.next_wake`: not a ground-
-    truth sample, which fires at its own time whenever the model is advanced past it)."""
-    nxt = getattr(sched, "next_wake", None)
-    return nxt() if nxt is not None else sched.next_deadline()
-
-
 class _SyncedLock:
     """Context manager (and lock-like object) over `DriveHost.lock` that advances the model."""
 
@@ -263,10 +255,11 @@ class _SyncedLock:
 
 class ClockHost(DriveHost):
     """`DriveHost` on a `VirtualClock` (docs/clock.md): no thread; a clock event advances the
-    model and runs the faces' ticks at every point of the host's period and, between two, at
-    the model's next timer (a brake delay, a DI filter, a capture latch), as the real-time
-    host wakes (`_next_wake`); a face that takes the lock brings the model up to the clock's
-    now, as on the real-time host. Model time 0 is the clock's time when the host is made."""
+    model and runs the faces' ticks at every point of the host's period (a grid from the
+    host's start) and, between two, at the model's next timer (a brake delay, a DI filter, a
+    capture latch), as the real-time host wakes for one; a face that takes the lock brings
+    the model up to the clock's now, as on the real-time host. Model time 0 is the clock's
+    time when the host is made."""
 
     def __init__(self, drive: Any, clock: Any, *, period_s: float = 0.001) -> None:
         self.clock = clock
@@ -276,6 +269,7 @@ class ClockHost(DriveHost):
         self._t0 = 0  # model time of the first tick: the period's grid
         self._ticking = False  # inside `_tick`: it plans the next wake-up itself
         self._armed: int | None = None  # the model's `Scheduler.armed` when it planned
+        self._at_once = -1  # model time of the last tick planned "at once" for a due timer
 
     def model_now(self) -> int:
         return self.clock.time_ns() - self._base
@@ -294,9 +288,10 @@ class ClockHost(DriveHost):
         return self
 
     def stop(self) -> None:
-        if self._event is not None:
-            self._event.cancel()
-            self._event = None
+        with self.lock:
+            if self._event is not None:
+                self._event.cancel()
+                self._event = None
 
     def _advance(self) -> None:
         now = self.model_now()
@@ -305,36 +300,48 @@ class ClockHost(DriveHost):
             drive.advance_to(now)
         elif self._ticking and self.timer_wakeups:  # woken at a timer armed for this instant
             sched = getattr(drive, "sched", None)
-            due = _next_wake(sched) if sched is not None else None
+            due = sched.next_deadline() if sched is not None else None
             if due is not None and due <= now:
                 drive.advance_to(now)
 
     def _tick(self) -> None:
-        self._ticking = True
-        try:
-            self.tick_once()
-        finally:
-            self._ticking = False
+        with self.lock:  # planned under the lock, as `poke` re-plans under it
+            self._ticking = True
+            try:
+                self.tick_once()
+            finally:
+                self._ticking = False
+            self._plan()
+
+    def _plan(self) -> None:
+        """The next wake-up: the next point of the period's grid (which starts at the host's
+        start; the ground truth samples on it), or the model's next timer if that comes first.
+        A timer already due means at once, but only once per instant: a model that cannot
+        advance (it failed) must not hold time at this instant for ever."""
         period = int(self.period_s * 1e9)
         now = self.model_now()
-        # the next point of the period's grid, which starts at the host's start (the ground
-        # truth's samples fall on it: a recording's state samples keep their log times)
         nxt = self._t0 + ((now - self._t0) // period + 1) * period
-        if self.timer_wakeups:  # or the model's next timer first, as the real-time host
+        sched = getattr(self.drive, "sched", None)
+        if self.timer_wakeups and sched is not None:
             try:
-                sched = getattr(self.drive, "sched", None)
-                due = _next_wake(sched) if sched is not None else None
-                if due is not None and due < nxt:  # due already: at once, at this instant
-                    nxt = due
+                due = sched.next_deadline()
+                if due is not None and due < nxt and (due > now or self._at_once != now):
+                    nxt = max(due, now)
+                    if due <= now:
+                        self._at_once = now
             except Exception as exc:  # a broken drive must not stop the clock
                 self._note_error("next wake-up", exc)
         self._planned = nxt
-        self._armed = getattr(getattr(self.drive, "sched", None), "armed", None)
+        self._armed = getattr(sched, "armed", None)
         self._event = self.clock.at(self.wall_ns(nxt), self._tick)
 
     def poke(self) -> None:
-        """Wake at the model's next timer if a face armed one before the planned wake-up."""
+        """Wake at the model's next timer if a face armed one before the planned wake-up. A
+        face in another thread (a test's own DI/DO set) hands the re-plan to the run's."""
         if not self.timer_wakeups or self._ticking or self._event is None:
+            return
+        if not self.clock.may_wait():
+            self.clock.at(self.clock.time_ns(), self.poke)  # the run's thread, next pass
             return
         try:
             sched = getattr(self.drive, "sched", None)
@@ -342,7 +349,7 @@ class ClockHost(DriveHost):
             if armed is not None and armed == self._armed:
                 return  # no timer armed since the wake-up was planned
             self._armed = armed
-            due = _next_wake(sched) if sched is not None else None
+            due = sched.next_deadline() if sched is not None else None
             if due is not None and due < self._planned:
                 self._event.cancel()
                 self._planned = due

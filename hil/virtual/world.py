@@ -206,18 +206,16 @@ class GroundTruth:
             grid = getattr(self.host, "next_grid", None)
             if grid is not None:  # on the host's grid: a sample's log time is its model time
                 first = grid(first)
-            if first <= self.drive.now:  # due at this tick: an observing timer armed now
-                self._on_timer()  # would fire only at the next one
+            if first <= self.drive.now:  # due at this tick: now, not a timer a tick late
+                self._on_timer()
             else:
-                self._timer = sched.at(first, self._on_timer, wake=False)
+                self._timer = sched.at(first, self._on_timer)
 
     def _on_timer(self) -> None:
         now = self.drive.now
         self._next = now + self.period_ns
         self.sample()
-        # observes only: a host is not woken for it (the sample is taken at its own time
-        # whenever the model is advanced past it)
-        self._timer = self.drive.sched.at(self._next, self._on_timer, wake=False)
+        self._timer = self.drive.sched.at(self._next, self._on_timer)
 
     def _on_event(self, ev: Any) -> None:
         t = getattr(ev, "t", self.drive.now)

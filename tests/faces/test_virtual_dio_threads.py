@@ -86,3 +86,22 @@ def test_another_threads_wait_for_is_in_wall_time_and_sees_the_runs_level(lines)
     assert "error" not in got, got
     assert isinstance(got["t"], int)
     assert 0.2 <= got["timeout_wall"] < 2, got
+
+
+def test_a_wait_inside_a_clock_event_is_refused(lines) -> None:
+    """Inside one of the run's events no level can change while it waits: it held the clock
+    for its whole timeout in wall time, then said the level never came (an outside review).
+    It is refused at once, as any wait inside an event."""
+    clk, harness, _drive = lines
+    seen: dict[str, BaseException] = {}
+
+    def event() -> None:
+        try:
+            harness.wait_for("DO1", True, 0.3)
+        except BaseException as exc:  # which one is the point
+            seen["error"] = exc
+
+    clk.after(1000, event)
+    clk.sleep(0.001)
+    assert type(seen.get("error")) is RuntimeError and "inside a clock event" in str(
+        seen["error"]), seen
