@@ -144,12 +144,6 @@ class DriveHost:
         if len(self.errors) > 100:
             del self.errors[:50]
 
-    def next_grid(self, t: int) -> int:
-        """The first point of the host's period grid at or after model time `t` (the ground
-        truth samples on it, where the host wakes anyway)."""
-        period = int(self.period_s * 1e9)
-        return -(-t // period) * period
-
     def _next_wake(self, period: int) -> int:
         """Model time of the next wake-up: the next point of the host's period and of the
         model's motion grid, or the model's next timer if that comes first; a timer already
@@ -275,6 +269,11 @@ class ClockHost(DriveHost):
         return self.clock.time_ns() - self._base
 
     def next_grid(self, t: int) -> int:
+        """The first point of the host's period grid (from its start) at or after model time
+        `t`: the ground truth samples on it, where the host wakes anyway. (The real-time host
+        has none: its samples keep the phase of its first tick, off the model's motion grid,
+        as before; on the motion grid a spec's sample after the step can miss an error that
+        passed P2.035 and raised AL009 in the same step: plc_al009.)"""
         period = int(self.period_s * 1e9)
         return self._t0 + -(-(t - self._t0) // period) * period
 
