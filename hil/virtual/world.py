@@ -203,10 +203,12 @@ class GroundTruth:
                     self.sample()
                 return
             first = max(now, self._next)
-            grid = getattr(self.host, "next_grid", None)
-            if grid is not None:  # on the host's grid: a sample's log time is its model time
-                first = grid(first)
-            if first <= self.drive.now:  # due at this tick: now, not a timer a tick late
+            grid = getattr(self.host, "next_grid", None)  # the virtual host's (ClockHost)
+            if grid is None:  # the real-time host: as before, at once through its wake-up
+                self._timer = sched.at(first, self._on_timer)
+                return
+            first = grid(first)  # on the host's grid: a sample's log time is its model time
+            if first <= self.drive.now:  # due at this tick: now, not a tick late
                 self._on_timer()
             else:
                 self._timer = sched.at(first, self._on_timer)
