@@ -4,10 +4,11 @@ the same run: wall time of each, the ratio, and every verdict that differs (docs
     .venv/bin/python benchmarks/bench_clock.py [PLAN ...] [--repeat-virtual]
 
 The axis-group plans (plans/group) are not run: on the wall clock a Python host misses
-their SYNC cycles (docs/clock.md). Prints; asserts nothing. The virtual pass runs the plans one at a time, like the real one; a
-last line also times the virtual pass as `hil run` runs it by default (one plan per usable CPU,
-docs/plans.md) against the same real pass. `--repeat-virtual` also runs the virtual pass twice
-and counts the recordings whose messages differ (topics, log times, payloads): determinism.
+their SYNC cycles (docs/clock.md). Prints; asserts nothing. The virtual pass runs the plans
+one at a time, like the real one; a last line also times the virtual pass as `hil run` runs
+it by default (one plan per usable CPU, docs/plans.md) against the same real pass.
+`--repeat-virtual` also runs the virtual pass twice and counts the recordings whose messages
+differ (topics, log times, payloads): determinism.
 """
 
 from __future__ import annotations
