@@ -451,10 +451,17 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
                 safe_tail(session)  # the drive's reaction on the record, as after a plan
             finally:
                 session.close()
+                unsafe = "; ".join(f"{a['drive']}: {a['action']}: {a['detail']}"
+                                   for a in safe.actions if not a["ok"]) if safe else ""
+                if unsafe and status == "pass":  # a test passes only if it leaves the bench
+                    status, reason = "error", f"safe state not confirmed: {unsafe}"  # safe
                 # written when the recording closes, after the other fixtures' teardown
                 request.node.stash[_RESULT] = {
                     "status": status, "reason": reason,
                     "safe_state_ok": safe.ok if safe is not None else ""}
+            if unsafe and not signals.cause:
+                pytest.fail(f"hil: the bench's safe state was not confirmed after the test: "
+                            f"{unsafe}", pytrace=False)
 
 
 @pytest.fixture

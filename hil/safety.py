@@ -51,6 +51,10 @@ class SafeDrive(Protocol):
 
     def write_controlword(self, cw: int) -> str | bool | None: ...
 
+    # optional: read the statusword back until bit 2 "operation enabled" (L18321-18331) is
+    # clear, i.e. the power stage is off (SWITCH ON DISABLED, or FAULT), within `timeout_ns`
+    # def power_stage_off(self, timeout_ns: int) -> str | bool: ...
+
     def di_wired(self, function: str) -> bool: ...
 
     def set_di(self, function: str, active: bool) -> Any: ...
@@ -113,6 +117,10 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
         if cw is not None and d.has_controlword():
             act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",
                 lambda d=d, cw=cw: d.write_controlword(cw))
+            confirm = getattr(d, "power_stage_off", None)
+            if confirm is not None and rep.actions[-1]["ok"]:  # the state it left, read back
+                act(d.name, "statusword: power stage off",
+                    lambda c=confirm: c(safe.timeout_ns), timeout_ms=safe.timeout_ns / 1e6)
         for func, active in safe.di.items():
             if d.di_wired(func):
                 act(d.name, f"DI {func} {'on' if active else 'off'}",

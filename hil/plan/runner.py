@@ -441,9 +441,12 @@ def _go_safe(session: Session, reason: str, rec: Any, res: PlanResult, events: N
             d._cia.cancel = None  # the plan's cancel must not cut the safe state's own waits
     res.safe = go_safe(session, reason, rec)
     if not res.safe.ok:
-        events.emit(Note(plan, "SAFE STATE NOT CONFIRMED: " + "; ".join(
-            f"{a['drive']}: {a['action']}: {a['detail']}"
-            for a in res.safe.actions if not a["ok"])))
+        failed = "; ".join(f"{a['drive']}: {a['action']}: {a['detail']}"
+                           for a in res.safe.actions if not a["ok"])
+        events.emit(Note(plan, "SAFE STATE NOT CONFIRMED: " + failed))
+        if res.status == PASS:  # a plan passes only if it leaves the bench safe
+            res.status, res.error = ERROR, f"safe state not confirmed: {failed}"
+            rec.log("error", f"plan {plan.name}: {res.error}", name="hil.runner")
     elif reason != "end of plan":
         events.emit(Note(plan, f"bench driven to its safe state ({reason})"))
 

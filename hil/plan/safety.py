@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from hil import clock
+from hil.drivers.cia402 import decode_state
 from hil.protocol.cia402 import CONTROLWORD
 from hil.safety import DriveGone, SafeReport, run_safe_state
 
@@ -30,6 +31,19 @@ class _SessionDrive:
 
     def write_controlword(self, cw: int) -> Any:
         return self.d.cia.write(0x6040, 0, cw)
+
+    def power_stage_off(self, timeout_ns: int) -> str:
+        """6041h read back until bit 2 "operation enabled" is clear (L18321-18331): the
+        state the controlword left is on the record (a timing spec judges it there)."""
+        end = clock.monotonic_ns() + timeout_ns
+        while True:
+            sw = self.d.cia.statusword
+            if not sw & 0x0004:
+                return f"statusword 0x{sw:04X}: {decode_state(sw)}"
+            if clock.monotonic_ns() >= end:
+                raise TimeoutError(f"statusword 0x{sw:04X} ({decode_state(sw)}) after "
+                                   f"{timeout_ns / 1e6:g} ms: the power stage is still on")
+            clock.sleep(0.002)
 
     def di_wired(self, function: str) -> bool:
         return function in self.d.spec.di

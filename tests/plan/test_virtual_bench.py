@@ -78,3 +78,40 @@ def test_a_failed_timing_check_is_an_error_on_the_log_with_its_line(tmp_path):
               if m["level"] >= 4]
     assert any("check_timing servo_on_brake" in m["message"] and m["line"] == 19
                and m["file"].endswith("brake.yaml") for m in errors), errors
+
+
+def test_the_safe_state_reads_the_statusword_back_and_a_check_judges_it(tmp_path):
+    """The safe state wrote disable voltage (6040h = 0) and read nothing back, so on the
+    recording of a run that enabled the drive `cia402_transitions` judged "never reached
+    SWITCH ON DISABLED": the last 6041h on the wire said OPERATION ENABLED (an outside
+    probe). It now reads 6041h until the power stage is off and says what it read."""
+    from hil.paths import fixture
+    from hil.timing.checker import check
+    from hil.timing.source import RecordingSource
+    from hil.timing.spec import load_spec
+
+    plan = loads_plan("name: enabled\nsteps:\n  - state: OPERATION ENABLED\n  - wait: 50ms\n",
+                      str(tmp_path / "enabled.yaml"))
+    [r] = run_plans([plan], load_bench(), tmp_path, stream=io.StringIO())
+    assert r.passed
+    rec = Recording.open(r.recording)
+    safety = [m for _, _, _, m in rec.messages(T.SAFETY)]
+    [read] = [m for m in safety if m["action"] == "statusword: power stage off"]
+    assert read["ok"] and read["detail"].endswith("SWITCH ON DISABLED"), read
+    spec = load_spec(fixture("timing", "cia402_transitions.yaml"))
+    verdicts = check(spec, RecordingSource(r.recording), binding={"bus": "can0"})
+    disable = [v for v in verdicts if v.constraint.startswith("transitions 7/9/10/12")]
+    assert [v.status for v in disable] == ["pass"], [(v.status, v.message) for v in disable]
+
+
+def test_a_plan_that_leaves_the_bench_unsafe_does_not_pass(tmp_path):
+    """Every step passed, but the safe state could not be confirmed (DO6 no longer carries
+    BRKR: the brake wait times out): the plan said PASS and `hil run` exited 0 (an outside
+    probe). A plan passes only if it leaves the bench in its safe state."""
+    plan = loads_plan("name: remap\nsteps:\n  - write: {P2.041: 0x0101}\n  - di: {SON: on}\n"
+                      "  - wait: 200ms\n", str(tmp_path / "remap.yaml"))
+    [r] = run_plans([plan], load_bench(), tmp_path, stream=io.StringIO())
+    assert all(s.status == "pass" for s in r.steps)
+    assert r.status == "error" and "safe state not confirmed" in r.error, r.error
+    meta = Recording.open(r.recording).metadata()["hil.result"]
+    assert meta["status"] == "error" and meta["safe_state_ok"] == "false", meta

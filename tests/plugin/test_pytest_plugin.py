@@ -532,3 +532,33 @@ def test_a_fixture_teardown_error_is_the_recordings_result(pytester: pytest.Pyte
     verdicts = [m for *_t, m in twice.messages(["/timing/verdicts"])]
     keys = [(v["spec"], v["constraint"], v["occurrence"], v["t_ns"]) for v in verdicts]
     assert verdicts and len(keys) == len(set(keys)), keys
+
+
+UNSAFE = '''
+import pytest
+from hil import clock
+
+@pytest.mark.hil
+def test_do6_remapped(hil_drive):
+    hil_drive.write_param("P2.041", 0x0101)  # DO6 now SRDY: BRKR is on no line
+    hil_drive.set_function("SON", True)
+    clock.sleep(0.2)
+'''
+
+
+def test_a_test_that_leaves_the_bench_unsafe_errors_at_teardown(pytester: pytest.Pytester,
+                                                                tmp_path) -> None:
+    """The test passed, the safe state could not be confirmed (the brake wait timed out):
+    pytest said "1 passed" and exited 0 (an outside probe). The teardown now errors, and the
+    recording's `hil.result` says error."""
+    from hil.record.reader import Recording
+
+    pytester.makepyfile(test_one=UNSAFE)
+    out = tmp_path / "out"
+    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
+                                           f"--hil-out={out}")
+    result.assert_outcomes(passed=1, errors=1)
+    result.stdout.fnmatch_lines(["*safe state was not confirmed*BRKR*"])
+    (path,) = out.glob("*.mcap")
+    meta = Recording.open(path).metadata()["hil.result"]
+    assert meta["status"] == "error" and meta["safe_state_ok"] == "false", meta
