@@ -209,24 +209,22 @@ def test_a_delivered_frame_is_what_python_can_makes_of_the_sent_one() -> None:
             bus.shutdown()
 
 
+def _tapped(tap) -> list[tuple[int, str]]:
+    """(identifier, direction) of each frame the recording tap (conftest's) was given."""
+    return [(frame.arbitration_id, direction) for _bus, frame, direction, _t, _s
+            in tap.can_frames]
+
+
 @pytest.mark.parametrize("tapped", [False, True])
-def test_a_filtered_recv_waits_its_timeout_in_bench_time(tapped) -> None:
+def test_a_filtered_recv_waits_its_timeout_in_bench_time(tapped, tap) -> None:
     """python-can's `BusABC.recv` counts its timeout in wall seconds: on the virtual clock a
     filtered `recv(0.5)` that saw no match ran on for hours of bench time."""
     from hil.transport.can_bus import TappedBus
-
-    class Tap:  # what the recorder would get
-        def __init__(self) -> None:
-            self.frames: list[tuple[int, str]] = []
-
-        def can(self, _bus, frame, direction, _t, _source_t) -> None:
-            self.frames.append((frame.arbitration_id, direction))
 
     c = VirtualClock(epoch_ns=0)
     with clock.use(c):
         a = open_can("virtual:sim-r")
         raw = open_can("virtual:sim-r")
-        tap = Tap()
         b = TappedBus(raw, tap, "can0") if tapped else raw
         b.set_filters([{"can_id": 0x181, "can_mask": 0x7FF}])
         assert b.recv(0.5) is None
@@ -247,7 +245,8 @@ def test_a_filtered_recv_waits_its_timeout_in_bench_time(tapped) -> None:
         assert got is not None and got.arbitration_id == 0x181 and bytes(got.data) == b"\x27\x06"
         assert c.time_ns() == 735_000_000 + frame_bits(tpdo) * 1000  # 1 Mbit/s: 1000 ns a bit
         if tapped:  # the recording has what arrived, the dropped frames too
-            assert tap.frames[-1] == (0x181, "rx") and (0x701, "rx") in tap.frames
+            frames = _tapped(tap)
+            assert frames[-1] == (0x181, "rx") and (0x701, "rx") in frames
         for bus in (a, b):
             bus.shutdown()
 
@@ -365,19 +364,10 @@ def test_frames_queued_at_one_instant_on_an_idle_bus_go_by_arbitration() -> None
             bus.shutdown()
 
 
-def test_a_classic_bus_refuses_can_fd_and_long_frames() -> None:
+def test_a_classic_bus_refuses_can_fd_and_long_frames(tap) -> None:
     """... and the recording tap does not record a refused frame as sent."""
-
-    class Tap:
-        def __init__(self) -> None:
-            self.rows: list[tuple[int, str]] = []
-
-        def can(self, _bus, frame, direction, _t, _source_t) -> None:
-            self.rows.append((frame.arbitration_id, direction))
-
     c = VirtualClock(epoch_ns=0)
     with clock.use(c):
-        tap = Tap()
         a, b = open_can("virtual:sim-fd", tap=tap, name="can0"), open_can("virtual:sim-fd")
         for bad in (can.Message(arbitration_id=0x100, data=bytes(64), is_fd=True,
                                 is_extended_id=False),
@@ -388,10 +378,10 @@ def test_a_classic_bus_refuses_can_fd_and_long_frames() -> None:
             with pytest.raises(can.CanOperationError, match="classic CAN"):
                 a.send(bad)
         assert b.recv(0.01) is None and c.time_ns() == 10_000_000  # nothing went on the wire
-        assert tap.rows == []  # nor on the record
+        assert _tapped(tap) == []  # nor on the record
         a.send(can.Message(arbitration_id=0x100, data=bytes(8), is_extended_id=False))
         assert b.recv(0.01) is not None  # the bus is still fine
-        assert tap.rows == [(0x100, "tx")]
+        assert _tapped(tap) == [(0x100, "tx")]
         for bus in (a, b):
             bus.shutdown()
 
