@@ -115,7 +115,8 @@ class Event:
         self.t, self.seq, self.fn, self.cancelled = t, seq, fn, False
 
     def __lt__(self, other: Event) -> bool:
-        return (self.t, self.seq) < (other.t, other.seq)
+        t, u = self.t, other.t
+        return t < u or (t == u and self.seq < other.seq)
 
     def cancel(self) -> None:
         self.cancelled = True
@@ -183,7 +184,8 @@ class VirtualClock:
         owners = self._owners
         if not owners:
             return True
-        return threading.current_thread() in owners or threading.get_ident() in self._watch
+        # a step thread (in `watch`) first: the cheap test, and the one most waits pass
+        return threading.get_ident() in self._watch or threading.current_thread() in owners
 
     # -- scheduling ----------------------------------------------------------------------
     def at(self, t: int, fn: Callable[[], Any], *, late: bool = False) -> Event:
@@ -191,6 +193,9 @@ class VirtualClock:
         is not late at the same time, also those scheduled later (a CAN bus starts its next
         frame once every node that has one at that instant has queued it: arbitration)."""
         ev = Event(max(int(t), self._now), next(self._seq) + (LATE if late else 0), fn)
+        if self._running and self._runner == threading.get_ident():
+            heapq.heappush(self._heap, ev)  # from an event: this thread holds the lock
+            return ev
         if not self.may_wait():  # another thread: handed over, never waiting for the lock
             self._inbox.append(ev)
             return ev
@@ -255,16 +260,21 @@ class VirtualClock:
         cancel, deadline = (self._watch.get(threading.get_ident(), (None, None)) if watched
                             else (None, None))
         with self._guard:
-            self._loops += 1  # a signal now is deferred to the top of a pass (defer_interrupt)
-            try:
-                return self._run_events(t, pred, cancel, deadline, watched)
-            except BaseException as exc:
-                pending, self._interrupt = self._interrupt, None
-                if pending is not None and pending is not exc:
-                    raise pending from exc  # the stop the user asked for, not a later error
-                raise
-            finally:
-                self._loops -= 1
+            return self._pass(t, pred, cancel, deadline, watched)
+
+    def _pass(self, t: int, pred: Callable[[], Any] | None, cancel: Any,
+              deadline: int | None, watched: bool) -> bool:
+        """`_run_events` with signals deferred to the top of a pass (under the lock)."""
+        self._loops += 1  # a signal now is deferred to the top of a pass (defer_interrupt)
+        try:
+            return self._run_events(t, pred, cancel, deadline, watched)
+        except BaseException as exc:
+            pending, self._interrupt = self._interrupt, None
+            if pending is not None and pending is not exc:
+                raise pending from exc  # the stop the user asked for, not a later error
+            raise
+        finally:
+            self._loops -= 1
 
     def _run_events(self, t: int, pred: Callable[[], Any] | None, cancel: Any,
                     deadline: int | None, watched: bool = True) -> bool:
@@ -341,12 +351,19 @@ class VirtualClock:
             self.held.append(busy)
             return
         end = self._now + SETTLE_LIMIT_NS  # an overloaded bus is never idle: give up then
+        heap = self._heap
         with self._guard:  # not cancellable: what is on the wire arrives (one SDO at a time)
-            while busy():
-                nxt = self.next_time()
-                if nxt is None or nxt > end:
+            while busy():  # between instants, never between two events of one instant
+                if self._inbox:
+                    self._take_inbox()
+                while heap and heap[0].cancelled:
+                    heapq.heappop(heap)
+                if not heap or heap[0].t > end:
                     return
-                self.run_until(nxt, watched=False)
+                if self.hung:
+                    raise ClockHung("the virtual clock is held by a step hung inside a clock "
+                                    "event")
+                self._pass(heap[0].t, None, None, None, False)  # that instant's events
 
 
 class _Held:
