@@ -58,8 +58,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         default=None,
         choices=("virtual", "real"),
         help="the bench's clock: virtual (deterministic, faster than real time) or real "
-        "(default: the bench file's clock:, else virtual where the bench can run on it; "
-        "docs/clock.md)",
+        "(default: the bench file's clock:, else virtual where the bench can run on it and "
+        "names no CAN channel; docs/clock.md)",
     )
     parser.addini("hil_plans", "directories whose *.yaml plan files are collected as tests",
                   type="paths", default=[])

@@ -159,6 +159,50 @@ def test_clock_virtual_is_refused_where_the_bench_cannot(tmp_path) -> None:
     assert dataclasses.replace(BUILTIN).clock == "virtual"
 
 
+def test_schemes_are_read_in_any_case_as_parse_url_reads_them(tmp_path) -> None:
+    """`VIRTUAL:auto` and `PTY:auto` are the in-process bus and the auto pty (`parse_url`
+    lower-cases a scheme): virtual time by default, and `clock: virtual` is no error naming
+    them "not in-process". On the wall clock the harness opens the pty's far end (it used to
+    open a second pty of its own: no reply to any Modbus request)."""
+    text = Path(fixture("benches", "virtual.yaml")).read_text()
+    upper = (text.replace('"virtual:auto"', '"VIRTUAL:auto"')
+             .replace('"pty:auto?baud=38400"', '" PTY:auto?baud=38400"'))
+    assert upper != text and '"virtual:' not in upper and '"pty:' not in upper
+    assert loads_bench(upper).clock == "virtual"
+    assert loads_bench("clock: virtual\n" + upper).clock == "virtual"
+    (tmp_path / "upper.yaml").write_text(upper)
+    bench = load_bench(tmp_path / "upper.yaml")
+    plan = load_plan(find_plans(["param_access"])[0])
+    for clk in ("virtual", "real"):
+        res = run_plan(plan, with_clock(bench, clk), tmp_path / clk)
+        assert res.status == "pass", (clk, res.error, [s.message for s in res.steps])
+
+
+def test_a_named_virtual_can_channel_keeps_the_wall_clock_unless_asked(tmp_path) -> None:
+    """A named `virtual:<channel>` is there for another bus of the process to open (a python-can
+    sniffer, which hears only the wall clock's bus): the wall clock by default, as a named
+    pty; `clock: virtual` (or `--clock virtual`) still runs it in virtual time."""
+    text = Path(fixture("benches", "virtual.yaml")).read_text()
+    named = text.replace('can0: "virtual:auto"', 'can0: "virtual:sniffed"')
+    assert named != text
+    assert loads_bench(named).clock == "real"
+    assert loads_bench("clock: virtual\n" + named).clock == "virtual"
+    assert with_clock(loads_bench(named), "virtual").clock == "virtual"
+    # `auto` with parameters is still nobody else's
+    rate = text.replace('can0: "virtual:auto"', 'can0: "virtual:auto?bitrate=500000"')
+    assert rate != text and loads_bench(rate).clock == "virtual"
+
+
+def test_a_tagged_clock_and_a_merge_key_are_named_for_what_they_are() -> None:
+    """`!!binary` is not "text" (it said "must be text, got text"); a YAML merge key is
+    refused by its line (it was "could not determine a constructor", no field)."""
+    text = Path(fixture("benches", "virtual.yaml")).read_text()
+    with pytest.raises(PlanFileError, match=r"b.yaml:1: clock: must be text, got binary data"):
+        loads_bench("clock: !!binary dmlydHVhbA==\n" + text, "b.yaml")
+    with pytest.raises(PlanFileError, match=r"b.yaml:1: <<: a YAML merge key is not supported"):
+        loads_bench("<<: {clock: virtual}\n" + text, "b.yaml")
+
+
 def test_cli_clock_flag_refusals(tmp_path, capsys) -> None:
     from hil.cli import main
 

@@ -292,6 +292,12 @@ def parse_bench(data: Any, file: str, text: str = "") -> Bench:
     )
 
 
+def _scheme_target(url: str) -> tuple[str, str]:
+    """A URL's scheme (lower case, as `parse_url` reads it) and target (before any `?`)."""
+    scheme, _, rest = url.strip().partition(":")
+    return scheme.lower(), rest.partition("?")[0]
+
+
 def clock_blocker(virtual: bool, process: str, can: dict[str, str], rs485: dict[str, str],
                   dio: list[str]) -> str | None:
     """Why a bench cannot run on the virtual clock (None: it can). Only an in-process
@@ -302,14 +308,28 @@ def clock_blocker(virtual: bool, process: str, can: dict[str, str], rs485: dict[
     if process != "inproc":
         return "process: subprocess runs its drives in other processes (wall clock)"
     for name, url in can.items():
-        if not url.startswith("virtual:"):
+        if _scheme_target(url)[0] != "virtual":
             return f"CAN bus {name} ({url}) is not an in-process virtual: bus"
     for name, url in rs485.items():
-        if not (url == "pty:auto" or url.startswith("pty:auto?")):
+        if _scheme_target(url) != ("pty", "auto"):
             return f"RS-485 line {name} ({url}) is not pty:auto (another program may open it)"
     for url in dio:
-        if not url.startswith("virtual:"):
+        if _scheme_target(url)[0] != "virtual":
             return f"DI/DO or pulse line {url} is not in-process virtual:"
+    return None
+
+
+def wall_clock_preferred(can: dict[str, str]) -> str | None:
+    """Why a bench that could run in virtual time defaults to the wall clock (None: it does
+    not): a named `virtual:<channel>` CAN bus is there for another bus of this process to
+    open, a python-can `can.Bus(interface="virtual", channel=...)` sniffer, which hears a
+    virtual-time bus only through `hil.transport.open_can` (docs/clock.md). `clock: virtual`
+    still runs it in virtual time."""
+    for name, url in can.items():
+        scheme, target = _scheme_target(url)
+        if scheme == "virtual" and target != "auto":
+            return (f"CAN bus {name} ({url}) is a named channel: a plain python-can virtual "
+                    "bus on it hears only the wall clock's")
     return None
 
 
@@ -337,7 +357,7 @@ def _clock(v: Checker, top: LDict, virtual: bool, process: str, can: dict[str, s
            rs485: dict[str, str], drives: dict[str, DriveSpec]) -> str:
     why = clock_blocker(virtual, process, can, rs485, _lines_of(drives))
     if "clock" not in top:
-        return "real" if why else "virtual"
+        return "real" if why or wall_clock_preferred(can) else "virtual"
     clock = v.text(top, "clock", "")
     if clock not in CLOCKS:
         raise v.err(top.kline("clock"), "clock", f"{clock!r}: one of {', '.join(CLOCKS)}")

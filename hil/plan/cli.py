@@ -64,8 +64,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--clock", choices=CLOCKS, default=None,
                         help="the bench's clock: virtual (the model's, deterministic and much "
                         "faster than real time) or real (the wall clock). Default: the bench "
-                        "file's clock:, else virtual where the bench can run on it (the "
-                        "built-in virtual bench), else real (docs/clock.md)")
+                        "file's clock:, else virtual where the bench can run on it and names no "
+                        "CAN channel (the built-in virtual bench), else real (docs/clock.md)")
     parser.add_argument("--allow-inconclusive", action="store_true",
                         help="count inconclusive timing verdicts as passed")
     parser.add_argument("--check", action="store_true",

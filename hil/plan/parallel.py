@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hil.bench.bench import Bench, load_bench, with_clock
+from hil.bench.bench import GATEWAY, Bench, load_bench, with_clock
 from hil.plan.events import Listener, Note, Notifier, PlanEnded, PlanStarted, StepEnded
 from hil.plan.plan import Plan, check_plan, load_plan
 from hil.plan.runner import PlanResult, output_stems, run_plan, signal_text, timing_specs
@@ -72,15 +72,16 @@ def jobs_from_arg(text: str) -> int:
 
 def parallel_blocker(bench: Bench) -> str | None:
     """Why `bench` cannot run plans in parallel (None when it can): it must be virtual, with
-    every transport private to the process that opens it (`virtual:` in process, or an
-    `auto` target with `auto` loopback ports)."""
+    every transport (CAN, RS-485, DI/DO and pulse lines) private to the process that opens it
+    (`virtual:` in process, or an `auto` target with `auto` loopback ports)."""
     if not bench.virtual:
         how = " behind a gateway lease" if bench.gateway is not None else ""
         return f"bench {bench.name} is not virtual{how}: one set of drives"
     urls = [*bench.can.values(), *bench.rs485.values(),
-            *(d.dio for d in bench.drives.values() if d.dio)]
+            *(u for d in bench.drives.values() for u in (d.dio, d.pulse) if u and u != GATEWAY)]
     for url in urls:
-        scheme, _, rest = url.partition(":")
+        scheme, _, rest = url.strip().partition(":")
+        scheme = scheme.lower()  # as `parse_url` reads it
         target, _, query = rest.partition("?")
         if scheme == "virtual" and bench.process == "inproc":
             continue

@@ -73,14 +73,17 @@ def _auto_endpoints(query: str, ports: dict[str, int]) -> str:
 
 
 def resolve_auto(bench: Bench, tmpdir: Path) -> dict[str, str]:
-    """URL of each transport with `auto` targets made unique: keys `can:<bus>`,
+    """URL of each transport with `auto` targets made unique (schemes in lower case, as
+    `parse_url` reads them: `PTY:auto` is a pty too): keys `can:<bus>`,
     `rs485:<line>`, `dio:<drive>`, `pulse:<drive>`. `virtual:auto` gets a unique name,
     `pty:auto` a link in `tmpdir`, `zenoh:auto` a unique key (`hil/<pid>-<n>/<kind>`), and a
     zenoh endpoint `tcp/127.0.0.1:auto` a free loopback port."""
     out: dict[str, str] = {}
 
     def fix(url: str, kind: str) -> str:
-        scheme, _, rest = url.partition(":")
+        scheme, _, rest = url.strip().partition(":")
+        scheme = scheme.lower()  # as `parse_url` reads it: `PTY:auto` is a pty too
+        url = f"{scheme}:{rest}"
         target, q, query = rest.partition("?")
         if scheme == "zenoh":
             query = _auto_endpoints(query, {})  # each URL its own port(s)

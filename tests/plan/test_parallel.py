@@ -148,6 +148,13 @@ def test_only_a_bench_private_to_each_process_runs_in_parallel():
     assert "7447" in (parallel_blocker(port) or "")
     auto = replace(port, can={"can0": "zenoh:auto?listen=tcp/127.0.0.1:auto"})
     assert parallel_blocker(auto) is None
+    # a pulse line on a fixed zenoh key is shared by every run too (it was not looked at)
+    drive = virtual.drives["drive1"]
+    pulse = replace(auto, drives={"drive1": replace(drive, pulse="zenoh:bench/pulse")})
+    assert "zenoh:bench/pulse" in (parallel_blocker(pulse) or "")
+    # schemes in any case, as `parse_url` reads them
+    upper = replace(virtual, can={"can0": "VIRTUAL:auto"}, rs485={"rs485": "PTY:auto"})
+    assert parallel_blocker(upper) is None
 
 
 MANY = ["pr_*"]  # 13 plans: enough for workers to pay off
