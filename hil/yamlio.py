@@ -133,6 +133,9 @@ class _Budget:
         self.max_depth = limit("HIL_YAML_MAX_DEPTH", 64)
 
 
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
 def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
            error: type[FileError], budget: _Budget | None = None,
            within: frozenset[int] = frozenset()) -> Any:
@@ -155,8 +158,11 @@ def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
         out = LDict()
         out.line, out.key_lines = line, {}
         for knode, vnode in node.value:
-            key = loader.construct_object(knode, deep=True)
             kline = knode.start_mark.line + 1
+            if knode.tag == _MERGE_TAG:  # `<<: *base`: each key must be on its own line
+                raise error(file, kline, join(where, "<<"), "a YAML merge key is not supported "
+                            "(a field's line must be its own): write the keys out")
+            key = loader.construct_object(knode, deep=True)
             if not isinstance(key, str | int | float | bool):
                 raise error(file, kline, where or "(top)", f"key {key!r} is not a name")
             key = _key_text(key, knode)

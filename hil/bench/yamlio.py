@@ -201,7 +201,15 @@ def _kind(v: Any) -> str:
         return "a list"
     if isinstance(v, int | float):
         return f"a number ({shorten(v)})"
-    return f"text ({shorten(v)})"
+    if isinstance(v, str):
+        return f"text ({shorten(v)})"
+    # a YAML tag's value (!!binary, a date): named as what it is, not as text
+    what = _TAGGED.get(type(v).__name__, f"a {type(v).__name__}")
+    return f"{what} ({shorten(v)})"
+
+
+_TAGGED = {"bytes": "binary data", "date": "a date", "datetime": "a date and time",
+           "set": "a set"}
 
 
 def level(v: Any) -> bool | None:
