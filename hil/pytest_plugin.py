@@ -418,7 +418,16 @@ def _outcome(node: pytest.Item) -> tuple[str, str]:
         crash = getattr(rep.longrepr, "reprcrash", None)
         what = crash.message.splitlines()[0] if crash is not None and crash.message else ""
         return "fail", f"test failed: {what}"[:300].rstrip(": ")
-    return ("skipped" if rep.skipped else "pass"), "end of test"
+    xfail = getattr(rep, "wasxfail", None)
+    if rep.skipped and xfail is not None:  # pytest's "xfailed": it failed, as expected
+        return "skipped", f"expected failure (xfail): {xfail}"[:300].rstrip(": ")
+    if rep.skipped:  # `pytest.skip()` in the test: (path, line, message)
+        longrepr = rep.longrepr
+        why = longrepr[2] if isinstance(longrepr, tuple) and len(longrepr) == 3 else ""
+        return "skipped", f"skipped: {str(why).removeprefix('Skipped: ')}"[:300].rstrip(": ")
+    if xfail is not None:  # "xpassed" (not strict): it passed although expected to fail
+        return "pass", f"passed, although expected to fail (xfail): {xfail}"[:300].rstrip(": ")
+    return "pass", "end of test"
 
 
 @pytest.fixture

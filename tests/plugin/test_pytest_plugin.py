@@ -131,6 +131,49 @@ def test_each_test_its_own_recording_and_what_ended_it(pytester: pytest.Pytester
     assert any(n.endswith("test_run_a_plan-servo_on_off_brake.mcap") for n in names)
 
 
+XFAIL = '''
+import pytest
+
+@pytest.mark.hil
+@pytest.mark.xfail(reason="the brake is slow on this bench")
+def test_xfails(hil_drive):
+    raise AssertionError("too slow")
+
+@pytest.mark.hil
+def test_skips(hil_drive):
+    pytest.skip("no brake fitted")
+
+@pytest.mark.hil
+@pytest.mark.xfail(reason="flaky wiring")
+def test_xpasses(hil_drive):
+    pass
+'''
+
+
+def test_xfail_skip_and_xpass_say_so_in_the_recording(pytester: pytest.Pytester,
+                                                      tmp_path) -> None:
+    """`hil.result` of an expected failure, a skip inside the test and an unexpected pass
+    names what pytest made of it and why (all three said "end of test")."""
+    pytester.makepyfile(test_x=XFAIL)
+    out = tmp_path / "out"
+    result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
+                                           f"--hil-out={out}")
+    result.assert_outcomes(xfailed=1, skipped=1, xpassed=1)
+    from hil.record.reader import Recording
+
+    def result_of(part: str) -> dict:
+        [path] = [p for p in out.glob("*.mcap") if part in p.name]
+        return dict(Recording.open(path).metadata()["hil.result"])
+
+    xf = result_of("test_xfails")
+    assert xf["status"] == "skipped", xf
+    assert xf["reason"] == "expected failure (xfail): the brake is slow on this bench", xf
+    sk = result_of("test_skips")
+    assert (sk["status"], sk["reason"]) == ("skipped", "skipped: no brake fitted"), sk
+    xp = result_of("test_xpasses")
+    assert xp["status"] == "pass" and "expected to fail (xfail): flaky wiring" in xp["reason"]
+
+
 def _shipped(name: str):
     from hil.plan.plan import find_plans
 
