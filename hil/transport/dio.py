@@ -110,8 +110,10 @@ class DioPort:
             self.tap.dio(self.name, line, level, t, source_t)
 
     def get(self, line: str) -> bool:
-        """Last known level of any line (False = open / not conducting if never seen)."""
+        """Last known level of any line (False = open / not conducting if never seen).
+        Raises ValueError on a closed port: its levels are no longer known."""
         is_input(line)
+        self._check_open()
         with self._cond:
             entry = self._levels.get(line)
         if entry is None and not self.owns(line):

@@ -22,6 +22,23 @@ def test_line_names():
             is_input(bad)
 
 
+def test_a_closed_port_refuses_reads_as_it_refuses_writes():
+    """`get` on a closed port raised nothing and gave the last level it knew (a stale DO6 read
+    as "brake released" after the session ended); it now says the port is closed."""
+    harness = open_dio("virtual:vd-closed", role="harness", name="drive1")
+    drive = open_dio("virtual:vd-closed", role="drive")
+    try:
+        drive.set("DO6", True)
+        assert harness.wait_for("DO6", True, 1.0) and harness.get("DO6")
+        harness.close()
+        for fn in (lambda: harness.get("DO6"), lambda: harness.set("DI1", True)):
+            with pytest.raises(ValueError, match=r"DI/DO drive1 \(virtual:vd-closed\) is closed"):
+                fn()
+    finally:
+        harness.close()
+        drive.close()
+
+
 def test_virtual_both_ways(tap):
     harness = open_dio("virtual:vd1", role="harness", tap=tap, name="drive1")
     drive = open_dio("virtual:vd1", role="drive")
