@@ -127,10 +127,14 @@ class ModbusSlave:
         lock: Any = None,
         options: ModbusFaceOptions | None = None,
         t0: int = 0,
+        wire: tuple[int, mb.CharFormat] | None = None,
     ) -> None:
         """Unset `station`/`mode`/`baud`/`char_format` come from P3.000/P3.002/P3.001 in
         `registers` (defaults 0x7F, 8N2 RTU, 38400 if unreadable: L10496, L10547, L10510).
-        `lock` (e.g. `DriveHost.lock`) is held around every store access."""
+        `lock` (e.g. `DriveHost.lock`) is held around every store access. `wire`: the line's
+        own baud and character format (the bench's URL); where the drive's UART differs in
+        baud, data bits or parity (P3.001 X, P3.002, L10509-L10557), every character it
+        receives is garbled and no request is read (None: never)."""
         self.registers = registers
         self.options = options or ModbusFaceOptions()
         # the low-word address of each parameter communication may not write (L16025), worked
@@ -148,6 +152,9 @@ class ModbusSlave:
         self._explicit_line = (mode, baud, char_format)
         self.line = self._load_line()
         self._next_line: LineSettings | None = None
+        self.wire = wire
+        self._garbled = self._wire_mismatch()  # why every character is garbled (None: not)
+        self._garble_noted = False
         self.stats: dict[str, int] = dict.fromkeys(
             ("bytes", "frames", "replies", "exceptions", "foreign", "broadcast", "bad_check",
              "dropped", "timeouts"), 0,
@@ -193,6 +200,19 @@ class ModbusSlave:
         st_baud = mb.P3001_BAUD.get((p3001 if p3001 is not None else 3) & 0xF, 38400)
         return LineSettings(mode or st_mode, baud or st_baud,
                             char_format or st_fmt or mb.CharFormat())
+
+    def _wire_mismatch(self) -> str | None:
+        """Why the UART cannot read the line (None: it can). The stop bits aside: a receiver
+        checks only the first, so an 8N1 sender is read by an 8N2 UART (⚠ a choice: the
+        manual does not say; docs/manual-choices.md#modbus)."""
+        if self.wire is None:
+            return None
+        baud, fmt = self.wire
+        own = self.line.char_format
+        if baud == self.line.baud and (fmt.data_bits, fmt.parity) == (own.data_bits, own.parity):
+            return None
+        return (f"the line runs {baud} baud {fmt}, the drive's UART {self.line.baud} baud "
+                f"{own} (P3.001 X / P3.002, L10509-L10557): every character garbled")
 
     def power_cycle(self) -> None:
         """Re-read P3.000 (● takes effect after a power cycle, L7014, L6722) and the line
@@ -287,6 +307,8 @@ class ModbusSlave:
                 self._broken = True
         self._last_t = t
         self._buf.append(byte)
+        if self._garbled is not None:  # a character the UART misread: the burst is lost
+            self._broken = True
         if len(self._buf) > mb.MAX_RTU_ADU:
             self._drop(f"RTU frame longer than {mb.MAX_RTU_ADU} bytes")
             self._broken = True  # swallow the rest until silence
@@ -336,7 +358,8 @@ class ModbusSlave:
         broken, self._broken = self._broken, False
         if broken:
             if buf:  # (an overlong burst cut at a multiple of 257 bytes leaves nothing here)
-                self._drop(f"RTU burst of {len(buf)} bytes broken (gap > t1.5 or overlong)")
+                self._drop(f"RTU burst of {len(buf)} bytes: {self._garbled}" if self._garbled
+                           else f"RTU burst of {len(buf)} bytes broken (gap > t1.5 or overlong)")
             return
         if _crc_ok(buf):  # e.g. an unknown function: only the silence ends it
             self._dispatch(buf, t)
@@ -351,6 +374,12 @@ class ModbusSlave:
         self._note(f"RTU burst without a valid CRC: {buf[:32].hex(' ')}")
 
     def _ascii_byte(self, byte: int, t: int) -> None:
+        if self._garbled is not None:  # a misread character: no ':' is ever seen
+            if self._in_ascii or not self._garble_noted:
+                self._drop(f"ASCII: {self._garbled}")
+                self._garble_noted = True
+            self._in_ascii = False
+            return
         if byte == 0x3A:  # ':' starts a frame and restarts a broken one (L15617)
             if self._in_ascii and len(self._buf) > 1:
                 self._drop(f"ASCII frame restarted by ':' after {len(self._buf)} chars")
@@ -484,6 +513,8 @@ class ModbusSlave:
             self.line, self._next_line = self._next_line, None
             self._buf.clear()
             self._in_ascii = False
+            self._garbled = self._wire_mismatch()
+            self._garble_noted = False
             if self.on_line_settings is not None:
                 self._callback("on_line_settings", self.on_line_settings, self.line)
 

@@ -12,6 +12,7 @@ The faces only adapt protocols; the drive decides (docs/architecture.md).
 from __future__ import annotations
 
 import contextlib
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,8 @@ from hil.model.drive import Drive
 from hil.model.events import AlarmChanged, PowerCycled
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
+from hil.profile.params import ParamTable
+from hil.protocol import modbus as mb
 from hil.record.topics import CAN_LATE_NS, can_line
 from hil.transport.can_bus import open_can
 from hil.transport.dio import open_dio
@@ -32,7 +35,10 @@ from hil.transport.inline import can_inline, inline_pump
 from hil.transport.pulse import open_pulse
 from hil.transport.serial_line import open_serial
 from hil.transport.sim import pump
+from hil.transport.urls import parse_url
 from hil.virtual.host import ClockHost, DriveHost
+
+log = logging.getLogger(__name__)
 
 RETRY_NS = 5_000_000  # after a failing tick (ModbusSlaveRunner.poll_s)
 
@@ -124,6 +130,39 @@ class DriveSpec:
     tpdo_defaults: str = "manual"  # CANopen PDO defaults: none, as printed (L17940-18124)
 
 
+def line_params(params: dict[str, int], url: str, mode: str | None) -> dict[str, int]:
+    """`params` with the drive's RS-485 settings, P3.001 digit X (baud) and P3.002 (protocol),
+    set to the line the bench declares (`url`'s baud and character format, `mode` RTU or
+    ASCII, default RTU) where `params` does not set them: a bench's drive is configured for its
+    line (L10509-L10557). A line the A3 cannot run (a baud P3.001 X does not offer, 7 data bits
+    in RTU) leaves them at their defaults, and the drive then reads garbage, as a real one would
+    (`ModbusSlave` `wire`)."""
+    out = dict(params)
+    try:
+        st = parse_url(url, "serial").serial()
+    except Exception:  # a bad URL is opening the line's to report
+        return out
+    if "P3.001" not in out:
+        x = {b: k for k, b in mb.P3001_BAUD.items()}.get(st.baud)
+        if x is None:
+            log.warning("RS-485 line %s: the A3 offers %s baud (P3.001 X, L10524-L10527); its "
+                        "drive cannot read this line", url,
+                        "/".join(map(str, mb.P3001_BAUD.values())))
+        else:
+            out["P3.001"] = (ParamTable.load().spec("P3.001").default & ~0xF) | x
+    if "P3.002" not in out:
+        want = mode or "rtu"
+        fits = [(fmt.stop_bits != st.stopbits, n) for n, (m, fmt) in mb.P3002_PROTOCOLS.items()
+                if m == want and (fmt.data_bits, fmt.parity) == (st.bytesize, st.parity)]
+        if fits:
+            out["P3.002"] = min(fits)[1]  # the same stop bits first
+        else:
+            log.warning("RS-485 line %s: no P3.002 protocol is %s %d%s (L10553-L10557); its "
+                        "drive cannot read this line", url, want.upper(), st.bytesize,
+                        st.parity)
+    return out
+
+
 class VirtualDriveStack:
     """A running virtual drive: `Drive` + `DriveHost` + faces."""
 
@@ -133,6 +172,8 @@ class VirtualDriveStack:
         ident = spec.node_id or spec.station
         if ident is not None:
             params.setdefault("P3.000", ident)
+        if spec.rs485:
+            params = line_params(params, spec.rs485, spec.modbus_mode)
         self.drive = (drive_factory or Drive)(
             name=spec.name,
             options=spec.options,
@@ -210,11 +251,13 @@ class VirtualDriveStack:
 
             self.serial = open_serial(spec.rs485, name=f"{spec.name}-rs485")
             self._closers.append(self.serial.close)
+            st = getattr(self.serial, "settings", None)  # the line's own format (its URL)
             self.modbus = ModbusSlave(
                 drive.params,
                 station=spec.station,
-                mode=spec.modbus_mode,  # type: ignore[arg-type]
-                baud=spec.modbus_baud or getattr(self.serial, "baudrate", None),
+                baud=spec.modbus_baud,  # else P3.001 X, set to the line's (`line_params`)
+                wire=None if st is None else (st.baud, mb.CharFormat(
+                    st.bytesize, st.parity, int(st.stopbits))),
                 lock=host.synced,
                 on_timeout=lambda _t: host.call(drive.raise_alarm, "AL020"),  # P3.004, L10571
                 # AL019 on an incorrect address / value (L19592-19596); the drive decides

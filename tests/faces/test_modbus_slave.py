@@ -462,3 +462,35 @@ def test_fuzz_random_bytes_never_raise(mode):
     slave.feed(valid[0], t + 2 * S)
     slave.tick(t + 3 * S)
     assert len(out) == 1 and mb.decode_adu(out[0], mode)[0] == 1
+
+
+# ---------------------------------------------------------------- the line against the UART
+
+
+def test_a_line_the_uart_is_not_set_for_gets_no_answer():
+    """The drive's UART runs at P3.001 X and P3.002 (L10509-L10557); a request sent on a line
+    of another baud, data bits or parity is garbled there and never answered. The stop bits
+    aside (a receiver checks the first only): an 8N1 sender is read at 8N2."""
+    req, reply = RTU_EXAMPLES[0]
+    for wire, answered in [((38400, mb.CharFormat(8, "N", 2)), True),
+                           ((38400, mb.CharFormat(8, "N", 1)), True),
+                           ((9600, mb.CharFormat(8, "N", 2)), False),
+                           ((38400, mb.CharFormat(8, "E", 1)), False),
+                           ((38400, mb.CharFormat(7, "N", 2)), False)]:
+        slave, out = make(station=1, wire=wire)  # P3.001 = 0x0203, P3.002 = 6: 38400 8N2
+        got = ask(slave, out, req)
+        assert got == ([reply] if answered else []), wire
+        if not answered:
+            assert slave.stats["dropped"] == 1 and "every character garbled" in slave.errors[-1]
+
+
+def test_a_new_p3001_or_p3002_leaves_the_line_from_the_next_frame():
+    """A write of P3.001 (9600) or P3.002 (8E1 RTU) is answered in the old settings, and the
+    next request on the unchanged line (38400 8N2) is not (L16035, L16037)."""
+    wire = (38400, mb.CharFormat(8, "N", 2))
+    for address, value in [(0x0302, 0x0201), (0x0304, 7)]:
+        slave, out = make(FakeStore(), station=1, wire=wire)
+        write = rtu(1, mb.write_single_request(address, value))
+        assert ask(slave, out, write) == [write]
+        assert ask(slave, out, RTU_EXAMPLES[0][0], t=S) == []
+        assert "every character garbled" in slave.errors[-1]

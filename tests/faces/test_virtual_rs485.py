@@ -117,3 +117,47 @@ def test_another_thread_closes_the_line_during_a_long_read(bench) -> None:
     assert line.closed
     assert time.monotonic() - w0 < 5
     assert clock.monotonic() - t0 < 3000
+
+
+@pytest.mark.parametrize("url, mode, p3001, p3002", [
+    ("pty:auto?baud=38400", None, 0x0203, 6),  # the A3's defaults (L10510, L10557)
+    ("pty:auto?baud=115200", None, 0x0205, 6),  # X = 5 (L10527)
+    ("pty:auto?baud=4800&parity=E&bytesize=7&stopbits=1", "ascii", 0x0200, 1),  # 7,E,1 ASCII
+    ("pty:auto?baud=9600&parity=O&stopbits=1", "rtu", 0x0201, 8),  # 8,O,1 RTU
+    ("pty:auto?baud=19200&stopbits=1", None, 0x0202, 6),  # 8N1 is not offered: 8N2 reads it
+])
+def test_the_drive_is_set_for_the_line_its_bench_declares(url, mode, p3001, p3002) -> None:
+    """P3.001 X and P3.002 (L10509-L10557) follow the bench's line URL where the bench sets
+    neither; a parameter the bench sets wins."""
+    from hil.virtual.stack import line_params
+
+    assert line_params({}, url, mode) == {"P3.001": p3001, "P3.002": p3002}
+    assert line_params({"P3.001": 0x0201, "P3.002": 7}, url, mode) == {"P3.001": 0x0201,
+                                                                       "P3.002": 7}
+
+
+def test_a_line_the_a3_cannot_run_is_said_and_left_to_garble(caplog) -> None:
+    """230400 baud is no P3.001 X, 7 data bits no RTU format: a warning names the line, and
+    the parameters stay at their defaults (the drive then reads garbage, as a real one)."""
+    from hil.virtual.stack import line_params
+
+    with caplog.at_level("WARNING"):
+        assert line_params({}, "pty:auto?baud=230400", None) == {"P3.002": 6}
+        assert line_params({}, "pty:auto?baud=9600&bytesize=7", "rtu") == {"P3.001": 0x0201}
+    assert "230400" in caplog.text and "P3.001 X" in caplog.text
+    assert "no P3.002 protocol is RTU 7N" in caplog.text
+
+
+def test_a_plan_that_moves_the_drive_off_its_line_loses_it(tmp_path) -> None:
+    """A Modbus write of P3.001 X = 1 (9600) is answered at 38400; the next request on the
+    bench's 38400 line gets no reply (L16035), as a real bench's would. The virtual drive used
+    to answer on at 38400, whatever P3.001 said."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import loads_plan
+    from hil.plan.runner import run_plan
+
+    plan = loads_plan("name: baud\nsteps:\n  - write: {P3.001: 0x0201, via: modbus}\n"
+                      "  - read: {P1.042: null, via: modbus, expect_error: timeout}\n",
+                      str(tmp_path / "baud.yaml"))
+    res = run_plan(plan, load_bench(None), tmp_path)
+    assert res.status == "pass", [(s.status, s.message) for s in res.steps]
