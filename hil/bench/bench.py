@@ -27,6 +27,7 @@ from hil.bench.yamlio import (
 )
 from hil.paths import fixture
 from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS, N_DO, N_PHYSICAL_DI
+from hil.protocol import modbus as mb
 from hil.transport.urls import TransportUrlError, parse_url
 
 # Named timeouts (ns) and their defaults; a bench overrides any of them. The CiA 402 ones
@@ -331,6 +332,46 @@ def wall_clock_preferred(can: dict[str, str]) -> str | None:
             return (f"CAN bus {name} ({url}) is a named channel: a plain python-can virtual "
                     "bus on it hears only the wall clock's")
     return None
+
+
+def line_warnings(bench: Bench) -> list[str]:
+    """`file:line: drives.<d>: problem` for each drive whose Modbus UART cannot read its RS-485
+    line as the bench declares it: the line's URL (baud, data bits, parity) and the harness's
+    `modbus_mode` against the drive's P3.001 X and P3.002 (L10509-L10557). The bench's `params`
+    set those; a virtual drive without them is set to its line (`hil.virtual.stack.line_params`)
+    unless the A3 offers no such setting. A warning, not an error: a plan may mean it."""
+    out = []
+    for name, d in bench.drives.items():
+        url = bench.rs485.get(d.rs485 or "")
+        if url is None:
+            continue
+        try:
+            st = parse_url(url, "serial").serial()
+        except (TransportUrlError, ValueError):
+            continue
+        fmt = mb.CharFormat(st.bytesize, st.parity, int(st.stopbits))
+        x, proto = mb.uart_for_line(st.baud, fmt, d.modbus_mode)
+        p3001, p3002 = d.params.get("P3.001"), d.params.get("P3.002")
+        if bench.virtual:  # as `line_params` sets them (the A3's defaults where it cannot)
+            p3001 = p3001 if p3001 is not None else (0x0200 | x if x is not None else 0x0203)
+            p3002 = p3002 if p3002 is not None else (proto if proto is not None else 6)
+        why = []
+        uart_baud = mb.P3001_BAUD.get(p3001 & 0xF) if isinstance(p3001, int) else None
+        uart_mode, uart_fmt = mb.P3002_PROTOCOLS.get(p3002, (None, None)) if isinstance(
+            p3002, int) else (None, None)
+        if uart_baud is not None or uart_fmt is not None:
+            garbled = mb.uart_mismatch(st.baud, fmt, uart_baud or st.baud, uart_fmt or fmt)
+            if garbled:
+                why.append(garbled.replace(" (P3.001 X / P3.002, L10509-L10557): every "
+                                           "character garbled", ""))
+        if uart_mode is not None and uart_mode != d.modbus_mode:
+            why.append(f"the harness speaks {d.modbus_mode.upper()}, P3.002 = {p3002} is "
+                       f"{uart_mode.upper()}")
+        if why:
+            out.append(f"{bench.path or bench.name}:{d.line}: {join('drives', name)}: "
+                       f"{'; '.join(why)} (P3.001 X / P3.002, L10509-L10557): the drive will "
+                       "not answer over Modbus")
+    return out
 
 
 def _lines_of(drives: dict[str, DriveSpec]) -> list[str]:

@@ -202,17 +202,10 @@ class ModbusSlave:
                             char_format or st_fmt or mb.CharFormat())
 
     def _wire_mismatch(self) -> str | None:
-        """Why the UART cannot read the line (None: it can). The stop bits aside: a receiver
-        checks only the first, so an 8N1 sender is read by an 8N2 UART (⚠ a choice: the
-        manual does not say; docs/manual-choices.md#modbus)."""
+        """Why the UART cannot read the line (None: it can; `mb.uart_mismatch`)."""
         if self.wire is None:
             return None
-        baud, fmt = self.wire
-        own = self.line.char_format
-        if baud == self.line.baud and (fmt.data_bits, fmt.parity) == (own.data_bits, own.parity):
-            return None
-        return (f"the line runs {baud} baud {fmt}, the drive's UART {self.line.baud} baud "
-                f"{own} (P3.001 X / P3.002, L10509-L10557): every character garbled")
+        return mb.uart_mismatch(*self.wire, self.line.baud, self.line.char_format)
 
     def power_cycle(self) -> None:
         """Re-read P3.000 (● takes effect after a power cycle, L7014, L6722) and the line
@@ -265,6 +258,9 @@ class ModbusSlave:
         char = self.line.char_time_ns
         for i, byte in enumerate(data):
             t = t_ns - (n - 1 - i) * char
+            if self._next_line is not None and self.settled:  # written another way
+                self._apply_line()
+                char = self.line.char_time_ns
             if self.line.mode == "rtu":
                 self._rtu_byte(byte, t, char)
             else:
@@ -279,6 +275,9 @@ class ModbusSlave:
         char = self.line.char_time_ns
         for byte, t in zip(data, times_ns, strict=True):
             self._now = max(self._now, t)
+            if self._next_line is not None and self.settled:  # written another way
+                self._apply_line()
+                char = self.line.char_time_ns
             if self.line.mode == "rtu":
                 self._rtu_byte(byte, t, char)
             else:
@@ -494,6 +493,12 @@ class ModbusSlave:
         if self.on_comm_error is not None:
             self._callback("on_comm_error", self.on_comm_error, code, message)
         return None if broadcast else mb.exception_response(fn, code)
+
+    def params_written(self) -> None:
+        """P3.001 / P3.002 written another way (an SDO, a test): the next frame uses them, as
+        after a write over the line (L16035, L16037; P3.002 has no ● mark, and P3.001's is for
+        digit Z, L10544). Taken at the next byte once nothing is in hand (`settled`)."""
+        self._after_write(P3_001, 4)
 
     def _after_write(self, address: int, count: int) -> None:
         """P3.001 / P3.002 written: the next frame uses them (L16035, L16037)."""

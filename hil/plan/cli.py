@@ -10,7 +10,7 @@ import os
 import sys
 from pathlib import Path
 
-from hil.bench.bench import CLOCKS, Bench, load_bench, with_clock
+from hil.bench.bench import CLOCKS, Bench, line_warnings, load_bench, with_clock
 from hil.bench.yamlio import PlanFileError
 from hil.fileio import dir_problem
 from hil.plan.events import Listener
@@ -233,7 +233,7 @@ def main(args: argparse.Namespace) -> int:
     if (why := dir_problem(out)) is not None:
         print(f"hil run: --out {args.out}: {why}", file=sys.stderr)
         return 2
-    for warning in bench_constant_warnings(bench, timing_specs()):
+    for warning in [*bench_constant_warnings(bench, timing_specs()), *line_warnings(bench)]:
         print(f"hil run: warning: {warning}", file=sys.stderr)
     try:
         if args.check:

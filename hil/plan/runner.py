@@ -25,7 +25,7 @@ from typing import Any, TextIO
 
 from hil import clock
 from hil.bench import virtual_module
-from hil.bench.bench import Bench
+from hil.bench.bench import Bench, line_warnings
 from hil.plan.context import (
     Cancelled,
     Inconclusive,
@@ -244,6 +244,8 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                 ctx = StepContext(session, rec, plan, specs, cancel, steps)  # type: ignore[arg-type]
                 _idle_inputs(ctx)
                 _record_dut(ctx, bench)
+                for warning in line_warnings(bench):  # why Modbus may go unanswered
+                    rec.log("warning", warning, name="hil.bench")
                 if plan.params:
                     _initial_params(ctx, plan)
                 _apply_plan_wiring(ctx, plan)

@@ -388,6 +388,28 @@ P3002_PROTOCOLS: dict[int, tuple[Mode, CharFormat]] = {
 }
 
 
+def uart_for_line(baud: int, fmt: CharFormat, mode: str) -> tuple[int | None, int | None]:
+    """P3.001 digit X and P3.002 of an A3 UART that reads a line of `baud` and `fmt` in `mode`
+    (None where the A3 offers none: L10524-L10527, L10553-L10557). The stop bits decide only
+    between two that fit: a receiver checks the first stop bit only."""
+    x = next((k for k, b in P3001_BAUD.items() if b == baud), None)
+    fits = [(f.stop_bits != fmt.stop_bits, n) for n, (m, f) in P3002_PROTOCOLS.items()
+            if m == mode and (f.data_bits, f.parity) == (fmt.data_bits, fmt.parity)]
+    return x, (min(fits)[1] if fits else None)
+
+
+def uart_mismatch(line_baud: int, line_fmt: CharFormat, uart_baud: int,
+                  uart_fmt: CharFormat) -> str | None:
+    """Why a UART at `uart_baud`/`uart_fmt` garbles a line at `line_baud`/`line_fmt` (None: it
+    reads it): another baud, data bits or parity. ⚠ The stop bits are not compared (a receiver
+    checks the first only: an 8N1 sender is read at 8N2; the manual does not say)."""
+    if line_baud == uart_baud and (line_fmt.data_bits, line_fmt.parity) == (
+            uart_fmt.data_bits, uart_fmt.parity):
+        return None
+    return (f"the line runs {line_baud} baud {line_fmt}, the drive's UART {uart_baud} baud "
+            f"{uart_fmt} (P3.001 X / P3.002, L10509-L10557): every character garbled")
+
+
 def protocol_from_p3002(value: int) -> tuple[Mode, CharFormat]:
     """P3.002 -> (mode, format); raises ValueError outside 0..8 (L10548)."""
     try:

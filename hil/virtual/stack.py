@@ -23,7 +23,7 @@ from hil.faces.dio_face import DioFace
 from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
 from hil.faces.pulse_face import PulseFace
 from hil.model.drive import Drive
-from hil.model.events import AlarmChanged, PowerCycled
+from hil.model.events import AlarmChanged, ParamChanged, PowerCycled
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
 from hil.profile.params import ParamTable
@@ -142,8 +142,10 @@ def line_params(params: dict[str, int], url: str, mode: str | None) -> dict[str,
         st = parse_url(url, "serial").serial()
     except Exception:  # a bad URL is opening the line's to report
         return out
+    want = mode or "rtu"
+    x, p3002 = mb.uart_for_line(st.baud, mb.CharFormat(st.bytesize, st.parity,
+                                                       int(st.stopbits)), want)
     if "P3.001" not in out:
-        x = {b: k for k, b in mb.P3001_BAUD.items()}.get(st.baud)
         if x is None:
             log.warning("RS-485 line %s: the A3 offers %s baud (P3.001 X, L10524-L10527); its "
                         "drive cannot read this line", url,
@@ -151,15 +153,12 @@ def line_params(params: dict[str, int], url: str, mode: str | None) -> dict[str,
         else:
             out["P3.001"] = (ParamTable.load().spec("P3.001").default & ~0xF) | x
     if "P3.002" not in out:
-        want = mode or "rtu"
-        fits = [(fmt.stop_bits != st.stopbits, n) for n, (m, fmt) in mb.P3002_PROTOCOLS.items()
-                if m == want and (fmt.data_bits, fmt.parity) == (st.bytesize, st.parity)]
-        if fits:
-            out["P3.002"] = min(fits)[1]  # the same stop bits first
-        else:
+        if p3002 is None:
             log.warning("RS-485 line %s: no P3.002 protocol is %s %d%s (L10553-L10557); its "
                         "drive cannot read this line", url, want.upper(), st.bytesize,
                         st.parity)
+        else:
+            out["P3.002"] = p3002
     return out
 
 
@@ -306,6 +305,9 @@ class VirtualDriveStack:
     def _on_event(self, event: object) -> None:
         if isinstance(event, PowerCycled) and self.modbus is not None:
             self.modbus.power_cycle()
+        if (isinstance(event, ParamChanged) and event.name in ("P3.001", "P3.002")
+                and self.modbus is not None):
+            self.modbus.params_written()  # an SDO's too: the next frame (L16035, L16037)
         if (isinstance(event, AlarmChanged) and event.code == "AL020" and not event.active
                 and self.modbus is not None and self.drive.options.al020_rearm == "reset"):
             # P3.004 counts again from the reset, on the face's own (line) clock

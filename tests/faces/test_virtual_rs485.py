@@ -161,3 +161,77 @@ def test_a_plan_that_moves_the_drive_off_its_line_loses_it(tmp_path) -> None:
                       str(tmp_path / "baud.yaml"))
     res = run_plan(plan, load_bench(None), tmp_path)
     assert res.status == "pass", [(s.status, s.message) for s in res.steps]
+
+
+def test_p3002_written_over_sdo_moves_the_uart_from_the_next_frame(tmp_path) -> None:
+    """P3.002 has no power-cycle mark (L10546-L10557), and a new protocol is used from the next
+    frame (L16037), whichever way it was written: an SDO write of 8E1 RTU loses a 8N2 line, and
+    one of 8N2 brings it back. Only a power cycle took an SDO's P3.002 before (helper-78)."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import loads_plan
+    from hil.plan.runner import run_plan
+
+    plan = loads_plan(
+        "name: sdo_line\nsteps:\n"
+        "  - write: {P3.002: 7, via: modbus}\n"
+        "  - read: {P1.042: null, via: modbus, expect_error: timeout}\n"
+        "  - write: {P3.002: 6, via: sdo}\n"
+        "  - read: {P1.042: null, via: modbus}\n"
+        "  - write: {P3.002: 7, via: sdo}\n"
+        "  - read: {P1.042: null, via: modbus, expect_error: timeout}\n",
+        str(tmp_path / "sdo_line.yaml"))
+    res = run_plan(plan, load_bench(None), tmp_path)
+    assert res.status == "pass", [(s.status, s.message) for s in res.steps]
+
+
+def _bench_text(**swap: str) -> str:
+    from pathlib import Path
+
+    from hil.paths import fixture
+
+    text = Path(fixture("benches", "virtual.yaml")).read_text()
+    for old, new in swap.values():
+        assert old in text, old
+        text = text.replace(old, new)
+    return text
+
+
+@pytest.mark.parametrize("swap, said", [
+    ({}, None),
+    ({"u": ('"pty:auto?baud=38400"', '"pty:auto?baud=115200&parity=E&stopbits=1"')}, None),
+    ({"u": ('"pty:auto?baud=38400"', '"pty:auto?baud=230400"')},
+     "the line runs 230400 baud 8N2, the drive's UART 38400 baud 8N2"),
+    ({"p": ("      P3.000: 1 ", "      P3.002: 7\n      P3.000: 1 ")},
+     "the line runs 38400 baud 8N2, the drive's UART 38400 baud 8E1"),
+    ({"m": ("    param_via: modbus\n", "    param_via: modbus\n    modbus_mode: ascii\n"),
+      "p": ("      P3.000: 1 ", "      P3.002: 6\n      P3.000: 1 ")},
+     "the harness speaks ASCII, P3.002 = 6 is RTU"),
+])
+def test_a_bench_whose_drive_cannot_read_its_line_is_warned_of(swap, said, tmp_path) -> None:
+    """The line's URL and `modbus_mode` against the drive's P3.001 X / P3.002 (L10509-L10557),
+    said by `hil run` and on the recording's /log with the bench file and the drive's line (the
+    plan then only said "received nothing"; helper-78)."""
+    from hil.bench.bench import line_warnings, loads_bench
+
+    got = line_warnings(loads_bench(_bench_text(**swap), str(tmp_path / "b.yaml")))
+    if said is None:
+        assert got == []
+    else:
+        assert len(got) == 1 and said in got[0], got
+        assert got[0].startswith(f"{tmp_path / 'b.yaml'}:18: drives.drive1: ")
+
+
+def test_a_real_bench_is_judged_by_the_params_it_sets(tmp_path) -> None:
+    """A real drive's settings are unknown unless the bench's params set them: nothing is said
+    then; P3.001 = 9600 on a 38400 line is."""
+    from pathlib import Path
+
+    from hil.bench.bench import line_warnings, loads_bench
+    from hil.paths import fixture
+
+    text = Path(fixture("benches", "example-asda-a3-socketcan.yaml")).read_text()
+    bench = loads_bench(text, "real.yaml")
+    assert bench.rs485 and line_warnings(bench) == []
+    d = next(iter(bench.drives.values()))
+    d.params["P3.001"] = 0x0201
+    assert "drive's UART 9600 baud" in " ".join(line_warnings(bench))
