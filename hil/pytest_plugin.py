@@ -410,15 +410,24 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
 
 
 def _outcome(node: pytest.Item) -> tuple[str, str]:
-    """(status, reason) of a test whose teardown is running: its call phase's report."""
-    rep = node.stash.get(_REPORTS, {}).get("call")
+    """(status, reason) of a test whose teardown is running: its call phase's report (its
+    setup's where a fixture set up after the bench skipped it or failed under xfail)."""
+    reports = node.stash.get(_REPORTS, {})
+    rep = reports.get("call")
     if rep is None:
-        return "error", "the test did not run"
+        setup = reports.get("setup")
+        if setup is None or not setup.skipped:
+            return "error", "the test did not run"
+        rep = setup
     if rep.failed:
         crash = getattr(rep.longrepr, "reprcrash", None)
         what = crash.message.splitlines()[0] if crash is not None and crash.message else ""
+        if not what and isinstance(rep.longrepr, str):  # "[XPASS(strict)] reason"
+            what = rep.longrepr.splitlines()[0] if rep.longrepr else ""
         return "fail", f"test failed: {what}"[:300].rstrip(": ")
     xfail = getattr(rep, "wasxfail", None)
+    if xfail is not None:  # `pytest.xfail("why")` reads "reason: why"
+        xfail = str(xfail).removeprefix("reason: ")
     if rep.skipped and xfail is not None:  # pytest's "xfailed": it failed, as expected
         return "skipped", f"expected failure (xfail): {xfail}"[:300].rstrip(": ")
     if rep.skipped:  # `pytest.skip()` in the test: (path, line, message)

@@ -502,7 +502,7 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
     _drive_buses(v, spec, d, where, can, rs485)
     if process == "subprocess" and virtual:
         for kind, urls, bname in (("can", can, spec.can), ("rs485", rs485, spec.rs485)):
-            if bname and urls[bname].startswith("virtual:"):
+            if bname and _scheme_target(urls[bname])[0] == "virtual":
                 raise v.err(d.kline(kind), join(where, kind),
                             "a virtual: bus is in-process only; process: subprocess needs "
                             "zenoh: or socketcan:")

@@ -155,6 +155,7 @@ class ModbusSlave:
         self.wire = wire
         self._garbled = self._wire_mismatch()  # why every character is garbled (None: not)
         self._garble_noted = False
+        self._reread = False  # P3.001 / P3.002 written another way (`params_written`)
         self.stats: dict[str, int] = dict.fromkeys(
             ("bytes", "frames", "replies", "exceptions", "foreign", "broadcast", "bad_check",
              "dropped", "timeouts"), 0,
@@ -258,8 +259,8 @@ class ModbusSlave:
         char = self.line.char_time_ns
         for i, byte in enumerate(data):
             t = t_ns - (n - 1 - i) * char
-            if self._next_line is not None and self.settled:  # written another way
-                self._apply_line()
+            if (self._reread or self._next_line is not None) and self.settled:
+                self._take_written_line()  # written another way: from this frame on
                 char = self.line.char_time_ns
             if self.line.mode == "rtu":
                 self._rtu_byte(byte, t, char)
@@ -275,8 +276,8 @@ class ModbusSlave:
         char = self.line.char_time_ns
         for byte, t in zip(data, times_ns, strict=True):
             self._now = max(self._now, t)
-            if self._next_line is not None and self.settled:  # written another way
-                self._apply_line()
+            if (self._reread or self._next_line is not None) and self.settled:
+                self._take_written_line()  # written another way: from this frame on
                 char = self.line.char_time_ns
             if self.line.mode == "rtu":
                 self._rtu_byte(byte, t, char)
@@ -497,8 +498,15 @@ class ModbusSlave:
     def params_written(self) -> None:
         """P3.001 / P3.002 written another way (an SDO, a test): the next frame uses them, as
         after a write over the line (L16035, L16037; P3.002 has no ● mark, and P3.001's is for
-        digit Z, L10544). Taken at the next byte once nothing is in hand (`settled`)."""
-        self._after_write(P3_001, 4)
+        digit Z, L10544). Only a flag here (any thread: an SDO's arrives in the CANopen face's);
+        the reader's thread re-reads them at its next byte once nothing is in hand (`settled`)."""
+        self._reread = True
+
+    def _take_written_line(self) -> None:
+        if self._reread:
+            self._reread = False
+            self._after_write(P3_001, 4)
+        self._apply_line()
 
     def _after_write(self, address: int, count: int) -> None:
         """P3.001 / P3.002 written: the next frame uses them (L16035, L16037)."""

@@ -12,6 +12,7 @@ The faces only adapt protocols; the drive decides (docs/architecture.md).
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +27,7 @@ from hil.model.drive import Drive
 from hil.model.events import AlarmChanged, ParamChanged, PowerCycled
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
-from hil.profile.params import ParamTable
+from hil.profile.params import ParamTable, canonical
 from hil.protocol import modbus as mb
 from hil.record.topics import CAN_LATE_NS, can_line
 from hil.transport.can_bus import open_can
@@ -125,19 +126,29 @@ class DriveSpec:
     mechanics: Mechanics = field(default_factory=Mechanics)
     inputs: dict[int, bool] = field(default_factory=dict)  # DI levels at power-up
     state_path: Path | None = None  # retained parameters / battery-backed data
-    modbus_mode: str | None = None  # "rtu" / "ascii" (default: P3.002)
-    modbus_baud: int | None = None  # default: the URL's baud, else P3.001
+    modbus_mode: str | None = None  # "rtu" / "ascii": sets P3.002 with the URL (`line_params`)
+    modbus_baud: int | None = None  # the face's fixed baud (tests); default P3.001 X
     tpdo_defaults: str = "manual"  # CANopen PDO defaults: none, as printed (L17940-18124)
 
 
-def line_params(params: dict[str, int], url: str, mode: str | None) -> dict[str, int]:
+def line_params(params: dict[str, int], url: str, mode: str | None,
+                state_path: Path | str | None = None) -> dict[str, int]:
     """`params` with the drive's RS-485 settings, P3.001 digit X (baud) and P3.002 (protocol),
     set to the line the bench declares (`url`'s baud and character format, `mode` RTU or
     ASCII, default RTU) where `params` does not set them: a bench's drive is configured for its
     line (L10509-L10557). A line the A3 cannot run (a baud P3.001 X does not offer, 7 data bits
     in RTU) leaves them at their defaults, and the drive then reads garbage, as a real one would
-    (`ModbusSlave` `wire`)."""
+    (`ModbusSlave` `wire`). A value the drive retained (`state_path`'s params.json) is its own
+    setting, and stays."""
     out = dict(params)
+    given = set()
+    for name in params:  # any spelling the drive takes ("P3-2", "p3.002")
+        with contextlib.suppress(Exception):
+            given.add(canonical(name))
+    if state_path is not None:
+        with contextlib.suppress(Exception):
+            data = json.loads((Path(state_path) / "params.json").read_text())["parameters"]
+            given |= {canonical(n) for n in data}
     try:
         st = parse_url(url, "serial").serial()
     except Exception:  # a bad URL is opening the line's to report
@@ -145,14 +156,14 @@ def line_params(params: dict[str, int], url: str, mode: str | None) -> dict[str,
     want = mode or "rtu"
     x, p3002 = mb.uart_for_line(st.baud, mb.CharFormat(st.bytesize, st.parity,
                                                        int(st.stopbits)), want)
-    if "P3.001" not in out:
+    if "P3.001" not in given:
         if x is None:
             log.warning("RS-485 line %s: the A3 offers %s baud (P3.001 X, L10524-L10527); its "
                         "drive cannot read this line", url,
                         "/".join(map(str, mb.P3001_BAUD.values())))
         else:
             out["P3.001"] = (ParamTable.load().spec("P3.001").default & ~0xF) | x
-    if "P3.002" not in out:
+    if "P3.002" not in given:
         if p3002 is None:
             log.warning("RS-485 line %s: no P3.002 protocol is %s %d%s (L10553-L10557); its "
                         "drive cannot read this line", url, want.upper(), st.bytesize,
@@ -172,7 +183,7 @@ class VirtualDriveStack:
         if ident is not None:
             params.setdefault("P3.000", ident)
         if spec.rs485:
-            params = line_params(params, spec.rs485, spec.modbus_mode)
+            params = line_params(params, spec.rs485, spec.modbus_mode, spec.state_path)
         self.drive = (drive_factory or Drive)(
             name=spec.name,
             options=spec.options,

@@ -235,3 +235,35 @@ def test_a_real_bench_is_judged_by_the_params_it_sets(tmp_path) -> None:
     d = next(iter(bench.drives.values()))
     d.params["P3.001"] = 0x0201
     assert "drive's UART 9600 baud" in " ".join(line_warnings(bench))
+
+
+def test_the_line_leaves_a_retained_or_otherwise_spelt_setting_alone(tmp_path) -> None:
+    """A P3.001 / P3.002 the drive retained (`state_path`) or one its params spell another way
+    (`P3-2`, as `hil drive --params` keeps them) is the drive's own: the line does not overwrite
+    it (it reset the retained P3.001 to its default, CAN digit Z with it; helper-77)."""
+    import json
+
+    from hil.virtual.stack import line_params
+
+    (tmp_path / "params.json").write_text(json.dumps({"parameters": {"P3.001": 0x0401,
+                                                                     "P3.002": 7}}))
+    assert line_params({}, "pty:auto?baud=38400", None, tmp_path) == {}
+    assert line_params({"P3-1": 0x0201, "p3.2": 7}, "pty:auto?baud=38400", None) == {
+        "P3-1": 0x0201, "p3.2": 7}
+    with VirtualDriveStack(DriveSpec(rs485=f"pty:{tmp_path}/l?baud=38400",
+                                     state_path=tmp_path)) as stack:
+        assert stack.drive.params.get("P3.001") == 0x0401
+        assert stack.drive.params.get("P3.002") == 7
+    assert json.loads((tmp_path / "params.json").read_text())["parameters"]["P3.001"] == 0x0401
+
+
+def test_a_subprocess_bench_refuses_a_virtual_bus_in_any_case(tmp_path) -> None:
+    """`VIRTUAL:x` is the in-process bus too: refused on a `process: subprocess` bench as
+    `virtual:x` is (its drives could never reach the harness)."""
+    from hil.bench.bench import loads_bench
+    from hil.bench.yamlio import PlanFileError
+
+    text = _bench_text(p=("process: inproc", "process: subprocess"),
+                       c=('can0: "virtual:auto"', 'can0: "VIRTUAL:auto"'))
+    with pytest.raises(PlanFileError, match=r"drives\.drive1\.can: a virtual: bus is in-process"):
+        loads_bench(text, "b.yaml")

@@ -147,6 +147,23 @@ def test_skips(hil_drive):
 @pytest.mark.xfail(reason="flaky wiring")
 def test_xpasses(hil_drive):
     pass
+
+@pytest.fixture
+def needs_encoder(hil_drive):
+    pytest.skip("no encoder cable")
+
+@pytest.mark.hil
+def test_fixture_skips(hil_drive, needs_encoder):
+    pass
+
+@pytest.mark.hil
+def test_imperative_xfail(hil_drive):
+    pytest.xfail("known firmware bug")
+
+@pytest.mark.hil
+@pytest.mark.xfail(reason="must fail", strict=True)
+def test_strict_xpass(hil_drive):
+    pass
 '''
 
 
@@ -158,7 +175,7 @@ def test_xfail_skip_and_xpass_say_so_in_the_recording(pytester: pytest.Pytester,
     out = tmp_path / "out"
     result = pytester.runpytest_subprocess("-m", "hil", "-q", "-p", "no:cacheprovider",
                                            f"--hil-out={out}")
-    result.assert_outcomes(xfailed=1, skipped=1, xpassed=1)
+    result.assert_outcomes(xfailed=2, skipped=2, xpassed=1, failed=1)
     from hil.record.reader import Recording
 
     def result_of(part: str) -> dict:
@@ -172,6 +189,13 @@ def test_xfail_skip_and_xpass_say_so_in_the_recording(pytester: pytest.Pytester,
     assert (sk["status"], sk["reason"]) == ("skipped", "skipped: no brake fitted"), sk
     xp = result_of("test_xpasses")
     assert xp["status"] == "pass" and "expected to fail (xfail): flaky wiring" in xp["reason"]
+    fx = result_of("test_fixture_skips")  # a fixture set up after the bench skipped it
+    assert (fx["status"], fx["reason"]) == ("skipped", "skipped: no encoder cable"), fx
+    ix = result_of("test_imperative_xfail")
+    assert ix["reason"] == "expected failure (xfail): known firmware bug", ix
+    sx = result_of("test_strict_xpass")
+    assert sx["status"] == "fail" and "XPASS(strict)" in sx["reason"] and "must fail" in \
+        sx["reason"], sx
 
 
 def _shipped(name: str):
