@@ -244,8 +244,6 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                 ctx = StepContext(session, rec, plan, specs, cancel, steps)  # type: ignore[arg-type]
                 _idle_inputs(ctx)
                 _record_dut(ctx, bench)
-                for warning in line_warnings(bench):  # why Modbus may go unanswered
-                    rec.log("warning", warning, name="hil.bench")
                 if plan.params:
                     _initial_params(ctx, plan)
                 _apply_plan_wiring(ctx, plan)
@@ -350,7 +348,8 @@ def _record_dut(ctx: StepContext, bench: Bench) -> None:
 
 def record_bench(rec: Recorder, bench: Bench, options: dict[str, Any] | None = None) -> None:
     """The `hil.bench` and `hil.clock` metadata of a recording made on `bench`, on the clock
-    in use (a plan's, and a pytest test's through `hil_session`). `deviations`: the model's
+    in use (a plan's, and a pytest test's through `hil_session`), and on `/log` the bench's
+    `line_warnings`. `deviations`: the model's
     deliberate deviation knobs (`dev_*`) in effect, the bench's and the plan's `options`."""
     deviations = sorted({f"{name}.{k}={v}" for name, d in bench.drives.items()
                          for k, v in (dict(d.options) | dict(options or {})).items()
@@ -366,6 +365,8 @@ def record_bench(rec: Recorder, bench: Bench, options: dict[str, Any] | None = N
         bind(clk)
     rec.add_metadata("hil.clock", {"clock": clk.name, "epoch_ns": str(getattr(clk, "epoch_ns", 0)),
                                    "started_wall_ns": str(time.time_ns())})
+    for warning in line_warnings(bench):  # why Modbus may go unanswered (a plan's, a test's)
+        rec.log("warning", warning, name="hil.bench")
 
 
 def plan_stem(plan: Plan) -> str:

@@ -267,3 +267,29 @@ def test_a_subprocess_bench_refuses_a_virtual_bus_in_any_case(tmp_path) -> None:
                        c=('can0: "virtual:auto"', 'can0: "VIRTUAL:auto"'))
     with pytest.raises(PlanFileError, match=r"drives\.drive1\.can: a virtual: bus is in-process"):
         loads_bench(text, "b.yaml")
+
+
+def test_the_warning_is_on_the_recording_of_a_plan_and_of_a_pytest_test(tmp_path) -> None:
+    """`record_bench` (a plan's recording, and `hil_session`'s) logs each line warning on /log,
+    where a reviewer of the recording finds why Modbus went unanswered."""
+    from hil import clock as hclock
+    from hil.bench.bench import loads_bench
+    from hil.plan.runner import record_bench
+
+    class Rec:
+        def __init__(self) -> None:
+            self.logs: list[tuple] = []
+
+        def add_metadata(self, *_a) -> None:
+            pass
+
+        def log(self, level, text, name=None, **_kw) -> None:
+            self.logs.append((level, text, name))
+
+    bench = loads_bench(_bench_text(p=("      P3.000: 1 ", "      P3.002: 7\n      P3.000: 1 ")),
+                        str(tmp_path / "b.yaml"))
+    rec = Rec()
+    with hclock.use(hclock.VirtualClock()):
+        record_bench(rec, bench)
+    assert [(lv, name) for lv, _t, name in rec.logs] == [("warning", "hil.bench")]
+    assert "the drive's UART 38400 baud 8E1" in rec.logs[0][1]
