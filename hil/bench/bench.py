@@ -362,8 +362,7 @@ def line_warnings(bench: Bench) -> list[str]:
         if uart_baud is not None or uart_fmt is not None:
             garbled = mb.uart_mismatch(st.baud, fmt, uart_baud or st.baud, uart_fmt or fmt)
             if garbled:
-                why.append(garbled.replace(" (P3.001 X / P3.002, L10509-L10557): every "
-                                           "character garbled", ""))
+                why.append(garbled)
         if uart_mode is not None and uart_mode != d.modbus_mode:
             why.append(f"the harness speaks {d.modbus_mode.upper()}, P3.002 = {p3002} is "
                        f"{uart_mode.upper()}")

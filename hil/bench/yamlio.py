@@ -208,8 +208,7 @@ def _kind(v: Any) -> str:
     return f"{what} ({shorten(v)})"
 
 
-_TAGGED = {"bytes": "binary data", "date": "a date", "datetime": "a date and time",
-           "set": "a set"}
+_TAGGED = {"bytes": "binary data", "date": "a date", "datetime": "a date and time"}
 
 
 def level(v: Any) -> bool | None:

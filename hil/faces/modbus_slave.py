@@ -206,7 +206,9 @@ class ModbusSlave:
         """Why the UART cannot read the line (None: it can; `mb.uart_mismatch`)."""
         if self.wire is None:
             return None
-        return mb.uart_mismatch(*self.wire, self.line.baud, self.line.char_format)
+        why = mb.uart_mismatch(*self.wire, self.line.baud, self.line.char_format)
+        return None if why is None else (f"{why} (P3.001 X / P3.002, L10509-L10557): every "
+                                         "character garbled")
 
     def power_cycle(self) -> None:
         """Re-read P3.000 (● takes effect after a power cycle, L7014, L6722) and the line

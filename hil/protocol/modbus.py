@@ -407,7 +407,7 @@ def uart_mismatch(line_baud: int, line_fmt: CharFormat, uart_baud: int,
             uart_fmt.data_bits, uart_fmt.parity):
         return None
     return (f"the line runs {line_baud} baud {line_fmt}, the drive's UART {uart_baud} baud "
-            f"{uart_fmt} (P3.001 X / P3.002, L10509-L10557): every character garbled")
+            f"{uart_fmt}")
 
 
 def protocol_from_p3002(value: int) -> tuple[Mode, CharFormat]:
