@@ -240,6 +240,27 @@ def test_gear_phase_and_ratio_specs_fail_when_the_follower_cannot_keep_up(tmp_pa
     cycles = _cycles(fine.recording)
     assert max(c["max_gear_phase_error"] for c in cycles) <= 5
     assert any(c["gear_phase_error"] == {"axis2": 0} for c in cycles)
+    assert any(c["gear_ratio_judged"] == 1 for c in cycles)
+
+
+def test_gear_specs_on_a_run_with_no_gear_are_not_a_pass(tmp_path) -> None:
+    # with no gear engaged, no phase and no ratio is measured (0 every cycle): the gear specs
+    # passed on that. Judged from the first cycle that judges a gear, they are "not
+    # applicable" there, as a spec whose scenario the recording lacks (docs/timing.md)
+    plan = loads_plan("name: nogear\nsteps:\n"
+                      "  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
+                      "  - group_move: {axis: axis1, by: 20000, speed: 200000}\n"
+                      "  - group_wait: {rdy: [axis1], timeout: 5s}\n"
+                      "  - check_timing: {spec: group_gear_phase}\n"
+                      "  - check_timing: {spec: group_gear_ratio}\n"
+                      "  - group_stop: {}\n", "nogear.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    verdicts = [(s.verdicts[0].get("spec"), s.verdicts[0]["status"],
+                 s.verdicts[0].get("explanation", "")) for s in res.steps
+                if s.kind == "check_timing"]
+    assert [v[:2] for v in verdicts] == [("group_gear_phase", "skipped"),
+                                         ("group_gear_ratio", "skipped")], verdicts
+    assert all(c["gear_judged"] == 0 for c in _cycles(res.recording))
 
 
 def test_capture_interface_fills_the_register_of_its_type(tmp_path) -> None:
@@ -308,6 +329,22 @@ def test_group_steps_refuse_hostile_values_with_file_line() -> None:
              "group_command.par.3"),
             ("group_command: {axis: axis2, code: 6, par: {2: -3}}", "group_command.par.2"),
             ("group_command: {axis: axis2, code: 6, par: {0: 0.5}}", "group_command.par.0"),
+            # Par2 0 is no function of COMMAND 6; a ratio 1e15/1e-300 overflowed the cycle;
+            # GInInc is a rise (6) or a fall (7) a cycle, never negative (004:244-246)
+            ("group_command: {axis: axis2, code: 6, par: {1: 1, 2: 0, 3: 1, 4: 1}}",
+             "group_command.par.2"),
+            ("group_command: {axis: axis2, code: 6, par: {1: 1, 2: 1, 3: 1.0e+9, "
+             "4: 1.0e-300}}", "group_command.par.4"),
+            ("group_command: {axis: axis2, code: 6, par: {1: 1, 2: 1, 3: 1.0e+15, 4: 1}}",
+             "group_command.par.3"),
+            ("group_command: {axis: axis2, code: 6, par: {1: 1, 2: 1, 3: 1, 4: 1, 5: -1}}",
+             "group_command.par.5"),
+            ("group_command: {axis: axis2, code: 7, par: {5: -20}}", "group_command.par.5"),
+            # NumberByte is the object's size (004:250): 256 in one byte went out as 00
+            ("group_sdo: {axis: axis1, write: {index: 0x6060, bytes: 1, data: 256}}",
+             "group_sdo.write.data"),
+            ("group_sdo: {axis: axis1, write: {index: 0x6060, bytes: 2, data: -32769}}",
+             "group_sdo.write.data"),
             ("group_cam_table: {tab: [0], values: [0, 1]}", "group_cam_table.tab"),
             ("group_cam_table: {tab: 1, line: 2.5, values: [0, 1]}", "group_cam_table.line"),
             ("group_cam_table: {values: [0, .inf]}", "group_cam_table.values"),
@@ -323,6 +360,12 @@ def test_group_steps_refuse_hostile_values_with_file_line() -> None:
         with pytest.raises(PlanFileError) as ei:
             check_plan(loads_plan(plan, "p.yaml"), bench)
         assert str(ei.value).startswith(f"p.yaml:4: steps[1].{field}: "), (step, str(ei.value))
+    # YAML 1.1 reads 1e9 as text: the message says so and how to write it as a number
+    with pytest.raises(PlanFileError, match=r"p\.yaml:4: steps\[1\]\.group_gear\.in: '1e9': .*"
+                       r"YAML reads 1e9 as text.*\(1\.0e\+9\)"):
+        check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
+                              "  - group_gear: {axis: axis2, master: axis1, in: 1e9}\n",
+                              "p.yaml"), bench)
     with pytest.raises(PlanFileError, match=r"p\.yaml:3: steps\[0\]\.group\.heartbeat: "):
         check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms, "
                               "heartbeat: 1.6ms}\n", "p.yaml"), bench)
@@ -589,3 +632,35 @@ steps:
     moving = [m["speed_rpm"] for m in _states(res.recording) if m["speed_rpm"] > 1]
     rpm = moving[len(moving) // 3: 2 * len(moving) // 3]  # the steady middle of the run
     assert max(rpm) - min(rpm) < 1.0, rpm
+
+
+def test_a_second_group_on_enabled_axes_keeps_them_enabled_every_cycle(tmp_path) -> None:
+    # a new group starts with no feedback yet; taking that for switch on disabled it sent
+    # 0x06 (shutdown, transition 8) to an enabled drive and then flipped 0x06 / 0x0F every
+    # cycle, the move running in half the cycles. It reads 6041h first (CiA 402 states)
+    plan = loads_plan("""name: twice
+steps:
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_stop: {}
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_move: {axis: axis1, by: 10000, speed: 20000}
+  - group_wait: {rdy: [axis1], timeout: 5s}
+  - group: {axes: [axis1, axis2], cycle: 2ms}
+  - group_move: {axis: axis1, by: 10000, speed: 20000}
+  - group_wait: {rdy: [axis1], timeout: 5s}
+  - group_stop: {}
+""", "twice.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
+    msgs = [(t, lt, json.loads(d)) for t, lt, d in messages(res.recording)
+            if t in ("/plan/steps", "/can/can0/raw", "/group/axes/cycle")]
+    second = next(lt for t, lt, d in msgs if t == "/plan/steps" and d["index"] == 2)
+    words = [int(d["data"][8:10], 16) for t, lt, d in msgs  # 6040h, low byte
+             if t == "/can/can0/raw" and d["id"] in (0x201, 0x202) and lt > second]
+    status = [d["status"] for t, lt, d in msgs if t == "/group/axes/cycle" and lt > second]
+    assert len(words) > 600 and set(words) == {0x0F}
+    # each new group's first cycle has no feedback yet (status 0, never); then 3 throughout
+    never = {"axis1": 0, "axis2": 0}
+    assert status.count(never) == 2
+    assert len(status) > 600 and all(s == {"axis1": 3, "axis2": 3} for s in status
+                                     if s != never)

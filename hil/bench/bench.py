@@ -24,6 +24,7 @@ from hil.bench.yamlio import (
     level,
     load_yaml_file,
     load_yaml_text,
+    text_number_hint,
 )
 from hil.paths import fixture
 from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS, N_DO, N_PHYSICAL_DI
@@ -653,10 +654,8 @@ def _drive_model(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
             if key == "brake_do" or val is None:
                 continue
             if isinstance(val, bool) or not isinstance(val, int | float):
-                hint = (" (YAML reads an exponent as a number only with a dot: write 1.0e-4)"
-                        if isinstance(val, str) and _exponent_text(val) else "")
                 raise v.err(m.kline(key), join(join(where, "mechanics"), key),
-                            f"{val!r} is not a number{hint}")
+                            f"{val!r} is not a number{text_number_hint(val)}")
             if not abs(val) <= 1e12:  # NaN, inf, an int too long for a float (no OverflowError)
                 raise v.err(m.kline(key), join(join(where, "mechanics"), key),
                             f"{str(val)[:40]} is not a finite number within ±1e12")
@@ -674,14 +673,6 @@ def _drive_model(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
         except (ValueError, TypeError) as e:
             raise v.err(m.line, join(where, "options"), str(e)) from None
         spec.options = _plain(m)
-
-
-_EXPONENT = re.compile(r"^[+-]?\d+(\.\d*)?[eE][+-]?\d+$")
-
-
-def _exponent_text(text: str) -> bool:
-    """`1e-4`: a number to the eye, text to YAML 1.1 (it wants `1.0e-4`)."""
-    return bool(_EXPONENT.match(text.strip()))
 
 
 def _plain(obj: Any) -> Any:

@@ -202,13 +202,26 @@ def _kind(v: Any) -> str:
     if isinstance(v, int | float):
         return f"a number ({shorten(v)})"
     if isinstance(v, str):
-        return f"text ({shorten(v)})"
+        return f"text ({shorten(v)}){text_number_hint(v)}"
     # a YAML tag's value (!!binary, a date): named as what it is, not as text
     what = _TAGGED.get(type(v).__name__, f"a {type(v).__name__}")
     return f"{what} ({shorten(v)})"
 
 
 _TAGGED = {"bytes": "binary data", "date": "a date", "datetime": "a date and time"}
+# what YAML 1.1 (PyYAML) reads as text although it looks like a number: an exponent without
+# a dot or without a sign (1e9, 1.0e15, 2E-3)
+_EXP_TEXT = re.compile(r"([-+]?)(\d+)(\.\d*)?([eE])([-+]?)(\d+)")
+
+
+def text_number_hint(v: Any) -> str:
+    """For text such as `1e9`, which YAML 1.1 does not read as a number: how to write it."""
+    m = _EXP_TEXT.fullmatch(v.strip()) if isinstance(v, str) else None
+    if m is None:
+        return ""
+    sign, whole, frac, e, esign, exp = m.groups()
+    fixed = f"{sign}{whole}{frac if frac and len(frac) > 1 else '.0'}{e}{esign or '+'}{exp}"
+    return f": YAML reads {v.strip()} as text, a number needs a dot and a signed exponent ({fixed})"
 
 
 def level(v: Any) -> bool | None:

@@ -236,6 +236,25 @@ class CommandError(ValueError):
     """A COMMAND the group cannot accept (Control stays set; the step names why)."""
 
 
+# a gear's In and Out, and the ratio In/Out: a group's choice, the seed gives no limit.
+# 1e9 / 1e-300 overflowed the cycle; a slave moved 1e9 times its master is no axis either
+RATIO_MAX = 1e9
+
+
+def ratio_problem(gin: float, gout: float) -> str:
+    """Why In/Out is no gear ratio ('' when it is one); In 0 is a ratio of 0."""
+    if not (math.isfinite(gin) and math.isfinite(gout)):
+        return f"In/Out = {gin:g}/{gout:g}: finite numbers"
+    if gout == 0:
+        return f"Out 0: the ratio In/Out = {gin:g}/0 needs Out"
+    if abs(gin) > RATIO_MAX or abs(gout) > RATIO_MAX:
+        return f"In/Out = {gin:g}/{gout:g}: each within ±{RATIO_MAX:g}"
+    if gin and not 1 / RATIO_MAX <= abs(gin / gout) <= RATIO_MAX:
+        return (f"ratio In/Out = {gin:g}/{gout:g}: within {1 / RATIO_MAX:g} ~ {RATIO_MAX:g} "
+                "(a slave moved 1e9 times its master is no axis)")
+    return ""
+
+
 # PG magnitudes per COMMAND code (004:220 "maximální akcelerace / decelerace / rychlost"):
 # Par0 Acc, Par1 Dec, Par2 PosSpeed (code 1's Par2 is a signed speed); 0 keeps the register
 MAGNITUDES = {1: ((0, "Acc"),), 2: ((0, "Acc"), (1, "Dec"), (2, "PosSpeed")),
@@ -467,6 +486,8 @@ class ServoAxis:
     _ever: bool = False
     _last_pos: float | None = None
     _sent: list[float] = field(default_factory=list)  # the last set-points sent, newest last
+    _cw: int = -1  # the state-keeping controlword sent last (-1: none yet)
+    _cw_new: bool = False  # it changed in the last cycle: its effect is not in the feedback
 
     @property
     def follow_error(self) -> float:
@@ -525,8 +546,8 @@ class ServoAxis:
             g = self.gea  # Par3/4 In/Out, Par5 IncIn; cams: Par6 CamLine, Par7 CamLen, Par8
             names = list(axes)  # CamScale, Par9 IniPosition, Par10 CamTab, Par12 ServoMode,
             idx = int(p[0])  # Par13 CamIncPosition (004:244)
-            kind = int(p[2]) or 1
-            if kind not in (1, 2, 3):
+            kind = int(p[2])
+            if kind not in (1, 2, 3) or p[2] != kind:
                 raise CommandError(f"Par2 {p[2]:g}: 1 gear, 2 return cam, 3 incremental cam")
             src = int(p[1])
             if src not in (1, 2, 3):  # 0 "GEA inactive", 4 the master's ExtPosition (004:230,
@@ -536,8 +557,9 @@ class ServoAxis:
             if not 0 <= idx < len(names) or p[0] != idx:
                 raise CommandError(f"Par0 {p[0]:g}: the master is an axis index 0-"
                                    f"{len(names) - 1} of the group")
-            if not p[4]:
-                raise CommandError("Par4 Out 0: the ratio In/Out needs Out != 0")
+            why = ratio_problem(p[3], p[4])
+            if why:
+                raise CommandError(f"Par3/Par4 {why}")
             if names[idx] == self.name:
                 raise CommandError(f"Par0 {idx}: an axis cannot be its own master")
             chain = gear_cycle(axes, self.name, names[idx], src)
@@ -648,13 +670,25 @@ class ServoAxis:
         Control bit 0 or 1 falls; cleared once enabled): 0x06 from switch on disabled, 0x07
         from ready to switch on, 0x0F from switched on (CiA 402). It never re-enables what
         something else switched off (the safe state, a plan step, the drive), and never
-        leaves a quick stop the drive is in (0x0B keeps it)."""
-        if self.control & 0x1:
-            return 0x80
-        if self.control & 0x2:
-            return 0x06
+        leaves a quick stop the drive is in (0x0B keeps it).
+
+        The feedback a cycle reads answers the controlword of two cycles before (the RPDO
+        of cycle k acts at SYNC k, the TPDO of SYNC k + 1 shows it, L17051-17057). So a
+        changed word is held one more cycle: judged on a statusword that does not show it
+        yet, the next word would undo it, and the two would alternate every cycle."""
+        if self.control & 0x3:
+            self._cw, self._cw_new = -1, False
+            return 0x80 if self.control & 0x1 else 0x06
+        cw = self._state_word()
+        if self._cw_new:
+            cw = self._cw  # the last change is not in the feedback yet: hold it
+        self._cw_new = cw != self._cw
+        self._cw = cw
+        return cw
+
+    def _state_word(self) -> int:
         sw = self.statusword
-        if sw & 0x4F in (0x00, 0x40):  # not ready / switch on disabled (or no feedback yet)
+        if sw & 0x4F in (0x00, 0x40):  # not ready / switch on disabled
             return 0x06 if self.enabling else 0x00
         if sw & 0x6F == 0x21:  # ready to switch on
             return 0x07 if self.enabling else 0x06
@@ -762,6 +796,8 @@ class AxisGroup:
         self.held: list[str] = []  # followers holding: their master is lost or faulted
         self.cams: dict[int, list[float]] = {0: [], 1: []}  # CamTab 0/1 (004:232)
         self.command_errors: dict[str, str] = {}  # axis -> why its COMMAND is refused
+        self.gear_judged = 0  # geared followers whose phase the last cycle judged
+        self.gear_ratio_judged = 0  # ... and whose ratio (their master moved enough)
         self._lock = threading.Lock()
 
     # -- setup ---------------------------------------------------------------------------
@@ -820,6 +856,7 @@ class AxisGroup:
         positions are the reference; then the phase error is how far the follower drifted
         from In/Out x the master's travel, the ratio error the measured ratio's relative
         error once the master moved MIN_TRAVEL. Source 3 (ServoTick) counts cycles."""
+        self.gear_judged = self.gear_ratio_judged = 0
         for a in self.axes:
             g = a.gea
             m = masters.get(g.master)
@@ -841,8 +878,10 @@ class AxisGroup:
             ratio = g.gin / g.gout
             df, dm = a.position - a._gear_ref[0], mv - a._gear_ref[1]
             a.gear_phase_error = df - ratio * dm
+            self.gear_judged += 1
             if abs(ratio * dm) >= MIN_TRAVEL:  # the follower's travel: whole increments
                 a.gear_ratio_error = abs(df / dm - ratio) / abs(ratio)
+                self.gear_ratio_judged += 1
 
     # -- the cycle -----------------------------------------------------------------------
     def start(self) -> None:
@@ -962,6 +1001,8 @@ class AxisGroup:
                                default=0.0)),
                            "gear_phase_error": {a.name: round(a.gear_phase_error)
                                                 for a in self.axes if a.gea.mode == 1},
+                           "gear_judged": self.gear_judged,
+                           "gear_ratio_judged": self.gear_ratio_judged,
                            "max_gear_phase_error": round(max(
                                (abs(a.gear_phase_error) for a in self.axes), default=0.0)),
                            "max_gear_ratio_error": round(max(

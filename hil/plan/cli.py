@@ -211,6 +211,14 @@ def main(args: argparse.Namespace) -> int:
         if bad:
             for e in bad:
                 print(f"hil run: {e}", file=sys.stderr)
+            # the files that did load are checked against the bench too: an error there
+            # is named now, not in the next run once the first file is mended
+            specs = timing_specs()
+            for p in loaded:
+                try:
+                    check_plan(p, bench, specs)
+                except PlanFileError as e:
+                    print(f"hil run: {e}", file=sys.stderr)
             return 2
         plans = select(loaded, args.keyword, args.marker)
     except PlanFileError as e:

@@ -306,6 +306,10 @@ class GroupCycle(TypedDict):
     max_follow_error: int
     cam_follow_error: int
     gear_phase_error: Annotated[dict[str, Any], F("a geared follower's drift from its master")]
+    gear_judged: Annotated[int, F("geared followers whose phase this cycle judged (the "
+                                  "reference taken, docs/group.md)")]
+    gear_ratio_judged: Annotated[int, F("geared followers whose ratio this cycle judged (the "
+                                        "master moved 1000 increments since the reference)")]
     max_gear_phase_error: int
     max_gear_ratio_error: float
 

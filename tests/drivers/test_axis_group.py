@@ -239,7 +239,7 @@ def test_command_6_takes_its_cam_from_the_cam_memory() -> None:
                      ([0, 4, 3, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "ExtPosition"),
                      ([0, 0, 3, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "0 is no gear"),
                      ([9, 1, 3, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "axis index"),
-                     ([0, 1, 3, 1, 0, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "Out != 0"),
+                     ([0, 1, 3, 1, 0, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "needs Out"),
                      ([0, 1, 2, 1, 1, 0, 0, 1, 1, 0, 1, 0, 0, 0, 0], "2 points or more"),
                      ([0, 1, 2, 1, 1, 0, 0, 2, 1, 0, 5, 0, 0, 0, 0], "CamTab 5"),
                      ([0, 1, 9, 1, 1, 0, 0, 2, 1, 0, 1, 0, 0, 0, 0], "Par2 9")):
@@ -585,3 +585,64 @@ def test_abort_with_par1_0_brakes_with_the_pg_s_dec() -> None:
         group.cycle()
         n += 1
     assert 45 <= n <= 55  # 20000 / 400000 = 50 ms at 1 ms cycles (with Acc it took 200)
+
+
+class _LaggingDrive:
+    """A CiA 402 drive as the group sees it over PDOs: the TPDO of SYNC k shows the state
+    before the RPDO of cycle k acts (L17051-17057). States: 0x40 switch on disabled, 0x21
+    ready, 0x23 switched on, 0x27 operation enabled."""
+
+    def __init__(self, state: int) -> None:
+        self.state = state
+
+    def cycle(self, cw: int) -> int:
+        shown = self.state
+        cmd = cw & 0x0F
+        if cmd & 0x02 == 0:
+            self.state = 0x40
+        elif cmd & 0x07 == 0x06:
+            self.state = 0x21  # 2, 6 or 8
+        elif cmd == 0x07 and self.state in (0x21, 0x27):
+            self.state = 0x23
+        elif cmd == 0x0F and self.state in (0x21, 0x23):
+            self.state = 0x27  # 3 + 4 from ready (L18276)
+        return shown
+
+
+def test_the_group_holds_a_changed_controlword_until_the_feedback_can_show_it() -> None:
+    # an enabled axis switched off by somebody else (an SDO shutdown: ready to switch on):
+    # the feedback lags the RPDO by a cycle, so a group that judges each cycle afresh undid
+    # its own word, 0x06 and 0x0F alternating for ever. Held a cycle, it settles off
+    from hil.drivers.axis_group import ServoAxis
+    ax, drive = ServoAxis("a", 1), _LaggingDrive(0x27)
+    ax.statusword = 0x27
+    sent = []
+    for k in range(40):
+        if k == 10:
+            drive.state = 0x21  # 6040h = 6 written over SDO between two cycles
+        cw = ax.controlword()
+        sent.append(cw)
+        ax.on_feedback(drive.cycle(cw), 0, 0.002)
+    assert sent[:10] == [0x0F] * 10
+    assert sent[-20:] == [0x06] * 20 and drive.state == 0x21  # stays off: not re-enabled
+    # and the walk up from switch on disabled still takes a state a word
+    ax, drive = ServoAxis("b", 2), _LaggingDrive(0x40)
+    ax.statusword = 0x40
+    for _ in range(12):
+        ax.on_feedback(drive.cycle(ax.controlword()), 0, 0.002)
+    assert drive.state == 0x27 and ax.status == 3
+
+
+@pytest.mark.parametrize(("par", "why"), [
+    ({2: 0.0, 3: 1.0, 4: 1.0}, "Par2 0"),  # 1 gear, 2 + CamType a cam (004:244)
+    ({2: 1.0, 3: 1e15, 4: 1e-300}, "Par3/Par4"),  # In/Out = inf: the cycle overflowed
+])
+def test_command_6_refuses_what_is_no_gear(par: dict[int, float], why: str) -> None:
+    from hil.drivers.axis_group import CommandError, ServoAxis
+    axes = {"m": ServoAxis("m", 1), "f": ServoAxis("f", 2)}
+    f = axes["f"]
+    f.command, f.par = 6, [par.get(i, 0.0) for i in range(15)]
+    f.par[1] = 1.0  # source: the master's WritePosition
+    with pytest.raises(CommandError, match=why):
+        f.accept_command(axes)
+    assert f.gea.mode == 0 and f.command == 6  # refused: nothing engaged, Control stays

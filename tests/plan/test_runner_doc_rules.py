@@ -39,10 +39,15 @@ def test_every_bad_plan_file_is_named_not_only_the_first(tmp_path, capsys):
     good = _plan(tmp_path, "ok", OK)
     bad1 = _plan(tmp_path, "bad1", "name: bad1\nsteps:\n  - wait: 10 parsecs\n")
     bad2 = _plan(tmp_path, "bad2", "name: bad2\nsteps:\n  - di: {SON: maybe}\n")
+    # a file that parses but the bench refuses (no such drive): named beside the others
+    bad3 = _plan(tmp_path, "bad3", "name: bad3\nsteps:\n  - expect: {state: FAULT}\n"
+                 "    drive: nosuch\n")
     for extra in (["--check"], ["--out", str(tmp_path / "out")]):
-        assert hil(["run", "-q", "-j", "1", *extra, good, bad1, bad2]) == 2
+        assert hil(["run", "-q", "-j", "1", *extra, good, bad1, bad2, bad3]) == 2
         err = capsys.readouterr().err
         assert "bad1.yaml:3: steps[0].wait" in err and "bad2.yaml:3: steps[0].di.SON" in err
+        assert "bad3.yaml:3: steps[0].drive: bench 'virtual' has no drive 'nosuch'" in err
+        assert "ok.yaml" not in err
     assert not (tmp_path / "out").exists()  # nothing ran
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from hil import clock
-from hil.bench.yamlio import Checker, join
+from hil.bench.yamlio import Checker, join, text_number_hint
 from hil.drivers.axis_group import (
     CAM_MEMORY,
     CAPTURE_FALLING,
@@ -25,6 +25,7 @@ from hil.drivers.axis_group import (
     CAPTURE_ZERO,
     MAGNITUDES,
     RAMP_TYPES,
+    RATIO_MAX,
     STATUS_FAULT,
     STATUS_LOST,
     STATUS_NEVER,
@@ -33,6 +34,7 @@ from hil.drivers.axis_group import (
     ServoAxis,
     gear_cycle,
     interpolation_period,
+    ratio_problem,
     worst_case_bits,
 )
 from hil.plan.context import Outcome, StepFailed
@@ -64,7 +66,8 @@ def _num(v: Checker, m: Any, key: str, where: str, lo: float, hi: float,
         return default
     val = m[key]
     if isinstance(val, bool) or not isinstance(val, int | float) or not lo <= val <= hi:
-        raise v.err(m.kline(key), join(where, key), f"{val!r}: a number {lo:g} ~ {hi:g}")
+        raise v.err(m.kline(key), join(where, key),
+                    f"{val!r}: a number {lo:g} ~ {hi:g}{text_number_hint(val)}")
     return float(val)
 
 
@@ -118,17 +121,14 @@ def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
     """What a gear and a cam share: axis, master, In/Out (neither 0), the master's source."""
     out = {"axis": _axis_name(v, m, "axis", where),
            "master": _axis_name(v, m, "master", where),
-           "gin": _num(v, m, "in", where, -1e9, 1e9, 1),
-           "gout": _num(v, m, "out", where, -1e9, 1e9, 1)}
-    if out["gout"] == 0:
-        raise v.err(m.kline("out"), join(where, "out"), "0: a gear ratio In/Out needs Out")
+           "gin": _num(v, m, "in", where, -RATIO_MAX, RATIO_MAX, 1),
+           "gout": _num(v, m, "out", where, -RATIO_MAX, RATIO_MAX, 1)}
     if out["gin"] == 0:
         raise v.err(m.kline("in"), join(where, "in"),
                     "ratio 0: nothing would move (group_command 7 ramps a gear out)")
-    if not 1e-9 <= abs(out["gin"] / out["gout"]) <= 1e9:  # 1e9 / 1e-300 overflowed the cycle
-        raise v.err(m.kline("out"), join(where, "out"),
-                    f"ratio In/Out = {out['gin']:g}/{out['gout']:g}: within 1e-9 ~ 1e9 "
-                    "(a slave moved 1e309 times the master would be no axis)")
+    why = ratio_problem(out["gin"], out["gout"])
+    if why:
+        raise v.err(m.kline("out") if "out" in m else m.line, join(where, "out"), why)
     if out["axis"] == out["master"]:
         raise v.err(line, where, "an axis cannot be its own master")
     src = m.get("source", "write")
@@ -404,6 +404,9 @@ class Group(StepKind):
         for a in axes:
             cia = drives[a.name].cia
             a.position = float(cia.read(0x6064, 0))
+            # the state it is in: the first RPDOs go out before any TPDO answers, and an
+            # axis taken for switch on disabled would be sent 0x06 (shutdown) when enabled
+            a.statusword = cia.read(0x6041, 0)
             group.connect(a)
             cia.write(0x60C1, 1, round(a.position))  # the set-point where it stands
         group.start()
@@ -680,7 +683,8 @@ class GroupCommand(_OneAxis):
                 seen.add(i)
                 if not _finite(val):
                     raise v.err(pm.kline(k), join(where, f"par.{k}"),
-                                f"{val!r}: a finite number within ±{_BIG:g}")
+                                f"{val!r}: a finite number within ±{_BIG:g}"
+                                f"{text_number_hint(val)}")
                 if code == 6 and i in (0, 1, 2, 6, 7, 10, 12) and val != int(val):
                     raise v.err(pm.kline(k), join(where, f"par.{k}"),
                                 f"{val!r}: a whole number (an index or a code, 004:244)")
@@ -690,9 +694,11 @@ class GroupCommand(_OneAxis):
                                 f"{val!r}: PG.{what} is a maximum, not negative (004:220; 0 "
                                 "keeps the register)")
                 par[i] = float(val)
-        if code == 6 and par[2] not in (0.0, 1.0, 2.0, 3.0):
-            raise v.err(m.kline("par"), join(where, "par.2"),
-                        f"{par[2]:g}: 1 gear, 2 return cam, 3 incremental cam (004:244)")
+        if code == 6:
+            _sync_on_pars(v, m, where, par)
+        if code == 7 and par[5] < 0:  # GInInc: "a positive number" (004:246)
+            raise v.err(_par_line(m, 5), join(where, "par.5"),
+                        f"{par[5]:g}: GInInc, the ratio's fall a cycle, is positive (004:246)")
         return GroupCommandArgs(_axis_name(v, m, "axis", where), code, par,
                                 v.duration(m, "timeout", where, 5 * S))
 
@@ -718,6 +724,30 @@ class GroupCommand(_OneAxis):
 
     def describe(self) -> str:
         return f"group_command {self.args.axis} {self.args.code}"
+
+
+def _par_line(m: Any, i: int) -> int:
+    """The line of Par `i` in a `par:` mapping (keyed 3 or "3"), else of `par:`."""
+    pm = m.get("par")
+    for k in (i, str(i)):
+        if isinstance(pm, dict) and k in pm:
+            return pm.kline(k)
+    return m.kline("par") if "par" in m else m.line
+
+
+def _sync_on_pars(v: Checker, m: Any, where: str, par: list[float]) -> None:
+    """COMMAND 6 (004:244): Par2 1 gear, 2 + CamType a cam; Par3/Par4 GIn/GOut, a ratio
+    as `group_gear` takes it; Par5 GInInc, the ratio's rise a cycle, not negative."""
+    if par[2] not in (1.0, 2.0, 3.0):
+        raise v.err(_par_line(m, 2), join(where, "par.2"),
+                    f"{par[2]:g}: 1 gear, 2 return cam, 3 incremental cam (004:244)")
+    why = ratio_problem(par[3], par[4])
+    if why:
+        i = 3 if abs(par[3]) > RATIO_MAX >= abs(par[4]) > 0 else 4  # else Out or the ratio
+        raise v.err(_par_line(m, i), join(where, f"par.{i}"), why)
+    if par[5] < 0:
+        raise v.err(_par_line(m, 5), join(where, "par.5"),
+                    f"{par[5]:g}: GInInc, the ratio's rise a cycle, is not negative (004:244)")
 
 
 class GroupSdo(_OneAxis):
@@ -747,6 +777,13 @@ class GroupSdo(_OneAxis):
                else 0}
         if out["index"] < 0:
             raise v.err(r.line, w, "needs `index:`")
+        n = out["bytes"]
+        if op == "write" and not -(1 << (8 * n - 1)) <= out["data"] < 1 << (8 * n):
+            # NumberByte is the object's size (004:250): a value it cannot hold would go on
+            # the wire cut to its low bytes, 256 in 1 byte as 0
+            raise v.err(r.kline("data") if "data" in r else r.line, join(w, "data"),
+                        f"{out['data']} does not fit in {n} byte(s): "
+                        f"{-(1 << (8 * n - 1))} ~ {(1 << (8 * n)) - 1}")
         out["expect"] = {}
         if "expect" in m:
             e = v.mapping(m["expect"], m.kline("expect"), join(where, "expect"))
