@@ -260,3 +260,32 @@ def test_a_virtual_time_plan_collects_the_older_gc_generations_seldom(tmp_path,
         assert clock.current() is clock.REAL
     finally:
         gc.set_threshold(*before)
+
+
+def test_another_process_with_another_hash_seed_records_the_same_messages(tmp_path) -> None:
+    # the determinism of tests/test_plans_hil.py runs both runs in one process, so one hash
+    # seed: a set of names iterated into a message would agree with itself there. Here the
+    # same plans run in a child `hil run` with another PYTHONHASHSEED (plans that touch the
+    # PLC's pulse train, the PR engine, the absolute encoder, capture, SYNC and STO)
+    import os
+    import subprocess
+    import sys
+
+    from tests.test_plans_hil import messages
+
+    names = ["plc_home_md1", "pr_jump_chain", "absolute_overflow", "capture_z",
+             "fault_sync_ip", "sto_both"]
+    seed = "1" if os.environ.get("PYTHONHASHSEED") != "1" else "2"
+    out = tmp_path / "child"
+    cmd = [sys.executable, "-m", "hil.cli", "run", "-q", "-j", "1", "--out", str(out), *names]
+    done = subprocess.run(cmd, env={**os.environ, "PYTHONHASHSEED": seed}, timeout=300,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    for name in names:
+        here = run_plan(load_plan(find_plans([name])[0]), BUILTIN, tmp_path / name,
+                        reports=False)
+        first, second = messages(here.recording), messages(str(out / f"{name}.mcap"))
+        assert len(first) == len(second), name
+        diff = next((i for i, (a, b) in enumerate(zip(first, second, strict=True)) if a != b),
+                    None)
+        assert diff is None, f"{name}: message {diff} differs: {first[diff]} vs {second[diff]}"
