@@ -260,6 +260,9 @@ def test_gear_specs_on_a_run_with_no_gear_are_not_a_pass(tmp_path) -> None:
                 if s.kind == "check_timing"]
     assert [v[:2] for v in verdicts] == [("group_gear_phase", "skipped"),
                                          ("group_gear_ratio", "skipped")], verdicts
+    # and a check_timing step that judged nothing fails, as any (nothing judged is no pass)
+    assert not res.passed
+    assert [s.status for s in res.steps if s.kind == "check_timing"] == ["fail", "fail"]
     assert all(c["gear_judged"] == 0 for c in _cycles(res.recording))
 
 
@@ -340,6 +343,16 @@ def test_group_steps_refuse_hostile_values_with_file_line() -> None:
             ("group_command: {axis: axis2, code: 6, par: {1: 1, 2: 1, 3: 1, 4: 1, 5: -1}}",
              "group_command.par.5"),
             ("group_command: {axis: axis2, code: 7, par: {5: -20}}", "group_command.par.5"),
+            # the side to change is named: a too-small ratio is In's, a too-large one Out's
+            ("group_command: {axis: axis2, code: 6, par: {1: 1, 2: 1, 3: 1.0e-12, 4: 1}}",
+             "group_command.par.3"),
+            ("group_gear: {axis: axis2, master: axis1, in: 1.0e-12}", "group_gear.in"),
+            ("group_gear: {axis: axis2, master: axis1, out: 1.0e-12}", "group_gear.out"),
+            # reads come back unsigned in NumberByte bytes: -4 or 256 from 1 byte never match
+            ("group_sdo: {axis: axis1, read: {index: 0x6060, bytes: 1}, expect: {data: -4}}",
+             "group_sdo.expect.data"),
+            ("group_sdo: {axis: axis1, read: {index: 0x6060, bytes: 1}, expect: {data: 256}}",
+             "group_sdo.expect.data"),
             # NumberByte is the object's size (004:250): 256 in one byte went out as 00
             ("group_sdo: {axis: axis1, write: {index: 0x6060, bytes: 1, data: 256}}",
              "group_sdo.write.data"),
@@ -366,6 +379,13 @@ def test_group_steps_refuse_hostile_values_with_file_line() -> None:
         check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
                               "  - group_gear: {axis: axis2, master: axis1, in: 1e9}\n",
                               "p.yaml"), bench)
+    # a quoted number is text for the same reason; where no number is wanted, no hint
+    for step, hint in (("group_gear: {axis: axis2, master: axis1, in: '1.0e+9'}",
+                        "write it without quotes"), ("group: 1e5", None)):
+        with pytest.raises(PlanFileError) as ei:
+            check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms}\n"
+                                  f"  - {step}\n", "p.yaml"), bench)
+        assert (hint in str(ei.value)) if hint else "YAML reads" not in str(ei.value)
     with pytest.raises(PlanFileError, match=r"p\.yaml:3: steps\[0\]\.group\.heartbeat: "):
         check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms, "
                               "heartbeat: 1.6ms}\n", "p.yaml"), bench)

@@ -137,7 +137,8 @@ class Checker:
             return default
         v = d[key]
         if isinstance(v, bool) or not isinstance(v, int):
-            raise self.err(d.kline(key), join(field, key), f"must be an integer, got {_kind(v)}")
+            raise self.err(d.kline(key), join(field, key),
+                           f"must be an integer, got {_kind(v)}{text_number_hint(v)}")
         if not lo <= v <= hi:
             raise self.err(d.kline(key), join(field, key), f"{v} is out of range {lo}..{hi}")
         return v
@@ -151,7 +152,8 @@ class Checker:
             return default
         v = d[key]
         if isinstance(v, bool) or not isinstance(v, int | float):
-            raise self.err(d.kline(key), join(field, key), f"must be a number, got {_kind(v)}")
+            raise self.err(d.kline(key), join(field, key),
+                           f"must be a number, got {_kind(v)}{text_number_hint(v)}")
         if v != v or not lo <= v <= hi:  # v != v: NaN
             raise self.err(d.kline(key), join(field, key),
                            f"{shorten(v)} is out of range {lo:g}..{hi:g}")
@@ -202,7 +204,7 @@ def _kind(v: Any) -> str:
     if isinstance(v, int | float):
         return f"a number ({shorten(v)})"
     if isinstance(v, str):
-        return f"text ({shorten(v)}){text_number_hint(v)}"
+        return f"text ({shorten(v)})"
     # a YAML tag's value (!!binary, a date): named as what it is, not as text
     what = _TAGGED.get(type(v).__name__, f"a {type(v).__name__}")
     return f"{what} ({shorten(v)})"
@@ -212,16 +214,25 @@ _TAGGED = {"bytes": "binary data", "date": "a date", "datetime": "a date and tim
 # what YAML 1.1 (PyYAML) reads as text although it looks like a number: an exponent without
 # a dot or without a sign (1e9, 1.0e15, 2E-3)
 _EXP_TEXT = re.compile(r"([-+]?)(\d+)(\.\d*)?([eE])([-+]?)(\d+)")
+_NUMBER_TEXT = re.compile(r"[-+]?(\d+(\.\d*)?([eE][-+]\d+)?|\.\d+|0x[0-9a-fA-F]+)")
 
 
 def text_number_hint(v: Any) -> str:
-    """For text such as `1e9`, which YAML 1.1 does not read as a number: how to write it."""
-    m = _EXP_TEXT.fullmatch(v.strip()) if isinstance(v, str) else None
-    if m is None:
+    """Where a number is wanted and text came: why YAML read it as text, and how to write it.
+    YAML 1.1 (PyYAML) reads an exponent as a number only with a dot and a signed exponent
+    (`1e9` is text, `1.0e+9` a number); text that reads as a number was quoted."""
+    if not isinstance(v, str):
         return ""
-    sign, whole, frac, e, esign, exp = m.groups()
-    fixed = f"{sign}{whole}{frac if frac and len(frac) > 1 else '.0'}{e}{esign or '+'}{exp}"
-    return f": YAML reads {v.strip()} as text, a number needs a dot and a signed exponent ({fixed})"
+    t = v.strip()
+    m = _EXP_TEXT.fullmatch(t)
+    if m is not None and not (m.group(3) and len(m.group(3)) > 1 and m.group(5)):
+        sign, whole, frac, e, esign, exp = m.groups()
+        fixed = f"{sign}{whole}{frac if frac and len(frac) > 1 else '.0'}{e}{esign or '+'}{exp}"
+        return (f": YAML reads {t} as text, a number needs a dot and a signed exponent "
+                f"({fixed})")
+    if _NUMBER_TEXT.fullmatch(t):
+        return ": text, not a number: write it without quotes"
+    return ""
 
 
 def level(v: Any) -> bool | None:

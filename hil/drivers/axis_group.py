@@ -241,18 +241,26 @@ class CommandError(ValueError):
 RATIO_MAX = 1e9
 
 
-def ratio_problem(gin: float, gout: float) -> str:
-    """Why In/Out is no gear ratio ('' when it is one); In 0 is a ratio of 0."""
-    if not (math.isfinite(gin) and math.isfinite(gout)):
-        return f"In/Out = {gin:g}/{gout:g}: finite numbers"
+def ratio_problem(gin: float, gout: float) -> tuple[str, str]:
+    """('in' or 'out', why) when In/Out is no gear ratio, else ('', ''); In 0 is a ratio of
+    0 (nothing moves). The side named is the one to change."""
+    if not math.isfinite(gin):
+        return "in", f"In {gin:g}: a finite number"
+    if not math.isfinite(gout):
+        return "out", f"Out {gout:g}: a finite number"
+    if abs(gin) > RATIO_MAX:
+        return "in", f"In {gin:g}: within ±{RATIO_MAX:g}"
     if gout == 0:
-        return f"Out 0: the ratio In/Out = {gin:g}/0 needs Out"
-    if abs(gin) > RATIO_MAX or abs(gout) > RATIO_MAX:
-        return f"In/Out = {gin:g}/{gout:g}: each within ±{RATIO_MAX:g}"
-    if gin and not 1 / RATIO_MAX <= abs(gin / gout) <= RATIO_MAX:
-        return (f"ratio In/Out = {gin:g}/{gout:g}: within {1 / RATIO_MAX:g} ~ {RATIO_MAX:g} "
-                "(a slave moved 1e9 times its master is no axis)")
-    return ""
+        return "out", f"Out 0: the ratio In/Out = {gin:g}/0 needs Out"
+    if abs(gout) > RATIO_MAX:
+        return "out", f"Out {gout:g}: within ±{RATIO_MAX:g}"
+    if gin and abs(gin / gout) > RATIO_MAX:
+        return "out", (f"ratio In/Out = {gin:g}/{gout:g}: at most {RATIO_MAX:g} (a slave "
+                       f"moved more than {RATIO_MAX:g} times its master is no axis)")
+    if gin and abs(gin / gout) < 1 / RATIO_MAX:
+        return "in", (f"ratio In/Out = {gin:g}/{gout:g}: at least {1 / RATIO_MAX:g}, 0 "
+                      f"aside (our limit, the mirror of {RATIO_MAX:g})")
+    return "", ""
 
 
 # PG magnitudes per COMMAND code (004:220 "maximální akcelerace / decelerace / rychlost"):
@@ -487,7 +495,7 @@ class ServoAxis:
     _last_pos: float | None = None
     _sent: list[float] = field(default_factory=list)  # the last set-points sent, newest last
     _cw: int = -1  # the state-keeping controlword sent last (-1: none yet)
-    _cw_new: bool = False  # it changed in the last cycle: its effect is not in the feedback
+    _fb_since_cw: int = 2  # feedbacks since it changed: the 2nd is the first to show it
 
     @property
     def follow_error(self) -> float:
@@ -557,9 +565,9 @@ class ServoAxis:
             if not 0 <= idx < len(names) or p[0] != idx:
                 raise CommandError(f"Par0 {p[0]:g}: the master is an axis index 0-"
                                    f"{len(names) - 1} of the group")
-            why = ratio_problem(p[3], p[4])
+            side, why = ratio_problem(p[3], p[4])
             if why:
-                raise CommandError(f"Par3/Par4 {why}")
+                raise CommandError(f"Par{3 if side == 'in' else 4} {why}")
             if names[idx] == self.name:
                 raise CommandError(f"Par0 {idx}: an axis cannot be its own master")
             chain = gear_cycle(axes, self.name, names[idx], src)
@@ -668,21 +676,25 @@ class ServoAxis:
         (shutdown, 0x06). Otherwise the group keeps the state it has, and walks an axis up
         to operation enabled only while `enabling` (set when the group starts and when
         Control bit 0 or 1 falls; cleared once enabled): 0x06 from switch on disabled, 0x07
-        from ready to switch on, 0x0F from switched on (CiA 402). It never re-enables what
+        from ready to switch on, 0x0F from switched on (CiA 402). It does not re-enable what
         something else switched off (the safe state, a plan step, the drive), and never
-        leaves a quick stop the drive is in (0x0B keeps it).
+        leaves a quick stop the drive is in (0x0B keeps it); but a word already on its way
+        when a plan step switches an axis off over SDO still acts: 0x0F on a drive in ready
+        to switch on enables it for a cycle (transitions 3 + 4, L18276).
 
-        The feedback a cycle reads answers the controlword of two cycles before (the RPDO
-        of cycle k acts at SYNC k, the TPDO of SYNC k + 1 shows it, L17051-17057). So a
-        changed word is held one more cycle: judged on a statusword that does not show it
-        yet, the next word would undo it, and the two would alternate every cycle."""
+        The TPDO of SYNC k is sampled before the RPDO of cycle k acts (L17051-17057), so
+        the first feedback after a changed word cannot show it and the second can. A changed
+        word is held until that second feedback has come: judged on a statusword that does
+        not show it yet, the next word would undo it, and the two would alternate every
+        cycle (a lost TPDO only holds it longer)."""
         if self.control & 0x3:
-            self._cw, self._cw_new = -1, False
+            self._cw, self._fb_since_cw = -1, 2
             return 0x80 if self.control & 0x1 else 0x06
         cw = self._state_word()
-        if self._cw_new:
-            cw = self._cw  # the last change is not in the feedback yet: hold it
-        self._cw_new = cw != self._cw
+        if self._cw >= 0 and self._fb_since_cw < 2:
+            cw = self._cw  # the change is not in the feedback yet: hold it
+        if cw != self._cw:
+            self._fb_since_cw = 0
         self._cw = cw
         return cw
 
@@ -707,6 +719,7 @@ class ServoAxis:
         self.position = float(position)
         self.statusword = statusword
         self._seen = self._ever = True
+        self._fb_since_cw += 1
         if statusword & 0x6F == 0x27:
             self.enabling = False  # there: from now on the group only keeps it
         if self.heartbeat_lost:

@@ -214,7 +214,7 @@ def main(args: argparse.Namespace) -> int:
             # the files that did load are checked against the bench too: an error there
             # is named now, not in the next run once the first file is mended
             specs = timing_specs()
-            for p in loaded:
+            for p in select(loaded, args.keyword, args.marker):
                 try:
                     check_plan(p, bench, specs)
                 except PlanFileError as e:

@@ -308,8 +308,9 @@ class GroupCycle(TypedDict):
     gear_phase_error: Annotated[dict[str, Any], F("a geared follower's drift from its master")]
     gear_judged: Annotated[int, F("geared followers whose phase this cycle judged (the "
                                   "reference taken, docs/group.md)")]
-    gear_ratio_judged: Annotated[int, F("geared followers whose ratio this cycle judged (the "
-                                        "master moved 1000 increments since the reference)")]
+    gear_ratio_judged: Annotated[int, F("geared followers whose ratio this cycle judged (In/Out "
+                                        "x the master's travel since the reference is 1000 "
+                                        "increments or more)")]
     max_gear_phase_error: int
     max_gear_ratio_error: float
 

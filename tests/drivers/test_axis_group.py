@@ -612,30 +612,43 @@ class _LaggingDrive:
 def test_the_group_holds_a_changed_controlword_until_the_feedback_can_show_it() -> None:
     # an enabled axis switched off by somebody else (an SDO shutdown: ready to switch on):
     # the feedback lags the RPDO by a cycle, so a group that judges each cycle afresh undid
-    # its own word, 0x06 and 0x0F alternating for ever. Held a cycle, it settles off
+    # its own word, 0x06 and 0x0F alternating for ever. Held until the second feedback after
+    # it, it settles off, also when a TPDO is lost on the way. The 0x0F already sent when
+    # the SDO came still enables the drive for a cycle (3 + 4 from ready, L18276): that one
+    # the group cannot know of
     from hil.drivers.axis_group import ServoAxis
-    ax, drive = ServoAxis("a", 1), _LaggingDrive(0x27)
-    ax.statusword = 0x27
-    sent = []
-    for k in range(40):
-        if k == 10:
-            drive.state = 0x21  # 6040h = 6 written over SDO between two cycles
-        cw = ax.controlword()
-        sent.append(cw)
-        ax.on_feedback(drive.cycle(cw), 0, 0.002)
-    assert sent[:10] == [0x0F] * 10
-    assert sent[-20:] == [0x06] * 20 and drive.state == 0x21  # stays off: not re-enabled
-    # and the walk up from switch on disabled still takes a state a word
+    for lost in (None, 11, 12, 13, 14):  # (10's TPDO alone shows the shutdown: lost, the
+        # 0x0F of cycle 10 has enabled the drive again before the group could see it off)
+        ax, drive = ServoAxis("a", 1), _LaggingDrive(0x27)
+        ax.statusword = 0x27
+        sent, states = [], []
+        for k in range(40):
+            if k == 10:
+                drive.state = 0x21  # 6040h = 6 written over SDO between two cycles
+            cw = ax.controlword()
+            sent.append(cw)
+            shown = drive.cycle(cw)
+            states.append(drive.state)
+            if k != lost:  # this cycle's TPDO never comes
+                ax.on_feedback(shown, 0, 0.002)
+        assert sent[:10] == [0x0F] * 10, lost
+        assert sent[-20:] == [0x06] * 20 and drive.state == 0x21, (lost, sent)  # stays off
+        assert states[10:].count(0x27) <= 1, (lost, states)  # enabled a cycle at most
+    # and the walk up from switch on disabled still takes a state every two cycles
     ax, drive = ServoAxis("b", 2), _LaggingDrive(0x40)
     ax.statusword = 0x40
-    for _ in range(12):
-        ax.on_feedback(drive.cycle(ax.controlword()), 0, 0.002)
+    sent = []
+    for _ in range(8):
+        sent.append(ax.controlword())
+        ax.on_feedback(drive.cycle(sent[-1]), 0, 0.002)
+    assert sent == [0x06, 0x06, 0x07, 0x07, 0x0F, 0x0F, 0x0F, 0x0F]
     assert drive.state == 0x27 and ax.status == 3
 
 
 @pytest.mark.parametrize(("par", "why"), [
     ({2: 0.0, 3: 1.0, 4: 1.0}, "Par2 0"),  # 1 gear, 2 + CamType a cam (004:244)
-    ({2: 1.0, 3: 1e15, 4: 1e-300}, "Par3/Par4"),  # In/Out = inf: the cycle overflowed
+    ({2: 1.0, 3: 1e15, 4: 1e-300}, "Par3 In"),  # In/Out = inf: the cycle overflowed
+    ({2: 1.0, 3: 1e9, 4: 1e-300}, "Par4 ratio"),
 ])
 def test_command_6_refuses_what_is_no_gear(par: dict[int, float], why: str) -> None:
     from hil.drivers.axis_group import CommandError, ServoAxis

@@ -48,6 +48,10 @@ def test_every_bad_plan_file_is_named_not_only_the_first(tmp_path, capsys):
         assert "bad1.yaml:3: steps[0].wait" in err and "bad2.yaml:3: steps[0].di.SON" in err
         assert "bad3.yaml:3: steps[0].drive: bench 'virtual' has no drive 'nosuch'" in err
         assert "ok.yaml" not in err
+    # -k / -m select among the files that loaded: an unselected one is not checked
+    assert hil(["run", "-q", "--check", "-k", "ok", good, bad1, bad3]) == 2
+    err = capsys.readouterr().err
+    assert "bad1.yaml:3: steps[0].wait" in err and "bad3.yaml" not in err
     assert not (tmp_path / "out").exists()  # nothing ran
 
 

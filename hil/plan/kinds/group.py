@@ -126,9 +126,9 @@ def _coupling(v: Checker, m: Any, line: int, where: str) -> dict[str, Any]:
     if out["gin"] == 0:
         raise v.err(m.kline("in"), join(where, "in"),
                     "ratio 0: nothing would move (group_command 7 ramps a gear out)")
-    why = ratio_problem(out["gin"], out["gout"])
+    side, why = ratio_problem(out["gin"], out["gout"])
     if why:
-        raise v.err(m.kline("out") if "out" in m else m.line, join(where, "out"), why)
+        raise v.err(m.kline(side) if side in m else m.line, join(where, side), why)
     if out["axis"] == out["master"]:
         raise v.err(line, where, "an axis cannot be its own master")
     src = m.get("source", "write")
@@ -413,7 +413,8 @@ class Group(StepKind):
         ctx.store[_KEY] = group
         ctx.session.on_close(group.stop)
         ctx.session.before_safe(group.stop)  # its controlwords must not undo the safe state
-        # the RPDO controlwords enable the axes, a CiA 402 step a cycle (no SDO on the bus)
+        # the RPDO controlwords enable the axes, a CiA 402 step every two cycles (the
+        # feedback lags a cycle, ServoAxis.controlword), with no SDO on the bus
         clock.sleep(3 * group.cycle_s)
         deadline = clock.monotonic_ns() + S
         while not all(a.status == 3 for a in axes):
@@ -698,7 +699,8 @@ class GroupCommand(_OneAxis):
             _sync_on_pars(v, m, where, par)
         if code == 7 and par[5] < 0:  # GInInc: "a positive number" (004:246)
             raise v.err(_par_line(m, 5), join(where, "par.5"),
-                        f"{par[5]:g}: GInInc, the ratio's fall a cycle, is positive (004:246)")
+                        f"{par[5]:g}: GInInc, the ratio's fall a cycle, is not negative "
+                        "(004:246 asks for a positive number; 0 ramps out at once)")
         return GroupCommandArgs(_axis_name(v, m, "axis", where), code, par,
                                 v.duration(m, "timeout", where, 5 * S))
 
@@ -741,13 +743,14 @@ def _sync_on_pars(v: Checker, m: Any, where: str, par: list[float]) -> None:
     if par[2] not in (1.0, 2.0, 3.0):
         raise v.err(_par_line(m, 2), join(where, "par.2"),
                     f"{par[2]:g}: 1 gear, 2 return cam, 3 incremental cam (004:244)")
-    why = ratio_problem(par[3], par[4])
+    side, why = ratio_problem(par[3], par[4])
     if why:
-        i = 3 if abs(par[3]) > RATIO_MAX >= abs(par[4]) > 0 else 4  # else Out or the ratio
+        i = 3 if side == "in" else 4
         raise v.err(_par_line(m, i), join(where, f"par.{i}"), why)
     if par[5] < 0:
         raise v.err(_par_line(m, 5), join(where, "par.5"),
-                    f"{par[5]:g}: GInInc, the ratio's rise a cycle, is not negative (004:244)")
+                    f"{par[5]:g}: GInInc, the ratio's rise a cycle, is not negative (004:244; "
+                    "0 engages at once)")
 
 
 class GroupSdo(_OneAxis):
@@ -792,6 +795,14 @@ class GroupSdo(_OneAxis):
             out["expect"] = {k: _int(v, e, k, we, *((0, 2) if k == "status"
                                                      else (-(2**31), 2**32 - 1)), 0)
                              for k in e}
+            want = out["expect"].get("data")
+            if (op == "read" and want is not None and out["expect"].get("status") != 2
+                    and not 0 <= want < 1 << (8 * n)):
+                # a read gives NumberByte bytes unsigned (a 1-byte -4 reads 252); Data holds
+                # an abort code only with Status 2
+                raise v.err(e.kline("data"), join(we, "data"),
+                            f"{want}: a read of {n} byte(s) gives 0 ~ {(1 << (8 * n)) - 1} "
+                            "(unsigned; with `status: 2` Data is the abort code)")
         return GroupSdoArgs(**out)
 
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
