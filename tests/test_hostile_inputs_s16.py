@@ -159,3 +159,14 @@ def test_a_drive_process_line_reaches_only_the_ground_truth_records():
     assert calls[0][1:] == (("drive1", {"t": 1}), {"source_t": 5})
     assert sorted(TRUTH_METHODS) == ["drive_event", "drive_params", "drive_state",
                                      "input_delivery"]
+
+
+@pytest.mark.parametrize("out", ["Y08", "Y008", "y8", "Y256"])
+def test_plc_output_refuses_a_name_the_program_refuses(tmp_path, capsys, out):
+    """An outside probe (session 22): `plc_output: {Y08: on}` passed the check and drove a
+    line nothing is wired to, while the program and `axis.clr` refuse Y08 (docs/pulse.md)."""
+    text = ("name: t\nbench_requires: [virtual, motion, pulse, dio]\nsteps:\n"
+            f"  - plc_output: {{{out}: on}}\n")
+    code, err = _check(tmp_path, text, capsys)
+    assert code == 2 and f"p.yaml:4: steps[0].plc_output.{out}: '{out}': a PLC output" in err
+    assert _check(tmp_path, text.replace(out, "Y8"), capsys)[0] == 0

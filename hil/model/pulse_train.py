@@ -157,7 +157,7 @@ class PulseTrain:
         self._cn1_base = 0  # P5.018 as last written (the counter presets to it)
         self.command = 0.0  # PT command position, physical counts (before smoothing)
         self._base = 0.0  # the command before the pulses began (the filters start from it)
-        self._frac = 0.0  # gear remainder, counts
+        self._rem = (0, 1)  # gear remainder (numerator, M): counts = numerator / M, exactly
         self._ma: deque[float] = deque()
         self._lpf: float | None = None
         self._active = False  # the axis follows the PT command
@@ -393,9 +393,11 @@ class PulseTrain:
               gear: tuple[int, int] | None = None) -> None:
         self.accepted += n * counts
         nx, m = gear or self.gear()
-        exact = n * counts * nx / m + self._frac
-        whole = math.floor(exact)
-        self._frac = exact - whole
+        # counts = pulses x N/M (L3578-3598), in integers: a float sum of 1677.7216-count
+        # steps fell just below a whole count and lost it on every move
+        rem, m0 = self._rem
+        whole, rem = divmod(n * counts * nx + (rem if m0 == m else rem * m // m0), m)
+        self._rem = (rem, m)
         self.command += whole
         self.freq_hz = s.freq
 
@@ -422,8 +424,11 @@ class PulseTrain:
         """The axis follows the PT command from here on, starting from its own demand."""
         if not self._active:
             self._active = self.used = True
+            if self.d.axis.demand != self.command:  # moved since (another mode): anew
+                self._rem = (0, 1)
+            # else the last train's remainder is carried: 20 one-pulse moves at 1677.7216
+            # counts a pulse are 33554 counts, not 20 x 1677
             self.command = self._base = self.d.axis.demand
-            self._frac = 0.0
             self._ma.clear()
             self._lpf = None
 
@@ -619,7 +624,7 @@ class PulseTrain:
             self.line_total += self.seg.direction * (taken - self._taken)
             self._taken = taken
         self.command = self._base = d.axis.position
-        self._frac = 0.0
+        self._rem = (0, 1)
         self._ma.clear()
         self._lpf = None
 
@@ -695,6 +700,7 @@ class PulseTrain:
         self._cruise_end = 0
         self._rebuild = None
         self._active = self.used = False
+        self._rem = (0, 1)
         self.freq_hz = 0.0
 
     def snapshot(self) -> dict[str, Any]:

@@ -189,6 +189,16 @@ def check_plan(plan: Plan, bench: Bench, spec_ids: set[str] | None = None) -> No
                 raise v.err(plan._lines.get(f"params.{name}", plan.key_line("params")),
                             join("params", name),
                             f"0x{value:04X} maps {why} (bench {bench.name!r} is virtual)")
+        # ... and each write of `params:` as the drive takes it, in order (a ratio P1.044
+        # / P1.045 in a PT mode is judged against the other half as it stands then)
+        target = bench.drives.get(plan.drive or bench.default_drive)
+        if plan.params and target is not None:
+            bad = virtual_rules().param_writes_problem(
+                target, dict(target.options) | dict(plan.options), plan.params.items())
+            if bad is not None:
+                raise v.err(plan._lines.get(f"params.{bad[0]}", plan.key_line("params")),
+                            join("params", bad[0]),
+                            f"{bad[1]} (the virtual drive refuses it at the run's start)")
     for s in plan.steps:
         _check_step(v, s, plan, bench, spec_ids)
 

@@ -55,6 +55,23 @@ def test_gear_half_means_two_command_pulses_per_motor_pulse() -> None:
     assert d.axis.position == pytest.approx(500, abs=1)
 
 
+def test_the_gear_remainder_is_carried_from_move_to_move_and_counted_exactly() -> None:
+    # counts = pulses x N1/M (L3578-3598): with 16777216/10000 a pulse is 1677.7216 counts.
+    # Twenty one-pulse moves are 33554.432 counts, of which 33554 whole; each move counted
+    # afresh gave 20 x 1677 = 33540. And +10000 / -10000 pulses (one turn each way) return to
+    # exactly where they began: a float sum of 50-pulse slices fell one count short a move
+    d = make(**{"P1.044": 16777216, "P1.045": 10000})
+    for _ in range(20):
+        run(d, 1000, 1, settle_ms=50)
+    assert d.pulse.command == 33554 and d.axis.position == 33554
+    start = d.axis.position
+    for i in range(7):
+        run(d, 50_000, 10_000, direction=-1 if i % 2 else 1, settle_ms=50)
+        assert d.pulse.command - start == (0 if i % 2 else COUNTS_PER_REV), i
+    d.advance(500 * MS)  # the axis settles on the command
+    assert d.axis.position - start == COUNTS_PER_REV
+
+
 @pytest.mark.parametrize("n, m, ok", [(1, 4, False), (1, 3, True), (2**24, 64, False),
                                        (2**24, 65, True)])
 def test_gear_ratio_range_is_quarter_to_262144(n: int, m: int, ok: bool) -> None:

@@ -262,3 +262,25 @@ def test_an_interrupt_is_recorded_with_the_signal_that_made_it() -> None:
     assert signal_text(signal.SIGTERM) == "SIGTERM"
     assert interrupt_cause(KeyboardInterrupt(signal_text(signal.SIGTERM))) == "SIGTERM"
     assert interrupt_cause(KeyboardInterrupt()) == "Ctrl-C / SIGTERM"  # raised elsewhere
+
+
+def test_check_judges_a_plans_params_in_order_as_the_virtual_drive_takes_them(tmp_path,
+                                                                             capsys):
+    """docs/plans.md: `--check` refuses what a run would. An outside probe (session 22):
+    `params: {P1.044: 1, P1.045: 2}` passed the check and the run ended in ERROR, the drive
+    refusing P1.044 = 1 against the P1.045 it still had (1/100000, L8547, a PT mode)."""
+    def plan(name: str, pairs: str) -> str:
+        return _plan(tmp_path, name, f"name: {name}\nparams:\n{pairs}steps:\n  - wait: 1ms\n")
+
+    never = plan("never", "  P1.044: 1\n  P1.045: 2\n")
+    m_first = plan("mfirst", "  P1.044: 10000\n  P1.045: 1000\n")
+    assert hil(["run", "-q", "--check", never, m_first]) == 2
+    err = capsys.readouterr().err
+    assert ("never.yaml:3: params.P1.044: P1.044 = 1: e-gear ratio 1/100000 outside" in err
+            and "neither order reaches 1/2 from the drive's 16777216/100000" in err)
+    assert ("mfirst.yaml:3: params.P1.044: P1.044 = 10000: e-gear ratio 10000/100000" in err
+            and "write the denominator P1.045 first" in err)
+    # listed the other way round the run takes it, and the check says so
+    swapped = plan("swapped", "  P1.045: 1000\n  P1.044: 10000\n")
+    assert hil(["run", "-q", "--check", swapped]) == 0
+    assert hil(["run", "-q", "-j", "1", "--out", str(tmp_path / "out"), swapped]) == 0

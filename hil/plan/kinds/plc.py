@@ -368,9 +368,13 @@ class PlcOutput(StepKind):
             raise v.err(line, where, "name at least one PLC output, e.g. Y8: on")
         out: dict[str, bool] = {}
         for k, val in m.items():
-            if not re.fullmatch(r"Y[0-9]{1,3}", str(k)) or int(str(k)[1:]) > _LINE_MAX["Y"]:
+            # the program's own rule (_X): Y08 names no line (a leading 0), so it is refused
+            # here too, not recorded on a line nothing is wired to
+            if (not isinstance(k, str) or not _X.match(k) or k[0] != "Y"
+                    or int(k[1:]) > _LINE_MAX["Y"]):
                 raise v.err(m.kline(k), join(where, str(k)),
-                            f"{k!r}: a PLC output Y0 ~ Y{_LINE_MAX['Y']} (001:42), like Y8")
+                            f"{k!r}: a PLC output Y0 ~ Y{_LINE_MAX['Y']} (001:42), like Y8 "
+                            "(no leading 0)")
             lv = level(val)
             if lv is None:
                 raise v.err(m.kline(k), join(where, str(k)), f"{val!r}: on or off")
