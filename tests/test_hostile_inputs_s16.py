@@ -128,6 +128,15 @@ steps:
     # a move inside its time still passes
     plan.write_text(text.replace("500000", "20000"))
     assert hil(["run", "-q", "-j", "1", "--out", str(tmp_path / "out"), str(plan)]) == 0
+    # a 32-bit stroke (legal, 001:38) lasts 3 h at 200 kHz: it was planned a ms at a time up
+    # front (27 s, 455 MB) and then refused as error 40 "speed too low"; planned up to the
+    # program's time, it is the same timeout as any move that runs past it
+    plan.write_text(text.replace('{SPD: 10000, DRV: "ADR,+,500000,Ps"}',
+                                 '{SPD: 100000, DRV: "ADR,+,2147483647,Ps"}'))
+    assert hil(["run", "-j", "1", "--out", str(tmp_path / "out"), str(plan)]) == 1
+    err = capsys.readouterr().err
+    assert "a move ran past the program's time (5 s left at its start)" in err
+    assert "error 40" not in err
 
 
 def test_a_drive_process_line_reaches_only_the_ground_truth_records():
@@ -170,3 +179,15 @@ def test_plc_output_refuses_a_name_the_program_refuses(tmp_path, capsys, out):
     code, err = _check(tmp_path, text, capsys)
     assert code == 2 and f"p.yaml:4: steps[0].plc_output.{out}: '{out}': a PLC output" in err
     assert _check(tmp_path, text.replace(out, "Y8"), capsys)[0] == 0
+
+
+def test_a_negative_data_register_stroke_with_a_direction_is_error_33(tmp_path, capsys):
+    """docs/pulse.md: registers are judged with the codes a constant gets; `ADR,+,-1000` is
+    33, and `ADR,+,D100` with D100 = -2000 passed the check and ran +2000 (session 22)."""
+    text = ("name: t\nbench_requires: [virtual, motion, pulse, dio]\nsteps:\n"
+            "  - plc_program:\n      axis: {max_speed: 100000}\n"
+            "      program: [{SPD: 20000, DRV: 'ADR,+,D100,Ps'}, MD]\n"
+            "      registers: {D100: %d}\n")
+    code, err = _check(tmp_path, text % -2000, capsys)
+    assert code == 2 and "error 33" in err and "stroke D100 = -2000: a direction +" in err
+    assert _check(tmp_path, text % 2000, capsys)[0] == 0

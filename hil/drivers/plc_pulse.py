@@ -396,7 +396,9 @@ class Program:
             raise PlcError(33, f"{what} {d.unit}: less than one pulse", step=i, field="DRV")
         if d.unit == "Ps" and value != int(value):
             raise PlcError(33, f"{what} Ps: a whole number of pulses", step=i, field="DRV")
-        if d.direction and value < 0 and not via:
+        # a data register holds a stroke as a constant does; a status register (DR4072's
+        # count, DR4088's position) is taken by its size in the direction written
+        if d.direction and value < 0 and via not in STATUS_REGISTERS:
             raise PlcError(33, f"{what}: a direction {d.direction} and a negative stroke",
                            step=i, field="DRV")
 
@@ -443,21 +445,29 @@ class Program:
 
 
 def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: float,
-                 slice_ns: int = 10 * MS) -> list[tuple[int, int]]:
+                 slice_ns: int = 10 * MS, limit_ns: int | None = None) -> list[tuple[int, int]]:
     """Time slices `(duration_ns, pulses)` of a chained move: `segments` = [(pulses, speed)]
     (pulses > 0), started and stopped at `v0` with slopes `acc` / `dec` (Ps/s²). The pulses
-    of the slices add up exactly to the total; a constant speed stays one slice."""
+    of the slices add up exactly to the total; a constant speed stays one slice.
+
+    `limit_ns`: plan no further than that (the program's time left: a move past it is cut
+    there anyway), so a 32-bit stroke at a low speed is not planned for hours up front. The
+    slices then end short of the total."""
     total = sum(n for n, _ in segments)
     if total <= 0:
         return []
     dt = 1e-3
+    per = max(1, slice_ns // MS)
+    steps_max = (limit_ns // MS + per) if limit_ns is not None else None
     v, x = 0.0, 0.0
     bounds = list(accumulate(n for n, _ in segments))
-    xs: list[float] = []  # position at each ms
+    ends: list[float] = []  # the position at the end of each slice (each `per` ms)
+    steps = 0  # ms planned
     i = 0
     v = min(v0, segments[0][1])
-    guard = 0
     while x < total - 1e-9:
+        if steps_max is not None and steps >= steps_max:
+            break
         while i < len(segments) - 1 and x >= bounds[i]:
             i += 1
         want = segments[i][1]
@@ -474,17 +484,20 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
             v = max(target, v - dec * dt) if math.isfinite(dec) else target
         v = max(v, min(v0, want))
         x = min(total, x + v * dt)
-        xs.append(x)
-        guard += 1
-        if guard > 10_000_000:
-            raise PlcError(40, "profile does not end (speed too low for the stroke)")
-    per = max(1, slice_ns // MS)
+        steps += 1
+        if steps % per == 0:
+            ends.append(x)
+        if steps_max is None and steps > 10_000_000:  # 2.8 h of 1 ms steps: no caller's
+            raise PlcError(40, "profile longer than 10000 s: give the move a time limit")
+    reached = x >= total - 1e-9
+    if steps % per:
+        ends.append(x)  # the last, shorter slice
     out: list[tuple[int, int]] = []
     done = 0
-    for k in range(0, len(xs), per):
-        chunk = xs[k:k + per]
-        n = (total if k + per >= len(xs) else math.floor(chunk[-1])) - done
-        dur = len(chunk) * MS
+    for k, end in enumerate(ends):
+        last = k == len(ends) - 1
+        n = (total if last and reached else math.floor(end)) - done
+        dur = (steps - k * per if last else per) * MS
         if n <= 0:
             if out:
                 out[-1] = (out[-1][0] + dur, out[-1][1])
@@ -621,15 +634,17 @@ class PulseMaster:
 
     # -- moves -------------------------------------------------------------------------
     def move(self, segments: list[tuple[int, float]], direction: int,
-             until: Callable[[], bool] | None = None) -> bool:
+             until: Callable[[], bool] | None = None, limit_ns: int | None = None) -> bool:
         """A DRV / DRVC chain of (pulses, Ps/s); True when `until` or abort cut it short.
-        The remaining pulses are then in `status.remaining` (DR4072, 001:44)."""
+        The remaining pulses are then in `status.remaining` (DR4072, 001:44). `limit_ns`:
+        the time the move may take at most (planned no further, `plan_profile`)."""
         p = self.p
         if self._last_dir and direction != self._last_dir and p.backlash:
             self._run(min(p.start_speed_pps * 10, p.max_speed_pps), direction, p.backlash,
                       None, None, counted=False)  # P7 on a reversal (001:56)
         total = sum(n for n, _ in segments)
-        slices = plan_profile(segments, p.start_speed_pps, p.accel, p.decel, self.slice_ns)
+        slices = plan_profile(segments, p.start_speed_pps, p.accel, p.decel, self.slice_ns,
+                              limit_ns)
         done = 0
         self.status.remaining = total
         for dur, n in slices:
@@ -916,7 +931,12 @@ class PulseMaster:
             out_of_time = clock.monotonic_ns() >= end
             return out_of_time
 
-        cut = self.move(segs, direction, stop_at)
+        # planned past the program's time (by 2 slices, and by 1 s for the first pulse at
+        # the lowest start speed), so the move reaches `end` still moving
+        cut = self.move(segs, direction, stop_at,
+                        limit_ns=round(left * S) + 2 * self.slice_ns + S)
+        if not cut and self.status.remaining > 0:  # the plan ended short of the stroke: it
+            out_of_time = True  # could only have run past the program's time
         if out_of_time:
             raise TimeoutError(f"program timeout: a move ran past the program's time ({left:g} "
                                f"s left at its start), {self.status.remaining} pulses short")

@@ -606,3 +606,16 @@ def test_drv_abs_0_is_the_configured_reading(abs_zero, moves):
             assert r.rev() == pytest.approx(0.0, abs=2 / PER_REV)
         else:  # ran on, forwards, until ACT
             assert r.plc.status.position > 30_000
+
+
+def test_a_profile_is_planned_no_further_than_its_limit() -> None:
+    # a 32-bit stroke at 200 kHz is 3 h of pulses: planned up to the limit only, the slices
+    # end short of the total, about the limit long (a ms at a time the whole stroke was
+    # 10 million steps and 455 MB before the first pulse)
+    total = 2**31 - 1
+    slices = plan_profile([(total, 200_000.0)], 500.0, 1e6, 1e6, 10 * MS, limit_ns=5 * S)
+    assert 5 * S <= sum(d for d, _ in slices) <= 5 * S + 20 * MS
+    assert 0 < sum(n for _, n in slices) < total
+    # without a limit a short move is planned whole, as before
+    whole = plan_profile([(20_000, 200_000.0)], 500.0, 1e6, 1e6, 10 * MS)
+    assert sum(n for _, n in whole) == 20_000
