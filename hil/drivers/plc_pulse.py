@@ -216,7 +216,8 @@ class AxisParams:
             raise PlcError(37, f"max_speed {self.max_speed_pps:g} Ps/s above the {self.hardware}"
                                f" {self.output} output's {top} Hz (001:14)", field="max_speed")
         if not 1 <= self.start_speed_pps <= self.max_speed_pps:  # 38: start/stop frequency
-            raise PlcError(38, f"start_speed {self.start_speed} not within 1 ~ max_speed",
+            raise PlcError(38, f"start_speed {self.start_speed} ({self.start_speed_pps:g} Ps/s) "
+                               f"not within 1 Ps/s ~ max_speed ({self.max_speed_pps:g} Ps/s)",
                            field="start_speed")
         if not 0 <= self.zero_count <= 255:  # P17: 18 by the seed's "parameter N + 1" rule
             raise PlcError(18, f"zero_count {self.zero_count}: 0 ~ 255", field="zero_count")
