@@ -191,3 +191,12 @@ def test_a_negative_data_register_stroke_with_a_direction_is_error_33(tmp_path, 
     code, err = _check(tmp_path, text % -2000, capsys)
     assert code == 2 and "error 33" in err and "stroke D100 = -2000: a direction +" in err
     assert _check(tmp_path, text % 2000, capsys)[0] == 0
+
+
+def test_a_line_name_with_a_trailing_newline_is_refused(tmp_path, capsys):
+    """A review (session 22): `$` matches before a final newline, so `"Y8\\n"` passed as Y8
+    and the run drove a line named "Y8\\n" that nothing is wired to."""
+    text = ("name: t\nbench_requires: [virtual, motion, pulse, dio]\nsteps:\n"
+            '  - plc_output: {"Y8\\n": on}\n')
+    code, err = _check(tmp_path, text, capsys)
+    assert code == 2 and "a PLC output" in err

@@ -472,6 +472,7 @@ class PulseTrain:
         d = self.d
         if not d.servo_on and self.used and not self._active:  # the command follows the
             pos = d.axis.position                                # feedback (a coasting motor)
+            self._rem = (0, 1)  # and the gear's remainder goes, as clear_error() does
             if self.command != pos:
                 self.command = self._base = pos
         if self.seg is None and not self._active:

@@ -72,6 +72,21 @@ def test_the_gear_remainder_is_carried_from_move_to_move_and_counted_exactly() -
     assert d.axis.position - start == COUNTS_PER_REV
 
 
+def test_servo_off_drops_the_gear_remainder_also_after_the_train_settled() -> None:
+    # servo off: the command follows the feedback (L9749), and the remainder of a count the
+    # gear carried goes with it, whether or not the last train had settled (a review: it
+    # was kept when the train had, so the next train began 0.7216 counts on)
+    d = make(**{"P1.044": 16777216, "P1.045": 10000})
+    run(d, 1000, 1, settle_ms=50)  # 1677.7216 counts: 1677 whole, 0.7216 carried
+    d.set_di(1, False)
+    d.advance(200 * MS)
+    d.set_di(1, True)
+    d.advance(200 * MS)
+    start = d.pulse.command
+    run(d, 1000, 1, settle_ms=50)
+    assert d.pulse.command - start == pytest.approx(1677, abs=1e-6)  # not 1678: not carried
+
+
 @pytest.mark.parametrize("n, m, ok", [(1, 4, False), (1, 3, True), (2**24, 64, False),
                                        (2**24, 65, True)])
 def test_gear_ratio_range_is_quarter_to_262144(n: int, m: int, ok: bool) -> None:
