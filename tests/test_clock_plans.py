@@ -277,7 +277,9 @@ def test_another_process_with_another_hash_seed_records_the_same_messages(tmp_pa
              "fault_sync_ip", "sto_both"]
     seed = "1" if os.environ.get("PYTHONHASHSEED") != "1" else "2"
     out = tmp_path / "child"
-    cmd = [sys.executable, "-m", "hil.cli", "run", "-q", "-j", "1", "--out", str(out), *names]
+    paths = [str(find_plans([n])[0]) for n in names]  # the same files as here (by name, a
+    # child outside the checkout would take the installed plans: another `file` on record)
+    cmd = [sys.executable, "-m", "hil.cli", "run", "-q", "-j", "1", "--out", str(out), *paths]
     done = subprocess.run(cmd, env={**os.environ, "PYTHONHASHSEED": seed}, timeout=300,
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-2000:]
