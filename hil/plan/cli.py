@@ -213,12 +213,7 @@ def main(args: argparse.Namespace) -> int:
                 print(f"hil run: {e}", file=sys.stderr)
             # the files that did load are checked against the bench too: an error there
             # is named now, not in the next run once the first file is mended
-            specs = timing_specs()
-            for p in select(loaded, args.keyword, args.marker):
-                try:
-                    check_plan(p, bench, specs)
-                except PlanFileError as e:
-                    print(f"hil run: {e}", file=sys.stderr)
+            _check_each(select(loaded, args.keyword, args.marker), bench, say_ok=False)
             return 2
         plans = select(loaded, args.keyword, args.marker)
     except PlanFileError as e:
@@ -245,17 +240,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil run: warning: {warning}", file=sys.stderr)
     try:
         if args.check:
-            specs = timing_specs()
-            failed = 0
-            for p in plans:
-                try:
-                    check_plan(p, bench, specs)
-                except PlanFileError as e:  # every plan is checked; each error is said
-                    print(f"hil run: {e}", file=sys.stderr)
-                    failed += 1
-                    continue
-                print(f"{p.path}: ok ({len(p.steps)} steps)")
-            return 2 if failed else 0
+            return 2 if _check_each(plans, bench, say_ok=True) else 0
         jobs = _jobs(args, bench, len(plans))
         try:
             if jobs > 1:
@@ -275,6 +260,23 @@ def main(args: argparse.Namespace) -> int:
         return 2
     _summarise(results, out, len(plans))
     return 0 if all(r.passed for r in results) else 1
+
+
+def _check_each(plans: list, bench: Bench, *, say_ok: bool) -> int:
+    """Check every plan against the bench, each error said on stderr (and, with `say_ok`,
+    each plan that passes on stdout); the number that failed."""
+    specs = timing_specs()
+    failed = 0
+    for p in plans:
+        try:
+            check_plan(p, bench, specs)
+        except PlanFileError as e:
+            print(f"hil run: {e}", file=sys.stderr)
+            failed += 1
+            continue
+        if say_ok:
+            print(f"{p.path}: ok ({len(p.steps)} steps)")
+    return failed
 
 
 def _summarise(results: list, out: Path, selected: int) -> None:

@@ -35,8 +35,11 @@ def param_writes_problem(spec: Any, options: Mapping[str, Any],
     params = initial_params(spec)
     writes = list(writes)
 
+    def fresh() -> Drive:
+        return Drive(options=ModelOptions.from_dict(dict(options)), params=dict(params))
+
     def first_refused(order: list[tuple[str, int]]) -> tuple[str, str] | None:
-        d = Drive(options=ModelOptions.from_dict(dict(options)), params=dict(params))
+        d = fresh()
         for name, value in order:
             try:
                 d.params.write(name, value)
@@ -53,8 +56,8 @@ def param_writes_problem(spec: Any, options: Mapping[str, Any],
         (g, target[g]) for g in (_GEAR if bad[0] == "P1.045" else _GEAR[::-1])]
     if first_refused(swapped) is None:
         return bad  # the drive's own words say to write the other one first
-    d = Drive(options=ModelOptions.from_dict(dict(options)), params=dict(params))
-    n0, m0 = d.params.get("P1.044"), d.params.get("P1.045")
+    start = fresh().params
+    n0, m0 = start.get("P1.044"), start.get("P1.045")
     why = bad[1].split("; write the ")[0]  # that advice would not help here
     return bad[0], (f"{why}; neither order reaches {target['P1.044']}/{target['P1.045']} "
                     f"from the drive's {n0}/{m0} in one write each: go through a pair inside "
