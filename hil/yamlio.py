@@ -58,9 +58,12 @@ class LList(list):
 
 
 def join(where: str, key: str | int) -> str:
-    """Field path: `steps[3].wait_until.timeout`."""
+    """Field path: `steps[3].wait_until.timeout`. A key that is not printable on one line
+    (a newline, a tab, an empty name) is shown quoted, so the message stays one line."""
     if isinstance(key, int):
         return f"{where}[{key}]"
+    if not key.isprintable() or not key.strip():
+        key = repr(key)
     return f"{where}.{key}" if where else key
 
 
@@ -188,7 +191,7 @@ def _build(node: yaml.Node, loader: yaml.SafeLoader, file: str, where: str,
 
 _INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
 # the number forms YAML 1.1 has and readers expect decimal: a leading 0 (octal) and ':' (60)
-_YAML11_ONLY = re.compile(r"^[-+]?(0[0-9_]+|[0-9][0-9_]*(:[0-5]?[0-9])+(\.[0-9_]*)?)$")
+_YAML11_ONLY = re.compile(r"^[-+]?(0[0-9_]+|[0-9][0-9_]*(:[0-5]?[0-9])+(\.[0-9_]*)?)\Z")
 
 
 _ODD_NAMES = {"\u2028": "LINE SEPARATOR", "\u2029": "PARAGRAPH SEPARATOR",

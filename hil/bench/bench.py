@@ -55,9 +55,9 @@ CLOCKS = ("virtual", "real")  # docs/clock.md
 PROFILES = ("asda-a3",)
 PARAM_VIAS = ("modbus", "sdo")
 STO_CHANNELS = {"A": "STO_A", "B": "STO_B"}
-_LINE_RE = re.compile(r"^(DI|DO)([0-9]{1,2})(?::([ab]))?$")
-_PARAM_RE = re.compile(r"^P[0-7]\.[0-9]{3}$")
-_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
+_LINE_RE = re.compile(r"^(DI|DO)([0-9]{1,2})(?::([ab]))?\Z")
+_PARAM_RE = re.compile(r"^P[0-7]\.[0-9]{3}\Z")
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*\Z")
 
 _TOP = {"name", "description", "virtual", "process", "clock", "can", "rs485", "drives", "timeouts",
         "timing", "gateway",
@@ -572,8 +572,8 @@ def _drive_dio(v: Checker, spec: DriveSpec, d: LDict, where: str,
 
 
 _PULSE_SOURCES = ("DOG", "NL", "PL")
-_X_RE = re.compile(r"^X[0-9]{1,3}$")
-_Y_RE = re.compile(r"^Y[0-9]{1,3}$")
+_X_RE = re.compile(r"^X[0-9]{1,3}\Z")
+_Y_RE = re.compile(r"^Y[0-9]{1,3}\Z")
 
 
 def _drive_pulse(v: Checker, spec: DriveSpec, d: LDict, where: str,
@@ -598,7 +598,7 @@ def _drive_pulse(v: Checker, spec: DriveSpec, d: LDict, where: str,
             val = str(val)
             if k in _PULSE_SOURCES and _X_RE.match(val):
                 out[k] = val
-            elif _Y_RE.match(str(k)) and re.match(r"^DI([1-9]|10)$", val):
+            elif _Y_RE.match(str(k)) and re.match(r"^DI([1-9]|10)\Z", val):
                 out[str(k)] = val
             else:
                 raise v.err(m.kline(k), join(fld, str(k)),

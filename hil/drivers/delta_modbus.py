@@ -35,7 +35,7 @@ from hil.protocol import modbus as mb
 # frame followed by another within the RTU silence is taken as that late reply (_more_follows)
 LATE_REPLIES = 3
 
-_NAME_RE = re.compile(r"^\s*P([0-7M])[.\-]([0-9]{1,3})\s*$", re.IGNORECASE)
+_NAME_RE = re.compile(r"^\s*P([0-7M])[.\-]([0-9]{1,3})\s*\Z", re.IGNORECASE)
 
 
 class ModbusError(Exception):

@@ -49,7 +49,7 @@ CLR_MAX_MS = 10_000.0  # not in the seed: a CLR pulse of 10 s is already no puls
 DRVZ_MODES = ("MD0", "MD1", "MD2")
 # Register operands (001:38-44): data registers R0-R3839, R5000-R8071 and D0-D3999 (the
 # register map of FUN141's operand table, 001:50), and Ps0's status registers (001:28-34)
-REGISTER = re.compile(r"^([RD])([0-9]{1,4})$")
+REGISTER = re.compile(r"^([RD])([0-9]{1,4})\Z")
 STATUS_REGISTERS = {"R4060": "error", "R4064": "step", "R4072": "remaining", "R4080": "freq",
                     "R4088": "position"}
 TIME_UNIT_S = 0.01  # WAIT TIME / ACT count 0.01 s (001:42)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 
-_CHUNK = re.compile(r"^[A-Za-z0-9_.-]+$")
+_CHUNK = re.compile(r"^[A-Za-z0-9_.-]+\Z")
 
 
 class KeyError_(ValueError):

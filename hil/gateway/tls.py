@@ -14,7 +14,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-_LOOPBACK = re.compile(r"^(tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):[0-9]{1,5}$")
+_LOOPBACK = re.compile(r"^(tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):[0-9]{1,5}\Z")
 # Every message kind zenoh's ACL knows (1.x); the allow rule covers them all.
 ACL_MESSAGES = ("put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
                 "liveliness_token", "declare_liveliness_subscriber", "liveliness_query")

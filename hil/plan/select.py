@@ -18,8 +18,8 @@ from dataclasses import dataclass
 __all__ = ["KEYWORDS", "TAG_WORD", "Expr", "ExprError", "is_glob", "matches", "select"]
 
 _TOKEN = re.compile(r"\s*(\(|\)|[^\s()]+)")
-_WORD = re.compile(r"^[\w.*?\[\]:/-]+$")
-TAG_WORD = re.compile(r"^[\w.:/-]+$")  # a plan's tag: a word without glob characters
+_WORD = re.compile(r"^[\w.*?\[\]:/-]+\Z")
+TAG_WORD = re.compile(r"^[\w.:/-]+\Z")  # a plan's tag: a word without glob characters
 KEYWORDS = ("and", "or", "not")
 MAX_DEPTH = 100  # nested `not` / parentheses: an ExprError beyond, not a RecursionError
 

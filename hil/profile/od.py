@@ -148,7 +148,7 @@ def load_objects(path: Path = OBJECTS_CSV) -> list[Entry]:
     return out
 
 
-_PARAM = re.compile(r"^P([0-9])\.([0-9]{3})$")
+_PARAM = re.compile(r"^P([0-9])\.([0-9]{3})\Z")
 _TRUE = {"1", "true", "yes", "y", "★", "ro", "x"}
 
 

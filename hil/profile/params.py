@@ -61,7 +61,7 @@ def digit_problem(param: str, value: int) -> str | None:
             return f"digit {digit} = {d:X} of 0x{value:04X}: it must be {rng} ({lines})"
     return None
 
-_NAME_RE = re.compile(r"^\s*P([0-7])[.\-]([0-9]{1,3})\s*$", re.IGNORECASE)
+_NAME_RE = re.compile(r"^\s*P([0-7])[.\-]([0-9]{1,3})\s*\Z", re.IGNORECASE)
 
 
 def parse_name(name: str) -> tuple[int, int]:

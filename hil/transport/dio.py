@@ -51,8 +51,8 @@ Role = Literal["harness", "drive"]
 ROLES = ("harness", "drive")
 Listener = Callable[[str, bool, int], None]
 
-_INPUT = re.compile(r"^(DI[1-9][0-9]*|STO_A|STO_B)$")
-_OUTPUT = re.compile(r"^(DO[1-9][0-9]*|FDBK)$")
+_INPUT = re.compile(r"^(DI[1-9][0-9]*|STO_A|STO_B)\Z")
+_OUTPUT = re.compile(r"^(DO[1-9][0-9]*|FDBK)\Z")
 _T = struct.Struct("<q")
 
 

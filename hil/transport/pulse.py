@@ -52,8 +52,8 @@ KINDS = ("seg", "oab", "oz")
 FORMS = ("ab", "cw_ccw", "pulse_sign")
 MAX_FREQ_HZ = 100e6  # no pulse line carries more; a larger value is refused as malformed
 Listener = Callable[[str, dict[str, Any], int, int | None], None]
-_X = re.compile(r"^X[0-9]{1,3}$")
-_Y = re.compile(r"^Y[0-9]{1,3}$")
+_X = re.compile(r"^X[0-9]{1,3}\Z")
+_Y = re.compile(r"^Y[0-9]{1,3}\Z")
 _T = struct.Struct("<q")
 
 

@@ -39,7 +39,7 @@ DEFAULT_PARITY = "N"
 DEFAULT_BYTESIZE = 8
 DEFAULT_STOPBITS = 2.0
 
-_SCHEME_RE = re.compile(r"^([A-Za-z][A-Za-z0-9_+.-]*):(.*)$", re.S)
+_SCHEME_RE = re.compile(r"^([A-Za-z][A-Za-z0-9_+.-]*):(.*)\Z", re.S)
 _KEY_BAD = re.compile(r"[*$#?\s]")
 
 
@@ -197,8 +197,8 @@ def _parse_query(url: str, query: str) -> dict[str, str]:
     return params
 
 
-_LOOPBACK = re.compile(r"^(?:tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):([0-9]{1,5}|auto)$")
-_ANY_TCP = re.compile(r"^(tcp|tls|quic)/(.+):([0-9]{1,5})$")
+_LOOPBACK = re.compile(r"^(?:tcp|tls)/(127\.0\.0\.1|\[::1\]|localhost):([0-9]{1,5}|auto)\Z")
+_ANY_TCP = re.compile(r"^(tcp|tls|quic)/(.+):([0-9]{1,5})\Z")
 
 
 class ZenohConfigError(ValueError):

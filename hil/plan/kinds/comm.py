@@ -67,8 +67,8 @@ _SERIAL_PARAMS: dict[str, tuple[str, ...]] = {
     "noise": ("bytes", "gap_ms"), "reply_late": ("delay_ms",), "reply_partial": ("bytes",),
     "reply_split": ("bytes", "gap_ms"), "reply_noise": ("bytes",)}
 MIN_PRODUCE_NS = 1_000_000  # produce: SYNC / heartbeat / guard at most every 1 ms
-_OBJ_RE = re.compile(r"^(?:0x)?([0-9A-Fa-f]{4})h?(?::([0-9]{1,3}))?$")
-_LINE_RE = re.compile(r"^(DI[0-9]{1,2}|STO_[AB])$")
+_OBJ_RE = re.compile(r"^(?:0x)?([0-9A-Fa-f]{4})h?(?::([0-9]{1,3}))?\Z")
+_LINE_RE = re.compile(r"^(DI[0-9]{1,2}|STO_[AB])\Z")
 
 
 NMT_COMMANDS = {"start": 0x01, "stop": 0x02, "pre-operational": 0x80, "reset_node": 0x81,

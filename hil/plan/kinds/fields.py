@@ -24,9 +24,9 @@ COMMANDABLE = STATES[:-1]
 MODES = tuple(m for m in CIA402_MODES if m != "IP")  # a `mode:` step offers no IP
 VIAS = ("modbus", "sdo")
 STO = ("A", "B")
-PARAM_RE = re.compile(r"^P[0-7]\.[0-9]{3}$")
-ALARM_RE = re.compile(r"^AL[0-9A-F]{3}$")
-NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+PARAM_RE = re.compile(r"^P[0-7]\.[0-9]{3}\Z")
+ALARM_RE = re.compile(r"^AL[0-9A-F]{3}\Z")
+NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\Z")
 INT32 = (-(2**31), 2**31 - 1)
 
 

@@ -48,9 +48,9 @@ if TYPE_CHECKING:
 _STEP_KEYS = {"SPD", "DRV", "DRVC", "DRVZ", "WAIT", "ACT", "EXT", "GOTO"}
 _X = re.compile(r"^[XMY](0|[1-9][0-9]{0,3})\Z")  # X00 / Y08 name no line: refused
 _DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?|[A-Za-z]{1,2}[0-9]+)"
-                  r"\s*,\s*(Ut|Ps)\s*$")
+                  r"\s*,\s*(Ut|Ps)\s*\Z")
 # meant as a register (R1000, r1000, DR1000, R10000, R0500): checked by operand_register
-_REG = re.compile(r"^[A-Za-z]{1,2}[0-9]+$")
+_REG = re.compile(r"^[A-Za-z]{1,2}[0-9]+\Z")
 _LINE_MAX = {"X": 255, "Y": 255, "M": 1911}  # 001:42
 # what `expect:` may name, and what each holds (the PLC's status, hil.drivers.plc_pulse.Status)
 _EXPECT = {"position": "int", "remaining": "int", "error": "int", "done": "bool",
@@ -191,9 +191,11 @@ def _step(v: Checker, obj: Any, line: int, where: str) -> PlcStep:
         if reg is not None:
             s.spd = reg
         elif (not isinstance(val, int | float) or isinstance(val, bool)
-              or not abs(val) <= 1e12):
+              or not abs(val) <= 1e12 or not float(val).is_integer()):
+            # the program holds a speed as a whole 32-bit number, Hz or cm/min (001:38)
             raise v.err(m.kline("SPD"), join(where, "SPD"),
-                        f"{repr(val)[:40]}: a speed (within ±1e12) or a register (error 31)")
+                        f"{repr(val)[:40]}: a whole number (Ps/s, or cm/min with P0 = 0; "
+                        "within ±1e12) or a register (error 31)")
         else:
             s.spd = float(val)
     drives = [k for k in ("DRV", "DRVC", "DRVZ") if k in m]

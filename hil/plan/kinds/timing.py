@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from hil.plan.session import DriveIO
     from hil.plan.steps import Step
 
-BIND_LINE_RE = re.compile(r"^(DI(?:10|[1-9])|DO[1-6])(:[ab])?$|^STO_[AB]$")  # A3 lines
+BIND_LINE_RE = re.compile(r"^(DI(?:10|[1-9])|DO[1-6])(:[ab])?\Z|^STO_[AB]\Z")  # A3 lines
 SINCE = ("start", "last_check")
 log = logging.getLogger(__name__)
 
