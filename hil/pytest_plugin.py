@@ -105,11 +105,16 @@ def _marker_name(line: str) -> str:
 def _foreign_markers(config: pytest.Config) -> set[str]:
     """Marker names registered by pytest or another plugin: not a plan tag's, and not one
     the project declares itself in its ini `markers` (a project may declare `brake`)."""
-    raw = config.inicfg.get("markers", "") if hasattr(config, "inicfg") else ""
-    lines = raw.splitlines() if isinstance(raw, str) else [str(x) for x in raw or ()]
-    own = {_marker_name(x) for x in lines if x.strip()}
-    return {_marker_name(line) for line in config.getini("markers")
-            if "(hil_plans)" not in line} - own
+    lines = [str(x) for x in config.getini("markers")]  # the ini's and the plugins'
+    # the project's own are those written in its config file (`config.inicfg`, which held
+    # them apart, is deprecated since pytest 9 and warned on every run)
+    path = getattr(config, "inipath", None)
+    try:
+        text = Path(path).read_text(encoding="utf-8") if path else ""
+    except (OSError, UnicodeDecodeError):
+        text = ""
+    own = {_marker_name(x) for x in lines if x.strip() and x.strip() in text}
+    return {_marker_name(line) for line in lines if "(hil_plans)" not in line} - own
 
 
 def _junit_dir(config: pytest.Config) -> Path | None:

@@ -526,6 +526,27 @@ def test_a_tag_the_project_declares_as_a_marker_is_still_applied(pytester: pytes
     assert "not applied" not in result.stdout.str()
 
 
+
+@pytest.mark.parametrize("config", ["ini", "pyproject"])
+def test_a_declared_marker_is_found_without_a_deprecation_warning(pytester: pytest.Pytester,
+                                                                  config: str) -> None:
+    """The plugin read the project's own markers through `config.inicfg`, which pytest 9
+    deprecates: every run printed two PytestRemovedIn10Warning lines. It reads the config
+    file instead, an ini or a pyproject.toml alike."""
+    plans = pytester.mkdir("plans")
+    (plans / "emgs.yaml").write_text(_shipped("emgs").read_text())
+    if config == "ini":
+        pytester.makeini("[pytest]\nhil_plans = plans\nmarkers =\n    brake: brake tests\n")
+    else:
+        pytester.makepyprojecttoml('[tool.pytest.ini_options]\nhil_plans = "plans"\n'
+                                   'markers = ["brake: brake tests"]\n')
+    result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-m", "brake",
+                                           "--collect-only", "-W", "error::DeprecationWarning")
+    out = result.stdout.str() + result.stderr.str()
+    assert result.ret == 0, out
+    assert "emgs" in out and "not applied" not in out and "inicfg" not in out
+
+
 TEARDOWN = '''
 import pytest
 
