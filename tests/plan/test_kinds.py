@@ -30,7 +30,9 @@ def test_parsed_step_holds_an_instance_of_its_kind():
                       "  - check_timing: brake_servo_off\n")
     kinds_seen = [type(s.action).__name__ for s in plan.steps]
     assert kinds_seen == ["Write", "Wait", "CheckTiming"]
-    assert plan.steps[0].label == "write P1.042=150 via -"
+    assert plan.steps[0].label == "write P1.042=150"  # the bench's param_via: no "via -"
+    assert loads_plan("name: p\nsteps:\n  - read: {P1.042: null, via: sdo}\n"
+                      ).steps[0].label == "read P1.042 via sdo"
     assert plan.steps[1].imposed_ns == 20_000_000
     assert plan.steps[2].action.judge_only and not plan.steps[0].action.judge_only
 

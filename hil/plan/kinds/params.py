@@ -117,7 +117,8 @@ class Write(StepKind):
         a = self.args
         vals = ", ".join(f"{p}={v}" for p, v in a.values.items())
         refused = f" refused 0x{a.expect_error:X}" if a.expect_error else ""
-        return f"write {vals} via {a.via or '-'}{refused}"
+        via = f" via {a.via}" if a.via else ""  # none: the bench's `param_via`
+        return f"write {vals}{via}{refused}"
 
 
 class Read(StepKind):
@@ -181,7 +182,8 @@ class Read(StepKind):
 
     def describe(self) -> str:
         err = f" expecting {self.args.expect_error}" if self.args.expect_error else ""
-        return f"read {', '.join(self.args.values)} via {self.args.via or '-'}{err}"
+        via = f" via {self.args.via}" if self.args.via else ""  # none: the bench's
+        return f"read {', '.join(self.args.values)}{via}{err}"
 
 
 KINDS = (Write, Read)
