@@ -265,7 +265,7 @@ def _describe_sdo(data: bytes, client: bool) -> dict:
             n = 4 - ((data[0] >> 2) & 3) if s else 4
             raw = bytes(data[4 : 4 + n])
             out["data"] = raw.hex()
-            out["value"] = int.from_bytes(raw, "little")
+            out["value"] = object_value(out.get("index", 0), out.get("sub", 0), raw)
             # flat fields the timing specs address (cia402_transitions.yaml)
             if client and out.get("index") == 0x6040 and out.get("sub") == 0:
                 out["controlword"] = out["value"]
@@ -341,8 +341,21 @@ PDO_NAMES: dict[tuple[int, int], str] = {
     (0x60C1, 1): "ip_position", (0x60F4, 0): "following_error_actual",
     (0x603F, 0): "error_code",
 }
-_SIGNED = {(0x6064, 0), (0x606C, 0), (0x6077, 0), (0x607A, 0), (0x60FF, 0), (0x6071, 0),
-           (0x60C1, 1), (0x60F4, 0), (0x6060, 0), (0x6061, 0)}
+# The CiA 402 objects of a signed type (INTEGER8/16/32, CiA 402-2; the A3's EDS agrees on
+# those it has): their values are decoded signed, in a PDO and in an SDO transfer alike
+SIGNED_OBJECTS: frozenset[tuple[int, int]] = frozenset({
+    (0x605A, 0), (0x605B, 0), (0x605C, 0), (0x605D, 0), (0x605E, 0),  # option codes
+    (0x6060, 0), (0x6061, 0), (0x6062, 0), (0x6063, 0), (0x6064, 0), (0x606B, 0),
+    (0x606C, 0), (0x6071, 0), (0x6074, 0), (0x6077, 0), (0x6078, 0), (0x607A, 0),
+    (0x607C, 0), (0x607D, 1), (0x607D, 2), (0x6098, 0), (0x60B0, 0), (0x60B1, 0),
+    (0x60B2, 0), (0x60BA, 0), (0x60BB, 0), (0x60BC, 0), (0x60BD, 0), (0x60C0, 0),
+    (0x60C1, 1), (0x60C1, 2), (0x60C2, 2), (0x60F4, 0), (0x60FC, 0), (0x60FF, 0),
+})
+
+
+def object_value(index: int, sub: int, raw: bytes) -> int:
+    """An object's value from its little-endian bytes: signed for `SIGNED_OBJECTS`."""
+    return int.from_bytes(raw, "little", signed=(index, sub) in SIGNED_OBJECTS)
 
 
 class PdoMaps:
@@ -442,7 +455,7 @@ class PdoMaps:
                                 f"{len(data)}-byte frame")
                 break
             v = (raw >> bit) & ((1 << bits) - 1)
-            if (index, sub) in _SIGNED and v >> (bits - 1):
+            if (index, sub) in SIGNED_OBJECTS and v >> (bits - 1):
                 v -= 1 << bits
             bit += bits
             out["objects"][f"{index:04X}h:{sub:02X}"] = v

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from hil.protocol.canopen import SDO_REQUEST, SDO_RESPONSE
+from hil.protocol.canopen import SDO_REQUEST, SDO_RESPONSE, object_value
 
 
 @dataclass
@@ -38,7 +38,8 @@ def _result(txn: _Txn, status: str, t: int | None, **extra) -> dict:
         "access": txn.access,
         "transfer": txn.transfer,
         "status": status,
-        "value": int.from_bytes(data, "little") if 0 < len(data) <= 8 else None,
+        # signed for a CiA 402 object of a signed type (607Ah -4300000, not 4290667296)
+        "value": object_value(txn.index, txn.sub, data) if 0 < len(data) <= 8 else None,
         "data": data.hex(),
         "size": len(data),
         "abort_code": None,

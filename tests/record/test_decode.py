@@ -27,6 +27,32 @@ def test_sdo_write_from_the_manual():
     assert txn["status"] == "ok" and txn["latency_ns"] == 1_000 and txn["frames"] == 2
 
 
+
+def test_a_signed_cia402_object_reads_signed_in_the_sdo_record_and_the_frame():
+    """607Ah target position (INTEGER32, CiA 402) -4300000 read 4290667296 in the SDO
+    record and the decoded frame, while a TPDO carrying it decoded it signed; a reviewer
+    saw a far positive target. 6041h (UNSIGNED16) and P-parameters stay unsigned."""
+    from hil.protocol.canopen import describe_frame
+
+    req = bytes.fromhex("237A6000") + (-4_300_000).to_bytes(4, "little", signed=True)
+    p = SdoPairing()
+    assert p.feed(0x601, req, 0) == []
+    (txn,) = p.feed(0x581, bytes.fromhex("607A600000000000"), 300)
+    assert txn["object"] == "607Ah:00" and txn["value"] == -4_300_000
+    assert txn["data"] == "2063beff"  # the bytes as on the wire
+    assert describe_frame(0x601, req)["value"] == -4_300_000
+    # 60C2h:02 interpolation time index (INTEGER8) -4: 2F C2 60 02 FC
+    assert describe_frame(0x601, bytes.fromhex("2FC26002FC000000"))["value"] == -4
+    # 60FFh target velocity -600 in an upload reply
+    p.feed(0x601, bytes.fromhex("40FF600000000000"), 1_000)
+    (up,) = p.feed(0x581, bytes.fromhex("43FF6000A8FDFFFF"), 1_300)
+    assert up["value"] == -600
+    # unsigned objects keep their unsigned reading
+    assert describe_frame(0x581, bytes.fromhex("4B416000FFFF0000"))["statusword"] == 0xFFFF
+    (u,) = [x for x in (p.feed(0x601, bytes.fromhex("2B01270018FC0000"), 2_000),
+                        p.feed(0x581, bytes.fromhex("6001270000000000"), 2_300)) if x][0]
+    assert u["value"] == 0xFC18  # 2701h: no CiA 402 type here
+
 def test_sdo_upload_2_bytes_and_abort():
     # upload request 40h, reply 4Bh = 2 bytes (L17003-L17016); abort 80h with code
     # 06020000h "object does not exist" (L17024-L17042)
