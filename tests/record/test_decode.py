@@ -49,8 +49,8 @@ def test_a_signed_cia402_object_reads_signed_in_the_sdo_record_and_the_frame():
     assert up["value"] == -600
     # unsigned objects keep their unsigned reading
     assert describe_frame(0x581, bytes.fromhex("4B416000FFFF0000"))["statusword"] == 0xFFFF
-    (u,) = [x for x in (p.feed(0x601, bytes.fromhex("2B01270018FC0000"), 2_000),
-                        p.feed(0x581, bytes.fromhex("6001270000000000"), 2_300)) if x][0]
+    assert p.feed(0x601, bytes.fromhex("2B01270018FC0000"), 2_000) == []
+    (u,) = p.feed(0x581, bytes.fromhex("6001270000000000"), 2_300)
     assert u["value"] == 0xFC18  # 2701h: no CiA 402 type here
 
 def test_sdo_upload_2_bytes_and_abort():
