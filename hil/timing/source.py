@@ -13,6 +13,7 @@ import fnmatch
 import heapq
 import itertools
 import json
+import logging
 import math
 from array import array
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -514,6 +515,9 @@ class _LazySource(MemorySource):
         #: bytes -> decoded message, for a source whose readers never change a message (one
         #: dict then serves every message with those bytes); None: each is decoded anew
         self._shared: dict[bytes, dict] | None = None
+        #: messages that were no JSON object, found as their topics were decoded (a file's
+        #: scan adds those its reader could not take): what `hil check` says and exits 4 on
+        self.bad_messages: int = 0
 
     def _keep_many(self, topic: str, msgs: list[tuple[int, bytes | dict]]) -> None:
         """Keep `msgs` (one topic's, in file order) undecoded until the topic is read."""
@@ -541,11 +545,13 @@ class _LazySource(MemorySource):
             last = lst[-1][0] if lst else None
             ordered = True
             shared = self._shared
+            bad0 = self.bad_messages
             for t, data in pend:
                 if last is not None and t < last:
                     ordered = False
                 last = t
                 if type(data) is not dict:
+                    raw = data
                     if shared is None:
                         data = _decode_obj(data)
                     else:  # a repeated message (a statusword poll) is decoded once
@@ -555,7 +561,13 @@ class _LazySource(MemorySource):
                                 shared.clear()
                             obj = shared[data] = _decode_obj(data)
                         data = obj
+                    if _is_bad(raw, data):  # judged as if it were not there: say so
+                        self.bad_messages += 1
                 lst.append((t, data))
+            if self.bad_messages > bad0:
+                logging.getLogger("hil.record").warning(
+                    "%s: %s: %d message(s) of a wrong shape skipped",
+                    getattr(self, "path", "the recording"), topic, self.bad_messages - bad0)
             if not ordered:
                 lst.sort(key=lambda m: m[0])  # stable: equal times keep file order
                 self._forget(topic)  # what was derived from its messages no longer holds
@@ -627,7 +639,10 @@ class RecordingSource(_LazySource):
                 if last.get(topic) == data:  # a repeated state: not decoded again
                     table.add_again(t)
                 else:
-                    table.add(t, loads(data))
+                    obj = loads(data)
+                    if _is_bad(data, obj):  # judged as if it were not there: counted
+                        self.bad_messages += 1
+                    table.add(t, obj)
                     last[topic] = data
                 return
             lst = raw.get(topic)
@@ -660,7 +675,10 @@ class RecordingSource(_LazySource):
         self.error: str | None = rec.error
         self.corrupt: bool = rec.corrupt
         self.truncated: bool = rec.truncated  # no footer: a killed (or running) recorder
-        self.bad_messages: int = rec.bad_messages  # of a wrong shape, skipped (`hil check`)
+        if self.bad_messages:  # in the columns read above
+            logging.getLogger("hil.record").warning(
+                "%s: %d message(s) of a wrong shape skipped", path, self.bad_messages)
+        self.bad_messages += rec.bad_messages  # of a wrong shape, skipped (`hil check`)
         self.schemas: set[str] = {c.schema for c in rec.channels()}
         self._res = res
         self.path = str(path)
@@ -700,6 +718,13 @@ _SHARED_MAX = 4096  # distinct messages a live source keeps decoded for reuse
 def _decode_obj(data: bytes) -> dict:
     obj = decode(data)
     return obj if isinstance(obj, dict) else {"value": obj}
+
+
+def _is_bad(data: bytes, obj: dict) -> bool:
+    """`obj` (from `_decode_obj(data)`) stands for no message of the recorder's: the bytes
+    were no JSON, or JSON but not an object (every hil message is one)."""
+    return bytes(data[:1]) != b"{" or (set(obj) == {"error", "raw"} and str(
+        obj["error"]).startswith("undecodable message"))
 
 
 class LiveSource(_LazySource):

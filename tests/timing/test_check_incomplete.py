@@ -187,3 +187,49 @@ def test_a_damaged_chunk_cuts_the_source_where_messages_may_be_missing(tmp_path)
     assert src.corrupt and src.cut_ns == 55_000_000
     assert [m["v"] for _t, m in src.messages("/x")] == [1, 2, 3, 4, 5]
     assert RecordingSource(path).cut_ns is None  # a whole file is not cut
+
+
+def _with_message(src: Path, dst: Path, topic: str, nth: int, payload: bytes) -> None:
+    """`src` copied to `dst` with the `nth` message of `topic` (1-based) replaced."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType
+    from mcap.writer import Writer as McapWriter
+
+    with open(src, "rb") as f:
+        r = make_reader(f)
+        summ = r.get_summary()
+        msgs = [(ch.topic, m.channel_id, m.log_time, m.publish_time, m.data)
+                for _s, ch, m in r.iter_messages(log_time_order=False)]
+        meta = list(r.iter_metadata())
+    with open(dst, "wb") as out:
+        w = McapWriter(out, compression=CompressionType.ZSTD)
+        w.start(profile="", library="test")
+        smap = {sid: w.register_schema(s.name, s.encoding, s.data)
+                for sid, s in summ.schemas.items()}
+        cmap = {cid: w.register_channel(c.topic, c.message_encoding, smap.get(c.schema_id, 0),
+                                        c.metadata) for cid, c in summ.channels.items()}
+        for m in meta:
+            w.add_metadata(m.name, m.metadata)
+        k = 0
+        for t, cid, lt, pt, data in msgs:
+            if t == topic:
+                k += 1
+                if k == nth:
+                    data = payload
+            w.add_message(cmap[cid], lt, data, pt)
+        w.finish()
+    assert k >= nth
+
+
+@pytest.mark.parametrize("payload", [b'{"level": fal', b"[]", b"5"])
+def test_a_broken_message_on_a_judged_signal_makes_the_check_incomplete(
+        recording, tmp_path, capsys, payload):
+    """An outside probe (session 23): a broken DI/DO message was dropped from the signal it
+    belonged to and `hil check` still passed (exit 0, nothing said), with fewer verdicts."""
+    assert hil(["check", str(recording)]) == 0
+    capsys.readouterr()
+    bad = tmp_path / "bad.mcap"
+    _with_message(recording, bad, "/dio/drive1/DI1", 2, payload)
+    assert hil(["check", str(bad)]) == 4
+    err = capsys.readouterr().err
+    assert "1 message(s) of a wrong shape" in err and str(bad) in err
