@@ -22,13 +22,17 @@ _loads = json.loads
 _UNSEEN: Any = object()
 
 
+class Undecodable(dict):
+    """What `decode` gives for bytes that are no JSON: {"error": ..., "raw": hex}."""
+
+
 def decode(data: bytes) -> Any:
-    """A message's JSON; an undecodable one as {"error": ..., "raw": hex} (never raises)."""
+    """A message's JSON; an undecodable one as `Undecodable` (never raises)."""
     try:
         return _loads(data)
     except (ValueError, RecursionError) as exc:  # RecursionError: nested past the stack
         why = "nested too deep" if isinstance(exc, RecursionError) else str(exc)
-        return {"error": f"undecodable message: {why}", "raw": bytes(data[:64]).hex()}
+        return Undecodable(error=f"undecodable message: {why}", raw=bytes(data[:64]).hex())
 
 
 # what a reader raises on a message of the wrong shape (a text where a number belongs, NaN

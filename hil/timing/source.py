@@ -22,7 +22,7 @@ from types import SimpleNamespace
 from typing import Any, Protocol
 
 from hil.record import topics
-from hil.record.reader import Recording, decode
+from hil.record.reader import Recording, Undecodable, decode
 
 _MISSING = object()
 MISSING_FIELD = _MISSING  # what a column holds where its messages lack the field
@@ -514,7 +514,7 @@ class _LazySource(MemorySource):
         self._raw_span: dict[str, list[int]] = {}  # per topic, [first t, last t] of `_raw`
         #: bytes -> decoded message, for a source whose readers never change a message (one
         #: dict then serves every message with those bytes); None: each is decoded anew
-        self._shared: dict[bytes, dict] | None = None
+        self._shared: dict[bytes, tuple[dict, bool]] | None = None
         #: messages that were no JSON object, found as their topics were decoded (a file's
         #: scan adds those its reader could not take): what `hil check` says and exits 4 on
         self.bad_messages: int = 0
@@ -551,17 +551,16 @@ class _LazySource(MemorySource):
                     ordered = False
                 last = t
                 if type(data) is not dict:
-                    raw = data
                     if shared is None:
-                        data = _decode_obj(data)
+                        data, bad = _decode_obj(data)
                     else:  # a repeated message (a statusword poll) is decoded once
-                        obj = shared.get(data)
-                        if obj is None:
+                        hit = shared.get(data)
+                        if hit is None:
                             if len(shared) >= _SHARED_MAX:
                                 shared.clear()
-                            obj = shared[data] = _decode_obj(data)
-                        data = obj
-                    if _is_bad(raw, data):  # judged as if it were not there: say so
+                            hit = shared[data] = _decode_obj(data)
+                        data, bad = hit
+                    if bad:  # judged as if it were not there: say so
                         self.bad_messages += 1
                 lst.append((t, data))
             if self.bad_messages > bad0:
@@ -639,8 +638,8 @@ class RecordingSource(_LazySource):
                 if last.get(topic) == data:  # a repeated state: not decoded again
                     table.add_again(t)
                 else:
-                    obj = loads(data)
-                    if _is_bad(data, obj):  # judged as if it were not there: counted
+                    obj, bad = loads(data)
+                    if bad:  # judged as if it were not there: counted
                         self.bad_messages += 1
                     table.add(t, obj)
                     last[topic] = data
@@ -715,16 +714,14 @@ class RecordingSource(_LazySource):
 _SHARED_MAX = 4096  # distinct messages a live source keeps decoded for reuse
 
 
-def _decode_obj(data: bytes) -> dict:
+def _decode_obj(data: bytes) -> tuple[dict, bool]:
+    """A message as a dict, and whether it was of a wrong shape: no JSON (`Undecodable`), or
+    JSON but not an object (every hil message is one). Such a one is judged as if it were
+    not there."""
     obj = decode(data)
-    return obj if isinstance(obj, dict) else {"value": obj}
-
-
-def _is_bad(data: bytes, obj: dict) -> bool:
-    """`obj` (from `_decode_obj(data)`) stands for no message of the recorder's: the bytes
-    were no JSON, or JSON but not an object (every hil message is one)."""
-    return bytes(data[:1]) != b"{" or (set(obj) == {"error", "raw"} and str(
-        obj["error"]).startswith("undecodable message"))
+    if type(obj) is dict:
+        return obj, False
+    return (dict(obj), True) if isinstance(obj, Undecodable) else ({"value": obj}, True)
 
 
 class LiveSource(_LazySource):
