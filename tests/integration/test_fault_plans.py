@@ -1,6 +1,7 @@
 """The fault plans (issue 16) on the in-process virtual bench and on the zenoh subprocess
 bench (`hil drive` as a child process, CAN and DI/DO over zenoh on loopback, RS-485 on a
-pty): every step and every timing verdict (fixtures/timing/fault_*.yaml) must pass."""
+pty): every step and every timing verdict (fixtures/timing/fault_*.yaml) must pass (on the
+wall clock, a plan the host made late is run again on its own: REAL_TIME_ATTEMPTS)."""
 
 from __future__ import annotations
 
@@ -20,15 +21,29 @@ pytestmark = pytest.mark.integration
 FAULT_PLANS = [p for p in find_plans() if p.stem.startswith("fault_")]
 
 
-def _run_all(bench_file, tmp_path):
+# A plan on the wall clock of a shared 2-core host can be late by tens of ms (the drive's
+# process starved while the harness sends, docs/timing.md "Under load"): such a plan is run
+# again, on its own, at most REAL_TIME_ATTEMPTS times in all. One that fails every time fails
+# the test; in virtual time (deterministic) a plan runs once.
+REAL_TIME_ATTEMPTS = 3
+
+
+def _run_all(bench_file, tmp_path, attempts: int = 1):
     bench = load_bench(bench_file) if bench_file else load_bench()
-    results = run_plans([load_plan(p) for p in FAULT_PLANS], bench, tmp_path,
-                        stream=io.StringIO())
-    for r in results:
+    plans = [load_plan(p) for p in FAULT_PLANS]
+    final = {}
+    for n in range(attempts):
+        for r in run_plans(plans, bench, tmp_path / f"try{n}", stream=io.StringIO()):
+            final[r.plan] = r
+        plans = [p for p in plans if not final[p.name].passed]
+        if not plans:
+            break
+    assert len(final) == len(FAULT_PLANS)
+    for r in final.values():
         assert r.passed, (r.plan, [(s.label, s.status, s.message) for s in r.steps
                                         if s.status != "pass"])
         _every_fault_starts_and_ends(r.plan, r.recording)
-    return results
+    return list(final.values())
 
 
 def _every_fault_starts_and_ends(plan: str, path) -> None:
@@ -57,7 +72,7 @@ def test_fault_plans_on_the_virtual_bench(tmp_path):
 def test_fault_plans_on_the_zenoh_subprocess_bench(tmp_path):
     bench_file = fixture("benches", "virtual-zenoh.yaml")
     assert load_bench(bench_file).process == "subprocess"
-    _run_all(bench_file, tmp_path)
+    _run_all(bench_file, tmp_path, REAL_TIME_ATTEMPTS)
 
 
 def test_burst_fault_plans_on_the_in_process_bench_in_real_time(tmp_path):

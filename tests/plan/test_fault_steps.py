@@ -114,6 +114,17 @@ def test_a_burst_the_host_stretched_past_1ms_is_sent_again():
                                       "bus_error", [frame(0)] * 3)  # no window
 
 
+def test_a_flood_needs_two_frames():
+    """"More than one" SDO / PDO (L19933, L19941): a burst of one cannot be the fault (it
+    passed `--check`, went out "tight", and the plan then waited for an alarm in vain)."""
+    from hil.plan.plan import loads_plan
+
+    for kind in ("sdo_flood", "duplicate_pdo, cob_id: 0x201"):
+        with pytest.raises(PlanFileError, match=r"count.*1: an integer 2\.\.1000"):
+            loads_plan(f"name: p\nsteps:\n  - fault: {{can: {kind}, count: 1}}\n", "p.yaml")
+    loads_plan("name: p\nsteps:\n  - fault: {can: bus_error, count: 1}\n", "p.yaml")
+
+
 def test_a_burst_the_wire_cannot_carry_within_1ms_is_refused_at_check():
     """9 SDO requests are 9 x 124 bits: 1.1 ms at 1 Mbit/s, never within AL111's 1 ms
     (L19933): `--check` says so, naming the count (an execution fuzz found it failing at run

@@ -254,7 +254,9 @@ class Fault(StepKind):
             out["delay"] = v.duration(m, "delay", where, 10_000_000 if kind == "delay" else 0)
         elif t == "can" and kind in CAN_BURSTS:
             v.keys(m, {"can", "count", "cob_id", "data", "bus"}, where)
-            out["count"] = (_int(v, m["count"], m.kline("count"), join(where, "count"), 1, 1000)
+            least = 2 if kind in BURST_WINDOW_NS else 1  # "more than one" (L19933, L19941)
+            out["count"] = (_int(v, m["count"], m.kline("count"), join(where, "count"), least,
+                                 1000)
                             if "count" in m else {"sdo_flood": 3, "duplicate_pdo": 2,
                                                   "bus_error": 17}[kind])
             if kind == "duplicate_pdo":
