@@ -339,6 +339,11 @@ class Scan:
     #: why each whole record that could not be read was stepped over (`past_damage`)
     skipped: list[str] = field(default_factory=list)
     stated_chunks: int | None = None  # what the summary's Statistics record says
+    #: the latest log time of any message read (chunk headers' end times, loose messages)
+    last_log_ns: int | None = None
+    #: a record cut short at the end (a killed run): a chunk's first log time, when its
+    #: header was there to read (every message logged before it was read, none from it on)
+    tail_log_ns: int | None = None
 
 
 def _parse(cls: Any, body: bytes) -> Any:
@@ -488,6 +493,8 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
         if end > n:
             out.error = f"record (opcode 0x{op:02x}) at offset {off} truncated: needs {ln} bytes"
             out.error_offset = off
+            if op == Opcode.CHUNK and off + 17 <= n:  # its message_start_time is there
+                (out.tail_log_ns,) = struct.unpack("<Q", data[off + 9 : off + 17])
             break
         if op == Opcode.CHUNK:
             out.chunk_count += 1
@@ -498,7 +505,7 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
         c_min: int | None = None
         try:
             if op == Opcode.CHUNK:
-                c_min, _c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(rec, 0)
+                c_min, c_max, usize, ucrc = _CHUNK_HEAD.unpack_from(rec, 0)
                 p = 28
                 (clen,) = struct.unpack_from("<I", rec, p)
                 comp = rec[p + 4 : p + 4 + clen].decode()
@@ -516,9 +523,13 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                     for _ in iter_chunk(raw, out.schemas, out.channels):
                         pass
                     out.chunks.append(raw)
+                if out.last_log_ns is None or c_max > out.last_log_ns:
+                    out.last_log_ns = c_max
             elif op == Opcode.MESSAGE:
                 cid, _seq, lt, pt = _MSG_BODY.unpack_from(rec, 0)
                 out.loose.append((cid, lt, pt, rec[22:]))
+                if out.last_log_ns is None or lt > out.last_log_ns:
+                    out.last_log_ns = lt
             elif op == Opcode.SCHEMA:
                 s = _parse(Schema, rec)
                 out.schemas[s.id] = s

@@ -284,6 +284,23 @@ class Recording:
         return self._scan.cut_log_ns
 
     @property
+    def last_log_ns(self) -> int | None:
+        """The latest log time of any message read."""
+        return self._scan.last_log_ns
+
+    @property
+    def tail_log_ns(self) -> int | None:
+        """For a file cut short with no damage (a killed run, or one still recording): the log
+        time from which messages may be missing (the cut chunk's first, else just after the
+        last read); None for a whole or a damaged file (`cut_log_ns`)."""
+        sc = self._scan
+        if not self.truncated or sc.corrupt:
+            return None
+        if sc.tail_log_ns is not None:
+            return sc.tail_log_ns
+        return sc.last_log_ns + 1 if sc.last_log_ns is not None else None
+
+    @property
     def size(self) -> int:
         return self._scan.size
 

@@ -155,7 +155,8 @@ def timing_diagrams(run: RunData, source: Any = None) -> list[tuple[str, str]]:
                                             for s in specs.values())
             shared = ({} if full else
                       {topics.drive_state(d): msgs for d, msgs in run.truth.items()})
-            source = RecordingSource(run.path, topics=sorted(wanted - set(shared)))
+            source = RecordingSource(run.path, topics=sorted(wanted - set(shared)),
+                                     at_rest=True)
             for topic, msgs in shared.items():
                 if topic in wanted:
                     source.put_topic(topic, msgs)

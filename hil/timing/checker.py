@@ -744,9 +744,11 @@ class Scope:
         after = f" after {ctx.label(ev.after)}" if ev.after else ""
         cut = getattr(ctx.source, "cut_ns", None)
         if cut is not None and hi > cut:
+            where = ("the recording's end (no footer: the run was killed), and what followed "
+                     "was not recorded" if getattr(ctx.source, "cut_kind", None) == "end" else
+                     "the recording's damage, and what followed could not be read")
             return Missing(f"expected {ctx.expectation(ev.name)}{after}; not seen in the "
-                           f"{_dur(max(span, 0))} before the recording's damage, and what "
-                           "followed could not be read", root=not ev.after, cut=True)
+                           f"{_dur(max(span, 0))} before {where}", root=not ev.after, cut=True)
         return Missing(f"expected {ctx.expectation(ev.name)}{after}; it never did in "
                        f"{_dur(max(span, 0))}", root=not ev.after)
 

@@ -310,7 +310,8 @@ def _read(args: argparse.Namespace, what: str, **kw: Any) -> RecordingSource | i
     terminal; the exit code (said on stderr) when it cannot be read."""
     progress = ReadProgress(args.recording, what)
     try:
-        return RecordingSource(args.recording, time=args.time, progress=progress, **kw)
+        return RecordingSource(args.recording, time=args.time, progress=progress,
+                               at_rest=True, **kw)
     except ImportError as e:
         print(f"hil check: cannot read recordings ({e})", file=sys.stderr)
         return 2
@@ -378,7 +379,7 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
         if until not in cache:  # only the latest read is kept: memory of one, not of each
             cache.clear()  # step (the steps come in order; checks at one step share it)
             cache[until] = RecordingSource(args.recording, time=args.time, until_log_ns=until,
-                                           topics=read[0], columns=read[1])
+                                           topics=read[0], columns=read[1], at_rest=True)
         src = cache[until]
         step_params, step_bind = (run["params"] | params) or None, dict(run["binding"]) | binding
         vs = check(spec, src, params=step_params, binding=step_bind,
@@ -425,6 +426,17 @@ def main(args: argparse.Namespace) -> int:
             if ids <= {r["spec"] for r in runs} else []  # a file or another spec: whole
     if runs:  # a plan run: re-check each check step as it was made, with no bench
         return _as_run(args, runs, binding, params, consts, res)
+    if (not (args.whole or args.spec) and rec_specs and source.meta.get("hil.plan")
+            and (source.truncated or repaired_cut(source.meta))):
+        # the plan's checks each had their own since/bind/constants: judging the specs with
+        # their defaults over the whole file instead is not what the plan checks
+        if args.json:
+            print_json([])
+        return final_code([], source, [
+            f"{args.recording}: it holds none of the plan's check_timing steps (cut or "
+            f"damaged before the first), so the plan's checks ({', '.join(rec_specs)}) are "
+            "not judged here with the specs' defaults in place of each step's since, bind "
+            "and constants (--whole judges them so)"])
     try:
         specs = (resolve_specs(args.spec) if args.spec else
                  resolve_specs(rec_specs, recorded=True)) if (args.spec or rec_specs) else [

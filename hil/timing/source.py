@@ -22,7 +22,7 @@ from types import SimpleNamespace
 from typing import Any, Protocol
 
 from hil.record import topics
-from hil.record.reader import Recording, Undecodable, decode
+from hil.record.reader import Recording, Undecodable, decode, repaired_cut
 
 _MISSING = object()
 MISSING_FIELD = _MISSING  # what a column holds where its messages lack the field
@@ -595,6 +595,16 @@ class _LazySource(MemorySource):
         return min(starts) if starts else None
 
 
+def _end_cut(rec: Any, meta: Mapping[str, Mapping[str, str]]) -> int | None:
+    """Where a killed run's file ends (no footer), or a repaired copy of one: the log time
+    from which messages may be missing; None for a file its run closed."""
+    tail = rec.tail_log_ns
+    if tail is None and repaired_cut(meta) is not None:  # the repair wrote a footer
+        last = rec.last_log_ns
+        tail = last + 1 if last is not None else None
+    return tail
+
+
 class RecordingSource(_LazySource):
     """Messages of an MCAP recording, read once through `hil.record.reader.Recording`.
 
@@ -606,8 +616,12 @@ class RecordingSource(_LazySource):
     def __init__(self, path: str | Path, topics: Iterable[str] | None = None,
                  time: str = "publish", until_log_ns: int | None = None,
                  columns: Mapping[str, Iterable[str] | None] | None = None,
-                 progress: Callable[[int, int], None] | None = None) -> None:
+                 progress: Callable[[int, int], None] | None = None,
+                 at_rest: bool = False) -> None:
         """`until_log_ns`: only what the harness had seen by then (re-checking a live check).
+        `at_rest`: the file is read as it will stay (`hil check`, `hil report`): one with no
+        footer is a killed run's, and what came after its end is unknown, as after damage
+        (`cut_ns`); a plan's own check of its recording so far leaves it False.
         `columns`: topic -> the fields to keep (None: all) of topics to hold as columns
         (`ColumnTable`) rather than as messages: what a long recording's checks read, in
         memory that grows with the changes of those fields, not with the messages. The
@@ -654,7 +668,14 @@ class RecordingSource(_LazySource):
         #: is known to have been read; what came later is dropped, so nothing is judged
         #: on a part of the recording that lost some of its messages (None: whole file)
         self.cut_ns: int | None = None
+        #: what the cut is: "damage" mid-file, or the "end" of a killed run's file
+        self.cut_kind: str | None = None
+        self.meta = _metadata(rec)
         cut = rec.cut_log_ns if rec.corrupt else None
+        if rec.corrupt and cut is not None:
+            self.cut_kind = "damage"
+        elif at_rest and (cut := _end_cut(rec, self.meta)) is not None:
+            self.cut_kind = "end"
         for table in tables.values():
             table.finish()
         if cut is not None:
@@ -667,7 +688,6 @@ class RecordingSource(_LazySource):
         self._tables = {topic: table for topic, table in tables.items() if len(table)}
         #: every topic with a message in the file, kept or not
         self._file_topics = set(rec.message_topics or ())
-        self.meta = _metadata(rec)
         res = _resolutions(rec, self.meta)
         #: the first broken record (None if the file is whole) and whether it is damage
         #: mid-file (`corrupt`) rather than a killed run's cut tail
