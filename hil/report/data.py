@@ -50,6 +50,8 @@ class RunData:
     bus_pending: bool = False  # the recording has bus messages not read yet (`bus_of`)
     bus_source_t: list[int] = field(default_factory=list)  # publish time of each bus entry
     truncated: bool = False
+    #: the first unreadable record of a file damaged mid-file (not a killed run's cut end)
+    damage: str | None = None
     t0: int = 0  # the plan start (first plan step event), else the first message: time zero
 
     def step(self, index: object) -> StepData | None:
@@ -310,6 +312,8 @@ def _load_run(path: str | Path, *, truth: bool = True,
     data.metadata = meta = rec.metadata()
     # a repaired copy of a cut or damaged run is as cut as its source (the footer is new)
     data.truncated = rec.truncated or repaired_cut(meta) is not None
+    if rec.corrupt:
+        data.damage = rec.error or "a record could not be read"
     run_meta = meta.get("hil.run", {})
     data.plan = run_meta.get("plan", data.plan)
     data.bench = run_meta.get("bench", data.bench)
@@ -324,14 +328,17 @@ def _load_run(path: str | Path, *, truth: bool = True,
         for sd in steps.values():  # the step that was running when the file ends
             if sd.t_start is not None and sd.t_end is None and sd.status == "skipped":
                 sd.status = "error"
-                sd.message = "cut short: the recording ends while it ran (the run was killed)"
+                sd.message = ("cut short: the recording is damaged while it ran (what "
+                              "followed could not be read)" if data.damage else
+                              "cut short: the recording ends while it ran (the run was killed)")
         try:  # the plan's steps never reached are said, not left out
             total = int(meta.get("hil.plan", {}).get("steps", 0))
         except (TypeError, ValueError):
             total = 0
         for k in range(min(total, 10_000)):
-            steps.setdefault(k, StepData(k, "(not reached)", message="not reached: the "
-                                         "recording ends before it"))
+            steps.setdefault(k, StepData(k, "(not reached)", message=(
+                "not shown: the recording is damaged before it" if data.damage else
+                "not reached: the recording ends before it")))
     data.steps = [steps[k] for k in sorted(steps)]
     if not data.status:
         bad = [s for s in data.steps if s.status not in ("pass", "skipped")]

@@ -310,7 +310,9 @@ def render_html(run: RunData, out: Path | None = None, index: bool | None = None
         run_info_table(run.info()),
         _first_failure(run),
         f"<p>Recording <code>{esc(run.path)}</code>"
-        + (" · <b>recording truncated (killed run)</b>" if run.truncated else "")
+        + (f" · <b>recording damaged ({esc(run.damage)}): what followed could not be read, "
+           "and nothing after it is shown</b>" if run.damage else
+           " · <b>recording truncated (killed run)</b>" if run.truncated else "")
         + " · times are ms from the plan start</p>",
     ]
     h += _steps_html(run)
@@ -434,6 +436,9 @@ def _motion_html(run: RunData) -> list[str]:
 def _safety_html(run: RunData) -> list[str]:
     h = ["<h2>Safe state</h2>"]
     if not run.safety:
+        if run.damage:
+            return [*h, "<p class='fail'>Safe state not seen: the recording is damaged before "
+                        "it, and what followed could not be read. Check the bench.</p>"]
         if run.truncated and not run.metadata.get("hil.result"):
             return [*h, "<p class='fail'>Safe state not confirmed: the recording ends before "
                         "the run drove one (the run was killed). Check the bench.</p>"]

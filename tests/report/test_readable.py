@@ -364,3 +364,31 @@ def test_a_killed_runs_page_says_where_it_was_cut_and_that_no_safe_state_was_see
     case = ET.fromstring(junit_xml([cut])).find(".//testcase")
     err = case.find("error")
     assert err is not None and "cut short" in err.get("message"), ET.tostring(case)[:400]
+
+
+def test_a_damaged_runs_page_says_damaged_not_killed(tmp_path) -> None:
+    """A file damaged mid-file (a chunk that cannot be read) is not a killed run: the page,
+    the cut step and the safe-state section say the recording is damaged and name the
+    unreadable record (helper-84 #5: it said "truncated (killed run)")."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, load_plan
+    from hil.plan.runner import run_plan
+    from hil.report import data as report_data
+    from hil.report.html import write_html
+    from tests.timing.test_check_incomplete import corrupt
+
+    # homing_pr: 0.6 MB, ten 64 KiB chunks however the host's clock flushed them
+    res = run_plan(load_plan(find_plans(["homing_pr"])[0]), load_bench(None), tmp_path,
+                   reports=False)
+    bad = tmp_path / "bad.mcap"
+    off = corrupt(Path(res.recording), bad, 3)
+    report_data.forget(bad)
+    run = report_data.load_run(bad)
+    assert run.damage and f"chunk at offset {off} unreadable" in run.damage
+    cut_steps = [s for s in run.steps if s.message.startswith("cut short")]
+    assert [s.message for s in cut_steps] == ["cut short: the recording is damaged while it "
+                                               "ran (what followed could not be read)"]
+    page = write_html(bad, tmp_path / "bad.html").read_text()
+    assert f"recording damaged (chunk at offset {off} unreadable" in page
+    assert "killed run" not in page and "the run was killed" not in page
+    assert "Safe state not seen: the recording is damaged before it" in page
