@@ -64,6 +64,8 @@ def summarise(rec: Recording, gaps: int = 3,
             lines.append(f"  ... and {len(rec.skipped) - 10} more")
         if not rec._scan.has_footer:
             lines.append("no footer/summary (the writer did not finish: killed run?)")
+    elif rec.corrupt:  # damage, not a killed run's cut end
+        lines.append(f"DAMAGED: {rec.error}; everything before it is readable")
     elif rec.truncated:
         why = rec.error or "no footer/summary (the writer did not finish: killed run?)"
         lines.append(f"TRUNCATED: {why}; everything before it is readable")

@@ -549,6 +549,11 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                 if data[end : end + 8] != MAGIC:
                     out.error = f"closing magic missing after the footer at offset {off}"
                     out.error_offset = end
+                elif n > end + 8:  # `cat a.mcap b.mcap`: what follows is unread
+                    out.error = (f"{n - end - 8:,} bytes after the closing magic at offset "
+                                 f"{end}: not part of this recording (files joined?)")
+                    out.error_offset = end + 8
+                    out.corrupt = True
                 out.has_footer = True
                 break
         except Exception as exc:  # a broken record ends the readable part

@@ -284,6 +284,11 @@ class Recording:
         return self._scan.cut_log_ns
 
     @property
+    def has_footer(self) -> bool:
+        """The file has its footer record (its writer finished)."""
+        return self._scan.has_footer
+
+    @property
     def last_log_ns(self) -> int | None:
         """The latest log time of any message read."""
         return self._scan.last_log_ns
@@ -440,10 +445,13 @@ def repaired_cut(metadata: Mapping[str, Any]) -> str | None:
 
 
 def incomplete(path: str | os.PathLike, *, corrupt: bool, truncated: bool,
-               error: str | None) -> str | None:
-    """Why what a reader judged of a recording is incomplete (exit 4), or None."""
+               error: str | None, footer: bool = False) -> str | None:
+    """Why what a reader judged of a recording is incomplete (exit 4), or None. `footer`:
+    the file has its footer (then an error is not a killed run's missing end)."""
     if corrupt:
         return f"{path}: damaged: {error}; nothing after it was read"
+    if truncated and footer:  # a footer without its closing magic, say
+        return f"{path}: cut short: {error}; judged only what it holds"
     if truncated:
         return (f"{path}: truncated (no footer: the run was killed or is still recording); "
                 "judged only what it holds")

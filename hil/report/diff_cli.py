@@ -39,7 +39,8 @@ def _check_inputs(paths: list[str]) -> tuple[str | None, list[str]]:
         why = not_hil_file(rec)
         if why:
             return f"{p}: {why}", []
-        cut = incomplete(p, corrupt=rec.corrupt, truncated=rec.truncated, error=rec.error)
+        cut = incomplete(p, corrupt=rec.corrupt, truncated=rec.truncated, error=rec.error,
+                         footer=rec.has_footer)
         if cut:
             partial.append(cut)
         elif (why := repaired_cut(rec.metadata())) is not None:  # cut before its repair

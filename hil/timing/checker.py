@@ -744,8 +744,10 @@ class Scope:
         after = f" after {ctx.label(ev.after)}" if ev.after else ""
         cut = getattr(ctx.source, "cut_ns", None)
         if cut is not None and hi > cut:
-            where = ("the recording's end (no footer: the run was killed), and what followed "
-                     "was not recorded" if getattr(ctx.source, "cut_kind", None) == "end" else
+            footer = getattr(ctx.source, "footer", False)
+            killed = "" if footer else " (no footer: the run was killed)"
+            where = (f"the recording's end{killed}, and what followed was not recorded"
+                     if getattr(ctx.source, "cut_kind", None) == "end" else
                      "the recording's damage, and what followed could not be read")
             return Missing(f"expected {ctx.expectation(ev.name)}{after}; not seen in the "
                            f"{_dur(max(span, 0))} before {where}", root=not ev.after, cut=True)

@@ -268,7 +268,8 @@ def not_hil(source: Any) -> str | None:
 def final_code(verdicts: list[Verdict], source: Any, incomplete: list[str]) -> int:
     """The exit code, printing on stderr why a result is incomplete (exit 4)."""
     why = reader_incomplete(source.path, corrupt=source.corrupt, error=source.error,
-                            truncated=getattr(source, "truncated", False))
+                            truncated=getattr(source, "truncated", False),
+                            footer=getattr(source, "footer", False))
     if why:  # what the run did after the cut is unknown
         incomplete = [why, *incomplete]
     if (cut := repaired_cut(getattr(source, "meta", {}) or {})) is not None:

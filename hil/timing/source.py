@@ -694,6 +694,7 @@ class RecordingSource(_LazySource):
         self.error: str | None = rec.error
         self.corrupt: bool = rec.corrupt
         self.truncated: bool = rec.truncated  # no footer: a killed (or running) recorder
+        self.footer: bool = rec.has_footer  # (a file with its footer may still be cut short)
         if self.bad_messages:  # in the columns read above
             logging.getLogger("hil.record").warning(
                 "%s: %d message(s) of a wrong shape skipped", path, self.bad_messages)

@@ -1,0 +1,52 @@
+"""Recordings that end wrongly but not by a kill (helper-84 #7): two files joined with `cat`,
+and a footer without its closing magic. Neither is a killed run, and neither is whole."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hil.bench.bench import load_bench
+from hil.cli import main as hil
+from hil.paths import plans_dir
+from hil.plan.plan import load_plan
+from hil.plan.runner import run_plan
+from hil.record.reader import Recording
+
+pytestmark = pytest.mark.virtual_time
+
+
+@pytest.fixture(scope="module")
+def emgs(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("emgs")
+    res = run_plan(load_plan(plans_dir() / "emgs.yaml"), load_bench(None), out, reports=False)
+    assert res.passed
+    return Path(res.recording)
+
+
+def test_two_recordings_joined_are_not_read_as_one_complete_file(emgs, tmp_path, capsys):
+    """`cat a.mcap b.mcap`: the scan stopped at a's footer and called the file complete;
+    b's 40 kB were never mentioned."""
+    joined = tmp_path / "joined.mcap"
+    joined.write_bytes(emgs.read_bytes() * 2)
+    rec = Recording.open(joined)
+    assert rec.corrupt and "after the closing magic" in rec.error
+    assert hil(["inspect", str(joined)]) == 0
+    out = capsys.readouterr().out
+    assert "complete:" not in out
+    assert f"DAMAGED: {emgs.stat().st_size:,} bytes after the closing magic" in out
+    assert "files joined?" in out
+    assert hil(["check", str(joined)]) == 4
+    err = capsys.readouterr().err
+    assert "damaged:" in err and "after the closing magic" in err
+
+
+def test_a_footer_without_its_closing_magic_is_cut_short_not_killed(emgs, tmp_path, capsys):
+    """The footer is there (the writer finished): "no footer: the run was killed" was wrong."""
+    cut = tmp_path / "nomagic.mcap"
+    cut.write_bytes(emgs.read_bytes()[:-8])
+    assert hil(["check", str(cut)]) == 4
+    err = capsys.readouterr().err
+    assert "cut short: closing magic missing after the footer" in err, err
+    assert "no footer" not in err and "killed" not in err, err
