@@ -71,6 +71,7 @@ def summarise(rec: Recording, gaps: int = 3,
         lines.append(f"TRUNCATED: {why}; everything before it is readable")
     else:
         lines.append("complete: footer and summary present")
+    lines += [f"DAMAGED attachment {bad}: left out" for bad in rec.bad_attachments[:10]]
     if times is None:
         times = {}
         for topic, lt, _pt, _d in rec.raw_messages():

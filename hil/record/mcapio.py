@@ -339,6 +339,8 @@ class Scan:
     #: why each whole record that could not be read was stepped over (`past_damage`)
     skipped: list[str] = field(default_factory=list)
     stated_chunks: int | None = None  # what the summary's Statistics record says
+    #: attachments whose CRC failed (name, offset): left out of `attachments`
+    bad_attachments: list[str] = field(default_factory=list)
     #: the latest log time of any message read (chunk headers' end times, loose messages)
     last_log_ns: int | None = None
     #: a record cut short at the end (a killed run): a chunk's first log time, when its
@@ -539,7 +541,14 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             elif op == Opcode.METADATA:
                 out.metadata.append(_parse(Metadata, rec))
             elif op == Opcode.ATTACHMENT:
-                out.attachments.append(_parse(Attachment, rec))
+                a = _parse(Attachment, rec)
+                # MCAP: a CRC-32 of the record's preceding fields, 0 = none. A damaged one
+                # is left out, said (`bad_attachments`), and the messages read on
+                (crc,) = struct.unpack_from("<I", rec, len(rec) - 4)
+                if crc and zlib.crc32(rec[:-4]) != crc:
+                    out.bad_attachments.append(f"{a.name!r} at offset {off}: CRC mismatch")
+                else:
+                    out.attachments.append(a)
             elif op == Opcode.DATA_END:
                 out.has_data_end = True
             elif op == Opcode.STATISTICS:  # chunk_count after message, schema, channel,

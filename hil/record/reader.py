@@ -284,6 +284,11 @@ class Recording:
         return self._scan.cut_log_ns
 
     @property
+    def bad_attachments(self) -> list[str]:
+        """Attachments left out because their CRC failed (name and offset each)."""
+        return self._scan.bad_attachments
+
+    @property
     def has_footer(self) -> bool:
         """The file has its footer record (its writer finished)."""
         return self._scan.has_footer

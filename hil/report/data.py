@@ -318,6 +318,9 @@ def _load_run(path: str | Path, *, truth: bool = True,
     data.plan = run_meta.get("plan", data.plan)
     data.bench = run_meta.get("bench", data.bench)
     data.status = meta.get("hil.result", {}).get("status", "")
+    for bad in rec.bad_attachments:  # "'plan.yaml' at offset 1572: CRC mismatch"
+        name, _, why = bad.partition(" at offset ")
+        data.attachments[name.strip("'\"")] = f"<damaged at offset {why}; not shown>"
     for a in rec.attachments():
         try:
             data.attachments[a.name] = a.data.decode("utf-8")

@@ -671,8 +671,11 @@ class RecordingSource(_LazySource):
         #: what the cut is: "damage" mid-file, or the "end" of a killed run's file
         self.cut_kind: str | None = None
         self.meta = _metadata(rec)
-        cut = rec.cut_log_ns if rec.corrupt else None
-        if rec.corrupt and cut is not None:
+        cut = None
+        if rec.corrupt:  # from the damaged chunk's first log time, else past what was read
+            last = rec.last_log_ns
+            cut = rec.cut_log_ns if rec.cut_log_ns is not None else (
+                last + 1 if last is not None else 0)
             self.cut_kind = "damage"
         elif at_rest and (cut := _end_cut(rec, self.meta)) is not None:
             self.cut_kind = "end"

@@ -50,3 +50,40 @@ def test_a_footer_without_its_closing_magic_is_cut_short_not_killed(emgs, tmp_pa
     err = capsys.readouterr().err
     assert "cut short: closing magic missing after the footer" in err, err
     assert "no footer" not in err and "killed" not in err, err
+
+
+def _flip_in_attachment(src: Path, dst: Path, name: bytes) -> int:
+    """`src` copied to `dst` with one byte of the attachment `name`'s data flipped; its offset."""
+    import struct
+
+    data = bytearray(src.read_bytes())
+    off = 8
+    while off + 9 <= len(data):
+        op, ln = struct.unpack_from("<BQ", data, off)
+        if op == 0x09 and name in data[off + 9: off + 9 + ln]:
+            data[off + 9 + ln - 20] ^= 0x20  # inside the data, before the CRC
+            dst.write_bytes(bytes(data))
+            return off
+        off += 9 + ln
+    raise AssertionError(f"no attachment {name!r}")
+
+
+def test_a_damaged_attachment_is_said_and_left_out(emgs, tmp_path, capsys):
+    """Attachment CRCs were not checked (helper-84 #6): a flipped byte in the plan file the
+    run attached was shown as the plan. It is left out and said; the messages are whole, so
+    the checks are judged as before."""
+    from hil.report import data as report_data
+
+    bad = tmp_path / "att.mcap"
+    off = _flip_in_attachment(emgs, bad, b"plan.yaml")
+    rec = Recording.open(bad)
+    assert rec.bad_attachments == [f"'plan.yaml' at offset {off}: CRC mismatch"]
+    assert "plan.yaml" not in [a.name for a in rec.attachments()]
+    assert "bench.yaml" in [a.name for a in rec.attachments()]
+    assert hil(["inspect", str(bad)]) == 0
+    assert f"DAMAGED attachment 'plan.yaml' at offset {off}: CRC mismatch" in \
+        capsys.readouterr().out
+    report_data.forget(bad)
+    run = report_data.load_run(bad)
+    assert run.attachments["plan.yaml"] == f"<damaged at offset {off}: CRC mismatch; not shown>"
+    assert hil(["check", str(bad)]) == hil(["check", str(emgs)]) == 0

@@ -93,3 +93,21 @@ def test_the_end_cut_is_only_for_a_file_at_rest(homing, tmp_path):
     assert rest.cut_kind == "end" and rest.cut_ns is not None
     whole = RecordingSource(homing, at_rest=True)
     assert whole.cut_ns is None and whole.cut_kind is None
+
+
+def test_damage_of_unknown_time_cuts_after_the_last_message_read(homing, tmp_path, capsys):
+    """A record whose damage gives no time (an opcode zeroed mid-file, not a chunk whose
+    header still reads) was judged as if the file were whole up to there: the events after
+    it were "never" seen, FAIL. What followed could not be read: inconclusive."""
+    data = bytearray(homing.read_bytes())
+    off = _cuts_before_the_first_check(homing)[-1]
+    data[off] = 0  # the chunk's opcode: no record 0x00, and non-zero bytes follow
+    bad = tmp_path / "op0.mcap"
+    bad.write_bytes(bytes(data))
+    src = RecordingSource(bad)
+    assert src.corrupt and src.cut_kind == "damage" and src.cut_ns is not None
+    hil(["check", str(bad), "--whole", "--json"])  # (the specs' defaults: a FAIL may stand)
+    vs = json.loads(capsys.readouterr().out)
+    assert not [v for v in vs if "it never did" in v["message"]], vs
+    cut = [v for v in vs if "before the recording's damage" in v["message"]]
+    assert cut and all(v["status"] in ("inconclusive", "skipped") for v in cut)
