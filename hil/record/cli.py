@@ -187,6 +187,10 @@ def main(args: argparse.Namespace) -> int:
         except FileProblem as exc:
             print(f"hil inspect: {exc}", file=sys.stderr)
             return 2
+        if Path(args.repair).is_dir():  # (said before the summary, not after it)
+            print(f"hil inspect: --repair {args.repair}: a directory; give the name of the "
+                  "MCAP file to write", file=sys.stderr)
+            return 2
     try:  # a message at a time: the file is never held whole; past a damaged record (a
         # chunk whose CRC fails): what lies after it is said and repaired too
         rec = Recording.stream(args.file, None, take, past_damage=True)

@@ -406,6 +406,10 @@ def main(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"hil check: {e}", file=sys.stderr)
         return 2
+    if any(not s.strip() for s in args.spec or ()):
+        print("hil check: --spec '': empty; a shipped spec id (e.g. servo_on_brake) or a spec "
+              "file", file=sys.stderr)
+        return 2
     if not Path(args.recording).is_file():
         why = "not a regular file" if Path(args.recording).exists() else "no such file"
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)

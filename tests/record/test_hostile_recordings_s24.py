@@ -87,3 +87,16 @@ def test_a_damaged_attachment_is_said_and_left_out(emgs, tmp_path, capsys):
     run = report_data.load_run(bad)
     assert run.attachments["plan.yaml"] == f"<damaged at offset {off}: CRC mismatch; not shown>"
     assert hil(["check", str(bad)]) == hil(["check", str(emgs)]) == 0
+
+
+def test_confusing_flag_values_are_named_before_any_work(emgs, tmp_path, capsys):
+    """helper-84 #8: `--spec ''` was read as the current directory (".:0: (file): a
+    directory"); `--repair DIR` failed only after the whole summary was printed."""
+    assert hil(["check", str(emgs), "--spec", ""]) == 2
+    err = capsys.readouterr().err
+    assert "--spec '': empty" in err and "directory" not in err
+    d = tmp_path / "outdir"
+    d.mkdir()
+    assert hil(["inspect", str(emgs), "--repair", str(d)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and f"--repair {d}: a directory" in err
