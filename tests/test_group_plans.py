@@ -684,3 +684,23 @@ steps:
     assert status.count(never) == 2
     assert len(status) > 600 and all(s == {"axis1": 3, "axis2": 3} for s in status
                                      if s != never)
+
+
+def test_cam_follow_is_not_applicable_to_a_run_with_no_cam(tmp_path, capsys) -> None:
+    """helper-84 #8: a group run with no axis on a cam has cam_follow_error 0, and
+    group_cam_follow passed on it. It is judged from the first cycle with an axis on a cam
+    (`cam_axes`): none, not applicable, and asked for by name, incomplete (exit 4)."""
+    from hil.cli import main as hil
+
+    nocam = run_plan(load_plan(plans_dir() / "group" / "group_command.yaml"),
+                     load_bench(GROUP_BENCH), tmp_path / "nocam", reports=False)
+    assert nocam.passed
+    cycles = _cycles(nocam.recording)
+    assert cycles and all(c["cam_axes"] == 0 and c["cam_follow_error"] == 0 for c in cycles)
+    assert hil(["check", str(nocam.recording), "--whole", "--spec", "group_cam_follow"]) == 4
+    out = capsys.readouterr().out
+    assert "0 pass, 0 fail, 0 inconclusive, 1 skipped" in out
+    cam = run_plan(load_plan(plans_dir() / "group" / "group_cams.yaml"),
+                   load_bench(GROUP_BENCH), tmp_path / "cam", reports=False)
+    assert cam.passed and any(c["cam_axes"] for c in _cycles(cam.recording))
+    assert hil(["check", str(cam.recording), "--whole", "--spec", "group_cam_follow"]) == 0

@@ -1012,6 +1012,7 @@ class AxisGroup:
                            "cam_follow_error": round(max(
                                (abs(a.follow_error) for a in self.axes if a.gea.mode == 2),
                                default=0.0)),
+                           "cam_axes": sum(1 for a in self.axes if a.gea.mode == 2),
                            "gear_phase_error": {a.name: round(a.gear_phase_error)
                                                 for a in self.axes if a.gea.mode == 1},
                            "gear_judged": self.gear_judged,

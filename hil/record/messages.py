@@ -304,7 +304,9 @@ class GroupCycle(TypedDict):
     follow_error: Annotated[dict[str, Any], F("the set-point the feedback answers minus the "
                                               "feedback, per axis")]
     max_follow_error: int
-    cam_follow_error: int
+    cam_follow_error: Annotated[int, F("the largest follow error of the axes on a cam, 0 "
+                                       "when none is (`cam_axes`)")]
+    cam_axes: Annotated[int, F("axes on a cam this cycle (GEA mode 2)")]
     gear_phase_error: Annotated[dict[str, Any], F("a geared follower's drift from its master")]
     gear_judged: Annotated[int, F("geared followers whose phase this cycle judged (the "
                                   "reference taken, docs/group.md)")]
