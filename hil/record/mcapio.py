@@ -463,6 +463,36 @@ ChunkSink = Callable[[bytes, dict, dict], None]
 _IN_CHUNKS = frozenset((Opcode.CHUNK, Opcode.MESSAGE_INDEX))  # what `chunks=False` steps over
 
 
+_COMPRESSIONS = (b"", b"zstd", b"lz4")
+
+
+def _resync(data: bytes | FileBytes, start: int, n: int) -> int | None:
+    """The offset of the next whole chunk record at or after `start` whose header holds
+    together (times in order, a known compression, its records' length the rest of the
+    record): where reading goes on past a record whose length was damaged. None if none."""
+    window = 1 << 20
+    pos = start
+    while pos < n:
+        buf = data[pos : pos + window + 64]
+        i = buf.find(b"\x06")
+        while i != -1 and i < window:
+            at = pos + i
+            head = data[at : at + 9 + 40]
+            if len(head) >= 9 + 36:
+                ln = int.from_bytes(head[1:9], "little")
+                c_min, c_max, usize, _crc = _CHUNK_HEAD.unpack_from(head, 9)
+                clen = int.from_bytes(head[37:41], "little")
+                if (at + 9 + ln <= n and c_min <= c_max and usize <= MAX_CHUNK_BYTES
+                        and clen <= 4):
+                    tail = data[at + 41 : at + 41 + clen + 8]
+                    if (len(tail) == clen + 8 and tail[:clen] in _COMPRESSIONS
+                            and int.from_bytes(tail[clen:], "little") == ln - 40 - clen):
+                        return at
+            i = buf.find(b"\x06", i + 1)
+        pos += window
+    return None
+
+
 def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
          chunks: bool = True, past_damage: bool = False) -> Scan:
     """Read every complete record of `data`; stop at the first broken one and say where.
@@ -493,6 +523,16 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             break
         end = off + 9 + ln
         if end > n:
+            nxt = _resync(data, off + 1, n) if past_damage else None
+            if nxt is not None:  # its length was damaged: whole chunks follow it
+                text = (f"record (opcode 0x{op:02x}) at offset {off} unreadable: its length "
+                        f"({ln:,} bytes) runs past the file's end; whole records follow at "
+                        f"offset {nxt}")
+                if out.error is None:
+                    out.error, out.error_offset, out.corrupt = text, off, True
+                out.skipped.append(text)
+                off = nxt
+                continue
             out.error = f"record (opcode 0x{op:02x}) at offset {off} truncated: needs {ln} bytes"
             out.error_offset = off
             if op == Opcode.CHUNK and off + 17 <= n:  # its message_start_time is there

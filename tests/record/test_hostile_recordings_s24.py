@@ -100,3 +100,41 @@ def test_confusing_flag_values_are_named_before_any_work(emgs, tmp_path, capsys)
     assert hil(["inspect", str(emgs), "--repair", str(d)]) == 2
     out, err = capsys.readouterr()
     assert out == "" and f"--repair {d}: a directory" in err
+
+
+@pytest.fixture(scope="module")
+def homing(tmp_path_factory) -> Path:
+    """0.6 MB in some ten 64 KiB chunks."""
+    out = tmp_path_factory.mktemp("homing")
+    res = run_plan(load_plan(plans_dir() / "homing_pr.yaml"), load_bench(None), out,
+                   reports=False)
+    assert res.passed
+    return Path(res.recording)
+
+
+@pytest.mark.parametrize("how", ["past the end", "short"])
+def test_repair_goes_on_past_a_chunk_whose_length_was_damaged(homing, tmp_path, capsys, how):
+    """helper-84 #4: a chunk whose length field was damaged (a huge one runs past the file's
+    end; a short one leaves the reader inside the chunk) ended `--repair` there, though
+    whole chunks follow. The scan finds the next whole chunk and reads on."""
+    import struct
+
+    from tests.timing.test_check_incomplete import chunk_offsets
+
+    data = bytearray(homing.read_bytes())
+    offs = chunk_offsets(bytes(data))
+    assert len(offs) >= 6
+    at = offs[3]
+    (ln,) = struct.unpack_from("<Q", data, at + 1)
+    struct.pack_into("<Q", data, at + 1, ln | (0x7F << 56) if how == "past the end" else ln - 100)
+    bad = tmp_path / "len.mcap"
+    bad.write_bytes(bytes(data))
+    (after,) = struct.unpack_from("<Q", data, offs[4] + 9)  # the next chunk's first log time
+    fixed = tmp_path / "fixed.mcap"
+    assert hil(["inspect", str(bad), "--repair", str(fixed)]) == 0
+    out = capsys.readouterr().out
+    assert f"whole records follow at offset {offs[4]}" in out
+    total = sum(1 for _ in Recording.open(homing).raw_messages())
+    got = [lt for _tp, lt, _pt, _d in Recording.open(fixed).raw_messages()]
+    assert max(got) >= after and len(got) < total  # read past it, and not the damaged chunk
+    assert hil(["check", str(bad)]) == 4  # a checker still stops at the first damage
