@@ -379,8 +379,10 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
         until = int(run["until_ns"])
         if until not in cache:  # only the latest read is kept: memory of one, not of each
             cache.clear()  # step (the steps come in order; checks at one step share it)
+            # (not at rest: a step is re-checked on what the harness had seen at its
+            # time, as it was checked then, even in a file cut later)
             cache[until] = RecordingSource(args.recording, time=args.time, until_log_ns=until,
-                                           topics=read[0], columns=read[1], at_rest=True)
+                                           topics=read[0], columns=read[1])
         src = cache[until]
         step_params, step_bind = (run["params"] | params) or None, dict(run["binding"]) | binding
         vs = check(spec, src, params=step_params, binding=step_bind,
