@@ -121,3 +121,18 @@ def copy_mcap(src, dst, message=None, *, metadata=None, attachment=None,
             w.add_attachment(0, 0, attachment[0], "application/yaml", attachment[1])
         w.finish()
     return dst
+
+
+def plan_recording(out, name: str):
+    """A shipped plan run on the built-in virtual bench (virtual time) into `out`: its
+    recording's path (the run must pass)."""
+    from pathlib import Path
+
+    from hil.bench.bench import load_bench
+    from hil.paths import plans_dir
+    from hil.plan.plan import load_plan
+    from hil.plan.runner import run_plan
+
+    res = run_plan(load_plan(plans_dir() / f"{name}.yaml"), load_bench(None), out, reports=False)
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
+    return Path(res.recording)

@@ -6,12 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from rec_helpers import plan_recording
 
-from hil.bench.bench import load_bench
 from hil.cli import main as hil
-from hil.paths import plans_dir
-from hil.plan.plan import load_plan
-from hil.plan.runner import run_plan
 from hil.record.reader import Recording
 
 pytestmark = pytest.mark.virtual_time
@@ -19,10 +16,7 @@ pytestmark = pytest.mark.virtual_time
 
 @pytest.fixture(scope="module")
 def emgs(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("emgs")
-    res = run_plan(load_plan(plans_dir() / "emgs.yaml"), load_bench(None), out, reports=False)
-    assert res.passed
-    return Path(res.recording)
+    return plan_recording(tmp_path_factory.mktemp("emgs"), "emgs")
 
 
 def test_two_recordings_joined_are_not_read_as_one_complete_file(emgs, tmp_path, capsys):
@@ -105,11 +99,7 @@ def test_confusing_flag_values_are_named_before_any_work(emgs, tmp_path, capsys)
 @pytest.fixture(scope="module")
 def homing(tmp_path_factory) -> Path:
     """0.6 MB in some ten 64 KiB chunks."""
-    out = tmp_path_factory.mktemp("homing")
-    res = run_plan(load_plan(plans_dir() / "homing_pr.yaml"), load_bench(None), out,
-                   reports=False)
-    assert res.passed
-    return Path(res.recording)
+    return plan_recording(tmp_path_factory.mktemp("homing"), "homing_pr")
 
 
 @pytest.mark.parametrize("how", ["past the end", "short"])
