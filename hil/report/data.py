@@ -5,14 +5,14 @@ from __future__ import annotations
 import datetime
 import json
 from bisect import bisect_left, bisect_right
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from sys import intern
 from typing import Any
 
 from hil.record import topics
 from hil.record.reader import Recording, decode, repaired_cut
+from hil.timing.source import MISSING_FIELD, ColumnTable
 
 
 @dataclass
@@ -43,7 +43,7 @@ class RunData:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: dict[str, str] = field(default_factory=dict)
     params: dict[str, dict[str, Any]] = field(default_factory=dict)  # drive -> values
-    truth: dict[str, list[tuple[int, dict]]] = field(default_factory=dict)  # drive -> states
+    truth: dict[str, TruthSamples] = field(default_factory=dict)  # drive -> states
     truth_fields: frozenset[str] | None = None  # the state fields kept (None: all)
     # (t, topic, msg): msg as recorded bytes (decoded when shown, `_decode`) or a dict
     bus: list[tuple[int, str, bytes | dict]] = field(default_factory=list)
@@ -270,6 +270,13 @@ def _load_run(path: str | Path, *, truth: bool = True,
         if kind == "bus":
             data.bus_pending = True
             return
+        if kind == "state":
+            d = topic.split("/")[2]
+            samples = data.truth.get(d)
+            if samples is None:
+                samples = data.truth[d] = TruthSamples(keep)
+            samples.add(pt or lt, raw)
+            return
         msg = _decode(raw)
         if kind == topics.PLAN_STEPS:
             _step_shape(msg)
@@ -294,11 +301,6 @@ def _load_run(path: str | Path, *, truth: bool = True,
             data.safety.append({**msg, "_t": lt})
         elif kind == topics.LOG:
             data.logs.append({**msg, "_t": lt})
-        elif kind == "state":
-            # thousands of samples: keep the fields the report draws and the recording's specs
-            # read (truth_fields), each key string once
-            msg = {intern(k): v for k, v in msg.items() if keep is None or k in keep}
-            data.truth.setdefault(topic.split("/")[2], []).append((pt or lt, msg))
         else:  # params
             d = topic.split("/")[2]
             data.params.setdefault(d, {}).update(msg.get("values") or {})
@@ -309,6 +311,8 @@ def _load_run(path: str | Path, *, truth: bool = True,
         rec = head
     else:
         rec = Recording.stream(path, None, take)
+    for samples in data.truth.values():
+        samples.finish()
     data.metadata = meta = rec.metadata()
     # a repaired copy of a cut or damaged run is as cut as its source (the footer is new)
     data.truncated = rec.truncated or repaired_cut(meta) is not None
@@ -422,6 +426,62 @@ def _brief(msg: dict, width: int = 600) -> str:
         text = " ".join(parts)
     text = str(text)
     return text if len(text) <= width else text[: width - 1] + "…"
+
+
+class TruthSamples(Sequence):
+    """A drive's ground-truth states as (t, dict) samples, held as columns (`ColumnTable`):
+    a long recording's hundreds of thousands of samples in memory that grows with the
+    changes of the kept fields (about 8 bytes a changing field a sample), not with a dict
+    a sample (some 640 bytes each). Indexing and iterating rebuild the dicts as they go."""
+
+    def __init__(self, keep: frozenset[str] | None) -> None:
+        self.table = ColumnTable(None if keep is None else set(keep))
+        self._last: bytes | None = None
+
+    def add(self, t: int, raw: bytes | dict) -> None:
+        if isinstance(raw, bytes | bytearray):
+            if raw == self._last and len(self.table):  # a repeated state: only its time
+                self.table.add_again(t)
+                return
+            self._last = bytes(raw)
+        else:
+            self._last = None
+        self.table.add(t, _decode(raw))
+
+    def finish(self) -> None:
+        self.table.finish()
+        self._last = None
+
+    def __len__(self) -> int:
+        return len(self.table)
+
+    def _row(self, i: int) -> tuple[int, dict]:
+        msg = {}
+        for name, col in self.table.cols.items():
+            k = bisect_right(col.starts, i) - 1
+            if k >= 0 and (v := col.values[k]) is not MISSING_FIELD:
+                msg[name] = v
+        return self.table.times[i], msg
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self._row(j) for j in range(*i.indices(len(self)))]
+        n = len(self)
+        if not -n <= i < n:
+            raise IndexError(i)
+        return self._row(i % n)
+
+    def column(self, name: str) -> list[Any] | None:
+        """One field's value at every sample (MISSING_FIELD where a sample lacks it), None if
+        no sample has it."""
+        col = self.table.cols.get(name)
+        return None if col is None else col.value_list(len(self.table))
+
+    def __iter__(self) -> Iterator[tuple[int, dict]]:
+        n = len(self.table)
+        cols = [(name, col.value_list(n)) for name, col in self.table.cols.items()]
+        for i, t in enumerate(self.table.times):
+            yield t, {name: vals[i] for name, vals in cols if vals[i] is not MISSING_FIELD}
 
 
 def _decode(raw: bytes | dict) -> dict:

@@ -19,7 +19,7 @@ from typing import Any
 
 from hil.fileio import write_text_atomic
 from hil.record import topics
-from hil.report.data import RunData, bus_around, bus_log, load_run
+from hil.report.data import RunData, TruthSamples, bus_around, bus_log, load_run
 from hil.report.latch_html import LATCH_SPEC, latch_html
 from hil.timing.checker import Verdict, context, spec_topics, state_fields
 from hil.timing.registry import load_specs
@@ -159,7 +159,7 @@ def timing_diagrams(run: RunData, source: Any = None) -> list[tuple[str, str]]:
                                      at_rest=True)
             for topic, msgs in shared.items():
                 if topic in wanted:
-                    source.put_topic(topic, msgs)
+                    source.put_table(topic, msgs.table)
     except Exception as e:  # a truncated or foreign recording: the table still stands
         return [("timing diagrams", f"<p>Diagrams not drawn: {esc(str(e))}</p>")]
     names = {f.name for f in fields(Verdict)}
@@ -218,13 +218,23 @@ def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
             ("velocity (rpm)", ("speed_rpm", "velocity", "vel")),
             ("torque (%)", ("torque_pct", "torque"))]
     series = []
+    times = samples.table.times if isinstance(samples, TruthSamples) else None
     for label, names in keys:
         pts = []
-        for t, msg in samples:
-            for n in names:
-                if isinstance(msg.get(n), int | float) and not isinstance(msg.get(n), bool):
-                    pts.append((t, float(msg[n])))
-                    break
+        if times is not None:  # columns: only the fields drawn are read
+            cols = [c for c in (samples.column(n) for n in names) if c is not None]
+            for i, t in enumerate(times):
+                for c in cols:
+                    v = c[i]
+                    if isinstance(v, int | float) and not isinstance(v, bool):
+                        pts.append((t, float(v)))
+                        break
+        else:
+            for t, msg in samples:
+                for n in names:
+                    if isinstance(msg.get(n), int | float) and not isinstance(msg.get(n), bool):
+                        pts.append((t, float(msg[n])))
+                        break
         if pts:
             series.append((label, pts))
     if not series:

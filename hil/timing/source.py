@@ -710,6 +710,15 @@ class RecordingSource(_LazySource):
         """The topic's columns, when it is held as columns."""
         return self._tables.get(topic)
 
+    def put_table(self, topic: str, table: ColumnTable) -> None:
+        """All messages of `topic` at once as columns, read elsewhere (`finish`ed)."""
+        self._samples_cache.clear()
+        self._raw.pop(topic, None)
+        self._raw_span.pop(topic, None)
+        self._msgs.pop(topic, None)
+        if len(table):
+            self._tables[topic] = table
+
     def messages(self, topic: str) -> list[tuple[int, dict]]:
         table = self._tables.get(topic)
         if table is None:

@@ -392,3 +392,36 @@ def test_a_damaged_runs_page_says_damaged_not_killed(tmp_path) -> None:
     assert f"recording damaged (chunk at offset {off} unreadable" in page
     assert "killed run" not in page and "the run was killed" not in page
     assert "Safe state not seen: the recording is damaged before it" in page
+
+
+def test_the_ground_truth_is_held_as_columns_and_reads_back_as_recorded(tmp_path) -> None:
+    """helper-84 #3: the report kept a dict a state sample (some 640 bytes each; 655 MB for a
+    23 MB recording). It holds them as columns now (TruthSamples): what it gives back, by
+    index and in order, is each recorded state with the kept fields, at its publish time."""
+    import json
+
+    from mcap.reader import make_reader
+
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import find_plans, load_plan
+    from hil.plan.runner import run_plan
+    from hil.report import data as report_data
+
+    res = run_plan(load_plan(find_plans(["homing_pr"])[0]), load_bench(None), tmp_path,
+                   reports=False)
+    report_data.forget(res.recording)
+    run = report_data.load_run(res.recording)
+    samples = run.truth["drive1"]
+    assert isinstance(samples, report_data.TruthSamples)
+    kept = run.truth_fields
+    with open(res.recording, "rb") as f:
+        want = sorted(((m.publish_time, {k: v for k, v in json.loads(m.data).items()
+                                         if kept is None or k in kept})
+                       for _, _, m in make_reader(f).iter_messages(
+                           topics=["/drive/drive1/state"])), key=lambda r: r[0])
+    assert len(want) > 1000 and len(samples) == len(want)
+    assert list(samples) == want
+    assert samples[-1] == want[-1] and samples[0] == want[0] and samples[500] == want[500]
+    assert samples[10:13] == want[10:13]
+    with pytest.raises(IndexError):
+        samples[len(want)]
