@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import heapq
 import itertools
 import sys
 from array import array
+from collections.abc import Mapping
 from pathlib import Path
 
 from hil.fileio import atomic_path
@@ -113,6 +115,15 @@ def summarise(rec: Recording, gaps: int = 3,
     return "\n".join(lines)
 
 
+def _source_cut(rec: Recording, before: Mapping[str, str]) -> str:
+    """The log time from which `rec`'s messages may be missing (damage, or a killed run's
+    cut end), the earlier of its own and a repaired source's; "" for a whole file."""
+    cuts = [c for c in (rec.cut_log_ns if rec.corrupt else rec.tail_log_ns,) if c is not None]
+    with contextlib.suppress(TypeError, ValueError):
+        cuts.append(int(before.get("source_cut_log_ns")))
+    return str(min(cuts)) if cuts else ""
+
+
 def repair(rec: Recording, out: Path, *, stream: bool = False) -> int:
     """Rewrite everything readable of `rec` into a complete MCAP file; return messages.
     `stream`: `rec` was streamed (it holds no message): its messages are read again from
@@ -162,6 +173,11 @@ def repair(rec: Recording, out: Path, *, stream: bool = False) -> int:
                 "source_truncated": str(rec.truncated
                                         or before.get("source_truncated") == "true").lower(),
                 "source_error": rec.error or before.get("source_error", ""),
+                # where the source was cut or damaged: what followed is unknown (a checker
+                # of this copy judges only what came before it)
+                "source_cut_log_ns": _source_cut(rec, before),
+                "source_damaged": str(rec.corrupt
+                                      or before.get("source_damaged") == "true").lower(),
                 "messages": str(n),
                 "skipped_records": str(len(rec.skipped)),
             },

@@ -332,8 +332,9 @@ class Scan:
     error_offset: int | None
     size: int
     corrupt: bool = False  # the broken record was whole but unreadable (not merely cut short)
-    # an unreadable chunk's first log time (its header was readable): every message logged
-    # before it was read, none from it on
+    # damage: an unreadable chunk's first log time (its header was readable), else just after
+    # the last message read before it: every message logged before it was read (None: where
+    # is unknown, a chunk missing from a whole file)
     cut_log_ns: int | None = None
     chunk_count: int = 0  # chunk records met (read or stepped over)
     #: why each whole record that could not be read was stepped over (`past_damage`)
@@ -466,6 +467,11 @@ _IN_CHUNKS = frozenset((Opcode.CHUNK, Opcode.MESSAGE_INDEX))  # what `chunks=Fal
 _COMPRESSIONS = (b"", b"zstd", b"lz4")
 
 
+def _after_read(out: Scan) -> int:
+    """Where damage that gives no time of its own cuts: just after the last message read."""
+    return out.last_log_ns + 1 if out.last_log_ns is not None else 0
+
+
 def _resync(data: bytes | FileBytes, start: int, n: int) -> int | None:
     """The offset of the next whole chunk record at or after `start` whose header holds
     together (times in order, a known compression, its records' length the rest of the
@@ -520,6 +526,8 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             # zeros to the end (as far as looked) are a tail the file system never filled
             # after a crash, a cut like a killed run's; anything else is damage
             out.corrupt = any(data[off : off + 65536])
+            if out.corrupt:
+                out.cut_log_ns = _after_read(out)
             break
         end = off + 9 + ln
         if end > n:
@@ -530,9 +538,18 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                         f"offset {nxt}")
                 if out.error is None:
                     out.error, out.error_offset, out.corrupt = text, off, True
+                    out.cut_log_ns = _after_read(out)
                 out.skipped.append(text)
                 off = nxt
                 continue
+            if n - off > 8 + 9 and data[n - 8 : n] == MAGIC:  # the file's own end is there:
+                # not a killed run's last record, but a length that was damaged
+                out.error = (f"record (opcode 0x{op:02x}) at offset {off} unreadable: its "
+                             f"length ({ln:,} bytes) runs past the file's end, which has its "
+                             "closing magic")
+                out.error_offset, out.corrupt = off, True
+                out.cut_log_ns = _after_read(out)
+                break
             out.error = f"record (opcode 0x{op:02x}) at offset {off} truncated: needs {ln} bytes"
             out.error_offset = off
             if op == Opcode.CHUNK and off + 17 <= n:  # its message_start_time is there
@@ -612,7 +629,7 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             if out.error is None:
                 out.error, out.error_offset = text, off
                 out.corrupt = True
-                out.cut_log_ns = c_min
+                out.cut_log_ns = c_min if c_min is not None else _after_read(out)
             if not past_damage:
                 break
             out.skipped.append(text)

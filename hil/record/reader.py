@@ -280,7 +280,8 @@ class Recording:
     @property
     def cut_log_ns(self) -> int | None:
         """For a damaged file: the log time from which nothing was read (the unreadable
-        chunk's first message), if its header said so; else None."""
+        chunk's first message, else just after the last message read before the damage);
+        None where that is unknown."""
         return self._scan.cut_log_ns
 
     @property

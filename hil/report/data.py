@@ -318,6 +318,8 @@ def _load_run(path: str | Path, *, truth: bool = True,
     data.truncated = rec.truncated or repaired_cut(meta) is not None
     if rec.corrupt:
         data.damage = rec.error or "a record could not be read"
+    elif (rep := meta.get("hil.repair", {})).get("source_damaged") == "true":
+        data.damage = f"repaired from a damaged recording: {rep.get('source_error') or '?'}"
     run_meta = meta.get("hil.run", {})
     data.plan = run_meta.get("plan", data.plan)
     data.bench = run_meta.get("bench", data.bench)
@@ -331,20 +333,24 @@ def _load_run(path: str | Path, *, truth: bool = True,
         except UnicodeDecodeError:
             data.attachments[a.name] = f"<{len(a.data)} bytes>"
     data.t0 = t_plan or t_first or 0
-    if data.truncated and not meta.get("hil.result"):  # killed: the file just ends
-        for sd in steps.values():  # the step that was running when the file ends
+    ended = bool(meta.get("hil.result"))  # the run closed its recording: only the file is cut
+    if data.truncated:  # killed, damaged, or a run whose file lost its tail
+        for sd in steps.values():  # a step the file has starting and not ending
             if sd.t_start is not None and sd.t_end is None and sd.status == "skipped":
                 sd.status = "error"
                 sd.message = ("cut short: the recording is damaged while it ran (what "
                               "followed could not be read)" if data.damage else
+                              "cut short: the recording's tail is lost (the run ended; how "
+                              "this step did was not kept)" if ended else
                               "cut short: the recording ends while it ran (the run was killed)")
-        try:  # the plan's steps never reached are said, not left out
+        try:  # the plan's steps the file does not hold are said, not left out
             total = int(meta.get("hil.plan", {}).get("steps", 0))
         except (TypeError, ValueError):
             total = 0
         for k in range(min(total, 10_000)):
             steps.setdefault(k, StepData(k, "(not reached)", message=(
                 "not shown: the recording is damaged before it" if data.damage else
+                "not shown: the recording's tail is lost" if ended else
                 "not reached: the recording ends before it")))
     data.steps = [steps[k] for k in sorted(steps)]
     if not data.status:
@@ -352,6 +358,8 @@ def _load_run(path: str | Path, *, truth: bool = True,
         data.status = "fail" if bad else ("pass" if data.steps else "unknown")
         if data.truncated:
             data.status = "aborted"
+    elif data.truncated and data.status == "pass":  # the run passed; the file holds part of it
+        data.status = "incomplete"
     return data
 
 

@@ -31,12 +31,12 @@ body{font:14px/1.4 system-ui,sans-serif;margin:1.5em;color:#222;max-width:1200px
 h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
 table{border-collapse:collapse;width:100%}td,th{border:1px solid #ddd;padding:3px 6px;
 text-align:left;vertical-align:top}th{background:#f3f3f3}
-.pass{color:#176f2c;font-weight:600}.fail,.error,.aborted{color:#b00020;font-weight:600}
+.pass{color:#176f2c;font-weight:600}.fail,.error,.aborted,.incomplete{color:#b00020;font-weight:600}
 .inconclusive{color:#a06000;font-weight:600}.skipped{color:#777}
 pre{background:#f7f7f7;padding:8px;overflow:auto;font-size:12px}
 pre.bus{white-space:pre-wrap;overflow-wrap:anywhere}.nav{font-size:13px;margin:0 0 .5em}
 .badge{display:inline-block;padding:2px 10px;border-radius:10px;color:#fff}
-.b-pass{background:#176f2c}.b-fail,.b-error,.b-aborted{background:#b00020}
+.b-pass{background:#176f2c}.b-fail,.b-error,.b-aborted,.b-incomplete{background:#b00020}
 .b-inconclusive{background:#a06000}.b-unknown{background:#777}
 svg{background:#fff;border:1px solid #ddd}
 .diagram{overflow-x:auto}.runinfo td{border:none;padding:1px 12px 1px 0}
@@ -320,8 +320,11 @@ def render_html(run: RunData, out: Path | None = None, index: bool | None = None
         run_info_table(run.info()),
         _first_failure(run),
         f"<p>Recording <code>{esc(run.path)}</code>"
-        + (f" · <b>recording damaged ({esc(run.damage)}): what followed could not be read, "
-           "and nothing after it is shown</b>" if run.damage else
+        + (f" · <b>recording damaged ({esc(run.damage)}): what followed could not be read"
+           + ("; the repair kept the records around it" if run.metadata.get("hil.repair")
+              else ", and nothing after it is shown") + "</b>" if run.damage else
+           " · <b>recording cut short: its tail is lost (the run itself ended)</b>"
+           if run.truncated and run.metadata.get("hil.result") else
            " · <b>recording truncated (killed run)</b>" if run.truncated else "")
         + " · times are ms from the plan start</p>",
     ]

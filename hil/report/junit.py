@@ -13,7 +13,7 @@ from hil.report.data import RunData, load_run
 from hil.terminal import xml_text
 
 NOT_PASSED = {"fail": "failure", "inconclusive": "failure", "error": "error",
-              "aborted": "error"}
+              "aborted": "error", "incomplete": "error"}
 CLASSNAME = "hil.plans"
 
 

@@ -418,10 +418,15 @@ def main(args: argparse.Namespace) -> int:
         return 2
     # first what the file says of itself, then only what the chosen specs read
     source = _read(args, "hil check: what the recording says of itself",
-                   topics=[topics.TIMING_VERDICTS])
+                   topics=[topics.TIMING_VERDICTS], cut=False)
     if isinstance(source, int):
         return source
     why = not_hil(source)
+    if why and source.truncated and not source.topics():  # killed before its first channel
+        if args.json:
+            print_json([])
+        return final_code([], source, [f"{args.recording}: cut before its first channel: "
+                                       "nothing was recorded to judge"])
     if why and not source.corrupt:
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)
         return EXIT_USAGE

@@ -595,14 +595,20 @@ class _LazySource(MemorySource):
         return min(starts) if starts else None
 
 
-def _end_cut(rec: Any, meta: Mapping[str, Mapping[str, str]]) -> int | None:
-    """Where a killed run's file ends (no footer), or a repaired copy of one: the log time
-    from which messages may be missing; None for a file its run closed."""
-    tail = rec.tail_log_ns
-    if tail is None and repaired_cut(meta) is not None:  # the repair wrote a footer
+def _repaired_cut(rec: Any, meta: Mapping[str, Mapping[str, str]]) -> tuple[int, str] | None:
+    """A `hil inspect --repair` copy of a cut or damaged file: (the log time from which its
+    source's messages may be missing, "damage" or "end"); None for any other file. The copy
+    is whole, and the chunks its repair read past a hole are in it: judged only up to the
+    hole all the same, as its source is."""
+    if repaired_cut(meta) is None:
+        return None
+    rep = meta.get("hil.repair", {})
+    kind = "damage" if rep.get("source_damaged") == "true" else "end"
+    try:
+        return int(rep["source_cut_log_ns"]), kind
+    except (KeyError, TypeError, ValueError):  # a copy an older hil repaired: at its end
         last = rec.last_log_ns
-        tail = last + 1 if last is not None else None
-    return tail
+        return (last + 1 if last is not None else 0), kind
 
 
 class RecordingSource(_LazySource):
@@ -617,11 +623,13 @@ class RecordingSource(_LazySource):
                  time: str = "publish", until_log_ns: int | None = None,
                  columns: Mapping[str, Iterable[str] | None] | None = None,
                  progress: Callable[[int, int], None] | None = None,
-                 at_rest: bool = False) -> None:
+                 at_rest: bool = False, cut: bool = True) -> None:
         """`until_log_ns`: only what the harness had seen by then (re-checking a live check).
         `at_rest`: the file is read as it will stay (`hil check`, `hil report`): one with no
         footer is a killed run's, and what came after its end is unknown, as after damage
-        (`cut_ns`); a plan's own check of its recording so far leaves it False.
+        (`cut_ns`); a plan's own check of its recording so far leaves it False. `cut=False`:
+        every message read is kept, none dropped at a cut (the plan's own records of what it
+        checked, which stand whole where they were written: `hil check` finding its steps).
         `columns`: topic -> the fields to keep (None: all) of topics to hold as columns
         (`ColumnTable`) rather than as messages: what a long recording's checks read, in
         memory that grows with the changes of those fields, not with the messages. The
@@ -671,18 +679,22 @@ class RecordingSource(_LazySource):
         #: what the cut is: "damage" mid-file, or the "end" of a killed run's file
         self.cut_kind: str | None = None
         self.meta = _metadata(rec)
-        cut = None
-        if rec.corrupt:  # from the damaged chunk's first log time, else past what was read
+        at: int | None = None  # where this source is cut
+        if not cut:
+            pass
+        elif rec.corrupt:  # from the damaged chunk's first log time, else past what was read
             last = rec.last_log_ns
-            cut = rec.cut_log_ns if rec.cut_log_ns is not None else (
+            at = rec.cut_log_ns if rec.cut_log_ns is not None else (
                 last + 1 if last is not None else 0)
             self.cut_kind = "damage"
-        elif at_rest and (cut := _end_cut(rec, self.meta)) is not None:
+        elif (repaired := _repaired_cut(rec, self.meta)) is not None:
+            at, self.cut_kind = repaired
+        elif at_rest and (at := rec.tail_log_ns) is not None:
             self.cut_kind = "end"
         for table in tables.values():
             table.finish()
-        if cut is not None:
-            self.cut_ns = cut - lag  # a message stamped this late may be in the lost chunk
+        if at is not None:
+            self.cut_ns = at - lag  # a message stamped this late may be in the lost chunk
             for topic, lst in raw.items():
                 raw[topic] = [m for m in lst if m[0] < self.cut_ns]
             for table in tables.values():
