@@ -169,7 +169,8 @@ def main(args: argparse.Namespace) -> int:
         return 2
     if head.truncated:
         print(
-            f"hil export: {args.file} is truncated ({head.error or 'no footer'}); "
+            f"hil export: {args.file} is "
+            f"{'damaged' if head.corrupt else 'truncated'} ({head.error or 'no footer'}); "
             "exporting what is readable",
             file=sys.stderr,
         )

@@ -128,3 +128,14 @@ def test_repair_goes_on_past_a_chunk_whose_length_was_damaged(homing, tmp_path, 
     got = [lt for _tp, lt, _pt, _d in Recording.open(fixed).raw_messages()]
     assert max(got) >= after and len(got) < total  # read past it, and not the damaged chunk
     assert hil(["check", str(bad)]) == 4  # a checker still stops at the first damage
+
+
+def test_export_says_damaged_not_truncated(homing, tmp_path, capsys):
+    """helper-85: `hil export` of a file whose chunk CRC fails called it truncated."""
+    from tests.timing.test_check_incomplete import corrupt
+
+    bad = tmp_path / "bad.mcap"
+    corrupt(homing, bad, 3)
+    assert hil(["export", str(bad), "-o", str(tmp_path / "o.log")]) == 0
+    err = capsys.readouterr().err
+    assert f"{bad} is damaged (chunk at offset" in err and "truncated" not in err, err
