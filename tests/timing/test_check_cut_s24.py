@@ -93,20 +93,27 @@ def test_a_run_that_ended_but_lost_its_tail_is_not_a_pass(emgs, tmp_path):
     assert "<error" in xml and 'errors="1"' in xml, xml[:600]
 
 
+def _one_message_a_chunk(path: Path, rows: list[tuple[str, int, bytes]]) -> None:
+    """An MCAP file of (topic, log = publish time, JSON bytes) rows, a chunk each."""
+    chans: dict[str, int] = {}
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=1)
+        w.start()
+        schema = w.register_schema("hil.Any", "jsonschema", b'{"type": "object"}')
+        for topic, t, data in rows:
+            if topic not in chans:
+                chans[topic] = w.register_channel(topic, "json", schema, {})
+            w.add_message(chans[topic], log_time=t, publish_time=t, data=data)
+        w.finish()
+
+
 def test_check_records_at_the_cut_chunks_first_time_are_kept(tmp_path):
     """The plan's check records stand whole where they were written: read with `cut=False`
     they are all kept, though a message at that time may be in the lost chunk."""
     path = tmp_path / "c.mcap"
-    with open(path, "wb") as f:
-        w = Writer(f, chunk_size=1)
-        w.start()
-        sid = w.register_schema("hil.Any", "jsonschema", b'{"type": "object"}')
-        v = w.register_channel("/timing/verdicts", "json", sid, {})
-        x = w.register_channel("/x", "json", sid, {})
-        w.add_message(x, log_time=50, publish_time=50, data=b'{"v": 0}')
-        w.add_message(v, log_time=100, publish_time=100, data=json.dumps({"v": 1}).encode())
-        w.add_message(x, log_time=100, publish_time=100, data=b'{"v": 2}' + b" " * 4000)
-        w.finish()
+    _one_message_a_chunk(path, [("/x", 50, b'{"v": 0}'),
+                                ("/timing/verdicts", 100, json.dumps({"v": 1}).encode()),
+                                ("/x", 100, b'{"v": 2}' + b" " * 4000)])
     data = path.read_bytes()
     offs = chunk_offsets(data)
     cut = tmp_path / "cut.mcap"
