@@ -353,9 +353,26 @@ SIGNED_OBJECTS: frozenset[tuple[int, int]] = frozenset({
 })
 
 
+_signed_params: frozenset[int] | None = None
+
+
+def signed_parameter_objects() -> frozenset[int]:
+    """The 2xxxh objects of the A3's signed P-parameters (a negative minimum in the chapter 8
+    table: P1.043, P6.001, ...; P1.044 -> 212Ch, L18154-18156), read once."""
+    global _signed_params
+    if _signed_params is None:
+        from hil.profile.params import ParamTable
+
+        _signed_params = frozenset(p.od_index for p in ParamTable.load() if p.signed)
+    return _signed_params
+
+
 def object_value(index: int, sub: int, raw: bytes) -> int:
-    """An object's value from its little-endian bytes: signed for `SIGNED_OBJECTS`."""
-    return int.from_bytes(raw, "little", signed=(index, sub) in SIGNED_OBJECTS)
+    """An object's value from its little-endian bytes: signed for `SIGNED_OBJECTS` and for
+    the P-parameters whose range is signed (2xxxh sub 0)."""
+    signed = (index, sub) in SIGNED_OBJECTS or (
+        sub == 0 and 0x2000 <= index < 0x3000 and index in signed_parameter_objects())
+    return int.from_bytes(raw, "little", signed=signed)
 
 
 class PdoMaps:

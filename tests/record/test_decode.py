@@ -31,7 +31,7 @@ def test_sdo_write_from_the_manual():
 def test_a_signed_cia402_object_reads_signed_in_the_sdo_record_and_the_frame():
     """607Ah target position (INTEGER32, CiA 402) -4300000 read 4290667296 in the SDO
     record and the decoded frame, while a TPDO carrying it decoded it signed; a reviewer
-    saw a far positive target. 6041h (UNSIGNED16) and P-parameters stay unsigned."""
+    saw a far positive target. 6041h (UNSIGNED16) and unsigned P-parameters stay unsigned."""
     from hil.protocol.canopen import describe_frame
 
     req = bytes.fromhex("237A6000") + (-4_300_000).to_bytes(4, "little", signed=True)
@@ -49,9 +49,28 @@ def test_a_signed_cia402_object_reads_signed_in_the_sdo_record_and_the_frame():
     assert up["value"] == -600
     # unsigned objects keep their unsigned reading
     assert describe_frame(0x581, bytes.fromhex("4B416000FFFF0000"))["statusword"] == 0xFFFF
-    assert p.feed(0x601, bytes.fromhex("2B01270018FC0000"), 2_000) == []
-    (u,) = p.feed(0x581, bytes.fromhex("6001270000000000"), 2_300)
-    assert u["value"] == 0xFC18  # 2701h: no CiA 402 type here
+    assert p.feed(0x601, bytes.fromhex("2B01210018FC0000"), 2_000) == []
+    (u,) = p.feed(0x581, bytes.fromhex("6001210000000000"), 2_300)
+    assert u["value"] == 0xFC18  # 2101h P1.001 control mode: 0..4383, unsigned
+
+
+def test_a_signed_p_parameter_reads_signed_in_the_sdo_record():
+    """P-parameters over SDO (2xxxh, L18154-18156) read unsigned in the record: P1.043 = -50
+    (brake-off delay, -1000..1000) read 65486, P6.001 = -4300000 (PR#0 data) 4290667296.
+    Signed where the chapter 8 table's range is."""
+    from hil.protocol.canopen import describe_frame
+
+    p = SdoPairing()
+    assert p.feed(0x601, bytes.fromhex("2B2B2100CEFF0000"), 0) == []  # 212Bh = P1.043, 2 bytes
+    (txn,) = p.feed(0x581, bytes.fromhex("602B210000000000"), 300)
+    assert txn["object"] == "212Bh:00" and txn["value"] == -50
+    req = bytes.fromhex("23012600") + (-4_300_000).to_bytes(4, "little", signed=True)
+    assert describe_frame(0x601, req)["value"] == -4_300_000  # 2601h = P6.001
+    p.feed(0x601, bytes.fromhex("4001260000000000"), 1_000)
+    (up,) = p.feed(0x581, bytes.fromhex("4301260020 63BEFF".replace(" ", "")), 1_300)
+    assert up["value"] == -4_300_000
+    # P1.044 (212Ch, 1..536870911) stays unsigned
+    assert describe_frame(0x601, bytes.fromhex("232C2100FFFFFFFF"))["value"] == 0xFFFFFFFF
 
 def test_sdo_upload_2_bytes_and_abort():
     # upload request 40h, reply 4Bh = 2 bytes (L17003-L17016); abort 80h with code
