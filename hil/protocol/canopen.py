@@ -7,6 +7,7 @@ never raises, whatever the bytes (a malformed frame is described with an `error`
 from __future__ import annotations
 
 import struct
+from collections.abc import Container
 
 # Function codes (COB-ID bits 10..7) -- L16873-L16899.
 NMT = 0x000
@@ -234,7 +235,8 @@ def _u32(data: bytes, at: int = 4) -> int:
     return int.from_bytes(data[at : at + 4].ljust(4, b"\0"), "little")
 
 
-def _describe_sdo(data: bytes, client: bool) -> dict:
+def _describe_sdo(data: bytes, client: bool,
+                  signed_params: Container[int] = frozenset()) -> dict:
     out: dict = {}
     if not data:
         out["error"] = "empty SDO frame"
@@ -265,7 +267,8 @@ def _describe_sdo(data: bytes, client: bool) -> dict:
             n = 4 - ((data[0] >> 2) & 3) if s else 4
             raw = bytes(data[4 : 4 + n])
             out["data"] = raw.hex()
-            out["value"] = object_value(out.get("index", 0), out.get("sub", 0), raw)
+            out["value"] = object_value(out.get("index", 0), out.get("sub", 0), raw,
+                                        signed_params)
             # flat fields the timing specs address (cia402_transitions.yaml)
             if client and out.get("index") == 0x6040 and out.get("sub") == 0:
                 out["controlword"] = out["value"]
@@ -283,8 +286,10 @@ def _describe_sdo(data: bytes, client: bool) -> dict:
     return out
 
 
-def describe_frame(can_id: int, data: bytes, *, remote: bool = False) -> dict:
-    """Decode one CAN frame into a flat dict (kind, node and the fields of its protocol)."""
+def describe_frame(can_id: int, data: bytes, *, remote: bool = False,
+                   signed_params: Container[int] = frozenset()) -> dict:
+    """Decode one CAN frame into a flat dict (kind, node and the fields of its protocol);
+    `signed_params`: manufacturer objects whose SDO values read signed (`object_value`)."""
     try:
         data = bytes(data)
         kind, node = classify(can_id)
@@ -321,7 +326,8 @@ def describe_frame(can_id: int, data: bytes, *, remote: bool = False) -> dict:
             if data:
                 out["counter"] = data[0]
         elif kind in ("sdo_rx", "sdo_tx"):
-            out.update(_describe_sdo(data, client=kind == "sdo_rx"))
+            out.update(_describe_sdo(data, client=kind == "sdo_rx",
+                                     signed_params=signed_params))
         elif kind.startswith(("tpdo", "rpdo")):
             out["data"] = data.hex()
         return out
@@ -353,25 +359,12 @@ SIGNED_OBJECTS: frozenset[tuple[int, int]] = frozenset({
 })
 
 
-_signed_params: frozenset[int] | None = None
-
-
-def signed_parameter_objects() -> frozenset[int]:
-    """The 2xxxh objects of the A3's signed P-parameters (a negative minimum in the chapter 8
-    table: P1.043, P6.001, ...; P1.044 -> 212Ch, L18154-18156), read once."""
-    global _signed_params
-    if _signed_params is None:
-        from hil.profile.params import ParamTable
-
-        _signed_params = frozenset(p.od_index for p in ParamTable.load() if p.signed)
-    return _signed_params
-
-
-def object_value(index: int, sub: int, raw: bytes) -> int:
-    """An object's value from its little-endian bytes: signed for `SIGNED_OBJECTS` and for
-    the P-parameters whose range is signed (2xxxh sub 0)."""
-    signed = (index, sub) in SIGNED_OBJECTS or (
-        sub == 0 and 0x2000 <= index < 0x3000 and index in signed_parameter_objects())
+def object_value(index: int, sub: int, raw: bytes,
+                 signed_params: Container[int] = frozenset()) -> int:
+    """An object's value from its little-endian bytes: signed for `SIGNED_OBJECTS`, and for
+    the manufacturer objects (sub 0) in `signed_params` (a drive profile's signed
+    parameters: the A3's P1.043 at 212Bh, hil.record.sdo_pairing.signed_parameter_objects)."""
+    signed = (index, sub) in SIGNED_OBJECTS or (sub == 0 and index in signed_params)
     return int.from_bytes(raw, "little", signed=signed)
 
 

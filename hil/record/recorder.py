@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import importlib
 import json
 import logging
@@ -43,7 +44,7 @@ from hil.record.queue_items import (
     SerialItem,
 )
 from hil.record.schemas import SCHEMA_BYTES, schema_for_topic
-from hil.record.sdo_pairing import SdoPairing
+from hil.record.sdo_pairing import SdoPairing, signed_parameter_objects
 
 log_ = logging.getLogger(__name__)
 # foxglove.LogLevel 1-5 -> logging levels (the same line also goes to Python logging)
@@ -740,6 +741,9 @@ class Recorder:
         self._describe_frame, self._decoders["canopen"] = _load(
             "hil.protocol.canopen", "describe_frame"
         )
+        if self._describe_frame is not None:  # the A3's signed P-parameters read signed
+            self._describe_frame = functools.partial(
+                self._describe_frame, signed_params=signed_parameter_objects())
         self._describe_adu, self._decoders["modbus"] = _load("hil.protocol.modbus", "describe_adu")
 
     def _do_bytes(self, item: BytesItem) -> None:

@@ -8,9 +8,29 @@ Block transfers are recognised but not reassembled.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 
 from hil.protocol.canopen import SDO_REQUEST, SDO_RESPONSE, object_value
+
+_signed_params: frozenset[int] | None = None
+
+
+def signed_parameter_objects() -> frozenset[int]:
+    """The 2xxxh objects of the A3's signed P-parameters (a negative minimum in the chapter 8
+    table: P1.043 at 212Bh, P6.001 at 2601h; P1.044 -> 212Ch, L18154-18156), read once:
+    their SDO values read signed in the record."""
+    global _signed_params
+    if _signed_params is None:
+        try:
+            from hil.profile.params import ParamTable
+
+            _signed_params = frozenset(p.od_index for p in ParamTable.load() if p.signed)
+        except Exception:  # no table: unsigned, as before; never a recorder that stops
+            logging.getLogger(__name__).warning("parameter table unreadable: P-parameters "
+                                                "over SDO are recorded unsigned", exc_info=True)
+            _signed_params = frozenset()
+    return _signed_params
 
 
 @dataclass
@@ -39,7 +59,8 @@ def _result(txn: _Txn, status: str, t: int | None, **extra) -> dict:
         "transfer": txn.transfer,
         "status": status,
         # signed for a CiA 402 object of a signed type (607Ah -4300000, not 4290667296)
-        "value": object_value(txn.index, txn.sub, data) if 0 < len(data) <= 8 else None,
+        "value": (object_value(txn.index, txn.sub, data, signed_parameter_objects())
+                  if 0 < len(data) <= 8 else None),
         "data": data.hex(),
         "size": len(data),
         "abort_code": None,

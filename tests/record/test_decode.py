@@ -58,8 +58,12 @@ def test_a_signed_p_parameter_reads_signed_in_the_sdo_record():
     """P-parameters over SDO (2xxxh, L18154-18156) read unsigned in the record: P1.043 = -50
     (brake-off delay, -1000..1000) read 65486, P6.001 = -4300000 (PR#0 data) 4290667296.
     Signed where the chapter 8 table's range is."""
-    from hil.protocol.canopen import describe_frame
+    from functools import partial
 
+    from hil.protocol.canopen import describe_frame as describe
+    from hil.record.sdo_pairing import signed_parameter_objects
+
+    describe_frame = partial(describe, signed_params=signed_parameter_objects())  # the recorder's
     p = SdoPairing()
     assert p.feed(0x601, bytes.fromhex("2B2B2100CEFF0000"), 0) == []  # 212Bh = P1.043, 2 bytes
     (txn,) = p.feed(0x581, bytes.fromhex("602B210000000000"), 300)
@@ -71,6 +75,20 @@ def test_a_signed_p_parameter_reads_signed_in_the_sdo_record():
     assert up["value"] == -4_300_000
     # P1.044 (212Ch, 1..536870911) stays unsigned
     assert describe_frame(0x601, bytes.fromhex("232C2100FFFFFFFF"))["value"] == 0xFFFFFFFF
+
+
+def test_the_recorder_reads_a_signed_p_parameter_signed(tmp_path):
+    """The same on a recording: the decoded frame and the SDO transaction of P1.043 = -50."""
+    p = tmp_path / "r.mcap"
+    with Recorder(p) as rec:
+        rec.can("can0", frame(0x601, "2B2B2100CEFF0000"), "tx", T0, None)
+        rec.can("can0", frame(0x581, "602B210000000000"), "rx", T0 + 300_000, None)
+    assert rec.errors == 0, rec.last_error
+    r = Recording.open(p)
+    req = [o for *_x, o in r.messages(topics.canopen("can0")) if o["dir"] == "tx"]
+    assert req[0]["value"] == -50
+    (txn,) = [o for *_x, o in r.messages(topics.canopen_sdo("can0"))]
+    assert txn["object"] == "212Bh:00" and txn["value"] == -50
 
 def test_sdo_upload_2_bytes_and_abort():
     # upload request 40h, reply 4Bh = 2 bytes (L17003-L17016); abort 80h with code
