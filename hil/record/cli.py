@@ -118,7 +118,8 @@ def summarise(rec: Recording, gaps: int = 3,
 def _source_cut(rec: Recording, before: Mapping[str, str]) -> str:
     """The log time from which `rec`'s messages may be missing (damage, or a killed run's
     cut end), the earlier of its own and a repaired source's; "" for a whole file."""
-    cuts = [c for c in (rec.cut_log_ns if rec.corrupt else rec.tail_log_ns,) if c is not None]
+    own = rec.cut_log_ns if rec.corrupt else rec.tail_log_ns
+    cuts = [] if own is None else [own]
     with contextlib.suppress(TypeError, ValueError):
         cuts.append(int(before.get("source_cut_log_ns")))
     return str(min(cuts)) if cuts else ""

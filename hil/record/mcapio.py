@@ -333,8 +333,7 @@ class Scan:
     size: int
     corrupt: bool = False  # the broken record was whole but unreadable (not merely cut short)
     # damage: an unreadable chunk's first log time (its header was readable), else just after
-    # the last message read before it: every message logged before it was read (None: where
-    # is unknown, a chunk missing from a whole file)
+    # the last message read before it: every message logged before it was read
     cut_log_ns: int | None = None
     chunk_count: int = 0  # chunk records met (read or stepped over)
     #: why each whole record that could not be read was stepped over (`past_damage`)
@@ -344,8 +343,9 @@ class Scan:
     bad_attachments: list[str] = field(default_factory=list)
     #: the latest log time of any message read (chunk headers' end times, loose messages)
     last_log_ns: int | None = None
-    #: a record cut short at the end (a killed run): a chunk's first log time, when its
-    #: header was there to read (every message logged before it was read, none from it on)
+    #: a file cut short with no damage (a killed run): the cut chunk's first log time, when
+    #: its header was there to read, else just after the last message read (every message
+    #: logged before it was read)
     tail_log_ns: int | None = None
 
 
@@ -640,4 +640,9 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                      f"{out.chunk_count}: part of the recording is missing")
         out.error_offset = None
         out.corrupt = True
+    # where what was read ends, when nothing said it sooner: after the last message read
+    if out.corrupt and out.cut_log_ns is None:
+        out.cut_log_ns = _after_read(out)
+    elif not out.corrupt and (out.error or not out.has_footer) and out.tail_log_ns is None:
+        out.tail_log_ns = _after_read(out)
     return out

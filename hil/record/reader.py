@@ -281,7 +281,7 @@ class Recording:
     def cut_log_ns(self) -> int | None:
         """For a damaged file: the log time from which nothing was read (the unreadable
         chunk's first message, else just after the last message read before the damage);
-        None where that is unknown."""
+        None for a file that is not damaged."""
         return self._scan.cut_log_ns
 
     @property
@@ -304,12 +304,7 @@ class Recording:
         """For a file cut short with no damage (a killed run, or one still recording): the log
         time from which messages may be missing (the cut chunk's first, else just after the
         last read); None for a whole or a damaged file (`cut_log_ns`)."""
-        sc = self._scan
-        if not self.truncated or sc.corrupt:
-            return None
-        if sc.tail_log_ns is not None:
-            return sc.tail_log_ns
-        return sc.last_log_ns + 1 if sc.last_log_ns is not None else None
+        return None if self._scan.corrupt else self._scan.tail_log_ns
 
     @property
     def size(self) -> int:

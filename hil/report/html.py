@@ -212,29 +212,22 @@ def timing_diagrams(run: RunData, source: Any = None) -> list[tuple[str, str]]:
     return out
 
 
-def _plot(run: RunData, drive: str, samples: list[tuple[int, dict]]) -> str:
+def _plot(run: RunData, drive: str, samples: TruthSamples) -> str:
     """Inline SVG: position, velocity and torque against time, one panel each."""
     keys = [("position (counts)", ("position_counts", "position", "pos")),
             ("velocity (rpm)", ("speed_rpm", "velocity", "vel")),
             ("torque (%)", ("torque_pct", "torque"))]
     series = []
-    times = samples.table.times if isinstance(samples, TruthSamples) else None
+    times = samples.table.times
     for label, names in keys:
         pts = []
-        if times is not None:  # columns: only the fields drawn are read
-            cols = [c for c in (samples.column(n) for n in names) if c is not None]
-            for i, t in enumerate(times):
-                for c in cols:
-                    v = c[i]
-                    if isinstance(v, int | float) and not isinstance(v, bool):
-                        pts.append((t, float(v)))
-                        break
-        else:
-            for t, msg in samples:
-                for n in names:
-                    if isinstance(msg.get(n), int | float) and not isinstance(msg.get(n), bool):
-                        pts.append((t, float(msg[n])))
-                        break
+        cols = [c for c in (samples.column(n) for n in names) if c is not None]  # drawn only
+        for i, t in enumerate(times):
+            for c in cols:
+                v = c[i]
+                if isinstance(v, int | float) and not isinstance(v, bool):
+                    pts.append((t, float(v)))
+                    break
         if pts:
             series.append((label, pts))
     if not series:

@@ -683,10 +683,7 @@ class RecordingSource(_LazySource):
         if not cut:
             pass
         elif rec.corrupt:  # from the damaged chunk's first log time, else past what was read
-            last = rec.last_log_ns
-            at = rec.cut_log_ns if rec.cut_log_ns is not None else (
-                last + 1 if last is not None else 0)
-            self.cut_kind = "damage"
+            at, self.cut_kind = rec.cut_log_ns, "damage"
         elif (repaired := _repaired_cut(rec, self.meta)) is not None:
             at, self.cut_kind = repaired
         elif at_rest and (at := rec.tail_log_ns) is not None:

@@ -16,22 +16,16 @@ from pathlib import Path
 
 import pytest
 
-from hil.bench.bench import load_bench
 from hil.cli import main as hil
-from hil.plan.plan import find_plans, load_plan
-from hil.plan.runner import run_plan
 from hil.record.reader import Recording
 from hil.timing.source import RecordingSource
+from tests.record.rec_helpers import plan_recording
 from tests.timing.test_check_incomplete import chunk_offsets
 
 
 @pytest.fixture(scope="module")
 def homing(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("homing")
-    result = run_plan(load_plan(find_plans(["homing_pr"])[0]), load_bench(None), out,
-                      reports=False)
-    assert result.passed
-    return Path(result.recording)
+    return plan_recording(tmp_path_factory.mktemp("homing"), "homing_pr")
 
 
 def _cuts_before_the_first_check(path: Path, most: int = 4) -> list[int]:
