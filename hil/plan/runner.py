@@ -297,9 +297,10 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
     return res
 
 
-# On a virtual clock nothing passes between the safe state and the end of the recording, so
-# the bench runs on this long (what closing a real-time run takes, and more than the drive
-# needs to cut torque after the brake engaged, P1.043): its reaction is on the record.
+# After the safe state the bench is recorded on for this long, on either clock (more than the
+# drive needs to cut torque after the brake engaged, P1.043 = 50 ms by default): its reaction
+# is on the record. (On a virtual clock nothing at all would pass otherwise; a real-time run
+# used to close about 2 ms after the safe state, before the brake clamped.)
 SAFE_TAIL_NS = 200_000_000
 # a step whose own timeout (`wait_until`, `pr_wait`, ...) or `wait` is longer than the bench's
 # step timeout: the step's watchdog waits this much past it, so the step fails saying what it
@@ -308,10 +309,9 @@ OWN_TIMEOUT_GRACE_NS = 1_000_000_000
 
 
 def safe_tail(session: Session) -> None:
-    """On a virtual clock, run the bench on for `SAFE_TAIL_NS` after the safe state (a plan's
-    end, a `hil_session` test's teardown), then take a last ground-truth sample."""
-    if not clock.is_virtual():
-        return
+    """Run the bench on for `SAFE_TAIL_NS` after the safe state (a plan's end, a
+    `hil_session` test's teardown), on the run's clock, then take a last ground-truth sample
+    (a virtual world's)."""
     with contextlib.suppress(Exception):
         clock.sleep(SAFE_TAIL_NS / 1e9)
         sample = getattr(session.world, "sample_truth", None)
