@@ -302,6 +302,10 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
 # is on the record. (On a virtual clock nothing at all would pass otherwise; a real-time run
 # used to close about 2 ms after the safe state, before the brake clamped.)
 SAFE_TAIL_NS = 200_000_000
+# a plan without `check_timing` steps keeps its messages in memory for its reports up to this
+# many (about 2 KB each: 50 s of a 1 kHz ground truth); past it they read the file, so a long
+# soak or wait in virtual time does not grow without bound (docs/clock.md)
+REPORT_MIRROR_LIMIT = 50_000
 # a step whose own timeout (`wait_until`, `pr_wait`, ...) or `wait` is longer than the bench's
 # step timeout: the step's watchdog waits this much past it, so the step fails saying what it
 # saw, or ends (docs/plans.md)
@@ -425,8 +429,10 @@ def _open_recording(plan: Plan, bench: Bench, out_dir: Path, stem: str | None = 
                                   "tags": json.dumps(plan.tags)})
     record_bench(rec, bench, plan.options)
     checked = sorted({s.args.spec for s in plan.steps if s.kind == "check_timing"})
-    if checked or mirror:  # the live checks read each message once (LiveSource)
+    if checked:  # the live checks read each message once (LiveSource)
         rec.keep_messages()
+    elif mirror:  # for the reports only, which read the file instead past the limit
+        rec.keep_messages(REPORT_MIRROR_LIMIT)
     if checked:  # read by `hil check` (docs/timing.md): specs and the default drive's binding
         dspec = plan_spec(plan, bench.drives[plan.drive or bench.default_drive])
         rec.add_metadata("timing", {"specs": json.dumps(checked),

@@ -263,6 +263,8 @@ class Recorder:
         self.written_channels: dict[str, tuple[str, dict[str, str]]] = {}
         #: see keep_messages(): (channel id, log time, publish time, bytes, payload or None)
         self.mirror: list[tuple[int, int, int, bytes, Any]] | None = None
+        self.mirror_limit: int | None = None
+        self.mirror_dropped = False
         self._channels: dict[str, int] = {}
         self._chan_meta: dict[str, dict[str, str]] = {}
         self._can_ch: dict[str, tuple] = {}
@@ -532,24 +534,41 @@ class Recorder:
         self.metadata_count += 1
         self._control(MetadataItem(name, _str_map(data)))
 
-    def keep_messages(self) -> list[tuple[int, int, int, bytes, Any]]:
+    def keep_messages(self, limit: int | None = None) -> list[tuple[int, int, int, bytes, Any]]:
         """From now on, also keep every message written (channel id, log time, publish
         time, bytes, payload) in `mirror`, in file order, for a live checker that reads each
         message once (`hil.timing.source.LiveSource`) instead of re-reading the file. The
         payload is the ground truth's own dict where decoding the bytes gives exactly it
-        (`json_plain`), so the checker need not decode it; None for any other message."""
+        (`json_plain`), so the checker need not decode it; None for any other message.
+
+        `limit` (a mirror only the reports read, which can read the file instead): once the
+        mirror holds that many messages it is dropped, its memory freed (about 2 KB a
+        message), `mirror` is None again and `mirror_dropped` True; asking for it again
+        then raises, as it would miss what was written meanwhile."""
+        if self.mirror_dropped:
+            raise RuntimeError(f"recorder: the mirror was dropped at its limit of "
+                               f"{self.mirror_limit} messages")
         if self.mirror is None:
             mirror: list[tuple[int, int, int, bytes, Any]] = []
             write = self._w.add_message
+            self.mirror_limit = limit
 
             def add_message(cid: int, log_time: int, publish_time: int, data: bytes,
                             *args: Any, obj: Any = None, **kw: Any) -> Any:
                 out = write(cid, log_time, publish_time, data, *args, **kw)
+                if self.mirror_dropped:  # (a message queued with its payload before)
+                    return out
                 mirror.append((cid, log_time, publish_time, data, obj))
+                if limit is not None and len(mirror) >= limit:  # (the writer thread's)
+                    self.mirror, self.mirror_dropped = None, True
+                    mirror.clear()
                 return out
 
             self._w.add_message = add_message  # type: ignore[method-assign]
             self.mirror = mirror  # only now: a payload is queued with its dict from here on
+        elif limit != self.mirror_limit:
+            raise ValueError(f"recorder: the mirror is kept with limit {self.mirror_limit}, "
+                             f"not {limit}")
         return self.mirror
 
     def flush(self, timeout: float = 10.0) -> bool:
