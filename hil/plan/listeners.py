@@ -8,6 +8,7 @@ default of `run_plans`). The live progress display is `hil/plan/progress.py`.
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,6 +19,12 @@ from hil.report.html import write_html
 from hil.report.junit import write_junit
 
 PASS, SKIPPED = "pass", "skipped"
+
+
+def recorded_file(path: str | None) -> str | None:
+    """A plan file as the recording names it: absolute, so that one plan gives the same
+    messages whether it was named by a relative or an absolute path."""
+    return os.path.abspath(path) if path else path
 
 
 class StepRecords(Listener):
@@ -32,7 +39,7 @@ class StepRecords(Listener):
         s, r = e.step, e.result
         e.recorder.plan_step(r.label, "end", plan=e.plan.name, index=s.index, kind=s.kind,
                              line=s.line, drive=e.drive, status=r.status, message=r.message,
-                             duration_ns=r.duration_ns, file=s.file)
+                             duration_ns=r.duration_ns, file=recorded_file(s.file))
 
 
 class Reports(Listener):

@@ -42,7 +42,7 @@ from hil.plan.events import (
     StepEnded,
     StepStarted,
 )
-from hil.plan.listeners import Reports, StepLines, StepRecords
+from hil.plan.listeners import Reports, StepLines, StepRecords, recorded_file
 from hil.plan.plan import Plan, check_plan, plan_spec
 from hil.plan.safety import SafeReport, go_safe
 from hil.plan.session import BenchError, Session, open_session
@@ -490,7 +490,7 @@ def _initial_params(ctx: StepContext, plan: Plan) -> None:
         d.write_param(p, v)
         ctx.written(d.name, {p: v})
     ctx.rec.plan_step("params", "end", plan=plan.name, index=-1, status=PASS, line=line,
-                      file=plan.path, duration_ns=clock.monotonic_ns() - t0,
+                      file=recorded_file(plan.path), duration_ns=clock.monotonic_ns() - t0,
                       message=", ".join(f"{p}={v}" for p, v in plan.params.items()))
 
 
@@ -543,7 +543,7 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
             # on /log too (Foxglove's Log panel), a judging step's failure as well, though
             # the plan goes on after it
             rec.log("error", f"step {s.index + 1} ({r.label}) {r.status}: {r.message}",
-                    name="hil.runner", file=s.file, line=s.line)
+                    name="hil.runner", file=recorded_file(s.file), line=s.line)
             if not s.action.judge_only:
                 for later in res.steps[s.index + 1:]:
                     later.message = f"not run: step {s.index + 1} {r.status}"
