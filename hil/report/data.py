@@ -59,7 +59,7 @@ class RunData:
         return next((s for s in self.steps if s.index == index), None)
 
     def info(self) -> dict[str, str]:
-        """Where and what ran: run date (UTC), hil version, host, bench, git revision."""
+        """Where and what ran: run date (UTC), hil version, host, bench, clock, git revision."""
         return run_info(self.metadata, self.bench)
 
 
@@ -82,7 +82,10 @@ def run_info(meta: dict[str, dict[str, str]], bench: str = "") -> dict[str, str]
         except (OverflowError, OSError, ValueError):  # past year 9999: a damaged record
             date = "?"
     out = {"date": date, "hil": ver.get("hil", "?"), "host": run.get("host", "?"),
-           "bench": bench or run.get("bench", "?"), "git": ver.get("git_revision", "?"),
+           "bench": bench or run.get("bench", "?"),
+           # the bench's clock (`hil.clock`): a virtual-time PASS is not a wall-clock one
+           "clock": str(meta.get("hil.clock", {}).get("clock") or "?"),
+           "git": ver.get("git_revision", "?"),
            "dut": dut_text(meta.get("hil.dut", {}))}
     try:  # the model's deviation knobs in effect: a reviewer must see them at once
         dev = json.loads(str(meta.get("hil.bench", {}).get("deviations") or "[]"))

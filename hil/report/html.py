@@ -263,11 +263,11 @@ def _plot(run: RunData, drive: str, samples: TruthSamples) -> str:
 
 
 def run_info_table(info: dict[str, str]) -> str:
-    """Run date, hil version, host, bench, git revision and the drives under test."""
+    """Run date, hil version, host, bench, clock, git revision and the drives under test."""
     dev = info.get("deviations")
     return ("<table class='runinfo' style='width:auto'><tr>" + "".join(
         f"<td><small>{esc(k)}</small><br><b>{esc(info.get(k, '?'))}</b></td>"
-        for k in ("date", "hil", "host", "bench", "git", "dut"))
+        for k in ("date", "hil", "host", "bench", "clock", "git", "dut"))
         + (f"<td class='fail'><small>deviation knobs (a deliberately wrong drive)</small><br>"
            f"<b>{esc(dev)}</b></td>" if dev else "") + "</tr></table>")
 

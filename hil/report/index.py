@@ -64,7 +64,7 @@ def _link(target: Path, out_dir: Path, text: str) -> str:
 def _merged_info(rows: list[dict]) -> dict[str, str]:
     """The run's identity; a field that differs between plans lists every value."""
     out = {}
-    for k in ("date", "hil", "host", "bench", "git", "dut"):
+    for k in ("date", "hil", "host", "bench", "clock", "git", "dut"):
         vals = sorted({r["info"].get(k, "?") for r in rows if r["info"]})
         if k == "date" and vals:
             vals = [vals[0]]  # the run started with its first plan

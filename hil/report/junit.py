@@ -53,8 +53,10 @@ def failure_text(run: RunData) -> tuple[str, str]:
 
 def case_properties(run: RunData, junit_dir: str | Path | None) -> list[tuple[str, str]]:
     """The properties of a plan's testcase, the same from `hil run` and from pytest: the
-    recording (relative to the JUnit file), bench, status, and one per step and verdict."""
+    recording (relative to the JUnit file), bench, the bench's clock, status, and one per
+    step and verdict."""
     props = [("recording", recording_ref(run.path, junit_dir)), ("bench", run.bench),
+             ("clock", run.info()["clock"]),
              ("status", run.status), ("truncated", str(run.truncated).lower())]
     return props + [(name, text) for name, _status, text in _lines(run)]
 
