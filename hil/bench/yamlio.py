@@ -64,7 +64,11 @@ def parse_duration(value: Any) -> int:
             f"duration {shown}: a number (ASCII digits, at most 15 before and after the "
             f"point) and a unit, e.g. 150ms, 1.5s (units: {', '.join(_UNITS)})"
         )
-    ns = round(float(m.group(1)) * _UNITS[m.group(2)])
+    exact = float(m.group(1)) * _UNITS[m.group(2)]
+    ns = round(exact)
+    if abs(exact - ns) > max(1e-6, abs(exact) * 1e-12):  # (a float's own error aside)
+        raise ValueError(f"duration {shown}: finer than 1 ns (a duration is a whole number "
+                         "of nanoseconds)")
     if ns > MAX_DURATION_NS:
         raise ValueError(f"duration {shown} is longer than {MAX_DURATION_NS // S // 3600} h, "
                          "the longest anything in a plan or bench may take")

@@ -19,6 +19,13 @@ def test_durations():
     for bad in ("150", 150, "1.5 parsecs", True):
         with pytest.raises(ValueError):
             parse_duration(bad)
+    # finer than 1 ns is refused (helper-86: `wait: 0.5ns` silently became 0); a float's own
+    # error in a whole number of ns is not
+    assert parse_duration("0.1us") == 100 and parse_duration("2.3s") == 2_300_000_000
+    assert parse_duration("1.000000001s") == 1_000_000_001
+    for bad in ("0.5ns", "0.0000001ms", "1.5ns", "1.0000000005s"):
+        with pytest.raises(ValueError, match="finer than 1 ns"):
+            parse_duration(bad)
 
 
 def test_virtual_bench_wiring_sets_mapping_parameters():
