@@ -96,7 +96,7 @@ def parallel_blocker(bench: Bench) -> str | None:
 # --- the worker side ---------------------------------------------------------------------
 
 
-_stop_requested = False
+_stop_requested: bool | str = False  # a signal's name (`signal_text`) once one came
 
 
 def _worker_init(log_level: int) -> None:
@@ -107,7 +107,7 @@ def _worker_init(log_level: int) -> None:
 
     def mark(signum: int, frame: Any) -> None:
         global _stop_requested
-        _stop_requested = True
+        _stop_requested = signal_text(signum)  # a plan stopped before it began names it
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, mark)
@@ -125,7 +125,7 @@ def _orphan_watch(parent: int, period_s: float = 0.2) -> None:
     while os.getppid() == parent:
         time.sleep(period_s)
     log.warning("hil run (pid %d) is gone: stopping this worker (pid %d)", parent, os.getpid())
-    _stop_requested = True
+    _stop_requested = _stop_requested or True
     os.kill(os.getpid(), signal.SIGINT)  # a running plan stops; an idle worker is marked
     end = time.monotonic() + STOP_GRACE_S
     while _busy.is_set() and time.monotonic() < end:
@@ -173,7 +173,7 @@ def _run_one(job: _Job) -> tuple[PlanResult | None, list[str], bool, Summary]:
                            allow_inconclusive=job.allow_inconclusive, index=job.index,
                            total=job.total, stop=lambda: _stop_requested, stem=job.stem)
         except KeyboardInterrupt as e:
-            _stop_requested = True
+            _stop_requested = _stop_requested or True
             res = getattr(e, "plan_result", None) or _interrupted_result(plan, bench, job)
             return res, notes.texts, True, _summary(res)
         return res, notes.texts, False, _summary(res)

@@ -204,13 +204,13 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
               listeners: list[Listener] | None = None,
               session_factory: Callable[[Bench, Any], Session] = open_session,
               allow_inconclusive: bool = False, reports: bool = True, index: int = 1,
-              total: int = 1, stop: Callable[[], bool] | None = None,
+              total: int = 1, stop: Callable[[], bool | str] | None = None,
               stem: str | None = None) -> PlanResult:
     """Run one plan (checked here against the bench first); raises KeyboardInterrupt after
     leaving the bench safe. Listeners hear plan and step events; the recording's step records
     and, with `reports`, the JUnit and HTML reports are listeners too. `stop()` true once the
     signal handlers are in place: a stop asked for while the plan was being set up (a `-j`
-    worker's signal), handled as Ctrl-C. `stem`: the output files' name (default: the plan
+    worker's signal, named where `stop()` gives its name), handled as Ctrl-C. `stem`: the output files' name (default: the plan
     file's; `output_stems` makes them unique within a run)."""
     specs = specs if specs is not None else timing_specs()
     check_plan(plan, bench, specs)
@@ -232,8 +232,10 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
     with Interrupts() as intr:
         try:
             try:
-                if stop is not None and stop():
-                    raise KeyboardInterrupt("stopped before the plan began")
+                why = stop() if stop is not None else None
+                if why:  # the signal's name where `stop` knows it (a `-j` worker's)
+                    raise KeyboardInterrupt(why if isinstance(why, str) and why.startswith("SIG")
+                                            else "stopped before the plan began")
                 sbench, truth = bench, rec
                 if bench.virtual:  # the virtual world's ground truth and model options
                     vt = virtual_module("truth")
