@@ -210,8 +210,9 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
     leaving the bench safe. Listeners hear plan and step events; the recording's step records
     and, with `reports`, the JUnit and HTML reports are listeners too. `stop()` true once the
     signal handlers are in place: a stop asked for while the plan was being set up (a `-j`
-    worker's signal, named where `stop()` gives its name), handled as Ctrl-C. `stem`: the output files' name (default: the plan
-    file's; `output_stems` makes them unique within a run)."""
+    worker's signal, named where `stop()` gives its name), handled as Ctrl-C. `stem`: the
+    output files' name (default: the plan file's; `output_stems` makes them unique within a
+    run)."""
     specs = specs if specs is not None else timing_specs()
     check_plan(plan, bench, specs)
     # in virtual time (short runs, messages in memory anyway for the checks) the reports
