@@ -300,10 +300,10 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
     return res
 
 
-# After the safe state the bench is recorded on for this long, on either clock (more than the
-# drive needs to cut torque after the brake engaged, P1.043 = 50 ms by default): its reaction
-# is on the record. (On a virtual clock nothing at all would pass otherwise; a real-time run
-# used to close about 2 ms after the safe state, before the brake clamped.)
+# After the safe state the bench is recorded on for this long, on either clock (longer than the
+# motor's brake takes to clamp after BRKR went off, and than a P1.043 delay up to 200 ms): the
+# drive's reaction is on the record. (On a virtual clock nothing at all would pass otherwise;
+# a real-time run used to close about 2 ms after the safe state, before the brake clamped.)
 SAFE_TAIL_NS = 200_000_000
 # a plan without `check_timing` steps keeps its messages in memory for its reports up to this
 # many (about 2 KB each: 50 s of a 1 kHz ground truth); past it they read the file, so a long
