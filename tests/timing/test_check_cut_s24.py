@@ -61,8 +61,10 @@ def test_a_repaired_copy_is_judged_only_up_to_its_sources_hole(homing, tmp_path,
 
 
 def _cut_in_the_last_chunk(src: Path, dst: Path) -> None:
-    """`src` as a run leaves it when its writer wrote `hil.result` before its last chunk
-    (the chunk was still being filled) and the file was cut inside that chunk."""
+    """`src` as a run leaves it when its writer wrote `hil.result` before a chunk still being
+    filled and the file was cut inside that chunk: the chunk that holds the last step's end
+    record (the chunks close on the writer's wall-clock flush, so the last chunk may hold
+    only what came after every step), and all after it lost."""
     data = src.read_bytes()
     off, result = 8, b""
     while off + 9 <= len(data):
@@ -73,7 +75,10 @@ def _cut_in_the_last_chunk(src: Path, dst: Path) -> None:
             break
         off += 9 + ln
     assert result
-    last = chunk_offsets(data)[-1]
+    t_end = max(lt for topic, lt, _pt, m in Recording.open(src).messages("/plan/steps")
+                if m.get("event") == "end")
+    last = next(at for at in chunk_offsets(data)  # the chunk's message_end_time
+                if struct.unpack_from("<Q", data, at + 17)[0] >= t_end)
     dst.write_bytes(data[:last] + result + data[last: last + 30])
 
 
