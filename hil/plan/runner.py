@@ -234,8 +234,8 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
         try:
             try:
                 why = stop() if stop is not None else None
-                if why:  # the signal's name where `stop` knows it (a `-j` worker's)
-                    raise KeyboardInterrupt(why if isinstance(why, str) and why.startswith("SIG")
+                if why:  # the signal's name where `stop` knows it (`interrupt_cause`)
+                    raise KeyboardInterrupt(why if isinstance(why, str)
                                             else "stopped before the plan began")
                 sbench, truth = bench, rec
                 if bench.virtual:  # the virtual world's ground truth and model options

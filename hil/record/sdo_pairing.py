@@ -8,29 +8,26 @@ Block transfers are recognised but not reassembled.
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass, field
 
 from hil.protocol.canopen import SDO_REQUEST, SDO_RESPONSE, object_value
 
-_signed_params: frozenset[int] | None = None
 
-
+@functools.cache
 def signed_parameter_objects() -> frozenset[int]:
     """The 2xxxh objects of the A3's signed P-parameters (a negative minimum in the chapter 8
     table: P1.043 at 212Bh, P6.001 at 2601h; P1.044 -> 212Ch, L18154-18156), read once:
     their SDO values read signed in the record."""
-    global _signed_params
-    if _signed_params is None:
-        try:
-            from hil.profile.params import ParamTable
+    try:
+        from hil.profile.params import ParamTable
 
-            _signed_params = frozenset(p.od_index for p in ParamTable.load() if p.signed)
-        except Exception:  # no table: unsigned, as before; never a recorder that stops
-            logging.getLogger(__name__).warning("parameter table unreadable: P-parameters "
-                                                "over SDO are recorded unsigned", exc_info=True)
-            _signed_params = frozenset()
-    return _signed_params
+        return frozenset(p.od_index for p in ParamTable.load() if p.signed)
+    except Exception:  # no table: unsigned, as before; never a recorder that stops
+        logging.getLogger(__name__).warning("parameter table unreadable: P-parameters over "
+                                            "SDO are recorded unsigned", exc_info=True)
+        return frozenset()
 
 
 @dataclass

@@ -680,13 +680,11 @@ class RecordingSource(_LazySource):
         self.cut_kind: str | None = None
         self.meta = _metadata(rec)
         at: int | None = None  # where this source is cut
-        if not cut:
-            pass
-        elif rec.corrupt:  # from the damaged chunk's first log time, else past what was read
+        if cut and rec.corrupt:  # the damaged chunk's first log time, else past what was read
             at, self.cut_kind = rec.cut_log_ns, "damage"
-        elif (repaired := _repaired_cut(rec, self.meta)) is not None:
+        elif cut and (repaired := _repaired_cut(rec, self.meta)) is not None:
             at, self.cut_kind = repaired
-        elif at_rest and (at := rec.tail_log_ns) is not None:
+        elif cut and at_rest and (at := rec.tail_log_ns) is not None:
             self.cut_kind = "end"
         for table in tables.values():
             table.finish()
