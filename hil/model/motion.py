@@ -36,6 +36,8 @@ Public API (all that the drive, CiA 402 and homing use)::
     # owner holds a lock they are ignored (`by=` names the owner); stops always act
     axis.hold()                                  # keep the current demand position
     axis.move_to(target_counts, speed_rpm, accel_ms, decel_ms)   # trapezoid, from current state
+    axis.move_to(..., overlap=True)   # PR OVLP: a new trapezoid from rest, summed with what
+                                      # is left of the running one (L5051-5057)
     axis.run_velocity(rpm, accel_ms, decel_ms)
     axis.run_torque(target_0p1, slope_ms)        # 6071h / 6087h (slope: ms for 0 -> 100 %)
     axis.ramp_stop(decel_ms)                     # decelerate, then hold
@@ -103,6 +105,29 @@ def accel_from_ms(ms_per_3000rpm: float, cpr: int = COUNTS_PER_REV) -> float:
 def ramp_time_ms(delta_rpm: float, ms_per_3000rpm: float) -> float:
     """Time to change speed by `delta_rpm` at a constant "T ms per 3000 rpm" slope (L4164)."""
     return abs(delta_rpm) * ms_per_3000rpm / 3000.0
+
+
+def _pos_step(pd: float, vd: float, tgt: float, vmax: float, acc: float, dec: float,
+              dt: float) -> tuple[float, float, bool]:
+    """One step of a trapezoid from demand `pd` at speed `vd` to `tgt`: (pd, vd, landed)."""
+    r = tgt - pd
+    if r == 0.0 and vd == 0.0:
+        return pd, vd, True
+    # the speed from which a stop at `dec` ends on the target after this step's Euler
+    # update (v·dt + v²/2dec = |r|): the demand never passes its target
+    ddt = dec * dt
+    vdes = math.sqrt(ddt * ddt + 2.0 * dec * abs(r)) - ddt
+    if vdes < ddt:  # the last step: land on the target, stop within one step
+        vdes = min(ddt, abs(r) / dt)
+    if vdes > vmax:
+        vdes = vmax
+    if r < 0.0:
+        vdes = -vdes
+    vd = _approach(vd, vdes, acc, dec, dt)
+    ds = vd * dt
+    if ds * r > 0.0 and abs(ds) >= abs(r) and abs(vd) <= abs(vdes) + dec * dt:
+        return tgt, 0.0, True
+    return pd + ds, vd, False
 
 
 # ---- the axis --------------------------------------------------------------------------
@@ -209,6 +234,13 @@ class Axis:
         self._acc = 1.0
         self._dec = 1.0
         self._vtarget = 0.0
+        # PR OVLP (L5051-5057): the decelerations of overlapped position profiles, each
+        # [speed when overlapped (counts/s), deceleration (counts/s²), time since (s)],
+        # summed with the running profile, whose own state is then `_pmain` / `_vmain`
+        self._tails: list[list[float]] = []
+        self._pmain = 0.0
+        self._vmain = 0.0
+        self._sum = (0.0, 0.0)  # the (demand, demand velocity) the sum gave last
         self._tq_target = 0.0  # N·m
         self._tq_dem = 0.0  # N·m
         self._tq_rate = math.inf  # N·m/s
@@ -251,6 +283,7 @@ class Axis:
             return
         self.power = on
         self.demand = self.position
+        self._tails.clear()
         self._stall_tq = 0.0
         profiling = on and self._mode in (_POS, _VEL, _STOP)
         self.demand_velocity = self.velocity if profiling else 0.0
@@ -319,18 +352,27 @@ class Axis:
 
     def hold(self) -> None:
         """Stop the profile now and hold the current demand position."""
+        self._tails.clear()
         self._mode = _HOLD
         self.demand_velocity = 0.0
 
     def move_to(
         self, target_counts: float, speed_rpm: float, accel_ms: float, decel_ms: float,
-        *, by: str = "",
+        *, by: str = "", overlap: bool = False,
     ) -> None:
         """Trapezoidal move of the demand to `target_counts` (physical), starting from the
         current demand position and speed (so calling it during a move is a change-set-
-        immediately)."""
+        immediately). `overlap` (PR OVLP, L5051-5057): during a position move, the new
+        trapezoid starts from rest at the running move's target instead, and the demand is
+        the sum of the two: the running move decelerates on to its end while the new one
+        accelerates (figure 7.1.6.11: smooth when Spd1/3000 x Dec = Spd2/3000 x Acc; the
+        total travel is the two strokes, 000:692-709)."""
         if self._refused(by):
             return
+        if overlap and self._mode == _POS and self.power:
+            self._overlap()
+        else:
+            self._tails.clear()
         if self._mode not in (_POS, _HOLD, _STOP, _INTERP):
             self.demand = self.position  # leaving a velocity/torque mode: start bumpless
             self.demand_velocity = self.velocity
@@ -342,10 +384,17 @@ class Axis:
         self._dec = accel_from_ms(decel_ms, self.cpr)
         self.moving = True
 
-    def run_velocity(self, rpm: float, accel_ms: float, decel_ms: float, *, by: str = "") -> None:
-        """Profile velocity: ramp the speed to `rpm` (capped by `max_speed_rpm`)."""
+    def run_velocity(self, rpm: float, accel_ms: float, decel_ms: float, *, by: str = "",
+                     overlap: bool = False) -> None:
+        """Profile velocity: ramp the speed to `rpm` (capped by `max_speed_rpm`). `overlap`
+        (PR OVLP into a speed command, L5051): during a position move the speed ramps from 0,
+        summed with what is left of the move's deceleration."""
         if self._refused(by):
             return
+        if overlap and self._mode == _POS and self.power:
+            self._overlap()
+        else:
+            self._tails.clear()
         if self._mode == _TORQUE:
             self.demand_velocity = self.velocity  # bumpless from the actual speed
         lim = self.max_speed_rpm
@@ -361,6 +410,7 @@ class Axis:
         slope of `slope_ms` per 100 % (6087h, L18803-18817); 0 ms = step."""
         if self._refused(by):
             return
+        self._tails.clear()
         rated = self.mech.rated_torque
         if self._mode != _TORQUE:
             self._tq_dem = self.torque_nm if self.power else 0.0
@@ -371,6 +421,7 @@ class Axis:
 
     def ramp_stop(self, decel_ms: float) -> None:
         """Decelerate at "decel_ms per 3000 rpm" to standstill, then hold the position."""
+        self._tails.clear()  # the summed demand stops as one
         if self._mode in (_TORQUE, _VEL):
             self.demand = self.position
             self.demand_velocity = self.velocity
@@ -386,6 +437,7 @@ class Axis:
             raise ValueError(f"Axis.interpolate_to: period must be > 0 ns, got {period_ns}")
         if self._refused(by):
             return
+        self._tails.clear()
         if self._mode in (_TORQUE, _VEL):
             self.demand = self.position
         smooth = by != "PT" and any(w > 1 for w in self.ip_windows)
@@ -406,6 +458,40 @@ class Axis:
         self._ip_still = 0
         self._ip_settled = False
         self.moving = True
+
+    def _overlap(self) -> None:
+        """The running position profile decelerates on at its own rate as a tail, and the
+        next one starts from rest where that deceleration ends: the demand stays where it is.
+        A tail at speed v0 with deceleration a is v(t) = v0 - a·t, and lies v(t)²/2a short
+        of its end (exact at any step length); what the running profile had left beyond
+        that (less than a tick's travel, L4909) goes to the next one, so the axis still ends
+        on the next profile's target (the total travel of both, 000:692-709)."""
+        if self._tails:
+            pm, vm = self._pmain, self._vmain
+        else:
+            pm, vm = self.demand, self.demand_velocity
+        if vm != 0.0:
+            dec = self._dec
+            self._tails.append([vm, dec, 0.0])
+            pm += vm * abs(vm) / (2.0 * dec)
+        self._pmain, self._vmain = pm, 0.0
+        self._sum = (self.demand, self.demand_velocity)
+
+    @property
+    def profile_remaining(self) -> float:
+        """Counts from the running position profile's demand to its target, overlapped
+        tails aside (what tells when its deceleration begins, L5051)."""
+        return self._target - (self._pmain if self._tails else self.demand)
+
+    @property
+    def profile_velocity(self) -> float:
+        """The running profile's own demand velocity, overlapped tails aside."""
+        return self._vmain if self._tails else self.demand_velocity
+
+    @property
+    def profile_decel(self) -> float:
+        """The running profile's deceleration, counts/s²."""
+        return self._dec
 
     def set_user_position(self, user_counts: float) -> None:
         """Make the current feedback read `user_counts` (homing / origin setting)."""
@@ -506,32 +592,17 @@ class Axis:
     def _profile(self, dt_ns: int, dt: float) -> tuple[int, float, float, bool]:
         """(mode, position demand, velocity demand, profile done) after `dt`."""
         mode = self._mode
+        if self._tails:
+            # (a speed command's demand position is its feedback: `_settle`)
+            if self.demand_velocity == self._sum[1] and (
+                    mode == _VEL or (mode == _POS and self.demand == self._sum[0])):
+                return self._profile_overlapped(mode, dt)
+            self._tails.clear()  # the demand was set from outside (P0.049 = 2): one profile
         pd = self.demand
         vd = self.demand_velocity
         done = True
         if mode == _POS:
-            tgt = self._target
-            r = tgt - pd
-            if r != 0.0 or vd != 0.0:
-                dec = self._dec
-                # the speed from which a stop at `dec` ends on the target after this step's
-                # Euler update (v·dt + v²/2dec = |r|): the demand never passes its target
-                ddt = dec * dt
-                vdes = math.sqrt(ddt * ddt + 2.0 * dec * abs(r)) - ddt
-                if vdes < ddt:  # the last step: land on the target, stop within one step
-                    vdes = min(ddt, abs(r) / dt)
-                if vdes > self._vmax:
-                    vdes = self._vmax
-                if r < 0.0:
-                    vdes = -vdes
-                vd = _approach(vd, vdes, self._acc, dec, dt)
-                ds = vd * dt
-                if ds * r > 0.0 and abs(ds) >= abs(r) and abs(vd) <= abs(vdes) + dec * dt:
-                    pd = tgt
-                    vd = 0.0
-                else:
-                    pd += ds
-                    done = False
+            pd, vd, done = _pos_step(pd, vd, self._target, self._vmax, self._acc, self._dec, dt)
         elif mode in (_VEL, _STOP):
             vd = _approach(vd, self._vtarget, self._acc, self._dec, dt)
             pd += vd * dt
@@ -556,6 +627,33 @@ class Axis:
             else:
                 vd = 0.0
         return mode, pd, vd, done
+
+    def _profile_overlapped(self, mode: int, dt: float) -> tuple[int, float, float, bool]:
+        """`_profile` while overlapped tails run (PR OVLP, L5051-5057): the running profile
+        from its own state, each tail decelerating on to its target, the demand their sum."""
+        if mode == _POS:
+            pm, vm, done = _pos_step(self._pmain, self._vmain, self._target, self._vmax,
+                                     self._acc, self._dec, dt)
+        else:  # _VEL
+            vm = _approach(self._vmain, self._vtarget, self._acc, self._dec, dt)
+            pm, done = self._pmain + vm * dt, False
+        self._pmain, self._vmain = pm, vm
+        pd, vd = pm, vm
+        left = []
+        for tail in self._tails:
+            v0, dec, t = tail
+            tail[2] = t = t + dt
+            speed = abs(v0) - dec * t
+            if speed > 0.0:
+                v = speed if v0 > 0.0 else -speed
+                left.append(tail)
+                pd -= v * speed / (2.0 * dec)  # still this far short of the tail's end
+                vd += v
+        self._tails = left
+        if not left:  # the last tail landed: the running profile alone, as if never summed
+            pd, vd = pm, vm
+        self._sum = (pd, vd)
+        return mode, pd, vd, done and not left
 
     def _ip_smoothed(self, dt_ns: int) -> tuple[float, bool]:
         """The interpolated command through the moving averages (P1.068, then P1.036).

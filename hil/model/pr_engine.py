@@ -96,6 +96,10 @@ class PrOptions:
     # sequential DLY counted from the command start, not from reaching the target (L4934)
     dev_dly_from_start: bool = False
     dev_ovlp_ignored: bool = False  # OVLP acts as a sequential command (L5051-5057)
+    # OVLP re-targets the running move at the next PR's speed and ramps (the model before
+    # wave 3 session 26) instead of summing the next PR's acceleration with the running
+    # deceleration (figure 7.1.6.11, L5051-5057)
+    dev_ovlp_retargets: bool = False
     dev_jump_ignores_dly: bool = False  # the jump target is read at once (DLY: L4505, L4982)
     dev_jump_falls_through: bool = False  # a jump continues with PR n+1 (target: L4505-4527)
     # software-limit stop with this deceleration (ms per 3000 rpm) instead of P5.003 Z/U
@@ -372,9 +376,14 @@ class PrEngine:
         g44, g45 = get("P1.044"), get("P1.045")
         acc = float(get(f"P5.{20 + path.acc:03d}"))
         dec = float(get(f"P5.{20 + path.dec:03d}"))
+        # OVLP: the PR the overlapping one continues to (not an INS one, which beats OVLP,
+        # nor a new trigger) starts from rest, summed with the running deceleration (L5051)
+        prev = self.cmd
+        overlap = (not external and not path.ins and prev is not None and prev.overlaps
+                   and prev.done is not None and not self.options.dev_ovlp_retargets)
         if path.type == SPEED:
             rpm = puu_per_s_to_rpm(path.data, g44, g45) if path.unit_pps else path.data / 10.0
-            ax.run_velocity(rpm, acc, dec)
+            ax.run_velocity(rpm, acc, dec, overlap=overlap)
             direction = rpm
         else:
             rpm = get(f"P5.{60 + path.spd:03d}") / 10.0  # 0.1 rpm (L11783)
@@ -384,7 +393,7 @@ class PrEngine:
             self.cmd_e = target
             counts = puu_to_counts(target, g44, g45) + ax.origin
             direction = counts - ax.demand
-            ax.move_to(counts, rpm, acc, dec)
+            ax.move_to(counts, rpm, acc, dec, overlap=overlap)
         self.trace.append((d.now, f"motion:{path.number}"))
         self._limit_inhibit(direction)
         ovlp = path.ovlp and not self.options.dev_ovlp_ignored
@@ -537,9 +546,9 @@ class PrEngine:
         if ax.mode != "position":
             return True  # replaced by a stop / another mode
         if c.overlaps:  # OVLP into the next motion: the decel began (L5051)
-            r = abs(ax.target - ax.demand)
-            v = abs(ax.demand_velocity)
-            return ax.at_target or (v > 0 and r <= v * v / (2.0 * ax._dec) + v * 1e-3)
+            r = abs(ax.profile_remaining)  # its own profile: an earlier OVLP's tail aside
+            v = abs(ax.profile_velocity)
+            return ax.at_target or (v > 0 and r <= v * v / (2.0 * ax.profile_decel) + v * 1e-3)
         return ax.at_target
 
     # ---------------------------------------------------------------- software limits
