@@ -9,6 +9,8 @@ The numbers below are worked out from those lines, not read off the model: ACC/D
 
 from __future__ import annotations
 
+import itertools
+
 from hil.model.drive import Drive
 from hil.model.motion import Axis, rpm_to_counts_per_s
 from hil.model.options import ModelOptions
@@ -56,7 +58,7 @@ def test_the_smooth_case_of_l5055_is_one_straight_ramp_from_spd1_to_spd2() -> No
     assert speed[m2 + 70] < 600.0 - 20.0  # still ramping 70 ms in
     assert abs(speed[m2 + 85] - 600.0) < 0.01  # the ramp is over by 80 ms (+ a tick)
     join = [speed[m2 + k] for k in range(0, 85)]
-    assert all(b >= a - 0.01 for a, b in zip(join, join[1:], strict=False))  # never slows down
+    assert all(b >= a - 0.01 for a, b in itertools.pairwise(join))  # never slows down
     assert puu(d) == 250_000  # the two strokes (000:692-709)
 
 
