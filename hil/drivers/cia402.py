@@ -93,6 +93,18 @@ class Cia402Timeout(Cia402Error):
         )
 
 
+def _setpoint_hint(sw: int) -> str:
+    """Why a PP set-point may wait for its acknowledge: a move still runs (bit 10 low)."""
+    if sw & SW_TARGET_REACHED:
+        return ""
+    return ("a set-point given while a move runs (bit 5 = 0) is acknowledged only when that "
+            "move completes (A3 manual L17172-17174): give timeouts.setpoint_ack the time "
+            "of the move before it, or wait for it first")
+
+
+_TIMEOUT_HINTS: dict[str, Callable[[int], str]] = {"setpoint_ack": _setpoint_hint}
+
+
 class Cia402Cancelled(Cia402Error):
     """A wait was given up because its owner cancelled it (`Cia402Driver.cancel`)."""
 
@@ -303,7 +315,8 @@ class Cia402Driver:
                     f"{decode_state(sw)} (statusword 0x{sw:04X}) after {elapsed:.3f} s"
                 )
             if elapsed > timeout:
-                raise Cia402Timeout(self.node_id, what, timeout_name, timeout, sw, elapsed)
+                raise Cia402Timeout(self.node_id, what, timeout_name, timeout, sw, elapsed,
+                                    _TIMEOUT_HINTS.get(timeout_name, lambda _sw: "")(sw))
             self._pause()
 
     def _pause(self) -> None:

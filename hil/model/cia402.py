@@ -141,6 +141,11 @@ class Cia402Options:
     pp_relative_base: str = "target"  # bit 6 relative to: "target" | "demand" | "actual"
     remote_bit: bool = True  # statusword bit 9 (no description, L18312)
     homing_stop_on_bit4_fall: bool = True  # HM bit 4 1->0 interrupts homing [std]
+    # PP, bit 5 = 0: a set-point triggered while a move runs is acknowledged (bit 12) and
+    # run only once that move completes (L17172-17174); until then it is held while bit 4
+    # stays high, and bit 4 falling withdraws it. False: acknowledged at once into a buffer
+    # of one, a further trigger then refused ([std] CiA 402; the model before session 26)
+    pp_ack_when_run: bool = True
     # State while a servo-off warning (EMGS AL013: WARN class, servo OFF, L19338) blocks the
     # servo: OPERATION ENABLED means servo on (L18326), so the machine leaves it and refuses
     # transition 4 while blocked. "switch_on_disabled" | "switched_on" | "operation_enabled"
@@ -274,6 +279,8 @@ class Cia402:
         self._ack = False
         self._pp_active: tuple[float, float, int, int] | None = None
         self._pp_queue: tuple[float, float, int, int] | None = None
+        # the queued set-point not yet acknowledged (pp_ack_when_run): (`_pp_last` before it,)
+        self._pp_waiting: tuple[float] | None = None
         self._pp_last = self.axis.demand
         self._ip_target: float | None = None
         self._homing_active = False
@@ -380,7 +387,7 @@ class Cia402:
     def drop_setpoints(self) -> None:
         """The drive took the axis (DI JOG, PFQS, CCLR): the PP set-points are gone, so the
         next one starts at once instead of waiting for a move that no longer runs."""
-        self._pp_active = self._pp_queue = None
+        self._pp_active = self._pp_queue = self._pp_waiting = None
         self._ip_target = None
 
     def set_gear(self, p1_044: int, p1_045: int) -> None:
@@ -742,7 +749,7 @@ class Cia402:
             if self.stop_homing is not None:
                 self.stop_homing()
         self._ack = False
-        self._pp_active = self._pp_queue = None
+        self._pp_active = self._pp_queue = self._pp_waiting = None
         self._halted = False
         self._inhibited = False
         self._tr_since = None
@@ -788,7 +795,7 @@ class Cia402:
             if self.stop_homing is not None:
                 self.stop_homing()
         self._ack = False
-        self._pp_active = self._pp_queue = None
+        self._pp_active = self._pp_queue = self._pp_waiting = None
         self._ip_target = None
 
     def _run_pv(self) -> None:
@@ -832,6 +839,9 @@ class Cia402:
         mode = self._mode
         if falling & 0x10:
             self._ack = False
+            if self._pp_waiting:  # withdrawn before it was acknowledged (pp_ack_when_run)
+                self._pp_queue, self._pp_last = None, self._pp_waiting[0]
+                self._pp_waiting = None
             if mode == HM and self._homing_active and self.options.homing_stop_on_bit4_fall:
                 self._homing_active = False
                 if self.stop_homing is not None:
@@ -870,12 +880,19 @@ class Cia402:
             target = self.axis.origin + delta
         speed = min(puu_per_s_to_rpm(v[(0x6081, 0)], num, den, self.axis.cpr), v[(0x607F, 0)] / 10)
         sp = (target, speed, v[(0x6083, 0)], v[(0x6084, 0)])
-        busy = self._pp_active is not None and not self._pp_done()
+        # a move runs until its profile ends or bit 10 says its target is reached (6067h /
+        # 6068h may say so in the profile's last ms): a master sees it done from then on
+        busy = (self._pp_active is not None and not self._pp_done()
+                and not (self._pp_queue is None and self._target_reached()))
         if not busy or cw & 0x20:  # idle, or change set immediately (bit 5)
-            self._pp_queue = None
+            self._pp_queue = self._pp_waiting = None
             self._start_pp(sp)
         elif self._pp_queue is None:
             self._pp_queue = sp  # bit 5 = 0: runs when the current move completes
+            if self.options.pp_ack_when_run:  # ... and is acknowledged then (L17172-17174)
+                self._pp_waiting = (self._pp_last,)
+                self._pp_last = target
+                return
         else:
             return  # one set-point already waits: not acknowledged
         self._pp_last = target
@@ -910,6 +927,10 @@ class Cia402:
             ):
                 sp, self._pp_queue = self._pp_queue, None
                 self._start_pp(sp)
+                if self._pp_waiting:  # acknowledged as it starts (L17172-17174)
+                    self._pp_waiting = None
+                    self._ack = True
+                    self._tr_since = None
             if not self._inhibited and (self._pl or self._nl) and not self._homing_busy():
                 vd = ax.demand_velocity if ax.mode != "torque" else ax.velocity
                 if (self._pl and vd > 0.0) or (self._nl and vd < 0.0):  # run inhibit (bits 14/15)

@@ -403,15 +403,79 @@ def test_pp_change_set_immediately():
     assert peak < 1_000_000 / 2  # never went to the first target
 
 
-def test_pp_setpoint_queued_when_bit5_is_0_and_buffer_of_one():
+def test_pp_setpoint_queued_when_bit5_is_0_is_acknowledged_only_when_it_runs():
+    """Bit 5 = 0 (L17172-17174): "若當前運動命令仍在執行 ... 即使新的命令觸發，伺服仍會繼續執行當前
+    的運動命令。只有在當前命令執行完成後，新的命令伺服才會被承認並執行": a trigger during a move
+    is neither acknowledged (bit 12) nor run until that move completes; then both."""
     rig = Rig()
+    rig.pp_setup()
+    rig.w(0x607A, 200000)
+    rig.cw(0x1F)
+    assert rig.sw & 0x1000  # idle: acknowledged at once
+    rig.cw(0x0F)
+    rig.step(50)
+    rig.w(0x607A, 0)
+    rig.cw(0x1F)  # the master holds bit 4 until bit 12 (the CiA 402 handshake)
+    assert not rig.sw & 0x1000
+    t_ack = rig.until(lambda: rig.sw & 0x1000)
+    assert rig.r(0x6062) == 200000  # the first move completed before the acknowledge
+    assert rig.axis.target == rig.axis.origin  # ... and the second runs from then
+    rig.cw(0x0F)
+    assert not rig.sw & 0x1000
+    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    assert rig.r(0x6064) == 0
+    assert t_ack > 50 * MS
+
+
+def test_pp_three_triggers_each_acknowledged_and_run_in_turn():
+    """The handshake of L17172-17174 repeated: each trigger given during a move (bit 4 held
+    until bit 12) is acknowledged when the move before it completes, and every one runs."""
+    rig = Rig()
+    rig.pp_setup()
+    for target in (100000, 150000, 20000):
+        rig.w(0x607A, target)
+        rig.cw(0x1F)
+        rig.until(lambda: rig.sw & 0x1000)
+        rig.cw(0x0F)
+        rig.step(5)  # the next trigger while this move runs
+    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    assert rig.r(0x6064) == 20000
+
+
+def test_pp_queued_setpoint_withdrawn_when_bit4_falls_before_its_acknowledge():
+    """Our choice (docs/manual-choices.md): a trigger waiting for the running move is held
+    while bit 4 stays high; bit 4 falling before the acknowledge withdraws it, so nothing
+    moves that the master took back."""
+    rig = Rig()
+    rig.pp_setup()
+    rig.w(0x607A, 100000)
+    rig.cw(0x1F)
+    rig.cw(0x0F)
+    rig.step(20)
+    rig.w(0x607A, 500000)
+    rig.cw(0x1F)
+    rig.cw(0x0F)  # withdrawn
+    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    rig.step(200)
+    assert rig.r(0x6064) == 100000
+    rig.w(0x607A, 30000)  # a relative move afterwards counts from the target that ran
+    rig.cw(0x5F)
+    rig.cw(0x4F)
+    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    assert rig.r(0x6064) == 130000
+
+
+def test_pp_buffer_of_one_acknowledged_at_once_as_an_option():
+    """`pp_ack_when_run=False`: CiA 402's buffer of one [std]: a trigger during a move is
+    acknowledged at once and queued; a further one while it waits is refused."""
+    rig = Rig(pp_ack_when_run=False)
     rig.pp_setup()
     rig.w(0x607A, 200000)
     rig.cw(0x1F)
     rig.cw(0x0F)
     rig.step(50)
     rig.w(0x607A, 0)
-    rig.cw(0x1F)  # queued (L17204: "a new trigger is queued until the move completes")
+    rig.cw(0x1F)  # queued
     assert rig.sw & 0x1000
     rig.cw(0x0F)
     rig.w(0x607A, 777)
