@@ -27,7 +27,8 @@ Rules, each from the manual (choices: docs/manual-choices.md#pr, `PrOptions`):
   capture + data (`capture_puu`, set by capture.py for every captured point). STP keeps
   Cmd_E, so INC 0 finishes the move and REL 0 discards it (000:605).
 * Completion (L4195-4201, L8596-8633, L15319-15326): Cmd_OK when the program has nothing
-  left and the last command plus its DLY is done; MC_OK = Cmd_OK and TPOS; P1.048.X holds
+  left and the last command plus its DLY is done (a last WRITE's, or homing's with PATH 0,
+  counted from its issue, L4533); MC_OK = Cmd_OK and TPOS; P1.048.X holds
   MC_OK, P1.048.Y raises AL380 when TPOS drops after MC_OK; a new trigger clears both.
   P5.007 reads n / n+10000 / n+20000 (L11185).
 * Software limits P5.008/P5.009 in PR mode, judged on the command position in whole PUU,
@@ -244,14 +245,15 @@ class PrEngine:
         self.cmd_e = d.params.get("P6.001")
         path = p6000 & 0xFF
         self.lead = 0
-        if not 1 <= path <= 0x63:
-            self._set_cmd_ok(True)
-            return
-        self.cursor = path
-        self._external = False
         self._prev_t = d.now
         self._prev_dly = self._dly_ns((p6000 >> 20) & 0xF)
         self._prev_motion = False
+        if not 1 <= path <= 0x63:  # PATH 0 "Stop": Cmd_OK once its DLY ran out (L4195)
+            self.cursor = None
+            self._update_cmd_ok()
+            return
+        self.cursor = path
+        self._external = False
         self._service()
 
     def power_up(self) -> None:
@@ -588,19 +590,26 @@ class PrEngine:
 
     # ---------------------------------------------------------------- outputs
     def _update_cmd_ok(self) -> None:
-        """Cmd_OK: nothing left to read and the command plus its DLY done (L15319)."""
+        """Cmd_OK: nothing left to read and the command plus its DLY done (L15319); when the
+        program ended on a statement (a WRITE PR, or homing's PATH 0), its DLY too, counted
+        from its read ("下達此...命令後，驅動器即開始計算延遲時間" L4533; "待延遲時間終了，PR 位置命令
+        完成數位輸出 Cmd_OK 才會輸出" L4195-4197)."""
         if self.cursor is not None or self.lead is None:
             return
         c = self.cmd
+        end = None
         if c is not None:
             if c.done is None:
                 return
             end = c.done
             if not self.options.dev_cmd_ok_ignores_dly:
                 end = c.end() or end
-            if end > self.drive.now:
-                self._wake_at(end)
-                return
+        if not self._prev_motion and not self.options.dev_cmd_ok_ignores_dly:
+            last = self._prev_t + self._prev_dly
+            end = last if end is None else max(end, last)
+        if end is not None and end > self.drive.now:
+            self._wake_at(end)
+            return
         self._set_cmd_ok(True)
 
     def _set_cmd_ok(self, on: bool) -> None:

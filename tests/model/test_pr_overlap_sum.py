@@ -169,3 +169,4 @@ def test_axis_overlap_keeps_the_demand_continuous_and_is_at_target_after_both() 
     while ax.moving:
         ax.step(MS)
     assert ax.demand == 1_000_000.0
+

@@ -1,0 +1,42 @@
+"""Cmd_OK after a PR program that ends on a statement (A3 §7.1.2, L4195-4197: "若此段 PR 命令有
+設定延遲時間 ... 待延遲時間終了，PR 位置命令完成數位輸出[0x15]Cmd_OK 才會輸出訊號"): the DLY of a
+last WRITE PR (counted from its issue, L4533) and of PR#0 homing with PATH 0 (P6.000 B,
+L12627) hold Cmd_OK. helper-66 (session 17) found both ignored."""
+
+from __future__ import annotations
+
+from hil.units import MS
+from tests.model.test_pr import put, times
+from tests.model.test_pr_overlap_sum import make
+
+
+def test_cmd_ok_waits_for_the_dly_of_a_last_write_pr() -> None:
+    """A WRITE PR's DLY counts from when it is issued ("下達此跳躍命令後，驅動器即開始計算延遲時間",
+    L4533), and Cmd_OK comes only once a PR's DLY has run out (L4195-4197): a program ending
+    on a WRITE with DLY #2 (P5.042 = 200 ms) raises Cmd_OK 200 ms after that write."""
+    d = make()
+    put(d, 1, type_="auto", data=10_000, spd=4)
+    put(d, 2, type_="write", data=600, dest="P5.064", dly=2)
+    t0 = d.now // MS
+    d.params.write("P5.007", 1)
+    d.advance(1000 * MS)
+    read = [t // MS - t0 for t, what in d.pr.trace if what.startswith("read:2")]
+    cmd_ok = [t - t0 for t in times(d, "Cmd_OK:1")]
+    assert len(read) == 1 and len(cmd_ok) == 1
+    assert d.params.get("P5.064") == 600
+    assert cmd_ok[0] == read[0] + 200, (read, cmd_ok)
+
+
+def test_cmd_ok_after_homing_with_path_0_waits_for_p6000s_dly() -> None:
+    """PR#0 homing with PATH 0 ("Stop：復歸完成，停止", P6.000 YX, L12617) and DLY B = 1
+    (P5.041 = 100 ms, L12627-12628): Cmd_OK 100 ms after the homing completed (L4195-4197)."""
+    d = make()
+    d.params.write("P5.004", 0x8)  # X = 8: the current position is the origin
+    d.params.write("P6.000", 0x0010_0000)  # B (DLY) = 1, PATH = 0
+    d.params.write("P5.007", 0)
+    d.advance(1000 * MS)
+    assert d.homing.homed
+    cmd_ok = times(d, "Cmd_OK:1")
+    homed = [t // MS for t, what in d.homing.trace if what == "homed"]
+    assert len(cmd_ok) == 1 and len(homed) == 1
+    assert cmd_ok[0] == homed[0] + 100, (homed, cmd_ok)
