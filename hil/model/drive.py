@@ -842,10 +842,16 @@ class Drive:
             # the PR rule for PR by P1.001 (a dual mode only while its PR side is in effect)
             # and for the CiA 402 position modes the drive runs as PR (PP, HM, IP)
             if mode == "PR":
-                if p1001 & 0xFF in PR_MODES and self.pr.tpos_off:
+                pr_by_p1001 = p1001 & 0xFF in PR_MODES
+                if pr_by_p1001 and self.pr.tpos_off:
                     return False
                 if ax.mode == "position":
                     err = ax.target - ax.position
+                elif pr_by_p1001 and self.pr.stopped_short():
+                    # STP or a software limit stopped the PR short of Cmd_E, which STP keeps
+                    # (000:605): TPOS judges "設定目標位置與實際馬達位置" (L8694), still far
+                    g44, g45 = self.params.get("P1.044"), self.params.get("P1.045")
+                    err = puu_to_counts(self.pr.cmd_e, g44, g45) + ax.origin - ax.position
         return abs(err) < p1054
 
     def _update_sensors(self, force: bool = False) -> None:

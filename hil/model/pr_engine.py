@@ -626,6 +626,12 @@ class PrEngine:
             self.tpos_off = False
             d.refresh_outputs()
 
+    def stopped_short(self) -> bool:
+        """The last command was a stop (STP, a software limit) that ended the program before
+        Cmd_E: TPOS then judges Cmd_E (L8694), which the stop kept."""
+        c = self.cmd
+        return c is not None and c.path is None
+
     def _tpos(self) -> bool:
         return self.drive.tpos()
 

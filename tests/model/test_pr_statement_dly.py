@@ -40,3 +40,27 @@ def test_cmd_ok_after_homing_with_path_0_waits_for_p6000s_dly() -> None:
     homed = [t // MS for t, what in d.homing.trace if what == "homed"]
     assert len(cmd_ok) == 1 and len(homed) == 1
     assert cmd_ok[0] == homed[0] + 100, (homed, cmd_ok)
+
+
+def test_after_stp_tpos_mc_ok_and_p5007_say_the_target_was_not_reached() -> None:
+    """PR mode TPOS: "當設定目標位置與實際馬達位置相差之偏差值小於設定之位置範圍(P1.054)" (L8694).
+    STP (P5.007 = 1000, L11183) stops the axis short and keeps Cmd_E (000:605): the command
+    is sent (Cmd_OK, L15319) but the motor is far from the set target, so TPOS and MC_OK stay
+    off (MC_OK = Cmd_OK and TPOS, L8628) and P5.007 reads n + 10000, "命令發送完畢，但馬達
+    定位未完成" (L11185-11188). INC 0 then completes the move (000:605): TPOS, MC_OK and
+    n + 20000."""
+    d = make()
+    put(d, 1, type_="single", data=500_000, spd=4)
+    put(d, 2, type_="single", data=0, cmd="INC", spd=4)
+    d.params.write("P5.007", 1)
+    d.advance(200 * MS)
+    d.params.write("P5.007", 1000)
+    d.advance(1000 * MS)
+    assert d.pr.cmd_ok and d.dio.do_function_state("Cmd_OK")
+    assert not d.dio.do_function_state("TPOS")
+    assert not d.pr.mc_ok and not d.dio.do_function_state("MC_OK")
+    assert d.params.get("P5.007") == 10001
+    d.params.write("P5.007", 2)
+    d.advance(3000 * MS)
+    assert d.dio.do_function_state("TPOS") and d.pr.mc_ok
+    assert d.params.get("P5.007") == 20002
