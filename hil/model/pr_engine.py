@@ -592,8 +592,8 @@ class PrEngine:
     def _update_cmd_ok(self) -> None:
         """Cmd_OK: nothing left to read and the command plus its DLY done (L15319); when the
         program ended on a statement (a WRITE PR, or homing's PATH 0), its DLY too, counted
-        from its read ("下達此...命令後，驅動器即開始計算延遲時間" L4533; "待延遲時間終了，PR 位置命令
-        完成數位輸出 Cmd_OK 才會輸出" L4195-4197)."""
+        from its read ("驅動器即開始計算延遲時間" L4533; "待延遲時間終了 ... Cmd_OK 才會輸出"
+        L4195-4197)."""
         if self.cursor is not None or self.lead is None:
             return
         c = self.cmd

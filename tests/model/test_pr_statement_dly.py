@@ -64,3 +64,18 @@ def test_after_stp_tpos_mc_ok_and_p5007_say_the_target_was_not_reached() -> None
     d.advance(3000 * MS)
     assert d.dio.do_function_state("TPOS") and d.pr.mc_ok
     assert d.params.get("P5.007") == 20002
+
+
+def test_a_write_pr_reads_the_monitors_the_drive_keeps() -> None:
+    """A WRITE PR's source may be a monitor variable (SOUR = 11, L4566-4575): 038, the
+    battery voltage (L15477), and 043, the last CAP data (L15481), as P0.009-P0.013 show
+    them, not only PR mode's own 000/001/002/064 (helper-66: refused as AL231)."""
+    d = make()
+    put(d, 1, type_="write", source="monitor", data=38, dest=5, dest_array=True, auto=True)
+    put(d, 2, type_="write", source="monitor", data=43, dest=6, dest_array=True)
+    d.pr.array[5] = d.pr.array[6] = 12345  # overwritten by the writes
+    d.params.write("P5.007", 1)
+    d.advance(100 * MS)
+    assert not d.alarms.active
+    assert d.pr.array[5] == d.hooks.monitors[38]() != 12345
+    assert d.pr.array[6] == d.hooks.monitors[43]() != 12345
