@@ -445,12 +445,16 @@ class Cia402Driver:
         base = CW_ENABLE_OPERATION | (0x40 if relative else 0)
         self._cw(base)  # bit 4 low before the edge
         self._cw(base | 0x10)
-        self._wait(
-            "set-point acknowledge (bit 12)",
-            "setpoint_ack",
-            lambda sw: bool(sw & SW_BIT12),
-            self._fault_reason,
-        )
+        try:
+            self._wait(
+                "set-point acknowledge (bit 12)",
+                "setpoint_ack",
+                lambda sw: bool(sw & SW_BIT12),
+                self._fault_reason,
+            )
+        except Cia402Timeout:
+            self._cw(base)  # taken back: a set-point still waiting for a move never runs
+            raise
         self._cw(base)
         if wait:
             self._wait(

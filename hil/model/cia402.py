@@ -279,8 +279,9 @@ class Cia402:
         self._ack = False
         self._pp_active: tuple[float, float, int, int] | None = None
         self._pp_queue: tuple[float, float, int, int] | None = None
-        # the queued set-point not yet acknowledged (pp_ack_when_run): (`_pp_last` before it,)
-        self._pp_waiting: tuple[float] | None = None
+        # the set-point waiting, unacknowledged, for the running move (pp_ack_when_run):
+        # (607Ah in counts, relative, speed, 6083h, 6084h), its target worked out when it runs
+        self._pp_waiting: tuple[float, bool, float, int, int] | None = None
         self._pp_last = self.axis.demand
         self._ip_target: float | None = None
         self._homing_active = False
@@ -839,9 +840,7 @@ class Cia402:
         mode = self._mode
         if falling & 0x10:
             self._ack = False
-            if self._pp_waiting:  # withdrawn before it was acknowledged (pp_ack_when_run)
-                self._pp_queue, self._pp_last = None, self._pp_waiting[0]
-                self._pp_waiting = None
+            self._pp_waiting = None  # withdrawn before it was acknowledged (pp_ack_when_run)
             if mode == HM and self._homing_active and self.options.homing_stop_on_bit4_fall:
                 self._homing_active = False
                 if self.stop_homing is not None:
@@ -865,8 +864,30 @@ class Cia402:
             return
         v = self._v
         num, den = self._num, self._den
-        delta = puu_to_counts(v[(0x607A, 0)], num, den)
-        if cw & 0x40:  # relative
+        speed = min(puu_per_s_to_rpm(v[(0x6081, 0)], num, den, self.axis.cpr), v[(0x607F, 0)] / 10)
+        req = (puu_to_counts(v[(0x607A, 0)], num, den), bool(cw & 0x40), speed,
+               v[(0x6083, 0)], v[(0x6084, 0)])
+        busy = self._pp_active is not None and not self._pp_done()
+        if not busy or cw & 0x20:  # idle, or change set immediately (bit 5)
+            self._pp_queue = self._pp_waiting = None
+            self._start_pp(self._pp_setpoint(req))
+        elif self.options.pp_ack_when_run:
+            if self._pp_waiting is None:  # acknowledged and worked out when it runs
+                self._pp_waiting = req    # (L17172-17174)
+            return
+        elif self._pp_queue is None:
+            self._pp_queue = self._pp_setpoint(req)  # [std] a buffer of one, acknowledged now
+        else:
+            return  # one set-point already waits: not acknowledged
+        self._ack = True
+        self._tr_since = None
+
+    def _pp_setpoint(self, req: tuple[float, bool, float, int, int]
+                     ) -> tuple[float, float, int, int]:
+        """(target counts, rpm, 6083h, 6084h) of a set-point as it is taken: a relative one
+        (bit 6) from the base `pp_relative_base` names, as it stands now."""
+        delta, relative, speed, acc, dec = req
+        if relative:
             base = self.options.pp_relative_base
             ref = (
                 self._pp_last
@@ -878,26 +899,8 @@ class Cia402:
             target = ref + delta
         else:
             target = self.axis.origin + delta
-        speed = min(puu_per_s_to_rpm(v[(0x6081, 0)], num, den, self.axis.cpr), v[(0x607F, 0)] / 10)
-        sp = (target, speed, v[(0x6083, 0)], v[(0x6084, 0)])
-        # a move runs until its profile ends or bit 10 says its target is reached (6067h /
-        # 6068h may say so in the profile's last ms): a master sees it done from then on
-        busy = (self._pp_active is not None and not self._pp_done()
-                and not (self._pp_queue is None and self._target_reached()))
-        if not busy or cw & 0x20:  # idle, or change set immediately (bit 5)
-            self._pp_queue = self._pp_waiting = None
-            self._start_pp(sp)
-        elif self._pp_queue is None:
-            self._pp_queue = sp  # bit 5 = 0: runs when the current move completes
-            if self.options.pp_ack_when_run:  # ... and is acknowledged then (L17172-17174)
-                self._pp_waiting = (self._pp_last,)
-                self._pp_last = target
-                return
-        else:
-            return  # one set-point already waits: not acknowledged
         self._pp_last = target
-        self._ack = True
-        self._tr_since = None
+        return (target, speed, acc, dec)
 
     def _start_pp(self, sp: tuple[float, float, int, int]) -> None:
         self._pp_active = sp
@@ -920,17 +923,20 @@ class Cia402:
         ax = self.axis
         if st == OPERATION_ENABLED:
             if (
-                self._pp_queue is not None
+                (self._pp_queue is not None or self._pp_waiting is not None)
                 and not self._halted
                 and self._mode == PP
                 and self._pp_done()
             ):
-                sp, self._pp_queue = self._pp_queue, None
-                self._start_pp(sp)
-                if self._pp_waiting:  # acknowledged as it starts (L17172-17174)
+                if self._pp_waiting is not None:  # acknowledged as it starts (L17172-17174)
+                    sp = self._pp_setpoint(self._pp_waiting)
                     self._pp_waiting = None
                     self._ack = True
                     self._tr_since = None
+                else:
+                    sp = self._pp_queue
+                self._pp_queue = None
+                self._start_pp(sp)
             if not self._inhibited and (self._pl or self._nl) and not self._homing_busy():
                 vd = ax.demand_velocity if ax.mode != "torque" else ax.velocity
                 if (self._pl and vd > 0.0) or (self._nl and vd < 0.0):  # run inhibit (bits 14/15)
@@ -969,7 +975,7 @@ class Cia402:
         mode = self._mode
         ax = self.axis
         if mode == PP and self._pp_active is not None:
-            if self._pp_queue is not None:
+            if self._pp_queue is not None or self._pp_waiting is not None:
                 return False  # a buffered set-point still to run: its target is not reached
             # the target (607Ah) minus the feedback inside 6067h, whether or not the profile
             # has ended (L18469)

@@ -186,3 +186,31 @@ def test_fault_reset_outside_fault_sends_the_edge_and_keeps_the_state(rig):
     drv.fault_reset()
     assert [w[2] for w in b.drive.writes[n:] if w[0] == 0x6040] == [0x8F, 0x0F]
     assert drv.state == "OPERATION ENABLED"
+
+
+def test_a_set_point_whose_acknowledge_timed_out_is_taken_back_and_never_runs() -> None:
+    """A set-point given while a move runs is acknowledged only when that move completes
+    (A3 L17172-17174). When the driver gives up waiting (timeouts.setpoint_ack) it drops bit 4
+    before raising, so the drive withdraws the set-point: the move the caller was told had
+    failed does not run later (helper-89). The driver is wired to the CiA 402 model."""
+    from hil.drivers.cia402 import DEFAULT_TIMEOUTS, Cia402Driver, Cia402Timeout
+    from tests.model.test_cia402 import Rig
+
+    rig = Rig()
+    rig.pp_setup()
+    drv = object.__new__(Cia402Driver)
+    drv.timeouts = {**DEFAULT_TIMEOUTS, "setpoint_ack": 0.2}
+    drv.node_id, drv.recorder, drv.cancel, drv._controlword = 7, None, None, 0
+    drv.clock = lambda: rig.t / 1e9
+    drv.read = lambda i, s=0: rig.r(i, s)
+    drv.write = lambda i, s, v: rig.w(i, v, s)
+    drv._pause = lambda: rig.step(1)
+    drv.set_mode = lambda m: None
+    drv.enable_operation = lambda: None
+    drv.move_to(500000, 500000, 200, 200, wait=False)
+    with pytest.raises(Cia402Timeout, match="acknowledged only when that move completes"):
+        drv.move_to(-400000, 500000, 200, 200)
+    assert not rig.r(0x6040) & 0x10
+    rig.until(lambda: rig.sw & 0x400 and not rig.axis.moving)
+    rig.step(3000)
+    assert rig.r(0x6064) == 500000

@@ -372,6 +372,9 @@ def test_pp_move_target_reached_after_window_time():
 
 
 def test_pp_relative_moves_add_to_the_previous_target():
+    """Each set-point given at bit 10 (the profile may have a ms or two left: it is then
+    acknowledged when it ends, L17172-17174), bit 4 held until bit 12 as CiA 402's
+    handshake has it."""
     rig = Rig()
     rig.pp_setup()
     rig.w(0x607A, 20000)
@@ -379,6 +382,7 @@ def test_pp_relative_moves_add_to_the_previous_target():
     rig.cw(0x4F)
     rig.until(lambda: rig.sw & 0x0400)
     rig.cw(0x5F)
+    rig.until(lambda: rig.sw & 0x1000)
     rig.cw(0x4F)
     rig.until(lambda: rig.sw & 0x0400)
     rig.w(0x607A, -5000)
@@ -463,6 +467,72 @@ def test_pp_queued_setpoint_withdrawn_when_bit4_falls_before_its_acknowledge():
     rig.cw(0x4F)
     rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
     assert rig.r(0x6064) == 130000
+
+
+@pytest.mark.parametrize("base", ["demand", "actual"])
+def test_pp_relative_set_point_waiting_for_a_move_counts_from_where_it_is_taken(base):
+    """A relative set-point (bit 6) given during a move is taken when that move completes
+    (L17172-17174): a "demand" or "actual" base is the position then, not at the trigger
+    (helper-89: it went back to the trigger's position)."""
+    rig = Rig(pp_relative_base=base)
+    rig.pp_setup()
+    rig.w(0x607A, 100000)
+    rig.cw(0x1F)
+    rig.cw(0x0F)
+    rig.step(30)
+    rig.w(0x607A, 10000)
+    rig.cw(0x5F)
+    rig.until(lambda: rig.sw & 0x1000)
+    rig.cw(0x4F)
+    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    assert abs(rig.r(0x6064) - 110000) <= 100
+
+
+def test_pp_drive_taking_the_axis_drops_a_waiting_set_point_without_a_trace():
+    """DI JOG / PFQS / CCLR take the axis (`drop_setpoints`): a set-point still waiting for
+    its acknowledge is gone, and a later relative move counts from the target that ran
+    (helper-89: from the dropped one)."""
+    rig = Rig()
+    rig.pp_setup()
+    rig.w(0x607A, 100000)
+    rig.cw(0x1F)
+    rig.cw(0x0F)
+    rig.step(20)
+    rig.w(0x607A, 150000)
+    rig.cw(0x1F)  # waits
+    rig.cia.drop_setpoints()
+    rig.cw(0x0F)
+    rig.axis.move_to(rig.axis.demand, 0.0, 100, 100)  # whatever took the axis holds it
+    rig.step(500)
+    rig.w(0x607A, 10000)
+    rig.cw(0x5F)
+    rig.until(lambda: rig.sw & 0x1000)
+    rig.cw(0x4F)
+    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    assert rig.r(0x6064) == 110000
+
+
+def test_pp_a_wide_position_window_does_not_end_a_move_early():
+    """6067h wide enough that bit 10 rises while the profile still runs at speed: the move is
+    still running ("尚未完成", L17172), so a bit 5 = 0 trigger waits for it (helper-89)."""
+    rig = Rig()
+    rig.pp_setup()
+    rig.w(0x6067, 50000)
+    rig.w(0x6068, 0)
+    rig.w(0x607A, 500000)
+    rig.cw(0x1F)
+    rig.cw(0x0F)
+    rig.until(lambda: rig.sw & 0x0400)
+    assert rig.axis.demand_velocity != 0.0
+    rig.w(0x607A, 0)
+    rig.cw(0x1F)
+    peak = 0
+    while not rig.sw & 0x1000:
+        rig.step()
+        peak = max(peak, rig.r(0x6062))
+    assert peak == 500000
+    rig.cw(0x0F)
+    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving and rig.r(0x6062) == 0)
 
 
 def test_pp_buffer_of_one_acknowledged_at_once_as_an_option():
