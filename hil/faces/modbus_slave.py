@@ -40,6 +40,8 @@ log = logging.getLogger(__name__)
 
 # Parameter addresses the face itself reads (address = (group << 8) + 2 n, L6697).
 P3_000 = 0x0300  # station, low byte YX (L10495-L10507); ● power cycle (L7014)
+# the motor parameters PM.000-PM.053 at FD00H-FD6BH (L14544-L15058), two words each
+PM_ADDRESSES = range(0xFD00, 0xFD00 + 2 * 54)
 P3_001 = 0x0302  # baud, digit X = RS-485 (L10509-L10527); next frame (L16035)
 P3_002 = 0x0304  # protocol 0..8 (L10546-L10557); next frame (L16037)
 P3_004 = 0x0308  # comm timeout, s, 0 = off, "immediately" (L10571-L10578)
@@ -448,6 +450,14 @@ class ModbusSlave:
             req = mb.decode_request(
                 pdu, max_read=self.options.max_read_words, max_write=self.options.max_write_words
             )
+            if req.address in PM_ADDRESSES:
+                # the PM group exists on the drive (readable and writable by communication,
+                # L16031, L16049) but is not modelled: "no parameter here" (02h), without
+                # the AL019 of an address the drive has not (docs/manual-choices.md)
+                return self._exception(fn, mb.ILLEGAL_DATA_ADDRESS,
+                                       f"PM.{(req.address - PM_ADDRESSES.start) // 2:03d}: the "
+                                       "motor parameters (PM group) are not modelled",
+                                       broadcast, alarm=False)
             if req.function == mb.READ_HOLDING:
                 if broadcast:
                     return None
@@ -490,10 +500,11 @@ class ModbusSlave:
                 return self.options.exception_codes[cls]
         return mb.SERVER_DEVICE_FAILURE
 
-    def _exception(self, fn: int, code: int, message: str, broadcast: bool) -> bytes | None:
+    def _exception(self, fn: int, code: int, message: str, broadcast: bool,
+                   alarm: bool = True) -> bytes | None:
         self.stats["exceptions"] += 1
         self._note(message)
-        if self.on_comm_error is not None:
+        if alarm and self.on_comm_error is not None:
             self._callback("on_comm_error", self.on_comm_error, code, message)
         return None if broadcast else mb.exception_response(fn, code)
 

@@ -127,3 +127,18 @@ def test_p5016_and_p5076_are_not_written_by_communication(name, address):
     assert ask(slave, out, rtu(OWN, 0x03, address >> 8, address & 0xFF, 0, 2), 9 * S)[0][1] == 3
     drive.params.write(name, 7)
     assert drive.params.read(name) == 7
+
+
+def test_the_pm_group_answers_no_parameter_without_tripping_al019():
+    """PM.000-PM.053 sit at FD00H-FD6BH (PM.004 at FD08H, L14637) and are readable and
+    writable by communication (L16031, L16049). The virtual drive does not model them: a read
+    or write answers exception 02h, but it is no bad address of AL019's kind (L19592-19596),
+    which would take the servo off; an address the drive has not still raises it (helper-90)."""
+    d = Drive(params={"P3.000": 1})
+    d.advance(10 * MS)
+    slave, out, _ = face(d.params, on_comm_error=lambda code, _m: d.modbus_comm_error(code))
+    assert ask(slave, out, rtu(1, 0x03, 0xFD, 0x08, 0x00, 0x02), S) == [rtu(1, 0x83, 0x02)]
+    assert ask(slave, out, rtu(1, 0x06, 0xFD, 0x00, 0x00, 0x01), 2 * S) == [rtu(1, 0x86, 0x02)]
+    assert "AL019" not in d.alarms.active
+    assert ask(slave, out, rtu(1, 0x03, 0x08, 0x00, 0x00, 0x02), 3 * S) == [rtu(1, 0x83, 0x02)]
+    assert "AL019" in d.alarms.active  # P8.000: no such group
