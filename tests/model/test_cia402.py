@@ -97,6 +97,25 @@ class Rig:
         self.w(0x6081, speed_puu_s)  # 500000 PUU/s = 300 rpm
         self.enable(1)
 
+    def pp_pulse(self, target: int, relative: bool = False) -> None:
+        """607Ah, then a bit 4 pulse (0x1F, 0x0F; bit 6 when relative) without waiting."""
+        rel = 0x40 if relative else 0
+        self.w(0x607A, target)
+        self.cw(0x1F | rel)
+        self.cw(0x0F | rel)
+
+    def pp_handshake(self, target: int, relative: bool = False) -> None:
+        """607Ah, bit 4 up, wait for bit 12 (the CiA 402 handshake), bit 4 down."""
+        rel = 0x40 if relative else 0
+        self.w(0x607A, target)
+        self.cw(0x1F | rel)
+        self.until(lambda: self.sw & 0x1000)
+        self.cw(0x0F | rel)
+
+    def settle(self) -> None:
+        """Until target reached (bit 10) and the axis at rest."""
+        self.until(lambda: self.sw & 0x0400 and not self.axis.moving)
+
 
 def abort_of(fn, *args) -> int:
     with pytest.raises(ObjectError) as info:
@@ -437,12 +456,9 @@ def test_pp_three_triggers_each_acknowledged_and_run_in_turn():
     rig = Rig()
     rig.pp_setup()
     for target in (100000, 150000, 20000):
-        rig.w(0x607A, target)
-        rig.cw(0x1F)
-        rig.until(lambda: rig.sw & 0x1000)
-        rig.cw(0x0F)
+        rig.pp_handshake(target)
         rig.step(5)  # the next trigger while this move runs
-    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    rig.settle()
     assert rig.r(0x6064) == 20000
 
 
@@ -452,20 +468,14 @@ def test_pp_queued_setpoint_withdrawn_when_bit4_falls_before_its_acknowledge():
     moves that the master took back."""
     rig = Rig()
     rig.pp_setup()
-    rig.w(0x607A, 100000)
-    rig.cw(0x1F)
-    rig.cw(0x0F)
+    rig.pp_pulse(100000)
     rig.step(20)
-    rig.w(0x607A, 500000)
-    rig.cw(0x1F)
-    rig.cw(0x0F)  # withdrawn
-    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    rig.pp_pulse(500000)  # withdrawn
+    rig.settle()
     rig.step(200)
     assert rig.r(0x6064) == 100000
-    rig.w(0x607A, 30000)  # a relative move afterwards counts from the target that ran
-    rig.cw(0x5F)
-    rig.cw(0x4F)
-    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    rig.pp_pulse(30000, relative=True)  # counts from the target that ran
+    rig.settle()
     assert rig.r(0x6064) == 130000
 
 
@@ -476,15 +486,10 @@ def test_pp_relative_set_point_waiting_for_a_move_counts_from_where_it_is_taken(
     (helper-89: it went back to the trigger's position)."""
     rig = Rig(pp_relative_base=base)
     rig.pp_setup()
-    rig.w(0x607A, 100000)
-    rig.cw(0x1F)
-    rig.cw(0x0F)
+    rig.pp_pulse(100000)
     rig.step(30)
-    rig.w(0x607A, 10000)
-    rig.cw(0x5F)
-    rig.until(lambda: rig.sw & 0x1000)
-    rig.cw(0x4F)
-    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    rig.pp_handshake(10000, relative=True)
+    rig.settle()
     assert abs(rig.r(0x6064) - 110000) <= 100
 
 
@@ -494,9 +499,7 @@ def test_pp_drive_taking_the_axis_drops_a_waiting_set_point_without_a_trace():
     (helper-89: from the dropped one)."""
     rig = Rig()
     rig.pp_setup()
-    rig.w(0x607A, 100000)
-    rig.cw(0x1F)
-    rig.cw(0x0F)
+    rig.pp_pulse(100000)
     rig.step(20)
     rig.w(0x607A, 150000)
     rig.cw(0x1F)  # waits
@@ -504,11 +507,8 @@ def test_pp_drive_taking_the_axis_drops_a_waiting_set_point_without_a_trace():
     rig.cw(0x0F)
     rig.axis.move_to(rig.axis.demand, 0.0, 100, 100)  # whatever took the axis holds it
     rig.step(500)
-    rig.w(0x607A, 10000)
-    rig.cw(0x5F)
-    rig.until(lambda: rig.sw & 0x1000)
-    rig.cw(0x4F)
-    rig.until(lambda: rig.sw & 0x0400 and not rig.axis.moving)
+    rig.pp_handshake(10000, relative=True)
+    rig.settle()
     assert rig.r(0x6064) == 110000
 
 
@@ -519,9 +519,7 @@ def test_pp_a_wide_position_window_does_not_end_a_move_early():
     rig.pp_setup()
     rig.w(0x6067, 50000)
     rig.w(0x6068, 0)
-    rig.w(0x607A, 500000)
-    rig.cw(0x1F)
-    rig.cw(0x0F)
+    rig.pp_pulse(500000)
     rig.until(lambda: rig.sw & 0x0400)
     assert rig.axis.demand_velocity != 0.0
     rig.w(0x607A, 0)
