@@ -450,7 +450,7 @@ class ModbusSlave:
             req = mb.decode_request(
                 pdu, max_read=self.options.max_read_words, max_write=self.options.max_write_words
             )
-            if req.address in PM_ADDRESSES:
+            if req.address in PM_ADDRESSES and req.address + req.count - 1 in PM_ADDRESSES:
                 # the PM group exists on the drive (readable and writable by communication,
                 # L16031, L16049) but is not modelled: "no parameter here" (02h), without
                 # the AL019 of an address the drive has not (docs/manual-choices.md)

@@ -222,6 +222,11 @@ class Homing:
     def active(self) -> bool:
         return bool(self.route)
 
+    @property
+    def pr_busy(self) -> bool:
+        """A PR homing is triggered (it starts on the next tick) or running."""
+        return self.route == "pr" or self._pending is not None
+
     # ---------------------------------------------------------------- the run
     def _begin(self, route: str) -> None:
         self.route = route

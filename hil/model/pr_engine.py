@@ -130,6 +130,7 @@ class _Cmd:
     done: int | None = None  # time the command output finished (or its decel began: OVLP)
     dly_from_start: bool = False  # OVLP: the DLY counts from the command start (L5051)
     overlaps: bool = False  # OVLP with a next motion PR: done once the decel begins
+    short_of_cmd_e: bool = False  # a stop that cut a position PR short of Cmd_E (TPOS, L8694)
 
     def end(self) -> int | None:
         """When the command and its DLY are over (None: still running)."""
@@ -162,6 +163,7 @@ class PrEngine:
         self._mc_was_on = False
         # TPOS off from a trigger until the command reached its target (L8624, L8689-8693)
         self.tpos_off = False
+        self._home_at: int | None = None  # a jump to PR#0: homing starts then (its DLY)
         self._prev_t = 0  # read time of the previous PR of the chain
         self._prev_dly = 0  # its DLY, ns
         self._prev_motion = False
@@ -235,7 +237,7 @@ class PrEngine:
         self._cancel_wake()
         if d.axis.power and (d.axis.moving or d.axis.velocity != 0.0):
             d.axis.ramp_stop(d.p5003_decel(7))  # P5.003.D: STP decel (L11091-11100)
-            self.cmd = _Cmd(None, d.now, 0)
+            self.cmd = _Cmd(None, d.now, 0, short_of_cmd_e=self._cuts_a_position())
         self._service()
 
     def after_homing(self) -> None:
@@ -267,6 +269,7 @@ class PrEngine:
     def abort(self) -> None:
         """The program ends without finishing (servo off, homing started, alarm)."""
         self.cursor = None
+        self._home_at = None
         self.cmd = None
         self.tpos_off = False
         self._cancel_wake()
@@ -277,6 +280,9 @@ class PrEngine:
         """Read PRs while they are ready (one 1 ms group), then execute the group's motion."""
         d = self.drive
         now = d.now
+        if self._home_at is not None:
+            self._jump_home()
+            return
         count = 0
         motion: tuple[PrPath, bool] | None = None
         while self.cursor is not None:
@@ -308,7 +314,19 @@ class PrEngine:
             self._advance_cursor(path)
         if motion is not None:
             self._issue(*motion)
+        if self._home_at is not None:
+            self._jump_home()
         self._update_cmd_ok()
+
+    def _jump_home(self) -> None:
+        """A jump to PR#0: homing, triggered once the jump's DLY ran out (L4505)."""
+        at = self._home_at
+        if at is not None and at > self.drive.now:
+            self._wake_at(at)
+            return
+        self._home_at = None
+        if self.homing is not None:
+            self.homing.trigger_pr("jump")
 
     def _ready(self, path: PrPath, motion_in_group: bool) -> int | None:
         """Earliest time PR `path` may be read; None = after the running command is done."""
@@ -348,8 +366,8 @@ class PrEngine:
         if path.type == JUMP:  # DLY counts from the jump's read (L4505)
             target = path.number + 1 if o.dev_jump_falls_through else path.data
             if target == 0 and self.homing is not None:  # PR#0 is homing (L4505, L4516)
-                self.cursor = None
-                self.homing.trigger_pr("jump")
+                self.cursor = None  # ... triggered once the jump's DLY ran out (L4505)
+                self._home_at = self._prev_t + self._prev_dly
             else:
                 self.cursor = target
         elif path.continues:
@@ -586,7 +604,7 @@ class PrEngine:
                 if decel is None:
                     decel = d.p5003_decel(digit)  # P5.003 Z SPL / U SNL (L11091-11100)
                 ax.ramp_stop(decel)
-                self.cmd = _Cmd(None, d.now, 0)
+                self.cmd = _Cmd(None, d.now, 0, short_of_cmd_e=self._cuts_a_position())
 
     # ---------------------------------------------------------------- outputs
     def _update_cmd_ok(self) -> None:
@@ -594,8 +612,10 @@ class PrEngine:
         program ended on a statement (a WRITE PR, or homing's PATH 0), its DLY too, counted
         from its read ("驅動器即開始計算延遲時間" L4533; "待延遲時間終了 ... Cmd_OK 才會輸出"
         L4195-4197)."""
-        if self.cursor is not None or self.lead is None:
+        if self.cursor is not None or self.lead is None or self._home_at is not None:
             return
+        if self.homing is not None and self.homing.pr_busy:
+            return  # PR#0 runs: Cmd_OK comes after it (`after_homing`)
         c = self.cmd
         end = None
         if c is not None:
@@ -604,6 +624,9 @@ class PrEngine:
             end = c.done
             if not self.options.dev_cmd_ok_ignores_dly:
                 end = c.end() or end
+        if self.tpos_off:  # the command is out: TPOS judges again, during the DLY too (L4195)
+            self.tpos_off = False
+            self.drive.refresh_outputs()
         if not self._prev_motion and not self.options.dev_cmd_ok_ignores_dly:
             last = self._prev_t + self._prev_dly
             end = last if end is None else max(end, last)
@@ -627,10 +650,20 @@ class PrEngine:
             d.refresh_outputs()
 
     def stopped_short(self) -> bool:
-        """The last command was a stop (STP, a software limit) that ended the program before
-        Cmd_E: TPOS then judges Cmd_E (L8694), which the stop kept."""
+        """The last command was a stop (STP, a software limit) that cut a position PR short of
+        Cmd_E: TPOS then judges Cmd_E (L8694), which the stop kept. (A stopped speed PR has no
+        set target: TPOS stays the following error's.)"""
         c = self.cmd
-        return c is not None and c.path is None
+        return c is not None and c.short_of_cmd_e
+
+    def _cuts_a_position(self) -> bool:
+        """The command a stop replaces is a position PR (or a stop that had cut one)."""
+        c = self.cmd
+        if c is None:
+            return False
+        if c.path is None:
+            return c.short_of_cmd_e
+        return c.path.type != SPEED
 
     def _tpos(self) -> bool:
         return self.drive.tpos()
@@ -789,6 +822,7 @@ def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
         homing.on_pr_start = pr.abort
     drive.hooks.step.append(pr.after_step)
     drive.hooks.boot.append(pr.power_up)
+    drive.hooks.servo_off.append(pr.abort)  # servo off ends the program, a DLY's wait too
     return pr
 
 

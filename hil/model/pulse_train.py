@@ -754,33 +754,43 @@ def _check_gear(d: DriveCore) -> Callable[[str, int], None]:
     return validate
 
 
+def _position_monitor(d: DriveCore, pt: PulseTrain, code: int) -> int:
+    """The position codes 000-006 of the monitor table (L15440-15446) and 049, the CN1 pulse
+    count (L15483)."""
+    if code == 49:  # pulse command count at CN1 (L15483), = P5.018
+        return pt.cn1_count()
+    ax = d.axis
+    n, m = d.params.get("P1.044"), d.params.get("P1.045")
+    fb, cmd = ax.user_position, ax.user_demand
+    if pt.used and pt.in_pt():
+        cmd = pt.live_command() - ax.origin
+    if code == 6:  # pulse command frequency, kpps
+        return round(pt.freq_hz / 1000.0)
+    if code == 1 and pt.in_pt():  # PT: the pulses received (L15441), none yet at first
+        return int(pt.snapshot()["pt_count"])
+    values = {0: fb * m / n, 1: cmd * m / n, 2: (cmd - fb) * m / n, 3: fb, 4: cmd,
+              5: cmd - fb}
+    return round(values[code])
+
+
+#: the codes this part keeps for every reader (`Hooks.monitors`: P0.009-P0.013 and a PR
+#: WRITE's monitor source alike); 000-002 stay P0.009's own, PR mode has its own (pr_engine)
+SHARED_MONITORS = (3, 4, 5, 6, 49)
+
+
 def _monitor(d: DriveCore, pt: PulseTrain, select: str, stored: Callable[[], int]
              ) -> Callable[[], int]:
-    """P0.009-P0.013 read the monitor code their P0.017-P0.021 select (L7147-7237): the
-    position codes 000-006 of the monitor table (L15440-15446), 049, the CN1 pulse count
-    (L15483), and the codes other parts register (`Hooks.monitors`, e.g. 038 the battery);
+    """P0.009-P0.013 read the monitor code their P0.017-P0.021 select (L7147-7237): the codes
+    parts register (`Hooks.monitors`: 003-006 and 049 here, 038 the battery, ...), 000-002;
     other codes keep the stored value (not modelled)."""
     def read() -> int:
         code = d.params.get(select)
         part = d.hooks.monitors.get(code)
         if part is not None:
             return part()
-        if code == 49:  # pulse command count at CN1 (L15483), = P5.018
-            return pt.cn1_count()
-        if code > 6:
+        if code > 2:
             return stored()
-        ax = d.axis
-        n, m = d.params.get("P1.044"), d.params.get("P1.045")
-        fb, cmd = ax.user_position, ax.user_demand
-        if pt.used and pt.in_pt():
-            cmd = pt.live_command() - ax.origin
-        if code == 6:  # pulse command frequency, kpps
-            return round(pt.freq_hz / 1000.0)
-        if code == 1 and pt.in_pt():  # PT: the pulses received (L15441), none yet at first
-            return int(pt.snapshot()["pt_count"])
-        values = {0: fb * m / n, 1: cmd * m / n, 2: (cmd - fb) * m / n, 3: fb, 4: cmd,
-                  5: cmd - fb}
-        return round(values[code])
+        return _position_monitor(d, pt, code)
     return read
 
 
@@ -790,6 +800,8 @@ def attach_pulse_train(drive: DriveCore) -> PulseTrain:
         reg, select = f"P0.{9 + i:03d}", f"P0.{17 + i:03d}"
         drive.params.on_read(reg, _monitor(drive, pt, select,
                                            lambda r=reg: drive.params.stored(r)))
+    for code in SHARED_MONITORS:
+        drive.hooks.monitors[code] = lambda c=code: _position_monitor(drive, pt, c)
     drive.params.on_read("P5.018", pt.cn1_count)
     drive.params.on_write("P5.018", pt.preset_cn1)
     drive.hooks.step.append(pt.after_step)

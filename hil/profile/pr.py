@@ -170,9 +170,10 @@ def decode(n: int, definition: int, data: int) -> PrPath:
 
 ARRAY_SIZE = 800  # data array 0..799 (L5097)
 # monitor sources the model computes: PR mode's own (L4178-4183) and those other parts of
-# the drive keep (037 CMP_DATA L15476, 038 battery voltage L15477, 043 CAP data L15481):
-# a WRITE PR reads each as P0.009-P0.013 show it (`PrEngine.monitor`, `hooks.monitors`)
-MONITOR_CODES = (0, 1, 2, 37, 38, 43, 64)
+# the drive keep (003-006 positions and pulse frequency L15443-15446, 037 CMP_DATA L15476,
+# 038 battery voltage L15477, 043 CAP data L15481, 049 CN1 pulses L15483): a WRITE PR reads
+# each as P0.009-P0.013 show it (`PrEngine.monitor`, `Hooks.monitors`)
+MONITOR_CODES = (0, 1, 2, 3, 4, 5, 6, 37, 38, 43, 49, 64)
 
 
 def _check_write(p: PrPath, where: str) -> None:

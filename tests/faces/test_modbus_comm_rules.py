@@ -140,5 +140,6 @@ def test_the_pm_group_answers_no_parameter_without_tripping_al019():
     assert ask(slave, out, rtu(1, 0x03, 0xFD, 0x08, 0x00, 0x02), S) == [rtu(1, 0x83, 0x02)]
     assert ask(slave, out, rtu(1, 0x06, 0xFD, 0x00, 0x00, 0x01), 2 * S) == [rtu(1, 0x86, 0x02)]
     assert "AL019" not in d.alarms.active
-    assert ask(slave, out, rtu(1, 0x03, 0x08, 0x00, 0x00, 0x02), 3 * S) == [rtu(1, 0x83, 0x02)]
-    assert "AL019" in d.alarms.active  # P8.000: no such group
+    # running past PM.053 (FD6BH) into the reserved PM.054 is an address the drive has not
+    assert ask(slave, out, rtu(1, 0x03, 0xFD, 0x6A, 0x00, 0x04), 3 * S) == [rtu(1, 0x83, 0x02)]
+    assert "AL019" in d.alarms.active

@@ -79,3 +79,83 @@ def test_a_write_pr_reads_the_monitors_the_drive_keeps() -> None:
     assert not d.alarms.active
     assert d.pr.array[5] == d.hooks.monitors[38]() != 12345
     assert d.pr.array[6] == d.hooks.monitors[43]() != 12345
+
+
+def test_a_stopped_speed_pr_keeps_tpos_and_raises_no_al380() -> None:
+    """AL380 is a displacement after positioning (L8632, L20147); a speed PR sets no target
+    position for L8694 to judge, so STP after it leaves TPOS (the following error's) and MC_OK
+    as they were, with P1.048 = 0x10 (AL380 armed): no alarm (helper-92)."""
+    d = make()
+    d.params.write("P1.048", 0x10)
+    put(d, 1, type_="speed", data=3000)  # 300 rpm
+    d.params.write("P5.007", 1)
+    d.advance(500 * MS)
+    assert d.pr.mc_ok
+    d.params.write("P5.007", 1000)
+    d.advance(1000 * MS)
+    assert not d.alarms.active
+    assert d.pr.mc_ok and d.dio.do_function_state("TPOS")
+    assert d.params.get("P5.007") == 20001
+
+
+def test_tpos_during_a_last_write_prs_dly() -> None:
+    """L4195-4197: with a DLY, TPOS comes on once the error is inside P1.054 and Cmd_OK when
+    the DLY ran out. A WRITE with DLY #2 (200 ms) triggered with the motor at rest on its
+    target: TPOS on at once, Cmd_OK 200 ms later (helper-92: TPOS waited for Cmd_OK)."""
+    d = make()
+    put(d, 1, type_="write", data=600, dest="P5.064", dly=2)
+    d.advance(100 * MS)
+    d.params.write("P5.007", 1)
+    d.advance(10 * MS)
+    assert d.dio.do_function_state("TPOS") and not d.pr.cmd_ok
+    d.advance(200 * MS)
+    assert d.pr.cmd_ok and d.pr.mc_ok
+
+
+def test_servo_off_during_a_dly_ends_the_program() -> None:
+    """Servo off ends a PR program (its Cmd_OK off): one waiting out a WRITE's DLY too, which
+    then raises no Cmd_OK or MC_OK with the servo off (helper-92)."""
+    d = make()
+    put(d, 1, type_="write", data=600, dest="P5.064", dly=2)
+    d.params.write("P5.007", 1)
+    d.advance(50 * MS)
+    d.set_di(1, False)  # SON off
+    d.advance(400 * MS)
+    assert not d.servo_on
+    assert not d.pr.cmd_ok and not d.pr.mc_ok
+    assert times(d, "Cmd_OK:1") == []
+
+
+def test_a_jump_to_pr0_homes_after_the_jumps_dly() -> None:
+    """A jump's DLY counts from its read and its target is read when it ran out (L4505):
+    a jump to PR#0 with DLY #2 (200 ms) starts the homing 200 ms after the jump, and Cmd_OK
+    stays off until the homing is over (helper-92: homing at once, Cmd_OK on for 1 ms)."""
+    d = make()
+    d.params.write("P5.004", 0x8)  # X = 8: the current position is the origin
+    put(d, 1, type_="jump", data=0, dly=2)
+    t0 = d.now // MS
+    d.params.write("P5.007", 1)
+    d.advance(500 * MS)
+    read = [t // MS - t0 for t, what in d.pr.trace if what.startswith("read:1")]
+    start = [t // MS - t0 for t, what in d.homing.trace if what.startswith("trigger:jump")]
+    homed = [t // MS - t0 for t, what in d.homing.trace if what == "homed"]
+    assert start == [read[0] + 200], (read, start)
+    assert d.homing.homed
+    assert [t - t0 for t in times(d, "Cmd_OK:1")] == homed
+
+
+def test_a_write_pr_reads_the_position_monitors_p0009_shows() -> None:
+    """Monitors 003-006 (positions in pulses, the pulse frequency, L15443-15446) and 049
+    (CN1 pulses, L15483) are in the table AL231 guards (L20077): a WRITE PR reads them as
+    P0.009 does (helper-92: AL231)."""
+    d = make()
+    put(d, 1, type_="auto", data=5000, spd=4)
+    put(d, 2, type_="write", source="monitor", data=4, dest=7, dest_array=True, auto=True)
+    put(d, 3, type_="write", source="monitor", data=49, dest=8, dest_array=True)
+    d.pr.array[7] = d.pr.array[8] = 12345
+    d.params.write("P5.007", 1)
+    d.advance(1000 * MS)
+    assert not d.alarms.active
+    d.params.write("P0.017", 4)  # the command in pulses: the target, 5000 PUU
+    assert d.pr.array[7] == d.params.read("P0.009") == round(5000 * 16777216 / 100000)
+    assert d.pr.array[8] == d.params.read("P5.018")
