@@ -114,6 +114,9 @@ class Homing:
         self._user_home = 0.0
         self._reported = False
         self._torque_since: int | None = None
+        # torque homing: the direction of the stop it pushed into while the P1.087 limit is
+        # still held after the detection (0: not held)
+        self._push_dir = 0
         self._pending: Timer | None = None
         self._early: Timer | None = None
         self._boot_armed = True
@@ -159,8 +162,8 @@ class Homing:
         d = self.drive
         if not d.servo_on or self._pending is not None or self.route == "canopen":
             return
-        if source != "BOOT" and not pr_mode(d):
-            return  # SHOM / CTRG / P5.007 = 0 are PR-mode triggers (L15197, L11174)
+        if not pr_mode(d):  # SHOM / CTRG / P5.007 = 0 are PR-mode triggers (L15197,
+            return  # L11174); so is BOOT: P6.000 is a PR-mode parameter (L12600-12601)
         self._set_home(False)  # "goes Off immediately when homing is triggered" (L15290)
         self.trace.append((d.now, f"trigger:{source}"))
         tick = (d.now // MS + 1) * MS
@@ -358,6 +361,8 @@ class Homing:
         if not ax.power:
             self._end()
             return
+        if self._push_dir and ax.demand_velocity * self._push_dir <= 0.0:
+            self._restore_torque_limits()  # the command has left the stop
         phase = self.phase
         if phase == "index":
             last, pos = ax.last_position, ax.position
@@ -375,7 +380,9 @@ class Homing:
                 if self._torque_since is None:
                     self._torque_since = d.now
                 elif d.now - self._torque_since >= ms(d.params.get("P1.088")):  # L8973-8984
-                    self._restore_torque_limits()
+                    # the P1.087 + 10 % limit stays until the command no longer pushes into
+                    # the stop (a harder impact may damage the machine, L4383, L8960-8971)
+                    self._push_dir = self._dir
                     self.reference = ax.position
                     plan = self.plan
                     assert plan is not None
@@ -449,7 +456,7 @@ class Homing:
             d.cia402.set_homing_status(False, True)
 
     def _end(self) -> None:
-        if self.phase == "torque":
+        if self.phase == "torque" or self._push_dir:
             self._restore_torque_limits()
         if self._early is not None:
             self._early.cancel()
@@ -458,6 +465,7 @@ class Homing:
         self.phase = ""
 
     def _restore_torque_limits(self) -> None:
+        self._push_dir = 0
         cia = self.drive.cia402
         self.drive.axis.set_torque_limits(cia.read(0x60E0, 0), cia.read(0x60E1, 0))
 
