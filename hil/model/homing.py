@@ -64,6 +64,11 @@ class HomingOptions:
     offset_sign: int = 1
     # PR X = 4/5 (Z directly): search speed "low" = P5.006 or "high" = P5.005 (L4348 silent).
     pr_z_speed: str = "low"
+    # An edge that is itself the home (no Z after it) entered at the search speed (6099h sub1)
+    # is not latched there but found again at the zero-search speed (sub2): out of the region
+    # and back in (CiA 402's two speeds; the same home from every start, L4336). False: the
+    # edge at search speed, off by that speed x the DI filter (the model before session 26)
+    reapproach_edge: bool = True
     # --- deviations ---
     ignore_index: bool = False  # Z pulse ignored: the switch edge is taken as home
     wrong_direction: bool = False  # final search (edge crossing and Z) the other way
@@ -328,8 +333,9 @@ class Homing:
         phase = self.phase
         if phase == "search":
             entered = "lo" if self._dir > 0 else "hi"
-            if entered == plan.edge and self._dir == plan.cross:
-                self._edge()
+            at_speed_home = not plan.index and self.options.reapproach_edge
+            if entered == plan.edge and self._dir == plan.cross and not at_speed_home:
+                self._edge()  # a Z after it sets the home exactly
             else:
                 self._inside()
         elif phase == "exit":

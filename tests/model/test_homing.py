@@ -115,6 +115,18 @@ def test_canopen_switch_methods(method: int, start: str) -> None:
     assert home_rev(h, s) == pytest.approx(cia_expected(method), abs=tol)
 
 
+@pytest.mark.parametrize("method", range(17, 31))
+def test_canopen_edge_methods_home_at_one_point_from_every_start(method: int) -> None:
+    """Without a Z after it the edge is the home: found at the zero-search speed (6099h sub2)
+    from every start, not latched at the switch-search speed (sub1) when the search happens
+    to enter through it (helper-91: methods 20, 22, 24, 25, 28, 29 moved with the start by
+    sub1 x the P2.009 filter). The origin is the same whatever the start (L4336): here
+    within the 30 rpm zero search x the 2 ms filter (0.001 rev)."""
+    homes = [home_rev(canopen_home(method, s)[1], s) for start, s in STARTS.items()
+             if not cia_fails(method, start)]
+    assert max(homes) - min(homes) <= 0.0012, homes
+
+
 @pytest.mark.parametrize("start", ["neg", "on", "pos"])
 @pytest.mark.parametrize(("method", "step"), [(33, -1), (34, 1), (35, 0)])
 def test_canopen_index_and_here(method: int, step: int, start: str) -> None:
