@@ -525,7 +525,11 @@ class PrEngine:
         g44, g45 = d.params.get("P1.044"), d.params.get("P1.045")
         fb = round(counts_to_puu(ax.user_position, g44, g45))
         cmd_o = round(counts_to_puu(ax.user_demand, g44, g45))
-        values = {0: fb, 1: cmd_o, 2: cmd_o - fb, 64: self.cmd_e}
+        cmd_e = self.cmd_e
+        h = self.homing
+        if h is not None and h.route == "pr":  # PR#0 runs (L4396): Cmd_E = Cmd_O until the
+            cmd_e = cmd_o if h.home_counts is None else d.params.get("P6.001")  # reference
+        values = {0: fb, 1: cmd_o, 2: cmd_o - fb, 64: cmd_e}
         if code in values:
             return values[code]
         part = d.hooks.monitors.get(code)  # the codes other parts model (037, 043, 038)

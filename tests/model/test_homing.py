@@ -408,3 +408,25 @@ def test_knob_home_early_reports_before_standstill() -> None:
         if drive.do(3):
             break
     assert drive.axis.moving and drive.read_object(0x6041) & 0x1000
+
+
+def test_cmd_e_follows_cmd_o_during_pr_homing_then_reads_the_reference() -> None:
+    """L4396: while PR homing runs Cmd_E (monitor 064) equals Cmd_O (001), the coordinate
+    not yet defined; once the reference is found Cmd_E is its coordinate (P6.001) while Cmd_O
+    runs on through the deceleration (figure 7.1.3.3; helper-91: Cmd_E kept its old value)."""
+    drive, h = make(0.0, **{"P5.004": 0x002, "P6.001": 2000})  # X=2: ORG, Y=0: back to Z
+    drive.set_di(1, True)
+    drive.advance(100 * MS)
+    drive.params.write("P5.007", 0)
+    seen_running = seen_found = False
+    for _ in range(20000):
+        drive.advance(MS)
+        if h.active and h.home_counts is None and drive.axis.moving:
+            assert drive.pr.monitor(64) == drive.pr.monitor(1)
+            seen_running = True
+        elif h.active and h.home_counts is not None:
+            assert drive.pr.monitor(64) == 2000
+            seen_found = True
+        if h.homed and not h.active:
+            break
+    assert seen_running and seen_found and drive.pr.monitor(64) == 2000
