@@ -463,7 +463,9 @@ class PrEngine:
         cmd = path.cmd
         if cmd == "ABS":
             return v
-        if cmd == "INC" or (cmd == "REL" and not external):  # REL acts as INC inside (L5000)
+        # REL acts as INC in an internal interrupt (an INS PR of the chain, L5000); any other
+        # REL is the motor's position plus the data (L4469), a sequential one's too
+        if cmd == "INC" or (cmd == "REL" and not external and path.ins):
             return self.cmd_e + v
         if cmd == "REL":
             return round(counts_to_puu(d.axis.user_position, g44, g45)) + v

@@ -6,7 +6,7 @@ L12627) hold Cmd_OK. helper-66 (session 17) found both ignored."""
 from __future__ import annotations
 
 from hil.units import MS
-from tests.model.test_pr import put, times
+from tests.model.test_pr import put, puu, times
 from tests.model.test_pr_overlap_sum import make
 
 
@@ -159,3 +159,20 @@ def test_a_write_pr_reads_the_position_monitors_p0009_shows() -> None:
     d.params.write("P0.017", 4)  # the command in pulses: the target, 5000 PUU
     assert d.pr.array[7] == d.params.read("P0.009") == round(5000 * 16777216 / 100000)
     assert d.pr.array[8] == d.params.read("P5.018")
+
+
+def test_a_sequential_rel_pr_counts_from_the_motor_not_from_cmd_e() -> None:
+    """REL: "目標位置為馬達目前位置加上位置命令的值" (L4469); only an internal interrupt (an INS
+    PR) makes REL act as INC (L5000). A speed PR (AUTO, DLY) then a sequential REL +10000:
+    the target is where the motor is when REL is issued plus 10000, not the old Cmd_E plus
+    10000, which drove the motor back (helper-93)."""
+    d = make()
+    put(d, 1, type_="speed", data=3000, auto=True, dly=1)  # 300 rpm, DLY #1 = 100 ms
+    put(d, 2, type_="single", data=10000, cmd="REL", spd=4)
+    d.params.write("P5.007", 1)
+    while not times(d, "motion:2"):
+        d.advance(MS)
+    at_issue = d.pr.monitor(0)
+    d.advance(2000 * MS)
+    assert abs(puu(d) - (at_issue + 10000)) <= 1, (at_issue, puu(d))
+    assert puu(d) > 40000  # onwards, not back to the old Cmd_E + 10000
