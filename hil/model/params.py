@@ -63,6 +63,9 @@ class ParameterStore:
         self._peek_hooks: dict[str, ReadHook] = {}  # current value without read side effects
         self._validators: dict[str, list[Validator]] = {}
         self._listeners: list[ChangeListener] = []
+        # RAM-only writes (a PR WRITE without ROM, L4533): the EEPROM value each reverts to
+        # at the next power cycle, and the one `save` keeps
+        self._eeprom: dict[str, int] = {}
         # bumped at every change of a value in effect or of the read hooks (`cached`)
         self.version = 0
         self._set_all_defaults()
@@ -125,9 +128,16 @@ class ParameterStore:
             validate(spec.param, value)
         return spec
 
-    def write(self, name: str, value: int) -> None:
-        """Write as communication / panel does: validated, then write hooks fire."""
+    def write(self, name: str, value: int, *, ram_only: bool = False) -> None:
+        """Write as communication / panel does: validated, then write hooks fire.
+        `ram_only`: into RAM alone (a PR WRITE without ROM, "ROM 為同時寫入 RAM 與 EEPROM，提供參數
+        斷電保持的功能" L4533): the value in EEPROM comes back at the next power cycle."""
         spec = self.check_write(name, value)
+        key = spec.param
+        if ram_only:
+            self._eeprom.setdefault(key, self._stored[key])
+        else:
+            self._eeprom.pop(key, None)
         self._commit(spec, value)
 
     def set_internal(self, name: str, value: int) -> None:
@@ -248,6 +258,11 @@ class ParameterStore:
     def power_cycle(self) -> list[str]:
         """● values take effect, ■ values revert to default; returns names whose value changed."""
         changed: list[str] = []
+        for key, value in self._eeprom.items():  # RAM-only writes are lost (L4533)
+            if self._stored[key] != value:
+                self._stored[key] = value
+                self._notify(key, value)
+        self._eeprom.clear()
         for spec in self.table:
             key = spec.param
             if spec.not_retained:
@@ -266,6 +281,7 @@ class ParameterStore:
 
     def reset_defaults(self) -> None:
         """Every parameter back to its default, in effect at once (P2.008 = 10 + power cycle)."""
+        self._eeprom.clear()
         for spec in self.table:
             if self._stored[spec.param] != spec.default:
                 self._stored[spec.param] = spec.default
@@ -280,10 +296,11 @@ class ParameterStore:
         path = Path(path) if path is not None else self.retained_path
         if path is None:
             raise ValueError("no retained_path to save parameters to")
+        eeprom = self._eeprom
         data = {
-            spec.param: self._stored[spec.param]
+            spec.param: eeprom.get(spec.param, self._stored[spec.param])
             for spec in self.table
-            if spec.retained and self._stored[spec.param] != spec.default
+            if spec.retained and eeprom.get(spec.param, self._stored[spec.param]) != spec.default
         }
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(path.suffix + ".tmp")

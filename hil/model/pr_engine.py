@@ -406,7 +406,8 @@ class PrEngine:
             ax.run_velocity(rpm, acc, dec, overlap=overlap)
             direction = rpm
         else:
-            rpm = get(f"P5.{60 + path.spd:03d}") / 10.0  # 0.1 rpm (L11783)
+            # 0.1 rpm (L11783); an index PR with S_LOW in 0.01 rpm (OPT2 bit 0, L4637)
+            rpm = get(f"P5.{60 + path.spd:03d}") / (100.0 if path.s_low else 10.0)
             target = self._target(path, external, g44, g45)
             if target is None:
                 return
@@ -492,7 +493,7 @@ class PrEngine:
             if value < 0 and spec.min >= 0 and spec.max > 0x7FFFFFFF:
                 value &= 0xFFFFFFFF
             try:
-                d.params.write(path.dest_param, value)
+                d.params.write(path.dest_param, value, ram_only=not path.rom)  # ROM: L4533
             except ReadOnly as exc:
                 self._fail("AL215", str(exc))  # read-only (L20059-20063)
                 return False

@@ -6,6 +6,7 @@ L12627) hold Cmd_OK. helper-66 (session 17) found both ignored."""
 from __future__ import annotations
 
 from hil.units import MS
+from tests.model.test_pr import make as make_with_params
 from tests.model.test_pr import put, puu, times
 from tests.model.test_pr_overlap_sum import make
 
@@ -176,3 +177,41 @@ def test_a_sequential_rel_pr_counts_from_the_motor_not_from_cmd_e() -> None:
     d.advance(2000 * MS)
     assert abs(puu(d) - (at_issue + 10000)) <= 1, (at_issue, puu(d))
     assert puu(d) > 40000  # onwards, not back to the old Cmd_E + 10000
+
+
+def test_an_index_pr_with_s_low_runs_in_hundredths_of_an_rpm() -> None:
+    """Index PR OPT2 bit 0 S_LOW: the speed unit is 0.01 rpm instead of 0.1 rpm (L4633,
+    L4637): SPD #4 (P5.064 = 3000) is 30 rpm, a tenth of the 300 rpm without it, so the same
+    index move takes about ten times as long (helper-93: the bit was ignored)."""
+    def duration(s_low: bool) -> int:
+        d = make_with_params(**{"P2.052": 100000})
+        d.params.write("P5.004", 8)  # X = 8: homed where it stands (L4360)
+        d.params.write("P5.007", 0)
+        d.advance(100 * MS)
+        assert d.homing.homed
+        put(d, 1, type_="index", data=25000, spd=4, s_low=s_low)
+        d.params.write("P5.007", 1)
+        d.advance(5000 * MS)
+        start, done = times(d, "motion:1")[0], times(d, "done:1")[0]
+        assert puu(d) == 25000
+        return done - start
+    fast, slow = duration(False), duration(True)
+    # 25000 PUU = 0.25 rev (P1.044/P1.045 factory): 50 ms at 5 rev/s plus the 20 ms ramp of
+    # P5.020 (200 ms per 3000 rpm); 500 ms at 0.5 rev/s, its ramps 2 ms
+    assert 65 <= fast <= 75 and 495 <= slow <= 510, (fast, slow)
+
+
+def test_a_write_pr_without_rom_is_lost_at_a_power_cycle() -> None:
+    """A WRITE PR's ROM bit: "ROM 為同時寫入 RAM 與 EEPROM，提供參數斷電保持的功能" (L4533).
+    Without it the write goes to RAM alone: after a power cycle the parameter has its old
+    value again; with it the value stays (helper-93: both stayed)."""
+    d = make()
+    put(d, 1, type_="write", data=77, dest="P5.045", auto=True)
+    put(d, 2, type_="write", data=88, dest="P5.046", rom=True)
+    before = d.params.get("P5.045")
+    d.params.write("P5.007", 1)
+    d.advance(50 * MS)
+    assert (d.params.get("P5.045"), d.params.get("P5.046")) == (77, 88)
+    d.power_cycle()
+    assert d.params.get("P5.045") == before != 77
+    assert d.params.get("P5.046") == 88
