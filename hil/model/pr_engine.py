@@ -164,6 +164,9 @@ class PrEngine:
         # TPOS off from a trigger until the command reached its target (L8624, L8689-8693)
         self.tpos_off = False
         self._home_at: int | None = None  # a jump to PR#0: homing starts then (its DLY)
+        # a triggered lead's motion (no INS) waiting in the generator's one-command buffer for
+        # the running command (L4928) while the rest of its group is read and run (L4924)
+        self._buffered: tuple[PrPath, bool] | None = None
         self._prev_t = 0  # read time of the previous PR of the chain
         self._prev_dly = 0  # its DLY, ns
         self._prev_motion = False
@@ -218,6 +221,7 @@ class PrEngine:
         self.trace.append((d.now, f"dispatch:{n}"))
         self.lead = n
         self.cursor = n
+        self._buffered = None  # the new group replaces the old (L4920-4924)
         self.tpos_off = True  # "清除信號 2、4、5、6" (L8624): Cmd_OK, TPOS, MC_OK
         self._external = True
         self._prev_t = d.now
@@ -234,6 +238,7 @@ class PrEngine:
             return  # STP and P5.007 are PR-mode functions (L15249, L11168)
         self.trace.append((d.now, f"stop:{source}"))
         self.cursor = None
+        self._buffered = None  # a buffered motion does not run after the stop either
         self._cancel_wake()
         if d.axis.power and (d.axis.moving or d.axis.velocity != 0.0):
             d.axis.ramp_stop(d.p5003_decel(7))  # P5.003.D: STP decel (L11091-11100)
@@ -270,6 +275,7 @@ class PrEngine:
         """The program ends without finishing (servo off, homing started, alarm)."""
         self.cursor = None
         self._home_at = None
+        self._buffered = None
         self.cmd = None
         self.tpos_off = False
         self._cancel_wake()
@@ -283,6 +289,12 @@ class PrEngine:
         if self._home_at is not None:
             self._jump_home()
             return
+        if self._buffered is not None:
+            idle = self._generator_idle()
+            if idle is not None and idle <= now:
+                self._issue(*self._buffered)  # the generator took it from its buffer
+            elif idle is not None:
+                self._wake_at(idle)
         count = 0
         motion: tuple[PrPath, bool] | None = None
         while self.cursor is not None:
@@ -297,7 +309,7 @@ class PrEngine:
             if path.type == 0 and self.options.stop_on_empty:
                 self.cursor = None
                 break
-            ready = self._ready(path, motion is not None)
+            ready = self._ready(path, motion is not None or self._buffered is not None)
             if ready is None:
                 break  # waits for the motion command (after_step)
             if ready > now:
@@ -313,7 +325,14 @@ class PrEngine:
                 break
             self._advance_cursor(path)
         if motion is not None:
-            self._issue(*motion)
+            path, external = motion
+            idle = self._generator_idle()
+            if external and not path.ins and (idle is None or idle > now):
+                self._buffered = motion  # the one-command buffer (L4928)
+                if idle is not None:
+                    self._wake_at(idle)
+            else:
+                self._issue(*motion)
         if self._home_at is not None:
             self._jump_home()
         self._update_cmd_ok()
@@ -331,10 +350,8 @@ class PrEngine:
     def _ready(self, path: PrPath, motion_in_group: bool) -> int | None:
         """Earliest time PR `path` may be read; None = after the running command is done."""
         now = self.drive.now
-        if self._external:
-            if path.ins or not path.is_motion:
-                return now
-            return self._generator_idle()  # the one-command buffer (L4928)
+        if self._external:  # the lead: read at once, its motion buffered if need be (L4924)
+            return now
         base = self._prev_t + self._prev_dly
         if path.ins:
             return base  # internal interrupt (L4982-4986)
@@ -390,6 +407,7 @@ class PrEngine:
     # ---------------------------------------------------------------- motion generator
     def _issue(self, path: PrPath, external: bool) -> None:
         """Send a motion PR to the generator, merged with the running command (L4468-4471)."""
+        self._buffered = None  # run, or replaced by a later motion PR (INS) of the group
         d = self.drive
         ax = d.axis
         get = d.params.get
@@ -619,7 +637,8 @@ class PrEngine:
         program ended on a statement (a WRITE PR, or homing's PATH 0), its DLY too, counted
         from its read ("驅動器即開始計算延遲時間" L4533; "待延遲時間終了 ... Cmd_OK 才會輸出"
         L4195-4197)."""
-        if self.cursor is not None or self.lead is None or self._home_at is not None:
+        if (self.cursor is not None or self.lead is None or self._home_at is not None
+                or self._buffered is not None):
             return
         if self.homing is not None and self.homing.pr_busy:
             return  # PR#0 runs: Cmd_OK comes after it (`after_homing`)

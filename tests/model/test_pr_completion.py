@@ -215,3 +215,38 @@ def test_a_write_pr_without_rom_is_lost_at_a_power_cycle() -> None:
     d.power_cycle()
     assert d.params.get("P5.045") == before != 77
     assert d.params.get("P5.046") == 88
+
+
+def test_a_triggered_group_runs_its_ins_prs_while_its_lead_waits_for_the_generator() -> None:
+    """Every ms the scheduler hands the lead PR *and its group* to the executor, which
+    replaces the running group at once; writes are done as they are read, and only motion
+    waits in the generator's one-command buffer (L4920-4928); the last motion PR of a group
+    runs, an INS one merging with the running command (L4986, L5022). PR#1 moves to 200000;
+    a trigger of PR#5 (no INS, AUTO) followed by PR#6 (INS, ABS 50000): PR#6 is read and
+    runs at once, not after PR#1 has reached 200000 (helper-93); with PR#6 an INS write, the
+    write is done at once and PR#5 runs when PR#1 is done."""
+    d = make_with_params()
+    put(d, 1, type_="single", data=200000, spd=4)
+    put(d, 5, type_="auto", data=10000, cmd="INC", spd=4)
+    put(d, 6, type_="single", data=50000, spd=4, ins=True)
+    d.params.write("P5.007", 1)
+    d.advance(100 * MS)
+    t5 = d.now // MS
+    d.params.write("P5.007", 5)
+    d.advance(1500 * MS)
+    assert times(d, "motion:6")[0] - t5 <= 1
+    assert puu(d) == 50000 and not times(d, "done:1")  # never went on to 200000
+
+    d = make_with_params()
+    put(d, 1, type_="single", data=200000, spd=4)
+    put(d, 5, type_="auto", data=10000, cmd="INC", spd=4)
+    put(d, 6, type_="write", data=123, dest="P5.055", ins=True)
+    d.params.write("P5.007", 1)
+    d.advance(100 * MS)
+    t5 = d.now // MS
+    d.params.write("P5.007", 5)
+    d.advance(1500 * MS)
+    wrote = [t // MS for t, what in d.pr.trace if what == "write:6"]
+    assert wrote and wrote[0] - t5 <= 1 and d.params.get("P5.055") == 123
+    assert times(d, "motion:5")[0] == times(d, "done:1")[0]  # from the buffer when PR#1 ends
+    assert puu(d) == 210000  # INC: PR#1's Cmd_E + 10000
