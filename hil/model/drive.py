@@ -254,6 +254,8 @@ class Drive:
         self.dio.on_function("ORGP", self.cia402.set_home_switch)
         self.dio.on_function("ARST", self._on_arst)
         self.params.on_write("P2.030", lambda *_: self._update_servo())
+        self.params.on_write(  # 8: the values in RAM backed up to EEPROM (L9501)
+            "P2.030", lambda _n, _o, new: self.params.backup_to_eeprom() if new == 8 else None)
         self.params.on_write("P2.008", self._special_write)
         # the DO functions follow their parameters at standstill too (ZSPD P1.038, TSPD
         # P1.039, TPOS P1.054, MC_OK hold / AL380 P1.048: L8608-8632, L15269-15275)

@@ -133,12 +133,7 @@ class ParameterStore:
         `ram_only`: into RAM alone (a PR WRITE without ROM, "ROM 為同時寫入 RAM 與 EEPROM，提供參數
         斷電保持的功能" L4533): the value in EEPROM comes back at the next power cycle."""
         spec = self.check_write(name, value)
-        key = spec.param
-        if ram_only:
-            self._eeprom.setdefault(key, self._stored[key])
-        else:
-            self._eeprom.pop(key, None)
-        self._commit(spec, value)
+        self._commit(spec, value, ram_only=ram_only)
 
     def set_internal(self, name: str, value: int) -> None:
         """Drive-side update (monitor values, P0.001, P4.000 history ...): no attribute checks.
@@ -147,6 +142,7 @@ class ParameterStore:
         """
         spec = self.table.spec(name)
         value = int(value)
+        self._eeprom.pop(spec.param, None)
         old = self._stored[spec.param]
         self._stored[spec.param] = value
         self._effective[spec.param] = value
@@ -279,6 +275,13 @@ class ParameterStore:
             self.save()
         return changed
 
+    def backup_to_eeprom(self) -> None:
+        """Every value now in RAM becomes the EEPROM's (P2.030 = 8, "備分所有參數(目前值)到
+        EEPROM 中，下次開電數值仍在", L9501): RAM-only writes are kept from then on."""
+        self._eeprom.clear()
+        if self.retained_path is not None and self.autosave:
+            self.save()
+
     def reset_defaults(self) -> None:
         """Every parameter back to its default, in effect at once (P2.008 = 10 + power cycle)."""
         self._eeprom.clear()
@@ -327,8 +330,12 @@ class ParameterStore:
             self._stored[spec.param] = spec.default
             self._effective[spec.param] = spec.default
 
-    def _commit(self, spec: ParamSpec, value: int) -> None:
+    def _commit(self, spec: ParamSpec, value: int, ram_only: bool = False) -> None:
         key = spec.param
+        if ram_only:
+            self._eeprom.setdefault(key, self._stored[key])
+        elif self._eeprom:
+            self._eeprom.pop(key, None)  # any other write goes to EEPROM too
         old = self._stored[key]
         self._stored[key] = value
         if not spec.power_cycle:

@@ -546,11 +546,7 @@ class PrEngine:
         g44, g45 = d.params.get("P1.044"), d.params.get("P1.045")
         fb = round(counts_to_puu(ax.user_position, g44, g45))
         cmd_o = round(counts_to_puu(ax.user_demand, g44, g45))
-        cmd_e = self.cmd_e
-        h = self.homing
-        if h is not None and h.route == "pr":  # PR#0 runs (L4396): Cmd_E = Cmd_O until the
-            cmd_e = cmd_o if h.home_counts is None else d.params.get("P6.001")  # reference
-        values = {0: fb, 1: cmd_o, 2: cmd_o - fb, 64: cmd_e}
+        values = {0: fb, 1: cmd_o, 2: cmd_o - fb, 64: self.cmd_e}
         if code in values:
             return values[code]
         part = d.hooks.monitors.get(code)  # the codes other parts model (037, 043, 038)
@@ -561,6 +557,13 @@ class PrEngine:
     # ---------------------------------------------------------------- every motion step
     def after_step(self) -> None:
         d = self.drive
+        h = self.homing
+        if h is not None and h.route == "pr":  # PR#0 runs (L4396): Cmd_E = Cmd_O until the
+            if h.home_counts is None:         # reference, then the reference's coordinate
+                self.cmd_e = round(counts_to_puu(d.axis.user_demand, d.params.get("P1.044"),
+                                                 d.params.get("P1.045")))
+            else:
+                self.cmd_e = d.params.get("P6.001")
         if not d.servo_on and (self.cursor is not None or self.cmd is not None):
             self.abort()  # servo off ends the program
             self.cmd = None
@@ -625,6 +628,7 @@ class PrEngine:
                 self.trace.append((d.now, f"{code}:{int(over)}"))
             if over and ax.demand_velocity * sign > 0 and ax.mode != "stop":
                 self.cursor = None
+                self._buffered = None  # the limit ends the program, a buffered lead too
                 decel = self.options.dev_soft_limit_decel_ms
                 if decel is None:
                     decel = d.p5003_decel(digit)  # P5.003 Z SPL / U SNL (L11091-11100)

@@ -250,3 +250,50 @@ def test_a_triggered_group_runs_its_ins_prs_while_its_lead_waits_for_the_generat
     assert wrote and wrote[0] - t5 <= 1 and d.params.get("P5.055") == 123
     assert times(d, "motion:5")[0] == times(d, "done:1")[0]  # from the buffer when PR#1 ends
     assert puu(d) == 210000  # INC: PR#1's Cmd_E + 10000
+
+
+def test_a_software_limit_stop_drops_a_buffered_lead() -> None:
+    """AL283 stops the program (L20105-20116); a lead waiting in the one-command buffer is
+    part of it and does not run after the stop ramp (helper-94: it drove to -30000)."""
+    d = make_with_params(**{"P5.008": 50000})
+    put(d, 1, type_="single", data=100000, spd=4)  # crosses P5.008
+    put(d, 2, type_="single", data=-30000, spd=4)
+    d.params.write("P5.007", 1)
+    d.advance(60 * MS)
+    d.params.write("P5.007", 2)  # PR#1 still runs: PR#2 waits in the buffer
+    d.advance(3000 * MS)
+    assert "AL283" in d.alarms.active
+    assert times(d, "motion:2") == [] and puu(d) > 50000
+
+
+def test_an_inc_pr_after_an_interrupted_homing_adds_to_the_cmd_e_it_showed() -> None:
+    """While PR#0 runs Cmd_E = Cmd_O (L4396) and INC adds to Cmd_E (L4470): an INC PR that
+    replaces a running homing (L4920) moves on from where the homing's command was, not from
+    the Cmd_E before the homing (helper-94: the motor was driven back)."""
+    d = make_with_params(**{"P5.004": 0x4, "P5.006": 100})  # X=4: next Z forward, 10 rpm
+    put(d, 1, type_="single", data=10000, cmd="INC", spd=4)
+    d.params.write("P5.007", 0)
+    d.advance(1500 * MS)
+    shown = d.pr.monitor(64)
+    assert shown == d.pr.monitor(1) > 10000
+    d.params.write("P5.007", 1)
+    d.advance(3000 * MS)
+    assert abs(puu(d) - (shown + 10000)) <= 100, (shown, puu(d))
+
+
+def test_a_communication_write_after_a_ram_only_write_is_kept() -> None:
+    """A WRITE PR without ROM writes RAM alone (L4533); a later write by communication goes
+    to EEPROM as ever, so it survives the power cycle (helper-94: the value before the PR came
+    back). P2.030 = 8 backs every value in RAM up to EEPROM (L9501)."""
+    d = make()
+    put(d, 1, type_="write", data=77, dest="P5.045")
+    d.params.write("P5.007", 1)
+    d.advance(50 * MS)
+    d.params.modbus_write(d.params.table.spec("P5.045").modbus_address, [55, 0])
+    d.power_cycle()
+    assert d.params.get("P5.045") == 55
+    d.params.write("P5.007", 1)
+    d.advance(50 * MS)
+    d.params.write("P2.030", 8)
+    d.power_cycle()
+    assert d.params.get("P5.045") == 77
