@@ -102,9 +102,6 @@ def _setpoint_hint(sw: int) -> str:
             "of the move before it, or wait for it first")
 
 
-_TIMEOUT_HINTS: dict[str, Callable[[int], str]] = {"setpoint_ack": _setpoint_hint}
-
-
 class Cia402Cancelled(Cia402Error):
     """A wait was given up because its owner cancelled it (`Cia402Driver.cancel`)."""
 
@@ -299,6 +296,7 @@ class Cia402Driver:
         timeout_name: str,
         ok: Callable[[int], bool],
         fail: Callable[[int], str | None] | None = None,
+        hint: Callable[[int], str] | None = None,  # why, from the last statusword, on a timeout
     ) -> int:
         timeout = self.timeouts[timeout_name]
         t0 = self.clock()
@@ -316,7 +314,7 @@ class Cia402Driver:
                 )
             if elapsed > timeout:
                 raise Cia402Timeout(self.node_id, what, timeout_name, timeout, sw, elapsed,
-                                    _TIMEOUT_HINTS.get(timeout_name, lambda _sw: "")(sw))
+                                    hint(sw) if hint is not None else "")
             self._pause()
 
     def _pause(self) -> None:
@@ -451,6 +449,7 @@ class Cia402Driver:
                 "setpoint_ack",
                 lambda sw: bool(sw & SW_BIT12),
                 self._fault_reason,
+                hint=_setpoint_hint,
             )
         except Cia402Timeout:
             self._cw(base)  # taken back: a set-point still waiting for a move never runs

@@ -40,12 +40,12 @@ log = logging.getLogger(__name__)
 
 # Parameter addresses the face itself reads (address = (group << 8) + 2 n, L6697).
 P3_000 = 0x0300  # station, low byte YX (L10495-L10507); ● power cycle (L7014)
-# the motor parameters PM.000-PM.053 at FD00H-FD6BH (L14544-L15058), two words each
-PM_ADDRESSES = range(0xFD00, 0xFD00 + 2 * 54)
 P3_001 = 0x0302  # baud, digit X = RS-485 (L10509-L10527); next frame (L16035)
 P3_002 = 0x0304  # protocol 0..8 (L10546-L10557); next frame (L16037)
 P3_004 = 0x0308  # comm timeout, s, 0 = off, "immediately" (L10571-L10578)
 P3_007 = 0x030E  # response delay (L10610-L10617); unit 0.5 ms (L10612) ⚠ 1 ms (L7020)
+# the motor parameters PM.000-PM.053 at FD00H-FD6BH (L14544-L15058), two words each
+PM_ADDRESSES = range(0xFD00, 0xFD00 + 2 * 54)
 
 
 class RegisterStore(Protocol):

@@ -253,9 +253,7 @@ class Drive:
         self.dio.on_function("PL", lambda a: self._on_limit("PL", a))
         self.dio.on_function("ORGP", self.cia402.set_home_switch)
         self.dio.on_function("ARST", self._on_arst)
-        self.params.on_write("P2.030", lambda *_: self._update_servo())
-        self.params.on_write(  # 8: the values in RAM backed up to EEPROM (L9501)
-            "P2.030", lambda _n, _o, new: self.params.backup_to_eeprom() if new == 8 else None)
+        self.params.on_write("P2.030", self._p2030_written)
         self.params.on_write("P2.008", self._special_write)
         # the DO functions follow their parameters at standstill too (ZSPD P1.038, TSPD
         # P1.039, TPOS P1.054, MC_OK hold / AL380 P1.048: L8608-8632, L15269-15275)
@@ -582,6 +580,13 @@ class Drive:
             or ("CANOPEN" in src and self.cia402.servo_enable_requested)
             or self.params.get("P2.030") == 1  # forced software servo on (L9496)
         )
+
+    def _p2030_written(self, _name: str, _old: int, new: int) -> None:
+        """P2.030: 1 forces a software servo on (L9496); 8 backs the values in RAM up to
+        EEPROM (L9501)."""
+        if new == 8:
+            self.params.backup_to_eeprom()
+        self._update_servo()
 
     def _update_servo(self, source: str = "") -> None:
         """Switch the servo to what is requested; `source` "cia402": the state machine asked."""

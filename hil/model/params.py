@@ -142,7 +142,8 @@ class ParameterStore:
         """
         spec = self.table.spec(name)
         value = int(value)
-        self._eeprom.pop(spec.param, None)
+        if self._eeprom:
+            self._eeprom.pop(spec.param, None)
         old = self._stored[spec.param]
         self._stored[spec.param] = value
         self._effective[spec.param] = value

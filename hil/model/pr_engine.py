@@ -564,9 +564,6 @@ class PrEngine:
                                                  d.params.get("P1.045")))
             else:
                 self.cmd_e = d.params.get("P6.001")
-        if not d.servo_on and (self.cursor is not None or self.cmd is not None):
-            self.abort()  # servo off ends the program
-            self.cmd = None
         c = self.cmd
         if c is not None and c.done is None and self._command_done(c):
             c.done = d.now
