@@ -669,7 +669,7 @@ def _drive_model(v: Checker, spec: DriveSpec, d: LDict, where: str) -> None:
         rules = virtual_rules()
         _known(v, m, rules.ModelOptions, join(where, "options"))
         try:
-            rules.ModelOptions.from_dict(_plain(m), where=join(where, "options"))
+            rules.model_options(_plain(m), where=join(where, "options"))
         except (ValueError, TypeError) as e:
             raise v.err(m.line, join(where, "options"), str(e)) from None
         spec.options = _plain(m)

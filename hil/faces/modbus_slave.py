@@ -27,11 +27,12 @@ import select
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Literal, Protocol
 
 from hil.faces.last_resort import LastResort
 from hil.model import errors
+from hil.profile.errors import UnknownParameter
 from hil.profile.params import ParamTable
 from hil.protocol import modbus as mb
 from hil.units import S
@@ -98,6 +99,43 @@ class ModbusFaceOptions:
     # P5.016's own entry says any value may be written (L11286). The comms chapter is
     # followed: a write is refused with exception 02h, as a read-only parameter's.
     comm_write_refused: frozenset[str] = frozenset({"P5.016", "P5.076"})
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any] | None) -> ModbusFaceOptions:
+        """From a bench file's `options.extra.modbus` mapping: each choice checked by its type
+        (`exception_codes` stays a Python-only field: its keys are exception classes)."""
+        data = dict(data or {})
+        choices = {"silence": ("t3.5", "manual"), "broadcast": ("execute", "ignore"),
+                   "auto_reply_station": ("own", "echo")}
+        known = {f.name for f in fields(cls)} - {"exception_codes"}
+        bad = sorted(set(data) - known)
+        if bad:
+            raise ValueError(f"modbus options: unknown {', '.join(map(str, bad))}; known: "
+                             f"{', '.join(sorted(known))}")
+        for k, v in data.items():
+            if k in choices:
+                if v not in choices[k]:
+                    raise ValueError(f"modbus options: {k} must be one of "
+                                     f"{', '.join(choices[k])}, not {v!r}")
+            elif k in ("fixed_t35_above_19200", "enforce_t15", "resync"):
+                if type(v) is not bool:
+                    raise ValueError(f"modbus options: {k} must be true or false, not {v!r}")
+            elif k in ("p3007_unit_ns", "max_read_words", "max_write_words"):
+                if type(v) is not int or not 0 < v <= 10**9:
+                    raise ValueError(f"modbus options: {k} must be a whole number 1-10^9, "
+                                     f"not {v!r}")
+            elif k == "comm_write_refused":
+                if not isinstance(v, list | tuple) or not all(type(n) is str for n in v):
+                    raise ValueError(f"modbus options: {k} must be a list of parameter "
+                                     f"names, not {v!r}")
+                table, names = ParamTable.load(), set()
+                for n in v:
+                    try:
+                        names.add(table.spec(n).param)
+                    except UnknownParameter as e:
+                        raise ValueError(f"modbus options: {k}: {e}") from None
+                data[k] = frozenset(names)
+        return cls(**data)
 
 
 @dataclass(frozen=True)

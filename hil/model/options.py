@@ -12,6 +12,7 @@ Two kinds of fields:
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -205,8 +206,10 @@ class ModelOptions:
     extra: dict[str, Any] = field(default_factory=dict)  # options of other rooms (homing, abs)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any] | None, where: str = "options") -> ModelOptions:
-        """Build from a bench file's `options:` mapping; unknown keys are an error."""
+    def from_dict(cls, data: dict[str, Any] | None, where: str = "options",
+                  faces: Mapping[str, Callable[[dict], Any]] | None = None) -> ModelOptions:
+        """Build from a bench file's `options:` mapping; unknown keys are an error. `faces`:
+        the faces' rooms of `extra:` and their checks (`_check_extra`)."""
         data = dict(data or {})
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)
@@ -219,7 +222,7 @@ class ModelOptions:
         for key, value in data.items():
             _check_type(key, value, getattr(defaults, key), where)
         if "extra" in data:
-            _check_extra(data["extra"], f"{where}.extra")
+            _check_extra(data["extra"], f"{where}.extra", faces)
         if "fdbk_table" in data and isinstance(data["fdbk_table"], str):
             tables = {"as_printed": FDBK_AS_PRINTED, "sto_active": FDBK_STO_ACTIVE}
             if data["fdbk_table"] not in tables:
@@ -262,9 +265,12 @@ _POSITIVE = {"output_window_ms", "motion_step_ms", "state_publish_ms", "sync_fai
 _FLOOR_MS = {"motion_step_ms": 0.01, "state_publish_ms": 0.1}
 
 
-def _check_extra(extra: Any, where: str) -> None:
+def _check_extra(extra: Any, where: str,
+                 faces: Mapping[str, Callable[[dict], Any]] | None = None) -> None:
     """`extra:` holds the options of other rooms, each checked by its own options class
-    (a wrong one failed the run with a bare TypeError, a misspelled room was ignored)."""
+    (a wrong one failed the run with a bare TypeError, a misspelled room was ignored).
+    `faces`: the rooms of the drive's faces, which the model does not import (the virtual
+    world's `hil.virtual.rules.FACE_ROOMS`); without them such a room is unknown."""
     from hil.model.absolute import AbsoluteOptions
     from hil.model.capture import CaptureOptions
     from hil.model.cia402 import Cia402Options
@@ -274,7 +280,7 @@ def _check_extra(extra: Any, where: str) -> None:
     rooms: dict[str, Any] = {
         "absolute": AbsoluteOptions.from_dict, "capture": CaptureOptions.from_dict,
         "cia402": lambda d: Cia402Options(**d), "homing": HomingOptions.from_dict,
-        "pr": PrOptions.from_dict}
+        "pr": PrOptions.from_dict, **(faces or {})}
     if not isinstance(extra, dict):
         raise ValueError(f"{where}: a mapping of {', '.join(sorted(rooms))}")
     for room, values in extra.items():

@@ -21,8 +21,8 @@ from hil.bench.yamlio import PlanFileError
 from hil.fileio import FileProblem, read_limited
 from hil.model.errors import ModelError
 from hil.model.mechanics import Mechanics
-from hil.model.options import ModelOptions
 from hil.transport.urls import TransportUrlError, parse_url
+from hil.virtual.rules import model_options
 from hil.virtual.stack import DriveSpec, VirtualDriveStack
 from hil.virtual.world import StdioControl, idle_inputs, initial_params
 from hil.yamlio import load_yaml_file
@@ -156,7 +156,7 @@ def _from_bench(spec: DriveSpec, args: argparse.Namespace) -> str:
     d = bench.drives[name]
     spec.name = name if args.name == "drive1" else args.name
     spec.mechanics = Mechanics.from_dict(dict(d.mechanics))
-    spec.options = ModelOptions.from_dict(dict(d.options), where=f"drives.{name}.options")
+    spec.options = model_options(d.options, where=f"drives.{name}.options")
     spec.params = {**initial_params(d), **spec.params}
     if not args.di:
         spec.inputs = idle_inputs(d)

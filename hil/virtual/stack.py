@@ -21,7 +21,7 @@ from typing import Any
 from hil import clock
 from hil.faces.canopen_slave import CanopenSlave
 from hil.faces.dio_face import DioFace
-from hil.faces.modbus_slave import ModbusSlave, ModbusSlaveRunner
+from hil.faces.modbus_slave import ModbusFaceOptions, ModbusSlave, ModbusSlaveRunner
 from hil.faces.pulse_face import PulseFace
 from hil.model.drive import Drive
 from hil.model.events import AlarmChanged, ParamChanged, PowerCycled
@@ -272,6 +272,8 @@ class VirtualDriveStack:
                 on_timeout=lambda _t: host.call(drive.raise_alarm, "AL020"),  # P3.004, L10571
                 # AL019 on an incorrect address / value (L19592-19596); the drive decides
                 on_comm_error=lambda code, _m: host.call(drive.modbus_comm_error, code),
+                # the face's choices (docs/manual-choices.md#modbus): options.extra.modbus
+                options=ModbusFaceOptions.from_dict(spec.options.extra.get("modbus")),
             )
             if self.clock is None:
                 self.modbus_runner = ModbusSlaveRunner(self.modbus, self.serial)

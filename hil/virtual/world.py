@@ -33,6 +33,7 @@ from hil import clock
 from hil.bench.bench import Bench, DriveSpec
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
+from hil.virtual.rules import model_options
 from hil.virtual.stack import DriveSpec as StackSpec
 from hil.virtual.stack import VirtualDriveStack
 
@@ -258,7 +259,7 @@ class VirtualDrive:
                  factory: DriveFactory | None, bench: Bench) -> None:
 
         self.spec = spec
-        options = ModelOptions.from_dict(dict(spec.options), where=f"drives.{spec.name}.options")
+        options = model_options(spec.options, where=f"drives.{spec.name}.options")
         self.stack = VirtualDriveStack(StackSpec(
             name=spec.name,
             can=urls[f"can:{spec.can}"] if spec.can else None,
