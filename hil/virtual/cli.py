@@ -22,7 +22,7 @@ from hil.fileio import FileProblem, read_limited
 from hil.model.errors import ModelError
 from hil.model.mechanics import Mechanics
 from hil.transport.urls import TransportUrlError, parse_url
-from hil.virtual.rules import model_options
+from hil.virtual.options import model_options
 from hil.virtual.stack import DriveSpec, VirtualDriveStack
 from hil.virtual.world import StdioControl, idle_inputs, initial_params
 from hil.yamlio import load_yaml_file

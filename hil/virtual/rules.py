@@ -10,23 +10,14 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from hil.faces.modbus_slave import ModbusFaceOptions
 from hil.model.dio import INERT_DI_FUNCTIONS, INERT_DO_FUNCTIONS, inert_mapping
 from hil.model.errors import ModelError
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
+from hil.virtual.options import FACE_ROOMS, model_options
 
 __all__ = ["FACE_ROOMS", "INERT_DI_FUNCTIONS", "INERT_DO_FUNCTIONS", "Mechanics",
            "ModelOptions", "inert_mapping", "model_options", "param_writes_problem"]
-
-# the rooms of `options.extra` that belong to a virtual drive's faces, not to its model
-FACE_ROOMS = {"modbus": ModbusFaceOptions.from_dict}
-
-
-def model_options(data: Mapping[str, Any] | None, where: str = "options") -> ModelOptions:
-    """A virtual drive's `options:` checked whole: the model's, and its faces' rooms of
-    `extra:` (`FACE_ROOMS`). ValueError names the field."""
-    return ModelOptions.from_dict(dict(data or {}), where=where, faces=FACE_ROOMS)
 
 _GEAR = ("P1.044", "P1.045")
 

@@ -33,7 +33,7 @@ from hil import clock
 from hil.bench.bench import Bench, DriveSpec
 from hil.model.mechanics import Mechanics
 from hil.model.options import ModelOptions
-from hil.virtual.rules import model_options
+from hil.virtual.options import model_options
 from hil.virtual.stack import DriveSpec as StackSpec
 from hil.virtual.stack import VirtualDriveStack
 
