@@ -135,3 +135,55 @@ def test_dev_no_t_r_fails_the_absw_rule(tmp_path: Path) -> None:
     rule = got["ABSW when T_R passes without ABSQ on"]
     assert set(rule) == {"fail"}, rule
     assert "expected ABSW to rise" in rule["fail"]
+
+
+def test_absw_of_a_warning_is_not_judged_as_a_handshake_abort(tmp_path: Path) -> None:
+    """ABSW is on for any absolute-encoder warning (L15294) and stays on after ABSE off while
+    one holds (L16521): a read tried under AL06A (no origin yet) leaves it on. The spec had
+    judged every ABSW rise as the abort of a late host and failed the drive (helper-96 F2)."""
+    path = tmp_path / "run.mcap"
+    drive = Drive(inputs={8: True}, params=ABS_PARAMS)
+    with Recorder(path) as rec:
+        tap = ModelTap(drive, rec)
+        lines = ModelLines(now=lambda: drive.now, advance_to=lambda t: tap.advance(t - drive.now),
+                           write=lambda line, level: tap.set_di(int(line[2:]), level),
+                           read=lambda line: drive.do(int(line[2:])),
+                           next_deadline=drive.sched.next_deadline)
+        reader = AbsPositionReader(lines, abse="DI2", absc="DI3", absw="DO4", clock=lines.clock)
+        tap.advance(20 * MS)
+        drive.power_cycle(off_for=100 * MS)  # ABSW falls and rises again on the record
+        tap.advance(50 * MS)
+        assert "AL06A" in drive.alarms.active and drive.do(4)  # ABSW for the warning
+        with pytest.raises(Exception, match="ABSW"):
+            reader.read()
+        tap.advance(20 * MS)
+        assert drive.do(4)  # still on: the warning holds (L16521)
+        tap.close()
+    got = verdicts(path, "abs_handshake")
+    bad = {n: s for n, s in got.items() if set(s) - {"pass", "skipped"}}
+    assert not bad, bad
+
+
+def test_a_host_that_requests_before_t_s_max_fails_the_host_rule(tmp_path: Path) -> None:
+    """T_S, the drive's switch of the pins, lies anywhere in P2.009 + 2 .. + 10 ms (L16498-16499)
+    and a host cannot see it: it waits the longest. A host asking at P2.009 + 5 ms happens to
+    meet this drive's +4 ms switch, and the rule had let it pass (helper-96 F5)."""
+    path = tmp_path / "run.mcap"
+    drive = Drive(inputs={8: True}, params=ABS_PARAMS)
+    with Recorder(path) as rec:
+        tap = ModelTap(drive, rec)
+        lines = ModelLines(now=lambda: drive.now, advance_to=lambda t: tap.advance(t - drive.now),
+                           write=lambda line, level: tap.set_di(int(line[2:]), level),
+                           read=lambda line: drive.do(int(line[2:])),
+                           next_deadline=drive.sched.next_deadline)
+        reader = AbsPositionReader(lines, abse="DI2", absc="DI3", absw="DO4", clock=lines.clock)
+        tap.advance(20 * MS)
+        reader.set_origin()
+        tap.advance(5 * MS)
+        reader.t_max_ms = drive.params.get("P2.009") + 5  # its T_S wait, and its timeouts
+        assert reader.read().status == 0
+        tap.advance(20 * MS)
+        tap.close()
+    got = verdicts(path, "abs_handshake")
+    assert "fail" in got["host waits T_S before the first request"], got  # the first request
+    assert set(got["T_Q - ABSR on after each request"]) == {"pass"}  # the drive is right

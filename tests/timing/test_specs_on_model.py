@@ -121,6 +121,14 @@ def sto_one_other_dips(tap: ModelTap) -> None:
     tap.advance(1500 * MS)
 
 
+def sto_one_other_dips_servo_on(tap: ModelTap) -> None:
+    """As `sto_one_other_dips` with the servo on: the firmware's Servo Off comes at STO_A's
+    own second, 495 ms after STO_A is lost alone again. sto_glitch had judged A's glitch
+    from that second start and failed the drive (an outside audit, helper-96 F1)."""
+    servo_on(tap)
+    sto_one_other_dips(tap)
+
+
 def sto_both_then_one_back(tap: ModelTap) -> None:
     """Both lost (AL500 after 10 ms), B back at 300 ms: A's own second ends with B present,
     so AL501 follows too; ARST then clears AL500 only."""
@@ -203,6 +211,8 @@ FAITHFUL = [
     ("sto", sto_both_then_one_back, {}, {}),
     ("sto_glitch", sto_glitch_then_loss, {}, {}),
     ("sto_glitch", sto_both, {}, {}),
+    ("sto_glitch", sto_one_other_dips_servo_on, {}, {}),
+    ("sto", sto_one_other_dips_servo_on, {}, {}),
     ("sto_reset", sto_one, {}, {}),
     ("sto_reset", sto_both, {}, {}),
     ("alarm_reset", arst_pulse_after_emgs, {}, {"alarm": "AL500"}),
