@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 from hil.model.errors import OutOfRange, ReadOnly
 from hil.model.events import CaptureLatched, ZPulse
-from hil.model.motion import counts_to_puu, puu_to_counts
+from hil.model.motion import counts_to_puu, puu_to_counts, s32
 from hil.profile.pr import ARRAY_SIZE
 from hil.units import MS
 
@@ -134,7 +134,16 @@ class Capture:
         return self.source_position(counts) + self.offset
 
     def set_position(self, value: float) -> None:
-        """Redefine the capture axis; on CN2 that redefines the motor coordinate (L11703)."""
+        """Redefine the capture axis; on CN2 that redefines the motor coordinate (L11703). A
+        COMPARE counting on it sees the jump as no motion: a point is fired when the axis
+        passes it (L5093 "通過"), not when the axis is set past it."""
+        compare = self.compare
+        before = compare.position() if compare is not None and compare.running else None
+        self._set_position(value)
+        if before is not None:
+            compare.shift(compare.position() - before)
+
+    def _set_position(self, value: float) -> None:
         if self.source == 3:
             d = self.drive
             d.axis.set_user_position(puu_to_counts(value, d.params.get("P1.044"),
@@ -251,7 +260,7 @@ class Capture:
             reset = p.get("P5.076")
             self.set_position(reset - (value - self.position()))
             value = reset
-        v = round(value)
+        v = s32(round(value))  # a 32-bit axis and array entry (P5.037 range L11482, L5097)
         addr = p.get("P5.036") + self.index
         d.array[addr] = v
         self.index += 1
@@ -290,7 +299,7 @@ def attach_capture(drive: DriveCore, options: CaptureOptions | None = None, *,
     for name in ("P5.036", "P5.037", "P5.038"):
         params.on_validate(name, cap.refuse_while_running)
     params.on_write("P5.037", lambda _n, _o, new: cap.set_position(new))
-    params.on_read("P5.037", lambda: round(cap.position()))
+    params.on_read("P5.037", lambda: s32(round(cap.position())))  # 32 bits (L11482)
     drive.dio.on_raw(cap.on_di)
     drive.hooks.step.append(cap.on_step)
     drive.hooks.boot.append(lambda: cap.running and cap.stop())

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 from hil.model.capture import CaptureOptions
 from hil.model.errors import OutOfRange, ReadOnly
 from hil.model.events import CompareFired
-from hil.model.motion import counts_to_puu
+from hil.model.motion import counts_to_puu, s32
 from hil.model.timebase import Timer
 from hil.profile.pr import ARRAY_SIZE
 from hil.units import MS
@@ -113,7 +113,7 @@ class Compare:
         p = self.drive.params
         addr = p.get("P5.056") + self.index
         base = self.drive.array[addr] if addr < ARRAY_SIZE else 0
-        return base + p.get("P1.023") + p.get("P1.024")
+        return s32(base + p.get("P1.023") + p.get("P1.024"))
 
     # ------------------------------------------------------------------ parameters
     def validate_p5059(self, _name: str, value: int) -> None:
@@ -144,7 +144,16 @@ class Compare:
                            "(L11708-11712)")
 
     def set_position(self, value: float) -> None:
-        self.offset += value - self.position()
+        jump = value - self.position()
+        self.offset += jump
+        self.shift(jump)
+
+    def shift(self, jump: float) -> None:
+        """The axis was redefined by `jump`: a redefinition passes no point (L5093 "通過")."""
+        if self._last is not None:
+            self._last += jump
+        if self.running:
+            self._predict()
 
     # ------------------------------------------------------------------ run
     def _idle_level(self) -> bool:
@@ -180,6 +189,16 @@ class Compare:
         self._check(exact=False)
         self._predict()
 
+    @staticmethod
+    def _near(goal: float, ref: float) -> float:
+        """`goal`, a point of the 32-bit axis (P5.057, L11705), as the position nearest `ref`
+        that the axis reads as it: past +2^31 - 1 the axis reads -2^31 (the position is
+        counted unwrapped, the registers wrap). `goal` itself, exactly, when it is nearest."""
+        gap = goal - ref
+        if -0x80000000 <= gap < 0x80000000:
+            return goal
+        return goal + round((s32(gap) - gap) / 0x100000000) * 0x100000000  # whole turns
+
     def _crossed(self, last: float, now: float, tgt: float) -> bool:
         if self.options.dev_compare_positive_only:
             return last < tgt <= now
@@ -193,7 +212,7 @@ class Compare:
         while self.running:
             tgt = self.target()
             direction = 1 if p >= last else -1
-            goal = tgt + late * direction
+            goal = self._near(tgt + late * direction, last)
             hit = self._crossed(last, p, goal)
             if exact and not hit:  # the predicted instant: rounding may leave p a hair short
                 hit = abs(p - goal) <= max(1e-6, abs(self.velocity()) * 2e-9) and (
@@ -215,7 +234,7 @@ class Compare:
         if v == 0:
             return
         p = self.position()
-        goal = self.target() + self.options.dev_compare_late * (1 if v > 0 else -1)
+        goal = self._near(self.target() + self.options.dev_compare_late * (1 if v > 0 else -1), p)
         if goal == self._last:
             return  # the point just passed (a cyclic single point, equal points): not again
         dt = (goal - p) / v
@@ -293,7 +312,7 @@ def attach_compare(drive: DriveCore, options: CaptureOptions | None = None, *,
     for name in ("P5.056", "P5.057", "P5.058"):
         params.on_validate(name, cmp_.refuse_while_running)
     params.on_write("P5.057", lambda _n, _o, new: cmp_.set_position(new))
-    params.on_read("P5.057", lambda: round(cmp_.position()))
+    params.on_read("P5.057", lambda: s32(round(cmp_.position())))  # 32 bits (L11705)
     drive.hooks.step.append(cmp_.on_step)
     drive.hooks.boot.append(lambda: cmp_.running and cmp_.stop())
     drive.hooks.boot.append(cmp_.reset_axis)  # the counters start afresh at power-up
