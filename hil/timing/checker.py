@@ -564,13 +564,43 @@ class Context:
             if ev.kind in ("rise", "fall", "change", "becomes", "raised", "cleared"):
                 tr = self.trace(ev.signal or "")
                 kind = {"raised": "rise", "cleared": "fall"}.get(ev.kind, ev.kind)
-                self._occs[name] = [tr.occ(t) for t in tr.edges(kind, ev.value)]
+                times = (tr.edges(kind, ev.value) if ev.held is None
+                         else self._lasting(tr, kind, ev))
+                self._occs[name] = [tr.occ(t) for t in times]
             elif ev.kind == "message":
                 self._occs[name] = self._messages(ev.signal or "")
             else:
                 occ = Scope(self, 0, NEG_INF, POS_INF).resolve(name)
                 self._occs[name] = [occ] if isinstance(occ, Occ) else []
         return self._occs[name]
+
+    def _lasting(self, tr: Any, kind: str, ev: EventDef) -> list[int]:
+        """The `kind` edges of the signal as a filter of `ev.held` ms passes it (a DI filter,
+        P2.009, L9229-9236; its parameters as at each change): a change counts once its new
+        value has lasted that long, stamped at the change itself; a bounce shorter than that
+        changes nothing, nor does the return to the value the filter still holds. A change
+        too near the recording's end to tell is kept."""
+        times, values = tr.times, tr.values
+        out: list[int] = []
+        if not times:
+            return out
+        held = values[0]  # what the filter passes
+        n = len(times)
+        for i in range(1, n):
+            a, b = values[i - 1], values[i]
+            if a == b or b == held:
+                continue
+            t = times[i]
+            j = i + 1
+            while j < n and values[j] == b:
+                j += 1
+            if j < n and times[j] - t < _duration_ns(ev.held, self.env(t), "held"):
+                continue  # a bounce
+            if ((kind == "rise" and not held and b) or (kind == "fall" and held and not b)
+                    or (kind == "change") or (kind == "becomes" and _eq(b, ev.value))):
+                out.append(t)
+            held = b
+        return out
 
     def _messages(self, name: str) -> list[Occ]:
         """`message: SIG`: every recorded message of the signal's topic that passes its

@@ -92,6 +92,7 @@ class EventDef:
     after: str | None = None
     before: str | None = None
     within: Expr | None = None
+    held: Expr | None = None  # an edge counts only if its new value lasts this long (ms)
     label: str = ""  # "BRKR rose", used in messages
 
 
@@ -537,6 +538,7 @@ def _event(v: _V, name: str, d: LDict, line: int, where: str, signals, events) -
     kind = kinds[0]
     allowed = {kind, *_EVENT_MODS} | ({"value"} if kind == "becomes" else set())
     allowed |= {"plus"} if kind == "at" else set()
+    allowed |= {"held"} if kind in ("rise", "fall", "becomes", "raised", "cleared") else set()
     v.keys(d, allowed, where, ("value",) if kind == "becomes" else ())
     ev = EventDef(name=name, kind=kind, line=line)
     kl = d.key_lines[kind]
@@ -577,6 +579,8 @@ def _event(v: _V, name: str, d: LDict, line: int, where: str, signals, events) -
         raise v.err(line, where, "use either `after` or `before`, not both")
     if "within" in d:
         ev.within = v.expr(d, "within", where, nonneg=True)
+    if "held" in d:  # a debounced edge: a bounce shorter than a DI filter is none (L9229)
+        ev.held = v.expr(d, "held", where, nonneg=True)
     ev.label = str(d.get("label", "") or "")
     return ev
 

@@ -234,3 +234,72 @@ def test_first_true_before_an_event_is_the_last_time_it_became_true(a_at, measur
                                            (200, True))})
     [v] = check(loads_spec(BEFORE), src, binding=BIND)
     assert v.status == "pass" and v.measured_ms == measured, v.message
+
+
+DEBOUNCED = """\
+id: debounced
+title: edges a 2 ms DI filter passes
+source: "test"
+signals:
+  A: {line: DI3}
+events:
+  up: {rise: A, held: 2}
+  down: {fall: A, held: 2}
+constraints:
+  - name: u
+    for_each: up
+    present: A
+    at: up
+  - name: d
+    for_each: down
+    absent: A
+    at: down
+"""
+
+
+def test_a_held_edge_is_one_a_filter_of_that_length_passes():
+    """docs/timing.md: `held: D` on an edge event counts a change once its new value has
+    lasted D ms, stamped at the change; a bounce shorter than D is none, nor is the return
+    to the value the filter still holds (a 1 ms release inside a press is no release, and
+    the press after it no new press). helper-96: servo_on_brake took SON bounces for
+    servo-ons and failed a right drive."""
+    src = MemorySource({dio("DI3"): levels(
+        (0, False), (10, True), (11, False), (12, True), (13, False),  # bounces: nothing
+        (20, True),                                                   # a press: 20
+        (40, False), (41, True),                                      # a 1 ms release: nothing
+        (60, False), (61, True), (62, False), (70, False))})         # a release at 62
+    ctx = context(loads_spec(DEBOUNCED), src, binding=BIND)
+    assert [o.t for o in ctx.occurrences("up")] == [20 * MS]
+    assert [o.t for o in ctx.occurrences("down")] == [62 * MS]
+    # a level too near the end to tell is kept: the edge is not called a bounce
+    src = MemorySource({dio("DI3"): levels((0, False), (10, True))})
+    assert [o.t for o in context(loads_spec(DEBOUNCED), src, binding=BIND)
+            .occurrences("up")] == [10 * MS]
+
+
+def test_held_on_an_edge_needs_an_edge_kind():
+    with pytest.raises(Exception, match="held"):
+        loads_spec(DEBOUNCED.replace("  up: {rise: A, held: 2}", "  up: {first_true: A, held: 2}"))
+
+
+def test_emgs_fails_a_drive_that_turns_the_servo_on_while_emgs_is_active():
+    """EMGS is a level (L15184) and AL013 holds the servo off (L19338): a drive that comes
+    back on with SON still held while EMGS stays active is wrong (helper-96 F6)."""
+    from hil.paths import fixture
+    from hil.timing.spec import load_spec
+
+    def state(t, on, alarms):
+        return (round(t * MS), {"servo_on": on, "torque_enabled": on, "speed_rpm": 0.0,
+                                "alarms": alarms})
+
+    src = MemorySource({
+        dio("DI8"): levels((0, True), (100, False), (500, True), (600, True)),  # b-contact
+        dio("DO6"): levels((0, True), (102, False), (600, False)),
+        STATE: [state(0, True, []), state(102, False, ["AL013"]),
+                state(300, True, ["AL013"]),  # back on under EMGS
+                state(502, True, []), state(600, True, [])],
+        PARAMS: [(0, {"P2.009": 2, "P1.043": 0, "P1.038": 100})]})
+    verdicts = {v.constraint: v for v in check(load_spec(fixture("timing", "emgs.yaml")), src,
+                                                binding=BIND)}
+    v = verdicts["servo stays off while EMGS is active"]
+    assert v.status == "fail", v.message

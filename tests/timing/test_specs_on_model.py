@@ -75,6 +75,48 @@ def servo_on(tap: ModelTap) -> None:
     tap.advance(400 * MS)
 
 
+def son_bounce_then_on(tap: ModelTap) -> None:
+    """SON bounces shorter than the P2.009 filter (2 ms), which pass nothing (L9229-9236), then
+    a real SON. servo_on_brake took each bounce for a servo-on and failed the drive
+    (helper-96 F7; the fault_di_bounce plan's recording under `hil check`)."""
+    for _ in range(3):
+        tap.set_di(1, True)
+        tap.advance(1 * MS)
+        tap.set_di(1, False)
+        tap.advance(1 * MS)
+    servo_on(tap)
+
+
+def son_held_under_a_long_emgs(tap: ModelTap) -> None:
+    """SON closes while EMGS holds the servo off (AL013, L19338) and stays closed 1.5 s until
+    EMGS is released: the servo comes on then, and BRKR P1.042 after it (L8499). The brake
+    rule looked for the servo-on only 1 s after SON and failed the drive (helper-96 F7)."""
+    tap.set_di(8, False)
+    tap.advance(50 * MS)
+    tap.set_di(1, True)
+    tap.advance(1500 * MS)
+    tap.set_di(8, True)
+    tap.advance(400 * MS)
+
+
+def emgs_bounce_then_stop(tap: ModelTap) -> None:
+    """EMGS (b-contact DI8) opens for 1 ms, under the 2 ms filter: no AL013 (L9229-9236).
+    Then a real EMGS and its release, the release bouncing too."""
+    servo_on(tap)
+    tap.set_di(8, False)
+    tap.advance(1 * MS)
+    tap.set_di(8, True)
+    tap.advance(50 * MS)
+    tap.set_di(8, False)
+    tap.advance(300 * MS)
+    tap.set_di(8, True)
+    tap.advance(1 * MS)
+    tap.set_di(8, False)
+    tap.advance(5 * MS)
+    tap.set_di(8, True)
+    tap.advance(100 * MS)
+
+
 def servo_off_moving(tap: ModelTap) -> None:
     tap.set_di(1, True)
     tap.advance(100 * MS)
@@ -203,6 +245,9 @@ def cia402_enable_under_emgs(tap: ModelTap) -> None:
 # -- faithful drive: every shipped spec passes ----------------------------------------------
 FAITHFUL = [
     ("servo_on_brake", servo_on, {"P1.042": 150}, {}),
+    ("servo_on_brake", son_bounce_then_on, {"P1.042": 150}, {}),
+    ("servo_on_brake", son_held_under_a_long_emgs, {"P1.042": 150}, {}),
+    ("emgs", emgs_bounce_then_stop, {}, {}),
     ("servo_off_brake", servo_off_moving, {"P1.043": 500, "P1.032": 0x0010}, {}),
     ("sto", sto_both, {}, {}),
     ("sto", sto_one, {}, {}),

@@ -37,6 +37,9 @@ def write_mcap(path, brkr_ms: float, meta: dict | None = None) -> None:
         put("/dio/drive1/DI1", 100, {"level": True})
         put("/drive/drive1/state", 102, {"servo_on": True, "alarms": []})
         put("/dio/drive1/DO6", 102 + brkr_ms, {"level": True}, res=MS)
+        # the run goes on: the servo is seen on past P1.042 (servo_on_brake judges a servo
+        # on that lasts that long; a shorter one leaves the brake engaged)
+        put("/drive/drive1/state", 102 + brkr_ms + 100, {"servo_on": True, "alarms": []})
         for name, data in (meta or {}).items():
             w.add_metadata(name, data)
         w.finish()
