@@ -155,3 +155,34 @@ def test_compare_pulse_every_point(tmp_path, knob, ok) -> None:
         assert_all_pass(vs)
     else:
         assert_fails(vs, "each DO4 pulse lasts P5.059.CBA ms")
+
+
+def there_and_back(tap) -> None:
+    """A cyclic COMPARE of one point (P5.059 bit1, L11742): the axis passes it going up,
+    turns and passes it again going down. The point fires each time (L5188)."""
+    pv(tap, 300)
+    d = tap.drive
+    d.params.write("P5.039", 0x0030)
+    target = round(d.compare.position() + d.compare.velocity() * 0.05)
+    d.pr.array[50] = target
+    d.params.write("P5.056", 50)
+    d.params.write("P5.058", 1)
+    d.params.write("P5.059", 10 << 16 | 0x0003)  # 10 ms pulses, cyclic, start
+    tap.advance(150 * MS)
+    tap.write_object(0x60FF, 0, -3000)
+    tap.advance(600 * MS)
+    there_and_back.target = target
+
+
+@pytest.mark.parametrize(("knob", "ok"), [({}, True), ({"dev_compare_positive_only": True}, False)])
+def test_compare_output_judges_every_crossing(tmp_path, knob, ok) -> None:
+    """compare_output had judged only the first crossing of a recording (its trigger was an
+    `earliest_of`, which has one occurrence): a drive firing upward only passed (helper-97)."""
+    path = run(tmp_path, there_and_back, options(**knob), **PARAMS)
+    vs = verdicts(path, "compare_output", target=there_and_back.target, width=10)
+    judged = [v for v in vs if v.status != "skipped"]
+    assert len(judged) == 4, [(v.constraint, v.status, v.message) for v in vs]
+    if ok:
+        assert_all_pass(vs)
+    else:
+        assert_fails(vs, "DO4 fires at the table position, moving down")
