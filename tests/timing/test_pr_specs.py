@@ -70,6 +70,18 @@ def pr_move_no_dly(tap) -> None:
     ctrg(tap, 1, 800)
 
 
+def pr_two_paths_no_dly_b(tap) -> None:
+    """PR#1 AUTO with DLY #1 (100 ms) -> PR#2 SINGLE without DLY: Cmd_OK comes as PR#2's
+    command ends (L15319), before the feedback has settled there; the spec's absent rule ran
+    to the feedback at rest and failed the drive (helper-97)."""
+    table(tap, {
+        1: (("auto", 50000), {"cmd": "INC", "spd": 4, "dly": 1}),
+        2: (("single", 30000), {"cmd": "INC", "spd": 4}),
+    })
+    servo_on(tap)
+    ctrg(tap, 1, 1200)
+
+
 def pr_two_paths(tap) -> None:
     """PR#1 AUTO with DLY #1 (100 ms) -> PR#2 SINGLE with DLY #2 (200 ms) (L4934-4947)."""
     table(tap, {
@@ -152,6 +164,8 @@ CASES = {  # spec id -> (scenario, params, constants)
     "pr_completion": (pr_move, PARAMS, {"dly": 100, "move": MOVE_50K}),
     "pr_completion/no_dly": (pr_move_no_dly, PARAMS, {"dly": 0, "move": MOVE_50K}),
     "pr_delay": (pr_two_paths, PARAMS, {"move_a": MOVE_50K, "move_b": MOVE_30K}),
+    "pr_delay/no_dly_b": (pr_two_paths_no_dly_b, PARAMS,
+                          {"move_a": MOVE_50K, "move_b": MOVE_30K, "dly_b": 0}),
     "pr_jump": (pr_jump_chain, PARAMS, {"move_a": MOVE_50K}),
     "pr_speed_delay": (pr_speed_paths, PARAMS, {}),
     "pr_overlap": (pr_overlapping_paths, PARAMS, {"move_a": MOVE_50K, "move_b": MOVE_30K}),
