@@ -42,6 +42,32 @@ def capture_scenario(tap) -> None:
         tap.advance(10 * MS)
 
 
+def capture_scenario_no(tap) -> None:
+    """As `capture_scenario` with P5.039.Z = 0 (NO, L11538): the closing edge latches, 3 ms
+    after the opening. The spec had judged the opening edge alone (helper-97)."""
+    pv(tap, 300)
+    p = tap.drive.params
+    for _ in range(3):
+        p.write("P5.038", 1)
+        p.write("P5.039", 0x0031)
+        tap.advance(7 * MS + 123_000)
+        tap.set_di(7, False)
+        tap.advance(3 * MS)
+        tap.set_di(7, True)
+        tap.advance(10 * MS)
+
+
+def test_capture_latency_on_the_no_edge(tmp_path) -> None:
+    path = run(tmp_path, capture_scenario_no, options(), **PARAMS)
+    vs = verdicts(path, "capture_latency")
+    assert len([v for v in vs if v.status == "pass"]) == 3, [
+        (v.constraint, v.status, v.message) for v in vs]
+    assert_all_pass(vs)
+    late = run(tmp_path / "late", capture_scenario_no, options(dev_capture_delay_us=50),
+               **PARAMS)
+    assert_fails(verdicts(late, "capture_latency"), "CAP_OK rises 5 µs after the DI7 edge (NO")
+
+
 def compare_scenario(rpm: float, width: int = 10):
     def scenario(tap) -> None:
         pv(tap, rpm)
@@ -86,9 +112,16 @@ def test_capture_latency_is_not_judged_where_it_does_not_apply(tmp_path) -> None
         tap.advance(10 * MS)
 
     path = run(tmp_path / "x", extra_edge, options(), **PARAMS)
-    vs = verdicts(path, "capture_latency")
+    vs, no = nc_and_no(verdicts(path, "capture_latency"))
     assert [v.status for v in vs] == ["pass", "pass", "pass", "skipped"], \
         [(v.status, v.message) for v in vs]
+    assert {v.status for v in no} == {"skipped"}  # Z = 1: the closing edges capture nothing
+
+
+def nc_and_no(vs: list) -> tuple[list, list]:
+    """The verdicts of the NC-edge rule and of the NO-edge rule (P5.039.Z, L11536-11540)."""
+    no = [v for v in vs if "(NO trigger)" in v.constraint]
+    return [v for v in vs if v not in no], no
 
 
 def test_a_three_point_capture_times_cap_ok_from_its_last_edge(tmp_path) -> None:
@@ -106,7 +139,8 @@ def test_a_three_point_capture_times_cap_ok_from_its_last_edge(tmp_path) -> None
             tap.set_di(7, True)
             tap.advance(10 * MS)
 
-    vs = verdicts(run(tmp_path, three_point, options(), **PARAMS), "capture_latency")
+    vs, _no = nc_and_no(verdicts(run(tmp_path, three_point, options(), **PARAMS),
+                                 "capture_latency"))
     assert [v.status for v in vs] == ["skipped", "skipped", "pass"], \
         [(v.status, v.message) for v in vs]
 
