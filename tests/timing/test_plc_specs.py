@@ -59,6 +59,21 @@ def test_clr_longer_than_20_ms_then_homing_complete():
     assert judge("plc_clr", early)["homing is not complete while CLR is on"] == "fail"
 
 
+def test_a_clr_line_rise_outside_a_homing_is_not_judged():
+    """Y8 driven as an ordinary output (before any DRVZ, or after the homing completed) is no
+    homing CLR: not judged, rather than measured against the last stop seen (helper-97)."""
+    msgs = {
+        SEG: [seg(0, 2000), seg(100, 0), seg(300, 2000), seg(400, 0)],
+        "/dio/drive1/Y8": [level(0, False), level(50, True), level(60, False),
+                           level(500, True), level(505, False)],
+        STATUS: [status(0, "step", drvz=""), status(200, "drvz"),
+                 status(400, "zero"), status(450, "homed", homed=True)],
+    }
+    assert set(judge("plc_clr", msgs).values()) == {"skipped"}
+    homing = clr_case(30, 130)
+    assert set(judge("plc_clr", homing).values()) == {"pass"}
+
+
 def dog_case(stop_ms: float) -> dict:
     return {
         "/dio/drive1/X0": [level(0, False), level(50, True), level(150, False)],
