@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from hil.model.events import AlarmChanged
+from hil.model.events import AlarmChanged, AlarmReset
 from hil.model.params import ParameterStore
 from hil.model.timebase import Scheduler
 from hil.profile.alarms import CLEAR_RULES, AlarmSpec, AlarmTable, UnknownAlarm
@@ -43,7 +43,7 @@ class AlarmManager:
         table: AlarmTable | None,
         scheduler: Scheduler,
         params: ParameterStore,
-        emit: Callable[[AlarmChanged], None] | None = None,
+        emit: Callable[[AlarmChanged | AlarmReset], None] | None = None,
         options: AlarmOptions | None = None,
     ) -> None:
         self.table = table if table is not None else AlarmTable.load()
@@ -194,6 +194,7 @@ class AlarmManager:
         """
         if source not in RESET_SOURCES:
             raise ValueError(f"reset source {source!r} not one of {RESET_SOURCES}")
+        self.emit(AlarmReset(self.scheduler.now, source))  # recorded: specs see the request
         for code in list(self._active):
             if code in self._causes:
                 continue

@@ -52,6 +52,15 @@ class AlarmChanged:
 
 
 @dataclass(frozen=True, slots=True)
+class AlarmReset:
+    """An alarm reset was asked for: "di" (ARST), "p0001" (P0.001 := 0), "6040h" (a fault
+    reset), "nmt" (L20199: what may clear AL500; `AlarmManager.reset`)."""
+
+    t: int
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
 class ParamChanged:
     """A parameter's stored value changed (name like "P3.000")."""
 
@@ -112,6 +121,7 @@ class ZPulse:
 
 
 DriveEvent = (
-    DoChanged | FdbkChanged | StateChanged | AlarmChanged | ParamChanged | PowerCycled
+    DoChanged | FdbkChanged | StateChanged | AlarmChanged | AlarmReset | ParamChanged
+    | PowerCycled
     | InputChanged | HomingPhase | BrakeChanged | CaptureLatched | CompareFired | ZPulse
 )

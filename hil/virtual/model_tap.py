@@ -14,7 +14,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from hil.model.events import AlarmChanged, DoChanged, FdbkChanged, ParamChanged, StateChanged
+from hil.model.events import (
+    AlarmChanged,
+    AlarmReset,
+    DoChanged,
+    FdbkChanged,
+    ParamChanged,
+    StateChanged,
+)
 from hil.record import topics
 from hil.units import MS
 
@@ -135,3 +142,5 @@ class ModelTap:
         elif isinstance(event, AlarmChanged | StateChanged):
             self.rec.drive_event(self.name, event, t=t, source_t=t)
             self._state()
+        elif isinstance(event, AlarmReset):
+            self.rec.drive_event(self.name, event, t=t, source_t=t)

@@ -140,6 +140,23 @@ def sto_both(tap: ModelTap) -> None:
     tap.set_di(5, False)
 
 
+def sto_both_cleared_by_p0001(tap: ModelTap) -> None:
+    """AL500, both channels back, then P0.001 := 0 clears it (L20199: ARST, P0.001 or a
+    6040h fault reset). The spec had waited for ARST alone and failed the drive (helper-96
+    F3)."""
+    tap.set_di(1, True)
+    tap.advance(200 * MS)
+    tap.set_sto("A", False)
+    tap.set_sto("B", False)
+    tap.advance(30 * MS)
+    tap.set_sto("A", True)
+    tap.set_sto("B", True)
+    tap.advance(20 * MS)
+    tap.drive.params.write("P0.001", 0)
+    tap.advance(50 * MS)
+    assert "AL500" not in tap.drive.alarms.active
+
+
 def sto_one(tap: ModelTap) -> None:
     tap.set_sto("A", False)
     tap.advance(int(1.2 * S))
@@ -251,6 +268,7 @@ FAITHFUL = [
     ("servo_off_brake", servo_off_moving, {"P1.043": 500, "P1.032": 0x0010}, {}),
     ("sto", sto_both, {}, {}),
     ("sto", sto_one, {}, {}),
+    ("sto", sto_both_cleared_by_p0001, {}, {}),
     ("sto", sto_glitch_then_loss, {}, {}),
     ("sto", sto_one_other_dips, {}, {}),
     ("sto", sto_both_then_one_back, {}, {}),

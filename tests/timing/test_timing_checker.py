@@ -182,10 +182,10 @@ def test_al502_for_sto_b_and_no_alarm_for_a_short_loss():
 
 def test_restored_channels_do_not_clear_al500():
     good = sto((100, 200), (100, 200), [(110, ["AL500"]), (302, [])], arst=[(300, True)])
-    v = by_name(check(SPECS["sto"], good), "restored channels do not clear AL500 (ARST needed)")
+    v = by_name(check(SPECS["sto"], good), "AL500 stays until a reset after both channels are back")
     assert v[0].status == "pass"
     bad = sto((100, 200), (100, 200), [(110, ["AL500"]), (250, [])])
-    v = by_name(check(SPECS["sto"], bad), "restored channels do not clear AL500 (ARST needed)")
+    v = by_name(check(SPECS["sto"], bad), "AL500 stays until a reset after both channels are back")
     assert v[0].status == "fail" and "AL500 cleared" in v[0].message
 
 
