@@ -704,3 +704,30 @@ def test_cam_follow_is_not_applicable_to_a_run_with_no_cam(tmp_path, capsys) -> 
                    load_bench(GROUP_BENCH), tmp_path / "cam", reports=False)
     assert cam.passed and any(c["cam_axes"] for c in _cycles(cam.recording))
     assert hil(["check", str(cam.recording), "--whole", "--spec", "group_cam_follow"]) == 0
+
+
+MODE_SWITCH = """\
+name: mode_switch
+steps:
+  - group: {axes: [axis1], cycle: 2ms}
+  - group_move: {axis: axis1, to: 50000, speed: 100000, acc: 500000, dec: 500000, ramp: 3}
+  - group_wait: {rdy: [axis1], timeout: 5s}
+  - wait: 50ms
+  - group_control: {axis: axis1, mode: 3}
+  - wait: 100ms
+  - group_expect: {axis: axis1, status: 3, write_position: [49990, 50010],
+                   position: [49900, 50100]}
+  - group_control: {axis: axis1, mode: 1}
+  - wait: 50ms
+  - group_expect: {axis: axis1, write_position: [49990, 50010]}
+  - group_stop: {}
+"""
+
+
+def test_group_control_mode_keeps_the_axis_where_it_stands(tmp_path) -> None:
+    """`group_control: {mode: 3}` on a PG axis standing at 50000 with no GEA: the seed sets a
+    generator up where the axis stands before connecting it (004:224, 004:236); the step had
+    set Servo.Mode alone and the set-point jumped to 0, the motor after it (helper-98)."""
+    res = run_plan(loads_plan(MODE_SWITCH, str(tmp_path / "mode_switch.yaml")),
+                   load_bench(GROUP_BENCH), tmp_path, reports=False)
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]

@@ -161,6 +161,13 @@ class Pg:
                 mid = (lo + hi) / 2
                 lo, hi = (mid, hi) if dist_at(mid) <= d else (lo, mid)
             v = lo
+            if v <= v0s and d > 0 and self.acc > 0 and self.dec > 0:
+                # below the search's resolution (an Acc or Dec of 1e-300): the root of
+                # dist_at(v) = d, a quadratic; 0 would land on the target in one cycle
+                a = ka / self.acc + (1.0 - kd) / self.dec
+                b = v0s * (1.0 - 2.0 * ka) / self.acc
+                c = v0s * v0s * (ka - 1.0) / self.acc - d
+                v = max(v0s, (-b + math.sqrt(max(0.0, b * b - 4.0 * a * c))) / (2.0 * a))
         ta = (v - v0s) / self.acc if self.acc > 0 else 0.0
         td = v / self.dec if self.dec > 0 else 0.0
         cruise = (d - dist_at(v)) / v if v > 0 else 0.0
@@ -267,6 +274,9 @@ def ratio_problem(gin: float, gout: float) -> tuple[str, str]:
 # Par0 Acc, Par1 Dec, Par2 PosSpeed (code 1's Par2 is a signed speed); 0 keeps the register
 MAGNITUDES = {1: ((0, "Acc"),), 2: ((0, "Acc"), (1, "Dec"), (2, "PosSpeed")),
               3: ((0, "Acc"), (1, "Dec"), (2, "PosSpeed")), 5: ((1, "Dec"),)}
+# the COMMAND functions (004:240-246): 1 speed, 2 absolute, 3 relative, 4 set reference,
+# 5 abort, 6 sync on, 7 sync off
+COMMAND_CODES = (1, 2, 3, 4, 5, 6, 7)
 
 
 def gear_cycle(axes: Mapping[str, Any], follower: str, master: str,
@@ -511,6 +521,11 @@ class ServoAxis:
         code, p = self.command, self.par
         if code == 0:
             return
+        if code not in COMMAND_CODES:
+            raise CommandError(f"Control {code}: a COMMAND function 1-7 (004:240)")
+        bad = next((i for i, x in enumerate(p) if not math.isfinite(x)), None)
+        if bad is not None:  # a NaN target ran away or hung the ramp
+            raise CommandError(f"Par{bad} {p[bad]}: a finite number")
         pg = self.pg
         if code in (1, 2, 3, 5):
             if int(p[5]) not in RAMP_TYPES or p[5] != int(p[5]):
@@ -574,6 +589,9 @@ class ServoAxis:
             if chain is not None:
                 raise CommandError(f"Par0 {idx}: a gear cycle {' <- '.join(chain)} (each "
                                    "would follow the other's travel and run away)")
+            if p[12] not in (0, 3, 4):
+                raise CommandError(f"Par12 {p[12]:g}: ServoMode 3 (GEA) or 4 (PG + GEA), 0 "
+                                   "as the axis is (004:242; Mode 1, 6-8 not modelled)")
             table = self._cam_table(cams or {}, p) if kind >= 2 else None
             if self.gea.mode:  # 004:244: not called again on a synchronised axis
                 raise CommandError("sync on of an axis already synchronised: sync off "
@@ -605,12 +623,19 @@ class ServoAxis:
             if not g.mode:  # no gear or cam on: nothing to switch off
                 self.command = 0
                 return
+            if p[5] < 0:
+                raise CommandError(f"Par5 {p[5]:g}: the ratio ramp a cycle, not negative "
+                                   "(004:244; 0 stops the gear at once)")
             g.gin, g.inc_in = 0.0, p[5]
             if g.actual_in != 0.0:
                 return  # still ramping: Control stays 7 (004:240)
-            self._connect_pg()
+            if self.mode == 4:  # the PG on top runs on as it is: the gear's part stays in
+                self.set_mode(1)  # the Offset (it had restarted the PG's move from the
+            else:  # gear's travel: a jump by all of it)
+                self._connect_pg()  # the PG takes over at rest where the axis stands
+                self.pg._plan = None
+                self.mode = 1
             g.mode = 0
-            self.mode = 1
         self.command = 0
 
     @staticmethod
@@ -635,11 +660,16 @@ class ServoAxis:
         return list(mem[line:line + length])
 
     def superimpose(self) -> None:
-        """Servo.Mode 4: the PG's moves on top of the gear / cam (004:218). The PG joins
-        with its position as it stands, so the Offset takes it out: nothing jumps."""
-        if self.mode != 4:
+        """Servo.Mode 4: the PG's moves on top of the gear / cam (004:218)."""
+        self.set_mode(4)
+
+    def set_mode(self, mode: int) -> None:
+        """Servo.Mode (004:216-218) changed without a jump: a generator joins with its
+        position as it stands and the Offset takes the difference (as the seed sets GEA.Offset
+        or PG.APos before it connects one, 004:224, 004:236), so WritePosition stays."""
+        if mode != self.mode:
             before = self.base()
-            self.mode = 4
+            self.mode = mode
             self.offset += before - self.base()
 
     def _connect_pg(self, speed: float = 0.0) -> None:

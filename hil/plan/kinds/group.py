@@ -1089,8 +1089,8 @@ class GroupControl(_OneAxis):
                 ax.control = (ax.control & ~0x2) | (0 if a.torque else 0x2)
             if a.correction is not None:  # added to WritePosition as it is (004:216)
                 ax.correction = a.correction
-            if a.mode is not None:
-                ax.mode = a.mode
+            if a.mode is not None:  # the generator joins where the axis stands (004:224)
+                ax.set_mode(a.mode)
         if a.fault_reset:
             with g._lock:
                 ax.control |= 0x1
