@@ -232,6 +232,26 @@ DEVIATIONS = [  # (case, knob, the constraint it breaks)
 ]
 
 
+@pytest.mark.parametrize(("case", "rule"), [
+    ("pr_soft_limit", "the motor stops with the P5.003.Z deceleration"),
+    ("pr_soft_limit_negative", "the motor stops with the P5.003.U deceleration")])
+def test_a_soft_limit_stop_sooner_than_its_ramp_fails(tmp_path, case, rule) -> None:
+    """P5.003.Z/U pick the stop's deceleration (P5.034 for the default E, L11091-11100). With
+    P5.034 = 1500 ms per 3000 rpm the stop from 300 rpm ramps 150 ms: a drive that stops at
+    once fails (the window had no lower limit; at 50 ms per 3000 rpm the 5 ms ramp hides in
+    the feedback's settling, helper-97)."""
+    scenario, params, constants = CASES[case]
+    params = params | {"P5.034": 1500}
+    constants = constants | {"decel": 1500}
+    good = verdicts(run(tmp_path / "good", scenario, options(), **params), case, **constants)
+    assert [v.status for v in good if v.constraint == rule] == ["pass"], [
+        v.message for v in good if v.constraint == rule]
+    bad = verdicts(run(tmp_path / "bad", scenario, options(dev_soft_limit_decel_ms=0.001),
+                       **params), case, **constants)
+    assert [v.status for v in bad if v.constraint == rule] == ["fail"], [
+        v.message for v in bad if v.constraint == rule]
+
+
 @pytest.mark.parametrize(
     ("case", "knob", "constraint"), DEVIATIONS,
     ids=lambda x: next(iter(x)) if isinstance(x, dict) else x,
