@@ -77,3 +77,25 @@ def test_limit_at_power_up_fails_on_a_drive_ignoring_power_up_levels(tmp_path) -
     path = run_limit_power_up(tmp_path, ModelOptions(dev_di_levels_ignored_at_power_up=True))
     failed = {v.constraint for v in verdicts(path, "limit_power_up") if v.status == "fail"}
     assert "AL014 present while NL is active from power-up" in failed
+
+
+def test_a_release_bounce_shorter_than_the_filter_is_no_release(tmp_path) -> None:
+    """EMGS released for 1 ms (under the 2 ms P2.009 filter, L9229-9236), then for good: AL013
+    stays through the bounce, as it should, and clears at the real release. The spec had
+    taken the bounce for a release and failed the drive (helper-96 F8)."""
+    path = tmp_path / "run.mcap"
+    drive = Drive(params=BENCH)
+    with Recorder(path) as rec:
+        tap = ModelTap(drive, rec)
+        tap.advance(20 * MS)
+        tap.set_di(1, True)
+        tap.advance(100 * MS)
+        tap.set_di(8, True)  # a bounce
+        tap.advance(1 * MS)
+        tap.set_di(8, False)
+        tap.advance(100 * MS)
+        assert "AL013" in drive.alarms.active
+        tap.set_di(8, True)  # released
+        tap.advance(100 * MS)
+        tap.close()
+    assert_all_pass(verdicts(path, "emgs_power_up"))
