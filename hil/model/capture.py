@@ -152,6 +152,13 @@ class Capture:
         else:
             self.offset = value - self.source_position()
 
+    def power_up(self) -> None:
+        """A power cycle stops CAPTURE; no capture has run since, so CAP_OK is off (L15323:
+        capture done). P5.038 reads its stored value again (its count-down is RAM's)."""
+        if self.running:
+            self.stop()
+        self.drive.dio.set_do_function("CAP_OK", False)
+
     # ------------------------------------------------------------------ parameters
     def validate_p5039(self, _name: str, value: int) -> None:
         old = self.drive.params.stored("P5.039")
@@ -194,7 +201,7 @@ class Capture:
         d = self.drive
         if reload:
             if d.params.stored("P5.038") <= 0:  # ended at 0: the previous count
-                d.params.set_internal("P5.038", self.count_set)
+                d.params.set_internal("P5.038", self.count_set, ram_only=True)
             if d.params.stored("P5.036") + d.params.stored("P5.038") > ARRAY_SIZE:
                 return  # P5.038 <= P5.010 - P5.036 (L11491): not started, as a write is refused
             d.params.set_internal("P5.039", d.params.stored("P5.039") | 1)
@@ -268,7 +275,7 @@ class Capture:
         self.values.append((t, addr, v))
         self.pr.capture_puu = v  # base of CAP commands (L4471)
         remaining = self.count_set - self.index
-        p.set_internal("P5.038", remaining)
+        p.set_internal("P5.038", remaining, ram_only=True)
         d.emit(CaptureLatched(d.now, addr, v))
         compare = self.compare
         if first and ctrl & 4 and compare is not None and not compare.running:
@@ -283,7 +290,7 @@ class Capture:
             self.pr.trigger(50, "CAPTURE")  # bit3: PR#50 (L5158)
         if p.get("P1.019") & 1:  # cyclic: reload, restart at P5.036 (L8139, L5176)
             self.index = 0
-            p.set_internal("P5.038", self.count_set)
+            p.set_internal("P5.038", self.count_set, ram_only=True)
         else:
             self.stop()  # P5.038 stays 0: "為零時抓取結束" (L5155)
 
@@ -302,7 +309,7 @@ def attach_capture(drive: DriveCore, options: CaptureOptions | None = None, *,
     params.on_read("P5.037", lambda: s32(round(cap.position())))  # 32 bits (L11482)
     drive.dio.on_raw(cap.on_di)
     drive.hooks.step.append(cap.on_step)
-    drive.hooks.boot.append(lambda: cap.running and cap.stop())
+    drive.hooks.boot.append(cap.power_up)
     drive.hooks.monitors[43] = lambda: cap.last_value or 0  # CAP data, the last (L15481)
     return cap
 

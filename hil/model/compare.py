@@ -163,7 +163,7 @@ class Compare:
         d = self.drive
         if reload:  # started by CAPTURE bit2 with the previous count (L5157)
             if d.params.stored("P5.058") <= 0:  # ended at 0: the previous count
-                d.params.set_internal("P5.058", self.count_set)
+                d.params.set_internal("P5.058", self.count_set, ram_only=True)
             if d.params.stored("P5.056") + d.params.stored("P5.058") > ARRAY_SIZE:
                 return  # P5.058 <= P5.010 - P5.056 (L11719): not started, as a write is refused
             d.params.set_internal("P5.059", d.params.stored("P5.059") | 1)
@@ -263,7 +263,7 @@ class Compare:
             p.set_internal("P1.024", 0)
         self.index += 1
         remaining = self.count_set - self.index
-        p.set_internal("P5.058", remaining)
+        p.set_internal("P5.058", remaining, ram_only=True)
         if remaining > 0:
             return
         if ctrl & 8:  # bit3: compare axis to 0 (L11746)
@@ -276,7 +276,7 @@ class Compare:
             self.pr.trigger(45, "COMPARE")
         if ctrl & 2:  # cyclic: reload (L11742)
             self.index = 0
-            p.set_internal("P5.058", self.count_set)
+            p.set_internal("P5.058", self.count_set, ram_only=True)
         else:
             self.stop()  # P5.058 stays 0 (L11722)
 

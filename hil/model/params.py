@@ -135,14 +135,17 @@ class ParameterStore:
         spec = self.check_write(name, value)
         self._commit(spec, value, ram_only=ram_only)
 
-    def set_internal(self, name: str, value: int) -> None:
+    def set_internal(self, name: str, value: int, ram_only: bool = False) -> None:
         """Drive-side update (monitor values, P0.001, P4.000 history ...): no attribute checks.
 
-        Takes effect at once (also for ● parameters); write hooks do not fire.
-        """
+        Takes effect at once (also for ● parameters); write hooks do not fire. `ram_only`: a
+        running count (P5.038, P5.058 counting down): the stored value comes back at the next
+        power cycle, as a RAM-only write's does."""
         spec = self.table.spec(name)
         value = int(value)
-        if self._eeprom:
+        if ram_only:
+            self._eeprom.setdefault(spec.param, self._stored[spec.param])
+        elif self._eeprom:
             self._eeprom.pop(spec.param, None)
         old = self._stored[spec.param]
         self._stored[spec.param] = value

@@ -118,3 +118,24 @@ def test_a_compare_point_past_the_wrap_fires_when_the_axis_gets_there() -> None:
     d.advance(1000 * MS)
     assert [g for _t, _i, g in d.compare.fired] == [point]
     assert d.params.read("P5.057") > point
+
+
+def test_after_a_power_cycle_cap_ok_is_off_and_the_counts_read_as_written() -> None:
+    """CAP_OK means a capture is done (L15323): a drive just powered up has done none. The
+    counts P5.038 / P5.058 count down as the points come (L5155, L11496, L11724): a running
+    count, not a new setting, so a power cycle reads back what was written and the capture
+    can be armed again at once (helper-95: CAP_OK stayed on, P5.038 read 0 and refused)."""
+    d = make()
+    d.params.write("P5.038", 2)
+    d.params.write("P5.039", 0x0031)  # CN2, start
+    capture_edge(d)
+    capture_edge(d)
+    assert d.params.read("P5.038") == 0 and d.dio.do_function_state("CAP_OK")
+    d.params.write("P5.058", 1)
+    compare_on_capture_axis(d, 10**6)  # P5.058 1, started: not reached
+    d.power_cycle(off_for=100 * MS)
+    d.advance(50 * MS)
+    assert not d.dio.do_function_state("CAP_OK")
+    assert d.params.read("P5.038") == 2 and d.params.read("P5.058") == 1
+    d.params.write("P5.039", 0x0031)  # armed again with the count as written
+    assert d.capture.running
