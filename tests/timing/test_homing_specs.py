@@ -46,6 +46,21 @@ for _m in range(17, 31):
     CIA[_m] = (_d0, _ref, 0)  # 17-30: the edge itself, no Z (L18919-18966)
 
 
+# the edge of the reference sensor's active region each method homes on: +1 the edge at the
+# lower position (entered moving +), -1 the one at the upper position. L18871-18966 name it
+# "上緣" / "下緣": 3/4 上緣 (a positive home switch), 5/6 下緣, 7/8 上緣, 9/10 下緣, 12 下緣,
+# 13/14 上緣, and for the same methods without Z 19/20 上緣 ... 27/28 下緣, 29/30 上緣; 11 is
+# printed 上緣 where 27, the same method without Z, and CiA 402 have the right (upper) edge:
+# read as 下緣. The limits: NL active below it (-1), PL active above it (+1).
+CIA_EDGE = {1: -1, 2: 1, 3: 1, 4: 1, 5: -1, 6: -1, 7: 1, 8: 1, 9: -1, 10: -1, 11: -1, 12: -1,
+            13: 1, 14: 1, 33: 0, 34: 0, 35: 0}  # fmt: skip
+for _m in range(17, 31):
+    CIA_EDGE[_m] = CIA_EDGE[_m - 16]
+# P5.004.X (L4229-4236): 0 PL, 1 NL; 2 forward ORG OFF->ON, 3 reverse OFF->ON, 6 forward
+# ON->OFF, 7 reverse ON->OFF (a cam's lower edge is OFF->ON moving forward)
+PR_EDGE = {0: 1, 1: -1, 2: 1, 3: -1, 6: -1, 7: 1}
+
+
 def cia_ref_line(method: int) -> str:
     base = method - 16 if method > 16 else method
     return {1: "DI6:b", 2: "DI7:b"}.get(base, "DI9")
@@ -145,14 +160,17 @@ def problems(vs: list) -> list[str]:
             and v.status != "skipped"]  # fmt: skip
 
 
-def canopen_verdicts(tmp_path: Path, method: int, start: str, homing: dict | None = None):
+def canopen_verdicts(tmp_path: Path, method: int, start: str, homing: dict | None = None,
+                     edge: int | None = None):
     path = record(tmp_path, STARTS[start], canopen_scenario(method), homing)
     d0, ref, z = CIA[method]
-    consts = {"v1": V1, "v2": V2, "d0": d0, "ref_dir": ref, "z_dir": z, "offset": OFFSET}
+    consts = {"v1": V1, "v2": V2, "d0": d0, "ref_dir": ref, "z_dir": z, "offset": OFFSET,
+              "ref_edge": CIA_EDGE[method] if edge is None else edge}
     return verdicts(path, "homing_canopen", {"REF": cia_ref_line(method)}, consts)
 
 
-def pr_verdicts(tmp_path: Path, x: int, y: int, start: str, homing: dict | None = None):
+def pr_verdicts(tmp_path: Path, x: int, y: int, start: str, homing: dict | None = None,
+                edge: int | None = None):
     p5004 = 0x100 | y << 4 | x  # Z = 1: reverse at a limit
     params = {"P5.004": p5004, "P5.005": V1 * 10, "P5.006": V2 * 10, "P6.001": 2000}
     torque = x in (9, 0xA)
@@ -160,7 +178,8 @@ def pr_verdicts(tmp_path: Path, x: int, y: int, start: str, homing: dict | None 
         params |= {"P1.087": 50, "P1.088": 100}  # L4372-4392
     path = record(tmp_path, STARTS[start], pr_scenario, homing, torque=torque, **params)
     d0, ref, z = pr_dirs(x, y)
-    consts = {"d0": d0, "ref_dir": ref, "z_dir": z}
+    consts = {"d0": d0, "ref_dir": ref, "z_dir": z,
+              "ref_edge": PR_EDGE.get(x, 0) if edge is None else edge}
     return verdicts(path, "homing_pr", {"REF": pr_ref_line(x)}, consts)
 
 
@@ -278,3 +297,20 @@ def test_homing_canopen_starts_only_in_homing_mode():
     assert pp and all(v.status == "skipped" for v in pp), [(v.status, v.message) for v in pp]
     hm = check(spec, src("HM"), binding=bind)
     assert [v for v in hm if v.status != "skipped"]  # judged (this stub has no motion: fails)
+
+
+@pytest.mark.parametrize(("route", "mode", "start", "edge"), [
+    ("canopen", 7, "neg", -1), ("canopen", 12, "pos", 1), ("canopen", 1, "neg", 1),
+    ("pr", (2, 0), "neg", -1), ("pr", (7, 0), "pos", -1)])
+def test_a_drive_homing_on_the_other_edge_fails(tmp_path, route, mode, start, edge) -> None:
+    """Methods 7 and 9 (and 11/13, 8/10, ...) search and cross in the same directions; only
+    the edge of the cam differs (上緣 / 下緣, L18877-18883). Judged as if it had been asked
+    for the other edge, a drive's homing fails: the spec had passed whichever edge a drive
+    took (helper-97)."""
+    if route == "canopen":
+        vs = canopen_verdicts(tmp_path, mode, start, edge=edge)
+    else:
+        vs = pr_verdicts(tmp_path, *mode, start, edge=edge)
+    failed = [v.constraint for v in vs if v.status == "fail"]
+    assert any("the reference is the mode's edge of the sensor" in c for c in failed), [
+        (v.constraint, v.status, v.message) for v in vs]
