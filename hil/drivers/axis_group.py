@@ -374,6 +374,14 @@ class Gea:
 # ------------------------------------------------------------------------------ SDO interface
 
 
+# CiA 301's abort "data type does not match, length of service parameter does not match"
+SDO_LENGTH_MISMATCH = 0x06070010
+
+
+class _SdoLength(Exception):
+    code = SDO_LENGTH_MISMATCH
+
+
 @dataclass
 class SdoInterface:
     """The SDO interface of one axis (004:248-250): Control 1 write / 2 read (0 when done),
@@ -393,6 +401,9 @@ class SdoInterface:
         if self.control not in (1, 2):
             return
         self.status = 1
+        if self.number_byte not in (1, 2, 3, 4):  # 1-4, the object's size (004:248-250):
+            self.status, self.data, self.control = 2, SDO_LENGTH_MISMATCH, 0  # nothing sent
+            return
         try:
             if self.control == 1:
                 raw = (self.data & ((1 << (8 * self.number_byte)) - 1)).to_bytes(
@@ -400,7 +411,9 @@ class SdoInterface:
                 download(self.index, self.sub, raw)
             else:
                 raw = upload(self.index, self.sub)
-                self.data = int.from_bytes(raw[:self.number_byte], "little")
+                if len(raw) != self.number_byte:  # not the object's size: no value read
+                    raise _SdoLength()
+                self.data = int.from_bytes(raw, "little")
             self.status = 0
         except Exception as e:
             self.status = 2

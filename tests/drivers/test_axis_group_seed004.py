@@ -139,3 +139,24 @@ def test_odd_command_registers_are_refused_and_nothing_moves() -> None:
     geared_follower(g, m, f)
     assert "Par5 -1" in command(g, f, 7, {5: -1})
     assert f.gea.mode == 1 and round(f.write_position) == 30000  # still geared
+
+
+def test_sdo_numberbyte_is_the_objects_size() -> None:
+    """NumberByte is 1-4, the size of the object (004:248-250): another count is refused
+    with Status 2 and nothing is sent; a read whose object is of another size gives Status 2
+    (CiA 301 0607 0010h, length does not match), not the value cut to NumberByte bytes
+    (123456 read in 2 bytes had reported 57920 with Status 0)."""
+    from hil.drivers.axis_group import SDO_LENGTH_MISMATCH, SdoInterface
+
+    sent: list = []
+    obj = {(0x607A, 0): (123456).to_bytes(4, "little")}
+    for n in (0, 5, 8, -1):
+        sdo = SdoInterface(control=1, number_byte=n, index=0x607A, sub=0, data=70000)
+        sdo.execute(lambda i, s: obj[(i, s)], lambda i, s, raw: sent.append(raw))
+        assert (sdo.control, sdo.status, sdo.data, sent) == (0, 2, SDO_LENGTH_MISMATCH, []), n
+    sdo = SdoInterface(control=2, number_byte=2, index=0x607A, sub=0)
+    sdo.execute(lambda i, s: obj[(i, s)], lambda i, s, raw: None)
+    assert (sdo.status, sdo.data) == (2, SDO_LENGTH_MISMATCH)
+    sdo = SdoInterface(control=2, number_byte=4, index=0x607A, sub=0)
+    sdo.execute(lambda i, s: obj[(i, s)], lambda i, s, raw: None)
+    assert (sdo.status, sdo.data) == (0, 123456)
