@@ -161,13 +161,6 @@ class Pg:
                 mid = (lo + hi) / 2
                 lo, hi = (mid, hi) if dist_at(mid) <= d else (lo, mid)
             v = lo
-            if v <= v0s and d > 0 and self.acc > 0 and self.dec > 0:
-                # below the search's resolution (an Acc or Dec of 1e-300): the root of
-                # dist_at(v) = d, a quadratic; 0 would land on the target in one cycle
-                a = ka / self.acc + (1.0 - kd) / self.dec
-                b = v0s * (1.0 - 2.0 * ka) / self.acc
-                c = v0s * v0s * (ka - 1.0) / self.acc - d
-                v = max(v0s, (-b + math.sqrt(max(0.0, b * b - 4.0 * a * c))) / (2.0 * a))
         ta = (v - v0s) / self.acc if self.acc > 0 else 0.0
         td = v / self.dec if self.dec > 0 else 0.0
         cruise = (d - dist_at(v)) / v if v > 0 else 0.0
@@ -274,9 +267,16 @@ def ratio_problem(gin: float, gout: float) -> tuple[str, str]:
 # Par0 Acc, Par1 Dec, Par2 PosSpeed (code 1's Par2 is a signed speed); 0 keeps the register
 MAGNITUDES = {1: ((0, "Acc"),), 2: ((0, "Acc"), (1, "Dec"), (2, "PosSpeed")),
               3: ((0, "Acc"), (1, "Dec"), (2, "PosSpeed")), 5: ((1, "Dec"),)}
+# the least non-zero PG.Acc / Dec / PosSpeed a COMMAND may give (inc/s², inc/s): the seed sets
+# none, but a smaller one is no move at all (Acc 1e-300 over 200000 inc takes 1e150 s) and
+# its profile is below the arithmetic's resolution (it had landed on the target at once)
+PG_MIN = 1e-3
 # the COMMAND functions (004:240-246): 1 speed, 2 absolute, 3 relative, 4 set reference,
 # 5 abort, 6 sync on, 7 sync off
 COMMAND_CODES = (1, 2, 3, 4, 5, 6, 7)
+# the Par each function reads (004:240-246)
+COMMAND_READS = {1: (0, 2, 4, 5), 2: (0, 1, 2, 3, 4, 5), 3: (0, 1, 2, 3, 4, 5), 4: (3,),
+                 5: (1, 5), 6: (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 12, 13), 7: (5,)}
 
 
 def gear_cycle(axes: Mapping[str, Any], follower: str, master: str,
@@ -536,17 +536,17 @@ class ServoAxis:
             return
         if code not in COMMAND_CODES:
             raise CommandError(f"Control {code}: a COMMAND function 1-7 (004:240)")
-        bad = next((i for i, x in enumerate(p) if not math.isfinite(x)), None)
-        if bad is not None:  # a NaN target ran away or hung the ramp
-            raise CommandError(f"Par{bad} {p[bad]}: a finite number")
+        bad = next((i for i in COMMAND_READS[code] if not math.isfinite(p[i])), None)
+        if bad is not None:  # a NaN target ran away or hung the ramp (an unread Par is moot:
+            raise CommandError(f"Par{bad} {p[bad]}: a finite number")  # an abort still acts)
         pg = self.pg
         if code in (1, 2, 3, 5):
             if int(p[5]) not in RAMP_TYPES or p[5] != int(p[5]):
                 raise CommandError(f"Par5 {p[5]:g}: a ramp type 0-3 (004:222)")
             for i, what in MAGNITUDES[code]:
-                if p[i] < 0:
-                    raise CommandError(f"Par{i} {p[i]:g}: PG.{what} is a maximum, not "
-                                       "negative (004:220; 0 keeps the register)")
+                if p[i] < 0 or 0 < p[i] < PG_MIN:
+                    raise CommandError(f"Par{i} {p[i]:g}: PG.{what} is a maximum, 0 (keep "
+                                       f"the register) or at least {PG_MIN:g} (004:220)")
             pg.type = int(p[5])
         if code == 1:  # run speed: Par0 Acc, Par2 Speed, Par4 0 cancel GEA / 1 superimpose
             pg.acc = p[0] or pg.acc
@@ -557,7 +557,7 @@ class ServoAxis:
             elif p[4] and self.gea.mode:
                 self.superimpose()
             else:
-                self.mode = 1
+                self.set_mode(1)  # the PG where the axis stands (a mode 3 axis had jumped)
             pg.start_speed(p[2])
         elif code in (2, 3):  # absolute / relative: Par0 Acc, Par1 Dec, Par2 Speed, Par3
             pg.acc, pg.dec, pg.pos_speed = p[0] or pg.acc, p[1] or pg.dec, p[2] or pg.pos_speed

@@ -528,7 +528,7 @@ class Status:
     step: int = 0
     feedback: int = 0  # OA/OB quadrature counts seen by the high-speed counter
     homed: bool = False  # a DRVZ found the zero point and completed (CLR included)
-    drvz: str = ""  # the DRVZ mode of the last / current machine-origin return
+    drvz: str = ""  # the DRVZ mode running or completed; empty before any and after a failed one
     zero_found_ns: int | None = None
 
 
@@ -838,7 +838,11 @@ class PulseMaster:
                     s = chain[-1][0]
                     self._drive(chain, s, left)
                 elif isinstance(s.drive, str):
-                    self.home(s.drive, spd or self.p.max_speed_pps, left)
+                    try:
+                        self.home(s.drive, spd or self.p.max_speed_pps, left)
+                    except BaseException:
+                        self.status.drvz = ""  # no homing runs any more: none completed
+                        raise
                     self._transition_after(s, left)
                 else:
                     self._transition_after(s, left)

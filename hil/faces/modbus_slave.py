@@ -107,6 +107,7 @@ class ModbusFaceOptions:
         data = dict(data or {})
         choices = {"silence": ("t3.5", "manual"), "broadcast": ("execute", "ignore"),
                    "auto_reply_station": ("own", "echo")}
+        limits = {"p3007_unit_ns": 10**9, "max_read_words": 125, "max_write_words": 123}
         known = {f.name for f in fields(cls)} - {"exception_codes"}
         bad = sorted(set(data) - known)
         if bad:
@@ -120,9 +121,10 @@ class ModbusFaceOptions:
             elif k in ("fixed_t35_above_19200", "enforce_t15", "resync"):
                 if type(v) is not bool:
                     raise ValueError(f"modbus options: {k} must be true or false, not {v!r}")
-            elif k in ("p3007_unit_ns", "max_read_words", "max_write_words"):
-                if type(v) is not int or not 0 < v <= 10**9:
-                    raise ValueError(f"modbus options: {k} must be a whole number 1-10^9, "
+            elif k in limits:  # a 03h reply holds 125 words, a 10h request 123 (one byte
+                top = limits[k]  # counts the bytes); P3.007's unit in ns
+                if type(v) is not int or not 0 < v <= top:
+                    raise ValueError(f"modbus options: {k} must be a whole number 1-{top}, "
                                      f"not {v!r}")
             elif k == "comm_write_refused":
                 if not isinstance(v, list | tuple) or not all(type(n) is str for n in v):

@@ -43,13 +43,15 @@ class AlarmManager:
         table: AlarmTable | None,
         scheduler: Scheduler,
         params: ParameterStore,
-        emit: Callable[[AlarmChanged | AlarmReset], None] | None = None,
+        emit: Callable[[AlarmChanged], None] | None = None,
         options: AlarmOptions | None = None,
+        on_reset: Callable[[AlarmReset], None] | None = None,
     ) -> None:
         self.table = table if table is not None else AlarmTable.load()
         self.scheduler = scheduler
         self.params = params
         self.emit = emit or (lambda event: None)
+        self.on_reset = on_reset or (lambda event: None)  # the request, for the record
         self.options = options or AlarmOptions()
         for code, rule in self.options.clear_override.items():
             self.table.spec(code)
@@ -194,7 +196,8 @@ class AlarmManager:
         """
         if source not in RESET_SOURCES:
             raise ValueError(f"reset source {source!r} not one of {RESET_SOURCES}")
-        self.emit(AlarmReset(self.scheduler.now, source))  # recorded: specs see the request
+        if source != "nmt":  # an alarm reset the manual names (L20199), recorded for the specs
+            self.on_reset(AlarmReset(self.scheduler.now, source))
         for code in list(self._active):
             if code in self._causes:
                 continue

@@ -35,9 +35,9 @@ from typing import TYPE_CHECKING, Any
 
 from hil.model.errors import OutOfRange, ReadOnly
 from hil.model.events import CaptureLatched, ZPulse
-from hil.model.motion import counts_to_puu, puu_to_counts, s32
+from hil.model.motion import counts_to_puu, puu_to_counts
 from hil.profile.pr import ARRAY_SIZE
-from hil.units import MS
+from hil.units import MS, s32
 
 if TYPE_CHECKING:
     from hil.model.compare import Compare
@@ -259,7 +259,7 @@ class Capture:
             return
         mask = p.get("P1.020")  # L8156: only when P5.038 > 1
         if self.last_value is not None and self.index and self.count_set > 1 and \
-                abs(value - self.last_value) < mask:
+                abs(s32(round(value) - self.last_value)) < mask:  # on the 32-bit axis
             return
         ctrl = p.get("P5.039")
         first = self.index == 0

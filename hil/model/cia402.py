@@ -67,7 +67,7 @@ from hil.protocol.canopen import (
     ABORT_VALUE_RANGE,
 )
 from hil.protocol.cia402 import MODES
-from hil.units import MS, S
+from hil.units import MS, S, s32
 
 # ---- states (names as canopen.BaseNode402 uses them) ------------------------------------
 NOT_READY = "NOT READY TO SWITCH ON"
@@ -499,7 +499,7 @@ class Cia402:
             return self._v[(index, sub)]
         value = self._actual(index, sub, d)
         if index in _COUNTERS:  # 32-bit counters wrap (L15290, counters.py)
-            return (value + 0x80000000) % 0x100000000 - 0x80000000
+            return s32(value)
         return _clip(value, d.dtype)
 
     def _actual(self, index: int, sub: int, d: _Obj) -> int:

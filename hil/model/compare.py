@@ -30,10 +30,10 @@ from typing import TYPE_CHECKING
 from hil.model.capture import CaptureOptions
 from hil.model.errors import OutOfRange, ReadOnly
 from hil.model.events import CompareFired
-from hil.model.motion import counts_to_puu, s32
+from hil.model.motion import counts_to_puu
 from hil.model.timebase import Timer
 from hil.profile.pr import ARRAY_SIZE
-from hil.units import MS
+from hil.units import MS, s32
 
 if TYPE_CHECKING:
     from hil.model.capture import Capture

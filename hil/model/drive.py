@@ -168,6 +168,7 @@ class Drive:
         self.alarms = AlarmManager(
             None, self.sched, self.params, self._on_alarm,
             AlarmOptions(override, fault_reset_listed=options.fault_reset_clears == "listed"),
+            on_reset=self.emit,
         )
         # P2.009 filter (L9229-9236): "stable" drops bounces; deviation knob: a pure delay
         filter_mode = "delay" if self.options.dev_di_filter_delay_only else "stable"

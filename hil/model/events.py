@@ -54,7 +54,8 @@ class AlarmChanged:
 @dataclass(frozen=True, slots=True)
 class AlarmReset:
     """An alarm reset was asked for: "di" (ARST), "p0001" (P0.001 := 0), "6040h" (a fault
-    reset), "nmt" (L20199: what may clear AL500; `AlarmManager.reset`)."""
+    reset): what L20199 names as clearing AL500 (`AlarmManager.reset`; a CANopen NMT reset,
+    which clears only its own alarms, is none)."""
 
     t: int
     source: str

@@ -67,12 +67,6 @@ from hil.model.mechanics import COUNTS_PER_REV, Mechanics
 # ---- pure conversions ----------------------------------------------------------------
 
 
-def s32(n: float) -> float:
-    """`n` as a signed 32-bit register holds it: it wraps past ±2^31 (an int stays an int;
-    a float keeps its fraction: a position between two counts)."""
-    return (n + 0x80000000) % 0x100000000 - 0x80000000
-
-
 def counts_to_puu(counts: float, p1_044: int, p1_045: int) -> float:
     """Encoder counts -> PUU: PUU = counts × P1.045 / P1.044 (L16408)."""
     return counts * p1_045 / p1_044

@@ -67,7 +67,7 @@ from hil.profile.pr import (
     read_path,
     source_error,
 )
-from hil.units import MS
+from hil.units import MS, s32
 
 if TYPE_CHECKING:
     from hil.model.core import DriveCore
@@ -505,7 +505,7 @@ class PrEngine:
         # unsigned 0x00000000~0xFFFFFFFF (P5.003, L11085) reads it unsigned, a data-array
         # entry (signed 32-bit, P5.012) signed
         if path.dest_array:
-            self.array[path.dest] = (value + 0x80000000) % 0x100000000 - 0x80000000
+            self.array[path.dest] = s32(value)
         else:
             spec = d.params.table.spec(path.dest_param)
             if value < 0 and spec.min >= 0 and spec.max > 0x7FFFFFFF:

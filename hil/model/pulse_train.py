@@ -51,6 +51,7 @@ from typing import TYPE_CHECKING, Any
 from hil.model.dio import N_DI
 from hil.model.errors import OutOfRange
 from hil.model.mechanics import COUNTS_PER_REV
+from hil.units import s32
 
 if TYPE_CHECKING:
     from hil.model.core import DriveCore
@@ -356,7 +357,7 @@ class PulseTrain:
         n = self.cn1 + self._cn1_base
         if self._cruise_end and s is not None:  # a cruise takes its pulses at its end
             n += s.counts(self._config().logic) * (s.pulses_at(self.d.now) - self._taken)
-        return (n + 2**31) % 2**32 - 2**31
+        return s32(n)
 
     def preset_cn1(self, _name: str, _old: int, value: int) -> None:
         self._cn1_base = value - self.cn1

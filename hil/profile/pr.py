@@ -18,6 +18,7 @@ from functools import cache
 
 from hil.profile.errors import ModelError
 from hil.profile.params import ParamTable, parse_name
+from hil.units import s32
 
 N_PATHS = 100  # PR#0 homing + PR#1..#99 (L4148)
 
@@ -112,17 +113,12 @@ def param_to_pr(name: str) -> tuple[int, str] | None:
     return None
 
 
-def _s32(v: int) -> int:
-    v &= 0xFFFFFFFF
-    return v - (1 << 32) if v & 0x80000000 else v
-
-
 def decode(n: int, definition: int, data: int) -> PrPath:
     """Decode PR#n; raise PrError for a path the drive would refuse to run."""
     d = definition & 0xFFFFFFFF
     x, y = d & 0xF, (d >> 4) & 0xF
     z, u, a, b, c, dd = ((d >> s) & 0xF for s in (8, 12, 16, 20, 24, 28))
-    data = _s32(data)
+    data = s32(data)
     where = f"PR#{n} (0x{d:08X})"
     common = {"number": n, "type": x, "ins": bool(y & 1), "dly": b, "data": data}
     if x == 0:
@@ -285,7 +281,7 @@ def encode(
         if not 0 <= v <= 15:
             raise PrError(f"{nm} {v}: an index 0..15 (P5.020/P5.040/P5.060 tables, L4164)")
     d = t | (y << 4) | (z << 8) | (u << 12) | (a << 16) | (dly << 20) | (c << 24)
-    return d, _s32(data)
+    return d, s32(data)
 
 
 def _type_of(type_: int | str) -> int:

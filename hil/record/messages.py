@@ -187,6 +187,7 @@ class DriveEvent(TypedDict):
     function: NotRequired[str]
     closed: NotRequired[bool]
     code: NotRequired[Annotated[str, F("alarm code")]]
+    source: NotRequired[Annotated[str, F("what asked for an alarm reset: di, p0001, 6040h")]]
     active: NotRequired[bool]
     emcy_code: NotRequired[int]
     name: NotRequired[Annotated[str, F("parameter name")]]
@@ -341,7 +342,8 @@ class PlcStatus(TypedDict):
     remaining: Annotated[int, F("DR4072: the pulses left")]
     error: Annotated[int, F("R4060: the latest error code")]
     homed: bool
-    drvz: Annotated[str, F("the DRVZ mode running, or empty")]
+    drvz: Annotated[str, F("the DRVZ mode running or completed; empty before any, and after "
+                           "one that failed")]
 
 
 MESSAGES: dict[str, type] = {

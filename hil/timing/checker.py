@@ -584,6 +584,11 @@ class Context:
         out: list[int] = []
         if not times:
             return out
+        # the filter's length, worked out once per change of a parameter it reads (as the
+        # thresholds are: `_thresholds`), not at every change of the signal
+        params, consts = self._reads([ev.held])
+        at = self.params.change_times(params) or [0]
+        need_at = [_duration_ns(ev.held, self.env(c, consts), "held") for c in at]
         held = values[0]  # what the filter passes
         n = len(times)
         for i in range(1, n):
@@ -594,7 +599,8 @@ class Context:
             j = i + 1
             while j < n and values[j] == b:
                 j += 1
-            if j < n and times[j] - t < _duration_ns(ev.held, self.env(t), "held"):
+            need = need_at[max(0, bisect.bisect_right(at, t) - 1)]
+            if j < n and times[j] - t < need:
                 continue  # a bounce
             if ((kind == "rise" and not held and b) or (kind == "fall" and held and not b)
                     or (kind == "change") or (kind == "becomes" and _eq(b, ev.value))):

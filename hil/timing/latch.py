@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from hil.record import topics
+from hil.units import s32
 
 
 @dataclass
@@ -125,7 +126,10 @@ def judge(edges: list[Edge], reference: Reference, captured: list[int], *,
             continue
         true, unc = got
         cap = captured[k] if k < len(captured) else None
-        res = LatchResult(k, e.t, true, unc, cap, None if cap is None else cap - true, "pass")
+        # a drive's capture is a 32-bit register (P5.037, L11482): past ±2^31 it has wrapped
+        # where the reference counts on
+        res = LatchResult(k, e.t, true, unc, cap, None if cap is None else s32(cap - true),
+                          "pass")
         if width is not None:
             nxt = next((x for x in edges[i + 1:] if x.level != trigger_level), None)
             end = None

@@ -37,7 +37,7 @@ def param_writes_problem(spec: Any, options: Mapping[str, Any],
     writes = list(writes)
 
     def fresh() -> Drive:
-        return Drive(options=ModelOptions.from_dict(dict(options)), params=dict(params))
+        return Drive(options=model_options(options), params=dict(params))
 
     def first_refused(order: list[tuple[str, int]]) -> tuple[str, str] | None:
         d = fresh()

@@ -113,12 +113,37 @@ def test_a_servo_mode_change_keeps_the_write_position() -> None:
     assert [round(x) for x in trace(g, f, 3)] == [30000] * 3
 
 
-def test_a_tiny_acc_or_dec_is_a_slow_move_not_a_jump() -> None:
+def test_a_tiny_acc_or_dec_is_refused_and_the_least_one_is_a_slow_move() -> None:
+    """Acc 1e-300 had landed the axis on its target in one cycle, below the profile's
+    arithmetic. An Acc or Dec under PG_MIN is refused; at PG_MIN the move is slow, from where
+    the axis stands, also on the fly (a running 5000 inc/s keeps going)."""
+    from hil.drivers.axis_group import PG_MIN
+
     for par in ({0: 1e-300, 1: 1e5}, {0: 1e5, 1: 1e-300}, {0: 1e-40, 1: 1e-40}):
         g, (a, _f) = group()
-        assert command(g, a, 2, {**par, 2: 50000, 3: 200000, 5: 3}) == ""
-        w = trace(g, a, 3)
-        assert all(abs(x) < 1.0 for x in w) and not a.pg.rdy, (par, w)
+        assert "at least" in command(g, a, 2, {**par, 2: 50000, 3: 200000, 5: 3}), par
+        assert trace(g, a, 3) == [0.0] * 3
+    g, (a, _f) = group()
+    assert command(g, a, 2, {0: PG_MIN, 1: PG_MIN, 2: 50000, 3: 10**9, 5: 3}) == ""
+    w = trace(g, a, 3)
+    assert all(0 <= x < 1.0 for x in w) and not a.pg.rdy, w
+    g, (a, _f) = group()
+    assert command(g, a, 1, {0: 1e6, 2: 5000, 5: 3}) == ""
+    trace(g, a, 100)
+    assert command(g, a, 2, {0: PG_MIN, 1: 1e5, 2: 50000, 3: 10**9, 5: 3}) == ""
+    w = trace(g, a, 10)
+    assert all(abs((y - x) - 5.0) < 1e-3 for x, y in pairwise(w)), w  # on at 5000 inc/s
+
+
+def test_a_speed_run_after_a_mode_change_starts_where_the_axis_stands() -> None:
+    """COMMAND 1 on an axis put in Servo.Mode 3 with no gear set Servo.Mode 1 alone: the
+    set-point jumped by the PG's position (helper-99)."""
+    g, (a, _f) = group()
+    assert command(g, a, 2, {0: 5e5, 1: 5e5, 2: 1e5, 3: 50000, 5: 3}) == ""
+    trace(g, a, 1000)
+    a.set_mode(3)
+    assert command(g, a, 1, {0: 1e5, 2: 0, 5: 3}) == ""
+    assert trace(g, a, 3) == [50000.0] * 3
 
 
 def test_odd_command_registers_are_refused_and_nothing_moves() -> None:
@@ -136,6 +161,11 @@ def test_odd_command_registers_are_refused_and_nothing_moves() -> None:
         why = command(g, f, code, par)
         assert said in why, (code, par, why)
         assert f.write_position == 0.0 and f.pg.rdy
+    f.pg.start_speed(1000.0)
+    assert command(g, f, 5, {1: 1e6, 5: 3, 9: nan}) == ""  # an abort with an unread NaN acts
+    trace(g, f, 50)
+    assert f.pg.aspeed == 0.0
+    g, (m, f) = group()
     geared_follower(g, m, f)
     assert "Par5 -1" in command(g, f, 7, {5: -1})
     assert f.gea.mode == 1 and round(f.write_position) == 30000  # still geared

@@ -304,6 +304,9 @@ def test_drvz_without_a_zero_point_times_out_and_stops():
         with pytest.raises(TimeoutError, match="DRVZ MD0"):
             r.plc.run(prog(Step(spd=20_000, drive="MD0")), timeout_s=0.5)
         assert r.segs[-1][1]["freq"] == 0  # the pulses stopped
+        # no homing runs and none completed: a later CLR-line rise is no homing's (plc_clr
+        # judged every later Y8 rise after a failed DRVZ, helper-99)
+        assert r.plc.status.drvz == "" and not r.plc.status.homed
 
 
 # -- found by a review against seed 001 (wave 3, session 9) --------------------------------------

@@ -65,6 +65,8 @@ BAD = [
     ("{silense: manual}", "unknown silense"),
     ("{resync: 1}", "resync must be true or false"),
     ("{p3007_unit_ns: 0}", "p3007_unit_ns must be a whole number"),
+    ("{max_read_words: 128}", "max_read_words must be a whole number 1-125"),  # a byte count
+    ("{max_write_words: 124}", "max_write_words must be a whole number 1-123"),
     ("{comm_write_refused: [P9.999]}", "comm_write_refused"),
     ("{exception_codes: {}}", "unknown exception_codes"),
     ("[manual]", "modbus: a mapping"),

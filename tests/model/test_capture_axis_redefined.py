@@ -139,3 +139,22 @@ def test_after_a_power_cycle_cap_ok_is_off_and_the_counts_read_as_written() -> N
     assert d.params.read("P5.038") == 2 and d.params.read("P5.058") == 1
     d.params.write("P5.039", 0x0031)  # armed again with the count as written
     assert d.capture.running
+
+
+def test_the_masking_range_works_past_the_wrap() -> None:
+    """P1.020 masks a capture within that many pulses of the last (L8156). Past the 32-bit
+    wrap the last value is stored wrapped: the distance is taken on the 32-bit axis too
+    (helper-99: two edges 120 PUU apart were both stored)."""
+    for start in (0, I32_MAX - 1000):
+        d = make()
+        d.params.write("P5.039", 0x0010)
+        d.params.write("P5.037", start)
+        pv(d, 6.0)
+        d.params.write("P1.020", 1000)
+        d.params.write("P5.036", 0)
+        d.params.write("P5.038", 3)
+        d.params.write("P5.039", 0x0011)
+        capture_edge(d)
+        d.advance(10 * MS)
+        capture_edge(d)
+        assert len(d.capture.values) == 1, (start, d.capture.values)

@@ -155,3 +155,13 @@ def test_a_check_that_judges_nothing_does_not_pass(tmp_path) -> None:
     step = r.steps[-1]
     assert step.status == "fail", (step.status, step.message)
     assert "nothing judged" in step.message and "not applicable" in step.message
+
+
+def test_a_capture_past_the_32_bit_wrap_is_judged_on_the_32_bit_axis():
+    """The drive's capture is a 32-bit register (P5.037, L11482): past +2^31 - 1 it reads
+    -2^31 on, where the ground truth counts on. The error is the distance on that axis, not
+    2^32 (helper-99)."""
+    truth = 2**31 + 100.0
+    ref = Reference([(0, truth - 10), (2_000_000, truth + 10)], resolution=0.5)
+    [r] = judge([Edge(1_000_000, True)], ref, [-(2**31) + 100], tolerance=20)
+    assert r.status == "pass" and abs(r.error_counts) < 1, r

@@ -29,6 +29,7 @@ from hil.plan.kinds.base import StepKind
 from hil.record import topics
 from hil.timing.latch import Reference, edges_from, judge
 from hil.timing.source import RecordingSource
+from hil.units import s32
 
 if TYPE_CHECKING:
     from hil.plan.context import StepContext
@@ -115,11 +116,7 @@ def arm_capture(ctx: Any, d: Any, *, start: int, count: int, nc: int, source: in
 
 def read_array(d: Any, start: int, count: int, via: str | None) -> list[int]:
     d.write_param("P5.011", start, via)
-    return [_s32(d.read_param("P5.012", via)) for _ in range(count)]
-
-
-def _s32(x: int) -> int:
-    return x - (1 << 32) if x >= 1 << 31 else x
+    return [s32(d.read_param("P5.012", via)) for _ in range(count)]
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from hil.drivers.axis_group import (
     CAPTURE_RISING,
     CAPTURE_ZERO,
     MAGNITUDES,
+    PG_MIN,
     RAMP_TYPES,
     RATIO_MAX,
     STATUS_FAULT,
@@ -690,10 +691,10 @@ class GroupCommand(_OneAxis):
                     raise v.err(pm.kline(k), join(where, f"par.{k}"),
                                 f"{val!r}: a whole number (an index or a code, 004:244)")
                 what = dict(MAGNITUDES.get(code, ())).get(i)
-                if what is not None and val < 0:
+                if what is not None and (val < 0 or 0 < val < PG_MIN):
                     raise v.err(pm.kline(k), join(where, f"par.{k}"),
-                                f"{val!r}: PG.{what} is a maximum, not negative (004:220; 0 "
-                                "keeps the register)")
+                                f"{val!r}: PG.{what} is a maximum, 0 (keep the register) or "
+                                f"at least {PG_MIN:g} (004:220)")
                 par[i] = float(val)
         if code == 6:
             _sync_on_pars(v, m, where, par)
