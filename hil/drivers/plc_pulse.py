@@ -215,6 +215,11 @@ class AxisParams:
         if self.max_speed_pps > top:
             raise PlcError(37, f"max_speed {self.max_speed_pps:g} Ps/s above the {self.hardware}"
                                f" {self.output} output's {top} Hz (001:14)", field="max_speed")
+        creep = self.speed(self.creep_speed)  # P6 in Ps/s: a homing's creep speed may not
+        if creep > self.max_speed_pps:  # go past P4 nor the output (it had sent 65.5 MHz)
+            raise PlcError(37, f"creep_speed {self.creep_speed} ({creep:g} Ps/s) above "
+                               f"max_speed ({self.max_speed_pps:g} Ps/s, 001:14, 001:56)",
+                           field="creep_speed")
         if not 1 <= self.start_speed_pps <= self.max_speed_pps:  # 38: start/stop frequency
             raise PlcError(38, f"start_speed {self.start_speed} ({self.start_speed_pps:g} Ps/s) "
                                f"not within 1 Ps/s ~ max_speed ({self.max_speed_pps:g} Ps/s)",
@@ -368,6 +373,11 @@ class Program:
             if d.chained and not chain and d.mode == "ADR" and not d.direction:
                 raise PlcError(43, "the first DRVC's direction is + or - (the chain runs "
                                    "that way, 001:40)", step=i, field="DRVC")
+            if d.chained and (s.goto is not None or s.wait_time is not None or s.wait_line
+                              or s.act is not None or s.ext):
+                raise PlcError(34, "a DRVC step runs on into the next segment (001:40: "
+                                   "GOTO NEXT, no WAIT, ACT or EXT): its transition would be "
+                                   "ignored", step=i, field="DRVC")
             if d.chained:
                 chain += 1
                 if chain >= MAX_DRVC:
@@ -463,6 +473,8 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
     v, x = 0.0, 0.0
     bounds = list(accumulate(n for n, _ in segments))
     ends: list[float] = []  # the position at the end of each slice (each `per` ms)
+    flat: list[float | None] = []  # each slice's speed when it held one speed throughout
+    slice_v: float | None = None  # this slice's one speed so far (None: it changed)
     steps = 0  # ms planned
     i = 0
     v = min(v0, segments[0][1])
@@ -485,20 +497,30 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
             v = max(target, v - dec * dt) if math.isfinite(dec) else target
         v = max(v, min(v0, want))
         x = min(total, x + v * dt)
+        slice_v = v if steps % per == 0 else (slice_v if slice_v == v else None)
         steps += 1
         if steps % per == 0:
             ends.append(x)
+            flat.append(slice_v)
         if steps_max is None and steps > 10_000_000:  # 2.8 h of 1 ms steps: no caller's
             raise PlcError(40, "profile longer than 10000 s: give the move a time limit")
     reached = x >= total - 1e-9
     if steps % per:
         ends.append(x)  # the last, shorter slice
+        flat.append(None)
     out: list[tuple[int, int]] = []
     done = 0
+    run = 0  # ms of the stretch at one speed the slices so far belong to (floored at its end)
     for k, end in enumerate(ends):
         last = k == len(ends) - 1
-        n = (total if last and reached else math.floor(end)) - done
         dur = (steps - k * per if last else per) * MS
+        if (not last and flat[k] is not None and k + 1 < len(flat)
+                and flat[k + 1] == flat[k]):
+            run += dur  # a constant speed stays one segment at its own frequency (the
+            continue  # floor of every 10 ms slice alternated 1200/1300 Hz for SPD 1234)
+        dur += run
+        run = 0
+        n = (total if last and reached else math.floor(end)) - done
         if n <= 0:
             if out:
                 out[-1] = (out[-1][0] + dur, out[-1][1])

@@ -620,11 +620,14 @@ class PulseTrain:
     def clear_error(self) -> None:
         """CCLR: the command position becomes the feedback (L9749)."""
         d = self.d
-        if self._cruise_end and self.seg is not None:  # the cleared error takes them along
-            self._cruise_end = 0
-            taken = self.seg.pulses_at(d.now)
-            self.line_total += self.seg.direction * (taken - self._taken)
-            self._taken = taken
+        if self._cruise_end and self.seg is not None:  # the cleared error takes them along,
+            self._cruise_end = 0  # but they were received: P5.018, monitors 049 and 001 count
+            s = self.seg  # them (L11298-11305, L15483, L15441; helper-100 found them lost)
+            n = s.pulses_at(d.now) - self._taken
+            if n > 0:
+                self._taken += n
+                self.line_total += s.direction * n
+                self._count(n, s, force=True)
         self.command = self._base = d.axis.position
         self._rem = (0, 1)
         self._ma.clear()

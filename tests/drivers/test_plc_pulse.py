@@ -622,3 +622,44 @@ def test_a_profile_is_planned_no_further_than_its_limit() -> None:
     # without a limit a short move is planned whole, as before
     whole = plan_profile([(20_000, 200_000.0)], 500.0, 1e6, 1e6, 10 * MS)
     assert sum(n for _, n in whole) == 20_000
+
+
+@pytest.mark.parametrize("spd", [1234, 150, 33333])
+def test_a_constant_spd_is_one_segment_at_its_own_frequency(spd):
+    """SPD is the output frequency (001:38) and a constant speed is one segment
+    (docs/pulse.md): the 10 ms slices, each floored to whole pulses, had alternated 1200 and
+    1300 Hz for SPD 1234 (±33 % at 150). The pulses still add up exactly."""
+    from hil.drivers.plc_pulse import plan_profile
+
+    slices = plan_profile([(2 * spd, float(spd))], v0=141.0, acc=spd / 0.1, dec=spd / 0.1)
+    assert sum(n for _, n in slices) == 2 * spd
+    longest = max(slices, key=lambda s: s[0])
+    assert longest[0] >= 1_500_000_000  # most of the 2 s move
+    assert abs(longest[1] / (longest[0] / 1e9) - spd) < 1.0
+
+
+def test_a_creep_speed_above_max_speed_is_refused():
+    """P6, the homing creep speed, converts as every speed does (001:56) and may not pass
+    P4 and the output's maximum (001:14; error 37, 001:34): 65535 cm/min at 6 Ps a cm had
+    been taken and sent a 65.5 MHz train (helper-100)."""
+    with pytest.raises(PlcError) as e:
+        AxisParams(unit=0, pulses_per_rev=6, travel_per_rev=1, max_speed=200,
+                   creep_speed=65535).check()
+    assert e.value.code == 37 and "creep_speed" in str(e.value)
+    with pytest.raises(PlcError):
+        AxisParams(unit=1, max_speed=10_000, creep_speed=65535).check()
+    AxisParams(unit=1, max_speed=10_000, creep_speed=10_000).check()
+
+
+@pytest.mark.parametrize("extra", [{"goto": 3}, {"wait_time": 1.0}, {"act": 0.5},
+                                   {"ext": "X1"}, {"wait_line": "X0"}])
+def test_a_drvc_step_with_a_transition_is_refused(extra):
+    """A DRVC segment runs straight into the next (001:40: "GOTO NEXT" on each DRVC of the
+    example): a GOTO to another step or a WAIT/ACT/EXT on it had been ignored without a
+    word (helper-100)."""
+    program = prog(Step(spd=10_000, drive=Drv("ADR", "+", 1000, chained=True), **extra),
+                   Step(spd=10_000, drive=Drv("ADR", "+", 50_000)),
+                   Step(spd=10_000, drive=Drv("ADR", "+", 2000)))
+    with pytest.raises(PlcError) as e:
+        program.check(AxisParams())
+    assert e.value.code == 34 and "DRVC" in str(e.value)

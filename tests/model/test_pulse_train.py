@@ -570,3 +570,24 @@ def test_inhp_on_di8_inhibits_at_the_terminal_edge_whatever_p2009(p2009: int) ->
     d.advance(3 * MS + 500_000)
     d.pulse.stop()
     assert d.pulse.accepted == sent + d.pulse.line_total - resumed
+
+
+@pytest.mark.parametrize("at_ms", [150, 1000, 1100])
+def test_a_cclr_edge_clears_the_error_but_every_pulse_is_counted(at_ms: int) -> None:
+    """CCLR clears the accumulated position error (L15088, P2.050 L9742-9753), not the pulses
+    received: P5.018 and monitor 049 are the CN1 pulse count (L11298-11305, L15483) and
+    monitor 001 the pulses received in PT (L15441). A CCLR edge during a steady train had
+    lost 660-1720 pulses from all three (helper-100)."""
+    d = make(**{"P1.044": 1, "P1.045": 1, "P2.050": 0})
+    d.pulse.segment(10_000, 1, 0)  # continuous, 10 kHz
+    d.advance(at_ms * MS)
+    d.set_di(2, True)  # CCLR (factory DI2, P2.011 = 0x0104)
+    d.advance(10 * MS)
+    d.set_di(2, False)
+    d.advance(500 * MS)
+    line = d.pulse.seg.pulses_at(d.now)
+    d.params.write("P0.017", 49)
+    mon049 = d.params.get("P0.009")
+    d.params.write("P0.017", 1)
+    mon001 = d.params.get("P0.009")
+    assert d.params.get("P5.018") == mon049 == mon001 == line
