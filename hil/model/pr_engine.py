@@ -539,17 +539,12 @@ class PrEngine:
         return self.monitor(path.data)
 
     def monitor(self, code: int) -> int:
-        """Monitor variables of PR mode (L4178-4183): 000 Fb_PUU, 001 Cmd_O, 002 Err_PUU,
-        064 Cmd_E."""
+        """Monitor variables of PR mode (L4178-4183): 064 Cmd_E here; 000 Fb_PUU, 001 Cmd_O,
+        002 Err_PUU and the rest as every reader of them has them (`Hooks.monitors`)."""
         d = self.drive
-        ax = d.axis
-        g44, g45 = d.params.get("P1.044"), d.params.get("P1.045")
-        fb = round(counts_to_puu(ax.user_position, g44, g45))
-        cmd_o = round(counts_to_puu(ax.user_demand, g44, g45))
-        values = {0: fb, 1: cmd_o, 2: cmd_o - fb, 64: self.cmd_e}
-        if code in values:
-            return values[code]
-        part = d.hooks.monitors.get(code)  # the codes other parts model (037, 043, 038)
+        if code == 64:
+            return self.cmd_e
+        part = d.hooks.monitors.get(code)  # the codes other parts model (000-006, 037, ...)
         if part is None:
             raise PrError(f"monitor code {code} not available (AL231)", "AL231")
         return part()

@@ -778,23 +778,18 @@ def _position_monitor(d: DriveCore, pt: PulseTrain, code: int) -> int:
 
 
 #: the codes this part keeps for every reader (`Hooks.monitors`: P0.009-P0.013 and a PR
-#: WRITE's monitor source alike); 000-002 stay P0.009's own, PR mode has its own (pr_engine)
-SHARED_MONITORS = (3, 4, 5, 6, 49)
+#: WRITE's monitor source alike, L4178-4183)
+SHARED_MONITORS = (0, 1, 2, 3, 4, 5, 6, 49)
 
 
 def _monitor(d: DriveCore, pt: PulseTrain, select: str, stored: Callable[[], int]
              ) -> Callable[[], int]:
     """P0.009-P0.013 read the monitor code their P0.017-P0.021 select (L7147-7237): the codes
-    parts register (`Hooks.monitors`: 003-006 and 049 here, 038 the battery, ...), 000-002;
-    other codes keep the stored value (not modelled)."""
+    parts register (`Hooks.monitors`: 000-006 and 049 here, 038 the battery, ...); other
+    codes keep the stored value (not modelled)."""
     def read() -> int:
-        code = d.params.get(select)
-        part = d.hooks.monitors.get(code)
-        if part is not None:
-            return part()
-        if code > 2:
-            return stored()
-        return _position_monitor(d, pt, code)
+        part = d.hooks.monitors.get(d.params.get(select))
+        return part() if part is not None else stored()
     return read
 
 
