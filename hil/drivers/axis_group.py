@@ -161,6 +161,13 @@ class Pg:
                 mid = (lo + hi) / 2
                 lo, hi = (mid, hi) if dist_at(mid) <= d else (lo, mid)
             v = lo
+            if v <= v0s and d > 0 and self.acc > 0 and self.dec > 0:
+                # below the search's resolution (PosSpeed 1e20 over Acc 0.001): the root of
+                # dist_at(v) = d, a quadratic; v = 0 would land on the target in one cycle
+                a = ka / self.acc + (1.0 - kd) / self.dec
+                b = v0s * (1.0 - 2.0 * ka) / self.acc
+                c = v0s * v0s * (ka - 1.0) / self.acc - d
+                v = max(v0s, (-b + math.sqrt(max(0.0, b * b - 4.0 * a * c))) / (2.0 * a))
         ta = (v - v0s) / self.acc if self.acc > 0 else 0.0
         td = v / self.dec if self.dec > 0 else 0.0
         cruise = (d - dist_at(v)) / v if v > 0 else 0.0
@@ -411,9 +418,9 @@ class SdoInterface:
                 download(self.index, self.sub, raw)
             else:
                 raw = upload(self.index, self.sub)
-                if len(raw) != self.number_byte:  # not the object's size: no value read
-                    raise _SdoLength()
-                self.data = int.from_bytes(raw, "little")
+                if len(raw) > self.number_byte:  # more than NumberByte: no value cut short
+                    raise _SdoLength()  # (a smaller object reads whole: the seed's own
+                self.data = int.from_bytes(raw, "little")  # example, 6060h in 2 bytes)
             self.status = 0
         except Exception as e:
             self.status = 2

@@ -496,8 +496,10 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
         elif v > target:
             v = max(target, v - dec * dt) if math.isfinite(dec) else target
         v = max(v, min(v0, want))
+        short = x + v * dt > total  # the last step, cut short: not a whole ms at `v`
         x = min(total, x + v * dt)
-        slice_v = v if steps % per == 0 else (slice_v if slice_v == v else None)
+        slice_v = None if short else v if steps % per == 0 else (
+            slice_v if slice_v == v else None)
         steps += 1
         if steps % per == 0:
             ends.append(x)
@@ -510,6 +512,7 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
         flat.append(None)
     out: list[tuple[int, int]] = []
     done = 0
+    lead = 0  # the time of leading slices without a whole pulse: the first segment's
     run = 0  # ms of the stretch at one speed the slices so far belong to (floored at its end)
     for k, end in enumerate(ends):
         last = k == len(ends) - 1
@@ -524,7 +527,11 @@ def plan_profile(segments: list[tuple[int, float]], v0: float, acc: float, dec: 
         if n <= 0:
             if out:
                 out[-1] = (out[-1][0] + dur, out[-1][1])
+            else:
+                lead += dur  # (they had been dropped: the move ran shorter than planned)
             continue
+        dur += lead
+        lead = 0
         done += n
         if out and out[-1][1] * dur == n * out[-1][0]:  # same speed: one segment
             out[-1] = (out[-1][0] + dur, out[-1][1] + n)

@@ -246,6 +246,8 @@ def encode(
 ) -> tuple[int, int]:
     """(definition, data) words of a PR given by field names (the inverse of `decode`)."""
     t = _type_of(type_)
+    if not isinstance(data, int) or isinstance(data, bool):  # a whole word (1.5 was written)
+        raise TypeError(f"data {data!r}: an integer (a 32-bit word)")
     if not -(1 << 31) <= data <= 0xFFFFFFFF:  # one 32-bit data word (P6.003 ..., L4440)
         raise PrError(f"data {data}: a 32-bit word, -2147483648..4294967295")
     y = int(ins)

@@ -599,7 +599,11 @@ class Context:
             j = i + 1
             while j < n and values[j] == b:
                 j += 1
-            need = need_at[max(0, bisect.bisect_right(at, t) - 1)]
+            k = bisect.bisect_right(at, t) - 1
+            # before a parameter's first record: as the window rules read it then (a value
+            # first written later does not cover the time before it: cannot judge)
+            need = (need_at[k] if k >= 0
+                    else _duration_ns(ev.held, self.env(t, consts), "held"))
             if j < n and times[j] - t < need:
                 continue  # a bounce
             if ((kind == "rise" and not held and b) or (kind == "fall" and held and not b)

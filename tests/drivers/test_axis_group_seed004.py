@@ -127,6 +127,10 @@ def test_a_tiny_acc_or_dec_is_refused_and_the_least_one_is_a_slow_move() -> None
     assert command(g, a, 2, {0: PG_MIN, 1: PG_MIN, 2: 50000, 3: 10**9, 5: 3}) == ""
     w = trace(g, a, 3)
     assert all(0 <= x < 1.0 for x in w) and not a.pg.rdy, w
+    g, (a, _f) = group()  # PosSpeed 1e15 over the least Acc: below the search's resolution
+    assert command(g, a, 2, {0: PG_MIN, 1: PG_MIN, 2: 1e15, 3: 1000, 5: 3}) == ""
+    w = trace(g, a, 3)
+    assert all(0 <= x < 1.0 for x in w) and not a.pg.rdy, w  # it had landed at once
     g, (a, _f) = group()
     assert command(g, a, 1, {0: 1e6, 2: 5000, 5: 3}) == ""
     trace(g, a, 100)
@@ -173,9 +177,9 @@ def test_odd_command_registers_are_refused_and_nothing_moves() -> None:
 
 def test_sdo_numberbyte_is_the_objects_size() -> None:
     """NumberByte is 1-4, the size of the object (004:248-250): another count is refused
-    with Status 2 and nothing is sent; a read whose object is of another size gives Status 2
-    (CiA 301 0607 0010h, length does not match), not the value cut to NumberByte bytes
-    (123456 read in 2 bytes had reported 57920 with Status 0)."""
+    with Status 2 and nothing is sent; a read of an object longer than NumberByte gives Status
+    2 (CiA 301 0607 0010h, length does not match), not the value cut to NumberByte bytes
+    (123456 read in 2 bytes had reported 57920 with Status 0); a shorter one reads whole."""
     from hil.drivers.axis_group import SDO_LENGTH_MISMATCH, SdoInterface
 
     sent: list = []
@@ -187,6 +191,10 @@ def test_sdo_numberbyte_is_the_objects_size() -> None:
     sdo = SdoInterface(control=2, number_byte=2, index=0x607A, sub=0)
     sdo.execute(lambda i, s: obj[(i, s)], lambda i, s, raw: None)
     assert (sdo.status, sdo.data) == (2, SDO_LENGTH_MISMATCH)
+    # the seed's own read: 6060h, one byte, with NumberByte 2 (004:250)
+    sdo = SdoInterface(control=2, number_byte=2, index=0x6060, sub=0)
+    sdo.execute(lambda i, s: b"\x07", lambda i, s, raw: None)
+    assert (sdo.status, sdo.data) == (0, 7)
     sdo = SdoInterface(control=2, number_byte=4, index=0x607A, sub=0)
     sdo.execute(lambda i, s: obj[(i, s)], lambda i, s, raw: None)
     assert (sdo.status, sdo.data) == (0, 123456)

@@ -4,6 +4,7 @@ seed, against the virtual drive on its own pulse line in virtual time (hil.clock
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 
 import pytest
@@ -663,3 +664,27 @@ def test_a_drvc_step_with_a_transition_is_refused(extra):
     with pytest.raises(PlcError) as e:
         program.check(AxisParams())
     assert e.value.code == 34 and "DRVC" in str(e.value)
+
+
+def test_a_move_ending_on_a_slice_boundary_keeps_its_speed_to_the_last_whole_ms():
+    """The last 1 ms step of a move is cut short: it is no ms at the constant speed, so the
+    stretch before it stays at SPD (1901 Ps at 100 kHz with no slope had become one 20 ms
+    segment at 95.05 kHz, helper-101). The pulses and the time are as before."""
+    from hil.drivers.plc_pulse import plan_profile
+
+    slices = plan_profile([(1901, 100_000.0)], v0=100_000.0, acc=math.inf, dec=math.inf)
+    assert sum(n for _, n in slices) == 1901
+    assert slices[0] == (10 * MS, 1000)  # 100 kHz
+    assert sum(t for t, _ in slices) == 20 * MS
+
+
+def test_leading_slices_without_a_whole_pulse_keep_their_time():
+    """5 Ps from 1 Hz at 10 Ps/s²: the first slices carry no whole pulse; their time belongs
+    to the first segment (it had been dropped: 875 ms of a 1225 ms move, helper-101)."""
+    from hil.drivers.plc_pulse import plan_profile
+
+    slices = plan_profile([(5, 100.0)], v0=1.0, acc=10.0, dec=10.0)
+    assert sum(n for _, n in slices) == 5
+    # a triangle from 1 Hz and back: 5 = 2 (v² - 1) / (2 x 10), v = sqrt(51), 2 (v - 1) / 10 s
+    t = 2 * (math.sqrt(51.0) - 1.0) / 10.0
+    assert abs(sum(d for d, _ in slices) / S - t) < 0.015

@@ -130,3 +130,23 @@ def test_history_and_error_objects(table, ptable) -> None:
     assert mgr2.error_register & 0x01
     mgr2.raise_alarm("AL001")  # 0x2310 current
     assert mgr2.error_register & 0x02
+
+
+def test_an_alarm_reset_request_is_an_event_with_its_source():
+    """ARST, P0.001 := 0 and a 6040h fault reset are the resets L20199 names for AL500: each
+    is recorded as an AlarmReset event with its source, for the specs (sto.yaml); a CANopen
+    NMT reset, which clears only its own alarms, is none."""
+    from hil.model.drive import Drive
+    from hil.model.events import AlarmReset
+    from hil.units import MS
+
+    d = Drive(inputs={8: True})
+    seen: list = []
+    d.subscribe(lambda e: isinstance(e, AlarmReset) and seen.append(e.source))
+    d.params.write("P0.001", 0)
+    d.write_object(0x6040, 0, 0x00)
+    d.write_object(0x6040, 0, 0x80)
+    d.set_di(5, True)  # ARST (factory DI5)
+    d.advance(10 * MS)
+    d.alarms.reset("nmt")
+    assert seen == ["p0001", "6040h", "di"]

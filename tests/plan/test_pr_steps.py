@@ -42,3 +42,14 @@ def test_driver_writes_reads_back_triggers_and_waits() -> None:
     assert pr.status() == (4, "in_position")
     with pytest.raises(PrTableError, match="L4451"):
         pr.write_table({1: {"type": "speed", "data": 70000}})
+
+
+@pytest.mark.parametrize("data", [1.5, 100000.0, True])
+def test_a_pr_data_word_that_is_not_an_integer_is_refused(data):
+    """A PR's data is one 32-bit word (L4440): 1.5 had been written to P6.003 as it was
+    (helper-101); only whole numbers are words."""
+    from hil.drivers.delta_pr import PrTableError, table_words
+
+    with pytest.raises(PrTableError, match="an integer"):
+        table_words({1: {"type": "auto", "data": data, "spd": 4, "dly": 1}})
+    assert table_words({1: {"type": "auto", "data": 100000, "spd": 4, "dly": 1}})

@@ -303,3 +303,17 @@ def test_emgs_fails_a_drive_that_turns_the_servo_on_while_emgs_is_active():
                                                 binding=BIND)}
     v = verdicts["servo stays off while EMGS is active"]
     assert v.status == "fail", v.message
+
+
+def test_a_held_edge_before_its_parameter_is_known_cannot_be_judged():
+    """docs/timing.md: a first value from a plain write does not cover the time before it.
+    A `held: "P2.009"` edge before P2.009's first record is not taken for a bounce on the
+    strength of the later value (it had passed: helper-101); it cannot be judged."""
+    from hil.timing.source import ParamTimeline
+
+    spec = loads_spec(DEBOUNCED.replace("held: 2}", 'held: "P2.009"}'))
+    src = MemorySource({dio("DI3"): levels((0, False), (100, True), (105, False),
+                                           (200, True), (300, False), (2000, False))})
+    late = ParamTimeline([(1000 * MS, {"P2.009": 10})])
+    statuses = {v.status for v in check(spec, src, params=late, binding=BIND)}
+    assert "pass" not in statuses and statuses & {"inconclusive", "skipped"}, statuses
