@@ -652,10 +652,12 @@ class AbsoluteEncoder:
         if self.bit < FRAME_BITS:
             self.state = READY
             return
-        self.state = DONE  # 80 bits sent; pins return to their functions (L16519)
+        # 80 bits sent: the exchange is complete when the host has seen this last ABSR off,
+        # so the pins return to their functions when it ends the cycle, ABSE off (L16519,
+        # `_end_handshake`). At once, a DO2 whose own function is on (ZSPD, the factory)
+        # hid the last ABSR off and the reader never finished (helper-102)
+        self.state = DONE
         self._output("ABSD", False)
-        self._overlay = False
-        self._set_overlay(False)
 
     def _violation(self, reason: str) -> None:
         """ABSW + AL068, handshake aborted until ABSE goes off (L16513-16517, L19787-19790)."""

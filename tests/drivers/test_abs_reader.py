@@ -198,6 +198,10 @@ def test_read_pulse_unit(counts, turns, pulses):
     assert len(r.timings) == 80
     t0 = r.timings[0]
     assert t0.t_q_ns == 6 * MS and t0.t_n_ns == 6 * MS  # P2.009 + 4 ms (L16495-16499)
+    # the pins go back when the drive sees ABSE off, the end of the cycle (L16519): ABSR
+    # stays the pin's until then, so the last ABSR off shows whatever DO2's own function is
+    assert b.overlay and not b.lines.get("DO2")
+    b.advance_to(b.sched.now + 3 * MS)  # ABSE off through the P2.009 filter (2 ms)
     assert not b.overlay and not b.lines.get("DO2")  # pins back, ABSE dropped
 
 

@@ -475,7 +475,11 @@ def test_handshake_sends_the_frame_and_restores_the_pins():
     r.enc.on_motor_position(-5 * REV + 1234)
     _start_read(r)
     bits = [_one_bit(r) for _ in range(FRAME_BITS)]
-    assert r.enc.state == DONE and not r.overlay  # L16519
+    # the 80th ABSR off is shown on the pin; the pins are the DIs'/DOs' again once the host
+    # ends the cycle, ABSE off (L16519)
+    assert r.enc.state == DONE and r.overlay and not r.outputs["ABSR"]
+    r.enc.on_abse(False)
+    assert not r.overlay
     frame = sum(b << i for i, b in enumerate(bits))
     assert split_frame(frame)[:3] == (0, -5, 1234)
     assert frame == r.enc.last_frame

@@ -187,3 +187,32 @@ def test_a_host_that_requests_before_t_s_max_fails_the_host_rule(tmp_path: Path)
     got = verdicts(path, "abs_handshake")
     assert "fail" in got["host waits T_S before the first request"], got  # the first request
     assert set(got["T_Q - ABSR on after each request"]) == {"pass"}  # the drive is right
+
+
+def test_a_read_works_with_do2_at_its_factory_function(tmp_path: Path) -> None:
+    """DI4/DO2/DO3 keep their own functions outside the exchange (L16504: mapping them to 0 is
+    a simplification, 「若要單純一點」). With DO2 = ZSPD, on at rest, the last bit's ABSR off
+    (L16508) must still show: the pins go back only when the exchange ends (L16519). They
+    went back at that very instant, DO2 stayed on, and the reader never finished (helper-102)."""
+    params = ABS_PARAMS | {"P2.019": 0x0103}  # DO2 = ZSPD (factory)
+    path = tmp_path / "run.mcap"
+    drive = Drive(inputs={8: True}, params=params)
+    with Recorder(path) as rec:
+        tap = ModelTap(drive, rec)
+        lines = ModelLines(now=lambda: drive.now, advance_to=lambda t: tap.advance(t - drive.now),
+                           write=lambda line, level: tap.set_di(int(line[2:]), level),
+                           read=lambda line: drive.do(int(line[2:])),
+                           next_deadline=drive.sched.next_deadline)
+        reader = AbsPositionReader(lines, abse="DI2", absc="DI3", absw="DO4", clock=lines.clock)
+        tap.advance(20 * MS)
+        reader.set_origin()
+        drive.axis.set_user_position(0.0)
+        drive.axis.position = drive.axis.last_position = float(3 * REV + 1234)
+        tap.advance(5 * MS)
+        assert drive.do(2)  # ZSPD: the motor at rest
+        r = reader.read()
+        tap.advance(20 * MS)
+        assert drive.do(2)  # DO2 is ZSPD's again after the cycle
+        tap.close()
+    assert (r.status, r.turns, r.position, r.attempts) == (0, 3, 1234, 1)
+    # (abs_handshake reads ABSR on the DO2 line and asks for DO2 idle low: not judged here)
