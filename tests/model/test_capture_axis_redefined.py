@@ -47,15 +47,23 @@ def capture_edge(d: Drive) -> None:
     d.advance(1 * MS)
 
 
-def test_a_first_point_reset_over_a_pending_point_does_not_fire_it() -> None:
+def reset_run(start: int, reset: int) -> Drive:
+    """The capture axis on CN5 at `start`, a COMPARE point at 20000 on it, the axis moving
+    forward at 10000 PUU/s, and CAPTURE armed with bit1: its first point resets the axis to
+    P5.076 = `reset` (L5157)."""
     d = make()
     d.params.write("P5.039", 0x0010)  # capture axis CN5, stopped
-    d.params.write("P5.037", 40000)
+    d.params.write("P5.037", start)
     compare_on_capture_axis(d, 20000)
-    pv(d, 6.0)  # forward, slowly: 10000 PUU/s
-    d.params.write("P5.076", 0)
+    pv(d, 6.0)
+    d.params.write("P5.076", reset)
     d.params.write("P5.038", 1)
-    d.params.write("P5.039", 0x0013)  # bit1: the first point resets the axis to P5.076
+    d.params.write("P5.039", 0x0013)
+    return d
+
+
+def test_a_first_point_reset_over_a_pending_point_does_not_fire_it() -> None:
+    d = reset_run(40000, 0)
     before = d.params.read("P5.037")
     capture_edge(d)
     after = d.params.read("P5.037")
@@ -66,14 +74,7 @@ def test_a_first_point_reset_over_a_pending_point_does_not_fire_it() -> None:
 
 
 def test_a_first_point_reset_up_over_a_pending_point_does_not_fire_it() -> None:
-    d = make()
-    d.params.write("P5.039", 0x0010)
-    d.params.write("P5.037", 0)
-    compare_on_capture_axis(d, 20000)
-    pv(d, 6.0)
-    d.params.write("P5.076", 50000)
-    d.params.write("P5.038", 1)
-    d.params.write("P5.039", 0x0013)
+    d = reset_run(0, 50000)
     capture_edge(d)
     assert 50000 <= d.params.read("P5.037") < 50100
     d.advance(500 * MS)

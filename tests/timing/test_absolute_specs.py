@@ -11,6 +11,7 @@ idle (L16504). DI9 is wired to the bench's home cam, so ABSE/ABSC are not put th
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import pytest
@@ -85,6 +86,23 @@ def run(tmp_path: Path, absolute: dict | None = None, late_bit: int | None = Non
     return path, result
 
 
+@contextlib.contextmanager
+def reader_rig(path: Path, params: dict | None = None):
+    """A recorded model drive on the absolute bench and the project's reader on its lines:
+    yields (drive, tap, reader); the recording is closed on leaving."""
+    drive = Drive(inputs={8: True}, params=params or ABS_PARAMS)
+    with Recorder(path) as rec:
+        tap = ModelTap(drive, rec)
+        lines = ModelLines(now=lambda: drive.now, advance_to=lambda t: tap.advance(t - drive.now),
+                           write=lambda line, level: tap.set_di(int(line[2:]), level),
+                           read=lambda line: drive.do(int(line[2:])),
+                           next_deadline=drive.sched.next_deadline)
+        reader = AbsPositionReader(lines, abse="DI2", absc="DI3", absw="DO4", clock=lines.clock)
+        tap.advance(20 * MS)
+        yield drive, tap, reader
+        tap.close()
+
+
 def verdicts(path: Path, spec_id: str) -> dict[str, dict[str, str]]:
     spec = load_spec(fixture("timing", f"{spec_id}.yaml"))
     out: dict[str, dict[str, str]] = {}
@@ -142,15 +160,7 @@ def test_absw_of_a_warning_is_not_judged_as_a_handshake_abort(tmp_path: Path) ->
     one holds (L16521): a read tried under AL06A (no origin yet) leaves it on. The spec had
     judged every ABSW rise as the abort of a late host and failed the drive (helper-96 F2)."""
     path = tmp_path / "run.mcap"
-    drive = Drive(inputs={8: True}, params=ABS_PARAMS)
-    with Recorder(path) as rec:
-        tap = ModelTap(drive, rec)
-        lines = ModelLines(now=lambda: drive.now, advance_to=lambda t: tap.advance(t - drive.now),
-                           write=lambda line, level: tap.set_di(int(line[2:]), level),
-                           read=lambda line: drive.do(int(line[2:])),
-                           next_deadline=drive.sched.next_deadline)
-        reader = AbsPositionReader(lines, abse="DI2", absc="DI3", absw="DO4", clock=lines.clock)
-        tap.advance(20 * MS)
+    with reader_rig(path) as (drive, tap, reader):
         drive.power_cycle(off_for=100 * MS)  # ABSW falls and rises again on the record
         tap.advance(50 * MS)
         assert "AL06A" in drive.alarms.active and drive.do(4)  # ABSW for the warning
@@ -158,7 +168,6 @@ def test_absw_of_a_warning_is_not_judged_as_a_handshake_abort(tmp_path: Path) ->
             reader.read()
         tap.advance(20 * MS)
         assert drive.do(4)  # still on: the warning holds (L16521)
-        tap.close()
     got = verdicts(path, "abs_handshake")
     bad = {n: s for n, s in got.items() if set(s) - {"pass", "skipped"}}
     assert not bad, bad
@@ -169,21 +178,12 @@ def test_a_host_that_requests_before_t_s_max_fails_the_host_rule(tmp_path: Path)
     and a host cannot see it: it waits the longest. A host asking at P2.009 + 5 ms happens to
     meet this drive's +4 ms switch, and the rule had let it pass (helper-96 F5)."""
     path = tmp_path / "run.mcap"
-    drive = Drive(inputs={8: True}, params=ABS_PARAMS)
-    with Recorder(path) as rec:
-        tap = ModelTap(drive, rec)
-        lines = ModelLines(now=lambda: drive.now, advance_to=lambda t: tap.advance(t - drive.now),
-                           write=lambda line, level: tap.set_di(int(line[2:]), level),
-                           read=lambda line: drive.do(int(line[2:])),
-                           next_deadline=drive.sched.next_deadline)
-        reader = AbsPositionReader(lines, abse="DI2", absc="DI3", absw="DO4", clock=lines.clock)
-        tap.advance(20 * MS)
+    with reader_rig(path) as (drive, tap, reader):
         reader.set_origin()
         tap.advance(5 * MS)
         reader.t_max_ms = drive.params.get("P2.009") + 5  # its T_S wait, and its timeouts
         assert reader.read().status == 0
         tap.advance(20 * MS)
-        tap.close()
     got = verdicts(path, "abs_handshake")
     assert "fail" in got["host waits T_S before the first request"], got  # the first request
     assert set(got["T_Q - ABSR on after each request"]) == {"pass"}  # the drive is right
@@ -196,15 +196,7 @@ def test_a_read_works_with_do2_at_its_factory_function(tmp_path: Path) -> None:
     went back at that very instant, DO2 stayed on, and the reader never finished (helper-102)."""
     params = ABS_PARAMS | {"P2.019": 0x0103}  # DO2 = ZSPD (factory)
     path = tmp_path / "run.mcap"
-    drive = Drive(inputs={8: True}, params=params)
-    with Recorder(path) as rec:
-        tap = ModelTap(drive, rec)
-        lines = ModelLines(now=lambda: drive.now, advance_to=lambda t: tap.advance(t - drive.now),
-                           write=lambda line, level: tap.set_di(int(line[2:]), level),
-                           read=lambda line: drive.do(int(line[2:])),
-                           next_deadline=drive.sched.next_deadline)
-        reader = AbsPositionReader(lines, abse="DI2", absc="DI3", absw="DO4", clock=lines.clock)
-        tap.advance(20 * MS)
+    with reader_rig(path, params) as (drive, tap, reader):
         reader.set_origin()
         drive.axis.set_user_position(0.0)
         drive.axis.position = drive.axis.last_position = float(3 * REV + 1234)
@@ -213,6 +205,5 @@ def test_a_read_works_with_do2_at_its_factory_function(tmp_path: Path) -> None:
         r = reader.read()
         tap.advance(20 * MS)
         assert drive.do(2)  # DO2 is ZSPD's again after the cycle
-        tap.close()
     assert (r.status, r.turns, r.position, r.attempts) == (0, 3, 1234, 1)
     # (abs_handshake reads ABSR on the DO2 line and asks for DO2 idle low: not judged here)

@@ -79,42 +79,30 @@ def son_bounce_then_on(tap: ModelTap) -> None:
     """SON bounces shorter than the P2.009 filter (2 ms), which pass nothing (L9229-9236), then
     a real SON. servo_on_brake took each bounce for a servo-on and failed the drive
     (helper-96 F7; the fault_di_bounce plan's recording under `hil check`)."""
-    for _ in range(3):
-        tap.set_di(1, True)
-        tap.advance(1 * MS)
-        tap.set_di(1, False)
-        tap.advance(1 * MS)
+    di_steps(tap, *[(1, level, 1) for _ in range(3) for level in (True, False)])
     servo_on(tap)
+
+
+def di_steps(tap: ModelTap, *steps: tuple[int, bool, float]) -> None:
+    """Each (DI n, level, ms): set the terminal, then let the drive run that long."""
+    for n, level, ms in steps:
+        tap.set_di(n, level)
+        tap.advance(round(ms * MS))
 
 
 def son_held_under_a_long_emgs(tap: ModelTap) -> None:
     """SON closes while EMGS holds the servo off (AL013, L19338) and stays closed 1.5 s until
     EMGS is released: the servo comes on then, and BRKR P1.042 after it (L8499). The brake
     rule looked for the servo-on only 1 s after SON and failed the drive (helper-96 F7)."""
-    tap.set_di(8, False)
-    tap.advance(50 * MS)
-    tap.set_di(1, True)
-    tap.advance(1500 * MS)
-    tap.set_di(8, True)
-    tap.advance(400 * MS)
+    di_steps(tap, (8, False, 50), (1, True, 1500), (8, True, 400))
 
 
 def emgs_bounce_then_stop(tap: ModelTap) -> None:
     """EMGS (b-contact DI8) opens for 1 ms, under the 2 ms filter: no AL013 (L9229-9236).
     Then a real EMGS and its release, the release bouncing too."""
     servo_on(tap)
-    tap.set_di(8, False)
-    tap.advance(1 * MS)
-    tap.set_di(8, True)
-    tap.advance(50 * MS)
-    tap.set_di(8, False)
-    tap.advance(300 * MS)
-    tap.set_di(8, True)
-    tap.advance(1 * MS)
-    tap.set_di(8, False)
-    tap.advance(5 * MS)
-    tap.set_di(8, True)
-    tap.advance(100 * MS)
+    di_steps(tap, (8, False, 1), (8, True, 50), (8, False, 300), (8, True, 1), (8, False, 5),
+             (8, True, 100))
 
 
 def servo_off_moving(tap: ModelTap) -> None:
@@ -126,7 +114,8 @@ def servo_off_moving(tap: ModelTap) -> None:
     tap.advance(1500 * MS)
 
 
-def sto_both(tap: ModelTap) -> None:
+def both_lost_and_back(tap: ModelTap) -> None:
+    """Servo on, both STO channels lost for 30 ms (AL500 at 10 ms), both back."""
     tap.set_di(1, True)
     tap.advance(200 * MS)
     tap.set_sto("A", False)
@@ -135,6 +124,10 @@ def sto_both(tap: ModelTap) -> None:
     tap.set_sto("A", True)
     tap.set_sto("B", True)
     tap.advance(20 * MS)
+
+
+def sto_both(tap: ModelTap) -> None:
+    both_lost_and_back(tap)
     tap.set_di(5, True)  # ARST rising edge clears AL500 (L2493)
     tap.advance(20 * MS)
     tap.set_di(5, False)
@@ -144,14 +137,7 @@ def sto_both_cleared_by_p0001(tap: ModelTap) -> None:
     """AL500, both channels back, then P0.001 := 0 clears it (L20199: ARST, P0.001 or a
     6040h fault reset). The spec had waited for ARST alone and failed the drive (helper-96
     F3)."""
-    tap.set_di(1, True)
-    tap.advance(200 * MS)
-    tap.set_sto("A", False)
-    tap.set_sto("B", False)
-    tap.advance(30 * MS)
-    tap.set_sto("A", True)
-    tap.set_sto("B", True)
-    tap.advance(20 * MS)
+    both_lost_and_back(tap)
     tap.drive.params.write("P0.001", 0)
     tap.advance(50 * MS)
     assert "AL500" not in tap.drive.alarms.active
