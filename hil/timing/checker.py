@@ -588,7 +588,7 @@ class Context:
         # thresholds are: `_thresholds`), not at every change of the signal
         params, consts = self._reads([ev.held])
         at = self.params.change_times(params) or [0]
-        need_at = [_duration_ns(ev.held, self.env(c, consts), "held") for c in at]
+        need_at: list[int | None] = [None] * len(at)  # worked out when an edge needs it
         held = values[0]  # what the filter passes
         n = len(times)
         for i in range(1, n):
@@ -600,10 +600,13 @@ class Context:
             while j < n and values[j] == b:
                 j += 1
             k = bisect.bisect_right(at, t) - 1
-            # before a parameter's first record: as the window rules read it then (a value
-            # first written later does not cover the time before it: cannot judge)
-            need = (need_at[k] if k >= 0
-                    else _duration_ns(ev.held, self.env(t, consts), "held"))
+            if k < 0:  # before a parameter's first record: as the window rules read it then
+                # (a value first written later does not cover the time before it: cannot judge)
+                need = _duration_ns(ev.held, self.env(t, consts), "held")
+            else:
+                if need_at[k] is None:
+                    need_at[k] = _duration_ns(ev.held, self.env(at[k], consts), "held")
+                need = need_at[k]
             if j < n and times[j] - t < need:
                 continue  # a bounce
             if ((kind == "rise" and not held and b) or (kind == "fall" and held and not b)
