@@ -28,7 +28,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
-from typing import Any, Literal, Protocol
+from typing import Any, Literal, Protocol, get_args, get_origin, get_type_hints
 
 from hil.faces.last_resort import LastResort
 from hil.model import errors
@@ -102,31 +102,35 @@ class ModbusFaceOptions:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> ModbusFaceOptions:
-        """From a bench file's `options.extra.modbus` mapping: each choice checked by its type
-        (`exception_codes` stays a Python-only field: its keys are exception classes)."""
+        """From a bench file's `options.extra.modbus` mapping, each choice checked by its
+        field: a `Literal` one of its values, a flag true/false, a count a whole number up to
+        its limit, `comm_write_refused` parameter names (`exception_codes` stays a
+        Python-only field: its keys are exception classes)."""
         data = dict(data or {})
-        choices = {"silence": ("t3.5", "manual"), "broadcast": ("execute", "ignore"),
-                   "auto_reply_station": ("own", "echo")}
-        limits = {"p3007_unit_ns": 10**9, "max_read_words": 125, "max_write_words": 123}
+        hints = get_type_hints(cls)
+        defaults = cls()
+        # a 03h reply holds 125 words, a 10h request 123 (one byte counts the bytes)
+        limits = {"max_read_words": 125, "max_write_words": 123}
         known = {f.name for f in fields(cls)} - {"exception_codes"}
         bad = sorted(set(data) - known)
         if bad:
             raise ValueError(f"modbus options: unknown {', '.join(map(str, bad))}; known: "
                              f"{', '.join(sorted(known))}")
         for k, v in data.items():
-            if k in choices:
-                if v not in choices[k]:
+            default = getattr(defaults, k)
+            if get_origin(hints[k]) is Literal:
+                if v not in get_args(hints[k]):
                     raise ValueError(f"modbus options: {k} must be one of "
-                                     f"{', '.join(choices[k])}, not {v!r}")
-            elif k in ("fixed_t35_above_19200", "enforce_t15", "resync"):
+                                     f"{', '.join(get_args(hints[k]))}, not {v!r}")
+            elif type(default) is bool:
                 if type(v) is not bool:
                     raise ValueError(f"modbus options: {k} must be true or false, not {v!r}")
-            elif k in limits:  # a 03h reply holds 125 words, a 10h request 123 (one byte
-                top = limits[k]  # counts the bytes); P3.007's unit in ns
+            elif type(default) is int:
+                top = limits.get(k, 10**9)
                 if type(v) is not int or not 0 < v <= top:
                     raise ValueError(f"modbus options: {k} must be a whole number 1-{top}, "
                                      f"not {v!r}")
-            elif k == "comm_write_refused":
+            else:  # comm_write_refused
                 if not isinstance(v, list | tuple) or not all(type(n) is str for n in v):
                     raise ValueError(f"modbus options: {k} must be a list of parameter "
                                      f"names, not {v!r}")

@@ -270,7 +270,7 @@ def _check_extra(extra: Any, where: str,
     """`extra:` holds the options of other rooms, each checked by its own options class
     (a wrong one failed the run with a bare TypeError, a misspelled room was ignored).
     `faces`: the rooms of the drive's faces, which the model does not import (the virtual
-    world's `hil.virtual.rules.FACE_ROOMS`); without them such a room is unknown."""
+    world's `hil.virtual.options.FACE_ROOMS`); without them such a room is unknown."""
     from hil.model.absolute import AbsoluteOptions
     from hil.model.capture import CaptureOptions
     from hil.model.cia402 import Cia402Options

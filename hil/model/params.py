@@ -143,10 +143,7 @@ class ParameterStore:
         power cycle, as a RAM-only write's does."""
         spec = self.table.spec(name)
         value = int(value)
-        if ram_only:
-            self._eeprom.setdefault(spec.param, self._stored[spec.param])
-        elif self._eeprom:
-            self._eeprom.pop(spec.param, None)
+        self._note_eeprom(spec.param, ram_only)
         old = self._stored[spec.param]
         self._stored[spec.param] = value
         self._effective[spec.param] = value
@@ -334,12 +331,17 @@ class ParameterStore:
             self._stored[spec.param] = spec.default
             self._effective[spec.param] = spec.default
 
-    def _commit(self, spec: ParamSpec, value: int, ram_only: bool = False) -> None:
-        key = spec.param
+    def _note_eeprom(self, key: str, ram_only: bool) -> None:
+        """Before `key` changes: a RAM-only value keeps the EEPROM's to come back to at the
+        next power cycle; any other write goes to EEPROM too."""
         if ram_only:
             self._eeprom.setdefault(key, self._stored[key])
         elif self._eeprom:
-            self._eeprom.pop(key, None)  # any other write goes to EEPROM too
+            self._eeprom.pop(key, None)
+
+    def _commit(self, spec: ParamSpec, value: int, ram_only: bool = False) -> None:
+        key = spec.param
+        self._note_eeprom(key, ram_only)
         old = self._stored[key]
         self._stored[key] = value
         if not spec.power_cycle:
