@@ -33,6 +33,9 @@ class AlarmOptions:
 
 
 POWER_CYCLE_KEEPS = frozenset({"AL3F1"})
+# "reset" alarms an NMT reset clears as well: AL401's remedy is an NMT reset or a 6040h reset
+# (L20186), its clear row an alarm reset (L20187)
+NMT_ALSO_CLEARS = frozenset({"AL401"})
 
 
 class AlarmManager:
@@ -78,7 +81,7 @@ class AlarmManager:
         WARN; of one class the first raised (only a higher priority overrides)."""
         best, rank = None, 0
         for code in self._active:
-            r = 2 if self.table.spec(code).kind == "ALM" else 1
+            r = 2 if self.kind(code) == "ALM" else 1
             if r > rank:
                 best, rank = code, r
         return best
@@ -90,12 +93,20 @@ class AlarmManager:
     @property
     def alrm(self) -> bool:
         """DO ALRM (0x07): an ALM-class alarm is active (L15282, L7470)."""
-        return any(self.table.spec(c).kind == "ALM" for c in self._active)
+        return any(self.kind(c) == "ALM" for c in self._active)
 
     @property
     def warn(self) -> bool:
         """DO WARN (0x11): a WARN-class event (limits, EMGS, undervoltage, comm...) (L15307)."""
-        return any(self.table.spec(c).kind == "WARN" for c in self._active)
+        return any(self.kind(c) == "WARN" for c in self._active)
+
+    def kind(self, code: str) -> str:
+        """"ALM" or "WARN" (table 13.1); P2.066 bit 9 = 1 makes AL003 an ALM (L9973-9975,
+        L19510)."""
+        spec = self.table.spec(code)
+        if spec.code == "AL003" and self.params.get("P2.066") & 0x200:
+            return "ALM"
+        return spec.kind
 
     def cause_present(self, code: str) -> bool:
         return self.table.spec(code).code in self._causes
@@ -205,7 +216,7 @@ class AlarmManager:
             if (source == "6040h" and self.options.fault_reset_listed and rule == "reset"
                     and "6040h" not in self.table.spec(code).note):
                 continue
-            if (rule == "reset" and source != "nmt") or (
+            if (rule == "reset" and (source != "nmt" or code in NMT_ALSO_CLEARS)) or (
                 rule == "nmt_or_reset" and source in ("6040h", "nmt")
             ):
                 self._clear(code)

@@ -385,9 +385,10 @@ class Drive:
         SWITCH ON DISABLED (transition 15 "Alarm 清除", L18265). Reset node also returns the
         6xxxh objects to their power-up values (CiA 301). Choice: docs/manual-choices.md."""
         self.commit_cycle()
-        if self.servo_on:
+        servo_on = self.servo_on
+        self.alarms.reset("nmt")  # an earlier AL401 too (L20186), not the one this raises
+        if servo_on:
             self.alarms.raise_alarm("AL401")
-        self.alarms.reset("nmt")
         if self.options.nmt_reset_reinit_402:
             if kind == "reset node" and not self.servo_on:
                 self.cia402.power_on()
@@ -716,8 +717,7 @@ class Drive:
         self._set_do("SRDY", self._srdy())
         # statusword bit 4 "voltage enabled": the main circuit is in (L18307)
         self.cia402.set_voltage(self._main_circuit_in())
-        specs = [al.table.spec(c) for c in al.active]
-        fault = any(sp.kind == "ALM" and sp.servo_off for sp in specs)
+        fault = any(al.kind(c) == "ALM" and al.table.spec(c).servo_off for c in al.active)
         cur = al.emcy_alarm if self.options.emcy_priority == "class" else al.current
         self.cia402.error_code = al.table.spec(cur).emcy if cur else 0  # 603Fh (L17063)
         self.cia402.set_fault(fault)
