@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.record import topics
-from hil.record.reader import Recording, decode, repaired_cut
+from hil.record.reader import Recording, Undecodable, decode, repaired_cut
 from hil.timing.source import MISSING_FIELD, ColumnTable
 
 
@@ -52,6 +52,10 @@ class RunData:
     truncated: bool = False
     #: the first unreadable record of a file damaged mid-file (not a killed run's cut end)
     damage: str | None = None
+    #: why the status is not the one `hil.result` gives: an unknown status, or a result of
+    #: pass that the recording's own failing steps or verdicts contradict ("" when none)
+    status_note: str = ""
+    bad_messages: int = 0  # records of a wrong shape the report skipped (a warning names one)
     t0: int = 0  # the plan start (first plan step event), else the first message: time zero
 
     def step(self, index: object) -> StepData | None:
@@ -280,7 +284,7 @@ def _load_run(path: str | Path, *, truth: bool = True,
                 samples = data.truth[d] = TruthSamples(keep)
             samples.add(pt or lt, raw)
             return
-        msg = _decode(raw)
+        msg = _record(raw, topic)
         if kind == topics.PLAN_STEPS:
             _step_shape(msg)
             t_plan = lt if t_plan is None else min(t_plan, lt)
@@ -319,6 +323,7 @@ def _load_run(path: str | Path, *, truth: bool = True,
     data.metadata = meta = rec.metadata()
     # a repaired copy of a cut or damaged run is as cut as its source (the footer is new)
     data.truncated = rec.truncated or repaired_cut(meta) is not None
+    data.bad_messages = getattr(rec, "bad_messages", 0)
     if rec.corrupt:
         data.damage = rec.error or "a record could not be read"
     elif (rep := meta.get("hil.repair", {})).get("source_damaged") == "true":
@@ -363,7 +368,37 @@ def _load_run(path: str | Path, *, truth: bool = True,
             data.status = "aborted"
     elif data.truncated and data.status == "pass":  # the run passed; the file holds part of it
         data.status = "incomplete"
+    _reconcile_status(data)
     return data
+
+
+# what a plan run's `hil.result` status can be (hil.plan.runner), and what the report adds
+PLAN_STATUSES = frozenset({"pass", "fail", "error", "skipped", "aborted", "inconclusive",
+                           "incomplete", "unknown"})
+
+
+def _reconcile_status(data: RunData) -> None:
+    """A recording whose result says what no run says (an unknown status) is an error; one
+    whose result says pass while its own steps or verdicts failed is a failure: the page and
+    the JUnit never show such a file as passed (a hand-edited or damaged metadata record)."""
+    if data.status not in PLAN_STATUSES:
+        data.status_note = (f"the recording's result status {data.status[:40]!r} is not a "
+                            "plan status")
+        data.status = "error"
+        return
+    if data.status not in ("pass", "incomplete"):
+        return
+    step = next((s for s in data.steps if s.status in ("fail", "error")), None)
+    verdict = next((v for v in data.verdicts if v.get("status") == "fail"), None)
+    if step is not None:
+        why = f"step {step.index + 1} {step.label} {step.status}"
+    elif verdict is not None:
+        why = (f"timing verdict {verdict.get('spec', '?')}: {verdict.get('constraint', '?')} "
+               "fail")
+    else:
+        return
+    data.status_note = f"the recording's result says {data.status}, but {why}"
+    data.status = "fail"
 
 
 # the ground-truth fields the motion plot draws (html._plot)
@@ -493,6 +528,20 @@ class TruthSamples(Sequence):
         cols = [(name, col.value_list(n)) for name, col in self.table.cols.items()]
         for i, t in enumerate(self.table.times):
             yield t, {name: vals[i] for name, vals in cols if vals[i] is not MISSING_FIELD}
+
+
+def _record(raw: bytes | dict, topic: str) -> dict:
+    """A step, verdict, safety, log or parameter record the page reads: TypeError for one
+    that is no JSON object (a reader skips and counts it as a message of the wrong shape,
+    with a warning naming the first, rather than show a junk row)."""
+    if isinstance(raw, dict):
+        return raw
+    obj = decode(raw)
+    if isinstance(obj, Undecodable):
+        raise TypeError(f"{topic}: {obj['error']}")
+    if not isinstance(obj, dict):
+        raise TypeError(f"{topic}: a {type(obj).__name__}, not an object")
+    return obj
 
 
 def _decode(raw: bytes | dict) -> dict:

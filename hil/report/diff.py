@@ -29,7 +29,7 @@ from typing import Any
 
 from hil.fileio import dumps_strict, write_text_atomic
 from hil.record import topics
-from hil.record.reader import Recording, decode
+from hil.record.reader import Recording, Undecodable, decode
 from hil.report.html import CSS
 from hil.units import MS
 from hil.yamlio import load_yaml_text
@@ -58,7 +58,9 @@ class Side:
     states: dict[str, list[str]] = field(default_factory=dict)  # "drive1 state" -> sequence
     verdicts: dict[tuple, dict] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)
-    options: dict[str, Any] = field(default_factory=dict)  # bench.yaml options + mechanics
+    # bench.yaml options (the plan's `options` over them, as the run merged them) + mechanics
+    options: dict[str, Any] = field(default_factory=dict)
+    bad_messages: int = 0  # records of a wrong shape skipped (the reader warns of the first)
 
 
 def _bench_drive(text: str) -> dict:
@@ -77,6 +79,17 @@ def _bench_drive(text: str) -> dict:
             if isinstance(drive.get(k), dict)}
 
 
+def _plan_options(text: str) -> dict:
+    """The `options` of a recording's plan.yaml attachment ({} for anything else), read with
+    the project's YAML limits."""
+    try:
+        data = load_yaml_text(text, "plan.yaml")
+    except Exception:  # a foreign or broken attachment: no options known
+        return {}
+    opts = data.get("options") if isinstance(data, dict) else None
+    return dict(opts) if isinstance(opts, dict) else {}
+
+
 def load_side(path: str | Path) -> Side:
     """One side of a diff, read twice without holding the file or its chunks: its metadata
     and attachments (the wiring) outside the chunks, then each message as it comes."""
@@ -84,10 +97,13 @@ def load_side(path: str | Path) -> Side:
     meta = rec.metadata()
     run = meta.get("hil.run", {})
     side = Side(str(path), run.get("plan", Path(path).stem), run.get("bench", "?"))
-    drive = {}
+    drive: dict = {}
+    plan_opts: dict = {}
     for a in rec.attachments():
         if a.name == "bench.yaml":
             drive = _bench_drive(a.data.decode("utf-8", "replace"))
+        elif a.name == "plan.yaml":  # a plan's options go to every drive (bench_with_options)
+            plan_opts = _plan_options(a.data.decode("utf-8", "replace"))
     wiring = dict(drive.get("wiring") or {})
     try:
         binding = json.loads(meta.get("timing", {}).get("binding", "{}"))
@@ -95,7 +111,7 @@ def load_side(path: str | Path) -> Side:
         binding = {}
     if isinstance(binding, dict):
         wiring |= {k: v for k, v in binding.items() if k not in ("drive", "dio")}
-    side.options = {**dict(drive.get("options") or {}),
+    side.options = {**dict(drive.get("options") or {}), **plan_opts,
                     **{f"mechanics.{k}": v for k, v in (drive.get("mechanics") or {}).items()}}
     line_func = {}
     for func, w in wiring.items():
@@ -108,11 +124,14 @@ def load_side(path: str | Path) -> Side:
         if topic.startswith("/can/"):
             return  # raw frames: nothing here reads them
         msg = decode(raw)
-        if not isinstance(msg, dict):
-            return
+        if isinstance(msg, Undecodable) or not isinstance(msg, dict):  # skipped and counted
+            raise TypeError(f"{topic}: " + (msg["error"] if isinstance(msg, Undecodable)
+                                            else f"a {type(msg).__name__}, not an object"))
         t = pt or lt
         if topic == topics.PLAN_STEPS:
             idx = msg.get("index")
+            if msg.get("event") == "start" and type(idx) is not int:
+                raise TypeError(f"{topic}: a step start whose index is no whole number")
             if msg.get("event") == "start" and isinstance(idx, int):
                 if idx not in side.starts:
                     side.start_order.append(idx)
@@ -146,7 +165,9 @@ def load_side(path: str | Path) -> Side:
             if not seq or seq[-1] != str(msg["statusword"]):
                 seq.append(str(msg["statusword"]))
 
-    full = Recording.stream(path, None, take).metadata().get("hil.run", {})
+    whole = Recording.stream(path, None, take)
+    side.bad_messages = whole.bad_messages
+    full = whole.metadata().get("hil.run", {})
     side.plan, side.bench = full.get("plan", side.plan), full.get("bench", side.bench)
     side.states = states
     side.t0 = min(side.starts.values()) if side.starts else 0
@@ -281,7 +302,7 @@ def explain(a: Side, b: Side) -> list[dict]:
             est = (base + delta) if isinstance(base, int | float) else delta
             basis = f"A's {p} = {base} + delta" if isinstance(base, int | float) else "delta"
         else:
-            est, basis = delta, "delta (the option is 0 / as in A)"
+            est, basis = delta, "B - A, with the option at 0 in A"
         out.append({"signature": sig.key, "what": sig.what, "options": list(sig.options),
                     "option": option, "a_ms": round(ma, 3), "b_ms": round(mb, 3),
                     "delta_ms": round(delta, 3), "estimate": round(est, 3), "basis": basis,
@@ -378,6 +399,12 @@ def diff(a_path: str | Path, b_path: str | Path) -> dict:
     options = {o: [a.options.get(o), b.options.get(o)]
                for o in sorted(set(a.options) | set(b.options))
                if a.options.get(o) != b.options.get(o)}
+    partial = [f"{x.path}: {x.bad_messages} message(s) of a wrong shape were skipped (the "
+               "warning above names the first): what they held is not compared"
+               for x in (a, b) if x.bad_messages]
+    partial += [f"{x.path}: no step start could be read ({y.path} has {len(y.starts)}): its "
+                "edges cannot be placed in the plan's steps" for x, y in ((a, b), (b, a))
+                if y.starts and not x.starts]
     return {"a": {"path": a.path, "plan": a.plan, "bench": a.bench},
             "b": {"path": b.path, "plan": b.plan, "bench": b.bench},
             "same_plan": a.plan == b.plan, "same_steps": la == lb,
@@ -387,7 +414,7 @@ def diff(a_path: str | Path, b_path: str | Path) -> dict:
                       for k in sorted(set(a.starts) | set(b.starts))],
             "signals": edge_diffs(a, b), "verdicts": verdict_diffs(a, b),
             "states": state_diffs(a, b), "explanations": explain(a, b),
-            "params": params, "options": options}
+            "params": params, "options": options, "incomplete": partial}
 
 
 # --- HTML -----------------------------------------------------------------------------------

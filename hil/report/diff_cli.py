@@ -81,6 +81,7 @@ def main(args: argparse.Namespace) -> int:
           f"differently, {len(d['states'])} state sequence(s) differ")
     print(html_out)
     print(json_out)
+    partial = [*partial, *d.get("incomplete", ())]
     for why in partial:  # compared what the files hold; as `hil check`, that is exit 4
         print(f"hil diff: incomplete: {why}", file=sys.stderr)
     return 4 if partial else 0

@@ -311,6 +311,8 @@ def render_html(run: RunData, out: Path | None = None, index: bool | None = None
         _nav(run, out, index),
         f"<h1>{esc(run.plan)} <span class='badge b-{esc(st)}'>{esc(st.upper())}</span></h1>",
         run_info_table(run.info()),
+        (f"<p class='first'><b>{esc(st.upper())}</b>: {esc(run.status_note)}</p>"
+         if run.status_note else ""),
         _first_failure(run),
         f"<p>Recording <code>{esc(run.path)}</code>"
         + (f" · <b>recording damaged ({esc(run.damage)}): what followed could not be read"
@@ -319,6 +321,8 @@ def render_html(run: RunData, out: Path | None = None, index: bool | None = None
            " · <b>recording cut short: its tail is lost (the run itself ended)</b>"
            if run.truncated and run.metadata.get("hil.result") else
            " · <b>recording truncated (killed run)</b>" if run.truncated else "")
+        + (f" · <b>{run.bad_messages} record(s) of a wrong shape skipped: steps, verdicts "
+           "or signals they held are not shown</b>" if run.bad_messages else "")
         + " · times are ms from the plan start</p>",
     ]
     h += _steps_html(run)

@@ -77,9 +77,11 @@ def plan_case(run: RunData, junit_dir: str | Path | None) -> ET.Element:
     status = run.status  # the plan's own verdict (an allowed inconclusive still passes)
     if status == "skipped":
         ET.SubElement(tc, "skipped", message="not run")
-    elif status in NOT_PASSED:
-        tag = NOT_PASSED[status]
+    elif status != "pass":  # anything else never passes (an "unknown" run included)
+        tag = NOT_PASSED.get(status, "error")
         first, text = failure_text(run)
+        if run.status_note:
+            first, text = run.status_note, f"{run.status_note}\n{text}"
         el = ET.SubElement(tc, tag, message=first, type=status)
         el.text = text
     out = ET.SubElement(tc, "system-out")

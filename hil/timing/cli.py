@@ -352,7 +352,7 @@ def _write_svg(args: argparse.Namespace, target: Path, text: str) -> bool:
 
 
 def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: dict,
-            consts: dict, res: dict) -> int:
+            consts: dict, res: dict, incomplete: list[str]) -> int:
     """Re-judge every `check_timing` step of a plan recording on what the run had seen by then,
     with the step's binding, parameters, constants and `since` (the live verdicts, offline)."""
     verdicts: list[Verdict] = []
@@ -396,7 +396,7 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
         print_json(verdicts)
     else:
         print(format_table(verdicts, args.verbose))
-    return final_code(verdicts, next(iter(cache.values())), [])
+    return final_code(verdicts, next(iter(cache.values())), incomplete)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -432,12 +432,17 @@ def main(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     rec_specs, rec_binding = recorded_specs(source.meta)
     runs = [] if args.whole else recorded_checks(source)
+    # verdict records no one can read: the plan's own checks in them cannot be re-made
+    lost = [] if args.whole or not source.bad_messages else [
+        f"{args.recording}: {source.bad_messages} /timing/verdicts message(s) of a wrong shape "
+        "were skipped (the warning above names the first): the plan checks they recorded "
+        "are not re-made as the run made them"]
     if runs and args.spec:  # the plan's own checks of these spec ids, as they were made
         ids = set(args.spec)
         runs = [r for r in runs if r["spec"] in ids] \
             if ids <= {r["spec"] for r in runs} else []  # a file or another spec: whole
     if runs:  # a plan run: re-check each check step as it was made, with no bench
-        return _as_run(args, runs, binding, params, consts, res)
+        return _as_run(args, runs, binding, params, consts, res, lost)
     if (not (args.whole or args.spec) and rec_specs and source.meta.get("hil.plan")
             and (source.truncated or repaired_cut(source.meta))):
         # the plan's checks each had their own since/bind/constants: judging the specs with
@@ -469,7 +474,7 @@ def main(args: argparse.Namespace) -> int:
         return source
     bench_consts = recorded_constants(source.meta)
     verdicts: list[Verdict] = []
-    incomplete: list[str] = []
+    incomplete: list[str] = list(lost)
     survey = not (args.spec or rec_specs)  # every shipped spec: only where each applies
     for spec in specs:
         own = constants_for(spec, bench_consts)
@@ -495,5 +500,5 @@ def main(args: argparse.Namespace) -> int:
     else:
         print(format_table(verdicts, args.verbose))
     if not _judged(verdicts) and not args.spec:
-        incomplete = [_why_nothing(sp, verdicts, source, bind) for sp in specs]
+        incomplete = [*lost, *(_why_nothing(sp, verdicts, source, bind) for sp in specs)]
     return final_code(verdicts, source, incomplete)

@@ -900,8 +900,15 @@ def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
     step and spec): spec, binding, params, constants, since_ns, until_ns — what a faithful
     offline re-check needs."""
     seen: dict[tuple, dict[str, Any]] = {}
+    damaged = 0
     for _t, v in source.messages(topics.TIMING_VERDICTS):
         if not _check_record(v):  # not a check step's verdict, or a damaged one: skipped
+            if isinstance(v, dict) and "check_until_ns" in v:  # a check step's, damaged
+                if not damaged:
+                    logging.getLogger("hil.record").warning(
+                        "%s: %s: a check step's verdict of a wrong shape skipped: %.200r",
+                        getattr(source, "path", "the recording"), topics.TIMING_VERDICTS, v)
+                damaged += 1
             continue
         key = (v.get("plan"), v["step"], v["spec"])
         if key not in seen:
@@ -909,6 +916,8 @@ def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
                          "binding": v.get("binding") or {}, "params": v.get("check_params") or {},
                          "constants": v.get("check_constants") or {},
                          "since_ns": v.get("check_since_ns"), "until_ns": v["check_until_ns"]}
+    if damaged and hasattr(source, "bad_messages"):  # counted: `hil check` is incomplete
+        source.bad_messages += damaged
     return list(seen.values())
 
 

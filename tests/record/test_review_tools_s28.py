@@ -1,0 +1,144 @@
+"""What a reviewer's tools say of a recording that contradicts itself or holds unreadable
+records, from an outside probe of `hil report`, `hil check` and `hil diff` (wave 3, session
+28, helper-103): a result status no run gives, a result of pass over a failing step or
+verdict, step and verdict records that are no JSON, and a plan's own deviation options."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+from rec_helpers import copy_mcap
+
+from hil.bench.bench import load_bench
+from hil.cli import main as hil
+from hil.paths import plans_dir
+from hil.plan.plan import load_plan
+from hil.plan.runner import run_plan
+from hil.record.reader import Recording
+
+pytestmark = pytest.mark.virtual_time
+
+
+@pytest.fixture(scope="module")
+def emgs(tmp_path_factory) -> Path:
+    """A genuine passing recording with check steps and their verdicts."""
+    out = tmp_path_factory.mktemp("emgs")
+    res = run_plan(load_plan(plans_dir() / "emgs.yaml"), load_bench(None), out, reports=False)
+    assert res.passed
+    return Path(res.recording)
+
+
+def _result(path: Path) -> dict[str, str]:
+    return dict(Recording.head(path).metadata()["hil.result"])
+
+
+def _junit(tmp_path: Path, rec: Path) -> ET.Element:
+    out = tmp_path / f"{rec.stem}.xml"
+    assert hil(["report", str(rec), "-o", str(tmp_path / f"{rec.stem}.html"),
+                "--junit", str(out)]) == 0
+    return ET.parse(out).getroot()
+
+
+def _first_changed(topic_wanted: str, change):
+    """A `copy_mcap` message hook changing the first message of `topic_wanted` that
+    `change(obj)` accepts (returns the new object, or None to pass it by)."""
+    done = []
+
+    def message(topic: str, data: bytes, lt: int) -> tuple[bytes, int]:
+        if topic == topic_wanted and not done:
+            new = change(json.loads(data))
+            if new is not None:
+                done.append(1)
+                return json.dumps(new).encode(), lt
+        return data, lt
+    return message
+
+
+def test_a_result_status_no_run_gives_is_an_error_not_a_pass(emgs, tmp_path):
+    bad = copy_mcap(emgs, tmp_path / "status.mcap",
+                    metadata={"hil.result": _result(emgs) | {"status": "not-a-number"}})
+    suite = _junit(tmp_path, bad)
+    assert suite.get("errors") == "1" and suite.get("failures") == "0"
+    err = suite.find(".//testcase/error")
+    assert err is not None and "not-a-number" in err.get("message")
+    page = (tmp_path / "status.html").read_text(encoding="utf-8")
+    assert "b-error" in page and "is not a plan status" in page
+
+
+def test_a_pass_result_over_a_failing_step_is_reported_failed(emgs, tmp_path):
+    def fail(obj):
+        return obj | {"status": "fail"} if obj.get("event") == "end" and obj.get(
+            "index", -1) >= 0 else None
+
+    bad = copy_mcap(emgs, tmp_path / "step.mcap", _first_changed("/plan/steps", fail))
+    assert _result(bad)["status"] == "pass"
+    suite = _junit(tmp_path, bad)
+    assert suite.get("failures") == "1"
+    page = (tmp_path / "step.html").read_text(encoding="utf-8")
+    assert "b-fail" in page and "result says pass, but step 1" in page
+
+
+def test_a_pass_result_over_a_failing_verdict_is_reported_failed(emgs, tmp_path):
+    bad = copy_mcap(emgs, tmp_path / "verdict.mcap", _first_changed(
+        "/timing/verdicts", lambda o: o | {"status": "fail"} if o.get("status") == "pass"
+        else None))
+    suite = _junit(tmp_path, bad)
+    assert suite.get("failures") == "1"
+    failure = suite.find(".//testcase/failure")
+    assert failure is not None and "timing verdict emgs" in failure.get("message")
+
+
+def _unreadable(topic_wanted: str):
+    def message(topic: str, data: bytes, lt: int) -> tuple[bytes, int]:
+        return (b"\xff{" if topic == topic_wanted else data), lt
+    return message
+
+
+def test_check_with_unreadable_verdict_records_is_incomplete(emgs, tmp_path, capsys, caplog):
+    """The plan's own checks are re-made from its verdict records: none readable, `hil check`
+    judged the specs over the whole file instead and exited 0."""
+    assert hil(["check", str(emgs)]) == 0
+    capsys.readouterr()
+    bad = copy_mcap(emgs, tmp_path / "v.mcap", _unreadable("/timing/verdicts"))
+    assert hil(["check", str(bad)]) == 4
+    err = capsys.readouterr().err
+    assert "wrong shape skipped" in caplog.text
+    assert "incomplete" in err and "/timing/verdicts message(s) of a wrong shape" in err
+
+
+def test_report_says_it_skipped_unreadable_step_records(emgs, tmp_path, caplog):
+    bad = copy_mcap(emgs, tmp_path / "s.mcap", _unreadable("/plan/steps"))
+    assert hil(["report", str(bad), "-o", str(tmp_path / "s.html")]) == 0
+    assert "the first: /plan/steps" in caplog.text  # one warning names the first
+    page = (tmp_path / "s.html").read_text(encoding="utf-8")
+    assert "record(s) of a wrong shape skipped" in page
+    assert "SKIPPED</span></td><td>–" not in page  # no junk step row
+
+
+def test_diff_with_unreadable_step_records_is_incomplete(emgs, tmp_path, capsys, caplog):
+    """B's steps unreadable: its edges were placed from the epoch (deltas of 30 years) and
+    the diff exited 0 without a word."""
+    bad = copy_mcap(emgs, tmp_path / "b.mcap", _unreadable("/plan/steps"))
+    code = hil(["diff", str(emgs), str(bad), "-o", str(tmp_path / "d.html")])
+    err = capsys.readouterr().err
+    assert code == 4
+    assert "no step start could be read" in err and "wrong shape" in err
+    assert "the first: /plan/steps" in caplog.text
+    assert json.loads((tmp_path / "d.json").read_text())["incomplete"]
+
+
+def test_diff_lists_a_deviation_option_the_plan_set(tmp_path, capsys):
+    text = (plans_dir() / "servo_on_off_brake.yaml").read_text(encoding="utf-8")
+    dev = tmp_path / "brake_dev.yaml"
+    dev.write_text(text.replace("\nsteps:", "\noptions:\n  dev_brake_on_delay_ms: 30\nsteps:", 1),
+                   encoding="utf-8")
+    bench = load_bench(None)
+    a = run_plan(load_plan(plans_dir() / "servo_on_off_brake.yaml"), bench, tmp_path / "a",
+                 reports=False)
+    b = run_plan(load_plan(dev), bench, tmp_path / "b", reports=False)
+    assert hil(["diff", a.recording, b.recording, "-o", str(tmp_path / "d.html")]) == 0
+    d = json.loads((tmp_path / "d.json").read_text())
+    assert d["options"] == {"dev_brake_on_delay_ms": [None, 30]}
