@@ -745,8 +745,9 @@ class Drive:
         ax = self.axis
         # a position pushed off its demand at standstill is corrected (and seen by TPOS)
         # pulses on the line are counted (or lost) at the motion steps (pulse_train.py)
+        # a load pulling the shaft (gravity) moves it whenever the brake does not hold it
         return (ax.moving or ax.velocity != 0.0 or (ax.power and ax.position != ax.demand)
-                or self.pulse.seg is not None)
+                or self.pulse.seg is not None or ax.pulled)
 
     def commit_cycle(self) -> None:
         """An input arrives inside a 1 ms cycle: the cycle runs to its end with the command

@@ -558,6 +558,13 @@ class Axis:
             return self._ip_rem <= 0 and (not self._ip_ma or self._ip_settled)
         return m == _HOLD
 
+    @property
+    def pulled(self) -> bool:
+        """A load pulls the shaft even at rest (gravity, a constant load torque) and the
+        brake does not hold it: time must be stepped at standstill too (a vertical axis sags
+        with the torque off, L1351, L2427; the loop holds it with torque)."""
+        return self._ext != 0.0 and not self.brake_clamped
+
     # ---- the integrator ------------------------------------------------------------
     def step(self, dt_ns: int) -> None:
         """Advance the axis by `dt_ns` (<= 1 ms for accuracy): the profile generator gives the

@@ -15,8 +15,9 @@
 
 The printed state table (L2454-2468) maps the alarms the other way round; the notes and
 chapter 13 agree with the mapping above (see docs/manual-choices.md). When both channels
-are lost long enough for AL500 (10 ms), AL500 has taken over: a channel's 1 s timer that
-ends while both are still lost and AL500 came raises nothing more.
+are lost, they are no longer out of step: a channel's 1 s that ends while both are lost
+raises nothing; AL500 comes after its 10 ms, and if the other channel comes back before
+that, the channel's alarm comes then (its second, counted from its own loss, is up).
 """
 
 from __future__ import annotations
@@ -55,6 +56,9 @@ class Sto:
         self._both_timer: Timer | None = None
         self._one_timers: dict[str, Timer | None] = {"A": None, "B": None}
         self._al500_raised = False  # in this loss of both channels
+        # a channel's second ran out while both were lost (`_one_lost`): judged when the
+        # other comes back
+        self._one_expired: dict[str, bool] = {"A": False, "B": False}
         self._off = False  # control power off (power_off): nothing is judged
 
     @property
@@ -96,6 +100,7 @@ class Sto:
                 t.cancel()
         self._cut_timer = self._both_timer = None
         self._one_timers = {"A": None, "B": None}
+        self._one_expired = {"A": False, "B": False}
 
     def _update(self) -> None:
         if self._off:  # inputs change while the drive is off: judged at power-up
@@ -121,6 +126,7 @@ class Sto:
             if self.torque_cut and self._opt.sto_resume_after_dropout:
                 self.torque_cut = False
                 self._on_cut(False)
+        al500 = self._al500_raised  # in the loss of both that may end now
         # both lost for 10 ms -> AL500 (L2478)
         if not a and not b:
             if self._both_timer is None:
@@ -134,14 +140,25 @@ class Sto:
         # a channel lost for 1 s -> AL501 (A) / AL502 (B) (L2482, L2487), from its own loss
         for ch, present in (("A", a), ("B", b)):
             timer = self._one_timers[ch]
-            if not present and timer is None:
-                one = self._opt.dev_sto_one_lost_ms or self._opt.sto_one_lost_ms
-                code = "AL501" if ch == "A" else "AL502"
-                self._one_timers[ch] = self._sched.after(
-                    ms(one), lambda c=ch, k=code: self._one_lost(c, k))
-            elif present and timer is not None:
-                timer.cancel()
-                self._one_timers[ch] = None
+            code = "AL501" if ch == "A" else "AL502"
+            if present:
+                self._one_expired[ch] = False
+                if timer is not None:
+                    timer.cancel()
+                    self._one_timers[ch] = None
+            elif self._one_expired[ch] and (a or b):  # the other is back, this one is not:
+                self._one_expired[ch] = False  # its second ran out while both were lost
+                if al500:  # AL500 had taken over: a new second of mismatch from now
+                    self._arm_one(ch, code)
+                else:  # both were lost under AL500's 10 ms: its own second is up (L2482)
+                    self._set_cause(code, True)
+            elif timer is None and not self._one_expired[ch]:
+                self._arm_one(ch, code)
+
+    def _arm_one(self, ch: str, code: str) -> None:
+        one = self._opt.dev_sto_one_lost_ms or self._opt.sto_one_lost_ms
+        self._one_timers[ch] = self._sched.after(ms(one),
+                                                 lambda c=ch, k=code: self._one_lost(c, k))
 
     def _cut(self) -> None:
         self._cut_timer = None
@@ -155,7 +172,12 @@ class Sto:
         self._set_cause("AL500", True)  # raises the alarm; the cause is present now
 
     def _one_lost(self, channel: str, code: str) -> None:
+        """A channel lost for its 1 s (L2482): AL501 / AL502, unless the other is lost too:
+        then the two are no longer out of step ("沒有同步且差距達 1 秒以上", L20203, L20209)
+        and AL500's 10 ms decides; if the other comes back first, this one's alarm comes
+        then (`_update`)."""
         self._one_timers[channel] = None
-        if self._al500_raised and not (self.a or self.b):
-            return  # both lost: AL500 has taken over
+        if not (self.a or self.b):
+            self._one_expired[channel] = True
+            return
         self._set_cause(code, True)

@@ -111,3 +111,37 @@ def test_servo_on_refused_while_a_channel_is_lost():
 def test_bad_option_value_is_refused():
     with pytest.raises(ValueError, match="sto_servo_off"):
         ModelOptions.from_dict({"sto_servo_off": "never"})
+
+
+def _alarms_after_skew(skew_ms: int, back_ms: int | None = None) -> tuple[str, ...]:
+    """STO_B lost, STO_A lost `skew_ms` later; STO_A back `back_ms` after its loss (None:
+    stays lost); the alarms 1.1 s after STO_B's loss."""
+    drive, _ = make()
+    enabled(drive)
+    drive.set_sto("B", False)
+    drive.advance(skew_ms * MS)
+    drive.set_sto("A", False)
+    if back_ms is not None:
+        drive.advance(back_ms * MS)
+        drive.set_sto("A", True)
+    drive.advance((1100 - skew_ms - (back_ms or 0)) * MS)
+    return drive.alarms.active
+
+
+@pytest.mark.parametrize("skew_ms", [500, 989, 990, 995, 999])
+def test_both_lost_within_the_second_is_al500_alone(skew_ms: int):
+    """AL502: "STO_B 失去致能訊號或 STO_A 訊號沒有與 STO_B 訊號同步且差距達 1 秒以上" (L20209):
+    both channels lost less than 1 s apart were never out of step for a second; both lost
+    for 10 ms is AL500 (L2478). A skew of 990-999 ms had raised AL502 (power cycle only,
+    L20211) with AL500 (helper-105)."""
+    assert _alarms_after_skew(skew_ms) == ("AL500",)
+
+
+def test_a_skew_of_more_than_a_second_is_al502_then_al500():
+    assert _alarms_after_skew(1005) == ("AL502", "AL500")
+
+
+def test_the_other_channel_back_within_10_ms_leaves_the_lost_ones_second_up():
+    """STO_B lost; STO_A lost 995 ms later and back 8 ms after (no AL500: L2478): STO_B has
+    been lost alone for more than its second, counted from its own loss: AL502 (L2482)."""
+    assert _alarms_after_skew(995, back_ms=8) == ("AL502",)

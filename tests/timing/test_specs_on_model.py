@@ -184,6 +184,17 @@ def sto_both_then_one_back(tap: ModelTap) -> None:
     tap.advance(1200 * MS)
 
 
+def sto_both_lost_995_ms_apart(tap: ModelTap) -> None:
+    """STO_B lost, STO_A 995 ms later: both lost less than a second apart were never out of
+    step for one (L20209): AL500 after 10 ms, no AL502. The spec had required AL502 at
+    STO_B's second, 5 ms into the loss of both (helper-105)."""
+    servo_on(tap)
+    tap.set_sto("B", False)
+    tap.advance(995 * MS)
+    tap.set_sto("A", False)
+    tap.advance(300 * MS)
+
+
 def sto_glitch_then_loss(tap: ModelTap) -> None:
     """Glitches shorter than the firmware's acknowledgement, then a real loss (L2474-2482)."""
     for cw in (0x06, 0x07, 0x0F):  # servo on through CiA 402: OPERATION ENABLED
@@ -258,6 +269,8 @@ FAITHFUL = [
     ("sto", sto_glitch_then_loss, {}, {}),
     ("sto", sto_one_other_dips, {}, {}),
     ("sto", sto_both_then_one_back, {}, {}),
+    ("sto", sto_both_lost_995_ms_apart, {}, {}),
+    ("sto_glitch", sto_both_lost_995_ms_apart, {}, {}),
     ("sto_glitch", sto_glitch_then_loss, {}, {}),
     ("sto_glitch", sto_both, {}, {}),
     ("sto_glitch", sto_one_other_dips_servo_on, {}, {}),
