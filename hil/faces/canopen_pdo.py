@@ -159,6 +159,8 @@ class PdoEngine:
             self.drive.raise_alarm("AL123")
             return
         acc, bits = int.from_bytes(data, "little"), 0
+        # a parameter an RPDO writes is kept per P3.011.X (the drive's `write_pdo_object`)
+        write = getattr(self.drive, "write_pdo_object", self.drive.write_object)
         for index, sub, length in mapping:
             raw = (acc >> bits) & ((1 << length) - 1)
             bits += length
@@ -166,7 +168,7 @@ class PdoEngine:
             if e is not None and e.type in P_SIGNED and raw >= 1 << (length - 1):
                 raw -= 1 << length
             try:
-                self.drive.write_object(index, sub, raw)
+                write(index, sub, raw)
             except errors.ModelError as exc:  # refused: an RPDO has no answer (CiA 301) but
                 self.stats["pdo_errors"] += 1  # the drive's PDO alarms (L19965-L19987)
                 alarm = _RPDO_ALARMS.get(getattr(exc, "abort_code", None))

@@ -444,9 +444,18 @@ class Drive:
 
     def _special_write(self, _name: str, _old: int, new: int) -> None:
         """P2.008 = 30 or 35: store the data array (COMPARE, CAPTURE, E-Cam) in EEPROM
-        (L9225, L5097)."""
+        (L9225, L5097); 10: reset the parameters, then a power cycle (L9222)."""
         if new in (30, 35):
             self.array_eeprom[:] = self.array
+        elif new == 10:
+            self.params.factory_reset()
+
+    def write_pdo_object(self, index: int, sub: int, value: int) -> None:
+        """`write_object` of an RPDO-mapped object: a parameter goes to EEPROM only with
+        P3.011.X = 1 ("X = 0：使用 PDO 寫入參數時，不會將參數存入 EEPROM", L10764-10768)."""
+        ram = 0x2000 <= index <= 0x2FFF and not self.params.get("P3.011") & 0x1
+        with self.params.ram_only_writes(ram):
+            self.write_object(index, sub, value)
 
     def close(self) -> None:
         """Save retained state (the process is going away)."""

@@ -14,9 +14,10 @@ Choices on ambiguous points: docs/manual-choices.md#parameters.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,9 @@ WriteHook = Callable[[str, int, int], None]
 ReadHook = Callable[[], int]
 ChangeListener = Callable[[str, int], None]
 Validator = Callable[[str, int], None]
+
+# the calibration parameters a reset (P2.008 = 10) leaves: "本參數無法重置" (L10947-11039)
+NOT_RESETTABLE = frozenset(f"P4.{n:03d}" for n in range(11, 22))
 
 # Parameters writable only after a P2.008 key (L9212-L9227): P2.071 (absolute position reset)
 # after 271 (L10081, L16454); P4.010 (calibration) after 20 (L10938, L16043); P4.011-P4.021
@@ -66,6 +70,7 @@ class ParameterStore:
         # RAM-only writes (a PR WRITE without ROM, L4533): the EEPROM value each reverts to
         # at the next power cycle, and the one `save` keeps
         self._eeprom: dict[str, int] = {}
+        self._ram_only = 0  # > 0 inside `ram_only_writes`: every write goes to RAM alone
         # bumped at every change of a value in effect or of the read hooks (`cached`)
         self.version = 0
         self._set_all_defaults()
@@ -133,7 +138,20 @@ class ParameterStore:
         `ram_only`: into RAM alone (a PR WRITE without ROM, "ROM 為同時寫入 RAM 與 EEPROM，提供參數
         斷電保持的功能" L4533): the value in EEPROM comes back at the next power cycle."""
         spec = self.check_write(name, value)
-        self._commit(spec, value, ram_only=ram_only)
+        # P2.030 = 5: "各參數之設定值於斷電後不保持" (L9495): no value written from then on is kept
+        no_eeprom = self._ram_only > 0 or (self._stored.get("P2.030") == 5
+                                           and spec.param != "P2.030")
+        self._commit(spec, value, ram_only=ram_only or no_eeprom)
+
+    @contextlib.contextmanager
+    def ram_only_writes(self, on: bool = True) -> Iterator[None]:
+        """Inside: every `write` goes to RAM alone, as a RAM-only one (a CANopen RPDO with
+        P3.011.X = 0, L10764-10768)."""
+        self._ram_only += bool(on)
+        try:
+            yield
+        finally:
+            self._ram_only -= bool(on)
 
     def set_internal(self, name: str, value: int, ram_only: bool = False) -> None:
         """Drive-side update (monitor values, P0.001, P4.000 history ...): no attribute checks.
@@ -280,6 +298,24 @@ class ParameterStore:
         """Every value now in RAM becomes the EEPROM's (P2.030 = 8, "備分所有參數(目前值)到
         EEPROM 中，下次開電數值仍在", L9501): RAM-only writes are kept from then on."""
         self._eeprom.clear()
+        if self.retained_path is not None and self.autosave:
+            self.save()
+
+    def factory_reset(self) -> None:
+        """P2.008 = 10 "參數重置(重置後請重新上電)" (L9222): every parameter a user writes back
+        to its default, as a write would set it (a ● one takes effect at the power cycle the
+        manual asks for); not P4.011-P4.021 ("無法重置", L10947-11039) nor the read-only ★
+        ones (monitors, the alarm history). Write hooks do not fire; listeners hear it."""
+        self._eeprom.clear()
+        for spec in self.table:
+            key = spec.param
+            if spec.read_only or key in NOT_RESETTABLE or self._stored[key] == spec.default:
+                continue
+            self._stored[key] = spec.default
+            if not spec.power_cycle:
+                self._effective[key] = spec.default
+            self._notify(key, spec.default)
+        self.version += 1
         if self.retained_path is not None and self.autosave:
             self.save()
 

@@ -437,7 +437,12 @@ def _verdict_rows(verdicts: list[dict]) -> list[list[dict]]:
 def _motion_html(run: RunData) -> list[str]:
     h = ["<h2>Motion (virtual-bench ground truth)</h2>"]
     if not run.truth:
-        return [*h, "<p>No ground truth in this recording (real bench).</p>"]
+        virtual = run.metadata.get("hil.bench", {}).get("virtual") in ("true", "True", True)
+        return [*h, "<p>No ground truth in this recording ("
+                + ("a virtual bench's, cut or damaged before its first state sample"
+                   if virtual and (run.truncated or run.damage) else
+                   "a virtual bench's that recorded none" if virtual else "real bench")
+                + ").</p>"]
     for d, samples in run.truth.items():
         h.append(f"<h3>{esc(d)}</h3>{_plot(run, d, samples)}")
     return h

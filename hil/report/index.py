@@ -15,7 +15,7 @@ from pathlib import Path
 
 from hil.fileio import write_text_atomic
 from hil.record.reader import RecordingError
-from hil.report.data import load_run, started_ns
+from hil.report.data import RunData, load_run, started_ns
 from hil.report.html import CSS, run_info_table
 
 esc = html.escape
@@ -43,7 +43,7 @@ def _row(rec: Path, out_dir: Path) -> dict:
                steps=(sum(s.status == "pass" for s in run.steps if s.index >= 0),
                       sum(s.index >= 0 for s in run.steps)),
                verdicts=Counter(str(v.get("status")) for v in run.verdicts),
-               reason=res.get("reason", "") if run.status != "pass" else "",
+               reason=_reason(run, res),
                description=run.metadata.get("hil.plan", {}).get("description", ""),
                tags=_tags(run.metadata.get("hil.plan", {}).get("tags", "[]")),
                started=started_ns(run.metadata.get("hil.run", {})))
@@ -52,6 +52,22 @@ def _row(rec: Path, out_dir: Path) -> dict:
     except (KeyError, ValueError):
         row["duration_ms"] = None
     return row
+
+
+def _reason(run: RunData, res: dict) -> str:
+    """Why a plan did not pass, in a line: the recording's own contradiction, the run's
+    reason when it stopped early, else the first step that did not pass (a plan that ran to
+    its end says "end of plan", which tells a reviewer nothing)."""
+    if run.status == "pass":
+        return ""
+    if run.status_note:
+        return run.status_note
+    why = str(res.get("reason", ""))
+    bad = next((s for s in run.steps if s.status not in ("pass", "skipped")), None)
+    if bad is not None and why in ("", "end of plan"):
+        text = f"step {bad.index + 1} {bad.label} {bad.status}"
+        return f"{text}: {bad.message}"[:300] if bad.message else text
+    return why
 
 
 def _link(target: Path, out_dir: Path, text: str) -> str:

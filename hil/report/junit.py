@@ -35,8 +35,9 @@ def _lines(run: RunData) -> list[tuple[str, str, str]]:
         out.append((name, st.status, text + (f": {st.message}" if st.message else "")))
     for v in run.verdicts:
         name = f"timing {v.get('spec', '?')}: {v.get('constraint', '?')}"
-        if v.get("occurrence"):
-            name += f" #{v['occurrence']}"
+        occ = v.get("occurrence")
+        if type(occ) is int and occ > 0:  # the second and later, counted from 1 as the
+            name += f" #{occ + 1}"  # report's diagrams and `hil check` count them
         status = v.get("status", "error")
         out.append((name, status, f"{status}: {v.get('message', '')}"))
     return out

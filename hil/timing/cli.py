@@ -231,7 +231,8 @@ def format_table(verdicts: list[Verdict], verbose: bool = False) -> str:
     rows = [v for v in verdicts if verbose or v.status != "skipped"]
     lines = [f"{'STATUS':<13}{'SPEC':<20}{'#':>3}  CONSTRAINT / EXPLANATION"]
     for v in rows:
-        lines.append(f"{v.status.upper():<13}{terminal_text(v.spec):<20}{v.occurrence:>3}  "
+        # occurrences counted from 1, as the report's diagrams name them
+        lines.append(f"{v.status.upper():<13}{terminal_text(v.spec):<20}{v.occurrence + 1:>3}  "
                      f"{terminal_text(v.constraint)}")
         lines.append(f"{'':<38}{terminal_text(v.message, 4 * TEXT_MAX)}")
     s = summary(verdicts)

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.paths import fixture
+from hil.profile.params import ParamTable
 from hil.record.messages import CLOSED
 from hil.record.schemas import SCHEMAS, schema_for_topic
 from hil.timing.expr import MAX_BIT, MAX_MAGNITUDE, Expr, ExprError, is_param
@@ -262,6 +263,12 @@ class _V:
         bad = sorted(n for n in e.names if not is_param(n) and n not in known)
         if bad:
             raise self.err(line, fld, f"unknown name {bad[0]!r}: {hint}")
+        if e.params:  # a parameter no drive has is no value any recording or --param gives
+            table = ParamTable.load()
+            unknown = [n for n in e.params if n not in table]
+            if unknown:
+                raise self.err(line, fld, f"unknown parameter {unknown[0]!r}: not in the "
+                               "drive's parameter table (P<group>.<nnn>, e.g. P1.042)")
         if want == "number" and names is None:
             val = self.value(e, line, fld)
             if nonneg and val is not None and val < 0:

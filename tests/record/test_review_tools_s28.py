@@ -142,3 +142,36 @@ def test_diff_lists_a_deviation_option_the_plan_set(tmp_path, capsys):
     assert hil(["diff", a.recording, b.recording, "-o", str(tmp_path / "d.html")]) == 0
     d = json.loads((tmp_path / "d.json").read_text())
     assert d["options"] == {"dev_brake_on_delay_ms": [None, 30]}
+
+
+def test_the_index_names_the_first_failing_step_not_end_of_plan(emgs, tmp_path):
+    """A plan that ran to its end and failed had "end of plan" as its reason on the index."""
+    def fail(obj):
+        return obj | {"status": "fail", "message": "made to fail"} if obj.get(
+            "event") == "end" and obj.get("index") == 2 else None
+
+    bad = copy_mcap(emgs, tmp_path / "idx.mcap", _first_changed("/plan/steps", fail),
+                    metadata={"hil.result": _result(emgs) | {"status": "fail"}})
+    assert _result(bad)["reason"] == "end of plan"
+    index = tmp_path / "index.html"
+    assert hil(["report", str(bad), "-o", str(tmp_path / "idx.html"), "--index",
+                str(index)]) == 0
+    page = index.read_text(encoding="utf-8")
+    assert "step 3 " in page and "made to fail" in page and "end of plan" not in page
+
+
+def test_check_counts_occurrences_from_one_as_the_report(emgs, capsys):
+    assert hil(["check", str(emgs)]) == 0
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("PASS")]
+    assert rows and all(ln.split()[2] != "0" for ln in rows)
+    assert any(ln.split()[2] == "1" for ln in rows)
+
+
+def test_a_cut_virtual_recording_is_not_called_a_real_bench(emgs, tmp_path):
+    data = emgs.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:1500])
+    assert hil(["report", str(cut), "-o", str(tmp_path / "cut.html")]) == 0
+    page = (tmp_path / "cut.html").read_text(encoding="utf-8")
+    if "No ground truth" in page:  # the cut fell before the first state sample
+        assert "real bench" not in page and "virtual bench" in page

@@ -130,3 +130,16 @@ def test_skipped_messages_make_a_passing_check_incomplete(capsys):
     src.bad_messages = 2
     assert final_code(v, src, []) == EXIT_INCOMPLETE
     assert "2 message(s) of a wrong shape were skipped" in capsys.readouterr().err
+
+
+def test_a_parameter_no_drive_has_is_refused_at_load():
+    """`P9.999` in a window was judged inconclusive ("neither recorded nor given: --param
+    P9.999=...") while `--param P9.999=3` was refused as unknown (helper-103, session 28)."""
+    base = ("signals:\n  v: {topic: \"/drive/{drive}/state\", field: speed_rpm, above: 1}\n"
+            "events:\n  start: {rise: v}\n  stop: {fall: v, after: start, within: 1000}\n"
+            "constraints:\n  - {name: c, from: start, to: stop, window: {min: 0, max: %s}}\n")
+    with pytest.raises(SpecError, match=r"m\.yaml:\d+: constraints\[0\]\.window\.max: unknown "
+                                        r"parameter 'P9\.999'"):
+        _spec(base % "\"P9.999 + 1\"")
+    [v] = check(_spec(base % "\"P1.042 + 100\""), SRC)
+    assert v.status == "pass"

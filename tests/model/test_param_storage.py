@@ -1,0 +1,70 @@
+"""Where a written parameter is kept, written afresh from the A3 manual (session 28,
+helper-106): P2.008 = 10 resets the parameters (L9222) but not P4.011-P4.021 (L10947-11039);
+P2.030 = 5 keeps no value written after it (L9495); a parameter an RPDO writes goes to EEPROM
+only with P3.011.X = 1 (L10764-10768, L10697). Injected clock."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+
+from hil.model.drive import Drive
+from hil.model.params import ParameterStore
+from tests.faces.test_manual_rules_s16 import NODE, Rig  # the CANopen face's rig
+
+
+def test_p2008_10_resets_the_parameters_but_not_the_calibration():
+    """"10 參數重置(重置後請重新上電)" (L9222); P4.011-P4.021 "本參數無法重置" (L10947)."""
+    d = Drive(inputs={8: True})
+    d.params.write("P5.020", 300)  # default 200
+    d.params.write("P1.042", 100)  # default 0
+    d.params.write("P3.000", 5)  # ● node / station number, default 0x7F
+    d.params.write("P2.008", 22)  # the key for P4.011-P4.021 (L16045)
+    d.params.write("P4.011", 7)
+    d.power_cycle()
+    assert d.params.get("P3.000") == 5
+    d.params.write("P2.008", 10)
+    assert d.params.read("P5.020") == 200 and d.params.read("P1.042") == 0
+    assert d.params.get("P3.000") == 5  # ●: the reset takes effect at the power cycle
+    d.power_cycle()
+    assert d.params.get("P3.000") == 0x7F and d.params.read("P2.008") == 0
+    assert d.params.read("P4.011") == 7
+
+
+def test_p2030_5_keeps_no_value_written_after_it(tmp_path):
+    """"5 設定後，各參數之設定值於斷電後不保持" (L9495); P2.030 itself returns to 0 at
+    power-up (L9505), so writes are kept again after it."""
+    path = tmp_path / "params.json"
+    store = ParameterStore(retained_path=path)
+    store.write("P1.042", 100)
+    store.write("P2.030", 5)
+    store.write("P1.042", 200)
+    assert store.read("P1.042") == 200  # in RAM, in effect
+    assert ParameterStore(retained_path=path).read("P1.042") == 100  # a restart: EEPROM's
+    store.power_cycle()
+    assert store.read("P1.042") == 100 and store.read("P2.030") == 0
+    store.write("P1.042", 300)
+    store.power_cycle()
+    assert store.read("P1.042") == 300
+
+
+@pytest.mark.parametrize(("p3011", "kept"), [(0x0000, 100), (0x0001, 555)])
+def test_an_rpdo_parameter_write_is_kept_only_with_p3011_x_1(p3011: int, kept: int):
+    """"X：1 為使用 ... 封包(PDO)寫入參數時會將參數存入 EEPROM；0 則不會" (L10697); an SDO
+    write is stored (L10764)."""
+    r = Rig()
+    try:
+        d = r.drive
+        d.params.write("P3.011", p3011)
+        r.write(0x212A, 0, 100, 2)  # P1.042 by SDO: to EEPROM
+        r.map_pdo(0x1400, [0x212A0010], 255)  # RPDO1 = 212Ah (P1.042), event driven
+        r.run(10)
+        r.feed(0x200 + NODE, struct.pack("<H", 555))
+        r.run(10)
+        assert d.params.read("P1.042") == 555
+        d.power_cycle()
+        r.run(50)
+        assert d.params.read("P1.042") == kept
+    finally:
+        r.close()
