@@ -78,6 +78,9 @@ class DiFunctions:
         self.jog_rpm = self._speed_of(drive.params.get("P4.005"), 20)
         self.gain_switched = False
         self._mode_cmd: tuple | None = None  # the S/T command given to the axis
+        # ZCLAMP with P2.065 bit 10 = 1 on the analog command: down to 0 rpm on the
+        # command's own curve, not at once (L9914-9916); `mode_command` gives it
+        self._clamp_ramp = False
         self.torque_limit_pct: float | None = None  # TRQLM limit in effect (%)
         self.speed_limit_rpm: float | None = None  # SPDLM limit in effect (rpm)
         self._p1001 = drive.params.cached("P1.001")  # read every motion step (TPOS, TQL)
@@ -255,7 +258,16 @@ class DiFunctions:
             self.speed_limit_rpm = rpm
         d.axis.speed_limit_rpm = self.speed_limit_rpm
         clamp = on("ZCLAMP") and mode in ZCLAMP_MODES
-        d.axis.zero_clamp = ("zero" if (get("P2.065") >> 10) & 1 else "lock") if clamp else ""
+        bit10 = (get("P2.065") >> 10) & 1
+        # bit 10 = 1 with the analog source ramps to 0 (L9914); with the register source
+        # the speed is set to 0 at once (L9918-9920), bit 10 = 0 locks the position
+        # (the analog command: S by P1.001 with SPD0/SPD1 off; a CiA 402 PV's 60FFh and the
+        # P1.009-P1.011 registers are register sources)
+        self._clamp_ramp = bool(clamp and bit10 and mode == "S"
+                                and P1001_MODES.get(self._p1001()[0] & 0xFF) == "S"
+                                and not (on("SPD0") or on("SPD1")))
+        d.axis.zero_clamp = ("" if self._clamp_ramp else "zero" if bit10 else "lock") \
+            if clamp else ""
         d.axis.zero_clamp_rpm = get("P1.038") / 10.0
         self._gains(mode)
         self.mode_command(mode)
@@ -282,13 +294,21 @@ class DiFunctions:
                 rpm = opts.analog_v_ref * get("P1.040") / 10.0 if mode == "S" else 0.0
             if (rpm > 0 and on("PL")) or (rpm < 0 and on("NL")):
                 rpm = 0.0  # no running towards an active limit (L15188-15191)
-            cmd: tuple = ("speed", rpm, get("P1.034"), get("P1.035"))
+            if self._clamp_ramp and abs(rpm) < get("P1.038") / 10.0:
+                rpm = 0.0  # ZCLAMP on the analog command, bit 10 = 1 (L9914-9916)
+            acc, dec = get("P1.034"), get("P1.035")
+            if mode == "S" and not sel and get("P1.036") == 0:  # (by_p1001: not 60FFh)
+                # "若使用類比命令，P1.036 的設定需要大於 0 才能有梯形加減速規劃" (L8342, L8353)
+                acc = dec = 0
+            cmd: tuple = ("speed", rpm, acc, dec)
         else:
             sel = on("TCM0") + 2 * on("TCM1")
             if sel:
                 pct = float(get(f"P1.{11 + sel:03d}"))
             else:  # T: T_REF x P1.041 / 10 V (L3955-3960); Tz: 0
                 pct = opts.analog_t_ref * get("P1.041") / 10.0 if mode == "T" else 0.0
+            if (pct > 0 and on("PL")) or (pct < 0 and on("NL")):
+                pct = 0.0  # PL/NL forbid running towards them in every mode (L15186-15191)
             cmd = ("torque", pct)
         if cmd == self._mode_cmd or d.axis.locks:
             return

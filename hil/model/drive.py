@@ -82,6 +82,7 @@ from hil.units import MS
 
 # WARN-class alarms that mean the main circuit is not powered: SRDY off (L15263, L19509, L19604)
 MAIN_POWER_ALARMS = frozenset({"AL003", "AL022"})
+SPEED_EPS_RPM = 1e-6  # speed comparisons (ZSPD, TSPD) ignore float noise below this
 
 # Physical wiring of the virtual bench's sensors: function -> (DI number, contact type).
 # Limit switches are normally closed (open at the limit), the home sensor normally open.
@@ -829,9 +830,10 @@ class Drive:
         rpm = ax.velocity_rpm
         _p2035, p1038, p1039, _p1054, _p1001 = self._step_params()
         last = self._dout_cache.get  # each output is set only when it changes (`_set_do`)
-        if last("ZSPD") != (on := abs(rpm) < p1038 / 10.0):
+        # compared beyond float noise (a speed settled on P1.039 reads 1000.0000000000001)
+        if last("ZSPD") != (on := abs(rpm) < p1038 / 10.0 - SPEED_EPS_RPM):
             self._set_do("ZSPD", on)
-        if last("TSPD") != (on := abs(rpm) > p1039):  # either direction (L8426)
+        if last("TSPD") != (on := abs(rpm) > p1039 + SPEED_EPS_RPM):  # either way (L8426)
             self._set_do("TSPD", on)
         if last("TPOS") != (on := self.tpos()):
             self._set_do("TPOS", on)
