@@ -68,6 +68,7 @@ from hil.model.pr_engine import PR_MODES, attach_pr
 from hil.model.pulse_train import attach_pulse_train, gear_problem
 from hil.model.sto import Sto
 from hil.model.timebase import Scheduler, ms
+from hil.profile.dio import mode_dio_defaults
 from hil.protocol.canopen import (
     ABORT_DATA_STATE,
     ABORT_DATA_STORE,
@@ -427,6 +428,7 @@ class Drive:
         self.holding_brake.coil(False)  # no control power: no DO conducts, the brake engages
         self.advance(off_for)
         self.params.power_cycle()
+        self._mode_dio_defaults()
         self.array[:] = self.array_eeprom  # RAM: lost at power-off (L5097), in place (shared)
         self.dio.power_cycle()
         self.absolute.power_cycle(battery)
@@ -442,6 +444,18 @@ class Drive:
         self.axis.set_power(False)
         self.emit(PowerCycled(self.sched.now, battery))
         self._boot()
+
+    def _mode_dio_defaults(self) -> None:
+        """P1.001.U = 1 "模式切換時，DIO (P2.010 ~ P2.022) 可重置為相對應各模式之預設值"
+        (L7811-7813; "請將 P1.001.U 設為 1，重上電後可重置", L1887): at the power-up where
+        it is in effect, the mapping takes the mode's defaults (tables L1862-1913); U itself
+        is "斷電不保持": it reads 0 afterwards."""
+        p1001 = self.params.get("P1.001")
+        if (p1001 >> 12) & 0xF != 1:
+            return
+        for name, value in mode_dio_defaults(p1001 & 0xFF).items():
+            self.params.set_internal(name, value)
+        self.params.set_internal("P1.001", p1001 & 0x0FFF)
 
     def _special_write(self, _name: str, _old: int, new: int) -> None:
         """P2.008 = 30 or 35: store the data array (COMPARE, CAPTURE, E-Cam) in EEPROM

@@ -130,3 +130,40 @@ def decode_mapping(kind: str, value: int, where: str) -> tuple[int, bool]:
     if code and code not in table:
         raise UnknownFunction(kind, code, where)
     return code, bool((value >> 8) & 0xF)
+
+
+# The DI/DO defaults of each control mode (§3.3.4 tables L1862-1913), which P1.001.U = 1 loads
+# at the power-up where it is in effect (L7811-7813, note L1887). DI1-DI8 (P2.010-P2.017) by
+# P1.001's mode byte; "-" is 0 (no function); NL, PL and EMGS b-contact and the others
+# a-contact, as the factory values (P2.015-P2.017 = 0x0022/0x0023/0x0021, P2.010 = 0x0101).
+# The CANopen (0x0C), DMCNET (0x0B) and PT-PR (0x0D-0x0F) modes have no DI column.
+_B_CONTACT = frozenset({0x21, 0x22, 0x23})
+_DI_COLUMNS: dict[tuple[int, ...], tuple[int, ...]] = {
+    (0x00,): (0x01, 0x04, 0x16, 0x17, 0x02, 0x22, 0x23, 0x21),  # PT
+    (0x01,): (0x01, 0x08, 0x11, 0x12, 0x02, 0x22, 0x23, 0x21),  # PR
+    (0x02, 0x04): (0x01, 0x09, 0x14, 0x15, 0x02, 0x22, 0x23, 0x21),  # S / Sz
+    (0x03, 0x05): (0x01, 0x10, 0x16, 0x17, 0x02, 0x22, 0x23, 0x21),  # T / Tz
+    (0x06,): (0x01, 0x04, 0x14, 0x15, 0x00, 0x00, 0x18, 0x21),  # PT-S
+    (0x07,): (0x01, 0x04, 0x16, 0x17, 0x00, 0x00, 0x20, 0x21),  # PT-T
+    (0x08,): (0x01, 0x08, 0x11, 0x12, 0x14, 0x15, 0x18, 0x21),  # PR-S
+    (0x09,): (0x01, 0x08, 0x11, 0x12, 0x16, 0x17, 0x20, 0x21),  # PR-T
+    (0x0A,): (0x01, 0x00, 0x14, 0x15, 0x16, 0x17, 0x23, 0x21),  # S-T
+}
+# DO1-DO5 (P2.018-P2.022): "PT/PR/通訊模式" DO3 HOME, "速度/扭矩模式" DO3 TSPD; a mixed mode
+# by its first mode (S-T: speed)
+_DO_POSITION = (0x0101, 0x0103, 0x0109, 0x0105, 0x0007)
+_DO_SPEED = (0x0101, 0x0103, 0x0104, 0x0105, 0x0007)
+_SPEED_TORQUE = frozenset({0x02, 0x03, 0x04, 0x05, 0x0A})
+
+
+def mode_dio_defaults(mode: int) -> dict[str, int]:
+    """P2.010-P2.022 as the tables L1862-1913 give them for P1.001's mode byte `mode`
+    (the DIs only where the table has a column)."""
+    out: dict[str, int] = {}
+    for modes, codes in _DI_COLUMNS.items():
+        if mode in modes:
+            for param, code in zip(DI_PARAMS, codes, strict=False):
+                out[param] = code if code in _B_CONTACT or not code else 0x0100 | code
+    dos = _DO_SPEED if mode in _SPEED_TORQUE else _DO_POSITION
+    out.update(zip(DO_PARAMS, dos, strict=False))
+    return out
