@@ -21,6 +21,10 @@ from typing import Any, Protocol
 from hil import clock
 from hil.protocol.cia402 import CONTROLWORD
 
+# a drive at rest after a quick stop: 606Ch within the A3's zero-speed level P1.038's
+# default, 10 rpm (0.1 rpm units, L8407)
+STANDSTILL = 100
+
 __all__ = ["DriveGone", "SafeDrive", "SafeReport", "SafeStateSpec", "run_safe_state"]
 
 
@@ -54,6 +58,11 @@ class SafeDrive(Protocol):
     # optional: read the statusword back until bit 2 "operation enabled" (L18321-18331) is
     # clear, i.e. the power stage is off (SWITCH ON DISABLED, or FAULT), within `timeout_ns`
     # def power_stage_off(self, timeout_ns: int) -> str | bool: ...
+
+    # optional, for the `quick_stop` controlword: until the quick stop's ramp has ended (the
+    # motor at rest, or the drive out of QUICK STOP ACTIVE by itself), within `timeout_ns`;
+    # the safe state then writes disable voltage (transition 12, L18262)
+    # def quick_stop_done(self, timeout_ns: int) -> str | bool: ...
 
     def di_wired(self, function: str) -> bool: ...
 
@@ -117,6 +126,16 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
         if cw is not None and d.has_controlword():
             act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",
                 lambda d=d, cw=cw: d.write_controlword(cw))
+            if safe.controlword == "quick_stop":
+                # the A3 stays in QUICK STOP ACTIVE, the servo on, until a command: transition
+                # 12 "Command Disable Voltage" (L18262): after the ramp, the power stage off
+                stopped = getattr(d, "quick_stop_done", None)
+                if stopped is not None:
+                    act(d.name, "quick stop ramp ended",
+                        lambda s=stopped: s(safe.timeout_ns), timeout_ms=safe.timeout_ns / 1e6)
+                act(d.name, f"controlword disable_voltage (0x{CONTROLWORD['disable_voltage']:02X})"
+                    " after the quick stop (transition 12)",
+                    lambda d=d: d.write_controlword(CONTROLWORD["disable_voltage"]))
             confirm = getattr(d, "power_stage_off", None)
             if confirm is not None and rep.actions[-1]["ok"]:  # the state it left, read back
                 act(d.name, "statusword: power stage off",

@@ -129,3 +129,51 @@ def test_gateway_controlword_frame_is_the_cia301_expedited_download():
     m = gateway_mod.sdo_write_controlword(5, 0x06)
     assert m.arbitration_id == 0x605
     assert bytes(m.data) == bytes([0x2B, 0x40, 0x60, 0x00, 0x06, 0x00, 0x00, 0x00])
+
+
+QS = SafeState(controlword="quick_stop", di={"SON": False}, wait_brake=False,
+               timeout_ns=500_000_000)
+
+
+def test_quick_stop_is_followed_by_disable_voltage():
+    """The A3 stays in QUICK STOP ACTIVE with the servo on after the ramp (transitions 12/16
+    are commands, L18262-18266): the safe state waits for the ramp where the drive can tell
+    (`quick_stop_done`), then writes disable voltage; a drive that cannot tell gets it at once
+    (the power stage off matters more than the ramp)."""
+    class Telling(FakeDrive):
+        def quick_stop_done(self, timeout_ns: int) -> str:
+            self.log.append("ramp")
+            return "at rest"
+
+    told, blind = Telling("a"), FakeDrive("b")
+    rep = run_safe_state([told, blind], QS, "end")
+    assert told.log == ["cw 0x2", "ramp", "cw 0x0", "SON False"]
+    assert blind.log == ["cw 0x2", "cw 0x0", "SON False"]
+    assert rep.ok
+
+
+def test_the_gateway_reads_the_quick_stop_ramp_end_over_sdo():
+    """606Ch read by expedited SDO uploads (40h) until it is within 10 rpm (L8407)."""
+    speeds = iter([15000, 2000, 40])
+
+    class Export:
+        def __init__(self) -> None:
+            self.asked: list[int] = []
+
+        def request(self, msg, match, timeout_s):
+            index = msg.data[1] | msg.data[2] << 8
+            assert msg.arbitration_id == 0x605 and msg.data[0] == 0x40
+            self.asked.append(index)
+            value = 0x0237 if index == 0x6041 else next(speeds)  # QUICK STOP ACTIVE
+            data = bytes([0x43, msg.data[1], msg.data[2], 0]) + value.to_bytes(4, "little",
+                                                                               signed=True)
+            ans = SimpleNamespace(arbitration_id=0x585, data=data)
+            return ans if match(ans) else None
+
+    export = Export()
+    d = SimpleNamespace(can="can0", node_id=5, di={}, do={}, sto={})
+    gw = SimpleNamespace(can={"can0": export}, dio={},
+                         bench=SimpleNamespace(safe_state=QS))
+    drive = gateway_mod._GatewayDrive(gw, "d", d)
+    assert drive.quick_stop_done(QS.timeout_ns) == "606Ch = 40 (0.1 rpm): at rest"
+    assert export.asked == [0x6041, 0x606C] * 3

@@ -8,9 +8,10 @@ from typing import TYPE_CHECKING, Any
 
 import can
 
+from hil import clock
 from hil.gateway.exports import DioExport
 from hil.protocol import canopen
-from hil.safety import run_safe_state
+from hil.safety import STANDSTILL, run_safe_state
 from hil.units import S
 
 if TYPE_CHECKING:
@@ -47,6 +48,36 @@ class _GatewayDrive:
         if ans is None:
             return "sent; no SDO answer"
         return "acknowledged" if ans.data[0] == 0x60 else False  # 60h: download response
+
+    def _upload(self, index: int, timeout_s: float) -> int | None:
+        """An expedited SDO upload of `index`:00 through the export, signed (None: no
+        answer or an abort)."""
+        export, node = self.gw.can[self.d.can], self.d.node_id
+        req = can.Message(arbitration_id=canopen.SDO_REQUEST + node, is_extended_id=False,
+                          data=canopen.sdo_upload_request(index, 0))
+        ans = export.request(req, lambda m: m.arbitration_id == canopen.SDO_RESPONSE + node
+                             and bytes(m.data[1:4]) == bytes((index & 0xFF, index >> 8, 0)),
+                             timeout_s)
+        if ans is None or ans.data[0] & 0xE3 not in (0x43, 0x47, 0x4B, 0x4F):
+            return None
+        size = 4 - ((ans.data[0] >> 2) & 0x3)
+        return int.from_bytes(bytes(ans.data[4:4 + size]), "little", signed=True)
+
+    def quick_stop_done(self, timeout_ns: int) -> str | bool:
+        """Until the drive is out of QUICK STOP ACTIVE by itself (6041h bit 2 clear) or at
+        rest (606Ch within the A3's zero-speed level, 0.1 rpm): the safe state then writes
+        disable voltage (transition 12, L18262)."""
+        end = clock.monotonic() + timeout_ns / S
+        while True:
+            sw = self._upload(0x6041, 0.2)
+            if sw is not None and not sw & 0x0004:
+                return f"statusword 0x{sw & 0xFFFF:04X}: power stage off"
+            v = self._upload(0x606C, 0.2)
+            if v is not None and abs(v) <= STANDSTILL:
+                return f"606Ch = {v} (0.1 rpm): at rest"
+            if clock.monotonic() >= end:
+                return False
+            clock.sleep(0.01)
 
     def di_wired(self, function: str) -> bool:
         return self.dio is not None and function in self.d.di

@@ -130,7 +130,9 @@ _COUNTERS = frozenset({0x6062, 0x6063, 0x6064})
 class Cia402Options:
     """Choices where the manual is silent (docs/manual-choices.md#cia402-motion)."""
 
-    quick_stop_option: int = 2  # 605Ah model: 6085h ramp, then SWITCH ON DISABLED (§3.6 ⚠)
+    # 605Ah model: 6 = the 6085h ramp, then QUICK STOP ACTIVE until a command: transition 12
+    # Disable Voltage or 16 Enable Operation (L18262-18265); 2 = then SWITCH ON DISABLED
+    quick_stop_option: int = 6
     disable_operation_option: int = 0  # 605Ch model: transition 5 = servo off (L18253)
     halt_option: int = 1  # 605Dh model: profile deceleration, then hold
     fault_reaction_option: int = 0  # 605Eh model: alarm = servo off at once (L18264)
@@ -211,7 +213,7 @@ def _objects(max_speed_rpm: int) -> dict[tuple[int, int], _Obj]:
         objs[(0x6093, sub)] = replace(objs[(0x6093, sub)], lo=1)
     o = _Obj
     objs.update({  # model-only option-code objects (_OPTION_CODES; option_objects)
-        (0x605A, 0): o("Quick stop option code", "I16", True, 2),
+        (0x605A, 0): o("Quick stop option code", "I16", True, 6),
         (0x605C, 0): o("Disable operation option code", "I16", True, 0),
         (0x605D, 0): o("Halt option code", "I16", True, 1),
         (0x605E, 0): o("Fault reaction option code", "I16", True, 0),

@@ -12,7 +12,7 @@ from typing import Any
 from hil import clock
 from hil.drivers.cia402 import decode_state
 from hil.protocol.cia402 import CONTROLWORD
-from hil.safety import DriveGone, SafeReport, run_safe_state
+from hil.safety import STANDSTILL, DriveGone, SafeReport, run_safe_state
 
 __all__ = ["CONTROLWORD", "DriveGone", "SafeReport", "go_safe"]
 
@@ -43,6 +43,23 @@ class _SessionDrive:
             if clock.monotonic_ns() >= end:
                 raise TimeoutError(f"statusword 0x{sw:04X} ({decode_state(sw)}) after "
                                    f"{timeout_ns / 1e6:g} ms: the power stage is still on")
+            clock.sleep(0.002)
+
+    def quick_stop_done(self, timeout_ns: int) -> str:
+        """After the quick-stop controlword: until the drive has left QUICK STOP ACTIVE by
+        itself (bit 2 clear) or its 606Ch velocity actual is within STANDSTILL (0.1 rpm
+        units: the A3's own zero-speed level P1.038, default 10 rpm, L8407)."""
+        end = clock.monotonic_ns() + timeout_ns
+        while True:
+            sw = self.d.cia.statusword
+            if not sw & 0x0004:
+                return f"statusword 0x{sw:04X}: {decode_state(sw)}"
+            v = self.d.cia.read(0x606C)
+            if abs(v) <= STANDSTILL:
+                return f"606Ch = {v} (0.1 rpm): at rest"
+            if clock.monotonic_ns() >= end:
+                raise TimeoutError(f"606Ch = {v} (0.1 rpm) after {timeout_ns / 1e6:g} ms: "
+                                   "still moving")
             clock.sleep(0.002)
 
     def di_wired(self, function: str) -> bool:

@@ -179,14 +179,17 @@ def test_quick_stop_from_ready_goes_to_switch_on_disabled():
     assert rig.cia.state == SWITCH_ON_DISABLED
 
 
-def test_quick_stop_ramps_with_6085h_then_switch_on_disabled():
+def test_quick_stop_ramps_with_6085h_then_stays_until_disable_voltage():
+    """Transition 11 "Quick Stop 功能啟動"; the only ways out of QUICK STOP ACTIVE are
+    commands: 12 "Command Disable Voltage" (servo off) and 16 Enable Operation (L18260-18266).
+    Until session 28 the model went to SWITCH ON DISABLED by itself after the ramp (605Ah
+    option 2; helpers 88, 105)."""
     rig = Rig()
     rig.w(0x6085, 100)  # ms for 3000 -> 0 rpm (L18787-18801)
     rig.w(0x60FF, 15000)  # 1500 rpm
     rig.enable(3)
     rig.until(lambda: rig.r(0x606C) == 15000)
     rig.cw(0x0B)  # bit 2 = 0: quick stop (L18278), transition 11
-    t0 = rig.t
     assert rig.cia.state == QUICK_STOP_ACTIVE
     assert rig.sw & 0x6F == 0x07  # L18328
     assert rig.cia.servo_enable_requested
@@ -194,6 +197,20 @@ def test_quick_stop_ramps_with_6085h_then_switch_on_disabled():
     assert rig.axis.demand_rpm > 0
     rig.step(1)
     assert rig.axis.demand_rpm == 0  # 1500 rpm at 100 ms/3000 rpm: 50 ms (L4164)
+    rig.step(500)
+    assert rig.cia.state == QUICK_STOP_ACTIVE and rig.cia.servo_enable_requested
+    rig.cw(0x00)  # transition 12: Disable Voltage
+    assert rig.cia.state == SWITCH_ON_DISABLED and not rig.cia.servo_enable_requested
+
+
+def test_quick_stop_option_2_still_ends_in_switch_on_disabled():
+    rig = Rig(quick_stop_option=2)
+    rig.w(0x6085, 100)
+    rig.w(0x60FF, 15000)
+    rig.enable(3)
+    rig.until(lambda: rig.r(0x606C) == 15000)
+    rig.cw(0x0B)
+    t0 = rig.t
     t_sod = rig.until(lambda: rig.cia.state == SWITCH_ON_DISABLED)
     assert t_sod - t0 < 200 * MS
     assert not rig.cia.servo_enable_requested
@@ -340,8 +357,8 @@ def test_object_access_errors():
 
 def test_option_code_objects_when_enabled():
     rig = Rig(option_objects=True)
-    assert rig.r(0x605A) == 2 and rig.r(0x605D) == 1 and rig.r(0x605E) == 0
-    rig.w(0x605A, 6)
+    assert rig.r(0x605A) == 6 and rig.r(0x605D) == 1 and rig.r(0x605E) == 0
+    rig.w(0x605A, 2)
     assert abort_of(rig.w, 0x605D, 0) == ABORT_VALUE_RANGE
 
 

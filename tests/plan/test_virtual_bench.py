@@ -115,3 +115,29 @@ def test_a_plan_that_leaves_the_bench_unsafe_does_not_pass(tmp_path):
     assert r.status == "error" and "safe state not confirmed" in r.error, r.error
     meta = Recording.open(r.recording).metadata()["hil.result"]
     assert meta["status"] == "error" and meta["safe_state_ok"] == "false", meta
+
+
+def test_a_quick_stop_safe_state_ramps_then_disables_voltage(tmp_path):
+    """`safe_state.controlword: quick_stop` on a drive that stays in QUICK STOP ACTIVE after
+    its ramp (the A3: transition 12 is a command, L18262): the safe state waits for the ramp,
+    then writes disable voltage, and confirms the power stage off and the brake engaged."""
+    from hil.paths import fixture
+
+    text = fixture("benches", "virtual.yaml").read_text(encoding="utf-8")
+    bench_file = tmp_path / "qs.yaml"
+    bench_file.write_text(text.replace("  controlword: disable_voltage\n",
+                                       "  controlword: quick_stop\n", 1), encoding="utf-8")
+    plan = loads_plan("name: spinning\nsteps:\n  - state: OPERATION ENABLED\n"
+                      "  - move: {mode: PV, velocity: 10000}\n  - wait: 300ms\n",
+                      str(tmp_path / "spinning.yaml"))
+    [r] = run_plans([plan], load_bench(bench_file), tmp_path, stream=io.StringIO())
+    assert r.passed, (r.status, r.error)
+    rec = Recording.open(r.recording)
+    actions = [m["action"] for _, _, _, m in rec.messages(T.SAFETY)]
+    i = actions.index("controlword quick_stop (0x02)")
+    assert actions[i + 1:i + 4] == [
+        "quick stop ramp ended", "controlword disable_voltage (0x00) after the quick stop "
+        "(transition 12)", "statusword: power stage off"]
+    assert actions[-1] == "safe_state_reached"
+    last = [m for _, _, _, m in rec.messages(T.drive_state("drive1"))][-1]
+    assert last["servo_on"] is False and last["brkr"] is False
