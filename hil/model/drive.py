@@ -83,6 +83,7 @@ from hil.units import MS
 
 # WARN-class alarms that mean the main circuit is not powered: SRDY off (L15263, L19509, L19604)
 MAIN_POWER_ALARMS = frozenset({"AL003", "AL022"})
+P2030_FUNCTIONS = frozenset({1, 5, 6, 7})  # P2.030 functions n, ended by -n (L9492-9505)
 SPEED_EPS_RPM = 1e-6  # speed comparisons (ZSPD, TSPD) ignore float noise below this
 
 # Physical wiring of the virtual bench's sensors: function -> (DI number, contact type).
@@ -159,6 +160,7 @@ class Drive:
             self.params.write(name_, value)
         if params:
             self.params.power_cycle()  # bench-given values act like configured drives
+        self._mode_dio_defaults()  # this power-up's P1.001.U (given, or a file left with it)
 
     def _make_parts(self, options: ModelOptions) -> None:
         """Alarms, DI/DO, axis, brake (BRKR) and holding brake, STO, CiA 402."""
@@ -218,6 +220,7 @@ class Drive:
         self.array_eeprom = new_data_array()
         self._hold_timer = None
         self._was_requested = False  # Servo On asked at the last _update_servo (AL053)
+        self._p2030: set[int] = set()  # P2.030 functions on (1, 5, 6, 7: `_p2030_written`)
         self._dout_cache: dict[str, bool] = {}
         self._sensor_state: dict[str, bool] = {}
         self._sensor_key: tuple[bool, bool, bool] | None = None  # (NL, PL, ORGP) last seen
@@ -428,6 +431,8 @@ class Drive:
         self.holding_brake.coil(False)  # no control power: no DO conducts, the brake engages
         self.advance(off_for)
         self.params.power_cycle()
+        self._p2030.clear()  # P2.030's functions end with the power (L9505)
+        self.params.no_eeprom = False
         self._mode_dio_defaults()
         self.array[:] = self.array_eeprom  # RAM: lost at power-off (L5097), in place (shared)
         self.dio.power_cycle()
@@ -456,6 +461,8 @@ class Drive:
         for name, value in mode_dio_defaults(p1001 & 0xFF).items():
             self.params.set_internal(name, value)
         self.params.set_internal("P1.001", p1001 & 0x0FFF)
+        if self.params.retained_path is not None:  # kept as any power-up's values are
+            self.params.save()
 
     def _special_write(self, _name: str, _old: int, new: int) -> None:
         """P2.008 = 30 or 35: store the data array (COMPARE, CAPTURE, E-Cam) in EEPROM
@@ -468,7 +475,8 @@ class Drive:
     def write_pdo_object(self, index: int, sub: int, value: int) -> None:
         """`write_object` of an RPDO-mapped object: a parameter goes to EEPROM only with
         P3.011.X = 1 ("X = 0：使用 PDO 寫入參數時，不會將參數存入 EEPROM", L10764-10768)."""
-        ram = 0x2000 <= index <= 0x2FFF and not self.params.get("P3.011") & 0x1
+        # (a 6xxxh object that is a parameter too, 6093h = P1.044 say, is kept alike)
+        ram = not self.params.get("P3.011") & 0x1
         with self.params.ram_only_writes(ram):
             self.write_object(index, sub, value)
 
@@ -580,12 +588,12 @@ class Drive:
             self.difunc.refresh()
         if index == 0x6093 and sub in (1, 2):  # 6093h = P1.044 / P1.045 (L18838-18854)
             name = "P1.044" if sub == 1 else "P1.045"
-            if self.params.read(name) != value:
-                self.params.set_internal(name, value)
+            if self.params.read(name) != value:  # kept as a write of it would be
+                self.params.set_internal(name, value, ram_only=self.params.ram_only_now())
         if index in (0x607F, 0x6080):  # 6080h "is P1.055", 607Fh = P1.055 x 10 (L18713-18735)
             rpm = round(value / 10) if index == 0x607F else value
             if self.params.read("P1.055") != rpm:
-                self.params.set_internal("P1.055", rpm)
+                self.params.set_internal("P1.055", rpm, ram_only=self.params.ram_only_now())
 
     def _param_of(self, index: int, sub: int) -> str:
         try:
@@ -604,14 +612,23 @@ class Drive:
         return (
             ("DI" in src and self.dio.function_active("SON"))
             or ("CANOPEN" in src and self.cia402.servo_enable_requested)
-            or self.params.get("P2.030") == 1  # forced software servo on (L9496)
+            or 1 in self._p2030  # forced software servo on (L9496)
         )
 
     def _p2030_written(self, _name: str, _old: int, new: int) -> None:
-        """P2.030: 1 forces a software servo on (L9496); 8 backs the values in RAM up to
-        EEPROM (L9501)."""
-        if new == 8:
+        """P2.030 (L9492-9505): 1 forces a software servo on, 5 keeps no value written after
+        it, 6/7 simulation / scope (stored, not modelled); each stays on until -n ends it, 0
+        ends them all, or the power goes ("-1, -5, -6, -7 分別關閉 1、5、6、7 的功能";
+        P2.030 reads 0 after power-up). 8 backs the values in RAM up to EEPROM (L9501)."""
+        if new == 0:
+            self._p2030.clear()
+        elif new in P2030_FUNCTIONS:
+            self._p2030.add(new)
+        elif -new in P2030_FUNCTIONS:
+            self._p2030.discard(-new)
+        elif new == 8:
             self.params.backup_to_eeprom()
+        self.params.no_eeprom = 5 in self._p2030
         self._update_servo()
 
     def _update_servo(self, source: str = "") -> None:

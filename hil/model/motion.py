@@ -563,7 +563,9 @@ class Axis:
         """A load pulls the shaft even at rest (gravity, a constant load torque) and the
         brake does not hold it: time must be stepped at standstill too (a vertical axis sags
         with the torque off, L1351, L2427; the loop holds it with torque)."""
-        return self._ext != 0.0 and not self.brake_clamped
+        # (a load static friction holds, with the torque off, moves nothing)
+        return (abs(self._ext) > self._fric or (self.power and self._ext != 0.0)) \
+            and not self.brake_clamped
 
     # ---- the integrator ------------------------------------------------------------
     def step(self, dt_ns: int) -> None:

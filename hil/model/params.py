@@ -71,6 +71,9 @@ class ParameterStore:
         # at the next power cycle, and the one `save` keeps
         self._eeprom: dict[str, int] = {}
         self._ram_only = 0  # > 0 inside `ram_only_writes`: every write goes to RAM alone
+        # P2.030 function 5 (set by the drive): "各參數之設定值於斷電後不保持" (L9495), every
+        # write from then on goes to RAM alone, whichever path it takes
+        self.no_eeprom = False
         # bumped at every change of a value in effect or of the read hooks (`cached`)
         self.version = 0
         self._set_all_defaults()
@@ -138,10 +141,12 @@ class ParameterStore:
         `ram_only`: into RAM alone (a PR WRITE without ROM, "ROM 為同時寫入 RAM 與 EEPROM，提供參數
         斷電保持的功能" L4533): the value in EEPROM comes back at the next power cycle."""
         spec = self.check_write(name, value)
-        # P2.030 = 5: "各參數之設定值於斷電後不保持" (L9495): no value written from then on is kept
-        no_eeprom = self._ram_only > 0 or (self._stored.get("P2.030") == 5
-                                           and spec.param != "P2.030")
-        self._commit(spec, value, ram_only=ram_only or no_eeprom)
+        self._commit(spec, value, ram_only=ram_only)
+
+    def ram_only_now(self) -> bool:
+        """Whether a write now goes to RAM alone: P2.030 function 5 on (`no_eeprom`), or
+        inside `ram_only_writes`."""
+        return self.no_eeprom or self._ram_only > 0
 
     @contextlib.contextmanager
     def ram_only_writes(self, on: bool = True) -> Iterator[None]:
@@ -303,17 +308,16 @@ class ParameterStore:
 
     def factory_reset(self) -> None:
         """P2.008 = 10 "參數重置(重置後請重新上電)" (L9222): every parameter a user writes back
-        to its default, as a write would set it (a ● one takes effect at the power cycle the
-        manual asks for); not P4.011-P4.021 ("無法重置", L10947-11039) nor the read-only ★
-        ones (monitors, the alarm history). Write hooks do not fire; listeners hear it."""
+        to its default in EEPROM, in effect at the power cycle the manual asks for (as a ●
+        one: until then the drive runs on the values it has, a read gives the reset one);
+        not P4.011-P4.021 ("無法重置", L10947-11039) nor the read-only ★ ones (monitors, the
+        alarm history). Write hooks do not fire; listeners hear it."""
         self._eeprom.clear()
         for spec in self.table:
             key = spec.param
             if spec.read_only or key in NOT_RESETTABLE or self._stored[key] == spec.default:
                 continue
             self._stored[key] = spec.default
-            if not spec.power_cycle:
-                self._effective[key] = spec.default
             self._notify(key, spec.default)
         self.version += 1
         if self.retained_path is not None and self.autosave:
@@ -377,7 +381,7 @@ class ParameterStore:
 
     def _commit(self, spec: ParamSpec, value: int, ram_only: bool = False) -> None:
         key = spec.param
-        self._note_eeprom(key, ram_only)
+        self._note_eeprom(key, ram_only or self.ram_only_now())
         old = self._stored[key]
         self._stored[key] = value
         if not spec.power_cycle:

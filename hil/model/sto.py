@@ -16,8 +16,9 @@
 The printed state table (L2454-2468) maps the alarms the other way round; the notes and
 chapter 13 agree with the mapping above (see docs/manual-choices.md). When both channels
 are lost, they are no longer out of step: a channel's 1 s that ends while both are lost
-raises nothing; AL500 comes after its 10 ms, and if the other channel comes back before
-that, the channel's alarm comes then (its second, counted from its own loss, is up).
+raises nothing (AL500 comes after its 10 ms); when the other channel comes back, the
+channel's alarm comes then (its second, counted from its own loss, is up), whether AL500
+came or not.
 """
 
 from __future__ import annotations
@@ -126,7 +127,6 @@ class Sto:
             if self.torque_cut and self._opt.sto_resume_after_dropout:
                 self.torque_cut = False
                 self._on_cut(False)
-        al500 = self._al500_raised  # in the loss of both that may end now
         # both lost for 10 ms -> AL500 (L2478)
         if not a and not b:
             if self._both_timer is None:
@@ -147,11 +147,8 @@ class Sto:
                     timer.cancel()
                     self._one_timers[ch] = None
             elif self._one_expired[ch] and (a or b):  # the other is back, this one is not:
-                self._one_expired[ch] = False  # its second ran out while both were lost
-                if al500:  # AL500 had taken over: a new second of mismatch from now
-                    self._arm_one(ch, code)
-                else:  # both were lost under AL500's 10 ms: its own second is up (L2482)
-                    self._set_cause(code, True)
+                self._one_expired[ch] = False  # its second, counted from its own loss, ran
+                self._set_cause(code, True)  # out while both were lost: it is up now
             elif timer is None and not self._one_expired[ch]:
                 self._arm_one(ch, code)
 

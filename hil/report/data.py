@@ -386,9 +386,12 @@ def _reconcile_status(data: RunData) -> None:
                             "plan status")
         data.status = "error"
         return
-    if data.status not in ("pass", "incomplete"):
+    said = data.metadata.get("hil.result", {}).get("status", "")
+    if said != "pass" or data.status not in ("pass", "incomplete"):
         return
-    step = next((s for s in data.steps if s.status in ("fail", "error")), None)
+    # (a step the reader marked "cut short" is the file's loss, not the run's failure)
+    step = next((s for s in data.steps if s.status in ("fail", "error")
+                 and not s.message.startswith("cut short")), None)
     verdict = next((v for v in data.verdicts if v.get("status") == "fail"), None)
     if step is not None:
         why = f"step {step.index + 1} {step.label} {step.status}"
@@ -397,7 +400,7 @@ def _reconcile_status(data: RunData) -> None:
                "fail")
     else:
         return
-    data.status_note = f"the recording's result says {data.status}, but {why}"
+    data.status_note = f"the recording's result says {said}, but {why}"
     data.status = "fail"
 
 

@@ -102,7 +102,8 @@ def load_side(path: str | Path) -> Side:
     for a in rec.attachments():
         if a.name == "bench.yaml":
             drive = _bench_drive(a.data.decode("utf-8", "replace"))
-        elif a.name == "plan.yaml":  # a plan's options go to every drive (bench_with_options)
+        elif a.name == "plan.yaml" and str(meta.get("hil.bench", {}).get("virtual")).lower() \
+                == "true":  # a plan's options go to every virtual drive (bench_with_options)
             plan_opts = _plan_options(a.data.decode("utf-8", "replace"))
     wiring = dict(drive.get("wiring") or {})
     try:

@@ -54,3 +54,15 @@ def test_u1_in_canopen_mode_resets_the_dos_only():
     d.params.write("P1.001", 0x100C)
     d.power_cycle()
     assert d.dio.di_function(2) == "TRQLM" and d.dio.do_function(3) == "HOME"
+
+
+def test_u1_given_at_construction_or_left_in_the_file_applies_at_that_power_up(tmp_path):
+    """A drive made with P1.001 = 0x1003 (a bench's values) powers up with U = 1 in effect;
+    so does one whose parameter file still holds U = 1 (helper-108)."""
+    d = Drive(inputs={8: True}, params={"P1.001": 0x1003})
+    assert d.dio.di_function(2) == "SPDLM" and d.params.read("P1.001") == 0x0003
+    path = tmp_path / "state"
+    first = Drive(inputs={8: True}, state_path=path, params={"P1.001": 0x1002})
+    assert first.params.read("P1.001") == 0x0002
+    again = Drive(inputs={8: True}, state_path=path)  # the file says U = 0 now
+    assert again.params.read("P1.001") == 0x0002 and again.dio.di_function(2) == "TRQLM"

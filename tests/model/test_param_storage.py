@@ -10,7 +10,7 @@ import struct
 import pytest
 
 from hil.model.drive import Drive
-from hil.model.params import ParameterStore
+from hil.units import MS
 from tests.faces.test_manual_rules_s16 import NODE, Rig  # the CANopen face's rig
 
 
@@ -26,27 +26,67 @@ def test_p2008_10_resets_the_parameters_but_not_the_calibration():
     assert d.params.get("P3.000") == 5
     d.params.write("P2.008", 10)
     assert d.params.read("P5.020") == 200 and d.params.read("P1.042") == 0
-    assert d.params.get("P3.000") == 5  # ●: the reset takes effect at the power cycle
+    # "重置後請重新上電": in effect at the power cycle; the drive runs on what it has
+    assert d.params.get("P3.000") == 5 and d.params.get("P5.020") == 300
     d.power_cycle()
     assert d.params.get("P3.000") == 0x7F and d.params.read("P2.008") == 0
+    assert d.params.get("P5.020") == 200 and d.params.get("P1.042") == 0
     assert d.params.read("P4.011") == 7
 
 
+def test_p2008_10_changes_nothing_in_effect_under_a_running_servo():
+    """A reset under Servo On touched ▲ parameters (the e-gear) and left derived state
+    stale (forced DO, 6080h, a forced servo on; helper-108): nothing takes effect before the
+    power cycle."""
+    d = Drive(inputs={8: True})
+    d.params.write("P1.044", 1000000)
+    d.params.write("P1.045", 1000000)
+    d.params.write("P1.055", 1000)
+    d.params.write("P2.030", 1)  # forced software servo on (L9496)
+    d.advance(20 * MS)
+    assert d.servo_on
+    d.params.write("P2.008", 10)
+    d.advance(20 * MS)
+    assert d.servo_on and d.params.get("P1.044") == 1000000
+    assert d.read_object(0x6080, 0) == d.params.get("P1.055") == 1000
+    d.power_cycle()
+    assert d.params.get("P1.044") == 16777216 and d.params.get("P1.055") == 3000
+
+
 def test_p2030_5_keeps_no_value_written_after_it(tmp_path):
-    """"5 設定後，各參數之設定值於斷電後不保持" (L9495); P2.030 itself returns to 0 at
-    power-up (L9505), so writes are kept again after it."""
+    """"5 設定後，各參數之設定值於斷電後不保持" (L9495), by any path (a parameter write, a
+    Modbus write, a CiA 402 object that is a parameter); "-5" ends it (L9502), and so does
+    the power (P2.030 reads 0 after power-up, L9505)."""
     path = tmp_path / "params.json"
-    store = ParameterStore(retained_path=path)
-    store.write("P1.042", 100)
-    store.write("P2.030", 5)
-    store.write("P1.042", 200)
-    assert store.read("P1.042") == 200  # in RAM, in effect
-    assert ParameterStore(retained_path=path).read("P1.042") == 100  # a restart: EEPROM's
-    store.power_cycle()
-    assert store.read("P1.042") == 100 and store.read("P2.030") == 0
-    store.write("P1.042", 300)
-    store.power_cycle()
-    assert store.read("P1.042") == 300
+    d = Drive(inputs={8: True}, state_path=path)
+    d.params.write("P1.042", 100)
+    d.params.write("P2.030", 5)
+    d.params.write("P1.042", 200)
+    d.params.write("P2.030", 8)  # 8 backs RAM up (L9501) ...
+    d.params.write("P1.043", 50)  # ... but function 5 stays on until -5
+    d.params.modbus_write(d.params.table.spec("P5.020").modbus_address, [300, 0])
+    d.write_object(0x6080, 0, 2000)  # = P1.055 (L18713-18735)
+    assert d.params.read("P1.043") == 50 and d.params.read("P5.020") == 300
+    assert d.params.read("P1.055") == 2000
+    restart = Drive(inputs={8: True}, state_path=path)  # what EEPROM holds
+    assert restart.params.read("P1.043") == 0 and restart.params.read("P5.020") == 200
+    d.power_cycle()
+    assert d.params.read("P1.043") == 0 and d.params.read("P2.030") == 0
+    assert d.params.read("P5.020") == 200 and d.params.read("P1.055") == 3000
+    assert d.params.read("P1.042") == 200  # backed up by the 8
+    d.params.write("P1.043", 30)
+    d.power_cycle()
+    assert d.params.read("P1.043") == 30  # function 5 ended with the power
+
+
+def test_p2030_5_then_minus_5_stores_again():
+    d = Drive(inputs={8: True})
+    d.params.write("P2.030", 5)
+    d.params.write("P1.042", 200)
+    d.params.write("P2.030", -5)
+    d.params.write("P1.043", 40)
+    d.power_cycle()
+    assert d.params.read("P1.042") == 0 and d.params.read("P1.043") == 40
 
 
 @pytest.mark.parametrize(("p3011", "kept"), [(0x0000, 100), (0x0001, 555)])

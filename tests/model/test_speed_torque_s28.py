@@ -109,3 +109,16 @@ def test_tspd_is_off_at_exactly_p1039(speed: int):
     d.params.write("P1.039", speed - 1)
     d.advance(5 * MS)
     assert d.dio.do_function_state("TSPD")
+
+
+def test_writing_p1036_replans_the_analog_command():
+    """P1.036 decides whether the analog command has a trapezoid (L8342): a write of it
+    mid-ramp takes effect, as a write of P1.034 does (helper-108)."""
+    d = make(2, ModelOptions(analog_v_ref=10.0), son=False,
+             **{"P1.040": 3000, "P1.034": 1000, "P1.035": 1000, "P1.036": 100})
+    d.set_di(1, True)
+    d.advance(60 * MS)
+    assert rpm(d) < 300
+    d.params.write("P1.036", 0)
+    d.advance(50 * MS)
+    assert rpm(d) > 2900

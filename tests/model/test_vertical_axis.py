@@ -50,3 +50,11 @@ def test_no_load_no_motion_at_rest():
     d.set_di(1, False)
     d.advance(200 * MS)
     assert d.feedback_counts() == p0
+
+
+def test_a_load_friction_holds_is_not_stepped_at_rest():
+    """Gravity below static friction moves nothing with the torque off: no motion steps."""
+    d = Drive(mechanics=Mechanics(gravity_torque=0.01, friction_torque=0.03), inputs={8: True})
+    d.advance(10 * MS)
+    assert not d.axis.pulled and not d._needs_steps()
+    assert Drive(mechanics=Mechanics(gravity_torque=0.8), inputs={8: True}).axis.pulled

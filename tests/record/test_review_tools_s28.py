@@ -175,3 +175,28 @@ def test_a_cut_virtual_recording_is_not_called_a_real_bench(emgs, tmp_path):
     page = (tmp_path / "cut.html").read_text(encoding="utf-8")
     if "No ground truth" in page:  # the cut fell before the first state sample
         assert "real bench" not in page and "virtual bench" in page
+
+
+def test_a_passing_run_whose_file_lost_its_tail_stays_incomplete():
+    """The reader marks the step a cut file holds starting and not ending "cut short"
+    (error): that is the file's loss, not a failure the result contradicts. The recorder's
+    `hil.result` can land before its last chunk, so such a file exists (helper-108 cut one
+    at 21542 bytes: the page said FAIL, "the result says incomplete")."""
+    from hil.report.data import RunData, StepData, _reconcile_status
+
+    def run(message: str) -> RunData:
+        r = RunData("x.mcap", "emgs", "virtual", "incomplete", truncated=True,
+                    metadata={"hil.result": {"status": "pass"}})
+        r.steps = [StepData(0, "wait", status="pass"),
+                   StepData(1, "check_timing emgs", status="error", message=message)]
+        return r
+
+    cut = run("cut short: the recording's tail is lost (the run ended; how this step did "
+              "was not kept)")
+    _reconcile_status(cut)
+    assert cut.status == "incomplete" and not cut.status_note
+    failed = run("a real error")
+    _reconcile_status(failed)
+    assert failed.status == "fail"
+    assert failed.status_note == ("the recording's result says pass, but step 2 "
+                                  "check_timing emgs error")

@@ -180,6 +180,18 @@ def test_al502_for_sto_b_and_no_alarm_for_a_short_loss():
     assert by_name(vs, "AL502 when STO_B lost for 1 s")[0].status == "skipped"
 
 
+def test_al502_while_both_channels_are_lost_fails():
+    """STO_B lost at 100, STO_A at 1095: at STO_B's second (1100) both are lost, so the two
+    are not out of step (L20209): AL500 alone (helper-105, helper-108: the spec had let a
+    drive raise AL502 there)."""
+    bad = sto((1095, 5000), (100, 5000), [(1100, ["AL502"]), (1105, ["AL502", "AL500"])])
+    vs = by_name(check(SPECS["sto"], bad), "no AL502 while both channels are lost")
+    assert [v.status for v in vs] == ["fail"]
+    good = sto((1095, 5000), (100, 5000), [(1105, ["AL500"])])
+    vs = by_name(check(SPECS["sto"], good), "no AL502 while both channels are lost")
+    assert [v.status for v in vs] == ["pass"]
+
+
 def test_restored_channels_do_not_clear_al500():
     good = sto((100, 200), (100, 200), [(110, ["AL500"]), (302, [])], arst=[(300, True)])
     v = by_name(check(SPECS["sto"], good), "AL500 stays until a reset after both channels are back")
