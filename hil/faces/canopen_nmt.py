@@ -39,9 +39,11 @@ class NmtErrorControl:
             self._set_state("PRE-OPERATIONAL")
         elif cs in (cop.NMT_RESET_NODE, cop.NMT_RESET_COMMUNICATION):
             kind = "reset node" if cs == cop.NMT_RESET_NODE else "reset communication"
+            self.state = "INITIALISING"  # no EMCY before the boot-up (L17089-L17095)
             if self.on_nmt_reset is not None:
                 self._callback("on_nmt_reset", self.on_nmt_reset, kind)  # AL401, alarm clearing
             self._reset(kind)
+            self._announce()  # the alarm standing after the reset (AL401), after the boot-up
 
     def _restart_heartbeat(self, now: int) -> None:
         period = self._values.get((0x1017, 0), 0)
@@ -90,19 +92,39 @@ class NmtErrorControl:
         """EMCY (L17061-L17069): code, 1001h, Delta alarm code in bytes 3-4 (little-endian).
         One alarm at a time (L17063, option `emcy_priority`): with "class" the alarm 603Fh
         shows, sent when it changes, 0000h once no alarm is left."""
-        cob = self._values.get((0x1014, 0), 0x80 + self.node_id)
-        if cob & 0x80000000 or self.state not in ("PRE-OPERATIONAL", "OPERATIONAL"):
-            return
         alarms = self.drive.alarms
         opts = getattr(self.drive, "options", None)  # a drive without the option: "latest"
         if getattr(opts, "emcy_priority", "latest") == "class":
             shown = alarms.emcy_alarm
             if shown == self._emcy_shown:
                 return  # a lower (or equal) priority alarm, or another one's clear
+            # what the drive shows now, sent or not: a clear while STOPPED is no EMCY, but the
+            # alarm's next occurrence is one (helper-109: it had been taken as shown already)
             self._emcy_shown = shown
             code, name = (alarms.table.spec(shown).emcy, shown) if shown else (0, "")
         else:
             code, name = (ev.emcy_code, ev.code) if ev.active else (0, "")
+        self._send_emcy(code, name)
+
+    def _announce(self) -> None:
+        """After an NMT reset's boot-up: the EMCY of the alarm the drive still shows (AL401
+        raised by that very reset, or one the reset did not clear), so that its clear is
+        announced too (L17063; CiA 301: each change of an error is an EMCY)."""
+        alarms = getattr(self.drive, "alarms", None)
+        if alarms is None:
+            return
+        opts = getattr(self.drive, "options", None)
+        shown = (alarms.emcy_alarm if getattr(opts, "emcy_priority", "latest") == "class"
+                 else alarms.current)
+        if shown is None:
+            return
+        self._emcy_shown = shown
+        self._send_emcy(alarms.table.spec(shown).emcy, shown)
+
+    def _send_emcy(self, code: int, name: str) -> None:
+        cob = self._values.get((0x1014, 0), 0x80 + self.node_id)
+        if cob & 0x80000000 or self.state not in ("PRE-OPERATIONAL", "OPERATIONAL"):
+            return
         alarm = 0
         if name.upper().startswith("AL"):
             try:

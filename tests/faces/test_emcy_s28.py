@@ -1,0 +1,57 @@
+"""EMCY around NMT states and resets, from an outside probe of the CiA 301 side (session 28,
+helper-109): "當伺服偵測到異常時，會發送異警並透過緊急物件 ... 通知上位機" (L17061-L17063); EMCY
+in PRE-OPERATIONAL and OPERATIONAL only, the boot-up alone in Initialization (L17089-L17095);
+AL401 (L20183-L20187)."""
+
+from __future__ import annotations
+
+from tests.faces.test_manual_rules_s16 import NODE, Rig
+
+EMCY = 0x80 + NODE
+BOOT = 0x700 + NODE
+
+
+def _frames(r: Rig) -> list[tuple[int, bytes]]:
+    return [(m.arbitration_id, bytes(m.data)) for m in r.drain()]
+
+
+def test_an_alarm_cleared_while_stopped_is_announced_when_it_comes_again():
+    r = Rig()
+    try:
+        r.feed(0x000, bytes([0x01, NODE]))  # start
+        r.drive.alarms.raise_alarm("AL020")
+        r.run(2)
+        assert next(f for f in _frames(r) if f[0] == EMCY)[1][:2] == b"\x10\x75"  # 7510h
+        r.feed(0x000, bytes([0x02, NODE]))  # stop: no EMCY (L17089-L17095)
+        r.drive.alarms.reset("di")
+        r.run(2)
+        assert [f for f in _frames(r) if f[0] == EMCY] == []
+        r.feed(0x000, bytes([0x01, NODE]))
+        r.drive.alarms.raise_alarm("AL020")  # a new occurrence: a new EMCY
+        r.run(2)
+        emcy = [f for f in _frames(r) if f[0] == EMCY]
+        assert len(emcy) == 1 and emcy[0][1][:2] == b"\x10\x75" and emcy[0][1][3:5] == b"\x20\x00"
+    finally:
+        r.close()
+
+
+def test_al401_is_announced_after_the_boot_up_and_its_clear_too():
+    r = Rig()
+    try:
+        r.feed(0x000, bytes([0x01, NODE]))
+        r.drive.set_di(1, True)  # SON
+        r.run(20)
+        assert r.drive.servo_on
+        _frames(r)
+        r.feed(0x000, bytes([0x81, NODE]))  # reset node with the servo on: AL401
+        r.run(2)
+        seq = [f for f in _frames(r) if f[0] in (EMCY, BOOT)]
+        assert [f[0] for f in seq] == [BOOT, EMCY]  # the boot-up first
+        assert seq[1][1][3:5] == b"\x01\x04"  # AL401 in bytes 3-4 (L17069)
+        r.drive.write_object(0x6040, 0, 0x00)
+        r.drive.write_object(0x6040, 0, 0x80)  # fault reset clears AL401 (L20186)
+        r.run(2)
+        assert "AL401" not in r.drive.alarms.active
+        assert [f[1][:3] for f in _frames(r) if f[0] == EMCY] == [b"\x00\x00\x00"]
+    finally:
+        r.close()
