@@ -61,6 +61,7 @@ from hil.model.events import (
 )
 from hil.model.homing import attach_homing
 from hil.model.mechanics import Mechanics
+from hil.model.monitors import attach_monitors
 from hil.model.motion import Axis, counts_to_puu, puu_to_counts
 from hil.model.options import ModelOptions
 from hil.model.params import ParameterStore
@@ -142,6 +143,8 @@ class Drive:
         self.difunc = attach_di_functions(self, absolute=self.absolute)
         self.pulse = attach_pulse_train(self)  # PT input, OA/OB/OZ output (docs/pulse.md)
         self.difunc.pulse = self.pulse  # CCLR clears the PT error too (L9749)
+        # the monitor codes the parts above do not own, P0.044, P0.008 (monitors.py)
+        self.monitors = attach_monitors(self)
         self._boot()
 
     # ------------------------------------------------------------------ construction
@@ -426,6 +429,7 @@ class Drive:
         self.axis.set_power(False)
         self.brake.reset()
         self.sto.power_off()
+        self.monitors.account()  # P0.008's hours up to the power-off
         self.powered = False
         self.dio.power_off()
         self.holding_brake.coil(False)  # no control power: no DO conducts, the brake engages
@@ -537,6 +541,7 @@ class Drive:
         # L2829-2831, L15184-15191), before anything may switch the servo on.
         if not self.options.dev_di_levels_ignored_at_power_up:
             self.dio.apply_levels()
+        self.monitors.account()
         self.powered = True
         self.axis.zero_speed_rpm = self.params.get("P1.038") / 10.0
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
@@ -676,6 +681,7 @@ class Drive:
             self._hold_timer = None
 
     def _servo_on(self) -> None:
+        self.monitors.account()  # P0.008's Servo On hours count from here
         self.servo_on = True
         self._end_torque_hold()
         self.axis.stop_mode = (self.params.get("P1.032") >> 4) & 0xF
@@ -691,6 +697,7 @@ class Drive:
     ) -> None:
         if not self.servo_on:
             return
+        self.monitors.account()
         self.servo_on = False
         self.axis.stop_mode = self._stop_mode(by_state_machine)
         self.axis.set_power(False)  # torque off first: every event below sees it off

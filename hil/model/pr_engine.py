@@ -542,9 +542,7 @@ class PrEngine:
         """Monitor variables of PR mode (L4178-4183): 064 Cmd_E here; 000 Fb_PUU, 001 Cmd_O,
         002 Err_PUU and the rest as every reader of them has them (`Hooks.monitors`)."""
         d = self.drive
-        if code == 64:
-            return self.cmd_e
-        part = d.hooks.monitors.get(code)  # the codes other parts model (000-006, 037, ...)
+        part = d.hooks.monitors.get(code)  # every part's codes (000-006, 037, 064 here ...)
         if part is None:
             raise PrError(f"monitor code {code} not available (AL231)", "AL231")
         return part()
@@ -781,6 +779,7 @@ def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
     """Create the PR engine of `drive` and wire triggers, hooks and parameters."""
     pr = PrEngine(drive, options, homing)
     pr.counters = counters
+    drive.hooks.monitors[64] = lambda: pr.cmd_e  # Cmd_E, PR command end point (L15496)
     # AL237 (index coordinate undefined) "can also be cleared at Servo On" (L20096)
     drive.hooks.servo_on.append(lambda: drive.alarms.clear("AL237"))
     dio = drive.dio

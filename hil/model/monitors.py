@@ -1,0 +1,137 @@
+"""Monitor variables of table 8.3 (L15440-15483) the rest of the model does not own, P0.044
+/ P0.045 (L7442-7458) and P0.008's hours (L7129-7145).
+
+Every reader of a monitor code goes through `Hooks.monitors` (P0.009-P0.013 by P0.017-
+P0.021, P0.044 by P0.045, a PR WRITE's monitor source, monitor 123 by P0.002). Position codes
+000-006 and 049 are the pulse train's, 037 COMPARE's, 038 the battery's, 043 CAPTURE's, 064
+the PR engine's; the codes below are the drive's. What the virtual drive does not simulate
+reads a nominal constant (`DC_BUS_V`, `IGBT_C`), said in docs/manual-choices.md; codes it has
+nothing for at all stay unregistered: a P0.009 reads its stored 0, a PR WRITE raises AL231.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from hil.units import S
+
+DC_BUS_V = 311.0  # the rectified 220 V mains (√2 x 220 V): the model has no bus
+IGBT_C = 40  # °C: the model has no thermal part
+HOUR_NS = 3600 * S
+
+# the monitor codes P0.002 / P0.017-P0.021 / P0.045 select, by name (L15440-15483)
+SPEED_FB, SPEED_CMD, TORQUE_CMD_PCT, DC_BUS, INERTIA, IGBT, Z_OFFSET = 7, 9, 11, 14, 15, 16, 18
+MAPPED_MONITORS = (23, 24, 25, 26)  # P0.009-P0.012 again (L15465-15468)
+
+
+class Monitors:
+    """The drive's own monitor codes and the P0.008 hour counters of one drive."""
+
+    def __init__(self, drive: Any) -> None:
+        self.d = drive
+        self._on_ns = 0  # control power on, whole run (P0.008 low word)
+        self._servo_ns = 0  # Servo On (high word)
+        self._t = drive.sched.now  # the counters are up to date to this model time
+
+    # -- P0.008 ----------------------------------------------------------------------------
+    def account(self) -> None:
+        """Bring the hour counters up to now (the drive calls it before power and servo
+        changes; a read does too)."""
+        d = self.d
+        now = d.sched.now
+        dt = now - self._t
+        self._t = now
+        if dt <= 0:
+            return
+        if d.powered:
+            self._on_ns += dt
+            if d.servo_on:
+                self._servo_ns += dt
+
+    def p0008(self) -> int:
+        """High word Servo On hours, low word power-on hours; "未滿 1 小時不會紀錄" (L7139)."""
+        self.account()
+        on_h = min(self._on_ns // HOUR_NS, 0xFFFF)
+        servo_h = min(self._servo_ns // HOUR_NS, 0xFFFF)
+        return int(servo_h << 16 | on_h)
+
+    # -- codes -----------------------------------------------------------------------------
+    def codes(self) -> dict[int, Callable[[], int]]:
+        d = self.d
+        ax = d.axis
+        p = d.params
+
+        def tenths(x: float) -> int:
+            return round(x * 10)
+
+        def analog_v() -> float:
+            return float(getattr(d.options, "analog_v_ref", 0.0))
+
+        def analog_t() -> float:
+            return float(getattr(d.options, "analog_t_ref", 0.0))
+
+        def z_offset() -> int:
+            """Position to the nearest Z, -4999 .. +5000 over a turn (L15461): Z at every
+            whole turn of the encoder."""
+            cpr = ax.cpr
+            frac = (d.feedback_counts() % cpr) / cpr  # 0 .. 1 past the last Z
+            off = round(frac * 10000)
+            return off - 10000 if off > 5000 else off
+
+        def panel() -> int:
+            """What the panel shows: the code P0.002 selects (L15483)."""
+            part = d.hooks.monitors.get(p.get("P0.002"))
+            return part() if part is not None and p.get("P0.002") != 123 else 0
+
+        def mapped(n: int) -> Callable[[], int]:
+            reg, sel = f"P0.{9 + n:03d}", f"P0.{17 + n:03d}"
+
+            def read() -> int:  # never itself (P0.017 = 23 reading 23 ...)
+                return 0 if p.get(sel) in MAPPED_MONITORS else p.read(reg)
+            return read
+
+        codes: dict[int, Callable[[], int]] = {
+            SPEED_FB: lambda: tenths(ax.velocity_rpm),  # 0.1 rpm (L15447; no filter modelled)
+            8: lambda: round(analog_v() * 100),  # analog speed command, 0.01 V (L15448)
+            SPEED_CMD: lambda: tenths(ax.demand_rpm),  # 0.1 rpm (L15449)
+            10: lambda: round(analog_t() * 100),  # analog torque command, 0.01 V (L15450)
+            TORQUE_CMD_PCT: lambda: round(ax.torque_demand / 10),  # % (L15451)
+            12: lambda: round(abs(ax.torque) / 10),  # load %: the torque (no 20 ms average)
+            13: lambda: round(abs(ax.torque) / 10),  # peak load %: the same (L15453)
+            DC_BUS: lambda: round(DC_BUS_V),  # V (L15454)
+            INERTIA: lambda: tenths(d.mech.load_inertia / d.mech.motor_inertia),  # (L15455)
+            IGBT: lambda: IGBT_C,  # °C (L15456)
+            Z_OFFSET: z_offset,
+            **{23 + n: mapped(n) for n in range(4)},
+            39: lambda: p.read("P4.007"),  # the DIs as the drive sees them (L15477)
+            40: lambda: p.read("P4.009"),  # the DOs as driven (L15478)
+            41: lambda: p.read("P0.046"),  # drive status (L15479)
+            50: lambda: tenths(ax.demand_rpm),  # 0.1 rpm (L15486)
+            51: lambda: tenths(ax.velocity_rpm),  # instant speed, 0.1 rpm (L15487)
+            53: lambda: round(ax.torque_demand),  # 0.1 % (L15488)
+            54: lambda: round(ax.torque),  # torque feedback, 0.1 % (L15489)
+            56: lambda: round(DC_BUS_V * 10),  # 0.1 V (L15491)
+            72: lambda: tenths(analog_v() * p.get("P1.040") / 10.0),  # 0.1 rpm (L15502)
+            96: lambda: p.read("P0.000") & 0xFFFF,  # DSP version low word, CPLD 0 (L15509)
+            123: panel,
+        }
+        return codes
+
+
+def _selected(drive: Any, select: str) -> Callable[[], int]:
+    """A register reading the monitor code `select` names (0 for a code nothing models)."""
+    def read() -> int:
+        part = drive.hooks.monitors.get(drive.params.get(select))
+        return part() if part is not None else 0
+    return read
+
+
+def attach_monitors(drive: Any) -> Monitors:
+    """Register the drive's monitor codes, P0.044 (by P0.045) and P0.008's hours."""
+    mon = Monitors(drive)
+    for code, fn in mon.codes().items():
+        drive.hooks.monitors.setdefault(code, fn)
+    drive.params.on_read("P0.044", _selected(drive, "P0.045"))  # "同參數 P0.009" (L7442)
+    drive.params.on_read("P0.008", mon.p0008)
+    return mon

@@ -1,0 +1,90 @@
+"""Monitor variables written afresh from table 8.3 (L15440-15483), P0.044/P0.045 (L7442-7458)
+and P0.008 (L7129-7145), from an outside probe (session 28, helper-111): most codes read 0
+through P0.009-P0.013 although the model had the values. Injected clock."""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.model.drive import Drive
+from hil.model.mechanics import Mechanics
+from hil.units import MS, S
+
+PV = 3
+
+
+def spinning(rpm: int = 1000) -> Drive:
+    """CiA 402 PV at `rpm` on a bench without limit switches."""
+    mech = Mechanics(nl_rev=-1e9, pl_rev=1e9, hard_stop_neg_rev=None, hard_stop_pos_rev=None)
+    d = Drive(inputs={8: True, 6: True, 7: True}, mechanics=mech)
+    d.write_object(0x6060, 0, PV)
+    d.write_object(0x60FF, 0, rpm * 10)  # 0.1 rpm
+    for cw in (0x06, 0x07, 0x0F):
+        d.write_object(0x6040, 0, cw)
+        d.advance(5 * MS)
+    d.advance(1000 * MS)
+    return d
+
+
+def monitor(d: Drive, code: int) -> int:
+    d.params.write("P0.017", code)
+    return d.params.read("P0.009")
+
+
+def test_speed_and_torque_codes_follow_the_cia402_objects():
+    """007/051 speed feedback and 009/050 speed command in 0.1 rpm, 054/053 torque in 0.1 %,
+    011 torque command in % (L15447-15451, L15486-15489); 606Ch and 6077h carry the same."""
+    d = spinning(1000)
+    assert monitor(d, 7) == monitor(d, 51) == d.read_object(0x606C, 0) == 10000
+    assert monitor(d, 9) == monitor(d, 50) == 10000
+    assert monitor(d, 54) == d.read_object(0x6077, 0)
+    assert monitor(d, 11) == round(monitor(d, 53) / 10)
+
+
+def test_status_codes_are_the_status_registers():
+    """039 = the DI state (P4.007), 040 = the DO outputs (P4.009), 041 = P0.046 (L15477-15479),
+    096 = the firmware version (L15509), 123 = what P0.002 shows (L15483)."""
+    d = spinning(500)
+    assert monitor(d, 39) == d.params.read("P4.007") != 0
+    assert monitor(d, 40) == d.params.read("P4.009") != 0
+    assert monitor(d, 41) == d.params.read("P0.046") != 0
+    assert monitor(d, 96) == d.params.read("P0.000") == 100
+    d.params.write("P0.002", 7)
+    assert monitor(d, 123) == 5000
+
+
+def test_the_inertia_ratio_and_the_offset_from_z():
+    d = spinning(0)
+    ratio = d.mech.load_inertia / d.mech.motor_inertia
+    assert monitor(d, 15) == round(ratio * 10)  # 0.1 x (L15455)
+    assert -4999 <= monitor(d, 18) <= 5000  # L15461
+    assert monitor(d, 14) > 0 and monitor(d, 56) == monitor(d, 14) * 10  # V / 0.1 V
+
+
+def test_p0044_reads_the_code_p0045_selects():
+    """P0.044 "同參數 P0.009", P0.045 "同參數 P0.017" (L7442-7458): it read 0 whatever P0.045."""
+    d = spinning(1000)
+    for code in (7, 0, 3):
+        d.params.write("P0.045", code)
+        d.params.write("P0.017", code)
+        assert d.params.read("P0.044") == d.params.read("P0.009")
+    d.params.write("P0.045", 7)
+    assert d.params.read("P0.044") == 10000
+
+
+def test_a_mapped_monitor_code_does_not_read_itself():
+    d = spinning(0)
+    assert monitor(d, 23) == 0  # P0.009 mapped on 23 = P0.009 itself: no recursion
+    d.params.write("P0.018", 7)
+    assert monitor(d, 24) == d.params.read("P0.010")
+
+
+@pytest.mark.parametrize("hours", [0.5, 2.2])
+def test_p0008_counts_whole_hours_on_and_servo_on(hours: float):
+    """High word Servo On hours, low word power-on hours; "未滿 1 小時不會紀錄" (L7139)."""
+    d = Drive(inputs={8: True})
+    d.advance(int(hours * 3600 * S))  # powered, servo off
+    d.set_di(1, True)  # SON
+    d.advance(int(hours * 3600 * S))
+    whole_on, whole_servo = int(2 * hours), int(hours)
+    assert d.params.read("P0.008") == whole_servo << 16 | whole_on
