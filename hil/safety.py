@@ -130,7 +130,7 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
                 # the A3 stays in QUICK STOP ACTIVE, the servo on, until a command: transition
                 # 12 "Command Disable Voltage" (L18262): after the ramp, the power stage off
                 stopped = getattr(d, "quick_stop_done", None)
-                if stopped is not None:
+                if stopped is not None and rep.actions[-1]["ok"]:  # no ramp if 0x02 failed
                     act(d.name, "quick stop ramp ended",
                         lambda s=stopped: s(safe.timeout_ns), timeout_ms=safe.timeout_ns / 1e6)
                 act(d.name, f"controlword disable_voltage (0x{CONTROLWORD['disable_voltage']:02X})"

@@ -366,7 +366,10 @@ class Cia402Driver:
         self._go(CW_ENABLE_OPERATION, "OPERATION ENABLED")
 
     def shutdown(self) -> None:
-        """Controlword 0x06 -> READY TO SWITCH ON (transitions 2, 6, 8)."""
+        """Controlword 0x06 -> READY TO SWITCH ON (transitions 2, 6, 8); from QUICK STOP
+        ACTIVE through SWITCH ON DISABLED (12: the A3 takes 0x00 or 0x06 there, L18262)."""
+        if self.state == "QUICK STOP ACTIVE":
+            self._go(CW_DISABLE_VOLTAGE, "SWITCH ON DISABLED")
         self._go(CW_SHUTDOWN, "READY TO SWITCH ON")
 
     def disable_voltage(self) -> None:

@@ -23,7 +23,10 @@ class NmtErrorControl:
             # SYNC supervision starts anew: the SYNCs outside OPERATIONAL were not watched, so
             # the last one seen before is no measure of the period (no stale AL3E3 / AL301)
             self.comm.sync_reset()
+        was = self.state
         self.state = state
+        if was == "STOPPED" and state in ("PRE-OPERATIONAL", "OPERATIONAL"):
+            self._catch_up()
 
     def _on_nmt(self, data: bytes) -> None:
         if len(data) != 2 or data[1] not in (0, self.node_id):
@@ -121,10 +124,24 @@ class NmtErrorControl:
         self._emcy_shown = shown
         self._send_emcy(alarms.table.spec(shown).emcy, shown)
 
+    def _catch_up(self) -> None:
+        """Out of STOPPED: the alarm changes made there were not sent (L17089-L17095); the
+        master hears where the drive stands now, if that differs from the last EMCY it heard:
+        the alarm shown, or 0000h (helper-110: a clear while STOPPED was never announced)."""
+        opts = getattr(self.drive, "options", None)
+        if getattr(opts, "emcy_priority", "latest") != "class":
+            return
+        shown = self._emcy_shown
+        if shown == self._emcy_sent:
+            return
+        alarms = self.drive.alarms
+        self._send_emcy(alarms.table.spec(shown).emcy if shown else 0, shown or "")
+
     def _send_emcy(self, code: int, name: str) -> None:
         cob = self._values.get((0x1014, 0), 0x80 + self.node_id)
         if cob & 0x80000000 or self.state not in ("PRE-OPERATIONAL", "OPERATIONAL"):
             return
+        self._emcy_sent = name or None  # what the master last heard
         alarm = 0
         if name.upper().startswith("AL"):
             try:

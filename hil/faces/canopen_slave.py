@@ -101,6 +101,7 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
         self.bitrate = 0
         self.state = "INITIALISING"
         self._emcy_shown: str | None = None
+        self._emcy_sent: str | None = None  # the alarm of the last EMCY sent (None: 0000h)
         self._full_path_cobs: frozenset[int] | None = None  # see _passes_by
         self.stats = {"rx": 0, "tx": 0, "sdo_aborts": 0, "pdo_errors": 0, "tx_errors": 0}
         # anything no CiA 301 rule answers (a model bug, a failing callback): counted, logged
@@ -200,6 +201,7 @@ class CanopenSlave(NmtErrorControl, SdoServer, PdoEngine):
         """Power-on / reset node / reset communication: reload 1xxx, boot-up, PRE-OP."""
         self.state = "INITIALISING"
         self._emcy_shown = None  # the alarm the last EMCY carried (L17063)
+        self._emcy_sent = None  # a boot-up: the master starts its view anew
         if self._fixed_node_id is not None:
             self.node_id = self._fixed_node_id
         else:

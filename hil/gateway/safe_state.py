@@ -58,9 +58,9 @@ class _GatewayDrive:
         ans = export.request(req, lambda m: m.arbitration_id == canopen.SDO_RESPONSE + node
                              and bytes(m.data[1:4]) == bytes((index & 0xFF, index >> 8, 0)),
                              timeout_s)
-        if ans is None or ans.data[0] & 0xE3 not in (0x43, 0x47, 0x4B, 0x4F):
+        if ans is None or ans.data[0] & 0xE2 != 0x42:  # 42h: expedited, size not given
             return None
-        size = 4 - ((ans.data[0] >> 2) & 0x3)
+        size = 4 - ((ans.data[0] >> 2) & 0x3) if ans.data[0] & 0x01 else 4
         return int.from_bytes(bytes(ans.data[4:4 + size]), "little", signed=True)
 
     def quick_stop_done(self, timeout_ns: int) -> str | bool:

@@ -681,7 +681,9 @@ class Cia402:
             elif cmd == _CMD_DISABLE_VOLTAGE:
                 self._disable(SWITCH_ON_DISABLED)  # 9
         elif st == QUICK_STOP_ACTIVE:
-            if cmd == _CMD_DISABLE_VOLTAGE:
+            # 12 "Command Disable Voltage (OD 6040h : 0000 0110 or xxxx xx0x)" (L18262): a
+            # shutdown (06h) leaves it for SWITCH ON DISABLED too
+            if cmd in (_CMD_DISABLE_VOLTAGE, _CMD_SHUTDOWN):
                 self._disable(SWITCH_ON_DISABLED)  # 12
             elif cmd == _CMD_ENABLE and not self._qs_disable:
                 self._set_state(OPERATION_ENABLED)  # 16

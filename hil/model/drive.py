@@ -595,10 +595,12 @@ class Drive:
             name = "P1.044" if sub == 1 else "P1.045"
             if self.params.read(name) != value:  # kept as a write of it would be
                 self.params.set_internal(name, value, ram_only=self.params.ram_only_now())
+                self.params.persist()
         if index in (0x607F, 0x6080):  # 6080h "is P1.055", 607Fh = P1.055 x 10 (L18713-18735)
             rpm = round(value / 10) if index == 0x607F else value
             if self.params.read("P1.055") != rpm:
                 self.params.set_internal("P1.055", rpm, ram_only=self.params.ram_only_now())
+                self.params.persist()
 
     def _param_of(self, index: int, sub: int) -> str:
         try:

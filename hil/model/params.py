@@ -143,6 +143,12 @@ class ParameterStore:
         spec = self.check_write(name, value)
         self._commit(spec, value, ram_only=ram_only)
 
+    def persist(self) -> None:
+        """Save the retained values now, as a changing `write` does (after a drive-side
+        update that stands for a write: a CiA 402 object that is a parameter)."""
+        if self.autosave and self.retained_path is not None:
+            self.save()
+
     def ram_only_now(self) -> bool:
         """Whether a write now goes to RAM alone: P2.030 function 5 on (`no_eeprom`), or
         inside `ram_only_writes`."""

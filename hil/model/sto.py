@@ -16,9 +16,9 @@
 The printed state table (L2454-2468) maps the alarms the other way round; the notes and
 chapter 13 agree with the mapping above (see docs/manual-choices.md). When both channels
 are lost, they are no longer out of step: a channel's 1 s that ends while both are lost
-raises nothing (AL500 comes after its 10 ms); when the other channel comes back, the
-channel's alarm comes then (its second, counted from its own loss, is up), whether AL500
-came or not.
+raises nothing. If that loss of both raised AL500, a new second of mismatch counts from the
+other channel's return (an E-stop released with its two contacts a few ms apart gives AL500
+alone); after a shorter dip of the other, the channel's own second is up at the return.
 """
 
 from __future__ import annotations
@@ -127,6 +127,7 @@ class Sto:
             if self.torque_cut and self._opt.sto_resume_after_dropout:
                 self.torque_cut = False
                 self._on_cut(False)
+        al500 = self._al500_raised  # in the loss of both that may end now
         # both lost for 10 ms -> AL500 (L2478)
         if not a and not b:
             if self._both_timer is None:
@@ -146,9 +147,14 @@ class Sto:
                 if timer is not None:
                     timer.cancel()
                     self._one_timers[ch] = None
-            elif self._one_expired[ch] and (a or b):  # the other is back, this one is not:
-                self._one_expired[ch] = False  # its second, counted from its own loss, ran
-                self._set_cause(code, True)  # out while both were lost: it is up now
+            elif al500 and (a or b):  # a loss of both that raised AL500 ended, this one
+                if timer is not None:  # still lost: a new second of mismatch counts from now
+                    timer.cancel()  # (an E-stop whose contacts close a few ms apart must
+                self._one_expired[ch] = False  # not give AL501/AL502, cleared only by a
+                self._arm_one(ch, code)  # power cycle, L20205)
+            elif self._one_expired[ch] and (a or b):  # the other is back from a dip shorter
+                self._one_expired[ch] = False  # than AL500's 10 ms: this one's second,
+                self._set_cause(code, True)  # counted from its own loss, is up
             elif timer is None and not self._one_expired[ch]:
                 self._arm_one(ch, code)
 

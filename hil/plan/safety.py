@@ -50,16 +50,20 @@ class _SessionDrive:
         itself (bit 2 clear) or its 606Ch velocity actual is within STANDSTILL (0.1 rpm
         units: the A3's own zero-speed level P1.038, default 10 rpm, L8407)."""
         end = clock.monotonic_ns() + timeout_ns
+        last = "no answer"
         while True:
-            sw = self.d.cia.statusword
-            if not sw & 0x0004:
-                return f"statusword 0x{sw:04X}: {decode_state(sw)}"
-            v = self.d.cia.read(0x606C)
-            if abs(v) <= STANDSTILL:
-                return f"606Ch = {v} (0.1 rpm): at rest"
+            try:  # a lost answer is asked again until the deadline (the ramp goes on)
+                sw = self.d.cia.statusword
+                if not sw & 0x0004:
+                    return f"statusword 0x{sw:04X}: {decode_state(sw)}"
+                v = self.d.cia.read(0x606C)
+                if abs(v) <= STANDSTILL:
+                    return f"606Ch = {v} (0.1 rpm): at rest"
+                last = f"606Ch = {v} (0.1 rpm): still moving"
+            except Exception as e:  # SdoError, a timeout: the bus may be busy
+                last = f"{type(e).__name__}: {e}"
             if clock.monotonic_ns() >= end:
-                raise TimeoutError(f"606Ch = {v} (0.1 rpm) after {timeout_ns / 1e6:g} ms: "
-                                   "still moving")
+                raise TimeoutError(f"{last} after {timeout_ns / 1e6:g} ms")
             clock.sleep(0.002)
 
     def di_wired(self, function: str) -> bool:

@@ -126,8 +126,8 @@ class FakeDrive:
             new = "SWITCH ON DISABLED"
         elif not cw & 0x04:
             new = "QUICK STOP ACTIVE" if s == "OPERATION ENABLED" else "SWITCH ON DISABLED"
-        elif cw & 0x0F == 0x06:
-            new = "READY TO SWITCH ON"
+        elif cw & 0x0F == 0x06:  # in QUICK STOP ACTIVE: transition 12 (L18262)
+            new = "SWITCH ON DISABLED" if s == "QUICK STOP ACTIVE" else "READY TO SWITCH ON"
         elif cw & 0x0F == 0x07:
             new = "SWITCHED ON" if s != "SWITCH ON DISABLED" else s
         elif cw & 0x0F == 0x0F:

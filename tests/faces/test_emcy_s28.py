@@ -26,11 +26,28 @@ def test_an_alarm_cleared_while_stopped_is_announced_when_it_comes_again():
         r.drive.alarms.reset("di")
         r.run(2)
         assert [f for f in _frames(r) if f[0] == EMCY] == []
-        r.feed(0x000, bytes([0x01, NODE]))
+        r.feed(0x000, bytes([0x01, NODE]))  # out of STOPPED: the clear it missed (helper-110)
+        r.run(2)
+        assert [f[1][:2] for f in _frames(r) if f[0] == EMCY] == [b"\x00\x00"]
         r.drive.alarms.raise_alarm("AL020")  # a new occurrence: a new EMCY
         r.run(2)
         emcy = [f for f in _frames(r) if f[0] == EMCY]
         assert len(emcy) == 1 and emcy[0][1][:2] == b"\x10\x75" and emcy[0][1][3:5] == b"\x20\x00"
+    finally:
+        r.close()
+
+
+def test_an_alarm_raised_while_stopped_is_announced_at_the_start():
+    r = Rig()
+    try:
+        r.feed(0x000, bytes([0x02, NODE]))
+        r.drive.alarms.raise_alarm("AL020")
+        r.run(2)
+        assert [f for f in _frames(r) if f[0] == EMCY] == []
+        r.feed(0x000, bytes([0x80, NODE]))  # to PRE-OPERATIONAL: EMCY allowed again
+        r.run(2)
+        emcy = [f for f in _frames(r) if f[0] == EMCY]
+        assert len(emcy) == 1 and emcy[0][1][3:5] == b"\x20\x00"
     finally:
         r.close()
 

@@ -108,3 +108,15 @@ def test_an_rpdo_parameter_write_is_kept_only_with_p3011_x_1(p3011: int, kept: i
         assert d.params.read("P1.042") == kept
     finally:
         r.close()
+
+
+def test_an_sdo_write_of_a_cia402_object_that_is_a_parameter_is_kept(tmp_path):
+    """6080h "is P1.055" (L18713-18735), 6093h = P1.044/P1.045 (L18838-18854): an SDO write
+    stores the parameter (L10764) in the parameter file too (helper-110: a restart from the
+    file had lost them)."""
+    path = tmp_path / "state"
+    d = Drive(inputs={8: True}, state_path=path)
+    d.write_object(0x6080, 0, 2000)
+    d.write_object(0x6093, 1, 1000)
+    again = Drive(inputs={8: True}, state_path=path)
+    assert again.params.read("P1.055") == 2000 and again.params.read("P1.044") == 1000

@@ -145,3 +145,20 @@ def test_the_other_channel_back_within_10_ms_leaves_the_lost_ones_second_up():
     """STO_B lost; STO_A lost 995 ms later and back 8 ms after (no AL500: L2478): STO_B has
     been lost alone for more than its second, counted from its own loss: AL502 (L2482)."""
     assert _alarms_after_skew(995, back_ms=8) == ("AL502",)
+
+
+@pytest.mark.parametrize("order", ["AB", "BA"])
+def test_an_estop_released_a_few_ms_apart_gives_al500_alone(order: str):
+    """Both channels cut 3 s (AL500), back 5 ms apart: each channel's own second ran out
+    while both were lost, but they were never out of step for one (L20203, L20209); AL501/
+    AL502 need a power cycle (L20205), AL500 an alarm reset (helper-110)."""
+    drive, _ = make()
+    enabled(drive)
+    drive.set_sto("A", False)
+    drive.set_sto("B", False)
+    drive.advance(3000 * MS)
+    drive.set_sto(order[0], True)
+    drive.advance(5 * MS)
+    drive.set_sto(order[1], True)
+    drive.advance(2000 * MS)
+    assert drive.alarms.active == ("AL500",)

@@ -133,11 +133,20 @@ def test_a_quick_stop_safe_state_ramps_then_disables_voltage(tmp_path):
     [r] = run_plans([plan], load_bench(bench_file), tmp_path, stream=io.StringIO())
     assert r.passed, (r.status, r.error)
     rec = Recording.open(r.recording)
-    actions = [m["action"] for _, _, _, m in rec.messages(T.SAFETY)]
+    safety = [(t, m) for _, t, _, m in rec.messages(T.SAFETY)]
+    actions = [m["action"] for _, m in safety]
     i = actions.index("controlword quick_stop (0x02)")
     assert actions[i + 1:i + 4] == [
         "quick stop ramp ended", "controlword disable_voltage (0x00) after the quick stop "
         "(transition 12)", "statusword: power stage off"]
     assert actions[-1] == "safe_state_reached"
+    # the ramp was waited for: the motor ran down from 1000 rpm with the servo on, and was
+    # at rest, the servo still on, when the disable voltage went out
+    t_qs, t_end = safety[i][0], safety[i + 1][0]
+    states = [(t, m) for _, t, _, m in rec.messages(T.drive_state("drive1"))]
+    during = [m for t, m in states if t_qs <= t <= t_end]
+    assert any(abs(m["speed_rpm"]) > 100 and m["servo_on"] for m in during)
+    at_end = [m for t, m in states if t <= t_end][-1]
+    assert abs(at_end["speed_rpm"]) <= 10 and at_end["servo_on"]
     last = [m for _, _, _, m in rec.messages(T.drive_state("drive1"))][-1]
     assert last["servo_on"] is False and last["brkr"] is False

@@ -175,8 +175,8 @@ def sto_one_other_dips_servo_on(tap: ModelTap) -> None:
 
 
 def sto_both_then_one_back(tap: ModelTap) -> None:
-    """Both lost (AL500 after 10 ms), B back at 300 ms: A's own second ends with B present,
-    so AL501 follows too; ARST then clears AL500 only."""
+    """Both lost (AL500 after 10 ms), B back at 300 ms: a new second of mismatch counts
+    from B's return, so AL501 follows 1 s later (docs/manual-choices.md "STO one lost")."""
     tap.set_sto("A", False)
     tap.set_sto("B", False)
     tap.advance(300 * MS)
