@@ -177,3 +177,32 @@ def test_the_gateway_reads_the_quick_stop_ramp_end_over_sdo():
     drive = gateway_mod._GatewayDrive(gw, "d", d)
     assert drive.quick_stop_done(QS.timeout_ns) == "606Ch = 40 (0.1 rpm): at rest"
     assert export.asked == [0x6041, 0x606C] * 3
+
+
+def _gateway_drive(answer):
+    """A `_GatewayDrive` whose export answers each expedited upload with `answer(index)`
+    (None: no answer)."""
+    class Export:
+        def request(self, msg, match, timeout_s):
+            index = msg.data[1] | msg.data[2] << 8
+            value = answer(index)
+            if value is None:
+                return None
+            data = bytes([0x43, msg.data[1], msg.data[2], 0]) + value.to_bytes(4, "little",
+                                                                               signed=True)
+            ans = SimpleNamespace(arbitration_id=0x585, data=data)
+            return ans if match(ans) else None
+
+    d = SimpleNamespace(can="can0", node_id=5, di={}, do={}, sto={})
+    gw = SimpleNamespace(can={"can0": Export()}, dio={}, bench=SimpleNamespace(safe_state=QS))
+    return gateway_mod._GatewayDrive(gw, "d", d)
+
+
+def test_the_gateway_sees_a_drive_that_left_quick_stop_by_itself():
+    drive = _gateway_drive(lambda index: 0x0250 if index == 0x6041 else 15000)
+    assert drive.quick_stop_done(QS.timeout_ns).endswith("power stage off")
+
+
+def test_the_gateway_gives_up_on_a_silent_drive_at_its_deadline():
+    drive = _gateway_drive(lambda index: None)
+    assert drive.quick_stop_done(50_000_000) is False
