@@ -154,6 +154,8 @@ class PrEngine:
         self.array = drive.array  # the data array (L5097), shared with CAPTURE/COMPARE
         self.capture_puu = 0  # last CAPTURE value, base of CAP commands (L4471)
         self.lead: int | None = None  # PR number of the last trigger (P5.007 read-back)
+        self._failed = False  # the program ended unfinished on an alarm (`_fail`)
+        self._readback: int | None = None  # P5.007 of a finished program a servo off ended
         self.cursor: int | None = None  # next PR to read
         self.cmd: _Cmd | None = None
         self.cmd_e = 0  # Cmd_E, monitor 064 [PUU] (L4180)
@@ -220,6 +222,8 @@ class PrEngine:
             homing.stop()  # the new group replaces PR#0 (L4920)
         self.trace.append((d.now, f"dispatch:{n}"))
         self.lead = n
+        self._failed = False
+        self._readback = None
         self.cursor = n
         self._buffered = None  # the new group replaces the old (L4920-4924)
         self.tpos_off = True  # "清除信號 2、4、5、6" (L8624): Cmd_OK, TPOS, MC_OK
@@ -272,7 +276,10 @@ class PrEngine:
                                          d.params.get("P1.045")))
 
     def abort(self) -> None:
-        """The program ends without finishing (servo off, homing started, alarm)."""
+        """The program ends without finishing (servo off, homing started, alarm); one that
+        had finished keeps reading n+20000 / n+10000 in P5.007 (it is not running)."""
+        if self.cmd_ok and self.lead is not None and self._readback is None:
+            self._readback = self.p5007_readback()
         self.cursor = None
         self._home_at = None
         self._buffered = None
@@ -324,7 +331,7 @@ class PrEngine:
             elif path.type == WRITE and not self._write(path):
                 break
             self._advance_cursor(path)
-        if motion is not None:
+        if motion is not None and not self._failed:  # an alarm ended the group: no motion
             path, external = motion
             idle = self._generator_idle()
             if external and not path.ins and (idle is None or idle > now):
@@ -399,10 +406,15 @@ class PrEngine:
         return ms(self.drive.params.get(f"P5.{40 + index:03d}") + self.options.dev_dly_offset_ms)
 
     def _fail(self, alarm: str, reason: str) -> None:
+        """The program ends there. An alarm that turns the servo off (AL249, AL809) ends it
+        unfinished: no Cmd_OK, no motion of its group, P5.007 reads n ("not finished",
+        L11189) until the next trigger; after a warning (AL213, the servo on) Cmd_OK follows
+        as after STP (docs/manual-choices.md)."""
         self.trace.append((self.drive.now, f"error:{reason}"))
         self.cursor = None
         if alarm:
             self.drive.alarms.raise_alarm(alarm)
+        self._failed = not self.drive.servo_on
 
     # ---------------------------------------------------------------- motion generator
     def _issue(self, path: PrPath, external: bool) -> None:
@@ -632,7 +644,7 @@ class PrEngine:
         from its read ("驅動器即開始計算延遲時間" L4533; "待延遲時間終了 ... Cmd_OK 才會輸出"
         L4195-4197)."""
         if (self.cursor is not None or self.lead is None or self._home_at is not None
-                or self._buffered is not None):
+                or self._buffered is not None or self._failed):
             return
         if self.homing is not None and self.homing.pr_busy:
             return  # PR#0 runs: Cmd_OK comes after it (`after_homing`)
@@ -712,6 +724,8 @@ class PrEngine:
         """n while running, n+10000 command sent, n+20000 and TPOS on (L11185)."""
         if self.lead is None:
             return self.drive.params.stored("P5.007")
+        if self._readback is not None:  # finished before a servo off ended it
+            return self._readback
         if not self.cmd_ok:
             return self.lead
         return self.lead + (20000 if self._tpos() else 10000)

@@ -33,6 +33,11 @@ INDEX_DIRS = ("forward", "reverse", "shortest")  # index OPT bits 3-2 (L4623)
 SPEED_LIMIT_0P1 = 60000  # speed PR data -60000..60000 (0.1 rpm, L4451)
 
 
+# a path word the drive cannot decode when it reads it: AL809 "驅動器 Motion 執行發生指令解碼
+# 異常" (L20229-20232), which only a power cycle clears
+DECODE = "AL809"
+
+
 class PrError(ModelError):
     """A PR definition the drive cannot run (the reason names the field and the line);
     `alarm`: the alarm the drive raises when it reads such a path."""
@@ -125,7 +130,8 @@ def decode(n: int, definition: int, data: int) -> PrPath:
         return PrPath(**common)  # an empty path: nothing to run
     if x == SPEED:
         if not y & 4 and not -SPEED_LIMIT_0P1 <= data <= SPEED_LIMIT_0P1:
-            raise PrError(f"{where}: speed {data} outside -60000..60000 x0.1 rpm (L4451)")
+            raise PrError(f"{where}: speed {data} outside -60000..60000 x0.1 rpm (L4451)",
+                          DECODE)
         return PrPath(**common, auto=bool(y & 2), unit_pps=bool(y & 4), acc=z, dec=u)
     if x in (SINGLE, AUTO):
         return PrPath(
@@ -139,9 +145,9 @@ def decode(n: int, definition: int, data: int) -> PrPath:
         return PrPath(**common)
     if x == WRITE:
         if dd != 0:
-            raise PrError(f"{where}: D must be 0 for a write PR (L4549)")
+            raise PrError(f"{where}: D must be 0 for a write PR (L4549)", DECODE)
         if c & 2:
-            raise PrError(f"{where}: C bit 1 is unused for a write PR (L4566)")
+            raise PrError(f"{where}: C bit 1 is unused for a write PR (L4566)", DECODE)
         p = PrPath(
             **common, auto=bool(y & 2), rom=bool(y & 4), dest_array=bool(c & 1),
             source=SOURCES[c >> 2], dest=(d >> 8) & 0xFFF,
@@ -150,9 +156,9 @@ def decode(n: int, definition: int, data: int) -> PrPath:
         return p
     if x == INDEX:
         if y >> 2 == 3:
-            raise PrError(f"{where}: index DIR 3 is undefined (L4623)")
+            raise PrError(f"{where}: index DIR 3 is undefined (L4623)", DECODE)
         if data < 0:
-            raise PrError(f"{where}: index target {data} must be >= 0 (L4645)")
+            raise PrError(f"{where}: index target {data} must be >= 0 (L4645)", DECODE)
         return PrPath(
             **common, ovlp=bool(y & 2), direction=INDEX_DIRS[y >> 2], acc=z, dec=u, spd=a,
             auto=bool(c & 4), s_low=bool(c & 1),
@@ -161,7 +167,7 @@ def decode(n: int, definition: int, data: int) -> PrPath:
         raise PrError(
             f"{where}: statement PRs are set up with ASDA-Soft only (L4649)", "AL809"
         )
-    raise PrError(f"{where}: TYPE {x:X} undefined (1, 2, 3, 7, 8, A, B: L4148-4155)")
+    raise PrError(f"{where}: TYPE {x:X} undefined (1, 2, 3, 7, 8, A, B: L4148-4155)", DECODE)
 
 
 ARRAY_SIZE = 800  # data array 0..799 (L5097)
