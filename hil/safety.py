@@ -122,15 +122,24 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
         else:
             live.append(d)
     cw = CONTROLWORD.get(safe.controlword)
+    quick = safe.controlword == "quick_stop"
+    sent: dict[str, bool] = {}  # the quick stop written to every drive first: all ramp at once
+    if cw is not None and quick:
+        for d in live:
+            if d.has_controlword():
+                act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",
+                    lambda d=d, cw=cw: d.write_controlword(cw))
+                sent[d.name] = rep.actions[-1]["ok"]
     for d in live:
         if cw is not None and d.has_controlword():
-            act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",
-                lambda d=d, cw=cw: d.write_controlword(cw))
-            if safe.controlword == "quick_stop":
+            if not quick:
+                act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",
+                    lambda d=d, cw=cw: d.write_controlword(cw))
+            else:
                 # the A3 stays in QUICK STOP ACTIVE, the servo on, until a command: transition
                 # 12 "Command Disable Voltage" (L18262): after the ramp, the power stage off
                 stopped = getattr(d, "quick_stop_done", None)
-                if stopped is not None and rep.actions[-1]["ok"]:  # no ramp if 0x02 failed
+                if stopped is not None and sent.get(d.name):  # no ramp if 0x02 failed
                     act(d.name, "quick stop ramp ended",
                         lambda s=stopped: s(safe.timeout_ns), timeout_ms=safe.timeout_ns / 1e6)
                 act(d.name, f"controlword disable_voltage (0x{CONTROLWORD['disable_voltage']:02X})"

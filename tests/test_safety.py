@@ -206,3 +206,38 @@ def test_the_gateway_sees_a_drive_that_left_quick_stop_by_itself():
 def test_the_gateway_gives_up_on_a_silent_drive_at_its_deadline():
     drive = _gateway_drive(lambda index: None)
     assert drive.quick_stop_done(50_000_000) is False
+
+
+def test_every_drive_gets_its_quick_stop_before_any_ramp_is_waited_for():
+    """Two drives: the second's 0x02 went out only after the first's whole ramp (helper-112)."""
+    order: list[str] = []
+
+    class Shared(FakeDrive):
+        def write_controlword(self, cw: int) -> Any:
+            order.append(f"{self.name} cw {cw:#x}")
+            return "acknowledged"
+
+        def quick_stop_done(self, timeout_ns: int) -> str:
+            order.append(f"{self.name} ramp")
+            return "at rest"
+
+    run_safe_state([Shared("a"), Shared("b")], QS, "end")
+    assert order == ["a cw 0x2", "b cw 0x2", "a ramp", "a cw 0x0", "b ramp", "b cw 0x0"]
+
+
+@pytest.mark.parametrize("first", [0x42, 0x4B])
+def test_the_gateway_reads_upload_answers_with_or_without_a_size(first: int):
+    """An expedited upload answer may give no size (42h: 4 bytes) or 2 bytes (4Bh) (CiA
+    301): a statusword 8237h (bit 15 set) out of QUICK STOP ACTIVE is read as such."""
+    class Export:
+        def request(self, msg, match, timeout_s):
+            index = msg.data[1] | msg.data[2] << 8
+            value = 0x8250 if index == 0x6041 else 0  # bit 2 clear: the power stage is off
+            data = bytes([first, msg.data[1], msg.data[2], 0]) + value.to_bytes(4, "little")
+            ans = SimpleNamespace(arbitration_id=0x585, data=data)
+            return ans if match(ans) else None
+
+    d = SimpleNamespace(can="can0", node_id=5, di={}, do={}, sto={})
+    gw = SimpleNamespace(can={"can0": Export()}, dio={}, bench=SimpleNamespace(safe_state=QS))
+    drive = gateway_mod._GatewayDrive(gw, "d", d)
+    assert drive.quick_stop_done(QS.timeout_ns) == "statusword 0x8250: power stage off"

@@ -129,12 +129,13 @@ class NmtErrorControl:
         master hears where the drive stands now, if that differs from the last EMCY it heard:
         the alarm shown, or 0000h (helper-110: a clear while STOPPED was never announced)."""
         opts = getattr(self.drive, "options", None)
-        if getattr(opts, "emcy_priority", "latest") != "class":
-            return
-        shown = self._emcy_shown
+        alarms = self.drive.alarms
+        if getattr(opts, "emcy_priority", "latest") == "class":
+            shown = self._emcy_shown
+        else:  # "latest": the alarm raised last, as P0.001 shows it
+            shown = alarms.current
         if shown == self._emcy_sent:
             return
-        alarms = self.drive.alarms
         self._send_emcy(alarms.table.spec(shown).emcy if shown else 0, shown or "")
 
     def _send_emcy(self, code: int, name: str) -> None:

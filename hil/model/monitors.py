@@ -1,4 +1,4 @@
-"""Monitor variables of table 8.3 (L15440-15483) the rest of the model does not own, P0.044
+"""Monitor variables of table 8.3 (L15440-15523) the rest of the model does not own, P0.044
 / P0.045 (L7442-7458) and P0.008's hours (L7129-7145).
 
 Every reader of a monitor code goes through `Hooks.monitors` (P0.009-P0.013 by P0.017-
@@ -20,9 +20,8 @@ DC_BUS_V = 311.0  # the rectified 220 V mains (√2 x 220 V): the model has no b
 IGBT_C = 40  # °C: the model has no thermal part
 HOUR_NS = 3600 * S
 
-# the monitor codes P0.002 / P0.017-P0.021 / P0.045 select, by name (L15440-15483)
+# the monitor codes P0.002 / P0.017-P0.021 / P0.045 select, by name (L15440-15523)
 SPEED_FB, SPEED_CMD, TORQUE_CMD_PCT, DC_BUS, INERTIA, IGBT, Z_OFFSET = 7, 9, 11, 14, 15, 16, 18
-MAPPED_MONITORS = (23, 24, 25, 26)  # P0.009-P0.012 again (L15465-15468)
 
 
 class Monitors:
@@ -30,6 +29,7 @@ class Monitors:
 
     def __init__(self, drive: Any) -> None:
         self.d = drive
+        self._reading: set[int] = set()  # codes being read now: a loop reads 0 (`guarded`)
         self._on_ns = 0  # control power on, whole run (P0.008 low word)
         self._servo_ns = 0  # Servo On (high word)
         self._t = drive.sched.now  # the counters are up to date to this model time
@@ -72,24 +72,21 @@ class Monitors:
             return float(getattr(d.options, "analog_t_ref", 0.0))
 
         def z_offset() -> int:
-            """Position to the nearest Z, -4999 .. +5000 over a turn (L15461): Z at every
-            whole turn of the encoder."""
+            """Position to the nearest Z, -4999 .. +5000 over a turn (L15462): the bench's Z
+            is `index_angle` past every whole turn (`Mechanics.index_crossed`)."""
             cpr = ax.cpr
-            frac = (d.feedback_counts() % cpr) / cpr  # 0 .. 1 past the last Z
+            z = d.mech.index_angle * cpr
+            frac = ((d.feedback_counts() - z) % cpr) / cpr  # 0 .. 1 past the last Z
             off = round(frac * 10000)
             return off - 10000 if off > 5000 else off
 
         def panel() -> int:
-            """What the panel shows: the code P0.002 selects (L15483)."""
+            """What the panel shows: the code P0.002 selects (L15518)."""
             part = d.hooks.monitors.get(p.get("P0.002"))
-            return part() if part is not None and p.get("P0.002") != 123 else 0
+            return part() if part is not None else 0
 
         def mapped(n: int) -> Callable[[], int]:
-            reg, sel = f"P0.{9 + n:03d}", f"P0.{17 + n:03d}"
-
-            def read() -> int:  # never itself (P0.017 = 23 reading 23 ...)
-                return 0 if p.get(sel) in MAPPED_MONITORS else p.read(reg)
-            return read
+            return lambda: p.read(f"P0.{9 + n:03d}")
 
         codes: dict[int, Callable[[], int]] = {
             SPEED_FB: lambda: tenths(ax.velocity_rpm),  # 0.1 rpm (L15447; no filter modelled)
@@ -100,23 +97,37 @@ class Monitors:
             12: lambda: round(abs(ax.torque) / 10),  # load %: the torque (no 20 ms average)
             13: lambda: round(abs(ax.torque) / 10),  # peak load %: the same (L15453)
             DC_BUS: lambda: round(DC_BUS_V),  # V (L15454)
-            INERTIA: lambda: tenths(d.mech.load_inertia / d.mech.motor_inertia),  # (L15455)
+            INERTIA: lambda: tenths(d.mech.load_inertia / d.mech.motor_inertia)  # (L15455)
+            if d.mech.motor_inertia else 0,
             IGBT: lambda: IGBT_C,  # °C (L15456)
             Z_OFFSET: z_offset,
             **{23 + n: mapped(n) for n in range(4)},
-            39: lambda: p.read("P4.007"),  # the DIs as the drive sees them (L15477)
-            40: lambda: p.read("P4.009"),  # the DOs as driven (L15478)
-            41: lambda: p.read("P0.046"),  # drive status (L15479)
+            39: lambda: p.read("P4.007"),  # the DIs as the drive sees them (L15478)
+            40: lambda: p.read("P4.009"),  # the DOs as driven (L15479)
+            41: lambda: p.read("P0.046"),  # drive status (L15480)
             50: lambda: tenths(ax.demand_rpm),  # 0.1 rpm (L15486)
             51: lambda: tenths(ax.velocity_rpm),  # instant speed, 0.1 rpm (L15487)
             53: lambda: round(ax.torque_demand),  # 0.1 % (L15488)
             54: lambda: round(ax.torque),  # torque feedback, 0.1 % (L15489)
             56: lambda: round(DC_BUS_V * 10),  # 0.1 V (L15491)
             72: lambda: tenths(analog_v() * p.get("P1.040") / 10.0),  # 0.1 rpm (L15502)
-            96: lambda: p.read("P0.000") & 0xFFFF,  # DSP version low word, CPLD 0 (L15509)
+            96: lambda: p.read("P0.000") & 0xFFFF,  # DSP version low word, CPLD 0 (L15511)
             123: panel,
         }
-        return codes
+        return {code: self.guarded(code, fn) for code, fn in codes.items()}
+
+    def guarded(self, code: int, fn: Callable[[], int]) -> Callable[[], int]:
+        """`fn` reading 0 when it is read again while it is being read: a selection that
+        loops (P0.002 = 23 with P0.017 = 123, say) reads 0 rather than recurse."""
+        def read() -> int:
+            if code in self._reading:
+                return 0
+            self._reading.add(code)
+            try:
+                return int(fn())
+            finally:
+                self._reading.discard(code)
+        return read
 
 
 def _selected(drive: Any, select: str) -> Callable[[], int]:

@@ -793,7 +793,7 @@ def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
     """Create the PR engine of `drive` and wire triggers, hooks and parameters."""
     pr = PrEngine(drive, options, homing)
     pr.counters = counters
-    drive.hooks.monitors[64] = lambda: pr.cmd_e  # Cmd_E, PR command end point (L15496)
+    drive.hooks.monitors[64] = lambda: pr.cmd_e  # Cmd_E, PR command end point (L15497)
     # AL237 (index coordinate undefined) "can also be cleared at Servo On" (L20096)
     drive.hooks.servo_on.append(lambda: drive.alarms.clear("AL237"))
     dio = drive.dio

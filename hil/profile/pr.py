@@ -171,11 +171,8 @@ def decode(n: int, definition: int, data: int) -> PrPath:
 
 
 ARRAY_SIZE = 800  # data array 0..799 (L5097)
-# monitor sources the model computes: PR mode's own (L4178-4183) and those other parts of
-# the drive keep (003-006 positions and pulse frequency L15443-15446, 037 CMP_DATA L15476,
-# 038 battery voltage L15477, 043 CAP data L15481, 049 CN1 pulses L15483): a WRITE PR reads
-# each as P0.009-P0.013 show it (`PrEngine.monitor`, `Hooks.monitors`)
-MONITOR_CODES = (0, 1, 2, 3, 4, 5, 6, 37, 38, 43, 49, 64)
+# (a monitor source is read as P0.009-P0.013 show it, `Hooks.monitors`: a code the drive does
+# not have is AL231 when the WRITE runs, `PrEngine.monitor`)
 
 
 def _check_write(p: PrPath, where: str) -> None:
@@ -192,7 +189,7 @@ def _check_write(p: PrPath, where: str) -> None:
         if not 0 <= p.data < ARRAY_SIZE:
             raise PrError(f"{where}: source array index {p.data} outside 0..799 (L5097; AL209)",
                           "AL209")
-    elif p.source == "monitor" and p.data not in MONITOR_CODES:
+    elif p.source == "monitor" and not 0 <= p.data <= 127:  # P0.017's range (L7199)
         raise PrError(f"{where}: monitor code {p.data} not available (AL231)", "AL231")
 
 

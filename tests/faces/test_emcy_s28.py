@@ -72,3 +72,20 @@ def test_al401_is_announced_after_the_boot_up_and_its_clear_too():
         assert [f[1][:3] for f in _frames(r) if f[0] == EMCY] == [b"\x00\x00\x00"]
     finally:
         r.close()
+
+
+def test_the_catch_up_out_of_stopped_with_emcy_priority_latest():
+    from hil.model.options import ModelOptions
+
+    r = Rig()
+    try:
+        r.drive.options = ModelOptions(emcy_priority="latest")
+        r.feed(0x000, bytes([0x02, NODE]))
+        r.drive.alarms.raise_alarm("AL020")
+        r.run(2)
+        r.feed(0x000, bytes([0x01, NODE]))
+        r.run(2)
+        emcy = [f for f in _frames(r) if f[0] == EMCY]
+        assert len(emcy) == 1 and emcy[0][1][3:5] == b"\x20\x00"
+    finally:
+        r.close()

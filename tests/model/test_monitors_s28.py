@@ -53,12 +53,24 @@ def test_status_codes_are_the_status_registers():
     assert monitor(d, 123) == 5000
 
 
-def test_the_inertia_ratio_and_the_offset_from_z():
+def test_the_inertia_ratio_and_the_dc_bus():
     d = spinning(0)
     ratio = d.mech.load_inertia / d.mech.motor_inertia
-    assert monitor(d, 15) == round(ratio * 10)  # 0.1 x (L15455)
-    assert -4999 <= monitor(d, 18) <= 5000  # L15461
+    assert monitor(d, 15) == round(ratio * 10) != 0  # 0.1 x (L15455)
     assert monitor(d, 14) > 0 and monitor(d, 56) == monitor(d, 14) * 10  # V / 0.1 V
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.25])
+def test_the_offset_from_z_over_a_turn(angle: float):
+    """018: "與 Z 相重疊處，其值為 0", -4999 .. +5000 (L15462); the bench's Z is `index_angle`
+    past each whole turn (helper-112: it had ignored the angle)."""
+    mech = Mechanics(index_angle=angle)
+    d = Drive(inputs={8: True}, mechanics=mech)
+    d.advance(10 * MS)
+    cpr = d.axis.cpr
+    for frac, want in ((angle, 0), (angle + 0.1, 1000), (angle - 0.3, -3000)):
+        d.axis.position = d.axis.demand = frac * cpr
+        assert monitor(d, 18) == want, frac
 
 
 def test_p0044_reads_the_code_p0045_selects():
@@ -72,11 +84,17 @@ def test_p0044_reads_the_code_p0045_selects():
     assert d.params.read("P0.044") == 10000
 
 
-def test_a_mapped_monitor_code_does_not_read_itself():
-    d = spinning(0)
-    assert monitor(d, 23) == 0  # P0.009 mapped on 23 = P0.009 itself: no recursion
+def test_mapped_monitor_codes_read_the_registers_and_never_loop():
+    """023-026 return P0.009-P0.012 (L15465-15468): a selection that loops through them or
+    through 123 (P0.002) reads 0 instead of recursing (helper-112: RecursionError)."""
+    d = spinning(1000)
     d.params.write("P0.018", 7)
-    assert monitor(d, 24) == d.params.read("P0.010")
+    assert monitor(d, 24) == 10000  # P0.010 = speed
+    assert monitor(d, 23) == 0  # P0.009 mapped on 23: itself
+    d.params.write("P0.002", 23)
+    assert monitor(d, 123) == 0
+    d.params.write("P0.045", 123)
+    assert d.params.read("P0.044") == 0
 
 
 @pytest.mark.parametrize("hours", [0.5, 2.2])
@@ -88,3 +106,23 @@ def test_p0008_counts_whole_hours_on_and_servo_on(hours: float):
     d.advance(int(hours * 3600 * S))
     whole_on, whole_servo = int(2 * hours), int(hours)
     assert d.params.read("P0.008") == whole_servo << 16 | whole_on
+
+
+def test_p0008_keeps_counting_across_a_power_cycle():
+    d = Drive(inputs={8: True})
+    d.advance(int(0.6 * 3600 * S))
+    d.power_cycle(off_for=int(5 * 3600 * S))  # off: nothing counts
+    d.advance(int(0.6 * 3600 * S))
+    assert d.params.read("P0.008") == 0x0001
+
+
+def test_a_pr_write_reads_any_monitor_the_drive_has():
+    """A WRITE PR's monitor source (L4178-4183) is read as P0.009 reads it: 054 had raised
+    AL231 (helper-112)."""
+    from tests.model.test_pr import make, put
+
+    d = make()
+    put(d, 1, type_="write", data=54, source="monitor", dest="P5.055")
+    d.params.write("P5.007", 1)
+    d.advance(50 * MS)
+    assert d.alarms.active == ()

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 from hil.plan.events import PlanEnded, PlanStarted, StepEnded, StepStarted
 from hil.plan.progress import RunProgress
 
-TWO = ["alarm_reset", "cia402_power_states"]  # short plans (16 + 14 steps)
+TWO = ["alarm_reset", "cia402_power_states"]  # short plans
 
 
 def _run(tmp_path, *args):

@@ -195,6 +195,19 @@ def sto_both_lost_995_ms_apart(tap: ModelTap) -> None:
     tap.advance(300 * MS)
 
 
+def sto_estop_released_5_ms_apart(tap: ModelTap) -> None:
+    """Both channels cut 3 s (AL500), back 5 ms apart: AL500 alone; a drive that raised
+    AL502 at the return fails "no AL502 within 1 s of a channel's return" (helper-112)."""
+    servo_on(tap)
+    tap.set_sto("A", False)
+    tap.set_sto("B", False)
+    tap.advance(3000 * MS)
+    tap.set_sto("A", True)
+    tap.advance(5 * MS)
+    tap.set_sto("B", True)
+    tap.advance(1500 * MS)
+
+
 def sto_glitch_then_loss(tap: ModelTap) -> None:
     """Glitches shorter than the firmware's acknowledgement, then a real loss (L2474-2482)."""
     for cw in (0x06, 0x07, 0x0F):  # servo on through CiA 402: OPERATION ENABLED
@@ -270,6 +283,7 @@ FAITHFUL = [
     ("sto", sto_one_other_dips, {}, {}),
     ("sto", sto_both_then_one_back, {}, {}),
     ("sto", sto_both_lost_995_ms_apart, {}, {}),
+    ("sto", sto_estop_released_5_ms_apart, {}, {}),
     ("sto_glitch", sto_both_lost_995_ms_apart, {}, {}),
     ("sto_glitch", sto_glitch_then_loss, {}, {}),
     ("sto_glitch", sto_both, {}, {}),
