@@ -10,7 +10,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from rec_helpers import copy_mcap
+from rec_helpers import copy_mcap, plan_recording
 
 from hil.bench.bench import load_bench
 from hil.cli import main as hil
@@ -25,10 +25,7 @@ pytestmark = pytest.mark.virtual_time
 @pytest.fixture(scope="module")
 def emgs(tmp_path_factory) -> Path:
     """A genuine passing recording with check steps and their verdicts."""
-    out = tmp_path_factory.mktemp("emgs")
-    res = run_plan(load_plan(plans_dir() / "emgs.yaml"), load_bench(None), out, reports=False)
-    assert res.passed
-    return Path(res.recording)
+    return plan_recording(tmp_path_factory.mktemp("emgs"), "emgs")
 
 
 def _result(path: Path) -> dict[str, str]:

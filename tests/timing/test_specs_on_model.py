@@ -199,13 +199,10 @@ def sto_estop_released_5_ms_apart(tap: ModelTap) -> None:
     """Both channels cut 3 s (AL500), back 5 ms apart: AL500 alone; a drive that raised
     AL502 at the return fails "no AL502 within 1 s of a channel's return" (helper-112)."""
     servo_on(tap)
-    tap.set_sto("A", False)
-    tap.set_sto("B", False)
-    tap.advance(3000 * MS)
-    tap.set_sto("A", True)
-    tap.advance(5 * MS)
-    tap.set_sto("B", True)
-    tap.advance(1500 * MS)
+    for level, then_ms in (((False, False), 3000), ((True, False), 5), ((True, True), 1500)):
+        tap.set_sto("A", level[0])
+        tap.set_sto("B", level[1])
+        tap.advance(then_ms * MS)
 
 
 def sto_glitch_then_loss(tap: ModelTap) -> None:
