@@ -130,7 +130,9 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
                 act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",
                     lambda d=d, cw=cw: d.write_controlword(cw))
                 sent[d.name] = rep.actions[-1]["ok"]
-    for d in live:
+    # a drive whose quick stop failed is not stopping: it is made safe first, waiting on no
+    # other drive's ramp (stable: the others keep their order)
+    for d in sorted(live, key=lambda d: sent.get(d.name, True)):
         if cw is not None and d.has_controlword():
             if not quick:
                 act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",

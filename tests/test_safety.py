@@ -241,3 +241,21 @@ def test_the_gateway_reads_upload_answers_with_or_without_a_size(first: int):
     gw = SimpleNamespace(can={"can0": Export()}, dio={}, bench=SimpleNamespace(safe_state=QS))
     drive = gateway_mod._GatewayDrive(gw, "d", d)
     assert drive.quick_stop_done(QS.timeout_ns) == "statusword 0x8250: power stage off"
+
+
+def test_a_drive_whose_quick_stop_failed_is_made_safe_before_the_ramps():
+    order: list[str] = []
+
+    class Shared(FakeDrive):
+        def write_controlword(self, cw: int) -> Any:
+            order.append(f"{self.name} cw {cw:#x}")
+            if self.fail_cw and cw == 0x02:
+                raise TimeoutError("no SDO answer")
+            return "acknowledged"
+
+        def quick_stop_done(self, timeout_ns: int) -> str:
+            order.append(f"{self.name} ramp")
+            return "at rest"
+
+    run_safe_state([Shared("a"), Shared("c", fail_cw=True)], QS, "end")
+    assert order == ["a cw 0x2", "c cw 0x2", "c cw 0x0", "a ramp", "a cw 0x0"]

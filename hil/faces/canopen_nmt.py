@@ -107,6 +107,7 @@ class NmtErrorControl:
             code, name = (alarms.table.spec(shown).emcy, shown) if shown else (0, "")
         else:
             code, name = (ev.emcy_code, ev.code) if ev.active else (0, "")
+            self._emcy_shown = name or None  # what this mode would have said, sent or not
         self._send_emcy(code, name)
 
     def _announce(self) -> None:
@@ -128,15 +129,11 @@ class NmtErrorControl:
         """Out of STOPPED: the alarm changes made there were not sent (L17089-L17095); the
         master hears where the drive stands now, if that differs from the last EMCY it heard:
         the alarm shown, or 0000h (helper-110: a clear while STOPPED was never announced)."""
-        opts = getattr(self.drive, "options", None)
-        alarms = self.drive.alarms
-        if getattr(opts, "emcy_priority", "latest") == "class":
-            shown = self._emcy_shown
-        else:  # "latest": the alarm raised last, as P0.001 shows it
-            shown = alarms.current
+        shown = self._emcy_shown  # what the mode's EMCYs said while STOPPED, none sent
         if shown == self._emcy_sent:
             return
-        self._send_emcy(alarms.table.spec(shown).emcy if shown else 0, shown or "")
+        spec = self.drive.alarms.table.spec(shown) if shown else None
+        self._send_emcy(spec.emcy if spec is not None else 0, shown or "")
 
     def _send_emcy(self, code: int, name: str) -> None:
         cob = self._values.get((0x1014, 0), 0x80 + self.node_id)

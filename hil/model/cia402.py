@@ -510,8 +510,8 @@ class Cia402:
             return self.statusword
         if index == 0x6061:
             return self._mode
-        if index == 0x6062:
-            return round(counts_to_puu(ax.user_demand, self._num, self._den))
+        if index == 0x6062:  # before the IP filters (L18410-18412); 60FCh after (L19207)
+            return round(counts_to_puu(ax.interpolator_demand, self._num, self._den))
         if index == 0x6063:
             return round(ax.user_position)
         if index == 0x6064:
@@ -965,7 +965,8 @@ class Cia402:
     def _fe_puu(self) -> int:
         ax = self.axis
         num, den = self._num, self._den
-        return round(counts_to_puu(ax.user_demand, num, den)) - round(
+        # 60F4h = 6062h - 6064h (L19193): the IP filters' lag included
+        return round(counts_to_puu(ax.interpolator_demand, num, den)) - round(
             counts_to_puu(ax.user_position, num, den)
         )
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from hil.units import S
+from hil.units import S, s32
 
 DC_BUS_V = 311.0  # the rectified 220 V mains (√2 x 220 V): the model has no bus
 IGBT_C = 40  # °C: the model has no thermal part
@@ -101,6 +101,7 @@ class Monitors:
             if d.mech.motor_inertia else 0,
             IGBT: lambda: IGBT_C,  # °C (L15456)
             Z_OFFSET: z_offset,
+            **{19 + n: (lambda n=n: p.read(f"P0.{25 + n:03d}")) for n in range(4)},  # L15463
             **{23 + n: mapped(n) for n in range(4)},
             39: lambda: p.read("P4.007"),  # the DIs as the drive sees them (L15478)
             40: lambda: p.read("P4.009"),  # the DOs as driven (L15479)
@@ -130,6 +131,55 @@ class Monitors:
         return read
 
 
+class ParamMapping:
+    """P0.025-P0.032, each mapped on the parameter(s) its P0.035-P0.042 names (L7326-7372):
+    a high and a low word, each group digit C / Z and index BA / YX in hex (0x0203 = P2.003);
+    the same word twice is one 32-bit parameter, two words two 16-bit ones (the high word the
+    first). A read gives them, a write writes them at once; an unset target (0) leaves the
+    register a plain value."""
+
+    def __init__(self, drive: Any, i: int) -> None:
+        self.d, self.reg, self.target = drive, f"P0.{25 + i:03d}", f"P0.{35 + i:03d}"
+
+    def _names(self) -> tuple[str, str] | None:
+        v = self.d.params.get(self.target)
+        ph, pl = v >> 16 & 0xFFFF, v & 0xFFFF
+        if not (ph or pl):
+            return None
+        return tuple(f"P{w >> 8 & 0xF}.{w & 0xFF:03d}" for w in (ph, pl))  # type: ignore
+
+    def _split(self, value: int) -> list[tuple[str, int]]:
+        names = self._names()
+        if names is None:
+            return []
+        hi, lo = names
+        if hi == lo:
+            return [(hi, value)]
+        out = []
+        for name, word in ((hi, value >> 16 & 0xFFFF), (lo, value & 0xFFFF)):
+            signed = self.d.params.table.spec(name).min < 0
+            out.append((name, word - 0x10000 if signed and word & 0x8000 else word))
+        return out
+
+    def read(self) -> int:
+        names = self._names()
+        p = self.d.params
+        if names is None:
+            return p.stored(self.reg)
+        hi, lo = names
+        if hi == lo:
+            return p.read(hi)
+        return s32((p.read(hi) & 0xFFFF) << 16 | p.read(lo) & 0xFFFF)
+
+    def validate(self, _name: str, value: int) -> None:
+        for name, word in self._split(value):  # a target refuses: the register does too
+            self.d.params.check_write(name, word)
+
+    def write(self, _name: str, _old: int, new: int) -> None:
+        for name, word in self._split(new):
+            self.d.params.write(name, word)
+
+
 def _selected(drive: Any, select: str) -> Callable[[], int]:
     """A register reading the monitor code `select` names (0 for a code nothing models)."""
     def read() -> int:
@@ -144,5 +194,10 @@ def attach_monitors(drive: Any) -> Monitors:
     for code, fn in mon.codes().items():
         drive.hooks.monitors.setdefault(code, fn)
     drive.params.on_read("P0.044", _selected(drive, "P0.045"))  # "同參數 P0.009" (L7442)
+    for i in range(8):  # P0.025-P0.032 by P0.035-P0.042 (L7326-7440)
+        m = ParamMapping(drive, i)
+        drive.params.on_read(m.reg, m.read)
+        drive.params.on_validate(m.reg, m.validate)
+        drive.params.on_write(m.reg, m.write)
     drive.params.on_read("P0.008", mon.p0008)
     return mon

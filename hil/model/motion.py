@@ -516,6 +516,15 @@ class Axis:
         return self.demand - self.origin
 
     @property
+    def interpolator_demand(self) -> float:
+        """The IP interpolator's output before the set-point filters (P1.068, P1.036): what
+        6062h shows in IP mode ("內部插值器所計算出來的插值命令。此命令接著會經過內部濾波器",
+        L18410-18412); the filtered demand (60FCh) otherwise and without a filter."""
+        if self._mode == _INTERP and self._ip_ma:
+            return self._ip_raw - self.origin
+        return self.demand - self.origin
+
+    @property
     def velocity_rpm(self) -> float:
         return self.velocity * 60.0 / self.cpr
 

@@ -221,9 +221,7 @@ class PrEngine:
         if homing is not None and homing.route == "pr":
             homing.stop()  # the new group replaces PR#0 (L4920)
         self.trace.append((d.now, f"dispatch:{n}"))
-        self.lead = n
-        self._failed = False
-        self._readback = None
+        self._new_lead(n)
         self.cursor = n
         self._buffered = None  # the new group replaces the old (L4920-4924)
         self.tpos_off = True  # "清除信號 2、4、5、6" (L8624): Cmd_OK, TPOS, MC_OK
@@ -255,7 +253,7 @@ class PrEngine:
         p6000 = d.params.get("P6.000")
         self.cmd_e = d.params.get("P6.001")
         path = p6000 & 0xFF
-        self.lead = 0
+        self._new_lead(0)
         self._prev_t = d.now
         self._prev_dly = self._dly_ns((p6000 >> 20) & 0xF)
         self._prev_motion = False
@@ -271,15 +269,26 @@ class PrEngine:
         """At power-up Cmd_E is where the motor is (the coordinate the drive starts with:
         0 incremental, the absolute position): an INC path adds to it (L4180)."""
         self.abort()
+        self._new_lead(None)  # nothing ran yet: P5.007 reads what was written
         d = self.drive
         self.cmd_e = round(counts_to_puu(d.axis.user_position, d.params.get("P1.044"),
                                          d.params.get("P1.045")))
 
-    def abort(self) -> None:
-        """The program ends without finishing (servo off, homing started, alarm); one that
-        had finished keeps reading n+20000 / n+10000 in P5.007 (it is not running)."""
+    def _new_lead(self, n: int | None) -> None:
+        """A new program (or none): P5.007 follows it, whatever ended the last one."""
+        self.lead = n
+        self._failed = False
+        self._readback = None
+
+    def servo_off(self) -> None:
+        """Servo off ends the program (`abort`); one that had finished keeps reading its
+        n+20000 / n+10000 in P5.007 (it is not running, L11185-11189)."""
         if self.cmd_ok and self.lead is not None and self._readback is None:
             self._readback = self.p5007_readback()
+        self.abort()
+
+    def abort(self) -> None:
+        """The program ends without finishing (servo off, homing started, alarm)."""
         self.cursor = None
         self._home_at = None
         self._buffered = None
@@ -857,7 +866,7 @@ def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
         homing.on_pr_start = pr.abort
     drive.hooks.step.append(pr.after_step)
     drive.hooks.boot.append(pr.power_up)
-    drive.hooks.servo_off.append(pr.abort)  # servo off ends the program, a DLY's wait too
+    drive.hooks.servo_off.append(pr.servo_off)  # servo off ends the program, a DLY's too
     return pr
 
 

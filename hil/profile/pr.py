@@ -171,8 +171,8 @@ def decode(n: int, definition: int, data: int) -> PrPath:
 
 
 ARRAY_SIZE = 800  # data array 0..799 (L5097)
-# (a monitor source is read as P0.009-P0.013 show it, `Hooks.monitors`: a code the drive does
-# not have is AL231 when the WRITE runs, `PrEngine.monitor`)
+# (a monitor source is read as P0.009-P0.013 show it, `Hooks.monitors`: a code the model does
+# not have is AL231 when the WRITE runs, `PrEngine.monitor`; `hil run --check` takes 0-127)
 
 
 def _check_write(p: PrPath, where: str) -> None:

@@ -153,3 +153,18 @@ def test_ip_set_points_never_run_into_an_active_limit(period_ms: int) -> None:
         d.write_object(0x60C1, 1, sp)
         d.advance(period_ms * MS)
     assert d.read_object(0x6064, 0) < start - 500
+
+
+def test_6062h_is_the_interpolator_output_and_60fch_the_filtered_demand() -> None:
+    """6062h "內部插值器所計算出來的插值命令。此命令接著會經過內部濾波器" (L18410-18412): before
+    the filters; 60FCh after them (L19207-19209); 60F4h = 6062h - 6064h (L19193). Both had
+    read the filtered demand (helper-115)."""
+    d = ip_drive()  # P1.068 = 4 ms
+    base_6062 = d.read_object(0x6062, 0)
+    d.write_object(0x60C1, 1, STEP_PUU)
+    d.advance(MS)
+    gear = d.axis.cpr / 100_000
+    assert d.read_object(0x6062, 0) - base_6062 == STEP_PUU  # interpolated in one period
+    filtered = (d.axis.demand - d.axis.origin) / gear
+    assert abs(filtered - base_6062 - 300) < 1  # the 4 ms mean: a quarter of the step
+    assert d.read_object(0x60F4, 0) == d.read_object(0x6062, 0) - d.read_object(0x6064, 0)

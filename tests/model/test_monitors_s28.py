@@ -126,3 +126,25 @@ def test_a_pr_write_reads_any_monitor_the_drive_has():
     d.params.write("P5.007", 1)
     d.advance(50 * MS)
     assert d.alarms.active == ()
+
+
+def test_mapping_parameters_read_and_write_their_targets():
+    """P0.035 = 0x02030205 maps P0.025 on P2.003 (high word) and P2.005 (low): writing
+    0x00050064 sets P2.003 = 5 and P2.005 = 100; the same word twice is one 32-bit parameter
+    (P6.010, 0x060A060A) (L7326-7372). Monitors 019-022 read P0.025-P0.028 (L15463-15466);
+    they had read 0 (helpers 111, 114)."""
+    d = Drive(inputs={8: True})
+    d.params.write("P0.035", 0x02030205)
+    d.params.write("P0.025", 0x00050064)
+    assert d.params.read("P2.003") == 5 and d.params.read("P2.005") == 100
+    d.params.write("P2.005", 120)
+    assert d.params.read("P0.025") == 0x00050078
+    d.params.write("P0.036", 0x060A060A)
+    d.params.write("P0.026", 0x00050064)
+    assert d.params.read("P6.010") == 0x00050064
+    d.params.write("P0.037", 0x01090109)  # P1.009, 32-bit
+    d.params.write("P1.009", 12345)
+    assert monitor(d, 21) == 12345 and monitor(d, 19) == 0x00050078
+    with pytest.raises(Exception, match=r"P2\.003"):
+        d.params.write("P0.025", 0x7FFF0064)  # P2.003 refuses 32767: the register too
+    assert d.params.read("P2.003") == 5

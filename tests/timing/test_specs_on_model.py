@@ -196,13 +196,22 @@ def sto_both_lost_995_ms_apart(tap: ModelTap) -> None:
 
 
 def sto_estop_released_5_ms_apart(tap: ModelTap) -> None:
-    """Both channels cut 3 s (AL500), back 5 ms apart: AL500 alone; a drive that raised
-    AL502 at the return fails "no AL502 within 1 s of a channel's return" (helper-112)."""
+    """Both channels cut 3 s (AL500), back together; then cut again, back 5 ms apart: AL500
+    alone; a drive that raised AL502 at the second return fails "no AL502 within 1 s of a
+    channel's return" (helpers 112, 114: the rule had judged a recording's first return
+    only)."""
     servo_on(tap)
-    for level, then_ms in (((False, False), 3000), ((True, False), 5), ((True, True), 1500)):
-        tap.set_sto("A", level[0])
-        tap.set_sto("B", level[1])
-        tap.advance(then_ms * MS)
+    for n, steps in enumerate(([((False, False), 3000), ((True, True), 1500)],  # a clean one
+                               [((False, False), 3000), ((True, False), 5), ((True, True), 1500)])):
+        for level, then_ms in steps:
+            tap.set_sto("A", level[0])
+            tap.set_sto("B", level[1])
+            tap.advance(then_ms * MS)
+        if n == 0:  # ARST clears AL500 (L2493) before the second
+            tap.set_di(5, True)
+            tap.advance(20 * MS)
+            tap.set_di(5, False)
+            tap.advance(20 * MS)
 
 
 def sto_glitch_then_loss(tap: ModelTap) -> None:
