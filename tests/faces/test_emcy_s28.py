@@ -89,3 +89,25 @@ def test_the_catch_up_out_of_stopped_with_emcy_priority_latest():
         assert len(emcy) == 1 and emcy[0][1][3:5] == b"\x20\x00"
     finally:
         r.close()
+
+
+def test_a_regular_sync_fed_on_the_drive_clock_raises_nothing():
+    """The rig stamps frames on the drive's clock: a 1 ms SYNC with 1006h = 1000 us in IP
+    mode is no early SYNC (a wall-clock stamp had raised AL3E2 on the second; helper-115)."""
+    r = Rig()
+    try:
+        r.run(2)
+        r.write(0x1006, 0, 1000, 4)
+        r.run(2)  # one SDO a ms (two within 1 ms are AL111, L19933)
+        r.write(0x6060, 0, 7, 1)
+        r.run(2)
+        for cw in (0x06, 0x07, 0x0F):
+            r.write(0x6040, 0, cw, 2)
+            r.run(2)
+        r.feed(0x000, bytes([0x01, NODE]))
+        for _ in range(20):
+            r.feed(0x080)
+            r.run(1)
+        assert r.drive.alarms.active == ()
+    finally:
+        r.close()

@@ -5,7 +5,6 @@ injected clock; its CANopen face is fed frame by frame."""
 from __future__ import annotations
 
 import struct
-import time
 import uuid
 
 import can
@@ -39,8 +38,10 @@ class Rig:
         self.out.shutdown()
 
     def feed(self, cid: int, data: bytes = b"", remote: bool = False) -> None:
+        # stamped on the drive's clock, which the slave measures SYNC periods on (a wall
+        # stamp gave a 1 ms SYNC sequence a false AL3E2: helper-115)
         msg = can.Message(arbitration_id=cid, data=data, is_extended_id=False,
-                          is_remote_frame=remote, timestamp=time.time())
+                          is_remote_frame=remote, timestamp=self.drive.now / 1e9)
         with self.slave.lock:
             self.slave.handle_frame(msg)
 
