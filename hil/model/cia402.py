@@ -435,7 +435,8 @@ class Cia402:
         # |round(a) - round(b)| <= |a - b| + 1: an error this far inside the window cannot
         # exceed it, so the exact PUU difference is worked out only near the limit (+1 more
         # for the float rounding of positions far from 0)
-        if abs(ax.demand - ax.position) * self._den / self._num + 2 <= limit:
+        # (60F4h's own demand: the IP interpolator's, before the filters, L19193)
+        if abs(ax.interpolator_demand - ax.user_position) * self._den / self._num + 2 <= limit:
             return False
         return abs(self._fe_puu()) > limit
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from hil.model.errors import OutOfRange
 from hil.units import S, s32
 
 DC_BUS_V = 311.0  # the rectified 220 V mains (√2 x 220 V): the model has no bus
@@ -131,33 +132,57 @@ class Monitors:
         return read
 
 
+MAPPING_REGISTERS = frozenset(f"P0.{n:03d}" for n in (*range(25, 33), *range(35, 43)))
+
+
 class ParamMapping:
     """P0.025-P0.032, each mapped on the parameter(s) its P0.035-P0.042 names (L7326-7372):
-    a high and a low word, each group digit C / Z and index BA / YX in hex (0x0203 = P2.003);
-    the same word twice is one 32-bit parameter, two words two 16-bit ones (the high word the
-    first). A read gives them, a write writes them at once; an unset target (0) leaves the
-    register a plain value."""
+    a high and a low word, each group digit C / Z and index BA / YX in hex (0x0203 = P2.003;
+    digits D / U "無作用"); the same word twice is one 32-bit parameter, two words two 16-bit
+    ones (the high word the first), a zero word no parameter (that half reads 0, a write
+    leaves it). A read gives the targets, a write writes them at once (a target's refusal
+    refuses it); a target must exist and may not be a mapping register itself (checked when
+    P0.035-P0.042 is written). An unset target (0) leaves the register a plain value."""
 
     def __init__(self, drive: Any, i: int) -> None:
         self.d, self.reg, self.target = drive, f"P0.{25 + i:03d}", f"P0.{35 + i:03d}"
 
-    def _names(self) -> tuple[str, str] | None:
+    @staticmethod
+    def word_name(word: int) -> str | None:
+        word &= 0x0FFF  # D / U: no effect (L7335)
+        return f"P{word >> 8 & 0xF}.{word & 0xFF:03d}" if word else None
+
+    def check_target(self, _name: str, value: int) -> None:
+        """Validator of P0.035-P0.042: each word names an existing parameter that is not a
+        mapping register (a loop would never end)."""
+        for word in (value >> 16 & 0xFFFF, value & 0xFFFF):
+            name = self.word_name(word)
+            if name is None:
+                continue
+            spec = self.d.params.table.spec(name)  # UnknownParameter for none (P0.034 ...)
+            if spec.param in MAPPING_REGISTERS:
+                raise OutOfRange(self.target, f"0x{word:04X} names {spec.param}, a mapping "
+                                 "register (L7326-7440)")
+
+    def _names(self) -> tuple[str | None, str | None] | None:
         v = self.d.params.get(self.target)
-        ph, pl = v >> 16 & 0xFFFF, v & 0xFFFF
-        if not (ph or pl):
-            return None
-        return tuple(f"P{w >> 8 & 0xF}.{w & 0xFF:03d}" for w in (ph, pl))  # type: ignore
+        hi, lo = self.word_name(v >> 16), self.word_name(v)
+        return None if hi is None and lo is None else (hi, lo)
 
     def _split(self, value: int) -> list[tuple[str, int]]:
         names = self._names()
         if names is None:
             return []
         hi, lo = names
-        if hi == lo:
-            return [(hi, value)]
+        table = self.d.params.table
+        if hi == lo:  # one 32-bit parameter: its own signedness
+            assert hi is not None
+            return [(hi, value if table.spec(hi).min < 0 else value & 0xFFFFFFFF)]
         out = []
         for name, word in ((hi, value >> 16 & 0xFFFF), (lo, value & 0xFFFF)):
-            signed = self.d.params.table.spec(name).min < 0
+            if name is None:
+                continue
+            signed = table.spec(name).min < 0
             out.append((name, word - 0x10000 if signed and word & 0x8000 else word))
         return out
 
@@ -168,8 +193,9 @@ class ParamMapping:
             return p.stored(self.reg)
         hi, lo = names
         if hi == lo:
-            return p.read(hi)
-        return s32((p.read(hi) & 0xFFFF) << 16 | p.read(lo) & 0xFFFF)
+            return s32(p.read(hi))  # the register is signed 32-bit (its CSV range)
+        word = [p.read(n) & 0xFFFF if n is not None else 0 for n in (hi, lo)]
+        return s32(word[0] << 16 | word[1])
 
     def validate(self, _name: str, value: int) -> None:
         for name, word in self._split(value):  # a target refuses: the register does too
@@ -197,7 +223,9 @@ def attach_monitors(drive: Any) -> Monitors:
     for i in range(8):  # P0.025-P0.032 by P0.035-P0.042 (L7326-7440)
         m = ParamMapping(drive, i)
         drive.params.on_read(m.reg, m.read)
+        drive.params.on_peek(m.reg, m.read)  # a one-word Modbus write keeps the other half
         drive.params.on_validate(m.reg, m.validate)
         drive.params.on_write(m.reg, m.write)
+        drive.params.on_validate(m.target, m.check_target)
     drive.params.on_read("P0.008", mon.p0008)
     return mon

@@ -397,8 +397,9 @@ class ParameterStore:
             self._notify(key, value)
             if self.autosave and self.retained_path is not None and spec.retained:
                 self.save()
-        for hook in list(self._write_hooks.get(key, ())):
-            hook(key, old, value)
+        with self.ram_only_writes(ram_only):  # what a hook writes is kept as this write is
+            for hook in list(self._write_hooks.get(key, ())):
+                hook(key, old, value)
 
     def _notify(self, key: str, value: int) -> None:
         for fn in list(self._listeners):

@@ -280,6 +280,12 @@ class PrEngine:
         self._failed = False
         self._readback = None
 
+    def homing_started(self) -> None:
+        """PR#0 (SHOM, CTRG with POS 0, BOOT) replaces the program: P5.007 follows PR#0,
+        "0" while it runs (L11185-11189), not the program before."""
+        self.abort()
+        self._new_lead(0)
+
     def servo_off(self) -> None:
         """Servo off ends the program (`abort`); one that had finished keeps reading its
         n+20000 / n+10000 in P5.007 (it is not running, L11185-11189)."""
@@ -836,7 +842,7 @@ def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
             pr.stop("P5.007")
         elif new == 0:
             pr.abort()  # homing (homing.py) replaces the program
-            pr.lead = None
+            pr._new_lead(None)
 
     params.on_validate("P5.007", check_p5007)
     params.on_write("P5.007", on_p5007)
@@ -863,7 +869,7 @@ def attach_pr(drive: DriveCore, options: PrOptions | None = None, *,
 
     if homing is not None:
         homing.on_pr_done = pr.after_homing
-        homing.on_pr_start = pr.abort
+        homing.on_pr_start = pr.homing_started
     drive.hooks.step.append(pr.after_step)
     drive.hooks.boot.append(pr.power_up)
     drive.hooks.servo_off.append(pr.servo_off)  # servo off ends the program, a DLY's too

@@ -168,3 +168,18 @@ def test_6062h_is_the_interpolator_output_and_60fch_the_filtered_demand() -> Non
     filtered = (d.axis.demand - d.axis.origin) / gear
     assert abs(filtered - base_6062 - 300) < 1  # the 4 ms mean: a quarter of the step
     assert d.read_object(0x60F4, 0) == d.read_object(0x6062, 0) - d.read_object(0x6064, 0)
+
+
+def test_al009_judges_60f4h_with_the_filters_lag() -> None:
+    """AL009 when |60F4h| > 6065h (L18452): with a 20 ms P1.068 the interpolator runs ahead
+    of the filtered demand, and 60F4h (6062h - 6064h) with it (helper-116: 60F4h read past
+    6065h with no alarm)."""
+    d = ip_drive(**{"P1.068": 20})
+    d.write_object(0x6065, 0, 3000)
+    base = d.read_object(0x6064, 0)
+    for k in range(12):
+        d.write_object(0x60C1, 1, base + 600 * (k + 1))
+        d.advance(MS)
+        if "AL009" in d.alarms.active:
+            break
+    assert "AL009" in d.alarms.active

@@ -148,3 +148,34 @@ def test_mapping_parameters_read_and_write_their_targets():
     with pytest.raises(Exception, match=r"P2\.003"):
         d.params.write("P0.025", 0x7FFF0064)  # P2.003 refuses 32767: the register too
     assert d.params.read("P2.003") == 5
+
+
+def test_mapping_targets_are_checked_when_they_are_set():
+    """A target must be a parameter and not a mapping register: P0.025 on itself (or two on
+    each other) had recursed for ever, an unknown target failed every read (helper-116)."""
+    from hil.model.errors import ModelError
+
+    d = Drive(inputs={8: True})
+    for bad in (0x00190019, 0x001A001A, 0x0FFF0FFF, 0x00220022):  # P0.025, P0.026, P15.255, P0.034
+        with pytest.raises(ModelError):
+            d.params.write("P0.035", bad)
+    assert d.params.read("P0.035") == 0
+
+
+def test_a_one_word_modbus_write_keeps_the_other_target():
+    """A function-06 write of one half of P0.025 combines it with the other half as the
+    targets hold it (the stored register had been used: P1.006 was overwritten with 0)."""
+    d = Drive(inputs={8: True})
+    d.params.write("P0.035", 0x01060107)  # P1.006 high, P1.007 low
+    d.params.write("P1.006", 500)
+    address = d.params.table.spec("P0.025").modbus_address
+    d.params.modbus_write(address, [300])  # the low word alone
+    assert d.params.read("P1.006") == 500 and d.params.read("P1.007") == 300
+
+
+def test_an_unsigned_32_bit_target_writes_back_what_it_reads():
+    d = Drive(inputs={8: True})
+    d.params.write("P0.035", 0x05030503)  # P5.003, 0 .. 0xFFFFFFFF
+    value = d.params.read("P0.025")
+    d.params.write("P0.025", value)
+    assert d.params.read("P5.003") == value & 0xFFFFFFFF

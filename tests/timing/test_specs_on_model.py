@@ -336,6 +336,8 @@ DEVIATIONS = [
     ),
     ("sto", sto_both, {"dev_sto_both_lost_ms": 15}, {}, "AL500 when both channels lost for 10 ms"),
     ("sto", sto_one, {"dev_sto_one_lost_ms": 500}, {}, "no AL501 before STO_A lost for 1 s"),
+    ("sto", sto_estop_released_5_ms_apart, {"dev_sto_one_lost_ms": 3}, {},
+     "no AL502 within 1 s of a channel's return from a loss of both (AL500)"),
     (
         "sto_glitch",
         sto_glitch_then_loss,
