@@ -5,6 +5,8 @@ AL401 (L20183-L20187)."""
 
 from __future__ import annotations
 
+import pytest
+
 from tests.faces.test_manual_rules_s16 import NODE, Rig
 
 EMCY = 0x80 + NODE
@@ -15,41 +17,48 @@ def _frames(r: Rig) -> list[tuple[int, bytes]]:
     return [(m.arbitration_id, bytes(m.data)) for m in r.drain()]
 
 
-def test_an_alarm_cleared_while_stopped_is_announced_when_it_comes_again():
+@pytest.fixture
+def rig():
     r = Rig()
-    try:
-        r.feed(0x000, bytes([0x01, NODE]))  # start
-        r.drive.alarms.raise_alarm("AL020")
-        r.run(2)
-        assert next(f for f in _frames(r) if f[0] == EMCY)[1][:2] == b"\x10\x75"  # 7510h
-        r.feed(0x000, bytes([0x02, NODE]))  # stop: no EMCY (L17089-L17095)
-        r.drive.alarms.reset("di")
-        r.run(2)
-        assert [f for f in _frames(r) if f[0] == EMCY] == []
-        r.feed(0x000, bytes([0x01, NODE]))  # out of STOPPED: the clear it missed (helper-110)
-        r.run(2)
-        assert [f[1][:2] for f in _frames(r) if f[0] == EMCY] == [b"\x00\x00"]
-        r.drive.alarms.raise_alarm("AL020")  # a new occurrence: a new EMCY
-        r.run(2)
-        emcy = [f for f in _frames(r) if f[0] == EMCY]
-        assert len(emcy) == 1 and emcy[0][1][:2] == b"\x10\x75" and emcy[0][1][3:5] == b"\x20\x00"
-    finally:
-        r.close()
+    yield r
+    r.close()
 
 
-def test_an_alarm_raised_while_stopped_is_announced_at_the_start():
-    r = Rig()
-    try:
-        r.feed(0x000, bytes([0x02, NODE]))
-        r.drive.alarms.raise_alarm("AL020")
-        r.run(2)
-        assert [f for f in _frames(r) if f[0] == EMCY] == []
-        r.feed(0x000, bytes([0x80, NODE]))  # to PRE-OPERATIONAL: EMCY allowed again
-        r.run(2)
-        emcy = [f for f in _frames(r) if f[0] == EMCY]
-        assert len(emcy) == 1 and emcy[0][1][3:5] == b"\x20\x00"
-    finally:
-        r.close()
+def nmt(r: Rig, cs: int) -> None:
+    r.feed(0x000, bytes([cs, NODE]))  # 01h start, 02h stop, 80h pre-operational
+
+
+def emcys(r: Rig, ms: int = 2) -> list[bytes]:
+    """The EMCY frames' data sent in the next `ms`."""
+    r.run(ms)
+    return [data for cid, data in _frames(r) if cid == EMCY]
+
+
+def test_an_alarm_cleared_while_stopped_is_announced_when_it_comes_again(rig):
+    nmt(rig, 0x01)
+    rig.drive.alarms.raise_alarm("AL020")
+    assert emcys(rig)[0][:2] == b"\x10\x75"  # 7510h
+    nmt(rig, 0x02)  # stop: no EMCY (L17089-L17095)
+    rig.drive.alarms.reset("di")
+    assert emcys(rig) == []
+    nmt(rig, 0x01)  # out of STOPPED: the clear it missed (helper-110)
+    assert [e[:2] for e in emcys(rig)] == [b"\x00\x00"]
+    rig.drive.alarms.raise_alarm("AL020")  # a new occurrence: a new EMCY
+    [e] = emcys(rig)
+    assert e[:2] == b"\x10\x75" and e[3:5] == b"\x20\x00"
+
+
+@pytest.mark.parametrize("priority", ["class", "latest"])
+def test_an_alarm_raised_while_stopped_is_announced_at_the_start(rig, priority):
+    from hil.model.options import ModelOptions
+
+    rig.drive.options = ModelOptions(emcy_priority=priority)
+    nmt(rig, 0x02)
+    rig.drive.alarms.raise_alarm("AL020")
+    assert emcys(rig) == []
+    nmt(rig, 0x80 if priority == "class" else 0x01)  # EMCY allowed again
+    [e] = emcys(rig)
+    assert e[3:5] == b"\x20\x00"
 
 
 def test_al401_is_announced_after_the_boot_up_and_its_clear_too():
@@ -70,23 +79,6 @@ def test_al401_is_announced_after_the_boot_up_and_its_clear_too():
         r.run(2)
         assert "AL401" not in r.drive.alarms.active
         assert [f[1][:3] for f in _frames(r) if f[0] == EMCY] == [b"\x00\x00\x00"]
-    finally:
-        r.close()
-
-
-def test_the_catch_up_out_of_stopped_with_emcy_priority_latest():
-    from hil.model.options import ModelOptions
-
-    r = Rig()
-    try:
-        r.drive.options = ModelOptions(emcy_priority="latest")
-        r.feed(0x000, bytes([0x02, NODE]))
-        r.drive.alarms.raise_alarm("AL020")
-        r.run(2)
-        r.feed(0x000, bytes([0x01, NODE]))
-        r.run(2)
-        emcy = [f for f in _frames(r) if f[0] == EMCY]
-        assert len(emcy) == 1 and emcy[0][1][3:5] == b"\x20\x00"
     finally:
         r.close()
 
