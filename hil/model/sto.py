@@ -177,8 +177,9 @@ class Sto:
     def _one_lost(self, channel: str, code: str) -> None:
         """A channel lost for its 1 s (L2482): AL501 / AL502, unless the other is lost too:
         then the two are no longer out of step ("沒有同步且差距達 1 秒以上", L20203, L20209)
-        and AL500's 10 ms decides; if the other comes back first, this one's alarm comes
-        then (`_update`)."""
+        and AL500's 10 ms decides; when the other comes back, this one's alarm comes then
+        after a dip shorter than AL500's 10 ms, or a new second counts after AL500
+        (`_update`)."""
         self._one_timers[channel] = None
         if not (self.a or self.b):
             self._one_expired[channel] = True
