@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from hil.model.errors import OutOfRange
+from hil.model.errors import ModelError, OutOfRange
 from hil.units import S, s32
 
 DC_BUS_V = 311.0  # the rectified 220 V mains (√2 x 220 V): the model has no bus
@@ -146,6 +146,7 @@ class ParamMapping:
 
     def __init__(self, drive: Any, i: int) -> None:
         self.d, self.reg, self.target = drive, f"P0.{25 + i:03d}", f"P0.{35 + i:03d}"
+        self._busy = False  # inside `read`
 
     @staticmethod
     def word_name(word: int) -> str | None:
@@ -186,16 +187,29 @@ class ParamMapping:
             out.append((name, word - 0x10000 if signed and word & 0x8000 else word))
         return out
 
-    def read(self) -> int:
+    def read(self, peek: bool = False) -> int:
+        """The targets as one register value (`peek`: without their reads' side effects);
+        a target list that loops back here reads 0 (a value a bench or an old file set
+        before the check of P0.035-P0.042 could)."""
         names = self._names()
         p = self.d.params
         if names is None:
             return p.stored(self.reg)
-        hi, lo = names
-        if hi == lo:
-            return s32(p.read(hi))  # the register is signed 32-bit (its CSV range)
-        word = [p.read(n) & 0xFFFF if n is not None else 0 for n in (hi, lo)]
-        return s32(word[0] << 16 | word[1])
+        if self._busy:
+            return 0
+        self._busy = True
+        try:
+            get = p.peek if peek else p.read
+            hi, lo = names
+            if hi == lo:
+                return s32(get(hi))  # the register is signed 32-bit (its CSV range)
+            word = [get(n) & 0xFFFF if n is not None else 0 for n in (hi, lo)]
+            return s32(word[0] << 16 | word[1])
+        finally:
+            self._busy = False
+
+    def peek(self) -> int:
+        return self.read(peek=True)
 
     def validate(self, _name: str, value: int) -> None:
         for name, word in self._split(value):  # a target refuses: the register does too
@@ -223,9 +237,13 @@ def attach_monitors(drive: Any) -> Monitors:
     for i in range(8):  # P0.025-P0.032 by P0.035-P0.042 (L7326-7440)
         m = ParamMapping(drive, i)
         drive.params.on_read(m.reg, m.read)
-        drive.params.on_peek(m.reg, m.read)  # a one-word Modbus write keeps the other half
+        drive.params.on_peek(m.reg, m.peek)  # a one-word Modbus write keeps the other half
         drive.params.on_validate(m.reg, m.validate)
         drive.params.on_write(m.reg, m.write)
         drive.params.on_validate(m.target, m.check_target)
+        try:  # a value given before the check (a bench's params, an old parameter file)
+            m.check_target(m.target, drive.params.stored(m.target))
+        except ModelError:  # ... that names no parameter or a register: unmapped
+            drive.params.set_internal(m.target, 0)
     drive.params.on_read("P0.008", mon.p0008)
     return mon

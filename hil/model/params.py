@@ -100,6 +100,18 @@ class ParameterStore:
         hook = self._read_hooks.get(spec.param)
         return int(hook()) if hook is not None else self._effective[spec.param]
 
+    def peek(self, name: str) -> int:
+        """The value a read would give, without a read's side effects (the data array's
+        pointer P5.011 does not advance): the peek hook where there is one, else the
+        stored value."""
+        spec = self.table.spec(name)
+        hook = self._peek_hooks.get(spec.param)
+        if hook is not None:
+            return int(hook())
+        if spec.param in self._read_hooks:  # a live value without a separate peek
+            return int(self._read_hooks[spec.param]())
+        return self._stored[spec.param]
+
     def stored(self, name: str) -> int:
         """The stored (last written) value, bypassing on_read hooks."""
         return self._stored[self.table.spec(name).param]
@@ -272,8 +284,11 @@ class ParameterStore:
             spec, got = specs[key], halves[key]
             if spec.size == 16 and 0 not in got:
                 continue  # only the (ignored) high word of a 16-bit parameter
-            peek = self._peek_hooks.get(key)
-            cur_low, cur_high = spec.to_words(int(peek()) if peek else self._stored[key])
+            if 0 in got and 1 in got:  # both halves given: the current value is not needed
+                cur_low = cur_high = 0
+            else:
+                peek = self._peek_hooks.get(key)
+                cur_low, cur_high = spec.to_words(int(peek()) if peek else self._stored[key])
             value = spec.from_words(got.get(0, cur_low), got.get(1, cur_high))
             plan.append((self.check_write(key, value), value))
         for spec, value in plan:

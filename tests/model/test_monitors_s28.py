@@ -179,3 +179,33 @@ def test_an_unsigned_32_bit_target_writes_back_what_it_reads():
     value = d.params.read("P0.025")
     d.params.write("P0.025", value)
     assert d.params.read("P5.003") == value & 0xFFFFFFFF
+
+
+def test_a_modbus_write_through_a_mapping_moves_the_array_pointer_once():
+    """P0.025 on P5.012 (the data array's window): a Modbus write of it is one write of P5.012
+    (entry P5.011, then the pointer +1); the mapping's peek had read P5.012 and moved the
+    pointer first (helper-117)."""
+    d = Drive(inputs={8: True})
+    d.params.write("P0.035", 0x050C050C)
+    for via in ("P0.025", "P5.012"):
+        d.pr.array[0], d.pr.array[1] = 0x00010002, 0x00030004
+        d.params.write("P5.011", 0)
+        d.params.modbus_write(d.params.table.spec(via).modbus_address, [0x0099, 0x0000])
+        assert d.params.get("P5.011") == 1 and d.pr.array[0:2] == [0x99, 0x00030004], via
+
+
+def test_a_looping_target_given_before_the_check_is_unmapped(tmp_path):
+    """A bench's params and a parameter file are written before P0.035's check exists: a
+    value that names a mapping register or no parameter is set to 0 at construction."""
+    d = Drive(inputs={8: True}, params={"P0.035": 0x00190019})
+    assert d.params.read("P0.035") == 0 and d.params.read("P0.025") == 0
+
+
+def test_writes_through_a_mapping_stay_ram_only_when_the_write_is():
+    d = Drive(inputs={8: True})
+    d.params.write("P0.035", 0x01060107)  # P1.006, P1.007
+    d.params.write("P1.006", 5)
+    d.params.write("P0.025", 40 << 16 | 50, ram_only=True)  # a PR WRITE without ROM
+    assert (d.params.read("P1.006"), d.params.read("P1.007")) == (40, 50)
+    d.power_cycle()
+    assert (d.params.read("P1.006"), d.params.read("P1.007")) == (5, 0)
