@@ -25,7 +25,30 @@ from hil.protocol.cia402 import CONTROLWORD
 # default, 10 rpm (0.1 rpm units, L8407)
 STANDSTILL = 100
 
-__all__ = ["DriveGone", "SafeDrive", "SafeReport", "SafeStateSpec", "run_safe_state"]
+__all__ = ["DriveGone", "SafeDrive", "SafeReport", "SafeStateSpec", "run_safe_state",
+           "wait_quick_stop"]
+
+
+def wait_quick_stop(read: Callable[[int], int | None], timeout_ns: int,
+                    period_s: float) -> tuple[bool, str]:
+    """After the quick-stop controlword, until the drive has left QUICK STOP ACTIVE by itself
+    (6041h bit 2 clear) or is at rest (606Ch within `STANDSTILL`), reading objects with
+    `read(index)` (None: no answer, asked again) every `period_s` until `timeout_ns`:
+    (done, what was last seen)."""
+    end = clock.monotonic_ns() + timeout_ns
+    last = "no answer"
+    while True:
+        sw = read(0x6041)
+        if sw is not None and not sw & 0x0004:
+            return True, f"statusword 0x{sw & 0xFFFF:04X}: power stage off"
+        v = read(0x606C) if sw is not None else None
+        if v is not None:
+            if abs(v) <= STANDSTILL:
+                return True, f"606Ch = {v} (0.1 rpm): at rest"
+            last = f"606Ch = {v} (0.1 rpm): still moving"
+        if clock.monotonic_ns() >= end:
+            return False, last
+        clock.sleep(period_s)
 
 
 class DriveGone(Exception):

@@ -8,10 +8,9 @@ from typing import TYPE_CHECKING, Any
 
 import can
 
-from hil import clock
 from hil.gateway.exports import DioExport
 from hil.protocol import canopen
-from hil.safety import STANDSTILL, run_safe_state
+from hil.safety import run_safe_state, wait_quick_stop
 from hil.units import S
 
 if TYPE_CHECKING:
@@ -64,20 +63,10 @@ class _GatewayDrive:
         return int.from_bytes(bytes(ans.data[4:4 + size]), "little", signed=True)
 
     def quick_stop_done(self, timeout_ns: int) -> str | bool:
-        """Until the drive is out of QUICK STOP ACTIVE by itself (6041h bit 2 clear) or at
-        rest (606Ch within the A3's zero-speed level, 0.1 rpm): the safe state then writes
-        disable voltage (transition 12, L18262)."""
-        end = clock.monotonic() + timeout_ns / S
-        while True:
-            sw = self._upload(0x6041, 0.2)
-            if sw is not None and not sw & 0x0004:
-                return f"statusword 0x{sw & 0xFFFF:04X}: power stage off"
-            v = self._upload(0x606C, 0.2)
-            if v is not None and abs(v) <= STANDSTILL:
-                return f"606Ch = {v} (0.1 rpm): at rest"
-            if clock.monotonic() >= end:
-                return False
-            clock.sleep(0.01)
+        """Until the quick stop's ramp has ended (`wait_quick_stop`, objects read by SDO
+        through the export): the safe state then writes disable voltage (L18262)."""
+        done, what = wait_quick_stop(lambda index: self._upload(index, 0.2), timeout_ns, 0.01)
+        return what if done else False
 
     def di_wired(self, function: str) -> bool:
         return self.dio is not None and function in self.d.di

@@ -261,16 +261,24 @@ class DiFunctions:
         bit10 = (get("P2.065") >> 10) & 1
         # bit 10 = 1 with the analog source ramps to 0 (L9914); with the register source
         # the speed is set to 0 at once (L9918-9920), bit 10 = 0 locks the position
-        # (the analog command: S by P1.001 with SPD0/SPD1 off; a CiA 402 PV's 60FFh and the
-        # P1.009-P1.011 registers are register sources)
-        self._clamp_ramp = bool(clamp and bit10 and mode == "S"
-                                and P1001_MODES.get(self._p1001()[0] & 0xFF) == "S"
-                                and not (on("SPD0") or on("SPD1")))
+        self._clamp_ramp = bool(clamp and bit10 and self._analog_speed(mode))
         d.axis.zero_clamp = ("" if self._clamp_ramp else "zero" if bit10 else "lock") \
             if clamp else ""
         d.axis.zero_clamp_rpm = get("P1.038") / 10.0
         self._gains(mode)
         self.mode_command(mode)
+
+    def _analog_speed(self, mode: str) -> bool:
+        """The speed command is the analog one: S by P1.001 with SPD0/SPD1 off (L3712; a
+        CiA 402 PV's 60FFh and P1.009-P1.011 are register sources)."""
+        on = self.d.dio.function_active
+        return (mode == "S" and P1001_MODES.get(self._p1001()[0] & 0xFF) == "S"
+                and not (on("SPD0") or on("SPD1")))
+
+    def _towards_limit(self, command: float) -> bool:
+        """PL/NL forbid running towards them in every mode (L15186-15191)."""
+        on = self.d.dio.function_active
+        return (command > 0 and on("PL")) or (command < 0 and on("NL"))
 
     def mode_command(self, mode: str | None = None) -> None:
         """The S/Sz speed or T/Tz torque command the DIs select, given to the axis when it
@@ -292,12 +300,12 @@ class DiFunctions:
                 rpm = get(f"P1.{8 + sel:03d}") / 10.0
             else:  # S: V_REF x P1.040 / 10 V (L3712); Sz: 0 (L3713)
                 rpm = opts.analog_v_ref * get("P1.040") / 10.0 if mode == "S" else 0.0
-            if (rpm > 0 and on("PL")) or (rpm < 0 and on("NL")):
-                rpm = 0.0  # no running towards an active limit (L15188-15191)
+            if self._towards_limit(rpm):
+                rpm = 0.0
             if self._clamp_ramp and abs(rpm) < get("P1.038") / 10.0:
                 rpm = 0.0  # ZCLAMP on the analog command, bit 10 = 1 (L9914-9916)
             acc, dec = get("P1.034"), get("P1.035")
-            if mode == "S" and not sel and get("P1.036") == 0:  # (by_p1001: not 60FFh)
+            if get("P1.036") == 0 and self._analog_speed(mode):
                 # "若使用類比命令，P1.036 的設定需要大於 0 才能有梯形加減速規劃" (L8342, L8353)
                 acc = dec = 0
             cmd: tuple = ("speed", rpm, acc, dec)
@@ -307,8 +315,8 @@ class DiFunctions:
                 pct = float(get(f"P1.{11 + sel:03d}"))
             else:  # T: T_REF x P1.041 / 10 V (L3955-3960); Tz: 0
                 pct = opts.analog_t_ref * get("P1.041") / 10.0 if mode == "T" else 0.0
-            if (pct > 0 and on("PL")) or (pct < 0 and on("NL")):
-                pct = 0.0  # PL/NL forbid running towards them in every mode (L15186-15191)
+            if self._towards_limit(pct):
+                pct = 0.0
             cmd = ("torque", pct)
         if cmd == self._mode_cmd or d.axis.locks:
             return

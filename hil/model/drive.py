@@ -465,8 +465,7 @@ class Drive:
         for name, value in mode_dio_defaults(p1001 & 0xFF).items():
             self.params.set_internal(name, value)
         self.params.set_internal("P1.001", p1001 & 0x0FFF)
-        if self.params.retained_path is not None:  # kept as any power-up's values are
-            self.params.save()
+        self.params.persist()  # kept as any power-up's values are
 
     def _special_write(self, _name: str, _old: int, new: int) -> None:
         """P2.008 = 30 or 35: store the data array (COMPARE, CAPTURE, E-Cam) in EEPROM
@@ -593,14 +592,12 @@ class Drive:
             self.difunc.refresh()
         if index == 0x6093 and sub in (1, 2):  # 6093h = P1.044 / P1.045 (L18838-18854)
             name = "P1.044" if sub == 1 else "P1.045"
-            if self.params.read(name) != value:  # kept as a write of it would be
-                self.params.set_internal(name, value, ram_only=self.params.ram_only_now())
-                self.params.persist()
+            if self.params.read(name) != value:
+                self.params.set_as_written(name, value)
         if index in (0x607F, 0x6080):  # 6080h "is P1.055", 607Fh = P1.055 x 10 (L18713-18735)
             rpm = round(value / 10) if index == 0x607F else value
             if self.params.read("P1.055") != rpm:
-                self.params.set_internal("P1.055", rpm, ram_only=self.params.ram_only_now())
-                self.params.persist()
+                self.params.set_as_written("P1.055", rpm)
 
     def _param_of(self, index: int, sub: int) -> str:
         try:

@@ -1,5 +1,6 @@
-"""Monitor variables of table 8.3 (L15440-15523) the rest of the model does not own, P0.044
-/ P0.045 (L7442-7458) and P0.008's hours (L7129-7145).
+"""Monitor variables of table 8.3 (L15440-15523) the rest of the model does not own, the
+status monitor registers P0.009-P0.013 and P0.044 that read them, the mapping parameters
+P0.025-P0.032 and P0.008's hours (L7129-7145).
 
 Every reader of a monitor code goes through `Hooks.monitors` (P0.009-P0.013 by P0.017-
 P0.021, P0.044 by P0.045, a PR WRITE's monitor source, monitor 123 by P0.002). Position codes
@@ -20,9 +21,6 @@ from hil.units import S, s32
 DC_BUS_V = 311.0  # the rectified 220 V mains (√2 x 220 V): the model has no bus
 IGBT_C = 40  # °C: the model has no thermal part
 HOUR_NS = 3600 * S
-
-# the monitor codes P0.002 / P0.017-P0.021 / P0.045 select, by name (L15440-15523)
-SPEED_FB, SPEED_CMD, TORQUE_CMD_PCT, DC_BUS, INERTIA, IGBT, Z_OFFSET = 7, 9, 11, 14, 15, 16, 18
 
 
 class Monitors:
@@ -66,11 +64,7 @@ class Monitors:
         def tenths(x: float) -> int:
             return round(x * 10)
 
-        def analog_v() -> float:
-            return float(getattr(d.options, "analog_v_ref", 0.0))
-
-        def analog_t() -> float:
-            return float(getattr(d.options, "analog_t_ref", 0.0))
+        opts = d.options
 
         def z_offset() -> int:
             """Position to the nearest Z, -4999 .. +5000 over a turn (L15462): the bench's Z
@@ -86,33 +80,34 @@ class Monitors:
             part = d.hooks.monitors.get(p.get("P0.002"))
             return part() if part is not None else 0
 
-        def mapped(n: int) -> Callable[[], int]:
-            return lambda: p.read(f"P0.{9 + n:03d}")
+        def register(name: str) -> Callable[[], int]:
+            return lambda: p.read(name)
 
         codes: dict[int, Callable[[], int]] = {
-            SPEED_FB: lambda: tenths(ax.velocity_rpm),  # 0.1 rpm (L15447; no filter modelled)
-            8: lambda: round(analog_v() * 100),  # analog speed command, 0.01 V (L15448)
-            SPEED_CMD: lambda: tenths(ax.demand_rpm),  # 0.1 rpm (L15449)
-            10: lambda: round(analog_t() * 100),  # analog torque command, 0.01 V (L15450)
-            TORQUE_CMD_PCT: lambda: round(ax.torque_demand / 10),  # % (L15451)
+            7: lambda: tenths(ax.velocity_rpm),  # 0.1 rpm (L15447; no filter modelled)
+            8: lambda: round(opts.analog_v_ref * 100),  # analog speed command, 0.01 V (L15448)
+            9: lambda: tenths(ax.demand_rpm),  # 0.1 rpm (L15449)
+            10: lambda: round(opts.analog_t_ref * 100),  # analog torque command, 0.01 V
+            11: lambda: round(ax.torque_demand / 10),  # % (L15451)
             12: lambda: round(abs(ax.torque) / 10),  # load %: the torque (no 20 ms average)
             13: lambda: round(abs(ax.torque) / 10),  # peak load %: the same (L15453)
-            DC_BUS: lambda: round(DC_BUS_V),  # V (L15454)
-            INERTIA: lambda: tenths(d.mech.load_inertia / d.mech.motor_inertia)  # (L15455)
+            14: lambda: round(DC_BUS_V),  # V (L15454)
+            15: lambda: tenths(d.mech.load_inertia / d.mech.motor_inertia)  # (L15455)
             if d.mech.motor_inertia else 0,
-            IGBT: lambda: IGBT_C,  # °C (L15456)
-            Z_OFFSET: z_offset,
-            **{19 + n: (lambda n=n: p.read(f"P0.{25 + n:03d}")) for n in range(4)},  # L15463
-            **{23 + n: mapped(n) for n in range(4)},
-            39: lambda: p.read("P4.007"),  # the DIs as the drive sees them (L15478)
-            40: lambda: p.read("P4.009"),  # the DOs as driven (L15479)
-            41: lambda: p.read("P0.046"),  # drive status (L15480)
+            16: lambda: IGBT_C,  # °C (L15456)
+            18: z_offset,
+            # mapped parameters P0.025-P0.028 and mapped monitors P0.009-P0.012 (L15463-15470)
+            **{19 + n: register(f"P0.{25 + n:03d}") for n in range(4)},
+            **{23 + n: register(f"P0.{9 + n:03d}") for n in range(4)},
+            39: register("P4.007"),  # the DIs as the drive sees them (L15478)
+            40: register("P4.009"),  # the DOs as driven (L15479)
+            41: register("P0.046"),  # drive status (L15480)
             50: lambda: tenths(ax.demand_rpm),  # 0.1 rpm (L15486)
             51: lambda: tenths(ax.velocity_rpm),  # instant speed, 0.1 rpm (L15487)
             53: lambda: round(ax.torque_demand),  # 0.1 % (L15488)
             54: lambda: round(ax.torque),  # torque feedback, 0.1 % (L15489)
             56: lambda: round(DC_BUS_V * 10),  # 0.1 V (L15491)
-            72: lambda: tenths(analog_v() * p.get("P1.040") / 10.0),  # 0.1 rpm (L15502)
+            72: lambda: tenths(opts.analog_v_ref * p.get("P1.040") / 10.0),  # 0.1 rpm (L15502)
             96: lambda: p.read("P0.000") & 0xFFFF,  # DSP version low word, CPLD 0 (L15511)
             123: panel,
         }
@@ -220,20 +215,28 @@ class ParamMapping:
             self.d.params.write(name, word)
 
 
-def _selected(drive: Any, select: str) -> Callable[[], int]:
-    """A register reading the monitor code `select` names (0 for a code nothing models)."""
+def _selected(drive: Any, reg: str, select: str) -> Callable[[], int]:
+    """Register `reg` reading the monitor code its selector `select` names (L7147-7237): a
+    code nothing models keeps the register's stored value."""
     def read() -> int:
         part = drive.hooks.monitors.get(drive.params.get(select))
-        return part() if part is not None else 0
+        return part() if part is not None else drive.params.stored(reg)
     return read
 
 
+# the status monitor registers and their selectors: P0.009-P0.013 by P0.017-P0.021 (L7147-7237)
+# and P0.044 by P0.045 ("同參數 P0.009 / P0.017", L7442-7458)
+SELECTED = (*((f"P0.{9 + i:03d}", f"P0.{17 + i:03d}") for i in range(5)), ("P0.044", "P0.045"))
+
+
 def attach_monitors(drive: Any) -> Monitors:
-    """Register the drive's monitor codes, P0.044 (by P0.045) and P0.008's hours."""
+    """Register the drive's monitor codes, the status monitor registers, the mapping
+    parameters and P0.008's hours."""
     mon = Monitors(drive)
     for code, fn in mon.codes().items():
         drive.hooks.monitors.setdefault(code, fn)
-    drive.params.on_read("P0.044", _selected(drive, "P0.045"))  # "同參數 P0.009" (L7442)
+    for reg, select in SELECTED:
+        drive.params.on_read(reg, _selected(drive, reg, select))
     for i in range(8):  # P0.025-P0.032 by P0.035-P0.042 (L7326-7440)
         m = ParamMapping(drive, i)
         drive.params.on_read(m.reg, m.read)

@@ -102,8 +102,8 @@ class ParameterStore:
 
     def peek(self, name: str) -> int:
         """The value a read would give, without a read's side effects (the data array's
-        pointer P5.011 does not advance): the peek hook where there is one, else the
-        stored value."""
+        pointer P5.011 does not advance): the peek hook where there is one, else the read
+        hook (a live value), else the stored value."""
         spec = self.table.spec(name)
         hook = self._peek_hooks.get(spec.param)
         if hook is not None:
@@ -156,10 +156,16 @@ class ParameterStore:
         self._commit(spec, value, ram_only=ram_only)
 
     def persist(self) -> None:
-        """Save the retained values now, as a changing `write` does (after a drive-side
-        update that stands for a write: a CiA 402 object that is a parameter)."""
+        """Save the retained values now (with `autosave`), as a changing `write` does."""
         if self.autosave and self.retained_path is not None:
             self.save()
+
+    def set_as_written(self, name: str, value: int) -> None:
+        """A drive-side update that stands for a write of `name` (a CiA 402 object that is
+        a parameter: 6080h = P1.055): kept as a write now would be (RAM-only with P2.030
+        function 5 or inside `ram_only_writes`), saved as a write is."""
+        self.set_internal(name, value, ram_only=self.ram_only_now())
+        self.persist()
 
     def ram_only_now(self) -> bool:
         """Whether a write now goes to RAM alone: P2.030 function 5 on (`no_eeprom`), or
@@ -287,8 +293,7 @@ class ParameterStore:
             if 0 in got and 1 in got:  # both halves given: the current value is not needed
                 cur_low = cur_high = 0
             else:
-                peek = self._peek_hooks.get(key)
-                cur_low, cur_high = spec.to_words(int(peek()) if peek else self._stored[key])
+                cur_low, cur_high = spec.to_words(self.peek(key))
             value = spec.from_words(got.get(0, cur_low), got.get(1, cur_high))
             plan.append((self.check_write(key, value), value))
         for spec, value in plan:
@@ -324,8 +329,7 @@ class ParameterStore:
         """Every value now in RAM becomes the EEPROM's (P2.030 = 8, "備分所有參數(目前值)到
         EEPROM 中，下次開電數值仍在", L9501): RAM-only writes are kept from then on."""
         self._eeprom.clear()
-        if self.retained_path is not None and self.autosave:
-            self.save()
+        self.persist()
 
     def factory_reset(self) -> None:
         """P2.008 = 10 "參數重置(重置後請重新上電)" (L9222): every parameter a user writes back
@@ -341,8 +345,7 @@ class ParameterStore:
             self._stored[key] = spec.default
             self._notify(key, spec.default)
         self.version += 1
-        if self.retained_path is not None and self.autosave:
-            self.save()
+        self.persist()
 
     def reset_defaults(self) -> None:
         """Every parameter back to its default, in effect at once (P2.008 = 10 + power cycle)."""
@@ -353,8 +356,7 @@ class ParameterStore:
                 self._notify(spec.param, spec.default)
             self._effective[spec.param] = spec.default
         self.version += 1
-        if self.retained_path is not None and self.autosave:
-            self.save()
+        self.persist()
 
     def save(self, path: Path | None = None) -> None:
         """Write retained (non-■) values that differ from default to JSON."""

@@ -782,23 +782,8 @@ def _position_monitor(d: DriveCore, pt: PulseTrain, code: int) -> int:
 SHARED_MONITORS = (0, 1, 2, 3, 4, 5, 6, 49)
 
 
-def _monitor(d: DriveCore, pt: PulseTrain, select: str, stored: Callable[[], int]
-             ) -> Callable[[], int]:
-    """P0.009-P0.013 read the monitor code their P0.017-P0.021 select (L7147-7237): the codes
-    parts register (`Hooks.monitors`: 000-006 and 049 here, 038 the battery, ...); other
-    codes keep the stored value (not modelled)."""
-    def read() -> int:
-        part = d.hooks.monitors.get(d.params.get(select))
-        return part() if part is not None else stored()
-    return read
-
-
 def attach_pulse_train(drive: DriveCore) -> PulseTrain:
     pt = PulseTrain(drive)
-    for i in range(5):
-        reg, select = f"P0.{9 + i:03d}", f"P0.{17 + i:03d}"
-        drive.params.on_read(reg, _monitor(drive, pt, select,
-                                           lambda r=reg: drive.params.stored(r)))
     for code in SHARED_MONITORS:
         drive.hooks.monitors[code] = lambda c=code: _position_monitor(drive, pt, c)
     drive.params.on_read("P5.018", pt.cn1_count)

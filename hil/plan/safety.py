@@ -12,7 +12,7 @@ from typing import Any
 from hil import clock
 from hil.drivers.cia402 import decode_state
 from hil.protocol.cia402 import CONTROLWORD
-from hil.safety import STANDSTILL, DriveGone, SafeReport, run_safe_state
+from hil.safety import DriveGone, SafeReport, run_safe_state, wait_quick_stop
 
 __all__ = ["CONTROLWORD", "DriveGone", "SafeReport", "go_safe"]
 
@@ -46,25 +46,18 @@ class _SessionDrive:
             clock.sleep(0.002)
 
     def quick_stop_done(self, timeout_ns: int) -> str:
-        """After the quick-stop controlword: until the drive has left QUICK STOP ACTIVE by
-        itself (bit 2 clear) or its 606Ch velocity actual is within STANDSTILL (0.1 rpm
-        units: the A3's own zero-speed level P1.038, default 10 rpm, L8407)."""
-        end = clock.monotonic_ns() + timeout_ns
-        last = "no answer"
-        while True:
-            try:  # a lost answer is asked again until the deadline (the ramp goes on)
-                sw = self.d.cia.statusword
-                if not sw & 0x0004:
-                    return f"statusword 0x{sw:04X}: {decode_state(sw)}"
-                v = self.d.cia.read(0x606C)
-                if abs(v) <= STANDSTILL:
-                    return f"606Ch = {v} (0.1 rpm): at rest"
-                last = f"606Ch = {v} (0.1 rpm): still moving"
-            except Exception as e:  # SdoError, a timeout: the bus may be busy
-                last = f"{type(e).__name__}: {e}"
-            if clock.monotonic_ns() >= end:
-                raise TimeoutError(f"{last} after {timeout_ns / 1e6:g} ms")
-            clock.sleep(0.002)
+        """After the quick-stop controlword: until the ramp has ended (`wait_quick_stop`;
+        a lost SDO answer is asked again until the deadline, the ramp goes on)."""
+        def read(index: int) -> int | None:
+            try:
+                return self.d.cia.read(index)
+            except Exception:  # SdoError, a timeout: the bus may be busy
+                return None
+
+        done, what = wait_quick_stop(read, timeout_ns, 0.002)
+        if not done:
+            raise TimeoutError(f"{what} after {timeout_ns / 1e6:g} ms")
+        return what
 
     def di_wired(self, function: str) -> bool:
         return function in self.d.spec.di

@@ -35,6 +35,20 @@ def decode(data: bytes) -> Any:
         return Undecodable(error=f"undecodable message: {why}", raw=bytes(data[:64]).hex())
 
 
+def decode_record(data: bytes | dict, topic: str) -> dict:
+    """A record a reader interprets (a plan step, a verdict, a DI/DO level ...) as a dict:
+    TypeError for one that is no JSON object, which a reader with `skip_bad_messages` on
+    skips and counts (a warning names the first) rather than read as a junk record."""
+    if isinstance(data, dict):
+        return data
+    obj = decode(data)
+    if isinstance(obj, Undecodable):
+        raise TypeError(f"{topic}: {obj['error']}")
+    if not isinstance(obj, dict):
+        raise TypeError(f"{topic}: a {type(obj).__name__}, not an object")
+    return obj
+
+
 # what a reader raises on a message of the wrong shape (a text where a number belongs, NaN
 # for an integer, a list for an object, JSON nested past the stack): with skip_bad_messages
 # on, that message is skipped and counted (`Recording.bad_messages`), the read goes on
@@ -429,6 +443,12 @@ def not_hil_file(rec: Recording) -> str | None:
     if rec.corrupt:
         return None
     return not_hil(rec.metadata(), [c.schema for c in rec.channels()], rec.topics())
+
+
+def virtual_bench(metadata: Mapping[str, Any]) -> bool:
+    """Whether the recording's run was on a virtual bench (`hil.bench.virtual`)."""
+    bench = metadata.get("hil.bench")
+    return isinstance(bench, Mapping) and str(bench.get("virtual")).lower() == "true"
 
 
 def repaired_cut(metadata: Mapping[str, Any]) -> str | None:

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.record import topics
-from hil.record.reader import Recording, Undecodable, decode, repaired_cut
+from hil.record.reader import Recording, decode, decode_record, repaired_cut
 from hil.timing.source import MISSING_FIELD, ColumnTable
 
 
@@ -57,6 +57,10 @@ class RunData:
     status_note: str = ""
     bad_messages: int = 0  # records of a wrong shape the report skipped (a warning names one)
     t0: int = 0  # the plan start (first plan step event), else the first message: time zero
+
+    def first_failure(self) -> StepData | None:
+        """The first step that did not pass (nor was skipped), None if there is none."""
+        return next((s for s in self.steps if s.status not in ("pass", "skipped")), None)
 
     def step(self, index: object) -> StepData | None:
         """The step with this index (a verdict's `step`), None if unknown."""
@@ -284,7 +288,7 @@ def _load_run(path: str | Path, *, truth: bool = True,
                 samples = data.truth[d] = TruthSamples(keep)
             samples.add(pt or lt, raw)
             return
-        msg = _record(raw, topic)
+        msg = decode_record(raw, topic)
         if kind == topics.PLAN_STEPS:
             _step_shape(msg)
             t_plan = lt if t_plan is None else min(t_plan, lt)
@@ -531,20 +535,6 @@ class TruthSamples(Sequence):
         cols = [(name, col.value_list(n)) for name, col in self.table.cols.items()]
         for i, t in enumerate(self.table.times):
             yield t, {name: vals[i] for name, vals in cols if vals[i] is not MISSING_FIELD}
-
-
-def _record(raw: bytes | dict, topic: str) -> dict:
-    """A step, verdict, safety, log or parameter record the page reads: TypeError for one
-    that is no JSON object (a reader skips and counts it as a message of the wrong shape,
-    with a warning naming the first, rather than show a junk row)."""
-    if isinstance(raw, dict):
-        return raw
-    obj = decode(raw)
-    if isinstance(obj, Undecodable):
-        raise TypeError(f"{topic}: {obj['error']}")
-    if not isinstance(obj, dict):
-        raise TypeError(f"{topic}: a {type(obj).__name__}, not an object")
-    return obj
 
 
 def _decode(raw: bytes | dict) -> dict:

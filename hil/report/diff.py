@@ -29,7 +29,7 @@ from typing import Any
 
 from hil.fileio import dumps_strict, write_text_atomic
 from hil.record import topics
-from hil.record.reader import Recording, Undecodable, decode
+from hil.record.reader import Recording, decode_record, virtual_bench
 from hil.report.html import CSS
 from hil.units import MS
 from hil.yamlio import load_yaml_text
@@ -102,8 +102,8 @@ def load_side(path: str | Path) -> Side:
     for a in rec.attachments():
         if a.name == "bench.yaml":
             drive = _bench_drive(a.data.decode("utf-8", "replace"))
-        elif a.name == "plan.yaml" and str(meta.get("hil.bench", {}).get("virtual")).lower() \
-                == "true":  # a plan's options go to every virtual drive (bench_with_options)
+        elif a.name == "plan.yaml" and virtual_bench(meta):  # a plan's options go to every
+            # virtual drive (bench_with_options)
             plan_opts = _plan_options(a.data.decode("utf-8", "replace"))
     wiring = dict(drive.get("wiring") or {})
     try:
@@ -124,10 +124,7 @@ def load_side(path: str | Path) -> Side:
     def take(topic: str, lt: int, pt: int, raw: bytes) -> None:
         if topic.startswith("/can/"):
             return  # raw frames: nothing here reads them
-        msg = decode(raw)
-        if isinstance(msg, Undecodable) or not isinstance(msg, dict):  # skipped and counted
-            raise TypeError(f"{topic}: " + (msg["error"] if isinstance(msg, Undecodable)
-                                            else f"a {type(msg).__name__}, not an object"))
+        msg = decode_record(raw, topic)  # none an object: skipped and counted
         t = pt or lt
         if topic == topics.PLAN_STEPS:
             idx = msg.get("index")

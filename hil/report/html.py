@@ -19,6 +19,7 @@ from typing import Any
 
 from hil.fileio import write_text_atomic
 from hil.record import topics
+from hil.record.reader import virtual_bench
 from hil.report.data import RunData, TruthSamples, bus_around, bus_log, load_run
 from hil.report.latch_html import LATCH_SPEC, latch_html
 from hil.timing.checker import Verdict, context, spec_topics, state_fields
@@ -336,7 +337,7 @@ def render_html(run: RunData, out: Path | None = None, index: bool | None = None
 def _first_failure(run: RunData) -> str:
     """The first step that did not pass, where it is in its plan file and why: the line a
     reviewer needs before scrolling (empty for a passing run)."""
-    bad = next((s for s in run.steps if s.status not in ("pass", "skipped")), None)
+    bad = run.first_failure()
     if bad is None:
         return ""
     where = f"{Path(bad.file).name}:{bad.line}" if bad.file and bad.line else (
@@ -437,7 +438,7 @@ def _verdict_rows(verdicts: list[dict]) -> list[list[dict]]:
 def _motion_html(run: RunData) -> list[str]:
     h = ["<h2>Motion (virtual-bench ground truth)</h2>"]
     if not run.truth:
-        virtual = run.metadata.get("hil.bench", {}).get("virtual") in ("true", "True", True)
+        virtual = virtual_bench(run.metadata)
         return [*h, "<p>No ground truth in this recording ("
                 + ("a virtual bench's, cut or damaged before its first state sample"
                    if virtual and (run.truncated or run.damage) else

@@ -63,7 +63,7 @@ def _reason(run: RunData, res: dict) -> str:
     if run.status_note:
         return run.status_note
     why = str(res.get("reason", ""))
-    bad = next((s for s in run.steps if s.status not in ("pass", "skipped")), None)
+    bad = run.first_failure()
     if bad is not None and why in ("", "end of plan"):
         text = f"step {bad.index + 1} {bad.label} {bad.status}"
         return f"{text}: {bad.message}"[:300] if bad.message else text
