@@ -284,7 +284,7 @@ class Cia402:
         # the set-point waiting, unacknowledged, for the running move (pp_ack_when_run):
         # (607Ah in counts, relative, speed, 6083h, 6084h), its target worked out when it runs
         self._pp_waiting: tuple[float, bool, float, int, int] | None = None
-        self._pp_last = self.axis.demand
+        self._pp_last: float | None = None  # the last set-point's target (None: none yet)
         self._ip_target: float | None = None
         self._homing_active = False
         self._hm_attained = False
@@ -709,7 +709,6 @@ class Cia402:
         self._set_servo(True, "state")
         self._set_state(OPERATION_ENABLED)
         self._halted = bool(self._cw & 0x100)
-        self._pp_last = self.axis.demand
         self._enter_mode(change=False)
 
     def _disable(self, new_state: str, operation: bool = False) -> None:
@@ -791,9 +790,11 @@ class Cia402:
             self._run_pt()
         elif change:
             self.axis.ramp_stop(self._v[(0x6084, 0)])
-        else:
-            self.axis.hold()
-        self._pp_last = self.axis.demand
+        elif self.axis.mode != "stop":  # a stop ramp (a quick stop's 6085h, 16) runs on to
+            self.axis.hold()            # standstill and holds there: no jump to a hold
+        # no set-point yet in this mode: a relative one (bit 6) counts from where the demand
+        # is when it is taken, not from where it was at the change (the ramp still ran)
+        self._pp_last = None
 
     def _leave_mode(self) -> None:
         if self._mode == HM and self._homing_active:
@@ -896,7 +897,7 @@ class Cia402:
             base = self.options.pp_relative_base
             ref = (
                 self._pp_last
-                if base == "target"
+                if base == "target" and self._pp_last is not None
                 else self.axis.demand
                 if base == "demand"
                 else self.axis.position
