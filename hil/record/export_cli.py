@@ -22,7 +22,7 @@ import can
 
 from hil.fileio import atomic_path, refuse_input
 from hil.record.canio import bus_topics, stream_can
-from hil.record.reader import Recording, RecordingError
+from hil.record.reader import CUT_EMPTY, Recording, RecordingError, cut_empty
 
 FORMATS = ("candump", "asc", "blf", "csv", "trc", "mf4")
 #: OUT extension -> format (the suffixes python-can's LogReader/Logger use)
@@ -166,6 +166,9 @@ def main(args: argparse.Namespace) -> int:
         bus_topics(head, args.bus)
     except (RecordingError, ValueError) as exc:
         print(f"hil export: {exc}", file=sys.stderr)
+        return 2
+    if cut_empty(head):
+        print(f"hil export: {args.file}: {CUT_EMPTY}", file=sys.stderr)
         return 2
     if head.truncated:
         print(

@@ -437,12 +437,25 @@ def not_hil(metadata: dict[str, Any], schemas: Iterable[str], topics: list[str])
             f"(channels: {found})")
 
 
+# what a file cut before its first channel is (a run killed as it started): `hil check`
+# judges it incomplete (exit 4); report, diff and export have nothing to read (exit 2)
+CUT_EMPTY = "cut before its first channel: nothing was recorded (a run killed as it started)"
+
+
 def not_hil_file(rec: Recording) -> str | None:
     """`not_hil` of a surveyed recording (`Recording.survey`); None for one whose damage hides
-    what it is (a corrupt chunk: judged as incomplete, not as foreign)."""
+    what it is (a corrupt chunk: judged as incomplete, not as foreign). A file cut before its
+    first channel is said to be that (`CUT_EMPTY`), not foreign."""
     if rec.corrupt:
         return None
+    if cut_empty(rec):
+        return CUT_EMPTY
     return not_hil(rec.metadata(), [c.schema for c in rec.channels()], rec.topics())
+
+
+def cut_empty(rec: Recording) -> bool:
+    """The file has no footer, and not one channel nor metadata record: nothing of a run."""
+    return rec.truncated and not rec.corrupt and not rec.channels() and not rec.metadata()
 
 
 def virtual_bench(metadata: Mapping[str, Any]) -> bool:
