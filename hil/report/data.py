@@ -49,6 +49,10 @@ class RunData:
     bus: list[tuple[int, str, bytes | dict]] = field(default_factory=list)
     bus_pending: bool = False  # the recording has bus messages not read yet (`bus_of`)
     bus_source_t: list[int] = field(default_factory=list)  # publish time of each bus entry
+    # the file position (message ordinal) of each bus entry, and of each step's start and
+    # end record: a step's bus log is what was written between the two (`bus_log`)
+    bus_k: list[int] = field(default_factory=list)
+    step_k: dict[int, list[int | None]] = field(default_factory=dict)
     truncated: bool = False
     #: the first unreadable record of a file damaged mid-file (not a killed run's cut end)
     damage: str | None = None
@@ -550,26 +554,60 @@ def bus_of(run: RunData) -> list[tuple[int, str, bytes | dict]]:
     recording the first time a report shows them (a passing run never needs them)."""
     if run.bus_pending:
         run.bus_pending = False
-        entries: list[tuple[int, str, bytes, int]] = []
+        entries: list[tuple[int, str, bytes, int, int]] = []
+        k = 0
 
         def take(topic: str, lt: int, pt: int, raw: bytes) -> None:
+            nonlocal k
+            k += 1
             if _is_bus(topic) and not topic.startswith("/can/"):
-                entries.append((lt, topic, bytes(raw), pt or lt))
+                entries.append((lt, topic, bytes(raw), pt or lt, k))
+            elif topic == topics.PLAN_STEPS:
+                _step_mark(run, raw, k)
 
         Recording.stream(run.path, None, take)  # a message at a time, not the whole file
-        entries.sort(key=lambda e: e[0])
-        run.bus = [(lt, topic, raw) for lt, topic, raw, _pt in entries]
-        run.bus_source_t = [pt for *_x, pt in entries]
+        entries.sort(key=lambda e: e[0])  # stable: one instant's messages in file order
+        run.bus = [(lt, topic, raw) for lt, topic, raw, _pt, _k in entries]
+        run.bus_source_t = [e[3] for e in entries]
+        run.bus_k = [e[4] for e in entries]
     return run.bus
 
 
+def _step_mark(run: RunData, raw: bytes, k: int) -> None:
+    """Note where step `index`'s start or end record lies in the file."""
+    try:
+        rec = json.loads(raw)
+        index, event = int(rec["index"]), rec["event"]
+    except (ValueError, TypeError, KeyError):
+        return  # a damaged record: that step's log falls back on its times
+    marks = run.step_k.setdefault(index, [None, None])
+    if event == "start":
+        marks[0] = k
+    elif event == "end":
+        marks[1] = k
+
+
 def bus_log(run: RunData, step: StepData, limit: int = 200) -> list[tuple[int, str, str]]:
-    """Decoded bus messages (CANopen, Modbus, DI/DO) seen during one step."""
+    """Decoded bus messages (CANopen, Modbus, DI/DO) seen during one step: those written
+    between its start and end records. (By time alone, a step's log also took the answer to
+    a request made before it and the safe state's first frames after it, logged at the
+    same instant as its start or end.)"""
     if step.t_start is None:
         return []
     end = step.t_end if step.t_end is not None else 2**63
     out = []
-    for t, topic, msg in bus_of(run):
+    bus = bus_of(run)
+    k0, k1 = run.step_k.get(step.index) or (None, None)
+    if k0 is not None and run.bus_k:
+        ks = run.bus_k
+        last = k1 if k1 is not None else 2**63
+        for i, (t, topic, msg) in enumerate(bus):
+            if k0 < ks[i] < last:
+                out.append((t, topic, _brief(_decode(msg))))
+                if len(out) >= limit:
+                    break
+        return out
+    for t, topic, msg in bus:
         if step.t_start <= t <= end:
             out.append((t, topic, _brief(_decode(msg))))
             if len(out) >= limit:
