@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from hil.model.errors import ModelError
 from hil.model.events import HomingPhase
-from hil.model.motion import puu_to_counts
+from hil.model.motion import puu_to_counts, rpm_to_counts_per_s
 from hil.model.pr_engine import pr_mode
 from hil.model.timebase import Timer, ms
 from hil.profile.homing_methods import (
@@ -103,7 +103,8 @@ class Homing:
         self.absolute = absolute  # gets its origin at the reference (L16458)
         self.options = options or HomingOptions.from_dict(drive.options.extra.get("homing"))
         self.route = ""  # "canopen" | "pr" while a run is active
-        self._phase = ""  # "" idle | search | exit | cross | index | torque | stop | return
+        # "" idle | search | exit | cross | back | index | torque | stop | return
+        self._phase = ""
         self.plan: Plan | None = None
         self.homed = False  # coordinate established since power-up
         self.on_homed: Callable[[], None] | None = None  # HOME came on (counters.py clears)
@@ -341,7 +342,24 @@ class Homing:
         elif phase == "exit":
             self._move("cross", plan.cross, self._v2, want=True)
         elif phase == "cross":
-            self._edge()
+            if not plan.index and self.options.reapproach_edge and self._above_v2():
+                # the home edge itself, reached while the slowdown from v1 still ran (a cam
+                # narrower than that ramp): back into the region at v2, then cross again, so
+                # the home does not move with the start (L4292, L4336)
+                self._move("back", -plan.cross, self._v2, want=not self._want)
+            else:
+                self._edge()
+        elif phase == "back":  # in the region again (or, crossing into it, out again)
+            if plan.pre_inside():
+                self._inside()
+            else:
+                self._move("cross", plan.cross, self._v2, want=True)
+
+    def _above_v2(self) -> bool:
+        """The commanded speed is still above the zero-search speed (6099h sub 2, P5.006)."""
+        ax = self.drive.axis
+        v2 = rpm_to_counts_per_s(self._v2, ax.cpr)
+        return abs(ax.demand_velocity) > v2 * 1.001 + 1.0
 
     def _moving_dir(self) -> int:
         ax = self.drive.axis
