@@ -11,13 +11,28 @@ import contextlib
 import json
 import math
 import os
+import re
 import stat
 import tempfile
+import unicodedata
 from collections.abc import Callable, Hashable, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
 T = TypeVar("T")
+
+
+_UNSAFE_NAME = re.compile(r"[^\w.-]")  # \w: letters and digits of every script, and _
+_UNSAFE_RUN = re.compile(r"[^\w.-]+")
+
+
+def safe_stem(text: str, *, collapse: bool = False) -> str:
+    """`text` as a file name: its letters and digits kept in any script (NFC, so a name
+    typed on one system and read on another is the same: `zkouška brzdy` stays
+    `zkouška_brzdy`), `.` and `-` kept, every other character `_` (`collapse`: every run of
+    them one `_`). No separator or anchor is left."""
+    text = unicodedata.normalize("NFC", text)
+    return (_UNSAFE_RUN if collapse else _UNSAFE_NAME).sub("_", text)
 
 
 class FileProblem(ValueError):

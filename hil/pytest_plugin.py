@@ -30,7 +30,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import re
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -290,7 +289,9 @@ def _safe_name(nodeid: str) -> str:
     hold. A parametrized id (`[...]`) also gets a short hash of the exact id, so
     `test_q[x y]`, `test_q[x_y]` and `test_q_x_y` keep one recording each, on any xdist
     worker (the name depends on the id alone)."""
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", nodeid).strip("_")
+    from hil.fileio import safe_stem
+
+    safe = safe_stem(nodeid, collapse=True).strip("_")
     _head, bracket, _params = nodeid.partition("[")
     if len(safe) > 150 or bracket:
         digest = hashlib.sha1(nodeid.encode()).hexdigest()[:8]

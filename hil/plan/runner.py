@@ -14,7 +14,6 @@ import contextlib
 import gc
 import json
 import os
-import re
 import signal
 import threading
 import time
@@ -26,6 +25,7 @@ from typing import Any, TextIO
 from hil import clock
 from hil.bench import virtual_module
 from hil.bench.bench import Bench, line_warnings
+from hil.fileio import safe_stem
 from hil.plan.context import (
     Cancelled,
     Inconclusive,
@@ -403,7 +403,7 @@ def output_stems(plans: list[Plan]) -> list[str]:
             out[i] = c
     seen: set[str] = set()
     for i, s in enumerate(out):
-        s = _SAFE_NAME.sub("_", s) or "plan"
+        s = safe_stem(s) or "plan"
         base, k = s, 2
         while s.casefold() in seen:
             s, k = f"{base}-{k}", k + 1
@@ -412,7 +412,6 @@ def output_stems(plans: list[Plan]) -> list[str]:
     return out
 
 
-_SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
 
 
 def _open_recording(plan: Plan, bench: Bench, out_dir: Path, stem: str | None = None, *,
