@@ -895,13 +895,12 @@ class Cia402:
         delta, relative, speed, acc, dec = req
         if relative:
             base = self.options.pp_relative_base
-            ref = (
-                self._pp_last
-                if base == "target" and self._pp_last is not None
-                else self.axis.demand
-                if base == "demand"
-                else self.axis.position
-            )
+            if base == "target" and self._pp_last is not None:
+                ref = self._pp_last
+            elif base in ("target", "demand"):  # no set-point yet: the demand now
+                ref = self.axis.demand
+            else:
+                ref = self.axis.position
             target = ref + delta
         else:
             target = self.axis.origin + delta

@@ -57,15 +57,16 @@ def test_a_relative_set_point_during_the_change_ramp_counts_from_the_demand_then
     d.write_object(0x6060, 0, 1)
     at_change = _pos(d)
     d.advance(20 * MS)
-    demand = _s32(d.read_object(0x6062, 0))
+    demand = _s32(d.read_object(0x6062, 0))  # the position demand value (L18398-18412)
+    actual = _pos(d)
     assert demand > at_change  # the ramp still runs on
+    assert demand - actual > 300  # the following error at speed: the two bases differ
     d.write_object(0x607A, 0, 10_000)
     d.write_object(0x6040, 0, 0x4F)
     d.write_object(0x6040, 0, 0x5F)
     d.advance(3000 * MS)
     end = _pos(d)
-    # 6062h is the demand after the command filter, a few hundred PUU behind the profile
-    assert abs(end - (demand + 10_000)) <= 1_000
+    assert abs(end - (demand + 10_000)) <= 1  # from the demand, not from 6064h
     assert end > at_change + 20_000  # not from the position at the change (+10 000 there)
 
 
