@@ -438,7 +438,8 @@ def not_hil(metadata: dict[str, Any], schemas: Iterable[str], topics: list[str])
 
 
 # what a file cut before its first channel is (a run killed as it started): `hil check`
-# judges it incomplete (exit 4); report, diff and export have nothing to read (exit 2)
+# judges it incomplete (exit 4) and export has nothing to export (exit 2); report and diff
+# show the run's metadata when it has some (the recorder writes it first), else exit 2
 CUT_EMPTY = "cut before its first channel: nothing was recorded (a run killed as it started)"
 
 
@@ -448,14 +449,21 @@ def not_hil_file(rec: Recording) -> str | None:
     first channel is said to be that (`CUT_EMPTY`), not foreign."""
     if rec.corrupt:
         return None
-    if cut_empty(rec):
+    if cut_empty(rec) and not rec.metadata():  # not even the run's metadata: nothing to show
         return CUT_EMPTY
     return not_hil(rec.metadata(), [c.schema for c in rec.channels()], rec.topics())
 
 
 def cut_empty(rec: Recording) -> bool:
-    """The file has no footer, and not one channel nor metadata record: nothing of a run."""
-    return rec.truncated and not rec.corrupt and not rec.channels() and not rec.metadata()
+    """`cut_before_channels` of a surveyed recording."""
+    return cut_before_channels(rec.truncated, rec.corrupt, len(rec.channels()))
+
+
+def cut_before_channels(truncated: bool, corrupt: bool, channels: int) -> bool:
+    """A file with no footer and not one channel, whatever metadata it holds (the recorder
+    writes the run's metadata first): nothing of a run to read (`CUT_EMPTY`). One rule for
+    check, report, diff and export."""
+    return truncated and not corrupt and channels == 0
 
 
 def virtual_bench(metadata: Mapping[str, Any]) -> bool:

@@ -1,10 +1,14 @@
-"""A recording cut before its first channel (a run killed as it started: the MCAP magic, or
-the magic and its header) is said to be that by every review command, never "not a hil
-recording", and export does not write an empty log for it as if it had been exported."""
+"""A recording cut before its first channel (a run killed as it started: the MCAP magic, the
+magic and its header, or what the recorder writes first, the run's metadata) is said to be
+that by every review command, never "not a hil recording" nor judged or reported as a run,
+and export does not write an empty log for it as if it had been exported."""
 
 from __future__ import annotations
 
 import io
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -22,15 +26,35 @@ def _header_only() -> bytes:
     return buf.getvalue()  # no channel, no footer: what a kill right after open leaves
 
 
-@pytest.fixture(params=["magic", "header"])
+def _recorder_killed_at_start(p: Path) -> None:
+    """A process that opened a Recorder (its hil.run metadata flushed) and died at once."""
+    code = ("import os, sys; from hil.record.recorder import Recorder; "
+            "Recorder(sys.argv[1], metadata={'hil.plan': 'x'}); os._exit(9)")
+    subprocess.run([sys.executable, "-c", code, str(p)], check=False, timeout=60,
+                   env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+    assert p.stat().st_size > len(MAGIC)
+
+
+@pytest.fixture(params=["magic", "header", "recorder"])
 def cut(request, tmp_path) -> Path:
+    p = tmp_path / "cut.mcap"
+    if request.param == "recorder":
+        _recorder_killed_at_start(p)
+    else:
+        p.write_bytes(MAGIC if request.param == "magic" else _header_only())
+    return p
+
+
+@pytest.fixture(params=["magic", "header"])
+def bare(request, tmp_path) -> Path:
     p = tmp_path / "cut.mcap"
     p.write_bytes(MAGIC if request.param == "magic" else _header_only())
     return p
 
 
-def test_report_diff_and_export_say_it_was_cut_and_exit_2(cut, tmp_path, capsys) -> None:
-    out = tmp_path / "x.log"
+def test_report_diff_and_export_say_it_was_cut_and_exit_2(bare, tmp_path, capsys) -> None:
+    """Not even the run's metadata: nothing to show."""
+    cut, out = bare, tmp_path / "x.log"
     assert hil(["report", str(cut), "-o", str(tmp_path / "r.html")]) == 2
     assert hil(["diff", str(cut), str(cut), "-o", str(tmp_path / "d.html")]) == 2
     assert hil(["export", str(cut), "-o", str(out)]) == 2
@@ -38,12 +62,28 @@ def test_report_diff_and_export_say_it_was_cut_and_exit_2(cut, tmp_path, capsys)
     assert err.count("cut before its first channel: nothing was recorded") == 3, err
     assert "not a hil recording" not in err
     assert not out.exists()  # no empty log that looks exported
-    assert not (tmp_path / "r.html").exists()
+    assert not (tmp_path / "r.html").exists() and not (tmp_path / "d.html").exists()
+
+
+def test_a_run_killed_after_its_metadata_is_shown_incomplete(tmp_path, capsys) -> None:
+    """The recorder's first records (hil.run, hil.versions) and no channel: the page shows
+    the run as incomplete, diff says it is cut (4), export has nothing to export (2)."""
+    cut = tmp_path / "cut.mcap"
+    _recorder_killed_at_start(cut)
+    assert hil(["report", str(cut), "-o", str(tmp_path / "r.html")]) == 0
+    page = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert "recording truncated" in page and "b-pass'" not in page.split("</style>")[1]
+    assert hil(["diff", str(cut), str(cut), "-o", str(tmp_path / "d.html")]) == 4
+    assert hil(["export", str(cut), "-o", str(tmp_path / "x.log")]) == 2
+    assert not (tmp_path / "x.log").exists()
+    assert "cut before its first channel" in capsys.readouterr().err
 
 
 def test_check_calls_it_incomplete(cut, capsys) -> None:
-    assert hil(["check", str(cut)]) == 4
-    assert "cut before its first channel" in capsys.readouterr().err
+    assert hil(["check", str(cut), "--json"]) == 4
+    out = capsys.readouterr()
+    assert "cut before its first channel" in out.err
+    assert out.out.strip() == "[]"  # nothing judged, not the specs' defaults inconclusive
 
 
 def test_a_foreign_mcap_is_still_not_a_hil_recording(tmp_path, capsys) -> None:
