@@ -1,7 +1,7 @@
 """pytest plugin `hil` (entry point `pytest11`): benches, drives and recordings as fixtures.
 
     pytest -m hil                          # the virtual bench (built in)
-    pytest -m hil --hil-bench bench.yaml   # a real bench (or HIL_BENCH=bench.yaml)
+    pytest -m hil --hil-bench=bench.yaml   # a real bench (or HIL_BENCH=bench.yaml)
 
 Plan files as tests: with the ini option `hil_plans = plans` (a directory, relative to the
 ini file; several may be given) every `*.yaml` plan in it is collected as a test item, marked
@@ -11,7 +11,8 @@ through the same runner as `hil run`; a failing plan shows its failing steps and
 Works with pytest-xdist (`-n 2`) on a bench private to each worker (the virtual one); a
 bench the workers would share errors each test that opens it.
 
-Marker `hil`: the test uses a bench. Fixtures:
+Marker `hil`: the test uses a bench (given to every test whose fixtures use the bench, so
+`-m hil` selects it and `-m "not hil"` leaves it out, written or not). Fixtures:
 
 * `hil_bench`    the loaded bench file (session scope; `--hil-bench`, default: virtual)
 * `hil_recorder` a `Recorder` writing `<hil-out>/<test id>.mcap`; its path is attached to the
@@ -145,9 +146,16 @@ def _plan_dirs(config: pytest.Config) -> list[Path]:
     return [Path(p).resolve() for p in config.getini("hil_plans")]
 
 
+@pytest.hookimpl(tryfirst=True)  # before `-m` selects
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """A bad `--hil-bench` / HIL_BENCH is one usage error before anything runs (not one
-    traceback per test); unique output names for the collected plans (`hil run`'s rule)."""
+    """A test that uses the bench (`hil_bench`, which `hil_session`, `hil_drive` and
+    `hil_run_plan` use) is marked `hil`, so `-m hil` selects it and `-m "not hil"` leaves
+    it out, marker written or not. A bad `--hil-bench` / HIL_BENCH is one usage error
+    before anything runs (not one traceback per test); unique output names for the
+    collected plans (`hil run`'s rule)."""
+    for i in items:
+        if "hil_bench" in getattr(i, "fixturenames", ()) and i.get_closest_marker("hil") is None:
+            i.add_marker("hil")
     uses_bench = any(isinstance(i, PlanItem) or "hil_bench" in getattr(i, "fixturenames", ())
                      for i in items)
     path = _bench_option(config)
@@ -415,6 +423,15 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
     return rep
 
 
+def _crash(rep: pytest.TestReport) -> str:
+    """The first line of what made a phase fail ("RuntimeError: boom")."""
+    crash = getattr(rep.longrepr, "reprcrash", None)
+    what = crash.message.splitlines()[0] if crash is not None and crash.message else ""
+    if not what and isinstance(rep.longrepr, str):  # "[XPASS(strict)] reason"
+        what = rep.longrepr.splitlines()[0] if rep.longrepr else ""
+    return what
+
+
 def _outcome(node: pytest.Item) -> tuple[str, str]:
     """(status, reason) of a test whose teardown is running: its call phase's report (its
     setup's where a fixture set up after the bench skipped it or failed under xfail)."""
@@ -422,15 +439,13 @@ def _outcome(node: pytest.Item) -> tuple[str, str]:
     rep = reports.get("call")
     if rep is None:
         setup = reports.get("setup")
+        if setup is not None and setup.failed:  # a fixture after the bench's, say: the
+            return "error", f"setup failed: {_crash(setup)}"[:300].rstrip(": ")  # bench moved
         if setup is None or not setup.skipped:
             return "error", "the test did not run"
         rep = setup
     if rep.failed:
-        crash = getattr(rep.longrepr, "reprcrash", None)
-        what = crash.message.splitlines()[0] if crash is not None and crash.message else ""
-        if not what and isinstance(rep.longrepr, str):  # "[XPASS(strict)] reason"
-            what = rep.longrepr.splitlines()[0] if rep.longrepr else ""
-        return "fail", f"test failed: {what}"[:300].rstrip(": ")
+        return "fail", f"test failed: {_crash(rep)}"[:300].rstrip(": ")
     xfail = getattr(rep, "wasxfail", None)
     if xfail is not None:  # `pytest.xfail("why")` reads "reason: why"
         xfail = str(xfail).removeprefix("reason: ")

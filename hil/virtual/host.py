@@ -308,9 +308,9 @@ class ClockHost(DriveHost):
             self._ticking = True
             try:
                 self.tick_once()
-            finally:
-                self._ticking = False
-            self._plan()
+            finally:  # the next tick is planned whatever cut this one short (a signal
+                self._ticking = False  # handler's exception): the model never stops
+                self._plan()
 
     def _plan(self) -> None:
         """The next wake-up: the next point of the period's grid (which starts at the host's

@@ -1,0 +1,98 @@
+"""The pytest plugin under what a stranger does (found by an outside probe, helper-120):
+pytest-timeout on a test waiting in virtual time, and a fixture that fails after the bench
+moved."""
+
+from __future__ import annotations
+
+import glob
+import shutil
+
+import pytest
+
+from hil.record.reader import Recording
+
+pytest_plugins = ["pytester"]
+
+FOREVER = """
+import pytest
+
+@pytest.mark.hil
+def test_wait_forever(hil_drive):
+    hil_drive.set_function("SON", True)
+    hil_drive.dio.wait_for("DO3", True, 1e6)   # HOME never comes: a day of bench time
+"""
+
+
+def _result(pytester: pytest.Pytester) -> tuple[dict, list[dict]]:
+    [path] = glob.glob(str(pytester.path / "reports" / "pytest" / "*.mcap"))
+    rec = Recording.open(path)
+    return (rec.metadata().get("hil.result", {}),
+            [m for _, _, _, m in rec.messages("/safety")])
+
+
+def test_a_pytest_timeout_in_virtual_time_leaves_the_bench_safe(pytester) -> None:
+    """pytest-timeout's SIGALRM used to land inside the drive's 1 ms tick, which then never
+    planned the next: the model stopped, and the safe state after the timeout said "BRKR
+    still on after 3000 ms: the brake may be released" (4 runs in 5). Its exception is now
+    raised between two clock events, and a tick cut short still plans the next."""
+    pytester.makepyfile(test_forever=FOREVER)
+    for _ in range(2):  # where the alarm lands varies
+        res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "--timeout=2")
+        res.assert_outcomes(failed=1)
+        out = res.stdout.str()
+        assert "Timeout" in out and "safe state was not confirmed" not in out
+        result, safety = _result(pytester)
+        assert result.get("status") == "fail" and "Timeout" in result.get("reason", "")
+        assert result.get("safe_state_ok") == "true"
+        assert safety[-1]["action"] == "safe_state_reached"
+
+
+SETUP = """
+import pytest
+
+@pytest.fixture
+def broken(hil_drive):
+    hil_drive.set_function("SON", True)
+    hil_drive.dio.wait_for("DO6", True, 2.0)  # the brake released: the bench moved
+    raise RuntimeError("setup boom")
+
+@pytest.mark.hil
+def test_setup_error(broken):
+    pass
+"""
+
+
+def test_a_fixture_failing_after_the_bench_moved_is_recorded_with_its_cause(pytester) -> None:
+    """It said "the test did not run", and "setup boom" was nowhere in the recording; the
+    safe state records why the bench went safe, as a teardown error's does."""
+    pytester.makepyfile(test_setup=SETUP)
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider")
+    res.assert_outcomes(errors=1)
+    result, safety = _result(pytester)
+    assert result.get("status") == "error"
+    assert result.get("reason") == "setup failed: RuntimeError: setup boom"
+    assert safety and all("setup boom" in m["reason"] for m in safety)
+    assert safety[-1]["action"] == "safe_state_reached"
+
+
+UNMARKED = """
+def test_uses_the_drive(hil_drive):
+    assert hil_drive is not None
+
+def test_plain():
+    pass
+"""
+
+
+def test_a_test_using_the_bench_is_a_hil_test_without_the_marker(pytester) -> None:
+    """`-m hil` selected only tests marked by hand: one using `hil_drive` unmarked was left
+    out of `pytest -m hil` and opened the bench under `-m "not hil"`."""
+    pytester.makepyfile(test_unmarked=UNMARKED)
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-m", "hil")
+    res.assert_outcomes(passed=1, deselected=1)
+    assert [p.name for p in (pytester.path / "reports").rglob("*.mcap")] == [
+        "test_unmarked.py_test_uses_the_drive.mcap"]
+    shutil.rmtree(pytester.path / "reports")
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-m", "not hil")
+    res.assert_outcomes(passed=1, deselected=1)
+    assert not list(pytester.path.rglob("*.mcap"))  # the bench was never opened
