@@ -31,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -343,6 +344,7 @@ def hil_recorder(request: pytest.FixtureRequest) -> Iterator[Any]:
     request.node.user_properties.append(("recording", _recording_property(request.config,
                                                                          path)))
     rec = Recorder(path, metadata={"pytest_nodeid": request.node.nodeid})
+    request.node.stash[_T0] = time.monotonic()  # the test's wall time, as a plan's
     yield rec
     # closed once every fixture of the test is torn down (`pytest_runtest_teardown`), so
     # that a teardown error of a fixture torn down after this one still reaches `hil.result`
@@ -352,6 +354,7 @@ def hil_recorder(request: pytest.FixtureRequest) -> Iterator[Any]:
 
 _REPORTS = pytest.StashKey[dict[str, pytest.TestReport]]()
 _OPEN = pytest.StashKey[Any]()  # the test's recorder, closed after its teardown
+_T0 = pytest.StashKey[float]()  # when the test's recording opened (monotonic s)
 _RESULT = pytest.StashKey[dict]()  # `hil.result` as `hil_session` left it
 _UNFINISHED = pytest.StashKey[list]()  # items whose recording is still open
 
@@ -395,6 +398,8 @@ def _finish_recording(item: pytest.Item, error: BaseException | None) -> None:
         if result is not None:
             if error is not None and result["status"] in ("pass", "skipped"):
                 result = {**result, **_teardown_outcome(error)}
+            if (t0 := item.stash.get(_T0, None)) is not None:  # wall ms, as a plan's
+                result = {**result, "duration_ms": round((time.monotonic() - t0) * 1e3, 3)}
             rec.add_metadata("hil.result", result)
     finally:
         del item.stash[_OPEN]
@@ -467,7 +472,7 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
     `hil.clock.sleep` / the drivers' waits, not `time.sleep`); the bench goes to its safe
     state afterwards, and the recording says why (the test's failure, or its end) and how
     the test ended (`hil.result`), as a plan's does."""
-    from hil.plan.runner import Interrupts, bench_clock, record_bench, safe_tail
+    from hil.plan.runner import Interrupts, bench_clock, record_bench, record_dut, safe_tail
     from hil.plan.safety import go_safe
     from hil.plan.session import open_session
 
@@ -476,6 +481,7 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
         session = open_session(hil_bench, hil_recorder)
         try:
             session.idle()
+            record_dut(session, hil_recorder, hil_bench)  # as a plan's: `hil.dut`
             yield session
         finally:
             signals.shield = True  # the safe state and the recording's close run to the end

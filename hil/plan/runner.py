@@ -263,7 +263,7 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                                     bench.timeouts["ready"] + 5_000_000_000, cancel)
                 ctx = StepContext(session, rec, plan, specs, cancel, steps)  # type: ignore[arg-type]
                 _idle_inputs(ctx)
-                _record_dut(ctx, bench)
+                record_dut(session, rec, bench)
                 if plan.params:
                     _initial_params(ctx, plan)
                 _apply_plan_wiring(ctx, plan)
@@ -343,17 +343,18 @@ def safe_tail(session: Session) -> None:
             sample()
 
 
-def _record_dut(ctx: StepContext, bench: Bench) -> None:
+def record_dut(session: Session, rec: Recorder, bench: Bench) -> None:
     """The drives under test, as OpenHTF records a dut_id: per drive the bench's name, node
     and station, P0.000 firmware (L7070) and the 1018h identity (vendor, product, revision,
-    serial, L17762-17800) where the bench reaches them; recorded as metadata `hil.dut`.
-    What a drive does not answer is "unavailable", never a failed plan."""
+    serial, L17762-17800) where the bench reaches them; recorded as metadata `hil.dut` (for
+    a plan, and for a pytest test through `hil_session`). What a drive does not answer is
+    "unavailable", never a failed plan or test."""
     meta: dict[str, str] = {}
     for name, spec in bench.drives.items():
         meta[f"{name}.node_id"] = str(spec.node_id or "")
         meta[f"{name}.station"] = str(spec.station or "")
         try:
-            d = ctx.session.drive(name)
+            d = session.drive(name)
         except Exception:  # a fake or partial session
             continue
         try:
@@ -367,7 +368,7 @@ def _record_dut(ctx: StepContext, bench: Bench) -> None:
                     meta[f"{name}.{key}"] = f"0x{int(d.cia.read(0x1018, sub)):08X}"
                 except Exception:  # 1018h sub 4 is optional (CiA 301)
                     meta[f"{name}.{key}"] = "unavailable"
-    ctx.rec.add_metadata("hil.dut", meta)
+    rec.add_metadata("hil.dut", meta)
 
 
 def record_bench(rec: Recorder, bench: Bench, options: dict[str, Any] | None = None) -> None:

@@ -338,7 +338,8 @@ def _load_run(path: str | Path, *, truth: bool = True,
         data.damage = f"repaired from a damaged recording: {rep.get('source_error') or '?'}"
     run_meta = meta.get("hil.run", {})
     data.plan = run_meta.get("plan", data.plan)
-    data.bench = run_meta.get("bench", data.bench)
+    # a pytest test's recording names its bench only in `hil.bench`
+    data.bench = run_meta.get("bench") or meta.get("hil.bench", {}).get("name") or data.bench
     data.status = meta.get("hil.result", {}).get("status", "")
     for bad in rec.bad_attachments:  # "'plan.yaml' at offset 1572: CRC mismatch"
         name, _, why = bad.partition(" at offset ")

@@ -48,7 +48,9 @@ def failure_text(run: RunData) -> tuple[str, str]:
     pytest's report of a collected plan): `step 03 wait_until ...: fail 300.0 ms
     (plans/x.yaml:13): message`, a line per step or verdict."""
     bad = [(n, t) for n, s, t in _lines(run) if s not in ("pass", "skipped")]
-    first = f"{bad[0][0]}: {bad[0][1]}" if bad else (run.status or "not passed")
+    # no step or verdict to name (a pytest test's recording): the result's own reason
+    why = str(run.metadata.get("hil.result", {}).get("reason") or "")
+    first = f"{bad[0][0]}: {bad[0][1]}" if bad else (why or run.status or "not passed")
     return first, "\n".join(f"{n}: {t}" for n, t in bad) or first
 
 

@@ -96,3 +96,32 @@ def test_a_test_using_the_bench_is_a_hil_test_without_the_marker(pytester) -> No
     res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "-m", "not hil")
     res.assert_outcomes(passed=1, deselected=1)
     assert not list(pytester.path.rglob("*.mcap"))  # the bench was never opened
+
+
+FAILS = """
+import pytest
+
+@pytest.mark.hil
+def test_boom(hil_drive):
+    hil_drive.set_function("SON", True)
+    raise RuntimeError("boom")
+"""
+
+
+def test_hil_report_of_a_pytest_recording_names_the_reason_bench_and_drive(pytester) -> None:
+    """The JUnit said `<failure message="fail">`, the page "bench ?" and "dut ?", and the
+    time 0: a pytest recording has no steps to name, and its bench is only in `hil.bench`."""
+    from hil.cli import main as hil
+
+    pytester.makepyfile(test_fails=FAILS)
+    pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider").assert_outcomes(failed=1)
+    [rec] = glob.glob(str(pytester.path / "reports" / "pytest" / "*.mcap"))
+    out = pytester.path / "r"
+    assert hil(["report", rec, "-o", str(out / "r.html"), "--junit", str(out / "j.xml")]) == 0
+    junit = (out / "j.xml").read_text(encoding="utf-8")
+    assert 'message="test failed: RuntimeError: boom"' in junit
+    assert '<property name="bench" value="virtual" />' in junit
+    assert 'time="0.000000"' not in junit
+    page = (out / "r.html").read_text(encoding="utf-8")
+    assert "<td>virtual</td>" in page.replace(" ", "") or ">virtual<" in page
+    assert "drive1 fw 100" in page  # hil.dut, as a plan's (P0.000, L7070)
