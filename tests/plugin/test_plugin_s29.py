@@ -125,3 +125,34 @@ def test_hil_report_of_a_pytest_recording_names_the_reason_bench_and_drive(pytes
     page = (out / "r.html").read_text(encoding="utf-8")
     assert "<td>virtual</td>" in page.replace(" ", "") or ">virtual<" in page
     assert "drive1 fw 100" in page  # hil.dut, as a plan's (P0.000, L7070)
+
+
+def _readme_example() -> str:
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    block = next(b.split("```", 1)[0] for b in text.split("```python\n")[1:]
+                 if "def test_brake_release" in b)
+    return "import pytest\n" + block
+
+
+def test_the_readme_brake_example_judges_the_brake_and_fails_an_early_one(pytester) -> None:
+    """The README's example checked at the BRKR edge, where "BRKR rises P1.042 after
+    servo on" cannot be judged yet (its event is servo on for P1.042 + 1 ms): a brake
+    released 40 ms early passed. It now waits past the window. (Early here: the check is
+    told P1.042 = 120 ms while the drive releases at its 80.)"""
+    example = _readme_example()
+    pytester.makepyfile(test_readme=example)
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider")
+    res.assert_outcomes(passed=1)
+    [rec] = glob.glob(str(pytester.path / "reports" / "pytest" / "*.mcap"))
+    names = [m["constraint"] for _, _, _, m in Recording.open(rec).messages(
+        "/timing/verdicts") if m.get("status") == "pass"]
+    assert "BRKR rises P1.042 after servo on" in names
+    early = example.replace('hil_check("servo_on_brake")',
+                            'hil_check("servo_on_brake", params={"P1.042": 120})')
+    assert early != example
+    pytester.makepyfile(test_readme=early)
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider")
+    res.assert_outcomes(failed=1)
+    assert "BRKR rises P1.042 after servo on: FAIL" in res.stdout.str()
