@@ -561,7 +561,7 @@ def hil_check(hil_recorder: Any) -> Callable[..., list]:
     from hil.paths import fixture
     from hil.timing.checker import check
     from hil.timing.source import RecordingSource
-    from hil.timing.spec import load_spec
+    from hil.timing.spec import load_spec, shipped_specs
 
     recorded: set[str] = set()  # a verdict judged again by a later call is recorded once
 
@@ -570,6 +570,10 @@ def hil_check(hil_recorder: Any) -> Callable[..., list]:
         path = Path(spec)
         if not path.exists():
             path = fixture("timing", f"{spec}.yaml")
+            if not path.is_file():
+                known = ", ".join(sorted(p.stem for p in shipped_specs()))
+                raise ValueError(f"timing spec {spec!r}: no such file, and no shipped spec "
+                                 f"has that id (shipped: {known})")
         hil_recorder.flush()
         loaded = load_spec(path)
         verdicts = check(loaded, RecordingSource(hil_recorder.path), binding=binding, **kw)

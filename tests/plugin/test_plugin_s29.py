@@ -156,3 +156,15 @@ def test_the_readme_brake_example_judges_the_brake_and_fails_an_early_one(pytest
     res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider")
     res.assert_outcomes(failed=1)
     assert "BRKR rises P1.042 after servo on: FAIL" in res.stdout.str()
+
+
+def test_hil_check_of_an_unknown_spec_lists_the_shipped_ones(pytester) -> None:
+    """It said "cannot read: No such file or directory" of a path under fixtures/."""
+    pytester.makepyfile(test_unknown="""
+import pytest
+
+def test_x(hil_drive, hil_check):
+    with pytest.raises(ValueError, match=r"no_such_spec.*shipped: .*servo_on_brake"):
+        hil_check("no_such_spec")
+""")
+    pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider").assert_outcomes(passed=1)
