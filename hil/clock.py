@@ -327,9 +327,11 @@ class VirtualClock:
         self._interrupt = exc
         return True
 
-    def drop_interrupt(self) -> None:
-        """Forget a deferred interrupt not yet raised (the safe state after it must run)."""
-        self._interrupt = None
+    def drop_interrupt(self) -> BaseException | None:
+        """Forget a deferred interrupt not yet raised (the safe state after it must run);
+        returns it (None when there was none)."""
+        exc, self._interrupt = self._interrupt, None
+        return exc
 
     def sleep(self, seconds: float) -> None:
         self.run_until(self._now + round(_sleep_s(seconds) * S))

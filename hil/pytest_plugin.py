@@ -355,6 +355,7 @@ def hil_recorder(request: pytest.FixtureRequest) -> Iterator[Any]:
 _REPORTS = pytest.StashKey[dict[str, pytest.TestReport]]()
 _OPEN = pytest.StashKey[Any]()  # the test's recorder, closed after its teardown
 _T0 = pytest.StashKey[float]()  # when the test's recording opened (monotonic s)
+_SIGNALS = pytest.StashKey[Any]()  # the test's `Interrupts` while its session is open
 _RESULT = pytest.StashKey[dict]()  # `hil.result` as `hil_session` left it
 _UNFINISHED = pytest.StashKey[list]()  # items whose recording is still open
 
@@ -428,6 +429,28 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
     return rep
 
 
+def _line(exc: BaseException) -> str:
+    """`Type: first line of the message` of an exception."""
+    what = str(exc).splitlines()[0] if str(exc) else ""
+    return f"{type(exc).__name__}: {what}".rstrip(": ")
+
+
+@pytest.hookimpl(wrapper=True, trylast=True)  # inside pytest-timeout's own wrapper
+def pytest_runtest_call(item: pytest.Item) -> Any:
+    """pytest-timeout with `func_only` installs its SIGALRM handler only now, after the
+    fixtures: wrap it as `hil_session` wrapped one installed before it (`wrap_alarm`)."""
+    signals = item.stash.get(_SIGNALS, None)
+    old = signals.wrap_alarm() if signals is not None else None
+    try:
+        return (yield)
+    finally:
+        if old is not None:
+            import signal
+
+            if getattr(signal.getsignal(signal.SIGALRM), "_hil_deferred", False):
+                signal.signal(signal.SIGALRM, old)
+
+
 def _crash(rep: pytest.TestReport) -> str:
     """The first line of what made a phase fail ("RuntimeError: boom")."""
     crash = getattr(rep.longrepr, "reprcrash", None)
@@ -477,6 +500,7 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
     from hil.plan.session import open_session
 
     with bench_clock(hil_bench) as clk, Interrupts(clk) as signals:
+        request.node.stash[_SIGNALS] = signals  # pytest-timeout's func_only handler too
         record_bench(hil_recorder, hil_bench)
         session = open_session(hil_bench, hil_recorder)
         try:
@@ -485,11 +509,12 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
             yield session
         finally:
             signals.shield = True  # the safe state and the recording's close run to the end
-            if hasattr(clk, "drop_interrupt"):
-                clk.drop_interrupt()  # one deferred but not yet raised must not cut it
+            signals.drop_pending()  # one deferred but not yet raised must not cut it
             status, reason = _outcome(request.node)
             if signals.cause:
                 status, reason = "aborted", f"interrupted ({signals.cause})"
+            elif signals.alarm is not None and status in ("pass", "skipped"):  # a timeout
+                status, reason = "fail", f"test failed: {_line(signals.alarm)}"  # not seen
             safe = None
             try:
                 safe = go_safe(session, reason, hil_recorder)
@@ -500,13 +525,19 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
                                    for a in safe.actions if not a["ok"]) if safe else ""
                 if unsafe and status == "pass":  # a test passes only if it leaves the bench
                     status, reason = "error", f"safe state not confirmed: {unsafe}"  # safe
+                if signals.alarm is not None and status in ("pass", "skipped"):  # came while
+                    status, reason = "fail", f"test failed: {_line(signals.alarm)}"  # shielded
                 # written when the recording closes, after the other fixtures' teardown
                 request.node.stash[_RESULT] = {
                     "status": status, "reason": reason,
                     "safe_state_ok": safe.ok if safe is not None else ""}
+                if _SIGNALS in request.node.stash:
+                    del request.node.stash[_SIGNALS]
             if unsafe and not signals.cause:
                 pytest.fail(f"hil: the bench's safe state was not confirmed after the test: "
                             f"{unsafe}", pytrace=False)
+            if signals.alarm is not None and not signals.cause:
+                raise signals.alarm  # the timeout, once the bench is safe and on the record
 
 
 @pytest.fixture

@@ -325,7 +325,7 @@ def wall_clock_preferred(can: dict[str, str]) -> str | None:
     """Why a bench that could run in virtual time defaults to the wall clock (None: it does
     not): a named `virtual:<channel>` CAN bus is there for another bus of this process to
     open, a python-can `can.Bus(interface="virtual", channel=...)` sniffer, which hears a
-    virtual-time bus only through `hil.transport.open_can` (docs/clock.md). `clock: virtual`
+    virtual-time bus only through `hil.transport.can_bus.open_can` (docs/clock.md). `clock: virtual`
     still runs it in virtual time."""
     for name, url in can.items():
         scheme, target = _scheme_target(url)

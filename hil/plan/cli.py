@@ -115,8 +115,8 @@ def _last_failed(plans: list, out: Path, *, quiet: bool) -> list:
     chosen = [p for i, p in enumerate(plans) if i in chosen_ix]
     if not chosen:
         if not quiet:
-            print(f"--last-failed: no plan failed in the previous run ({junit}): "
-                  "running the selection", file=sys.stderr)
+            print(f"--last-failed: none of the selected plans failed in the previous run "
+                  f"({junit}): running the selection", file=sys.stderr)
         return plans
     if not quiet:
         print(f"--last-failed: {len(chosen)} of {len(plans)} plan(s) failed last time",

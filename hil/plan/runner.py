@@ -132,6 +132,10 @@ class Interrupts:
         self.cause = ""  # the signal that stopped the run ("SIGINT (Ctrl-C)", "SIGTERM")
         self.clk = clk
         self._old: dict[int, Any] = {}
+        # another handler's exception (pytest-timeout's) that the test never saw: deferred
+        # and then dropped, or raised while shielded; the caller raises it once it is done
+        self.alarm: BaseException | None = None
+        self._pending: BaseException | None = None  # deferred, maybe not raised yet
 
     @property
     def requested(self) -> bool:
@@ -153,24 +157,51 @@ class Interrupts:
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 self._old[sig] = signal.signal(sig, self._handler)
-            alarm = getattr(signal, "SIGALRM", None)
-            other = signal.getsignal(alarm) if alarm is not None else None
-            if self.clk is not None and callable(other):  # pytest-timeout's, say: deferred
-                self._old[alarm] = signal.signal(alarm, self._deferred(other))
+            if (undo := self.wrap_alarm()) is not None:
+                self._old[signal.SIGALRM] = undo
         return self
 
+    def wrap_alarm(self) -> Any:
+        """On a virtual clock, wrap the SIGALRM handler in place (pytest-timeout's, also one
+        installed later, for the test function only: the plugin calls this again then) so
+        that its exception is raised between two clock events, as an interrupt is, never
+        inside one: a host tick it cut stopped the virtual drive, and the safe state after
+        the timeout failed. While shielded (the safe state, closing the recording) it is
+        kept in `alarm` instead. Returns the handler it replaced (None: nothing wrapped)."""
+        alarm = getattr(signal, "SIGALRM", None)
+        if (self.clk is None or alarm is None
+                or threading.current_thread() is not threading.main_thread()):
+            return None
+        other = signal.getsignal(alarm)
+        if not callable(other) or getattr(other, "_hil_deferred", False):
+            return None
+        signal.signal(alarm, self._deferred(other))
+        return other
+
     def _deferred(self, handler: Callable[[int, Any], Any]) -> Callable[[int, Any], None]:
-        """Another handler (pytest-timeout's SIGALRM) whose exception is raised between two
-        clock events, as an interrupt is, never inside one: a host tick it cut used to stop
-        the virtual drive, and the safe state after the timeout then failed."""
         def run(signum: int, frame: Any) -> None:
             try:
                 handler(signum, frame)
             except BaseException as exc:
+                if self.shield:  # the safe state and the recording's close run to their end
+                    self.alarm = self.alarm or exc
+                    return
                 defer = getattr(self.clk, "defer_interrupt", None)
                 if defer is None or not defer(exc):
                     raise
+                self._pending = exc
+
+        run._hil_deferred = True  # type: ignore[attr-defined]
         return run
+
+    def drop_pending(self) -> None:
+        """Before the safe state: a deferred exception not raised yet is dropped from the
+        clock (it must not cut the safe state) and kept in `alarm` if it was another
+        handler's (a deferred Ctrl-C is known by `cause`)."""
+        drop = getattr(self.clk, "drop_interrupt", None)
+        lost = drop() if drop is not None else None
+        if lost is not None and lost is self._pending:
+            self.alarm = self.alarm or lost
 
     def __exit__(self, *exc: Any) -> None:
         for sig, old in self._old.items():
@@ -282,6 +313,17 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                 reason = f"error: {res.error}"
                 rec.log("error", f"plan {plan.name}: {res.error}", name="hil.runner")
                 events.emit(Note(plan, f"ERROR {res.error}"))
+            except BaseException as e:  # pytest-timeout's Failed, SystemExit: the plan is
+                intr.shield = True      # cut, never "end of plan" passed; raised again
+                interrupted = e         # once the bench is safe
+                what = str(e).splitlines()[0] if str(e) else ""
+                reason = f"stopped: {type(e).__name__}: {what}".rstrip(": ")
+                res.status, res.error = ABORTED, reason
+                for r in res.steps:
+                    if r.status == SKIPPED and not r.message:
+                        r.message = f"not run: {reason}"
+                if ctx is not None:
+                    _record_skipped(ctx, plan, res, events)
             finally:
                 intr.shield = True
                 cancel.set()

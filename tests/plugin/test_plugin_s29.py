@@ -133,7 +133,7 @@ def _readme_example() -> str:
     text = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
     block = next(b.split("```", 1)[0] for b in text.split("```python\n")[1:]
                  if "def test_brake_release" in b)
-    return "import pytest\n" + block
+    return block  # as written: its imports included
 
 
 def test_the_readme_brake_example_judges_the_brake_and_fails_an_early_one(pytester) -> None:
@@ -168,3 +168,118 @@ def test_x(hil_drive, hil_check):
         hil_check("no_such_spec")
 """)
     pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider").assert_outcomes(passed=1)
+
+
+def _doc_block(doc: str, lang: str, marker: str) -> str:
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / doc).read_text(encoding="utf-8")
+    return next(b.split("```", 1)[0] for b in text.split(f"```{lang}\n")[1:] if marker in b)
+
+
+def test_the_readme_plan_excerpt_judges_the_brake_rule(tmp_path) -> None:
+    """The excerpt checked at the BRKR edge, so "BRKR rises P1.042 after servo on" was
+    skipped ("no servo on for P1.042 in the recording"): 2 verdicts, the brake's not one."""
+    from hil.bench.bench import load_bench
+    from hil.plan.plan import loads_plan
+    from hil.plan.runner import run_plans
+
+    text = _doc_block("README.md", "yaml", "# plans/servo_on_off_brake.yaml (excerpt)")
+    plan = loads_plan(text, str(tmp_path / "excerpt.yaml"))
+    [res] = run_plans([plan], load_bench(None), tmp_path / "out", quiet=True)
+    assert res.passed
+    judged = [v["constraint"] for s in res.steps for v in s.verdicts if v["status"] == "pass"]
+    assert "BRKR rises P1.042 after servo on" in judged, judged
+
+
+def test_the_documented_pytest_ini_gives_no_warning(pytester) -> None:
+    """pytest's ini values take no inline comment: `hil_plans = plans  # one or more ...`
+    made every word a directory, with a PytestConfigWarning each."""
+    ini = _doc_block("docs/plans.md", "ini", "hil_plans")
+    pytester.makeini(ini)
+    pytester.mkdir("plans")
+    (pytester.path / "plans" / "p.yaml").write_text(
+        "name: p\nsteps:\n  - expect: {do: {SRDY: on}}\n", encoding="utf-8")
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "--collect-only",
+                                        "-W", "error::pytest.PytestConfigWarning")
+    assert res.ret == 0, res.stdout.str() + res.stderr.str()
+    assert "is not a directory" not in res.stdout.str() + res.stderr.str()
+
+
+FUNC_ONLY = """
+import pytest
+
+@pytest.mark.hil
+@pytest.mark.timeout(2, func_only=True)
+def test_wait_forever(hil_drive):
+    hil_drive.set_function("SON", True)
+    hil_drive.dio.wait_for("DO3", True, 1e6)
+"""
+
+LOST = """
+import os, signal
+import hil.clock
+
+def test_alarm_in_last_wait(hil_drive):
+    def pred():  # pytest-timeout's alarm landing as the last wait's condition comes true
+        os.kill(os.getpid(), signal.SIGALRM)
+        return True
+    hil.clock.wait_for(pred, 1.0)
+"""
+
+IN_SAFE_STATE = """
+import signal
+import hil.plan.safety as safety
+
+_go_safe = safety.go_safe
+
+def go_safe(session, reason, rec, *a, **k):  # the timer running out while the bench goes safe
+    signal.setitimer(signal.ITIMER_REAL, 0.001)
+    return _go_safe(session, reason, rec, *a, **k)
+
+safety.go_safe = go_safe
+
+def test_servo_on(hil_drive):
+    hil_drive.set_function("SON", True)
+    hil_drive.dio.wait_for("DO6", True, 2.0)
+"""
+
+
+@pytest.mark.parametrize(("source", "args"), [
+    (FUNC_ONLY, ()),  # its handler is installed after the fixtures
+    (LOST, ("--timeout=60",)),  # deferred, then the test ended before it was raised
+    (IN_SAFE_STATE, ("--timeout=60",)),  # while shielded: the safe state ran on
+], ids=["func_only", "lost", "in_safe_state"])
+def test_a_pytest_timeout_is_never_lost_nor_cuts_the_safe_state(pytester, source, args) -> None:
+    """helper-123: with `func_only` the alarm cut a host tick (the model stopped, "BRKR still
+    on after 3000 ms"); one deferred in the test's last wait was dropped before the safe
+    state and the test passed; one during the safe state cut it (no safe_state_reached).
+    Each now fails the test as a timeout, after the safe state, which is on the record."""
+    pytester.makepyfile(test_t=source)
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", *args)
+    out = res.stdout.str()
+    assert "Timeout" in out and "safe state was not confirmed" not in out, out
+    outcomes = res.parseoutcomes()
+    assert res.ret == 1 and ("failed" in outcomes or "errors" in outcomes), outcomes
+    result, safety = _result(pytester)
+    assert result.get("status") == "fail" and "Timeout" in result.get("reason", ""), result
+    assert result.get("safe_state_ok") == "true"
+    assert safety[-1]["action"] == "safe_state_reached"
+
+
+def test_a_plan_cut_by_pytest_timeout_is_recorded_aborted(pytester) -> None:
+    """pytest's Failed is neither a KeyboardInterrupt nor an Exception: a plan it cut was
+    recorded `pass`, "end of plan" (helper-123)."""
+    (pytester.path / "long.yaml").write_text(
+        "name: long\nsteps:\n  - di: {SON: on}\n  - wait: 40000s\n", encoding="utf-8")
+    pytester.makepyfile(test_np="""
+def test_plan(hil_run_plan):
+    assert hil_run_plan("long.yaml").passed
+""")
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "--timeout=2")
+    res.assert_outcomes(failed=1)
+    result, safety = _result(pytester)
+    assert result.get("status") == "aborted", result
+    assert result.get("reason", "").startswith("stopped: Failed: Timeout"), result
+    assert safety[-1]["action"] == "safe_state_reached"
+    assert all("Timeout" in m["reason"] for m in safety)
