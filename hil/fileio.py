@@ -11,7 +11,6 @@ import contextlib
 import json
 import math
 import os
-import re
 import stat
 import tempfile
 import unicodedata
@@ -22,17 +21,34 @@ from typing import Any, TypeVar
 T = TypeVar("T")
 
 
-_UNSAFE_NAME = re.compile(r"[^\w.-]")  # \w: letters and digits of every script, and _
-_UNSAFE_RUN = re.compile(r"[^\w.-]+")
+def _name_char(c: str) -> bool:
+    """Kept in a file name: a letter, mark or digit of any script (`L*`, `M*`, `N*`: the
+    vowel signs of Devanagari and the harakat of Arabic are marks), `_`, `.` and `-`; not a
+    space, a separator, an anchor, a control or a format character (a bidi override)."""
+    return c in "_.-" or unicodedata.category(c)[0] in "LMN"
 
 
 def safe_stem(text: str, *, collapse: bool = False) -> str:
-    """`text` as a file name: its letters and digits kept in any script (NFC, so a name
-    typed on one system and read on another is the same: `zkouška brzdy` stays
-    `zkouška_brzdy`), `.` and `-` kept, every other character `_` (`collapse`: every run of
-    them one `_`). No separator or anchor is left."""
-    text = unicodedata.normalize("NFC", text)
-    return (_UNSAFE_RUN if collapse else _UNSAFE_NAME).sub("_", text)
+    """`text` as a file name: its letters, marks and digits kept in any script (NFC, so a
+    name typed on one system and read on another is the same: `zkouška brzdy` stays
+    `zkouška_brzdy`, `हिन्दी` stays whole), `.` and `-` kept, every other character `_`
+    (`collapse`: every run of them one `_`). No separator or anchor is left."""
+    out: list[str] = []
+    for c in unicodedata.normalize("NFC", text):
+        if _name_char(c):
+            out.append(c)
+        elif not (collapse and out and out[-1] == "_"):
+            out.append("_")
+    return "".join(out)
+
+
+def fit_bytes(text: str, limit: int) -> str:
+    """`text` cut to at most `limit` bytes of UTF-8, at a character boundary (a file name
+    may hold 255 bytes, not characters)."""
+    data = text.encode("utf-8")
+    if len(data) <= limit:
+        return text
+    return data[:limit].decode("utf-8", "ignore")
 
 
 class FileProblem(ValueError):

@@ -298,13 +298,13 @@ def _safe_name(nodeid: str) -> str:
     hold. A parametrized id (`[...]`) also gets a short hash of the exact id, so
     `test_q[x y]`, `test_q[x_y]` and `test_q_x_y` keep one recording each, on any xdist
     worker (the name depends on the id alone)."""
-    from hil.fileio import safe_stem
+    from hil.fileio import fit_bytes, safe_stem
 
     safe = safe_stem(nodeid, collapse=True).strip("_")
     _head, bracket, _params = nodeid.partition("[")
-    if len(safe) > 150 or bracket:
+    if len(safe.encode("utf-8")) > 150 or bracket:  # bytes: a file name holds 255 of them
         digest = hashlib.sha1(nodeid.encode()).hexdigest()[:8]
-        safe = f"{safe[:141]}-{digest}"
+        safe = f"{fit_bytes(safe, 141)}-{digest}"
     return safe
 
 
@@ -550,6 +550,7 @@ def hil_drive(hil_session: Any) -> Any:
 def hil_run_plan(hil_bench: Any, request: pytest.FixtureRequest) -> Callable[[str | Path], Any]:
     """Run a plan (name or path) on the bench; returns the `PlanResult`."""
     from hil.bench.yamlio import PlanFileError
+    from hil.fileio import fit_bytes, safe_stem
     from hil.plan.plan import find_plans, load_plan
     from hil.plan.runner import plan_stem, run_plan
 
@@ -573,7 +574,7 @@ def hil_run_plan(hil_bench: Any, request: pytest.FixtureRequest) -> Callable[[st
         # named after the test and the plan: never the name of a plan collected as a test
         # (`hil_plans`) or of this plan run by another test
         nodeid = request.node.nodeid
-        stem = f"{_safe_name(nodeid)}-{plan_stem(loaded)}"
+        stem = f"{_safe_name(nodeid)}-{fit_bytes(safe_stem(plan_stem(loaded)), 80)}"
         runs.append(stem)
         if runs.count(stem) > 1:
             stem = f"{stem}-{runs.count(stem)}"

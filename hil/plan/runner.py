@@ -25,7 +25,7 @@ from typing import Any, TextIO
 from hil import clock
 from hil.bench import virtual_module
 from hil.bench.bench import Bench, line_warnings
-from hil.fileio import safe_stem
+from hil.fileio import fit_bytes, safe_stem
 from hil.plan.context import (
     Cancelled,
     Inconclusive,
@@ -463,7 +463,7 @@ def output_stems(plans: list[Plan]) -> list[str]:
             out[i] = c
     seen: set[str] = set()
     for i, s in enumerate(out):
-        s = safe_stem(s) or "plan"
+        s = fit_bytes(safe_stem(s), 200) or "plan"  # room for `-2` and `.junit.xml`
         base, k = s, 2
         while s.casefold() in seen:
             s, k = f"{base}-{k}", k + 1

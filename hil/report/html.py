@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 from hil.fileio import write_text_atomic
 from hil.record import topics
@@ -293,7 +294,7 @@ def _nav(run: RunData, out: Path | None, index: bool | None = None) -> str:
         links.append("<a href='index.html'>&larr; all plans of this run</a>")
     rec = Path(run.path).resolve()
     href = Path(os.path.relpath(rec, here)).as_posix()
-    links.append(f"<a href='{esc(href)}' download>recording {esc(rec.name)}</a> (open it in "
+    links.append(f"<a href='{esc(quote(href))}' download>recording {esc(rec.name)}</a> (open it in "
                  "Foxglove)")
     return "<p class='nav'>" + " · ".join(links) + "</p>"
 

@@ -12,6 +12,7 @@ import json
 import os
 from collections import Counter
 from pathlib import Path
+from urllib.parse import quote
 
 from hil.fileio import write_text_atomic
 from hil.record.reader import RecordingError
@@ -74,7 +75,8 @@ def _link(target: Path, out_dir: Path, text: str) -> str:
     if not target.exists():
         return ""
     href = Path(os.path.relpath(target.resolve(), out_dir.resolve())).as_posix()
-    return f"<a href='{esc(href)}'>{esc(text)}</a>"
+    # percent-encoded: a `#`, `%`, `?` or space in a file name is part of the name
+    return f"<a href='{esc(quote(href))}'>{esc(text)}</a>"
 
 
 def _merged_info(rows: list[dict]) -> dict[str, str]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import unicodedata
 from pathlib import Path
 
-from hil.fileio import safe_stem
+from hil.fileio import fit_bytes, safe_stem
 from hil.plan.plan import load_plan
 from hil.plan.runner import output_stems
 from hil.pytest_plugin import _safe_name
@@ -40,3 +40,34 @@ def test_no_separator_or_anchor_survives() -> None:
 
 def test_pytest_recording_names_keep_letters_too() -> None:
     assert _safe_name("tests/test_brzda.py::test_zkouška") == "tests_test_brzda.py_test_zkouška"
+
+
+def test_marks_of_every_script_are_kept_and_format_characters_are_not() -> None:
+    """`\\w` dropped combining and spacing marks without a precomposed form (helper-123):
+    `हिन्दी परीक्षण` became `ह_न_द__पर_क_षण`. A bidi override is no name character."""
+    assert safe_stem("हिन्दी परीक्षण") == "हिन्दी_परीक्षण"
+    assert safe_stem("مُحَرِّك") == "مُحَرِّك"
+    assert safe_stem("q\u0307") == "q\u0307"
+    assert safe_stem("a\u202eb") == "a_b"
+    assert safe_stem("a  b", collapse=True) == "a_b"
+
+
+def test_a_long_name_fits_a_file_name_in_bytes(tmp_path: Path) -> None:
+    """150 characters of CJK are 450 bytes: past the 255 a file name holds (helper-123:
+    "File name too long" for a test named in Chinese)."""
+    long = "test_" + "制动器释放时间" * 13
+    name = _safe_name(f"tests/test_x.py::{long}")
+    assert len(name.encode("utf-8")) <= 150
+    (tmp_path / f"{name}.junit.xml").write_text("x", encoding="utf-8")  # it can be made
+    assert fit_bytes("制动器", 4) == "制"  # never half a character
+    [stem] = output_stems([load_plan(_plan(tmp_path / ("制" * 80 + ".yaml")))])
+    assert len(stem.encode("utf-8")) <= 200
+
+
+def test_index_links_to_names_with_anchors_are_encoded(tmp_path: Path) -> None:
+    """A `#` in a file name started a fragment in the index's link."""
+    from hil.report.index import _link
+
+    target = tmp_path / "a #1 %.html"
+    target.write_text("x", encoding="utf-8")
+    assert "href='a%20%231%20%25.html'" in _link(target, tmp_path, "x")
