@@ -22,7 +22,7 @@ import can
 
 from hil.fileio import atomic_path, refuse_input
 from hil.record.canio import bus_topics, stream_can
-from hil.record.reader import CUT_EMPTY, Recording, RecordingError, cut_empty
+from hil.record.reader import Recording, RecordingError, before_channels
 
 FORMATS = ("candump", "asc", "blf", "csv", "trc", "mf4")
 #: OUT extension -> format (the suffixes python-can's LogReader/Logger use)
@@ -167,8 +167,8 @@ def main(args: argparse.Namespace) -> int:
     except (RecordingError, ValueError) as exc:
         print(f"hil export: {exc}", file=sys.stderr)
         return 2
-    if cut_empty(head):
-        print(f"hil export: {args.file}: {CUT_EMPTY}", file=sys.stderr)
+    if empty := before_channels(head.truncated, head.corrupt, len(head.channels())):
+        print(f"hil export: {args.file}: {empty}: nothing to export", file=sys.stderr)
         return 2
     if head.truncated:
         print(

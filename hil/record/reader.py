@@ -455,15 +455,23 @@ def not_hil_file(rec: Recording) -> str | None:
 
 
 def cut_empty(rec: Recording) -> bool:
-    """`cut_before_channels` of a surveyed recording."""
-    return cut_before_channels(rec.truncated, rec.corrupt, len(rec.channels()))
+    """A surveyed recording cut before its first channel (`before_channels` says "cut")."""
+    return before_channels(rec.truncated, rec.corrupt, len(rec.channels())) == CUT_EMPTY
 
 
-def cut_before_channels(truncated: bool, corrupt: bool, channels: int) -> bool:
-    """A file with no footer and not one channel, whatever metadata it holds (the recorder
-    writes the run's metadata first): nothing of a run to read (`CUT_EMPTY`). One rule for
-    check, report, diff and export."""
-    return truncated and not corrupt and channels == 0
+DAMAGED_EMPTY = "damaged before its first channel: nothing of the run could be read"
+
+
+def before_channels(truncated: bool, corrupt: bool, channels: int) -> str | None:
+    """Why a file has no channel to read, whatever metadata it holds (the recorder writes the
+    run's metadata first): cut (no footer: `CUT_EMPTY`) or damaged (`DAMAGED_EMPTY`) before
+    its first channel; None when it has one, or is whole. One rule for check and export
+    (and for report and diff, which show the run's metadata if any)."""
+    if channels:
+        return None
+    if corrupt:
+        return DAMAGED_EMPTY
+    return CUT_EMPTY if truncated else None
 
 
 def virtual_bench(metadata: Mapping[str, Any]) -> bool:

@@ -30,7 +30,7 @@ from typing import Any
 from hil.fileio import dumps_strict
 from hil.record import topics
 from hil.record.progress import ReadProgress
-from hil.record.reader import RecordingError, cut_before_channels, repaired_cut
+from hil.record.reader import RecordingError, before_channels, repaired_cut
 from hil.record.reader import incomplete as reader_incomplete
 from hil.record.reader import not_hil as reader_not_hil
 from hil.terminal import TEXT_MAX, terminal_text
@@ -423,11 +423,11 @@ def main(args: argparse.Namespace) -> int:
     if isinstance(source, int):
         return source
     why = not_hil(source)
-    if cut_before_channels(source.truncated, source.corrupt, len(source.topics())):
-        if args.json:  # killed before its first channel, with its metadata or not
+    if empty := before_channels(source.truncated, source.corrupt, len(source.topics())):
+        if args.json:  # killed (or damaged) before its first channel, metadata or not
             print_json([])
-        return final_code([], source, [f"{args.recording}: cut before its first channel: "
-                                       "nothing was recorded to judge"])
+        return final_code([], source, [f"{args.recording}: {empty.partition(':')[0]}: "
+                                       "nothing to judge"])
     if why and not source.corrupt:
         print(f"hil check: {args.recording}: {why}", file=sys.stderr)
         return EXIT_USAGE

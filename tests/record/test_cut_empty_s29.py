@@ -98,3 +98,40 @@ def test_a_foreign_mcap_is_still_not_a_hil_recording(tmp_path, capsys) -> None:
         w.finish()
     assert hil(["report", str(p), "-o", str(tmp_path / "r.html")]) == 2
     assert "not a hil recording" in capsys.readouterr().err
+
+
+def _first_chunk_damaged(p: Path) -> None:
+    """A recorder's file (its metadata, then one chunk of log lines) killed, with a byte of
+    its first chunk flipped: no channel of it can be read."""
+    import struct
+
+    code = ("import os, sys; from hil.record.recorder import Recorder; "
+            "r = Recorder(sys.argv[1], metadata={'hil.plan': 'x'})\n"
+            "for i in range(50): r.log('info', f'hello {i}', name='t')\n"
+            "r.flush(); os._exit(9)")
+    subprocess.run([sys.executable, "-c", code, str(p)], check=False, timeout=60,
+                   env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+    b = bytearray(p.read_bytes())
+    pos = len(MAGIC)
+    while pos < len(b):
+        op, n = b[pos], struct.unpack_from("<Q", b, pos + 1)[0]
+        if op == 0x06:  # the chunk: a byte in the middle of its records
+            b[pos + 9 + n // 2] ^= 0xFF
+            break
+        pos += 9 + n
+    else:
+        raise AssertionError("no chunk")
+    p.write_bytes(bytes(b))
+
+
+def test_a_first_chunk_damaged_is_judged_and_exported_as_nothing(tmp_path, capsys) -> None:
+    """helper-123: check judged it with every spec's defaults (206 verdicts, 20 of them
+    inconclusive) and export wrote an empty log (exit 0)."""
+    bad = tmp_path / "bad.mcap"
+    _first_chunk_damaged(bad)
+    assert hil(["check", str(bad), "--json"]) == 4
+    out = capsys.readouterr()
+    assert out.out.strip() == "[]" and "damaged before its first channel" in out.err
+    assert hil(["export", str(bad), "-o", str(tmp_path / "x.log")]) == 2
+    assert "damaged before its first channel" in capsys.readouterr().err
+    assert not (tmp_path / "x.log").exists()
