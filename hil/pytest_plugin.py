@@ -395,13 +395,15 @@ def _finish_recording(item: pytest.Item, error: BaseException | None) -> None:
     unfinished = item.config.stash.get(_UNFINISHED, [])
     if item in unfinished:
         unfinished.remove(item)
+    if result is None:  # no `hil_session` (a test of `hil_recorder` alone): its outcome
+        status, reason = _outcome(item)
+        result = {"status": status, "reason": reason}
     try:
-        if result is not None:
-            if error is not None and result["status"] in ("pass", "skipped"):
-                result = {**result, **_teardown_outcome(error)}
-            if (t0 := item.stash.get(_T0, None)) is not None:  # wall ms, as a plan's
-                result = {**result, "duration_ms": round((time.monotonic() - t0) * 1e3, 3)}
-            rec.add_metadata("hil.result", result)
+        if error is not None and result["status"] in ("pass", "skipped"):
+            result = {**result, **_teardown_outcome(error)}
+        if (t0 := item.stash.get(_T0, None)) is not None:  # wall ms, as a plan's
+            result = {**result, "duration_ms": round((time.monotonic() - t0) * 1e3, 3)}
+        rec.add_metadata("hil.result", result)
     finally:
         del item.stash[_OPEN]
         rec.close()
@@ -588,7 +590,7 @@ def hil_run_plan(hil_bench: Any, request: pytest.FixtureRequest) -> Callable[[st
 
 
 @pytest.fixture
-def hil_check(hil_recorder: Any) -> Callable[..., list]:
+def hil_check(hil_recorder: Any, request: pytest.FixtureRequest) -> Callable[..., list]:
     """Check a shipped timing spec (id or path) on this test's recording so far."""
     from hil.paths import fixture
     from hil.timing.checker import check
@@ -600,8 +602,10 @@ def hil_check(hil_recorder: Any) -> Callable[..., list]:
     def run(spec: str | Path, *, binding: dict | None = None, allow_inconclusive: bool = False,
             **kw: Any) -> list:
         path = Path(spec)
+        if not path.exists() and (request.config.rootpath / path).exists():
+            path = request.config.rootpath / path  # as `hil_run_plan` finds a plan
         if not path.exists():
-            path = fixture("timing", f"{spec}.yaml")
+            path = fixture("timing", f"{Path(spec).name.removesuffix('.yaml')}.yaml")
             if not path.is_file():
                 known = ", ".join(sorted(p.stem for p in shipped_specs()))
                 raise ValueError(f"timing spec {spec!r}: no such file, and no shipped spec "

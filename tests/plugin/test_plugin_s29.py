@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import glob
 import shutil
+from pathlib import Path
 
 import pytest
 
+from hil.paths import fixture
 from hil.record.reader import Recording
 
 pytest_plugins = ["pytester"]
@@ -283,3 +285,32 @@ def test_plan(hil_run_plan):
     assert result.get("reason", "").startswith("stopped: Failed: Timeout"), result
     assert safety[-1]["action"] == "safe_state_reached"
     assert all("Timeout" in m["reason"] for m in safety)
+
+
+def test_a_recorder_only_test_has_a_result_and_specs_are_found_as_named(pytester,
+                                                                        monkeypatch) -> None:
+    """A test of `hil_recorder` alone had no `hil.result` (its JUnit said "unknown", time
+    0); `hil_check("servo_on_brake.yaml")`, the shipped file's own name, was unknown, and a
+    spec path relative to the rootdir failed from a subfolder (helper-123)."""
+    (pytester.path / "specs").mkdir()
+    (pytester.path / "specs" / "mine.yaml").write_text(
+        (Path(fixture("timing", "servo_on_brake.yaml"))).read_text(encoding="utf-8"),
+        encoding="utf-8")
+    sub = pytester.mkpydir("sub")
+    (sub / "test_r.py").write_text("""
+def test_rec_only(hil_recorder):
+    hil_recorder.log("info", "hello", name="t")
+
+def test_specs(hil_drive, hil_check):
+    hil_drive.set_function("SON", True)
+    hil_drive.dio.wait_for("DO6", True, 2.0)
+    hil_check("servo_on_brake.yaml")
+    hil_check("specs/mine.yaml")
+""", encoding="utf-8")
+    pytester.makeini("[pytest]\n")
+    monkeypatch.chdir(sub)  # pytest run from a subfolder of the rootdir
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider")
+    res.assert_outcomes(passed=2)
+    [rec] = glob.glob(str(pytester.path / "reports" / "pytest" / "*rec_only.mcap"))
+    result = Recording.open(rec).metadata().get("hil.result", {})
+    assert result.get("status") == "pass" and float(result.get("duration_ms")) > 0
