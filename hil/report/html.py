@@ -244,7 +244,10 @@ def _plot(run: RunData, drive: str, samples: TruthSamples) -> str:
         y0 = i * PH + 10
         lo = min(v for _, v in pts)
         hi = max(v for _, v in pts)
-        rng = (hi - lo) or 1.0
+        if hi == lo:  # a flat signal: drawn mid-panel between two labels that differ
+            half = max(1.0, abs(hi) * 0.1)  # (it read "0" above "0", the line on the floor)
+            lo, hi = lo - half, hi + half
+        rng = hi - lo
         coords = " ".join(decimate(pts, lambda t: pad + (W - pad - 10) * (t - t0) / span,
                                    lambda v, y0=y0, lo=lo, rng=rng:
                                    y0 + PH - 20 - (PH - 30) * (v - lo) / rng))

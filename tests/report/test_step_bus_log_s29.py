@@ -39,3 +39,23 @@ def test_a_failing_steps_bus_log_is_its_own_frames(tmp_path: Path) -> None:
     page = html.unescape(re.sub("<[^>]+>", "", Path(res.html).read_text(encoding="utf-8")))
     log = page.split("Bus log of failing steps", 1)[1].split("Parameters", 1)[0]
     assert "212Ah" in log and "6040h" not in log
+
+
+def test_a_flat_motion_signal_is_drawn_mid_panel_with_distinct_labels() -> None:
+    """At rest the motion plot labelled each panel "0" above "0" and drew the line on its
+    floor, where it read as a missing trace."""
+    from hil.report.data import RunData, TruthSamples
+    from hil.report.html import _plot
+
+    samples = TruthSamples(None)
+    for k in range(5):
+        samples.add(k * 1_000_000, b'{"position_counts": 0, "speed_rpm": 0.0, "torque_pct": 0.0}')
+    samples.finish()
+    svg = _plot(RunData("x.mcap", "p", "b", "pass"), "drive1", samples)
+    labels = re.findall(r'font-size="9">([^<]*)<', svg)
+    assert len(labels) == 6 and all(a != b for a, b in zip(labels[::2], labels[1::2],
+                                                            strict=True)), labels
+    ys = {float(y) for y in re.findall(r"[\d.]+,([\d.]+)", svg.split("<polyline", 1)[1]
+                                       .split("/>", 1)[0])}
+    assert len(ys) == 1  # one flat line, between the panel's top (10) and floor (100)
+    assert 30 < ys.pop() < 80
