@@ -259,7 +259,8 @@ class ModbusSlave:
     def power_cycle(self) -> None:
         """Re-read P3.000 (● takes effect after a power cycle, L7014, L6722) and the line
         P3.001/P3.002 set, however they were written (an SDO, say), and reset the receiver.
-        An explicit `station=` / `mode=` / `baud=` / `char_format=` argument keeps winning."""
+        An explicit `station=` / `mode=` / `baud=` / `char_format=` argument keeps winning
+        until a Modbus write of P3.000 / P3.001 / P3.002 hands it to the parameter."""
         self.station = self._load_station()
         self._next_line = self._load_line()
         if self._next_line == self.line:
@@ -566,7 +567,12 @@ class ModbusSlave:
         self._apply_line()
 
     def _after_write(self, address: int, count: int) -> None:
-        """P3.001 / P3.002 written: the next frame uses them (L16035, L16037)."""
+        """P3.001 / P3.002 written: the next frame uses them (L16035, L16037). P3.000
+        written over the line: from now on the parameter sets the station, at the next
+        power cycle (●, L7014), as P3.001/P3.002 set the line once written (helper-124: a
+        virtual drive given its station by the bench kept it for ever)."""
+        if address <= P3_000 + 1 and address + count > P3_000:
+            self._explicit_station = None
         if address <= P3_002 + 1 and address + count > P3_001:
             p3001, p3002 = self._param(P3_001), self._param(P3_002)
             mode, fmt = mb.P3002_PROTOCOLS.get(p3002, (self.line.mode, self.line.char_format))
