@@ -324,7 +324,8 @@ class VirtualClock:
         state after the interrupt could not run). False outside an event: raise it now."""
         if not (self._running or self._loops):
             return False
-        self._interrupt = exc
+        if not isinstance(self._interrupt, KeyboardInterrupt):  # a Ctrl-C already waiting
+            self._interrupt = exc  # stays: it stops the run, whatever came after it
         return True
 
     def drop_interrupt(self) -> BaseException | None:

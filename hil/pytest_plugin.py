@@ -248,10 +248,17 @@ class PlanItem(pytest.Item):
         if _SHARED in self.config.stash:
             pytest.fail(self.config.stash[_SHARED], pytrace=False)
         bench = _load_bench(self.config)
-        result = run_plan(self.plan, bench, _out_dir(self.config), stem=self.stem)
         from hil.report.data import load_run
         from hil.report.junit import case_properties
 
+        try:
+            result = run_plan(self.plan, bench, _out_dir(self.config), stem=self.stem)
+        except BaseException as e:  # cut (Ctrl-C, pytest-timeout): its recording is kept
+            cut = getattr(e, "plan_result", None)
+            if cut is not None and cut.recording:
+                self.user_properties.append(
+                    ("recording", _recording_property(self.config, cut.recording)))
+            raise
         # `hil run`'s JUnit shape: recording (relative to the JUnit file), steps, verdicts
         run = load_run(result.recording)
         self.user_properties.extend(case_properties(run, _junit_dir(self.config)))
@@ -368,7 +375,7 @@ def pytest_sessionfinish(session: pytest.Session) -> Any:
         return (yield)
     finally:
         for item in list(session.config.stash.get(_UNFINISHED, [])):
-            _finish_recording(item, None)
+            _finish_recording(item, None, stopped=True)
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)
@@ -385,7 +392,8 @@ def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> 
         _finish_recording(item, error)
 
 
-def _finish_recording(item: pytest.Item, error: BaseException | None) -> None:
+def _finish_recording(item: pytest.Item, error: BaseException | None,
+                      stopped: bool = False) -> None:
     rec = item.stash.get(_OPEN, None)
     result = item.stash.get(_RESULT, None)
     if result is not None:
@@ -396,7 +404,7 @@ def _finish_recording(item: pytest.Item, error: BaseException | None) -> None:
     if item in unfinished:
         unfinished.remove(item)
     if result is None:  # no `hil_session` (a test of `hil_recorder` alone): its outcome
-        status, reason = _outcome(item)
+        status, reason = ("aborted", "interrupted (Ctrl-C)") if stopped else _outcome(item)
         result = {"status": status, "reason": reason}
     try:
         if error is not None and result["status"] in ("pass", "skipped"):
@@ -429,12 +437,6 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
     rep = yield
     item.stash.setdefault(_REPORTS, {})[rep.when] = rep
     return rep
-
-
-def _line(exc: BaseException) -> str:
-    """`Type: first line of the message` of an exception."""
-    what = str(exc).splitlines()[0] if str(exc) else ""
-    return f"{type(exc).__name__}: {what}".rstrip(": ")
 
 
 @pytest.hookimpl(wrapper=True, trylast=True)  # inside pytest-timeout's own wrapper
@@ -497,7 +499,14 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
     `hil.clock.sleep` / the drivers' waits, not `time.sleep`); the bench goes to its safe
     state afterwards, and the recording says why (the test's failure, or its end) and how
     the test ended (`hil.result`), as a plan's does."""
-    from hil.plan.runner import Interrupts, bench_clock, record_bench, record_dut, safe_tail
+    from hil.plan.runner import (
+        Interrupts,
+        bench_clock,
+        first_line,
+        record_bench,
+        record_dut,
+        safe_tail,
+    )
     from hil.plan.safety import go_safe
     from hil.plan.session import open_session
 
@@ -516,7 +525,7 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
             if signals.cause:
                 status, reason = "aborted", f"interrupted ({signals.cause})"
             elif signals.alarm is not None and status in ("pass", "skipped"):  # a timeout
-                status, reason = "fail", f"test failed: {_line(signals.alarm)}"  # not seen
+                status, reason = "fail", f"test failed: {first_line(signals.alarm)}"  # not seen
             safe = None
             try:
                 safe = go_safe(session, reason, hil_recorder)
@@ -525,10 +534,10 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
                 session.close()
                 unsafe = "; ".join(f"{a['drive']}: {a['action']}: {a['detail']}"
                                    for a in safe.actions if not a["ok"]) if safe else ""
+                if signals.alarm is not None and status in ("pass", "skipped"):  # came while
+                    status, reason = "fail", f"test failed: {first_line(signals.alarm)}"  # shielded
                 if unsafe and status == "pass":  # a test passes only if it leaves the bench
                     status, reason = "error", f"safe state not confirmed: {unsafe}"  # safe
-                if signals.alarm is not None and status in ("pass", "skipped"):  # came while
-                    status, reason = "fail", f"test failed: {_line(signals.alarm)}"  # shielded
                 # written when the recording closes, after the other fixtures' teardown
                 request.node.stash[_RESULT] = {
                     "status": status, "reason": reason,
@@ -536,8 +545,9 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
                 if _SIGNALS in request.node.stash:
                     del request.node.stash[_SIGNALS]
             if unsafe and not signals.cause:
+                also = f" ({first_line(signals.alarm)})" if signals.alarm is not None else ""
                 pytest.fail(f"hil: the bench's safe state was not confirmed after the test: "
-                            f"{unsafe}", pytrace=False)
+                            f"{unsafe}{also}", pytrace=False)
             if signals.alarm is not None and not signals.cause:
                 raise signals.alarm  # the timeout, once the bench is safe and on the record
 
@@ -581,7 +591,14 @@ def hil_run_plan(hil_bench: Any, request: pytest.FixtureRequest) -> Callable[[st
         if runs.count(stem) > 1:
             stem = f"{stem}-{runs.count(stem)}"
         stem = _unique_stem(request.config, stem, nodeid)
-        result = run_plan(loaded, hil_bench, _out_dir(request.config), stem=stem)
+        try:
+            result = run_plan(loaded, hil_bench, _out_dir(request.config), stem=stem)
+        except BaseException as e:  # cut (Ctrl-C, pytest-timeout): its recording is kept
+            result = getattr(e, "plan_result", None)
+            if result is not None and result.recording:
+                request.node.user_properties.append(
+                    ("recording", _recording_property(request.config, result.recording)))
+            raise
         request.node.user_properties.append(
             ("recording", _recording_property(request.config, result.recording)))
         return result
@@ -605,7 +622,11 @@ def hil_check(hil_recorder: Any, request: pytest.FixtureRequest) -> Callable[...
         if not path.exists() and (request.config.rootpath / path).exists():
             path = request.config.rootpath / path  # as `hil_run_plan` finds a plan
         if not path.exists():
-            path = fixture("timing", f"{Path(spec).name.removesuffix('.yaml')}.yaml")
+            if path.parent != Path("."):  # a path, not a shipped spec's id or file name
+                raise ValueError(f"timing spec {spec!r}: no such file (from "
+                                 f"{Path.cwd()} nor from the rootdir {request.config.rootpath})")
+            name = path.stem if path.suffix in (".yaml", ".yml") else path.name
+            path = fixture("timing", f"{name}.yaml")
             if not path.is_file():
                 known = ", ".join(sorted(p.stem for p in shipped_specs()))
                 raise ValueError(f"timing spec {spec!r}: no such file, and no shipped spec "

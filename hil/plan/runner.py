@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import hashlib
 import json
 import os
 import signal
@@ -104,6 +105,12 @@ def signal_text(signum: int) -> str:
     except ValueError:
         name = f"signal {signum}"
     return f"{name} (Ctrl-C)" if signum == signal.SIGINT else name
+
+
+def first_line(e: BaseException) -> str:
+    """`Type: first line of its message`."""
+    what = str(e).splitlines()[0] if str(e) else ""
+    return f"{type(e).__name__}: {what}".rstrip(": ")
 
 
 def interrupt_cause(e: BaseException) -> str:
@@ -316,8 +323,7 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
             except BaseException as e:  # pytest-timeout's Failed, SystemExit: the plan is
                 intr.shield = True      # cut, never "end of plan" passed; raised again
                 interrupted = e         # once the bench is safe
-                what = str(e).splitlines()[0] if str(e) else ""
-                reason = f"stopped: {type(e).__name__}: {what}".rstrip(": ")
+                reason = f"stopped: {first_line(e)}"
                 res.status, res.error = ABORTED, reason
                 for r in res.steps:
                     if r.status == SKIPPED and not r.message:
@@ -463,7 +469,10 @@ def output_stems(plans: list[Plan]) -> list[str]:
             out[i] = c
     seen: set[str] = set()
     for i, s in enumerate(out):
-        s = fit_bytes(safe_stem(s), 200) or "plan"  # room for `-2` and `.junit.xml`
+        s = safe_stem(s) or "plan"
+        if len(s.encode("utf-8")) > 200:  # room for `-2` and `.junit.xml`; a cut name gets
+            digest = hashlib.sha1(s.encode("utf-8")).hexdigest()[:8]  # a hash of the whole
+            s = f"{fit_bytes(s, 191)}-{digest}"  # one: the same name whatever is selected
         base, k = s, 2
         while s.casefold() in seen:
             s, k = f"{base}-{k}", k + 1
@@ -591,8 +600,11 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
             r.status, r.message = ERROR, str(e)
         except Exception as e:
             r.status, r.message = ERROR, f"{type(e).__name__}: {e}"
-        except KeyboardInterrupt as e:  # this step ran and was cut: it ends on the record too
-            r.status, r.message = ERROR, f"interrupted ({interrupt_cause(e)}) while it ran"
+        except BaseException as e:  # this step ran and was cut (Ctrl-C, pytest-timeout's
+            r.status = ERROR        # Failed): it ends on the record too
+            r.message = (f"interrupted ({interrupt_cause(e)}) while it ran"
+                         if isinstance(e, KeyboardInterrupt) else
+                         f"stopped ({first_line(e)}) while it ran")
             r.duration_ns = clock.monotonic_ns() - t0
             events.emit(StepEnded(plan, s, r, d.name, rec))
             raise

@@ -373,8 +373,8 @@ def _load_run(path: str | Path, *, truth: bool = True,
     if not data.status:
         bad = [s for s in data.steps if s.status not in ("pass", "skipped")]
         data.status = "fail" if bad else ("pass" if data.steps else "unknown")
-        if data.truncated:
-            data.status = "aborted"
+        if data.truncated:  # no result: killed (cut short), or its end unreadable (damaged:
+            data.status = "incomplete" if data.damage else "aborted"  # how it ended is unknown)
     elif data.truncated and data.status == "pass":  # the run passed; the file holds part of it
         data.status = "incomplete"
     _reconcile_status(data)

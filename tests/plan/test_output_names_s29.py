@@ -71,3 +71,16 @@ def test_index_links_to_names_with_anchors_are_encoded(tmp_path: Path) -> None:
     target = tmp_path / "a #1 %.html"
     target.write_text("x", encoding="utf-8")
     assert "href='a%20%231%20%25.html'" in _link(target, tmp_path, "x")
+
+
+def test_a_cut_name_is_the_same_whatever_is_selected(tmp_path: Path) -> None:
+    """Two plans whose names differ only past the cut were both cut to one stem, and the
+    second got `-2`, which depended on the selection: `--lf` then ran one plan under the
+    other's name and overwrote its recording (helper-125)."""
+    a = _plan(tmp_path / ("制" * 80 + "甲.yaml"))
+    b = _plan(tmp_path / ("制" * 80 + "乙.yaml"))
+    both = output_stems([load_plan(a), load_plan(b)])
+    assert len(set(both)) == 2
+    assert output_stems([load_plan(b)]) == [both[1]]  # alone, the same name as in the pair
+    assert output_stems([load_plan(a)]) == [both[0]]
+    assert all(len(s.encode("utf-8")) <= 200 for s in both)

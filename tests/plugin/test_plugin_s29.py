@@ -314,3 +314,60 @@ def test_specs(hil_drive, hil_check):
     [rec] = glob.glob(str(pytester.path / "reports" / "pytest" / "*rec_only.mcap"))
     result = Recording.open(rec).metadata().get("hil.result", {})
     assert result.get("status") == "pass" and float(result.get("duration_ms")) > 0
+
+
+def test_a_step_cut_by_pytest_timeout_ran_and_its_plan_is_in_the_junit(pytester) -> None:
+    """The step pytest-timeout cut was recorded "skipped, not run" (Ctrl-C records "error,
+    interrupted while it ran"), and the JUnit named no recording for the cut plan."""
+    (pytester.path / "long.yaml").write_text(
+        "name: long\nsteps:\n  - di: {SON: on}\n  - wait: 40000s\n", encoding="utf-8")
+    pytester.makepyfile(test_np="""
+def test_plan(hil_run_plan):
+    assert hil_run_plan("long.yaml").passed
+""")
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "--timeout=2",
+                                        "--junitxml=j.xml")
+    res.assert_outcomes(failed=1)
+    [rec] = glob.glob(str(pytester.path / "reports" / "pytest" / "*.mcap"))
+    ends = [m for _, _, _, m in Recording.open(rec).messages("/plan/steps")
+            if m.get("event") == "end"]
+    wait = next(m for m in ends if m["index"] == 1)
+    assert wait["status"] == "error" and "while it ran" in wait["message"], wait
+    junit = (pytester.path / "j.xml").read_text(encoding="utf-8")
+    assert '<property name="recording"' in junit and Path(rec).name in junit
+
+
+def test_a_recorder_only_test_that_judges_nothing_is_nothing_to_judge(pytester, tmp_path,
+                                                                       capsys) -> None:
+    """A whole recording with no channel (a skipped test of `hil_recorder` alone) was judged
+    with every spec's defaults: 186 skipped and 20 inconclusive, exit 3."""
+    from hil.cli import main as hil
+
+    pytester.makepyfile(test_skip="""
+import pytest
+
+def test_skipped(hil_recorder):
+    pytest.skip("not today")
+""")
+    pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider").assert_outcomes(skipped=1)
+    [rec] = glob.glob(str(pytester.path / "reports" / "pytest" / "*.mcap"))
+    capsys.readouterr()
+    assert hil(["check", rec, "--json"]) == 4
+    out = capsys.readouterr()
+    assert out.out.strip() == "[]" and "holds no channel: nothing to judge" in out.err
+
+
+def test_hil_check_of_a_missing_spec_path_is_an_error(pytester) -> None:
+    """`hil_check("spec/servo_on_brake.yaml")`, a folder that does not exist, was judged
+    with the shipped spec of that name."""
+    pytester.makepyfile(test_p="""
+import pytest
+
+def test_x(hil_drive, hil_check):
+    with pytest.raises(ValueError, match="no such file"):
+        hil_check("spec/servo_on_brake.yaml")
+    hil_drive.set_function("SON", True)
+    hil_drive.dio.wait_for("DO6", True, 2.0)
+    hil_check("servo_on_brake.yml")  # the shipped one, by a name with the other suffix
+""")
+    pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider").assert_outcomes(passed=1)

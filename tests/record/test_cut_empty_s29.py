@@ -135,3 +135,13 @@ def test_a_first_chunk_damaged_is_judged_and_exported_as_nothing(tmp_path, capsy
     assert hil(["export", str(bad), "-o", str(tmp_path / "x.log")]) == 2
     assert "damaged before its first channel" in capsys.readouterr().err
     assert not (tmp_path / "x.log").exists()
+
+
+def test_a_damaged_recording_without_a_result_is_incomplete_not_aborted(tmp_path) -> None:
+    """With its first chunk unreadable, how the run ended is unknown: the page said
+    ABORTED, which nothing in the file supports (helper-125)."""
+    from hil.report.data import load_run
+
+    bad = tmp_path / "bad.mcap"
+    _first_chunk_damaged(bad)
+    assert load_run(bad).status == "incomplete"
