@@ -49,8 +49,11 @@ class LeaseRefused(RuntimeError):
         self.bench, self.holder, self.since_ns, self.reason = bench, holder, since_ns, reason
         self.since = datetime.fromtimestamp(since_ns / S).astimezone() if since_ns else None
         when = self.since.isoformat(timespec="seconds") if self.since else "?"
-        super().__init__(f"bench {bench} is leased by {holder} since {when}"
-                         + ("" if reason == "held" else f" ({reason})"))
+        if reason.startswith("bad request"):  # refused for what it asked, not held: no
+            super().__init__(f"bench {bench} refused the lease request: {reason}")  # holder
+        else:
+            super().__init__(f"bench {bench} is leased by {holder} since {when}"
+                             + ("" if reason == "held" else f" ({reason})"))
 
 
 class GatewayUnreachable(ConnectionError):

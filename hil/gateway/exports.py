@@ -61,6 +61,7 @@ class _Export:
         self._thread: threading.Thread | None = None
         self._opened_once = False
         self._refused_logged = 0.0
+        self._bad_logged = 0.0
         self._entities: list[Any] = []
 
     def _declare(self) -> None:
@@ -111,6 +112,16 @@ class _Export:
 
     def _close_backend(self) -> None:
         raise NotImplementedError
+
+    def _bad(self, why: str) -> None:
+        """A sample from the holder that no device could send: dropped and counted (`bad`),
+        logged at most once a second."""
+        with self.health.lock:
+            self.health.bad += 1
+        now = time.monotonic()
+        if now - self._bad_logged > 1.0:
+            self._bad_logged = now
+            self.gw._log("warning", why)
 
     def _refuse(self, sample: zenoh.Sample) -> None:
         with self.health.lock:
@@ -222,8 +233,10 @@ class CanExport(_Export):
             return
         try:
             msg = unpack_can(sample.payload.to_bytes(), time.time(), self.name)
+            if msg.is_error_frame:  # a controller signals errors, it never sends one
+                raise ValueError("an error frame: no controller sends one as a frame")
         except ValueError as e:
-            self.gw._log("warning", f"can {self.name}: bad sample: {e}")
+            self._bad(f"can {self.name}: bad sample: {e}")
             return
         with contextlib.suppress(OSError, can.CanError):
             self.send(msg)
@@ -284,6 +297,13 @@ class SerialExport(_Export):
     def _is_open(self) -> bool:
         return self.line is not None and not self.line.closed
 
+    def discard_output(self) -> None:
+        """Drop the bytes written to the line that have not left yet (the lease ended)."""
+        line = self.line
+        if line is not None:
+            with contextlib.suppress(OSError):
+                line.discard_output()
+
     def _open(self) -> None:
         self.line = self._factory(self.name, self.url)
 
@@ -323,7 +343,7 @@ class SerialExport(_Export):
         try:
             data, _t0, _pub, _rel = unpack_chunk(sample.payload.to_bytes())
         except (ValueError, struct.error) as e:
-            self.gw._log("warning", f"rs485 {self.name}: bad sample: {e}")
+            self._bad(f"rs485 {self.name}: bad sample: {e}")
             return
         line = self.line
         if line is None:
@@ -333,7 +353,8 @@ class SerialExport(_Export):
         try:
             line.write(data)
         except OSError as e:
-            self._lost(e)
+            if self.line is line:  # not a line the poll thread has reopened since
+                self._lost(e)
             return
         with self.health.lock:
             self.health.tx += len(data)
@@ -418,6 +439,7 @@ class DioExport(_Export):
             return
         payload = sample.payload.to_bytes()
         if payload not in (b"0", b"1"):
+            self._bad(f"dio {self.name}: bad sample on {line}: not 0 or 1")
             return
         with contextlib.suppress(OSError, ValueError):
             self.set(line, payload == b"1")

@@ -106,6 +106,9 @@ class Gateway:
         self.prefix = keys.prefix(config.lab, self.name)
         if not config.listen and not config.connect:
             raise ValueError("hil gateway: give at least one --listen or --connect endpoint")
+        period = config.health_period_s
+        if not 0.01 <= period <= 3600:  # NaN too: a negative period published ~100 a second
+            raise ValueError(f"--health-period {period:g} s: must be 0.01..3600 s")
         self._remote = check_exposure(config.listen, config.connect, config.tls,
                                       config.allow_cn)
         if config.tls is not None:
@@ -336,6 +339,8 @@ class Gateway:
 
     def _end(self, info: LeaseInfo, reason: str, *, safe: bool, wait: bool = False) -> None:
         self._lease_event("ended", info.holder, {**info.public(), "reason": reason})
+        for export in self.rs485.values():  # the holder's bytes still queued for the line
+            export.discard_output()  # never reach the bench after its lease (helper-126)
         if not safe:
             self.lease.safe_done()
             return
@@ -389,9 +394,12 @@ class Gateway:
         return {"drive": drive, "action": action, "ok": ok, "detail": msg, **extra}
 
     def _log(self, level: str, message: str) -> None:
-        getattr(log, level if level != "warning" else "warning")(message)
+        """To Python logging once: through the recorder, which forwards it there, when
+        there is one (a line went to stderr twice, helper-126)."""
         if self.recorder is not None:
             self.recorder.log(level, message, name="hil.gateway")
+        else:
+            getattr(log, level)(message)
 
 
 __all__ = [

@@ -36,6 +36,7 @@ class BusHealth:
     rx: int = 0  # from the bench to the network
     tx: int = 0  # from the holder onto the bench
     refused: int = 0  # samples without the current holder's lease token (dropped)
+    bad: int = 0  # the holder's samples no device could send (a bad frame, chunk or level)
     errors: int = 0  # adapter / port errors (OSError, CanError, serial errors)
     reopens: int = 0
     last_error: str = ""

@@ -44,8 +44,9 @@ class _GatewayDrive:
             lambda m: m.arbitration_id == canopen.SDO_RESPONSE + node
             and bytes(m.data[1:4]) == b"\x40\x60\x00",
             min(timeout_s, 1.0))
-        if ans is None:
-            return "sent; no SDO answer"
+        if ans is None:  # sent, but the drive did not say it took it: not confirmed, as
+            raise TimeoutError(  # the runner's safe state counts it (helper-126)
+                f"sent; no SDO answer within {min(timeout_s, 1.0):g} s: not confirmed")
         return "acknowledged" if ans.data[0] == 0x60 else False  # 60h: download response
 
     def _upload(self, index: int, timeout_s: float) -> int | None:

@@ -277,8 +277,8 @@ def _lease_urls(s: Session, urls: dict[str, str]) -> dict[str, str]:
     assert gw is not None
     try:
         s.lease = acquire(gw.lab, gw.bench, holder=gw.holder, connect=gw.connect, mode=gw.mode)
-    except LeaseRefused as e:
-        raise BenchError(f"bench {gw.lab}/{gw.bench}: {e}") from e
+    except LeaseRefused as e:  # its message names the bench already
+        raise BenchError(str(e)) from e
     except ConnectionError as e:
         raise BenchError(f"bench {gw.lab}/{gw.bench}: gateway not reachable at "
                          f"{', '.join(gw.connect)}: {e}") from e

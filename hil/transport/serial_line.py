@@ -28,6 +28,7 @@ import functools
 import os
 import select
 import struct
+import termios
 import threading
 import time
 import tty
@@ -162,6 +163,12 @@ class SerialLine:
     def flush(self, timeout: float | None = None) -> bool:
         """Wait until every written byte has left (True) or `timeout` s passed (False)."""
         return True
+
+    def discard_output(self) -> None:
+        """Drop what was written but has not left yet (a lease ended: its holder's bytes
+        must not reach the bench after it, docs/gateway.md). The next write starts now."""
+        with self._cond:
+            self._tx_free = 0
 
     # -- reading ---------------------------------------------------------------------
     def read(self, n: int = 1, timeout: float | None = None) -> bytes:
@@ -385,6 +392,12 @@ class PtyLine(SerialLine):
             with self._tx_cond:
                 self._tx_cond.notify_all()
 
+    def discard_output(self) -> None:
+        with self._tx_cond:
+            self._tx.clear()
+            self._tx_cond.notify_all()
+        super().discard_output()
+
     def flush(self, timeout: float | None = None) -> bool:
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._tx_cond:
@@ -452,6 +465,11 @@ class PySerialLine(SerialLine):
     def flush(self, timeout: float | None = None) -> bool:
         self.port.flush()
         return True
+
+    def discard_output(self) -> None:
+        with contextlib.suppress(serial.SerialException, OSError, termios.error):
+            self.port.reset_output_buffer()  # the driver's and the UART's queue (TCOFLUSH)
+        super().discard_output()
 
     def _close_backend(self) -> None:
         self._reader.join(1)

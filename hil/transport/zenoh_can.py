@@ -73,10 +73,12 @@ def _check_frame(can_id: int, flags: int, dlc: int, data: bytes) -> None:
     if can_id > (0x1FFFFFFF if flags & EXT else 0x7FF):
         raise ValueError(f"CAN id 0x{can_id:X} beyond {'29' if flags & EXT else '11'} bits")
     if flags & ERR:
-        if len(data) > 8:
-            raise ValueError(f"error frame with {len(data)} data bytes")
+        if len(data) > 8 or dlc > 8:
+            raise ValueError(f"error frame with {len(data)} data bytes, DLC {dlc}")
         return
     if flags & FD:
+        if flags & RTR:
+            raise ValueError("an FD frame has no remote form")
         if len(data) not in FD_LENGTHS or dlc != len(data):
             raise ValueError(f"FD frame of {len(data)} bytes, DLC {dlc}")
     elif flags & RTR:
