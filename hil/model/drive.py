@@ -274,6 +274,11 @@ class Drive:
         # P1.055 (no power-cycle mark, L8700) limits every mode at once (L4034), and 607Fh /
         # 6080h read it (L18713-18735)
         self.params.on_write("P1.055", lambda _n, _o, new: self.cia402.set_max_speed(new))
+        # 6093h sub 1/2 are P1.044/P1.045 (L18838-18854): a write of the parameter, however
+        # it came (212Ch, Modbus, a PR WRITE), is the CiA 402 side's gear at once too
+        for name_ in ("P1.044", "P1.045"):
+            self.params.on_write(name_, lambda *_: self.cia402.set_gear(
+                self.params.get("P1.044"), self.params.get("P1.045")))
 
     # ------------------------------------------------------------------ public API
     @property
@@ -355,6 +360,17 @@ class Drive:
             except ModelError as exc:  # ParamError, UnknownFunction (P2.010 = 0x0007) ...
                 raise ObjectError(index, sub, _abort_for(exc, value), str(exc)) from exc
             return
+        if index == 0x6093 and sub in (1, 2):  # 6093h is P1.044 / P1.045 (L18838-18854):
+            if self.cia402.servo_enable_requested:  # written as the parameter, its range,
+                raise ObjectError(index, sub, ABORT_DATA_STATE,  # ▲ and refusals included
+                                  "e-gear not writable while servo on (▲, L6721)")
+            try:  # (helper-127: a write here skipped them, and a parameter write never
+                self.params.write("P1.044" if sub == 1 else "P1.045", value)  # reached here)
+            except ObjectError:
+                raise
+            except ModelError as exc:
+                raise ObjectError(index, sub, _abort_for(exc, value), str(exc)) from exc
+            return
         if 0x6000 <= index <= 0x6FFF:
             try:
                 self.cia402.write(index, sub, value)
@@ -430,6 +446,7 @@ class Drive:
         self.brake.reset()
         self.sto.power_off()
         self.monitors.account()  # P0.008's hours up to the power-off
+        self.monitors.cn2.offset = 0  # P5.016's offset is RAM (monitors.AxisPositionCn2)
         self.powered = False
         self.dio.power_off()
         self.holding_brake.coil(False)  # no control power: no DO conducts, the brake engages
@@ -590,10 +607,6 @@ class Drive:
     def _on_object_written(self, index: int, sub: int, value: int) -> None:
         if index == 0x6060:  # the mode decides which DI functions act (di_functions.py)
             self.difunc.refresh()
-        if index == 0x6093 and sub in (1, 2):  # 6093h = P1.044 / P1.045 (L18838-18854)
-            name = "P1.044" if sub == 1 else "P1.045"
-            if self.params.read(name) != value:
-                self.params.set_as_written(name, value)
         if index in (0x607F, 0x6080):  # 6080h "is P1.055", 607Fh = P1.055 x 10 (L18713-18735)
             rpm = round(value / 10) if index == 0x607F else value
             if self.params.read("P1.055") != rpm:

@@ -220,8 +220,29 @@ def _selected(drive: Any, reg: str, select: str) -> Callable[[], int]:
     code nothing models keeps the register's stored value."""
     def read() -> int:
         part = drive.hooks.monitors.get(drive.params.get(select))
-        return part() if part is not None else drive.params.stored(reg)
+        # a 32-bit register (L7150): a PUU count past 2^31 wraps as 6064h does (L16417)
+        return s32(part()) if part is not None else drive.params.stored(reg)
     return read
+
+
+class AxisPositionCn2:
+    """P5.016 (L11280-11286): read, the CN2 feedback position, monitor 000 plus an offset;
+    a write of any value only sets that offset, so that it reads back what was written,
+    monitor 000 and the coordinates untouched ("只是為了調整一偏移值，方便觀察用"). The
+    offset is the drive's RAM: a power cycle starts it at 0."""
+
+    def __init__(self, drive: Any) -> None:
+        self.d, self.offset = drive, 0
+
+    def _fb_puu(self) -> int:
+        part = self.d.hooks.monitors.get(0)  # monitor 000, Fb_PUU (L15440)
+        return part() if part is not None else 0
+
+    def read(self) -> int:
+        return s32(self._fb_puu() + self.offset)
+
+    def write(self, _name: str, _old: int, new: int) -> None:
+        self.offset = new - self._fb_puu()
 
 
 # the status monitor registers and their selectors: P0.009-P0.013 by P0.017-P0.021 (L7147-7237)
@@ -249,4 +270,7 @@ def attach_monitors(drive: Any) -> Monitors:
         except ModelError:  # ... that names no parameter or a register: unmapped
             drive.params.set_internal(m.target, 0)
     drive.params.on_read("P0.008", mon.p0008)
+    cn2 = mon.cn2 = AxisPositionCn2(drive)
+    drive.params.on_read("P5.016", cn2.read)
+    drive.params.on_write("P5.016", cn2.write)
     return mon

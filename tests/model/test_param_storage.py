@@ -117,6 +117,7 @@ def test_an_sdo_write_of_a_cia402_object_that_is_a_parameter_is_kept(tmp_path):
     path = tmp_path / "state"
     d = Drive(inputs={8: True}, state_path=path)
     d.write_object(0x6080, 0, 2000)
-    d.write_object(0x6093, 1, 1000)
+    # (a ratio PT mode takes: 6093h is written as P1.044 is, its checks included)
+    d.write_object(0x6093, 1, 1_000_000)
     again = Drive(inputs={8: True}, state_path=path)
-    assert again.params.read("P1.055") == 2000 and again.params.read("P1.044") == 1000
+    assert again.params.read("P1.055") == 2000 and again.params.read("P1.044") == 1_000_000
