@@ -25,8 +25,8 @@ from hil.protocol.cia402 import CONTROLWORD
 # default, 10 rpm (0.1 rpm units, L8407)
 STANDSTILL = 100
 
-__all__ = ["DriveGone", "SafeDrive", "SafeReport", "SafeStateSpec", "run_safe_state",
-           "wait_quick_stop"]
+__all__ = ["DriveGone", "SafeDrive", "SafeReport", "SafeStateSpec", "Unanswered",
+           "run_safe_state", "wait_quick_stop"]
 
 
 def wait_quick_stop(read: Callable[[int], int | None], timeout_ns: int,
@@ -116,6 +116,11 @@ def _raise(e: Exception) -> None:
     raise e
 
 
+class Unanswered(TimeoutError):
+    """A command was sent but no answer said it was taken (an SDO download without its
+    response): not confirmed, but maybe acting (a quick stop's ramp is still waited for)."""
+
+
 def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
                    record: Record | None = None) -> SafeReport:
     """Drive every drive to `safe`; never raises. Returns what was done and whether it held."""
@@ -129,6 +134,8 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
             msg = detail if isinstance(detail, str) else "" if ok else "not confirmed"
         except DriveGone as e:
             ok, msg = False, str(e)
+        except Unanswered as e:  # sent: what follows it (a ramp) may still confirm it
+            ok, msg, extra = False, f"not confirmed: {e}", {**extra, "sent": True}
         except Exception as e:
             ok, msg = False, f"{type(e).__name__}: {e}"
         rep.actions.append({"drive": drive, "action": action, "ok": ok, "detail": msg, **extra})
@@ -152,7 +159,8 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
             if d.has_controlword():
                 act(d.name, f"controlword {safe.controlword} (0x{cw:02X})",
                     lambda d=d, cw=cw: d.write_controlword(cw))
-                sent[d.name] = rep.actions[-1]["ok"]
+                last = rep.actions[-1]
+                sent[d.name] = bool(last["ok"] or last.get("sent"))  # unanswered: may ramp
     # a drive whose quick stop failed is not stopping: it is made safe first, waiting on no
     # other drive's ramp (stable: the others keep their order)
     for d in sorted(live, key=lambda d: sent.get(d.name, True)):

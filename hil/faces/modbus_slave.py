@@ -553,6 +553,14 @@ class ModbusSlave:
             self._callback("on_comm_error", self.on_comm_error, code, message)
         return None if broadcast else mb.exception_response(fn, code)
 
+    def station_written(self) -> None:
+        """P3.000 changed, however it was written (Modbus, an SDO of 2300h, a plan): from
+        now on the parameter sets the station, at the next power cycle (●, L7014), as
+        P3.001/P3.002 set the line once written (helper-124: a virtual drive given its
+        station by the bench kept it for ever; a write of the value it held changes
+        nothing)."""
+        self._explicit_station = None
+
     def params_written(self) -> None:
         """P3.001 / P3.002 written another way (an SDO, a test): the next frame uses them, as
         after a write over the line (L16035, L16037; P3.002 has no ● mark, and P3.001's is for
@@ -567,12 +575,8 @@ class ModbusSlave:
         self._apply_line()
 
     def _after_write(self, address: int, count: int) -> None:
-        """P3.001 / P3.002 written: the next frame uses them (L16035, L16037). P3.000
-        written over the line: from now on the parameter sets the station, at the next
-        power cycle (●, L7014), as P3.001/P3.002 set the line once written (helper-124: a
-        virtual drive given its station by the bench kept it for ever)."""
-        if address <= P3_000 + 1 and address + count > P3_000:
-            self._explicit_station = None
+        """P3.001 / P3.002 written: the next frame uses them (L16035, L16037). (P3.000:
+        `station_written`, however it was written.)"""
         if address <= P3_002 + 1 and address + count > P3_001:
             p3001, p3002 = self._param(P3_001), self._param(P3_002)
             mode, fmt = mb.P3002_PROTOCOLS.get(p3002, (self.line.mode, self.line.char_format))

@@ -10,7 +10,7 @@ import can
 
 from hil.gateway.exports import DioExport
 from hil.protocol import canopen
-from hil.safety import run_safe_state, wait_quick_stop
+from hil.safety import Unanswered, run_safe_state, wait_quick_stop
 from hil.units import S
 
 if TYPE_CHECKING:
@@ -45,8 +45,8 @@ class _GatewayDrive:
             and bytes(m.data[1:4]) == b"\x40\x60\x00",
             min(timeout_s, 1.0))
         if ans is None:  # sent, but the drive did not say it took it: not confirmed, as
-            raise TimeoutError(  # the runner's safe state counts it (helper-126)
-                f"sent; no SDO answer within {min(timeout_s, 1.0):g} s: not confirmed")
+            raise Unanswered(  # the runner's safe state counts it (helper-126)
+                f"sent; no SDO answer within {min(timeout_s, 1.0):g} s")
         return "acknowledged" if ans.data[0] == 0x60 else False  # 60h: download response
 
     def _upload(self, index: int, timeout_s: float) -> int | None:

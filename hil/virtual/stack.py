@@ -321,6 +321,8 @@ class VirtualDriveStack:
         if (isinstance(event, ParamChanged) and event.name in ("P3.001", "P3.002")
                 and self.modbus is not None):
             self.modbus.params_written()  # an SDO's too: the next frame (L16035, L16037)
+        if isinstance(event, ParamChanged) and event.name == "P3.000" and self.modbus is not None:
+            self.modbus.station_written()  # at the next power cycle (●, L7014)
         if (isinstance(event, AlarmChanged) and event.code == "AL020" and not event.active
                 and self.modbus is not None and self.drive.options.al020_rearm == "reset"):
             # P3.004 counts again from the reset, on the face's own (line) clock

@@ -41,3 +41,37 @@ def test_a_station_written_over_modbus_is_the_station_after_a_power_cycle(tmp_pa
         finally:
             line.close()
             stack.stop()
+
+
+def test_a_station_written_by_sdo_moves_too_and_a_rewrite_of_the_same_value_does_not(
+        tmp_path: Path) -> None:
+    """helper-128: an SDO write of 2300h (P3.000, the node ID and the station) left the
+    bench's station; a Modbus write of the value P3.000 already held handed the station to
+    it (node ID 3, station 5: the drive moved to 3)."""
+    clk = VirtualClock()
+    with clock.use(clk):
+        url = f"pty:{tmp_path}/l?baud=38400"
+        stack = VirtualDriveStack(DriveSpec(rs485=url, station=5, node_id=3)).start()
+        line = open_serial(f"serial:{tmp_path}/l?baud=38400")
+        try:
+            def ask(station: int) -> bool:
+                clock.sleep(0.05)
+                line.write(mb.encode_adu(station, mb.read_request(0x0300, 1), "rtu"))
+                return line.read_frame(timeout=0.3) is not None
+
+            def power_cycle() -> None:
+                stack.host.call(stack.drive.power_cycle)
+                stack.modbus.power_cycle()
+                clock.sleep(0.5)
+
+            assert ask(5) and stack.drive.params.get("P3.000") == 3
+            line.write(mb.encode_adu(5, bytes([6, 3, 0, 0, 3]), "rtu"))  # P3.000 = 3 again
+            assert line.read_frame(timeout=0.3) is not None
+            power_cycle()
+            assert ask(5) and not ask(3)
+            stack.host.call(stack.drive.write_object, 0x2300, 0, 9)  # SDO 2300h: P3.000 = 9
+            power_cycle()
+            assert ask(9) and not ask(5)
+        finally:
+            line.close()
+            stack.stop()

@@ -111,3 +111,48 @@ def test_a_bad_lease_request_is_not_shown_as_a_held_bench(make_rig) -> None:
     assert "refused the lease request: bad request" in str(e.value)
     assert "leased by" not in str(e.value)
 
+
+
+def test_an_unanswered_quick_stop_is_still_waited_for_before_disable_voltage() -> None:
+    """helper-128: once a controlword without an SDO answer was not confirmed, a quick stop
+    whose answer came late skipped its ramp and disable voltage cut the power stage mid-ramp.
+    Unanswered is not confirmed, but the ramp wait (6041h/606Ch) still runs."""
+    from types import SimpleNamespace
+
+    from hil.safety import Unanswered, run_safe_state
+    from hil.units import S
+
+    log: list[str] = []
+
+    class Late:
+        name = "x"
+
+        def gone(self) -> None:
+            return None
+
+        def has_controlword(self) -> bool:
+            return True
+
+        def write_controlword(self, cw: int) -> str:
+            log.append(f"cw 0x{cw:02X}")
+            raise Unanswered("sent; no SDO answer within 1 s")
+
+        def quick_stop_done(self, timeout_ns: int) -> str:
+            log.append("ramp")
+            return "ramp ended"
+
+        def di_wired(self, f: str) -> bool:
+            return False
+
+        def has_sto(self) -> bool:
+            return False
+
+        def has_brkr(self) -> bool:
+            return False
+
+    spec = SimpleNamespace(controlword="quick_stop", di={}, sto={}, wait_brake=False,
+                           timeout_ns=2 * S)
+    rep = run_safe_state([Late()], spec, "test")
+    assert log == ["cw 0x02", "ramp", "cw 0x00"]
+    assert rep.ok is False  # never confirmed by an answer
+    assert rep.actions[0]["detail"].startswith("not confirmed")
