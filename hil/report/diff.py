@@ -267,6 +267,36 @@ def _param_moves(a: Side, b: Side, sig: Signature) -> tuple[str, float, float] |
     return None
 
 
+def _unset(x: Any) -> str:
+    return "not set (its default)" if x is None else str(x)
+
+
+def _recorded_options(a: Side, b: Side, sig: Signature) -> dict | None:
+    """On two recordings whose model options are on record (virtual benches), what they say
+    instead of a guess: the option of this interval that differs, with its two values; or,
+    when none of its options differs, the options that do (helper-129: a page showed
+    dev_brake_on_delay_ms 30 in A and 6 in B and explained "~ -24 ms, the option at 0 in
+    A", and named dev_brake_off_delay_ms for a run that differed only in
+    dev_ignore_speed_rule). None when the options are not known, or no option differs and
+    a parameter may explain it."""
+    if not a.options and not b.options:
+        return None
+    names = [o for o in sig.options if not _is_param(o)]
+    for o in names:
+        va, vb = a.options.get(o), b.options.get(o)
+        if va != vb:
+            return {"option": o, "estimate": vb,
+                    "basis": f"{o} differs in the recordings ({_unset(va)} in A, "
+                             f"{_unset(vb)} in B)"}
+    other = sorted(k for k in set(a.options) | set(b.options)
+                   if a.options.get(k) != b.options.get(k) and k not in names)
+    if other and _param_moves(a, b, sig) is None:
+        return {"option": ", ".join(other), "estimate": None,
+                "basis": "none of this interval's options differs in the recordings; "
+                         f"these do: {', '.join(other)}"}
+    return None
+
+
 def explain(a: Side, b: Side) -> list[dict]:
     """Model options that would explain the differences, with an estimate of their size."""
     out = []
@@ -279,6 +309,12 @@ def explain(a: Side, b: Side) -> list[dict]:
         if abs(delta) < max(MIN_DELTA_MS, 0.05 * abs(ma)):
             continue
         option = sig.options[0]
+        recorded = _recorded_options(a, b, sig)  # virtual benches: the options are known
+        if recorded is not None:
+            out.append({"signature": sig.key, "what": sig.what, "options": list(sig.options),
+                        "a_ms": round(ma, 3), "b_ms": round(mb, 3), "delta_ms": round(delta, 3),
+                        "n": [len(ia), len(ib)], **recorded})
+            continue
         moved = _param_moves(a, b, sig)  # a parameter of this interval differs: its part
         if moved is not None:
             p, pa, pb = moved
@@ -423,6 +459,22 @@ def _n(x: Any) -> str:
     return "–" if x is None else (f"{x:.3f}" if isinstance(x, float) else esc(str(x)))
 
 
+def _estimate_html(est: Any) -> str:
+    """` ≈ 6 ms` (a size), ` ≈ True` (an option's value), nothing when none is known."""
+    if est is None:
+        return ""
+    unit = "" if isinstance(est, bool) or not isinstance(est, int | float) else " ms"
+    return f" ≈ <b>{_n(est)}</b>{unit}"
+
+
+def _verdict_cell(v: dict, side: str) -> str:
+    """A verdict's value and status in one run; "not in this run" where it has none."""
+    status = v[f"{side}_status"]
+    if status is None:
+        return "– <small>not in this run</small>"
+    return f"{_n(v[f'{side}_ms'])} {esc(str(status))}"
+
+
 def render_html(d: dict) -> str:
     h = ["<!DOCTYPE html><html><head><meta charset='utf-8'>",
          f"<title>hil diff: {esc(d['a']['plan'])}</title><style>{CSS}</style></head><body>",
@@ -430,6 +482,8 @@ def render_html(d: dict) -> str:
          f"<p>A <code>{esc(d['a']['path'])}</code> (bench {esc(d['a']['bench'])}) · "
          f"B <code>{esc(d['b']['path'])}</code> (bench {esc(d['b']['bench'])}) · times in ms from "
          "A's plan start, B mapped onto A step by step</p>"]
+    for why in d.get("incomplete", ()):  # a cut or damaged file: compared as far as it goes
+        h.append(f"<p class='fail'>Incomplete: {esc(why)}</p>")
     if not d["same_plan"] or not d["same_steps"]:
         h.append("<p class='fail'>The recordings are not of the same plan (steps differ): "
                  "the alignment is by step index only.</p>")
@@ -440,7 +494,7 @@ def render_html(d: dict) -> str:
         for e in d["explanations"]:
             h.append(f"<tr><td>{esc(e['what'])}</td><td>{_n(e['a_ms'])}</td><td>{_n(e['b_ms'])}"
                      f"</td><td>{_n(e['delta_ms'])}</td><td>{esc(', '.join(e['options']))}</td>"
-                     f"<td>{esc(e['option'])} ≈ <b>{_n(e['estimate'])}</b> ms<br><small>"
+                     f"<td>{esc(e['option'])}{_estimate_html(e['estimate'])}<br><small>"
                      f"{esc(e['basis'])}</small></td></tr>")
         h.append("</table>")
     else:
@@ -451,9 +505,9 @@ def render_html(d: dict) -> str:
         step = v["step"] + 1 if isinstance(v["step"], int) else "–"
         h.append(f"<tr><td>{step}</td><td>{esc(str(v['spec']))}</td>"
                  f"<td>{esc(str(v['constraint']))}</td>"
-                 f"<td class='{esc(str(v['a_status']))}'>{_n(v['a_ms'])} {esc(str(v['a_status']))}"
-                 f"</td><td class='{esc(str(v['b_status']))}'>{_n(v['b_ms'])} "
-                 f"{esc(str(v['b_status']))}</td><td>{_n(v['delta_ms'])}</td></tr>")
+                 f"<td class='{esc(str(v['a_status']))}'>{_verdict_cell(v, 'a')}</td>"
+                 f"<td class='{esc(str(v['b_status']))}'>{_verdict_cell(v, 'b')}</td>"
+                 f"<td>{_n(v['delta_ms'])}</td></tr>")
     h.append("</table><h2>Edges per signal</h2><table><tr><th>signal</th><th>edge</th>"
              "<th>step</th><th>A ms</th><th>B ms</th><th>delta ms</th></tr>")
     labels = {s["index"]: s["label"] for s in d["steps"]}
@@ -484,8 +538,12 @@ def render_html(d: dict) -> str:
 
 
 def write_diff(a: str | Path, b: str | Path, html_out: str | Path,
-               json_out: str | Path | None = None) -> tuple[dict, Path, Path]:
+               json_out: str | Path | None = None,
+               incomplete: list[str] | None = None) -> tuple[dict, Path, Path]:
+    """The comparison to `html_out` and `json_out`; `incomplete`: what the caller found cut
+    or damaged in the files (`hil diff`'s reader checks), on the page and in the JSON too."""
     d = diff(a, b)
+    d["incomplete"] = [*(incomplete or ()), *d["incomplete"]]
     html_out = Path(html_out)
     json_out = Path(json_out) if json_out else html_out.with_suffix(".json")
     write_text_atomic(html_out, render_html(d))

@@ -60,7 +60,7 @@ def main(args: argparse.Namespace) -> int:
         if same_file(out, json_out):  # `-o x.json` makes its JSON beside it: the same file
             how = "--json" if args.json else "the JSON output (-o's name with .json)"
             raise FileProblem(f"{how} {json_out}: is the HTML output (-o) too")
-        d, html_out, json_out = write_diff(args.a, args.b, out, json_out)
+        d, html_out, json_out = write_diff(args.a, args.b, out, json_out, partial)
     except (RecordingError, FileProblem) as e:
         print(f"hil diff: {e}", file=sys.stderr)
         return 2
@@ -71,17 +71,29 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil diff: A ran plan {d['a']['plan']!r} and B {d['b']['plan']!r}: the "
               "differences below may come from the plans, not the drive", file=sys.stderr)
     for p, (pa, pb) in d["params"].items():
-        print(f"parameter {p}: A {pa}, B {pb}")
+        print(f"parameter {p}: A {_v(pa)}, B {_v(pb)}")
+    for o, (oa, ob) in d["options"].items():  # (recording.md: "on stdout as well")
+        print(f"option {o}: A {_v(oa)}, B {_v(ob)}")
     for e in d["explanations"]:
-        print(f"{e['what']}: A {e['a_ms']} ms, B {e['b_ms']} ms (delta {e['delta_ms']} ms) "
-              f"-> {e['option']} ~ {e['estimate']} ms ({e['basis']})")
+        size = "" if e["estimate"] is None else f" ~ {e['estimate']}" + (
+            "" if isinstance(e["estimate"], bool) else " ms")
+        print(f"{e['what']}: A {_v(e['a_ms'])} ms, B {_v(e['b_ms'])} ms (delta "
+              f"{_v(e['delta_ms'])} ms) -> {e['option']}{size} ({e['basis']})")
     moved = sum(s["differs"] for s in d["signals"])
-    print(f"{moved} signal(s) with edges that differ, "
-          f"{sum(v['delta_ms'] not in (None, 0) for v in d['verdicts'])} verdict(s) measured "
-          f"differently, {len(d['states'])} state sequence(s) differ")
+    measured = sum(v["delta_ms"] not in (None, 0) for v in d["verdicts"])
+    one_sided = sum((v["a_status"] is None) != (v["b_status"] is None) for v in d["verdicts"])
+    status = sum(v["a_status"] is not None and v["b_status"] is not None
+                 and v["a_status"] != v["b_status"] for v in d["verdicts"])
+    print(f"{moved} signal(s) with edges that differ, {measured} verdict(s) measured "
+          f"differently, {status} with another status, {one_sided} in one run only, "
+          f"{len(d['states'])} state sequence(s) differ")
     print(html_out)
     print(json_out)
-    partial = [*partial, *d.get("incomplete", ())]
-    for why in partial:  # compared what the files hold; as `hil check`, that is exit 4
+    for why in d.get("incomplete", ()):  # compared what the files hold; as `hil check`, 4
         print(f"hil diff: incomplete: {why}", file=sys.stderr)
-    return 4 if partial else 0
+    return 4 if d.get("incomplete") else 0
+
+
+def _v(x: object) -> str:
+    """A value on stdout: "–" where the run had none (not Python's None)."""
+    return "–" if x is None else str(x)
