@@ -120,6 +120,7 @@ def load_side(path: str | Path) -> Side:
         line_func[line] = (func, contact == "b")
     last: dict[str, Any] = {}
     states: dict[str, list[str]] = {}
+    shapeless = [0]  # DI/DO records without a level
 
     def take(topic: str, lt: int, pt: int, raw: bytes) -> None:
         if topic.startswith("/can/"):
@@ -138,7 +139,10 @@ def load_side(path: str | Path) -> Side:
         elif topic == topics.TIMING_VERDICTS:
             key = (msg.get("spec"), msg.get("constraint"), msg.get("occurrence"))
             side.verdicts[key] = msg
-        elif topic.startswith("/dio/") and "level" in msg:
+        elif topic.startswith("/dio/"):
+            if type(msg.get("level")) is not bool and msg.get("level") not in (0, 1):
+                shapeless[0] += 1  # {} or "false": no level (it read as a True edge, or
+                return  # vanished, with exit 0: helper-129)
             line = topic.split("/")[3]
             func, inverted = line_func.get(line, ("", False))
             name = f"{line} {func}".strip()
@@ -164,7 +168,7 @@ def load_side(path: str | Path) -> Side:
                 seq.append(str(msg["statusword"]))
 
     whole = Recording.stream(path, None, take)
-    side.bad_messages = whole.bad_messages
+    side.bad_messages = whole.bad_messages + shapeless[0]
     full = whole.metadata().get("hil.run", {})
     side.plan, side.bench = full.get("plan", side.plan), full.get("bench", side.bench)
     side.states = states
@@ -428,7 +432,8 @@ def diff(a_path: str | Path, b_path: str | Path) -> dict:
     a, b = load_side(a_path), load_side(b_path)
     la = [a.labels[k] for k in sorted(a.labels)]
     lb = [b.labels[k] for k in sorted(b.labels)]
-    params = {p: [a.params.get(p), b.params.get(p)] for p in sorted(set(a.params) | set(b.params))
+    # the parameters both hold (a run cut before its snapshot holds none: not 554 changes)
+    params = {p: [a.params.get(p), b.params.get(p)] for p in sorted(set(a.params) & set(b.params))
               if a.params.get(p) != b.params.get(p)}
     options = {o: [a.options.get(o), b.options.get(o)]
                for o in sorted(set(a.options) | set(b.options))
@@ -439,6 +444,9 @@ def diff(a_path: str | Path, b_path: str | Path) -> dict:
     partial += [f"{x.path}: no step start could be read ({y.path} has {len(y.starts)}): its "
                 "edges cannot be placed in the plan's steps" for x, y in ((a, b), (b, a))
                 if y.starts and not x.starts]
+    partial += [f"{x.path}: holds no parameter values ({y.path} holds {len(y.params)}): its "
+                "parameters are not compared" for x, y in ((a, b), (b, a))
+                if y.params and not x.params]
     return {"a": {"path": a.path, "plan": a.plan, "bench": a.bench},
             "b": {"path": b.path, "plan": b.plan, "bench": b.bench},
             "same_plan": a.plan == b.plan, "same_steps": la == lb,

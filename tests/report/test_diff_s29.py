@@ -83,3 +83,48 @@ def test_verdicts_of_one_run_only_are_counted(runs, tmp_path, capsys) -> None:
     assert one > 0
     assert f"{one} in one run only" in capsys.readouterr().out
     assert "None" not in (tmp_path / "d.html").read_text(encoding="utf-8").split("<table")[-1]
+
+
+def test_a_level_record_of_a_wrong_shape_is_counted_and_params_of_one_run_not_listed(
+        runs, tmp_path, capsys) -> None:
+    """A DI/DO record with level "false" read as a True edge (or `{}` vanished), exit 0;
+    a recording cut before its parameter snapshot listed 554 "parameter P0.000: A 100, B
+    None" lines."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    src = Path(runs["base"])
+    bad = tmp_path / "bad.mcap"
+    with open(src, "rb") as f, open(bad, "wb") as out:
+        reader = make_reader(f)
+        w = Writer(out)
+        w.start(profile="", library="test")
+        ids: dict[int, int] = {}
+        schemas: dict[int, int] = {}
+        summary = reader.get_summary()
+        for sid, sch in summary.schemas.items():
+            schemas[sid] = w.register_schema(sch.name, sch.encoding, sch.data)
+        for cid, ch in summary.channels.items():
+            ids[cid] = w.register_channel(ch.topic, ch.message_encoding,
+                                          schemas.get(ch.schema_id, 0), dict(ch.metadata))
+        for m in reader.iter_metadata():
+            w.add_metadata(m.name, dict(m.metadata))
+        for a in reader.iter_attachments():
+            w.add_attachment(a.log_time, a.create_time, a.name, a.media_type, a.data)
+        changed = 0
+        for _s, ch, m in reader.iter_messages(log_time_order=False):
+            data = m.data
+            if ch.topic.endswith("/DO6") and not changed:
+                data, changed = b'{"level":"false"}', 1
+            w.add_message(ids[ch.id], m.log_time, data, m.publish_time)
+        w.finish()
+    assert changed
+    capsys.readouterr()
+    rc, d = _diff(runs["base"], str(bad), tmp_path)
+    assert rc == 4 and any("wrong shape" in w for w in d["incomplete"])
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(src.read_bytes()[:600])
+    capsys.readouterr()
+    rc, d = _diff(runs["base"], str(cut), tmp_path)
+    assert rc == 4 and d["params"] == {}
+    assert "parameter P0.000" not in capsys.readouterr().out
