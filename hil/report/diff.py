@@ -45,6 +45,7 @@ class Side:
     path: str
     plan: str = ""
     bench: str = ""
+    clock: str = ""  # `hil.clock`'s clock (virtual / real), "" where not recorded
     starts: dict[int, int] = field(default_factory=dict)  # step index -> start (ns)
     start_order: list[int] = field(default_factory=list)  # step indices as their starts came
     # (signal, t) -> how many step starts the recording held when the edge was recorded: an
@@ -96,7 +97,8 @@ def load_side(path: str | Path) -> Side:
     rec = Recording.head(path)
     meta = rec.metadata()
     run = meta.get("hil.run", {})
-    side = Side(str(path), run.get("plan", Path(path).stem), run.get("bench", "?"))
+    side = Side(str(path), run.get("plan", Path(path).stem), run.get("bench", "?"),
+                str(meta.get("hil.clock", {}).get("clock", "")))
     drive: dict = {}
     plan_opts: dict = {}
     for a in rec.attachments():
@@ -447,8 +449,8 @@ def diff(a_path: str | Path, b_path: str | Path) -> dict:
     partial += [f"{x.path}: holds no parameter values ({y.path} holds {len(y.params)}): its "
                 "parameters are not compared" for x, y in ((a, b), (b, a))
                 if y.params and not x.params]
-    return {"a": {"path": a.path, "plan": a.plan, "bench": a.bench},
-            "b": {"path": b.path, "plan": b.plan, "bench": b.bench},
+    return {"a": {"path": a.path, "plan": a.plan, "bench": a.bench, "clock": a.clock},
+            "b": {"path": b.path, "plan": b.plan, "bench": b.bench, "clock": b.clock},
             "same_plan": a.plan == b.plan, "same_steps": la == lb,
             "steps": [{"index": k, "label": a.labels.get(k, b.labels.get(k)),
                        "a_ms": round((a.starts[k] - a.t0) / MS, 3) if k in a.starts else None,
@@ -465,6 +467,12 @@ esc = html.escape
 
 def _n(x: Any) -> str:
     return "–" if x is None else (f"{x:.3f}" if isinstance(x, float) else esc(str(x)))
+
+
+def _side_bench(side: dict) -> str:
+    """`bench virtual, clock real`: which bench and on which clock the run went."""
+    clk = side.get("clock") or ""
+    return f"bench {esc(side['bench'])}" + (f", clock {esc(clk)}" if clk else "")
 
 
 def _estimate_html(est: Any) -> str:
@@ -487,14 +495,17 @@ def render_html(d: dict) -> str:
     h = ["<!DOCTYPE html><html><head><meta charset='utf-8'>",
          f"<title>hil diff: {esc(d['a']['plan'])}</title><style>{CSS}</style></head><body>",
          f"<h1>hil diff: {esc(d['a']['plan'])}</h1>",
-         f"<p>A <code>{esc(d['a']['path'])}</code> (bench {esc(d['a']['bench'])}) · "
-         f"B <code>{esc(d['b']['path'])}</code> (bench {esc(d['b']['bench'])}) · times in ms from "
+         f"<p>A <code>{esc(d['a']['path'])}</code> ({_side_bench(d['a'])}) · "
+         f"B <code>{esc(d['b']['path'])}</code> ({_side_bench(d['b'])}) · times in ms from "
          "A's plan start, B mapped onto A step by step</p>"]
     for why in d.get("incomplete", ()):  # a cut or damaged file: compared as far as it goes
         h.append(f"<p class='fail'>Incomplete: {esc(why)}</p>")
-    if not d["same_plan"] or not d["same_steps"]:
-        h.append("<p class='fail'>The recordings are not of the same plan (steps differ): "
-                 "the alignment is by step index only.</p>")
+    if not d["same_plan"]:
+        h.append("<p class='fail'>The recordings are not of the same plan: the alignment is "
+                 "by step index only.</p>")
+    elif not d["same_steps"]:  # (it said "not of the same plan" while the JSON said it was)
+        h.append("<p class='fail'>The plan's steps differ between the recordings: the "
+                 "alignment is by step index only.</p>")
     h.append("<h2>Model options that would explain the differences</h2>")
     if d["explanations"]:
         h.append("<table id='explanations'><tr><th>signature</th><th>A ms</th><th>B ms</th>"

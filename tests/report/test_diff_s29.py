@@ -128,3 +128,13 @@ def test_a_level_record_of_a_wrong_shape_is_counted_and_params_of_one_run_not_li
     rc, d = _diff(runs["base"], str(cut), tmp_path)
     assert rc == 4 and d["params"] == {}
     assert "parameter P0.000" not in capsys.readouterr().out
+
+
+def test_the_page_names_each_runs_clock_and_says_which_of_plan_or_steps_differs(
+        runs, tmp_path) -> None:
+    """A virtual run against a real-time one showed "bench virtual" for both; a plan whose
+    steps differed was called "not of the same plan" while the JSON said it was."""
+    _rc, d = _diff(runs["base"], runs["on30"], tmp_path)
+    page = (tmp_path / "d.html").read_text(encoding="utf-8")
+    assert d["a"]["clock"] == "virtual" and "bench virtual, clock virtual" in page
+    assert not d["same_plan"] and "not of the same plan" in page  # names differ: base/on30
