@@ -160,14 +160,16 @@ def load_side(path: str | Path) -> Side:
                 if msg.get(f) not in (None, ""):
                     _change(side, last, f"{d}.{f}", t, msg[f])
                     seq = states.setdefault(f"{d} {f}", [])
-                    if not seq or seq[-1] != str(msg[f]):
-                        seq.append(str(msg[f]))
+                    shown = _word(msg[f]) if f == "statusword" else str(msg[f])
+                    if not seq or seq[-1] != shown:
+                        seq.append(shown)
         elif topic.startswith("/drive/") and topic.endswith("/params"):
             side.params.update(msg.get("values") or {})
         elif topic.startswith("/canopen/") and "statusword" in msg:  # a real drive's TPDO
             seq = states.setdefault(f"{topic} statusword", [])
-            if not seq or seq[-1] != str(msg["statusword"]):
-                seq.append(str(msg["statusword"]))
+            shown = _word(msg["statusword"])
+            if not seq or seq[-1] != shown:
+                seq.append(shown)
 
     whole = Recording.stream(path, None, take)
     side.bad_messages = whole.bad_messages + shapeless[0]
@@ -178,6 +180,12 @@ def load_side(path: str | Path) -> Side:
     for name in list(side.edges):  # only what happened during the plan
         side.edges[name] = [(t, v) for t, v in side.edges[name] if t >= side.t0]
     return side
+
+
+def _word(value: Any) -> str:
+    """A statusword as the manual writes one, `0x0237` (it read `567`); anything else as
+    it came."""
+    return f"0x{value:04X}" if type(value) is int and 0 <= value <= 0xFFFF else str(value)
 
 
 def _change(side: Side, last: dict, name: str, t: int, value: Any) -> None:

@@ -138,3 +138,13 @@ def test_the_page_names_each_runs_clock_and_says_which_of_plan_or_steps_differs(
     page = (tmp_path / "d.html").read_text(encoding="utf-8")
     assert d["a"]["clock"] == "virtual" and "bench virtual, clock virtual" in page
     assert not d["same_plan"] and "not of the same plan" in page  # names differ: base/on30
+
+
+def test_statuswords_read_in_hex(runs) -> None:
+    """The state sequences showed statuswords as 535, 1559, 4663."""
+    from hil.report.diff import load_side
+
+    states = load_side(runs["base"]).states
+    words = states["drive1 statusword"]
+    assert words, states
+    assert all(w.startswith("0x") and len(w) == 6 for w in words), words
