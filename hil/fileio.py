@@ -8,6 +8,7 @@ A leaf: every command that reads a user's file or writes a result uses these, so
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import math
 import os
@@ -40,6 +41,16 @@ def safe_stem(text: str, *, collapse: bool = False) -> str:
         elif not (collapse and out and out[-1] == "_"):
             out.append("_")
     return "".join(out)
+
+
+def fit_name(text: str, limit: int, key: str | None = None) -> str:
+    """`text` if it fits in `limit` bytes, else cut to fit with `-` and 8 hex digits of a
+    hash of `key` (default: `text` itself) after it: a long name stays a file name, and two
+    long names that differ only past the cut stay apart. `key` given: always hashed."""
+    if key is None and len(text.encode("utf-8")) <= limit:
+        return text
+    digest = hashlib.sha1((text if key is None else key).encode("utf-8")).hexdigest()[:8]
+    return f"{fit_bytes(text, limit - 9)}-{digest}"
 
 
 def fit_bytes(text: str, limit: int) -> str:

@@ -305,14 +305,11 @@ def _safe_name(nodeid: str) -> str:
     hold. A parametrized id (`[...]`) also gets a short hash of the exact id, so
     `test_q[x y]`, `test_q[x_y]` and `test_q_x_y` keep one recording each, on any xdist
     worker (the name depends on the id alone)."""
-    from hil.fileio import fit_bytes, safe_stem
+    from hil.fileio import fit_name, safe_stem
 
     safe = safe_stem(nodeid, collapse=True).strip("_")
-    _head, bracket, _params = nodeid.partition("[")
-    if len(safe.encode("utf-8")) > 150 or bracket:  # bytes: a file name holds 255 of them
-        digest = hashlib.sha1(nodeid.encode()).hexdigest()[:8]
-        safe = f"{fit_bytes(safe, 141)}-{digest}"
-    return safe
+    _head, bracket, _params = nodeid.partition("[")  # bytes: a file name holds 255 of them
+    return fit_name(safe, 150, nodeid if bracket or len(safe.encode()) > 150 else None)
 
 
 _STEMS = pytest.StashKey[dict[str, str]]()
@@ -426,9 +423,9 @@ def _teardown_outcome(error: BaseException) -> dict[str, str]:
         return {"status": "skipped", "reason": f"skipped in teardown: {error}"[:300]}
     if isinstance(error, KeyboardInterrupt):
         return {"status": "aborted", "reason": "interrupted (SIGINT) during teardown"}
-    what = str(error).splitlines()[0] if str(error) else ""
-    reason = f"teardown failed: {type(error).__name__}: {what}".rstrip(": ")
-    return {"status": "error", "reason": reason[:300]}
+    from hil.plan.runner import first_line
+
+    return {"status": "error", "reason": f"teardown failed: {first_line(error)}"[:300]}
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)

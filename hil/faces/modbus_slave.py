@@ -260,7 +260,8 @@ class ModbusSlave:
         """Re-read P3.000 (● takes effect after a power cycle, L7014, L6722) and the line
         P3.001/P3.002 set, however they were written (an SDO, say), and reset the receiver.
         An explicit `station=` / `mode=` / `baud=` / `char_format=` argument keeps winning
-        until a Modbus write of P3.000 / P3.001 / P3.002 hands it to the parameter."""
+        until the parameter takes over: a Modbus write of P3.001 / P3.002, a change of P3.000
+        however it came (`station_written`)."""
         self.station = self._load_station()
         self._next_line = self._load_line()
         if self._next_line == self.line:

@@ -32,6 +32,7 @@ class Monitors:
         self._on_ns = 0  # control power on, whole run (P0.008 low word)
         self._servo_ns = 0  # Servo On (high word)
         self._t = drive.sched.now  # the counters are up to date to this model time
+        self.cn2 = AxisPositionCn2(drive)  # P5.016 (`attach_monitors` registers it)
 
     # -- P0.008 ----------------------------------------------------------------------------
     def account(self) -> None:
@@ -270,7 +271,6 @@ def attach_monitors(drive: Any) -> Monitors:
         except ModelError:  # ... that names no parameter or a register: unmapped
             drive.params.set_internal(m.target, 0)
     drive.params.on_read("P0.008", mon.p0008)
-    cn2 = mon.cn2 = AxisPositionCn2(drive)
-    drive.params.on_read("P5.016", cn2.read)
-    drive.params.on_write("P5.016", cn2.write)
+    drive.params.on_read("P5.016", mon.cn2.read)
+    drive.params.on_write("P5.016", mon.cn2.write)
     return mon

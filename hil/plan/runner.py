@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import gc
-import hashlib
 import json
 import os
 import signal
@@ -27,7 +26,7 @@ from typing import Any, TextIO
 from hil import clock
 from hil.bench import virtual_module
 from hil.bench.bench import Bench, line_warnings
-from hil.fileio import fit_bytes, safe_stem
+from hil.fileio import fit_name, safe_stem
 from hil.plan.context import (
     Cancelled,
     Inconclusive,
@@ -325,28 +324,22 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                     _initial_params(ctx, plan)
                 _apply_plan_wiring(ctx, plan)
                 reason = _steps(ctx, plan, res, events, allow_inconclusive)
-            except KeyboardInterrupt as e:
-                intr.shield = True
-                interrupted, reason = e, f"interrupted ({interrupt_cause(e)})"
-                res.status = ABORTED
-                for r in res.steps:
-                    if r.status == SKIPPED and not r.message:
-                        r.message = "not run: interrupted"
-                if ctx is not None:
-                    _record_skipped(ctx, plan, res, events)
             except Exception as e:
                 res.status, res.error = ERROR, f"{type(e).__name__}: {e}"
                 reason = f"error: {res.error}"
                 rec.log("error", f"plan {plan.name}: {res.error}", name="hil.runner")
                 events.emit(Note(plan, f"ERROR {res.error}"))
-            except BaseException as e:  # pytest-timeout's Failed, SystemExit: the plan is
-                intr.shield = True      # cut, never "end of plan" passed; raised again
-                interrupted = e         # once the bench is safe
-                reason = f"stopped: {first_line(e)}"
-                res.status, res.error = ABORTED, reason
+            except BaseException as e:  # Ctrl-C / SIGTERM, pytest-timeout's Failed,
+                intr.shield = True      # SystemExit: the plan is cut, never "end of plan"
+                interrupted = e         # passed; raised again once the bench is safe
+                if isinstance(e, KeyboardInterrupt):
+                    reason, why = f"interrupted ({interrupt_cause(e)})", "interrupted"
+                else:
+                    reason = why = res.error = f"stopped: {first_line(e)}"
+                res.status = ABORTED
                 for r in res.steps:
                     if r.status == SKIPPED and not r.message:
-                        r.message = f"not run: {reason}"
+                        r.message = f"not run: {why}"
                 if ctx is not None:
                     _record_skipped(ctx, plan, res, events)
             finally:
@@ -488,10 +481,8 @@ def output_stems(plans: list[Plan]) -> list[str]:
             out[i] = c
     seen: set[str] = set()
     for i, s in enumerate(out):
-        s = safe_stem(s) or "plan"
-        if len(s.encode("utf-8")) > 200:  # room for `-2` and `.junit.xml`; a cut name gets
-            digest = hashlib.sha1(s.encode("utf-8")).hexdigest()[:8]  # a hash of the whole
-            s = f"{fit_bytes(s, 191)}-{digest}"  # one: the same name whatever is selected
+        # room for `-2` and `.junit.xml`; a cut name gets a hash of the whole one: the same
+        s = fit_name(safe_stem(s) or "plan", 200)  # name whatever is selected
         base, k = s, 2
         while s.casefold() in seen:
             s, k = f"{base}-{k}", k + 1

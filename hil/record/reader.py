@@ -437,9 +437,9 @@ def not_hil(metadata: dict[str, Any], schemas: Iterable[str], topics: list[str])
             f"(channels: {found})")
 
 
-# what a file cut before its first channel is (a run killed as it started): `hil check`
-# judges it incomplete (exit 4) and export has nothing to export (exit 2); report and diff
-# show the run's metadata when it has some (the recorder writes it first), else exit 2
+# a file cut before its first channel (a run killed as it started): `hil check` judges it
+# incomplete (exit 4) and export has nothing to export (exit 2); report and diff show the
+# run's metadata when it has some (the recorder writes it first), else exit 2
 CUT_EMPTY = "cut before its first channel: nothing was recorded (a run killed as it started)"
 
 
@@ -449,14 +449,10 @@ def not_hil_file(rec: Recording) -> str | None:
     first channel is said to be that (`CUT_EMPTY`), not foreign."""
     if rec.corrupt:
         return None
-    if cut_empty(rec) and not rec.metadata():  # not even the run's metadata: nothing to show
-        return CUT_EMPTY
+    empty = before_channels(rec.truncated, rec.corrupt, len(rec.channels()))
+    if empty == CUT_EMPTY and not rec.metadata():  # not even the run's metadata: nothing
+        return CUT_EMPTY  # to show
     return not_hil(rec.metadata(), [c.schema for c in rec.channels()], rec.topics())
-
-
-def cut_empty(rec: Recording) -> bool:
-    """A surveyed recording cut before its first channel (`before_channels` says "cut")."""
-    return before_channels(rec.truncated, rec.corrupt, len(rec.channels())) == CUT_EMPTY
 
 
 DAMAGED_EMPTY = "damaged before its first channel: nothing of the run could be read"
