@@ -35,6 +35,7 @@ from pymodbus.client import ModbusTcpClient
 
 from hil import clock
 from hil.record.tap import Tap
+from hil.transport.inorder import InOrder
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 from hil.transport.zenoh_net import (
     ASK_TIMEOUT_S,
@@ -82,6 +83,7 @@ class DioPort:
         # thread's `get` is not held up), any other thread in wall time (docs/clock.md)
         self._cond = clock.ClockCondition()
         self._closed = False
+        self._in_order = InOrder()  # listeners hear changes in the order they were stored
 
     def owns(self, line: str) -> bool:
         """Whether this side drives `line` (harness: inputs; drive: outputs)."""
@@ -179,10 +181,15 @@ class DioPort:
             if old is not None and (if_unknown or old[0] == level):
                 return
             self._levels[line] = (level, t)
-            listeners = list(self._listeners)
             self._cond.notify_all()
+            self._in_order.queue(lambda: self._tell(line, level, t, source_t))
+        self._in_order.run()
+
+    def _tell(self, line: str, level: bool, t: int, source_t: int | None) -> None:
         if self.tap is not None:
             self.tap.dio(self.name, line, level, t, source_t)
+        with self._cond:
+            listeners = list(self._listeners)
         for fn, with_source in listeners:
             if with_source:
                 fn(line, level, t, source_t)

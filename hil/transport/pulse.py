@@ -35,6 +35,7 @@ from typing import Any, Literal
 import zenoh
 
 from hil import clock
+from hil.transport.inorder import InOrder
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 from hil.transport.zenoh_net import (
     ASK_TIMEOUT_S,
@@ -120,6 +121,7 @@ class PulsePort:
         self._levels: dict[str, bool] = {}
         self._subs: list[Listener] = []
         self._lock = threading.Lock()
+        self._in_order = InOrder()  # listeners hear messages in the order they were taken
         self.errors: list[str] = []  # malformed messages received (and ignored)
         self.closed = False
 
@@ -148,14 +150,18 @@ class PulsePort:
             self.tap.dio(self.name, line, level, t, source_t)
         self._publish_level(line, level, t if source_t is None else source_t)
 
-    def _store_level(self, line: str, level: bool, if_unknown: bool = False) -> bool:
+    def _store_level(self, line: str, level: bool, if_unknown: bool = False,
+                     then: Callable[[], None] | None = None) -> bool:
         """Keep `level` of `line`; False when it was that already (nothing to publish), or,
-        with `if_unknown`, when the line was heard of at all."""
+        with `if_unknown`, when the line was heard of at all. `then` is queued for delivery
+        with the store, so listeners hear levels in the order they were kept."""
         with self._lock:
             old = self._levels.get(line)
             if old == level or (if_unknown and old is not None):
                 return False
             self._levels[line] = level
+            if then is not None:
+                self._in_order.queue(then)
             return True
 
     def get(self, line: str) -> bool:
@@ -192,20 +198,28 @@ class PulsePort:
             self.errors.append(str(e))
             return
         t = clock.time_ns()
-        if self.tap is not None:
-            self.tap.pulse(self.name, kind, body, t, source_t)
-        self._deliver(kind, body, t, source_t)
+
+        def tell() -> None:
+            if self.tap is not None:
+                self.tap.pulse(self.name, kind, body, t, source_t)
+            self._deliver(kind, body, t, source_t)
+
+        self._in_order.queue(tell)
+        self._in_order.run()
 
     def _received_level(self, line: str, level: bool, source_t: int | None,
                         if_unknown: bool = False) -> None:
         if self.closed or _owns(self.role, line) or not (_X.match(line) or _Y.match(line)):
             return
-        if not self._store_level(line, level, if_unknown):
-            return
         t = clock.time_ns()
-        if self.tap is not None:
-            self.tap.dio(self.name, line, level, t, source_t)
-        self._deliver("level", {"line": line, "level": level}, t, source_t)
+
+        def tell() -> None:
+            if self.tap is not None:
+                self.tap.dio(self.name, line, level, t, source_t)
+            self._deliver("level", {"line": line, "level": level}, t, source_t)
+
+        if self._store_level(line, level, if_unknown, then=tell):
+            self._in_order.run()
 
     def _deliver(self, kind: str, body: dict[str, Any], t: int, source_t: int | None) -> None:
         for fn in list(self._subs):

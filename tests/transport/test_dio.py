@@ -67,6 +67,38 @@ def test_virtual_both_ways(tap):
         ("drive1", "DO1", False)]
 
 
+def test_listeners_hear_changes_in_the_order_they_were_stored():
+    """Two threads report at once (a zenoh subscriber and a query's answer): the listeners
+    and the tap must get the changes in the order the levels took, not the order the
+    threads happened to reach them (a CI run heard STO_A, DI4, STO_B)."""
+    heard: list[str] = []
+    racing = threading.Event()
+    other_done = threading.Event()
+
+    class Tap:  # the tap runs first; while it holds STO_B, another thread reports DI4
+        def dio(self, name, line, level, t, source_t):
+            if line == "STO_B" and not racing.is_set():
+                racing.set()
+                threading.Thread(target=lambda: (h2.set("DI4", True), other_done.set()),
+                                 daemon=True).start()
+                other_done.wait(2.0)
+
+    drive = open_dio("virtual:order", role="drive", tap=Tap())
+    h1 = open_dio("virtual:order", role="harness")
+    h2 = open_dio("virtual:order", role="harness")
+    try:
+        drive.subscribe(lambda line, level, t: heard.append(line))
+        h1.set("STO_A", True)
+        h1.set("STO_B", True)
+        assert racing.is_set() and other_done.wait(2.0)
+        assert heard == ["STO_A", "STO_B", "DI4"]
+        h1.set("DI5", True)  # and delivery goes on after the race
+        assert heard == ["STO_A", "STO_B", "DI4", "DI5"]
+    finally:
+        for p in (h1, h2, drive):
+            p.close()
+
+
 def test_virtual_late_joiner_sees_levels():
     drive = open_dio("virtual:vd2", role="drive")
     drive.set("FDBK", True)
@@ -291,3 +323,22 @@ def test_modbus_unreachable_names_url(port):
     with pytest.raises(TransportUrlError, match=f"127.0.0.1:{port}"):
         open_dio(f"modbus-tcp://127.0.0.1:{port}?timeout=0.2", role="harness",
                  mapping={"DI1": 0})
+
+
+def test_in_order_keeps_what_a_failed_delivery_left():
+    from hil.transport.inorder import InOrder
+
+    told: list[int] = []
+    q = InOrder()
+
+    def fail() -> None:
+        raise RuntimeError("listener failed")
+
+    q.queue(lambda: told.append(1))
+    q.queue(fail)
+    q.queue(lambda: told.append(3))
+    with pytest.raises(RuntimeError):
+        q.run()
+    assert told == [1]
+    q.run()  # the next run delivers what is left, and it is not stuck "busy"
+    assert told == [1, 3]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import random
+import threading
 import time
 
 import pytest
@@ -46,6 +47,38 @@ def test_virtual_segments_and_levels_both_ways(tap):
     finally:
         plc.close()
         drv.close()
+
+
+def test_listeners_hear_messages_in_the_order_they_were_taken():
+    """A level heard on one thread while another is delivering (a zenoh subscriber and a
+    query's answer) is told after it, not before: the tap and listeners keep the order."""
+    heard: list[str] = []
+    racing, other_done = threading.Event(), threading.Event()
+
+    class Tap:  # the tap runs first; while it holds Y1, another master sets Y2
+        def dio(self, name, line, level, t, source_t):
+            if line == "Y1" and not racing.is_set():
+                racing.set()
+                threading.Thread(target=lambda: (plc2.set("Y2", True), other_done.set()),
+                                 daemon=True).start()
+                other_done.wait(2.0)
+
+        def pulse(self, *a):
+            pass
+
+    drv = open_pulse("virtual:tp-order", role="drive", tap=Tap())
+    plc1 = open_pulse("virtual:tp-order", role="master")
+    plc2 = open_pulse("virtual:tp-order", role="master")
+    try:
+        drv.subscribe(lambda kind, body, t, s: heard.append(body.get("line", kind)))
+        plc1.set("Y1", True)
+        assert racing.is_set() and other_done.wait(2.0)
+        plc1.send("seg", {"freq": 1000.0, "count": 5})
+        assert heard == ["Y1", "Y2", "seg"]
+        assert drv.errors == []
+    finally:
+        for p in (plc1, plc2, drv):
+            p.close()
 
 
 def test_each_side_sends_only_its_own():
