@@ -11,6 +11,7 @@ from mcap.reader import make_reader
 
 from hil.bench.bench import load_bench, loads_bench
 from hil.bench.yamlio import PlanFileError
+from hil.drivers.axis_group import AxisGroup, CommandError, ServoAxis
 from hil.paths import fixture, plans_dir
 from hil.plan.plan import check_plan, load_plan, loads_plan
 from hil.plan.runner import run_plan
@@ -367,7 +368,14 @@ def test_group_steps_refuse_hostile_values_with_file_line() -> None:
              "group_expect.arrived_same_cycle"),
             ("group_expect: {axis: axis1, peak_acc: [true, 5]}", "group_expect.peak_acc"),
             ("group_expect: {axis: axis1, position: [0, " + "9" * 400 + "]}",
-             "group_expect.position")):
+             "group_expect.position"),
+            # outside test (helper-130): Enable_GEA is 0 or 1 (004:240), a code is a whole
+            # number, and CamScale multiplies the cam (004:258): 0 would hold it at 0
+            ("group_command: {axis: axis1, code: 2, par: {3: 100, 4: 7}}",
+             "group_command.par.4"),
+            ("group_command: {axis: axis1, code: 2.0, par: {3: 100}}", "group_command.code"),
+            ("group_cam: {axis: axis2, master: axis1, table: [0, 1], scale: 0}",
+             "group_cam.scale")):
         plan = ("name: p\nsteps:\n  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
                 f"  - {step}\n")
         with pytest.raises(PlanFileError) as ei:
@@ -731,3 +739,46 @@ def test_group_control_mode_keeps_the_axis_where_it_stands(tmp_path) -> None:
     res = run_plan(loads_plan(MODE_SWITCH, str(tmp_path / "mode_switch.yaml")),
                    load_bench(GROUP_BENCH), tmp_path, reports=False)
     assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
+
+
+@pytest.mark.parametrize("second", [
+    "group_gear: {axis: axis3, master: axis2}",  # another master (at 0, axis1 at 100000)
+    "group_gear: {axis: axis3, master: axis1, source: time}",  # another source
+    "group_cam: {axis: axis3, master: axis2, table: [0, 5000, 10000]}",  # a cam on another
+])
+def test_a_new_master_or_source_moves_the_follower_nothing_at_once(tmp_path, second) -> None:
+    """004:236-238 couple a gear so that nothing jumps, and 004:244 has a new coupling start
+    from a sync off. An outside test gave a geared axis another master: the gear took the
+    new master's first value against the old one's last, a one-cycle step of 100000."""
+    plan = loads_plan(f"""name: regear
+steps:
+  - group: {{axes: [axis1, axis2, axis3], cycle: 2ms}}
+  - group_gear: {{axis: axis3, master: axis1}}
+  - group_move: {{axis: axis1, to: 100000, speed: 200000, acc: 2000000, dec: 2000000}}
+  - group_wait: {{rdy: [axis1], timeout: 2s}}
+  - wait: 20ms
+  - {second}
+  - wait: 20ms
+  - group_stop: {{}}
+""", "regear.yaml")
+    res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path)
+    assert res.passed, [(s.label, s.message) for s in res.steps if s.status != "pass"]
+    follower = [c["write_position"]["axis3"] for c in _cycles(res.recording)]
+    assert follower[-1] == pytest.approx(100_000, abs=1000)  # it stays where it stood
+    # axis1's move at 200000 inc/s is 400 increments a 2 ms cycle; the new coupling at
+    # most 1 increment (ServoTick) or a cam step
+    steps = [abs(b - a) for a, b in itertools.pairwise(follower)]
+    assert max(steps) <= 401, max(steps)
+
+
+def test_the_group_refuses_what_its_plan_check_refuses() -> None:
+    """The Python API holds the same limits as a plan (helper-130): a cycle below 1 ms (the
+    plan's `cycle:` and the message say 1-10 ms), and Enable_GEA other than 0 / 1 written
+    to the registers directly (004:240)."""
+    with pytest.raises(ValueError, match="SYNC 1-10 ms"):
+        AxisGroup(None, [ServoAxis("a1", 1)], 0.0005, sdo_write=lambda *a: None)
+    a = ServoAxis("a1", 1)
+    a.par[4], a.par[3] = 7.0, 100.0
+    a.command = 2
+    with pytest.raises(CommandError, match="Par4 7: Enable_GEA"):
+        a.accept_command({"a1": a})

@@ -355,6 +355,11 @@ class Gea:
         stroke = self.cam_inc_position or table[-1]
         return (passes * stroke + a + (b - a) * frac) * self.cam_scale
 
+    def reset_master(self) -> None:
+        """Forget the master's last value: the next tick takes its value as the start, so a
+        new master or source moves nothing at once (004:236-238: nothing jumps)."""
+        self._last = None
+
     def tick(self, master_value: float) -> None:
         if self.mode == 0:
             self._last = None
@@ -533,6 +538,7 @@ class ServoAxis:
         reaches the drive at SYNC k and is interpolated to by SYNC k + 1, whose TPDO the
         group reads in cycle k + 2 (L17051-17057)."""
         return self._sent[0] - self.position if len(self._sent) == 3 else 0.0
+
     def accept_command(self, axes: dict[str, ServoAxis],
                        cams: dict[int, list[float]] | None = None) -> None:
         """COMMAND (004:240-246): the function in `command` with `par`, taken at the start
@@ -547,6 +553,9 @@ class ServoAxis:
         if bad is not None:  # a NaN target ran away or hung the ramp (an unread Par is moot:
             raise CommandError(f"Par{bad} {p[bad]}: a finite number")  # an abort still acts)
         pg = self.pg
+        if code in (1, 2, 3) and p[4] not in (0.0, 1.0):  # Enable_GEA 0 / 1 (004:240)
+            raise CommandError(f"Par4 {p[4]:g}: Enable_GEA, 0 cancel the GEA or 1 "
+                               "superimpose (004:240)")
         if code in (1, 2, 3, 5):
             if int(p[5]) not in RAMP_TYPES or p[5] != int(p[5]):
                 raise CommandError(f"Par5 {p[5]:g}: a ramp type 0-3 (004:222)")
@@ -833,7 +842,7 @@ class AxisGroup:
                  lost_after: int = 3) -> None:
         if not axes:
             raise ValueError("an axis group needs at least one axis")
-        if not 0.0005 <= cycle_s <= 0.010:
+        if not 0.001 <= cycle_s <= 0.010:
             raise ValueError(f"cycle {cycle_s * 1e3:g} ms: SYNC 1-10 ms (L17211-17244)")
         self.net, self.axes, self.cycle_s = network, axes, cycle_s
         self.by_name = {a.name: a for a in axes}

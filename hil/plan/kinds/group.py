@@ -32,6 +32,7 @@ from hil.drivers.axis_group import (
     STATUS_NEVER,
     STATUS_READY,
     AxisGroup,
+    Gea,
     ServoAxis,
     gear_cycle,
     interpolation_period,
@@ -483,6 +484,15 @@ class GroupMove(StepKind):
         return f"group_move {', '.join(a.axes)} {a.what} {a.value:g}"
 
 
+def _new_master(gea: Gea, master: str, source: int) -> None:
+    """Couple `gea` to `master`'s `source`. Another master or source starts the travel anew
+    at the next cycle: the last value taken was the old one's, and its difference to the
+    new one would have moved the follower in one cycle (helper-130: 100000 increments)."""
+    if (gea.master, gea.source) != (master, source):
+        gea.reset_master()
+    gea.master, gea.source = master, source
+
+
 class GroupGear(StepKind):
     """`group_gear: {axis, master, in, out, inc_in, source}`: couple a linear gear (004:230)."""
 
@@ -510,7 +520,7 @@ class GroupGear(StepKind):
         with g._lock:
             _no_cycle(g, a)
             gea = ax.gea
-            gea.master, gea.source = a.master, a.source
+            _new_master(gea, a.master, a.source)
             gea.gin, gea.gout, gea.inc_in = a.gin, a.gout, a.inc_in
             if gea.mode == 1:  # geared already: a new ratio, ramped by inc_in (004:236)
                 return Outcome(f"{a.axis} geared to {a.master} {a.gin:g}/{a.gout:g}")
@@ -542,6 +552,10 @@ class GroupCam(StepKind):
         v.keys(m, {"axis", "master", "in", "out", "table", "type", "scale", "source"}, where)
         out = _coupling(v, m, line, where)
         out["scale"] = _num(v, m, "scale", where, -1e6, 1e6, 1)
+        if out["scale"] == 0:  # CamScale multiplies the cam's data (004:258): 0 holds it
+            raise v.err(m.kline("scale"), join(where, "scale"),  # at 0; COMMAND 6 takes
+                        "0 would hold the cam at 0 (CamScale multiplies its values, 004:258; "
+                        "COMMAND 6 takes Par8 0 as 1)")  # its Par8 0 as 1
         if "table" not in m:
             raise v.err(line, where, "needs `table:` (cam positions, one per 1024 pointer "
                         "increments)")
@@ -569,7 +583,7 @@ class GroupCam(StepKind):
         with g._lock:
             _no_cycle(g, a)
             gea = ax.gea
-            gea.master, gea.source = a.master, a.source
+            _new_master(gea, a.master, a.source)
             gea.gin = gea.actual_in = a.gin
             gea.gout, gea.inc_in = a.gout, 0.0
             gea.cam, gea.cam_type, gea.cam_scale = a.table, a.type, a.scale
@@ -659,7 +673,7 @@ class GroupCommand(_OneAxis):
         m = v.mapping(obj, line, where)
         v.keys(m, {"axis", "code", "par", "timeout"}, where)
         code = m.get("code")
-        if code not in range(1, 8) or isinstance(code, bool):
+        if not isinstance(code, int) or isinstance(code, bool) or code not in range(1, 8):
             raise v.err(m.kline("code") if "code" in m else line, join(where, "code"),
                         "1 speed, 2 absolute, 3 relative, 4 set reference, 5 abort, "
                         "6 sync on, 7 sync off (004:244)")
@@ -696,6 +710,10 @@ class GroupCommand(_OneAxis):
                                 f"{val!r}: PG.{what} is a maximum, 0 (keep the register) or "
                                 f"at least {PG_MIN:g} (004:220)")
                 par[i] = float(val)
+        if code in (1, 2, 3) and par[4] not in (0.0, 1.0):  # Enable_GEA (004:240)
+            raise v.err(_par_line(m, 4), join(where, "par.4"),
+                        f"{par[4]:g}: Enable_GEA, 0 cancels an active GEA, 1 puts the move "
+                        "on top of it (004:240)")
         if code == 6:
             _sync_on_pars(v, m, where, par)
         if code == 7 and par[5] < 0:  # GInInc: "a positive number" (004:246)
