@@ -35,7 +35,6 @@ from pymodbus.client import ModbusTcpClient
 
 from hil import clock
 from hil.record.tap import Tap
-from hil.transport.inorder import InOrder
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 from hil.transport.zenoh_net import (
     ASK_TIMEOUT_S,
@@ -83,7 +82,6 @@ class DioPort:
         # thread's `get` is not held up), any other thread in wall time (docs/clock.md)
         self._cond = clock.ClockCondition()
         self._closed = False
-        self._in_order = InOrder()  # listeners hear changes in the order they were stored
 
     def owns(self, line: str) -> bool:
         """Whether this side drives `line` (harness: inputs; drive: outputs)."""
@@ -181,15 +179,10 @@ class DioPort:
             if old is not None and (if_unknown or old[0] == level):
                 return
             self._levels[line] = (level, t)
+            listeners = list(self._listeners)
             self._cond.notify_all()
-            self._in_order.queue(lambda: self._tell(line, level, t, source_t))
-        self._in_order.run()
-
-    def _tell(self, line: str, level: bool, t: int, source_t: int | None) -> None:
         if self.tap is not None:
             self.tap.dio(self.name, line, level, t, source_t)
-        with self._cond:
-            listeners = list(self._listeners)
         for fn, with_source in listeners:
             if with_source:
                 fn(line, level, t, source_t)
@@ -288,6 +281,10 @@ class ZenohDio(DioPort):
             raise TransportUrlError(url, str(e)) from None
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._sub = self._queryable = None
+        # levels are heard on two threads, the subscriber's and a query's answer: one at a
+        # time, each stored and told to the listeners before the next, so listeners and the
+        # tap hear them in the order they were stored (a CI run heard STO_A, DI4, STO_B)
+        self._heard = threading.RLock()
         self._asker = AskAgain(
             lambda: self._learn_levels(min(query_timeout, ASK_TIMEOUT_S), if_unknown=True),
             f"dio-ask-{self.key}")
@@ -323,7 +320,8 @@ class ZenohDio(DioPort):
             raw = sample.attachment.to_bytes()
             if len(raw) >= _T.size:  # source time, then a gateway lease token if any
                 source_t = _T.unpack_from(raw)[0]
-        self._changed(line, payload == b"1", None, source_t)
+        with self._heard:
+            self._changed(line, payload == b"1", None, source_t)
 
     def _on_query(self, query: zenoh.Query) -> None:
         with self._cond:
@@ -336,7 +334,8 @@ class ZenohDio(DioPort):
     def _learn_levels(self, timeout_s: float, if_unknown: bool = False) -> None:
         for line, level in self.query_levels(timeout_s).items():
             if not self.owns(line):
-                self._changed(line, level, if_unknown=if_unknown)
+                with self._heard:
+                    self._changed(line, level, if_unknown=if_unknown)
 
     def _ask_levels(self) -> None:
         if not self._closed:  # a line heard of meanwhile keeps what was heard (if_unknown)

@@ -35,7 +35,6 @@ from typing import Any, Literal
 import zenoh
 
 from hil import clock
-from hil.transport.inorder import InOrder
 from hil.transport.urls import TransportUrl, TransportUrlError, parse_url
 from hil.transport.zenoh_net import (
     ASK_TIMEOUT_S,
@@ -121,7 +120,6 @@ class PulsePort:
         self._levels: dict[str, bool] = {}
         self._subs: list[Listener] = []
         self._lock = threading.Lock()
-        self._in_order = InOrder()  # listeners hear messages in the order they were taken
         self.errors: list[str] = []  # malformed messages received (and ignored)
         self.closed = False
 
@@ -150,18 +148,14 @@ class PulsePort:
             self.tap.dio(self.name, line, level, t, source_t)
         self._publish_level(line, level, t if source_t is None else source_t)
 
-    def _store_level(self, line: str, level: bool, if_unknown: bool = False,
-                     then: Callable[[], None] | None = None) -> bool:
+    def _store_level(self, line: str, level: bool, if_unknown: bool = False) -> bool:
         """Keep `level` of `line`; False when it was that already (nothing to publish), or,
-        with `if_unknown`, when the line was heard of at all. `then` is queued for delivery
-        with the store, so listeners hear levels in the order they were kept."""
+        with `if_unknown`, when the line was heard of at all."""
         with self._lock:
             old = self._levels.get(line)
             if old == level or (if_unknown and old is not None):
                 return False
             self._levels[line] = level
-            if then is not None:
-                self._in_order.queue(then)
             return True
 
     def get(self, line: str) -> bool:
@@ -198,28 +192,20 @@ class PulsePort:
             self.errors.append(str(e))
             return
         t = clock.time_ns()
-
-        def tell() -> None:
-            if self.tap is not None:
-                self.tap.pulse(self.name, kind, body, t, source_t)
-            self._deliver(kind, body, t, source_t)
-
-        self._in_order.queue(tell)
-        self._in_order.run()
+        if self.tap is not None:
+            self.tap.pulse(self.name, kind, body, t, source_t)
+        self._deliver(kind, body, t, source_t)
 
     def _received_level(self, line: str, level: bool, source_t: int | None,
                         if_unknown: bool = False) -> None:
         if self.closed or _owns(self.role, line) or not (_X.match(line) or _Y.match(line)):
             return
+        if not self._store_level(line, level, if_unknown):
+            return
         t = clock.time_ns()
-
-        def tell() -> None:
-            if self.tap is not None:
-                self.tap.dio(self.name, line, level, t, source_t)
-            self._deliver("level", {"line": line, "level": level}, t, source_t)
-
-        if self._store_level(line, level, if_unknown, then=tell):
-            self._in_order.run()
+        if self.tap is not None:
+            self.tap.dio(self.name, line, level, t, source_t)
+        self._deliver("level", {"line": line, "level": level}, t, source_t)
 
     def _deliver(self, kind: str, body: dict[str, Any], t: int, source_t: int | None) -> None:
         for fn in list(self._subs):
@@ -327,6 +313,9 @@ class ZenohPulse(PulsePort):
             raise TransportUrlError(url, str(e)) from None
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._sub = self._queryable = None
+        # heard on two threads (the subscriber's, a query's answer): one at a time, each told
+        # before the next, so listeners hear the order the levels were stored (as ZenohDio)
+        self._heard = threading.RLock()
         self._asker = AskAgain(
             lambda: self._learn_levels(min(query_timeout, ASK_TIMEOUT_S), if_unknown=True),
             f"pulse-ask-{self.key}")
@@ -345,7 +334,8 @@ class ZenohPulse(PulsePort):
     def _learn_levels(self, timeout_s: float, if_unknown: bool = False) -> None:
         for reply in self.session.get(f"{self.key}/**", timeout=timeout_s):
             if reply.ok is not None:
-                self._level_sample(reply.ok, if_unknown)
+                with self._heard:
+                    self._level_sample(reply.ok, if_unknown)
 
     def _ask_levels(self) -> None:
         if not self.closed:  # a line heard of meanwhile keeps what was heard (if_unknown)
@@ -365,6 +355,10 @@ class ZenohPulse(PulsePort):
             self._received_level(line, payload == b"1", self._source_t(sample), if_unknown)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
+        with self._heard:
+            self._on_sample_heard(sample)
+
+    def _on_sample_heard(self, sample: zenoh.Sample) -> None:
         last = str(sample.key_expr).rsplit("/", 1)[-1]
         if last in KINDS:
             try:

@@ -67,38 +67,6 @@ def test_virtual_both_ways(tap):
         ("drive1", "DO1", False)]
 
 
-def test_listeners_hear_changes_in_the_order_they_were_stored():
-    """Two threads report at once (a zenoh subscriber and a query's answer): the listeners
-    and the tap must get the changes in the order the levels took, not the order the
-    threads happened to reach them (a CI run heard STO_A, DI4, STO_B)."""
-    heard: list[str] = []
-    racing = threading.Event()
-    other_done = threading.Event()
-
-    class Tap:  # the tap runs first; while it holds STO_B, another thread reports DI4
-        def dio(self, name, line, level, t, source_t):
-            if line == "STO_B" and not racing.is_set():
-                racing.set()
-                threading.Thread(target=lambda: (h2.set("DI4", True), other_done.set()),
-                                 daemon=True).start()
-                other_done.wait(2.0)
-
-    drive = open_dio("virtual:order", role="drive", tap=Tap())
-    h1 = open_dio("virtual:order", role="harness")
-    h2 = open_dio("virtual:order", role="harness")
-    try:
-        drive.subscribe(lambda line, level, t: heard.append(line))
-        h1.set("STO_A", True)
-        h1.set("STO_B", True)
-        assert racing.is_set() and other_done.wait(2.0)
-        assert heard == ["STO_A", "STO_B", "DI4"]
-        h1.set("DI5", True)  # and delivery goes on after the race
-        assert heard == ["STO_A", "STO_B", "DI4", "DI5"]
-    finally:
-        for p in (h1, h2, drive):
-            p.close()
-
-
 def test_virtual_late_joiner_sees_levels():
     drive = open_dio("virtual:vd2", role="drive")
     drive.set("FDBK", True)
@@ -166,6 +134,39 @@ def test_zenoh_inputs_outputs_and_query(port, tap):
         assert replies == {"tzd/drive1/DO3": b"1"}
     finally:
         harness.close()
+        drive.close()
+
+
+def _sample(key: str, payload: bytes):
+    from types import SimpleNamespace
+    return SimpleNamespace(key_expr=key, payload=SimpleNamespace(to_bytes=lambda: payload),
+                           attachment=None)
+
+
+def test_zenoh_levels_heard_on_two_threads_are_told_in_the_order_stored(port, monkeypatch):
+    """A CI run heard STO_A, DI4, STO_B: the subscriber had stored STO_B and not yet told it
+    when a query's answer (another thread) stored DI4 and told it first. One level is heard
+    at a time now: the answer waits until STO_B is told."""
+    heard: list[str] = []
+    answering_done = threading.Event()
+
+    class Tap:  # the tap is told first; while it holds STO_B, a query's answer comes in
+        def dio(self, name, line, level, t, source_t):
+            if line == "STO_B" and not answering_done.is_set():
+                threading.Thread(target=lambda: (drive._learn_levels(0.1, if_unknown=True),
+                                                 answering_done.set()), daemon=True).start()
+                answering_done.wait(0.3)  # with the fix it cannot finish while we hold STO_B
+
+    drive = open_dio(f"zenoh:tzo/drive1?listen=tcp/127.0.0.1:{port}", role="drive", tap=Tap())
+    try:
+        monkeypatch.setattr(drive, "query_levels", lambda timeout_s=1.0: {
+            "STO_A": True, "STO_B": True, "DI4": True})
+        drive.subscribe(lambda line, level, t: heard.append(line))
+        for line in ("STO_A", "STO_B"):  # as the subscriber's thread hears them
+            drive._on_sample(_sample(f"tzo/drive1/{line}", b"1"))
+        assert answering_done.wait(2.0)
+        assert heard == ["STO_A", "STO_B", "DI4"]
+    finally:
         drive.close()
 
 
@@ -323,22 +324,3 @@ def test_modbus_unreachable_names_url(port):
     with pytest.raises(TransportUrlError, match=f"127.0.0.1:{port}"):
         open_dio(f"modbus-tcp://127.0.0.1:{port}?timeout=0.2", role="harness",
                  mapping={"DI1": 0})
-
-
-def test_in_order_keeps_what_a_failed_delivery_left():
-    from hil.transport.inorder import InOrder
-
-    told: list[int] = []
-    q = InOrder()
-
-    def fail() -> None:
-        raise RuntimeError("listener failed")
-
-    q.queue(lambda: told.append(1))
-    q.queue(fail)
-    q.queue(lambda: told.append(3))
-    with pytest.raises(RuntimeError):
-        q.run()
-    assert told == [1]
-    q.run()  # the next run delivers what is left, and it is not stuck "busy"
-    assert told == [1, 3]

@@ -49,38 +49,6 @@ def test_virtual_segments_and_levels_both_ways(tap):
         drv.close()
 
 
-def test_listeners_hear_messages_in_the_order_they_were_taken():
-    """A level heard on one thread while another is delivering (a zenoh subscriber and a
-    query's answer) is told after it, not before: the tap and listeners keep the order."""
-    heard: list[str] = []
-    racing, other_done = threading.Event(), threading.Event()
-
-    class Tap:  # the tap runs first; while it holds Y1, another master sets Y2
-        def dio(self, name, line, level, t, source_t):
-            if line == "Y1" and not racing.is_set():
-                racing.set()
-                threading.Thread(target=lambda: (plc2.set("Y2", True), other_done.set()),
-                                 daemon=True).start()
-                other_done.wait(2.0)
-
-        def pulse(self, *a):
-            pass
-
-    drv = open_pulse("virtual:tp-order", role="drive", tap=Tap())
-    plc1 = open_pulse("virtual:tp-order", role="master")
-    plc2 = open_pulse("virtual:tp-order", role="master")
-    try:
-        drv.subscribe(lambda kind, body, t, s: heard.append(body.get("line", kind)))
-        plc1.set("Y1", True)
-        assert racing.is_set() and other_done.wait(2.0)
-        plc1.send("seg", {"freq": 1000.0, "count": 5})
-        assert heard == ["Y1", "Y2", "seg"]
-        assert drv.errors == []
-    finally:
-        for p in (plc1, plc2, drv):
-            p.close()
-
-
 def test_each_side_sends_only_its_own():
     plc = open_pulse("virtual:tp2", role="master")
     drv = open_pulse("virtual:tp2", role="drive")
@@ -157,6 +125,42 @@ def test_zenoh_line_between_two_sessions(port, tap):
         assert seen == ["oz"]
     finally:
         plc.close()
+        drv.close()
+
+
+def test_zenoh_levels_heard_on_two_threads_are_told_in_the_order_stored(port):
+    """As on the DI/DO port: a query's answer (its own thread) does not tell a level while
+    the subscriber's thread has stored one and not yet told it."""
+    from types import SimpleNamespace
+
+    def sample(line: str):
+        return SimpleNamespace(key_expr=f"tzo/pulse/{line}", attachment=None,
+                               payload=SimpleNamespace(to_bytes=lambda: b"1"))
+
+    heard: list[str] = []
+    answering_done = threading.Event()
+
+    class Tap:
+        def dio(self, name, line, level, t, source_t):
+            if line == "Y1" and not answering_done.is_set():
+                threading.Thread(target=lambda: (drv._learn_levels(0.1, if_unknown=True),
+                                                 answering_done.set()), daemon=True).start()
+                answering_done.wait(0.3)
+
+        def pulse(self, *a):
+            pass
+
+    drv = open_pulse(f"zenoh:tzo/pulse?listen=tcp/127.0.0.1:{port}", role="drive", tap=Tap())
+    session = drv.session
+    try:
+        drv.session = SimpleNamespace(get=lambda key, timeout: [
+            SimpleNamespace(ok=sample("Y1")), SimpleNamespace(ok=sample("Y2"))])
+        drv.subscribe(lambda kind, body, t, s: heard.append(body.get("line", kind)))
+        drv._on_sample(sample("Y1"))  # as the subscriber's thread hears it
+        assert answering_done.wait(2.0)
+        assert heard == ["Y1", "Y2"]
+    finally:
+        drv.session = session
         drv.close()
 
 
