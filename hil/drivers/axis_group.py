@@ -553,9 +553,6 @@ class ServoAxis:
         if bad is not None:  # a NaN target ran away or hung the ramp (an unread Par is moot:
             raise CommandError(f"Par{bad} {p[bad]}: a finite number")  # an abort still acts)
         pg = self.pg
-        if code in (1, 2, 3) and p[4] not in (0.0, 1.0):  # Enable_GEA 0 / 1 (004:240)
-            raise CommandError(f"Par4 {p[4]:g}: Enable_GEA, 0 cancel the GEA or 1 "
-                               "superimpose (004:240)")
         if code in (1, 2, 3, 5):
             if int(p[5]) not in RAMP_TYPES or p[5] != int(p[5]):
                 raise CommandError(f"Par5 {p[5]:g}: a ramp type 0-3 (004:222)")
@@ -627,6 +624,7 @@ class ServoAxis:
                                    "(COMMAND 7) first (004:244)")
             g.master = names[idx]
             g.source = src
+            g.reset_master()  # the travel counts from the next cycle's master value
             g.gin, g.gout, g.inc_in = p[3], p[4], p[5]
             g.actual_in = 0.0 if p[5] else p[3]
             if table is None:
@@ -1023,6 +1021,8 @@ class AxisGroup:
                             self.held.remove(a.name)  # from where it is now, without
                             g._last = src  # taking the travel it missed in one cycle
                     g.tick(src)
+                elif not g.mode:  # off (COMMAND 7, COMMAND 1-3 with Par4 0): the next
+                    g.reset_master()  # engagement counts from its own first master value
                 a.compute()
             self._judge_gears(masters)
             captured = []
