@@ -4,6 +4,7 @@ virtual time, a wall-clock watchdog, and `--clock` / `clock:` refusals."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from pathlib import Path
 
@@ -291,3 +292,33 @@ def test_another_process_with_another_hash_seed_records_the_same_messages(tmp_pa
         diff = next((i for i, (a, b) in enumerate(zip(first, second, strict=True)) if a != b),
                     None)
         assert diff is None, f"{name}: message {diff} differs: {first[diff]} vs {second[diff]}"
+
+
+def _brkr_edge_after_son_ns(res) -> int:
+    """From the recording: the DI1 (SON) rise to the DO6 (BRKR) rise, in bench ns."""
+    rises: dict[str, int] = {}
+    with open(res.recording, "rb") as f:
+        for _, ch, m in make_reader(f).iter_messages():
+            line = ch.topic.rsplit("/", 1)[-1]
+            if ch.topic.startswith("/dio/") and line in ("DI1", "DO6") \
+                    and json.loads(m.data).get("level"):
+                rises.setdefault(line, m.log_time)
+    return rises["DO6"] - rises["DI1"]
+
+
+def test_wait_until_takes_its_last_look_at_the_deadline_not_after(tmp_path) -> None:
+    """helper-131: `wait_until` slept a whole poll (1 ms) past its timeout and then passed
+    on a condition met after it: BRKR at 2 ms passed a 1.5 ms timeout. Met before the
+    timeout it passes; met after it, it fails, whatever the poll period."""
+    def run(timeout_us: int, out: str):
+        plan = loads_plan("name: wu\nsteps:\n  - di: {SON: on}\n"
+                          f"  - wait_until: {{do: {{BRKR: on}}, timeout: {timeout_us}us}}\n",
+                          "wu.yaml")
+        return run_plan(plan, BUILTIN, tmp_path / out, reports=False)
+
+    edge_ns = _brkr_edge_after_son_ns(run(50_000, "long"))
+    assert edge_ns > 1_000_000  # past the first 1 ms poll, so a poll can overshoot it
+    late = run(edge_ns // 1000 - 500, "late")  # the timeout 0.5 ms before the edge
+    assert late.steps[1].status == "fail" and "timeout" in late.steps[1].message
+    on_time = run(edge_ns // 1000 + 200, "on_time")
+    assert on_time.steps[1].status == "pass"

@@ -127,11 +127,14 @@ class WaitUntil(_Conditions):
             seen = [evaluate(d, c) for c in conds]
             if all(ok for ok, _ in seen):
                 return Outcome(f"met after {(clock.monotonic_ns() - t0) / 1e6:.1f} ms")
-            if clock.monotonic_ns() - t0 >= timeout:
+            left = timeout - (clock.monotonic_ns() - t0)
+            if left <= 0:
                 want = " and ".join(c.describe() for c in conds)
                 saw = ", ".join(obs for _, obs in seen)
                 raise StepFailed(f"timeout {timeout / 1e6:g} ms waiting for {want}; saw {saw}")
-            ctx.sleep(poll)
+            # the last look is at the deadline, not a poll past it: a condition met after
+            # the timeout had passed (helper-131: BRKR at 2 ms passed a 1.5 ms timeout)
+            ctx.sleep(min(poll, left))
 
 
 class Expect(_Conditions):
