@@ -322,3 +322,30 @@ def test_wait_until_takes_its_last_look_at_the_deadline_not_after(tmp_path) -> N
     assert late.steps[1].status == "fail" and "timeout" in late.steps[1].message
     on_time = run(edge_ns // 1000 + 200, "on_time")
     assert on_time.steps[1].status == "pass"
+
+
+def test_the_safe_state_looks_at_the_brake_at_its_timeout(tmp_path) -> None:
+    from hil.units import S
+
+    """helper-131: the brake wait polled every 2 ms and never looked at its deadline, so a
+    BRKR that went off exactly at the safe state's timeout was recorded as "still on"; a
+    shorter timeout was reported a poll late. Timed from the record of SON off."""
+    plan = loads_plan("name: son\nsteps:\n  - di: {SON: on}\n"
+                      "  - wait_until: {do: {BRKR: on}, timeout: 1s}\n", "son.yaml")
+
+    def safety(timeout_ns: int, out: str) -> dict[str, tuple[int, dict]]:
+        bench = dataclasses.replace(BUILTIN, safe_state=dataclasses.replace(
+            BUILTIN.safe_state, timeout_ns=timeout_ns))
+        res = run_plan(plan, bench, tmp_path / out, reports=False)
+        with open(res.recording, "rb") as f:
+            return {json.loads(m.data)["action"].split(" (")[0]: (m.log_time, json.loads(m.data))
+                    for _, ch, m in make_reader(f).iter_messages(topics=["/safety"])}
+
+    roomy = safety(3 * S, "roomy")
+    t_off = roomy["wait BRKR off"][0] - roomy["DI SON off"][0]
+    assert roomy["wait BRKR off"][1]["ok"] and t_off > 500_000
+    exact = safety(t_off, "exact")  # the brake engages at the timeout itself: confirmed
+    assert exact["wait BRKR off"][1]["ok"], exact["wait BRKR off"][1]
+    short = safety(t_off - 500_000, "short")  # 0.5 ms short: reported at the timeout
+    assert not short["wait BRKR off"][1]["ok"]
+    assert short["wait BRKR off"][0] - short["DI SON off"][0] == t_off - 500_000

@@ -312,16 +312,17 @@ class Cia402Driver:
                     f"node {self.node_id}: expected {what}, saw {reason}: state "
                     f"{decode_state(sw)} (statusword 0x{sw:04X}) after {elapsed:.3f} s"
                 )
-            if elapsed > timeout:
+            if elapsed >= timeout:
                 raise Cia402Timeout(self.node_id, what, timeout_name, timeout, sw, elapsed,
                                     hint(sw) if hint is not None else "")
-            self._pause()
+            self._pause(timeout - elapsed)  # the last look at the timeout, not a poll past it
 
-    def _pause(self) -> None:
-        """One poll interval; raises Cia402Cancelled once `cancel` is set."""
+    def _pause(self, at_most: float | None = None) -> None:
+        """One poll interval (`at_most` shorter); raises Cia402Cancelled once `cancel` is set."""
+        period = self.timeouts["poll"] if at_most is None else min(self.timeouts["poll"], at_most)
         if self.cancel is None:
-            clock.sleep(self.timeouts["poll"])
-        elif clock.wait(self.cancel, self.timeouts["poll"]):
+            clock.sleep(period)
+        elif clock.wait(self.cancel, period):
             raise Cia402Cancelled(f"node {self.node_id}: wait cancelled")
 
     def wait_state(self, name: str, timeout: float | None = None) -> int:

@@ -76,10 +76,13 @@ class _SessionDrive:
 
     def brake_engaged(self, timeout_ns: int) -> str | bool:
         end = clock.monotonic_ns() + timeout_ns
-        while clock.monotonic_ns() < end:
-            if not self.d.do_active("BRKR"):
+        while True:  # looked at every 2 ms and at the timeout itself (helper-131: a BRKR off
+            if not self.d.do_active("BRKR"):  # at the timeout was reported still on)
                 return "BRKR off: brake engaged"
-            clock.sleep(0.002)
+            left = end - clock.monotonic_ns()
+            if left <= 0:
+                break
+            clock.sleep(min(0.002, left / 1e9))
         raise TimeoutError(f"BRKR still on after {timeout_ns / 1e6:g} ms: the brake may be "
                            "released")
 

@@ -204,7 +204,7 @@ def test_a_set_point_whose_acknowledge_timed_out_is_taken_back_and_never_runs() 
     drv.clock = lambda: rig.t / 1e9
     drv.read = lambda i, s=0: rig.r(i, s)
     drv.write = lambda i, s, v: rig.w(i, v, s)
-    drv._pause = lambda: rig.step(1)
+    drv._pause = lambda at_most=None: rig.step(1)
     drv.set_mode = lambda m: None
     drv.enable_operation = lambda: None
     drv.move_to(500000, 500000, 200, 200, wait=False)
@@ -214,3 +214,34 @@ def test_a_set_point_whose_acknowledge_timed_out_is_taken_back_and_never_runs() 
     rig.until(lambda: rig.sw & 0x400 and not rig.axis.moving)
     rig.step(3000)
     assert rig.r(0x6064) == 500000
+
+
+def test_a_wait_takes_its_last_look_at_its_timeout_not_a_poll_past_it():
+    """helper-131 (the same rule as wait_until's): the 2 ms poll slept past the timeout and
+    a state reached after it still passed. A statusword that turns at 3 ms: met with a
+    3 ms timeout (the last look is at it), a timeout at 2.5 ms is a timeout."""
+    from hil import clock
+    from hil.clock import VirtualClock
+    from hil.units import MS
+
+    class Drv(Cia402Driver):
+        def __init__(self, timeout_s: float) -> None:  # the poll loop alone, no bus
+            self.timeouts = {"poll": 0.002, "state": timeout_s}
+            self.node_id, self.cancel = NODE, None
+            self.clock = clock.monotonic
+
+        @property
+        def statusword(self) -> int:
+            return 0x0237 if clock.monotonic_ns() >= 3 * MS else 0x0250
+
+    for timeout_s, met in ((0.003, True), (0.0025, False)):
+        c = VirtualClock(epoch_ns=0)
+        with clock.use(c):
+            drv = Drv(timeout_s)
+            if met:
+                assert drv._wait("OPERATION ENABLED", "state", lambda sw: sw == 0x0237) == 0x0237
+                assert c.time_ns() == 3 * MS
+            else:
+                with pytest.raises(Cia402Timeout):
+                    drv._wait("OPERATION ENABLED", "state", lambda sw: sw == 0x0237)
+                assert c.time_ns() == 2.5 * MS  # reported at the timeout, not a poll later
