@@ -174,6 +174,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             _load_bench(config)
         except ValueError as e:
             raise pytest.UsageError(f"--hil-clock: {e}") from None
+    if uses_bench and config.pluginmanager.hasplugin("rerunfailures") \
+            and _load_bench(config).clock == "virtual":
+        # virtual time is deterministic: a failure is a failure, never rerun (issue 25),
+        # whatever `--reruns` or a test's own `flaky` marker asks (this one is looked at first)
+        for i in items:
+            if isinstance(i, PlanItem) or "hil_bench" in getattr(i, "fixturenames", ()):
+                i.add_marker(pytest.mark.flaky(reruns=0), append=False)
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
     if uses_bench and workers > 1:  # xdist: each worker would open the bench at once
         from hil.plan.parallel import parallel_blocker
