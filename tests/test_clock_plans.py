@@ -349,3 +349,37 @@ def test_the_safe_state_looks_at_the_brake_at_its_timeout(tmp_path) -> None:
     short = safety(t_off - 500_000, "short")  # 0.5 ms short: reported at the timeout
     assert not short["wait BRKR off"][1]["ok"]
     assert short["wait BRKR off"][0] - short["DI SON off"][0] == t_off - 500_000
+
+
+def test_a_clock_event_that_hangs_the_safe_state_is_stopped_by_its_watchdog(
+        tmp_path, monkeypatch) -> None:
+    """helper-131: a step timed out before its event fired; the safe state then ran that
+    event, which never returned, in the run's own thread: no watchdog, Ctrl-C and SIGTERM
+    ignored (the safe state is shielded), the recording never closed. The safe state now
+    runs under a wall-clock watchdog: not confirmed, with why, and a readable recording."""
+    from hil.plan import context
+    from hil.plan.kinds.waits import Wait
+    from hil.record.reader import Recording
+    from hil.units import MS
+
+    monkeypatch.setattr(context, "WATCHDOG_GRACE_NS", 500 * MS)
+    monkeypatch.setattr(context, "WATCHDOG_FACTOR", 0)
+
+    def hang(self, ctx, step, d):
+        def forever() -> None:  # a model bug: an event that never returns
+            while True:
+                time.sleep(0.001)
+        clock.call_later(1e-6, forever)  # due after the step's 1 ns timeout: the safe
+        clock.sleep(0.01)                 # state's first SDO runs it
+
+    monkeypatch.setattr(Wait, "run", hang)
+    plan = loads_plan("name: hung\nsteps:\n  - wait: 10ms\n    timeout: 1ns\n", "hung.yaml")
+    t0 = time.monotonic()
+    res = run_plan(plan, BUILTIN, tmp_path, reports=False)
+    assert time.monotonic() - t0 < 30
+    assert res.status == "error" and res.safe is not None and not res.safe.ok
+    rec = Recording.open(res.recording)
+    assert rec.metadata()["hil.result"]["safe_state_ok"] == "false"
+    safety = [m for _, _, _, m in rec.messages("/safety")]
+    assert safety[-1]["action"] == "safe_state_not_confirmed"
+    assert any("wall-clock watchdog" in m.get("detail", "") for m in safety)

@@ -6,9 +6,11 @@ neither imports the other's internals.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -28,6 +30,49 @@ WATCH_S = 0.25  # how often a running step's bench is looked at (a drive process
 # ... or this many times the step timeout, whichever is longer: a heavy bench (many axes at a
 # short SYNC) may run slower than real time, and a legitimate long step must not trip it
 WATCHDOG_FACTOR = 10
+
+
+class SafeStateHung(clock.ClockHung):
+    """The safe state (or the tail after it) ran past its wall-clock watchdog on a virtual
+    clock: the host hung inside a clock event that this thread itself was running."""
+
+    def __init__(self, *args: object) -> None:  # raised as a class, from another thread
+        super().__init__(*args or ("the safe state ran past its wall-clock watchdog: a clock "
+                                   "event hung the host (docs/clock.md)",))
+
+
+@contextlib.contextmanager
+def safe_state_watchdog(timeout_ns: int) -> Iterator[None]:
+    """On a virtual clock, stop the block once it has run `max(WATCHDOG_GRACE_NS,
+    WATCHDOG_FACTOR x timeout_ns)` of wall time: the clock is marked hung and SafeStateHung
+    is raised in this thread, so the safe state records what it could not confirm and the
+    recording is closed. A step's own hang is `StepThread.run`'s watchdog; this one covers
+    a model event that never returns while the safe state runs it (helper-131: the process
+    hung for good, Ctrl-C and SIGTERM ignored). On the wall clock the safe state's own
+    timeouts stop it."""
+    clk = clock.current()
+    if not isinstance(clk, clock.VirtualClock):
+        yield
+        return
+    wall_s = max(WATCHDOG_GRACE_NS, WATCHDOG_FACTOR * timeout_ns) / S
+    ident, lock, done = threading.get_ident(), threading.Lock(), threading.Event()
+
+    def bark() -> None:
+        if done.wait(wall_s):
+            return
+        with lock:
+            if done.is_set():
+                return
+            clk.hung = True  # every other use of the clock fails at once from now on
+            ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
+                                                       ctypes.py_object(SafeStateHung))
+
+    threading.Thread(target=bark, name="hil-safe-watchdog", daemon=True).start()
+    try:
+        yield
+    finally:
+        with lock:
+            done.set()
 
 
 class StepFailed(Exception):

@@ -33,6 +33,7 @@ from hil.plan.context import (
     StepContext,
     StepFailed,
     StepThread,
+    safe_state_watchdog,
 )
 from hil.plan.events import (
     Listener,
@@ -349,8 +350,10 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                     rec.log("warning", "a step did not end within 5 s of its cancel; going "
                             "safe anyway (one SDO transaction at a time)", name="hil.runner")
                 if session is not None:
-                    _go_safe(session, reason, rec, res, events, plan)
-                    safe_tail(session)
+                    with safe_state_watchdog(session.bench.safe_state.timeout_ns
+                                             + SAFE_TAIL_NS):
+                        _go_safe(session, reason, rec, res, events, plan)
+                        safe_tail(session)
                 elif reason != "end of plan":  # stopped or failed before the bench was up
                     rec.safety("safe_state_not_confirmed", reason, ok=False,
                                detail="the bench was not up yet: no safe state was driven")
