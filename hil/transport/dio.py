@@ -152,8 +152,10 @@ class DioPort:
         clock.refuse_in_event("DioPort.wait_for")
         # bench time in the run's thread on a virtual clock (the events deliver levels to it),
         # wall time in any other thread and on the wall clock
-        now = clock.monotonic if clock.waits_on_clock() else time.monotonic
-        deadline = now() + timeout_s
+        # in whole ns: a float of seconds since 2000 (virtual time) resolves only ~119 ns, and
+        # a deadline rounded early missed an edge at 2 ms of a 2.00003 ms wait (helper-131)
+        now_ns = clock.monotonic_ns if clock.waits_on_clock() else time.monotonic_ns
+        deadline_ns = now_ns() + round(timeout_s * 1e9)
         if line not in self._levels and not self.owns(line):
             self._ask_levels()
         with self._cond:
@@ -161,7 +163,7 @@ class DioPort:
                 entry = self._levels.get(line)
                 if entry is not None and entry[0] == bool(level):
                     return entry[1]
-                left = deadline - now()
+                left = (deadline_ns - now_ns()) / 1e9
                 if left <= 0 or self._closed:
                     seen = "never seen" if entry is None else f"last seen {int(entry[0])}"
                     raise TimeoutError(f"DI/DO {self.name}: {line} did not become "

@@ -324,3 +324,25 @@ def test_modbus_unreachable_names_url(port):
     with pytest.raises(TransportUrlError, match=f"127.0.0.1:{port}"):
         open_dio(f"modbus-tcp://127.0.0.1:{port}?timeout=0.2", role="harness",
                  mapping={"DI1": 0})
+
+
+def test_a_virtual_wait_for_is_exact_to_the_ns():
+    """helper-131: virtual time counts from 2000-01-01, where a float of seconds resolves
+    only ~119 ns; wait_for's deadline in float seconds ended a 2.00003 ms wait before an
+    edge at exactly 2 ms. The deadline is kept in whole ns."""
+    from hil import clock
+    from hil.clock import VirtualClock
+
+    with clock.use(VirtualClock()) as clk:
+        drive = open_dio("virtual:exact-ns", role="drive")
+        harness = open_dio("virtual:exact-ns", role="harness")
+        try:
+            t0 = clk.time_ns()
+            clk.at(t0 + 2_000_000, lambda: drive.set("DO6", True))
+            with pytest.raises(TimeoutError):
+                harness.wait_for("DO6", True, 0.00199997)
+            assert clk.time_ns() - t0 == 1_999_970
+            assert harness.wait_for("DO6", True, 0.00000033) == t0 + 2_000_000
+        finally:
+            harness.close()
+            drive.close()
