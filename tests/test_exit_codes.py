@@ -123,3 +123,16 @@ def test_documented_codes_are_returned(work, capsys):
         got[(cmd, code)] = _run(fn)
         capsys.readouterr()
     assert {k: v for k, v in got.items() if k[1] != v} == {}
+
+
+def test_ctrl_c_while_the_command_loads_is_exit_130_without_a_traceback(monkeypatch, capsys):
+    """helper-131: a Ctrl-C in the first second of `hil run` (its modules still loading, in
+    `build_parser`) printed a raw KeyboardInterrupt traceback and ended by the signal (-2)."""
+    from hil import cli
+
+    def loading(argv):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "build_parser", loading)
+    assert cli.main(["run", "servo_on_off_brake"]) == 130
+    assert "hil: interrupted" in capsys.readouterr().err
