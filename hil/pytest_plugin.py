@@ -511,7 +511,7 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
         record_dut,
         safe_tail,
     )
-    from hil.plan.safety import go_safe
+    from hil.plan.safety import go_safe_watched
     from hil.plan.session import open_session
 
     with bench_clock(hil_bench) as clk, Interrupts(clk) as signals:
@@ -532,8 +532,8 @@ def hil_session(hil_bench: Any, hil_recorder: Any,
                 status, reason = "fail", f"test failed: {first_line(signals.alarm)}"  # not seen
             safe = None
             try:
-                safe = go_safe(session, reason, hil_recorder)
-                safe_tail(session)  # the drive's reaction on the record, as after a plan
+                # the drive's reaction on the record after it, as after a plan (safe_tail)
+                safe = go_safe_watched(session, reason, hil_recorder, safe_tail)
             finally:
                 session.close()
                 unsafe = "; ".join(f"{a['drive']}: {a['action']}: {a['detail']}"

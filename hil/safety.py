@@ -46,9 +46,10 @@ def wait_quick_stop(read: Callable[[int], int | None], timeout_ns: int,
             if abs(v) <= STANDSTILL:
                 return True, f"606Ch = {v} (0.1 rpm): at rest"
             last = f"606Ch = {v} (0.1 rpm): still moving"
-        if clock.monotonic_ns() >= end:
+        left = end - clock.monotonic_ns()
+        if left <= 0:
             return False, last
-        clock.sleep(period_s)
+        clock.sleep(min(period_s, left / 1e9))  # the last look at the deadline itself
 
 
 class DriveGone(Exception):

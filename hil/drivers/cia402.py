@@ -420,13 +420,13 @@ class Cia402Driver:
             if shown == code:
                 return
             elapsed = self.clock() - t0
-            if elapsed > timeout:
+            if elapsed >= timeout:
                 raise Cia402ModeError(
                     f"node {self.node_id}: expected 6061h = {code} ({mode}) within "
                     f"{timeout:.3f} s (timeouts['mode']), saw {shown} "
                     f"({MODE_NAMES.get(shown, '?')}) after {elapsed:.3f} s"
                 )
-            self._pause()
+            self._pause(timeout - elapsed)
 
     def move_to(
         self,

@@ -112,10 +112,11 @@ class DeltaPr:
             got, st = self.status()
             if got == n and STATES[st] >= STATES[state]:
                 return self._clock() - t0
-            if self._clock() - t0 > timeout_s:
+            left = timeout_s - (self._clock() - t0)
+            if left <= 0:
                 raise TimeoutError(f"PR#{n} not {state} after {timeout_s:g} s "
                                    f"(P5.007 says PR#{got} {st})")
-            self._sleep(self.poll_s)
+            self._sleep(min(self.poll_s, left))  # the last look at the timeout itself
 
 
 __all__ = ["STATES", "DeltaPr", "PrTableError", "table_words"]

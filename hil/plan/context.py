@@ -32,47 +32,68 @@ WATCH_S = 0.25  # how often a running step's bench is looked at (a drive process
 WATCHDOG_FACTOR = 10
 
 
-class SafeStateHung(clock.ClockHung):
-    """The safe state (or the tail after it) ran past its wall-clock watchdog on a virtual
-    clock: the host hung inside a clock event that this thread itself was running."""
+class SafeStateHung(BaseException):
+    """The safe state (or the 200 ms after it) ran past its wall-clock watchdog on a virtual
+    clock: the host hung inside a clock event that this thread itself was running. A
+    BaseException, so that no `except Exception` in the hung event or on the way out (the
+    safe state's own per-action handling, the tail's) takes it for something to carry on
+    after; `hil.plan.safety.go_safe_watched` records it."""
 
     def __init__(self, *args: object) -> None:  # raised as a class, from another thread
-        super().__init__(*args or ("the safe state ran past its wall-clock watchdog: a clock "
-                                   "event hung the host (docs/clock.md)",))
+        super().__init__(*args or ("a clock event hung the host during the safe state or the "
+                                   "200 ms after it: stopped by its wall-clock watchdog "
+                                   "(docs/clock.md)",))
+
+
+def _async_raise(ident: int, exc: type[BaseException] | None) -> None:
+    """Raise `exc` in thread `ident` at its next Python instruction (None: withdraw one not
+    yet raised)."""
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
+                                               None if exc is None else ctypes.py_object(exc))
 
 
 @contextlib.contextmanager
 def safe_state_watchdog(timeout_ns: int) -> Iterator[None]:
     """On a virtual clock, stop the block once it has run `max(WATCHDOG_GRACE_NS,
     WATCHDOG_FACTOR x timeout_ns)` of wall time: the clock is marked hung and SafeStateHung
-    is raised in this thread, so the safe state records what it could not confirm and the
-    recording is closed. A step's own hang is `StepThread.run`'s watchdog; this one covers
-    a model event that never returns while the safe state runs it (helper-131: the process
-    hung for good, Ctrl-C and SIGTERM ignored). On the wall clock the safe state's own
-    timeouts stop it."""
+    is raised in this thread, again every second until the block has ended (an event that
+    caught it once is stopped the next time). A step's own hang is `StepThread.run`'s
+    watchdog; this one covers a model event that never returns while the safe state runs it
+    (helper-131: the process hung for good, Ctrl-C and SIGTERM held off). An event blocked
+    in a C-level wait (a lock, an Event) gets it only when it runs Python again. On the wall
+    clock the safe state's own timeouts end it."""
     clk = clock.current()
     if not isinstance(clk, clock.VirtualClock):
         yield
         return
     wall_s = max(WATCHDOG_GRACE_NS, WATCHDOG_FACTOR * timeout_ns) / S
-    ident, lock, done = threading.get_ident(), threading.Lock(), threading.Event()
+    ident, lock, done = threading.get_ident(), threading.RLock(), threading.Event()
 
     def bark() -> None:
-        if done.wait(wall_s):
-            return
-        with lock:
-            if done.is_set():
-                return
-            clk.hung = True  # every other use of the clock fails at once from now on
-            ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
-                                                       ctypes.py_object(SafeStateHung))
+        wait_s = wall_s
+        while not done.wait(wait_s):
+            with lock:
+                if done.is_set():
+                    return
+                clk.hung = True  # every other use of the clock fails at once from now on
+                _async_raise(ident, SafeStateHung)
+            wait_s = 1.0
 
     threading.Thread(target=bark, name="hil-safe-watchdog", daemon=True).start()
     try:
         yield
     finally:
-        with lock:
-            done.set()
+        landed: SafeStateHung | None = None
+        while True:  # one raised just as the block ended lands here: done is set anyway
+            try:
+                with lock:
+                    done.set()
+                    _async_raise(ident, None)  # one not raised yet never will be
+                break
+            except SafeStateHung as e:
+                landed = e
+        if landed is not None:
+            raise landed
 
 
 class StepFailed(Exception):

@@ -33,7 +33,6 @@ from hil.plan.context import (
     StepContext,
     StepFailed,
     StepThread,
-    safe_state_watchdog,
 )
 from hil.plan.events import (
     Listener,
@@ -46,7 +45,7 @@ from hil.plan.events import (
 )
 from hil.plan.listeners import Reports, StepLines, StepRecords, recorded_file
 from hil.plan.plan import Plan, check_plan, plan_spec
-from hil.plan.safety import SafeReport, go_safe
+from hil.plan.safety import SafeReport, go_safe_watched
 from hil.plan.session import BenchError, Session, open_session
 from hil.record.recorder import Recorder
 from hil.report.data import forget as forget_report
@@ -350,10 +349,7 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                     rec.log("warning", "a step did not end within 5 s of its cancel; going "
                             "safe anyway (one SDO transaction at a time)", name="hil.runner")
                 if session is not None:
-                    with safe_state_watchdog(session.bench.safe_state.timeout_ns
-                                             + SAFE_TAIL_NS):
-                        _go_safe(session, reason, rec, res, events, plan)
-                        safe_tail(session)
+                    _go_safe(session, reason, rec, res, events, plan)
                 elif reason != "end of plan":  # stopped or failed before the bench was up
                     rec.safety("safe_state_not_confirmed", reason, ok=False,
                                detail="the bench was not up yet: no safe state was driven")
@@ -532,7 +528,7 @@ def _go_safe(session: Session, reason: str, rec: Any, res: PlanResult, events: N
     for d in session.drives.values():
         if getattr(d, "_cia", None) is not None:
             d._cia.cancel = None  # the plan's cancel must not cut the safe state's own waits
-    res.safe = go_safe(session, reason, rec)
+    res.safe = go_safe_watched(session, reason, rec, safe_tail)  # the tail after it too
     if not res.safe.ok:
         failed = "; ".join(f"{a['drive']}: {a['action']}: {a['detail']}"
                            for a in res.safe.actions if not a["ok"])

@@ -7,10 +7,12 @@ SAFETY topic and the log.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from hil import clock
 from hil.drivers.cia402 import decode_state
+from hil.plan.context import SafeStateHung, safe_state_watchdog
 from hil.protocol.cia402 import CONTROLWORD
 from hil.safety import DriveGone, SafeReport, run_safe_state, wait_quick_stop
 
@@ -40,10 +42,11 @@ class _SessionDrive:
             sw = self.d.cia.statusword
             if not sw & 0x0004:
                 return f"statusword 0x{sw:04X}: {decode_state(sw)}"
-            if clock.monotonic_ns() >= end:
+            left = end - clock.monotonic_ns()
+            if left <= 0:
                 raise TimeoutError(f"statusword 0x{sw:04X} ({decode_state(sw)}) after "
                                    f"{timeout_ns / 1e6:g} ms: the power stage is still on")
-            clock.sleep(0.002)
+            clock.sleep(min(0.002, left / 1e9))  # the last look at the timeout itself
 
     def quick_stop_done(self, timeout_ns: int) -> str:
         """After the quick-stop controlword: until the ramp has ended (`wait_quick_stop`;
@@ -85,6 +88,29 @@ class _SessionDrive:
             clock.sleep(min(0.002, left / 1e9))
         raise TimeoutError(f"BRKR still on after {timeout_ns / 1e6:g} ms: the brake may be "
                            "released")
+
+
+def go_safe_watched(session: Any, reason: str, recorder: Any = None,
+                    tail: Callable[[Any], None] | None = None) -> SafeReport:
+    """`go_safe`, then `tail(session)` (the bench recorded on after it), on a virtual clock
+    under the safe state's wall-clock watchdog (`safe_state_watchdog`): a clock event that
+    hangs the run's thread is stopped, and the safe state is recorded and reported as not
+    confirmed, saying so. The runner's plans and the `hil_session` fixture both go safe
+    here; never raises SafeStateHung."""
+    rep: SafeReport | None = None
+    try:
+        with safe_state_watchdog(session.bench.safe_state.timeout_ns):
+            rep = go_safe(session, reason, recorder)
+            if tail is not None:
+                tail(session)
+    except SafeStateHung as e:
+        hung = {"drive": "*", "action": "watchdog", "ok": False, "detail": str(e)}
+        if recorder is not None:
+            recorder.safety("safe_state_not_confirmed", reason, ok=False, detail=str(e))
+            recorder.log("error", f"safe state: {e} ({reason})", name="hil.safety")
+        rep = SafeReport(reason, ok=False, actions=[*(rep.actions if rep else []), hung],
+                         duration_ns=rep.duration_ns if rep else 0)
+    return rep
 
 
 def go_safe(session: Any, reason: str, recorder: Any = None) -> SafeReport:

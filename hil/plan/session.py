@@ -379,15 +379,3 @@ def _open_harness(s: Session, urls: dict[str, str]) -> None:
                              timeout_s=t["modbus"] / 1e9, baud=line.baudrate,
                              port_name=spec.rs485)
         s.drives[name] = DriveIO(spec, bench, dio=dio, cia=cia, modbus=mb, pulse=pulse)
-
-
-def wait_for(pred: Callable[[], Any], timeout_ns: int, poll_s: float = 0.002) -> tuple[bool, Any]:
-    """Poll `pred` until truthy or timeout; returns (ok, last value)."""
-    end = clock.monotonic_ns() + timeout_ns
-    while True:
-        v = pred()
-        if v:
-            return True, v
-        if clock.monotonic_ns() >= end:
-            return False, v
-        clock.sleep(poll_s)

@@ -53,3 +53,25 @@ def test_a_pr_data_word_that_is_not_an_integer_is_refused(data):
     with pytest.raises(PrTableError, match="an integer"):
         table_words({1: {"type": "auto", "data": data, "spd": 4, "dly": 1}})
     assert table_words({1: {"type": "auto", "data": 100000, "spd": 4, "dly": 1}})
+
+
+def test_pr_wait_takes_its_last_look_at_its_timeout():
+    """A review (helper-133), the rule wait_until keeps: `pr_wait` polled P5.007 every 10 ms
+    and slept past its timeout, so a PR in position up to a poll late still passed."""
+    from hil.drivers.delta_pr import DeltaPr
+
+    now = [0.0]
+
+    class Access:  # PR#1 in position (20000 + 1, L11185) from 25 ms on
+        def read_param(self, name):
+            return 20001 if now[0] >= 0.025 else 1
+
+    def sleep(s):
+        now[0] += s
+
+    pr = DeltaPr(Access(), poll_s=0.01, sleep=sleep, clock=lambda: now[0])
+    with pytest.raises(TimeoutError, match=r"PR#1 not in_position after 0\.022 s"):
+        pr.wait(1, "in_position", timeout_s=0.022)
+    assert now[0] == pytest.approx(0.022)  # looked at the timeout, not at 30 ms
+    now[0] = 0.0
+    assert pr.wait(1, "in_position", timeout_s=0.025) == pytest.approx(0.025)

@@ -397,3 +397,31 @@ def test_a_plugin_test_in_virtual_time_is_never_rerun(pytester, monkeypatch) -> 
     assert res.parseoutcomes() == {"failed": 2, "rerun": 2}
     out = res.stdout.str()
     assert "ATTEMPT 1" in out and "ATTEMPT 2" not in out  # the two reruns: the other test's
+
+
+HANG_AT_TEARDOWN = """
+import time
+from hil import clock
+
+def test_leaves_a_hung_event(hil_session):
+    def forever():  # a model bug: an event that never returns, due as the test ends
+        while True:
+            time.sleep(0.001)
+    clock.call_later(1e-6, forever)
+"""
+
+
+def test_the_hil_session_safe_state_runs_under_the_watchdog(pytester, monkeypatch) -> None:
+    """A review (helper-133): the fixture's safe state had no watchdog, so an event left on
+    the clock hung pytest for good (pytest-timeout and SIGTERM held off). It goes safe
+    through the runner's one path now: stopped, not confirmed, the test an error."""
+    monkeypatch.delenv("HIL_BENCH", raising=False)
+    pytester.makeconftest("import hil.plan.context as c\nc.WATCHDOG_GRACE_NS = 500_000_000\n"
+                          "c.WATCHDOG_FACTOR = 0\n")
+    pytester.makepyfile(test_hang=HANG_AT_TEARDOWN)
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", timeout=60)
+    res.assert_outcomes(passed=1, errors=1)
+    result, safety = _result(pytester)
+    assert result.get("safe_state_ok") == "false"
+    assert safety[-1]["action"] == "safe_state_not_confirmed"
+    assert "wall-clock watchdog" in safety[-1]["detail"]

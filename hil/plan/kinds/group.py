@@ -420,10 +420,11 @@ class Group(StepKind):
         clock.sleep(3 * group.cycle_s)
         deadline = clock.monotonic_ns() + S
         while not all(a.status == 3 for a in axes):
-            if clock.monotonic_ns() > deadline:
+            left = deadline - clock.monotonic_ns()
+            if left <= 0:
                 raise StepFailed("axes not enabled: " + ", ".join(
                     f"{a.name} status {a.status} (6041h {a.statusword:04X}h)" for a in axes))
-            clock.sleep(group.cycle_s)
+            clock.sleep(min(group.cycle_s, left / S))
         return Outcome(f"{len(axes)} axes in IP mode, cycle {self.args.cycle / MS:g} ms")
 
     def describe(self) -> str:
@@ -908,10 +909,11 @@ def _await_capture(ctx: StepContext, g: AxisGroup, a: ServoAxis, timeout: float)
     dio = ctx.session.drive(a.name)
     deadline = clock.monotonic_ns() + round(timeout * S)
     while dio.read_param("P5.038", "sdo") != 0:
-        if clock.monotonic_ns() > deadline:
+        left = deadline - clock.monotonic_ns()
+        if left <= 0:
             raise StepFailed(f"{a.name}: nothing captured in {timeout:g} s (P5.038 still "
                              f"{dio.read_param('P5.038', 'sdo')})")
-        clock.sleep(g.cycle_s)
+        clock.sleep(min(g.cycle_s, left / S))
     value = read_array(dio, cap.start, 1, "sdo")[0]
     with g._lock:
         cap.store(float(value), a.write_position)
