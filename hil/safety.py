@@ -139,6 +139,10 @@ def run_safe_state(drives: list[SafeDrive], safe: SafeStateSpec, reason: str,
             ok, msg, extra = False, f"not confirmed: {e}", {**extra, "sent": True}
         except Exception as e:
             ok, msg = False, f"{type(e).__name__}: {e}"
+        except BaseException as e:  # the safe state's watchdog cut it: which drive and
+            if record is not None:  # action hung is on the record before it goes on up
+                record(drive, action, False, f"{type(e).__name__}: {e}", extra)
+            raise
         rep.actions.append({"drive": drive, "action": action, "ok": ok, "detail": msg, **extra})
         if not ok:
             rep.ok = False

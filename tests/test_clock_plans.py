@@ -383,3 +383,42 @@ def test_a_clock_event_that_hangs_the_safe_state_is_stopped_by_its_watchdog(
     safety = [m for _, _, _, m in rec.messages("/safety")]
     assert safety[-1]["action"] == "safe_state_not_confirmed"
     assert any("wall-clock watchdog" in m.get("detail", "") for m in safety)
+    # which drive's action hung is on the record (a review, helper-134)
+    assert [m["action"] for m in safety if m.get("drive") == "drive1" and not m["ok"]] == [
+        "controlword disable_voltage (0x00)"]
+
+
+@pytest.mark.parametrize("due_s, action", [(0.010001, "safe_state_not_confirmed"),
+                                           (0.15, "safe_tail_hung")])
+def test_a_passed_plan_whose_safe_state_hung_says_so(tmp_path, monkeypatch, due_s,
+                                                     action) -> None:
+    """A review (helper-134): a plan that passed and then hung in its safe state said
+    "end of plan" as its result's reason (the JUnit's message); and a hang in the 200 ms
+    after a safe state that was reached read as the safe state not confirmed."""
+    from hil.plan import context
+    from hil.plan.context import Outcome
+    from hil.plan.kinds.waits import Wait
+    from hil.record.reader import Recording
+    from hil.units import MS
+
+    monkeypatch.setattr(context, "WATCHDOG_GRACE_NS", 500 * MS)
+    monkeypatch.setattr(context, "WATCHDOG_FACTOR", 0)
+
+    def hang(self, ctx, step, d):
+        def forever() -> None:
+            while True:
+                time.sleep(0.001)
+        clock.call_later(due_s, forever)  # after the step: it passes
+        clock.sleep(0.01)
+        return Outcome("ok")
+
+    monkeypatch.setattr(Wait, "run", hang)
+    res = run_plan(loads_plan("name: hung\nsteps:\n  - wait: 10ms\n", "hung.yaml"), BUILTIN,
+                   tmp_path, reports=False)
+    assert res.status == "error" and res.steps[0].status == "pass"
+    rec = Recording.open(res.recording)
+    result = rec.metadata()["hil.result"]
+    assert result["reason"].startswith("safe state not confirmed") and action in result["reason"]
+    actions = [m["action"] for _, _, _, m in rec.messages("/safety")]
+    assert actions[-1] == action
+    assert ("safe_state_reached" in actions) == (action == "safe_tail_hung")

@@ -361,6 +361,8 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                 session.close()
             tmp.close()
             res.duration_ns = time.monotonic_ns() - t_start
+            if reason == "end of plan" and res.error:  # the safe state failed a passed plan
+                reason = res.error
             rec.add_metadata("hil.result", {"status": res.status, "reason": reason,
                                             "duration_ms": res.duration_ns / 1e6,
                                             "safe_state_ok": res.safe.ok if res.safe else ""})

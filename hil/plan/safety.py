@@ -104,9 +104,12 @@ def go_safe_watched(session: Any, reason: str, recorder: Any = None,
             if tail is not None:
                 tail(session)
     except SafeStateHung as e:
-        hung = {"drive": "*", "action": "watchdog", "ok": False, "detail": str(e)}
+        # in the safe state: which action hung is on the record (run_safe_state); after it,
+        # in the tail, the safe state was reached and the record says so before this
+        action = "safe_state_not_confirmed" if rep is None else "safe_tail_hung"
+        hung = {"drive": "*", "action": action, "ok": False, "detail": str(e)}
         if recorder is not None:
-            recorder.safety("safe_state_not_confirmed", reason, ok=False, detail=str(e))
+            recorder.safety(action, reason, ok=False, detail=str(e))
             recorder.log("error", f"safe state: {e} ({reason})", name="hil.safety")
         rep = SafeReport(reason, ok=False, actions=[*(rep.actions if rep else []), hung],
                          duration_ns=rep.duration_ns if rep else 0)
