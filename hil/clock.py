@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import ctypes
 import heapq
 import itertools
 import queue
@@ -49,6 +50,11 @@ HELD_WAIT_S = 10.0
 class ClockHung(RuntimeError):
     """The virtual clock is held by a thread that does not let go (a step hung inside a clock
     event): nothing else can run on it."""
+
+
+class EventHung(BaseException):
+    """Raised inside a clock event that held off an interrupt for HELD_WAIT_S of wall time
+    (it never ended); the interrupt itself is raised from it."""
 
 
 class Cancelled(Exception):
@@ -326,7 +332,25 @@ class VirtualClock:
             return False
         if not isinstance(self._interrupt, KeyboardInterrupt):  # a Ctrl-C already waiting
             self._interrupt = exc  # stays: it stops the run, whatever came after it
+            threading.Thread(target=self._cut_hung_event, args=(self._interrupt,),
+                             name="hil-interrupt-watchdog", daemon=True).start()
         return True
+
+    def _cut_hung_event(self, exc: BaseException) -> None:
+        """An interrupt deferred for HELD_WAIT_S of wall time to the end of an event that
+        never ends (a model event that loops; helper-134: pytest-timeout and Ctrl-C waited for
+        ever in a `hil_session` test): the event is cut after all. The clock is marked hung
+        and EventHung raised in the thread running it; `_pass` raises the deferred interrupt
+        from it. An event blocked in a C-level wait gets it when it runs Python again."""
+        end = time.monotonic() + HELD_WAIT_S
+        while time.monotonic() < end:
+            if self._interrupt is not exc:  # raised (or dropped) in time
+                return
+            time.sleep(0.05)
+        if self._interrupt is exc and self._running:
+            self.hung = True  # what the event left half done is not to be run on
+            ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._runner),
+                                                       ctypes.py_object(EventHung))
 
     def drop_interrupt(self) -> BaseException | None:
         """Forget a deferred interrupt not yet raised (the safe state after it must run);

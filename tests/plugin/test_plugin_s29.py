@@ -425,3 +425,35 @@ def test_the_hil_session_safe_state_runs_under_the_watchdog(pytester, monkeypatc
     assert result.get("safe_state_ok") == "false"
     assert safety[-1]["action"] == "safe_state_not_confirmed"
     assert "wall-clock watchdog" in safety[-1]["detail"]
+
+
+HANG_IN_BODY = """
+import time
+from hil import clock
+
+def test_hangs_in_an_event(hil_session):
+    def forever():  # a model bug: an event that never returns, while the test waits
+        while True:
+            time.sleep(0.001)
+    clock.call_later(0.001, forever)
+    clock.sleep(0.01)
+"""
+
+
+def test_pytest_timeout_cuts_an_event_that_never_ends(pytester, monkeypatch) -> None:
+    """A review (helper-134): pytest-timeout's alarm (and Ctrl-C) are held to the end of the
+    clock event running, so that no model tick is cut in half; an event that never ended
+    held them for ever and pytest hung. After HELD_WAIT_S the event is cut: the test fails
+    with the timeout, the safe state is recorded as not confirmed (the clock is hung), and
+    the recording is closed."""
+    monkeypatch.delenv("HIL_BENCH", raising=False)
+    pytester.makeconftest("import hil.clock as c\nc.HELD_WAIT_S = 1.0\n")
+    pytester.makepyfile(test_hang=HANG_IN_BODY)
+    res = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider", "--timeout=2",
+                                        "--timeout-method=signal", timeout=60)
+    res.assert_outcomes(failed=1, errors=1)  # the error: its teardown's safe state
+    assert "Timeout" in res.stdout.str()
+    result, safety = _result(pytester)
+    assert result.get("status") == "fail" and "Timeout" in result.get("reason", "")
+    assert result.get("safe_state_ok") == "false"
+    assert safety[-1]["action"] == "safe_state_not_confirmed"
