@@ -243,7 +243,9 @@ class AxisParams:
                             and int(val[1:]) <= top):
                 raise PlcError(code, f"{name} {val!r}: {prefix}0 ~ {prefix}{top}", field=name)
         if self.pg0 not in ("", "OZ"):
-            raise PlcError(52, f"pg0 {self.pg0!r}: OZ (the drive's Z output) or empty",
+            raise PlcError(52, f"pg0 {self.pg0!r}: OZ (the drive's Z output) or empty; a "
+                           "PLC takes PG0 on X0~X15 (001:60), but the pulse line carries "
+                           "the drive's Z pulses as OZ only, not as an X input's level",
                            field="pg0")
         if self.run_direction not in (0, 1):  # P9-0, error 10 (P9's)
             raise PlcError(10, f"run_direction {self.run_direction}: 0 or 1", field="run_direction")
