@@ -348,9 +348,12 @@ class VirtualClock:
                 return
             time.sleep(0.05)
         if self._interrupt is exc and self._running:
-            self.hung = True  # what the event left half done is not to be run on
-            ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._runner),
-                                                       ctypes.py_object(EventHung))
+            runner = ctypes.c_ulong(self._runner)
+            ctypes.pythonapi.PyThreadState_SetAsyncExc(runner, ctypes.py_object(EventHung))
+            if self._interrupt is exc and self._running:
+                self.hung = True  # what the event left half done is not to be run on
+            else:  # it ended just now and took the interrupt: withdraw it (helper-136)
+                ctypes.pythonapi.PyThreadState_SetAsyncExc(runner, None)
 
     def drop_interrupt(self) -> BaseException | None:
         """Forget a deferred interrupt not yet raised (the safe state after it must run);
