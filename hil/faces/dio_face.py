@@ -61,6 +61,7 @@ class DioFace:
                 return
         except (ValueError, KeyError) as exc:  # e.g. DI11 on the wire: not a terminal
             self.errors.append(f"{line}: {exc}")
+            del self.errors[:-20]  # a hostile flood keeps the last few, as the Modbus face
             return
         if sent_ns is not None and self.on_input is not None:
             self.on_input(line, level, sent_ns, drive.now)

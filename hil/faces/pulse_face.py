@@ -69,6 +69,7 @@ class PulseFace:
                 logic=data["logic"], total=data.get("total"))
         except ValueError as e:
             self.errors.append(str(e))
+            del self.errors[:-20]  # a hostile flood keeps the last few, as the Modbus face
 
     def close(self) -> None:
         self._unsub()

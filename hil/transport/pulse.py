@@ -55,6 +55,7 @@ Listener = Callable[[str, dict[str, Any], int, int | None], None]
 _X = re.compile(r"^X[0-9]{1,3}\Z")
 _Y = re.compile(r"^Y[0-9]{1,3}\Z")
 _T = struct.Struct("<q")
+ERRORS_KEPT = 20  # reasons kept of the messages refused (as the Modbus face keeps them)
 
 
 class PulseError(ValueError):
@@ -120,7 +121,8 @@ class PulsePort:
         self._levels: dict[str, bool] = {}
         self._subs: list[Listener] = []
         self._lock = threading.Lock()
-        self.errors: list[str] = []  # malformed messages received (and ignored)
+        self.errors: list[str] = []  # the last malformed messages received (and ignored)
+        self.refused = 0  # how many in all: a flood keeps only the last ERRORS_KEPT reasons
         self.closed = False
 
     # -- sending ---------------------------------------------------------------------------
@@ -189,7 +191,7 @@ class PulsePort:
         try:
             body = check_segment(kind, data)
         except PulseError as e:
-            self.errors.append(str(e))
+            self._refuse(str(e))
             return
         t = clock.time_ns()
         if self.tap is not None:
@@ -212,7 +214,12 @@ class PulsePort:
             try:
                 fn(kind, body, t, source_t)
             except Exception as e:
-                self.errors.append(f"listener {fn!r}: {e!r}")
+                self._refuse(f"listener {fn!r}: {e!r}")
+
+    def _refuse(self, reason: str) -> None:
+        self.refused += 1
+        self.errors.append(reason)
+        del self.errors[:-ERRORS_KEPT]
 
     # -- backend -------------------------------------------------------------------------------
     def _publish(self, kind: str, body: dict[str, Any], t: int) -> None:
@@ -364,7 +371,7 @@ class ZenohPulse(PulsePort):
             try:
                 data = json.loads(sample.payload.to_bytes())
             except (ValueError, UnicodeDecodeError) as e:
-                self.errors.append(f"pulse {last}: not JSON ({e})")
+                self._refuse(f"pulse {last}: not JSON ({e})")
                 return
             self._received(last, data, self._source_t(sample))
         else:

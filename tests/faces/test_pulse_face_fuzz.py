@@ -65,3 +65,33 @@ def test_random_traffic_never_breaks_the_drive(seed: int) -> None:
         finally:
             plc.close()
             stack.stop()
+
+
+def test_the_face_keeps_only_the_last_refusals() -> None:
+    """A review (helper-136): every segment the model refused was kept, so a flood grew the
+    drive's memory without end; the face keeps the last 20, as the Modbus face does."""
+    with clock.use(clock.VirtualClock()):
+        stack = VirtualDriveStack(DriveSpec(name="d", pulse="virtual:pulse-face-flood",
+                                            inputs={8: True})).start()
+        try:
+            face = stack.pulse_face
+            for i in range(500):  # a form the model does not know: refused by the model
+                stack.host.call(face._segment, {"freq": 1000.0 + i, "direction": 1,
+                                                "count": 1, "form": "zigzag", "logic": 0})
+            assert 0 < len(face.errors) <= 20 and "zigzag" in face.errors[-1]
+        finally:
+            stack.stop()
+
+
+def test_the_dio_face_keeps_only_the_last_refusals() -> None:
+    """The same for the DI/DO face: DI lines the drive has no terminal for (DI11 and up)."""
+    with clock.use(clock.VirtualClock()):
+        stack = VirtualDriveStack(DriveSpec(name="d", dio="virtual:dio-face-flood",
+                                            inputs={8: True})).start()
+        try:
+            face = stack.dio_face
+            for i in range(500):
+                stack.host.call(face._apply, f"DI{11 + i % 50}", bool(i % 2))
+            assert 0 < len(face.errors) <= 20
+        finally:
+            stack.stop()

@@ -288,3 +288,18 @@ def test_an_adapter_behind_the_interface_drives_the_virtual_drive():
         finally:
             gen.close()
             stack.stop()
+
+
+def test_a_flood_of_malformed_messages_keeps_only_the_last_reasons():
+    """A review (helper-136): every refused message's reason was kept, so a hostile flood
+    grew the port's memory without end. The last few are kept, and all are counted."""
+    plc = open_pulse("virtual:tp-flood", role="master")
+    drv = open_pulse("virtual:tp-flood", role="drive")
+    try:
+        for i in range(5000):
+            drv._received("seg", {"freq": -i - 1}, None)
+        assert drv.refused == 5000 and 0 < len(drv.errors) <= 20
+        assert "-5000" in drv.errors[-1]  # the newest reason is there
+    finally:
+        plc.close()
+        drv.close()
