@@ -57,6 +57,14 @@ class EventHung(BaseException):
     (it never ended); the interrupt itself is raised from it."""
 
 
+def async_raise(ident: int, exc: type[BaseException] | None) -> None:
+    """Raise `exc` in thread `ident` at its next Python instruction (None: withdraw one not
+    yet raised). A thread in a C-level wait (a lock, an Event) gets it once it runs Python
+    again. For the watchdogs that stop a thread hung inside a clock event."""
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
+                                               None if exc is None else ctypes.py_object(exc))
+
+
 class Cancelled(Exception):
     """A wait ended because its step was cancelled (step timeout, Ctrl-C)."""
 
@@ -348,12 +356,12 @@ class VirtualClock:
                 return
             time.sleep(0.05)
         if self._interrupt is exc and self._running:
-            runner = ctypes.c_ulong(self._runner)
-            ctypes.pythonapi.PyThreadState_SetAsyncExc(runner, ctypes.py_object(EventHung))
+            runner = self._runner
+            async_raise(runner, EventHung)
             if self._interrupt is exc and self._running:
                 self.hung = True  # what the event left half done is not to be run on
             else:  # it ended just now and took the interrupt: withdraw it (helper-136)
-                ctypes.pythonapi.PyThreadState_SetAsyncExc(runner, None)
+                async_raise(runner, None)
 
     def drop_interrupt(self) -> BaseException | None:
         """Forget a deferred interrupt not yet raised (the safe state after it must run);

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from hil.faces import ERRORS_KEPT
 from hil.model.events import DoChanged, FdbkChanged
 
 InputHook = Callable[[str, bool, int, int], None]
@@ -61,7 +62,7 @@ class DioFace:
                 return
         except (ValueError, KeyError) as exc:  # e.g. DI11 on the wire: not a terminal
             self.errors.append(f"{line}: {exc}")
-            del self.errors[:-20]  # a hostile flood keeps the last few, as the Modbus face
+            del self.errors[:-ERRORS_KEPT]
             return
         if sent_ns is not None and self.on_input is not None:
             self.on_input(line, level, sent_ns, drive.now)

@@ -30,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any, Literal, Protocol, get_args, get_origin, get_type_hints
 
+from hil.faces import ERRORS_KEPT
 from hil.faces.last_resort import LastResort
 from hil.model import errors
 from hil.profile.errors import UnknownParameter
@@ -678,7 +679,7 @@ class ModbusSlave:
 
     def _note(self, reason: str) -> None:
         self.errors.append(reason)
-        del self.errors[:-20]
+        del self.errors[:-ERRORS_KEPT]
 
 
 def _request_length(buf: bytearray, k: int) -> int | None:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from hil.faces import ERRORS_KEPT
+
 # Seed 001's example 3 (001:120): DOG X0, PG0 X4 (here the OZ messages), CLR Y8; the
 # stroke limits on X1 / X2; CLR drives DI2, the factory CCLR input (P2.011 = 0x0104, L1866).
 DEFAULT_WIRING: dict[str, str] = {"DOG": "X0", "NL": "X1", "PL": "X2", "Y8": "DI2"}
@@ -69,7 +71,7 @@ class PulseFace:
                 logic=data["logic"], total=data.get("total"))
         except ValueError as e:
             self.errors.append(str(e))
-            del self.errors[:-20]  # a hostile flood keeps the last few, as the Modbus face
+            del self.errors[:-ERRORS_KEPT]
 
     def close(self) -> None:
         self._unsub()

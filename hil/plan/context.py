@@ -7,7 +7,6 @@ neither imports the other's internals.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -45,13 +44,6 @@ class SafeStateHung(BaseException):
                                    "(docs/clock.md)",))
 
 
-def _async_raise(ident: int, exc: type[BaseException] | None) -> None:
-    """Raise `exc` in thread `ident` at its next Python instruction (None: withdraw one not
-    yet raised)."""
-    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
-                                               None if exc is None else ctypes.py_object(exc))
-
-
 @contextlib.contextmanager
 def safe_state_watchdog(timeout_ns: int) -> Iterator[None]:
     """On a virtual clock, stop the block once it has run `max(WATCHDOG_GRACE_NS,
@@ -76,7 +68,7 @@ def safe_state_watchdog(timeout_ns: int) -> Iterator[None]:
                 if done.is_set():
                     return
                 clk.hung = True  # every other use of the clock fails at once from now on
-                _async_raise(ident, SafeStateHung)
+                clock.async_raise(ident, SafeStateHung)
             wait_s = 1.0
 
     threading.Thread(target=bark, name="hil-safe-watchdog", daemon=True).start()
@@ -88,7 +80,7 @@ def safe_state_watchdog(timeout_ns: int) -> Iterator[None]:
             try:
                 with lock:
                     done.set()
-                    _async_raise(ident, None)  # one not raised yet never will be
+                    clock.async_raise(ident, None)  # one not raised yet never will be
                 break
             except SafeStateHung as e:
                 landed = e

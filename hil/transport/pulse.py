@@ -55,7 +55,7 @@ Listener = Callable[[str, dict[str, Any], int, int | None], None]
 _X = re.compile(r"^X[0-9]{1,3}\Z")
 _Y = re.compile(r"^Y[0-9]{1,3}\Z")
 _T = struct.Struct("<q")
-ERRORS_KEPT = 20  # reasons kept of the messages refused (as the Modbus face keeps them)
+ERRORS_KEPT = 20  # reasons kept of the messages refused (as the faces keep theirs)
 
 
 class PulseError(ValueError):
