@@ -60,8 +60,10 @@ def safe_state_watchdog(timeout_ns: int) -> Iterator[None]:
         return
     wall_s = max(WATCHDOG_GRACE_NS, WATCHDOG_FACTOR * timeout_ns) / S
     ident, lock, done = threading.get_ident(), threading.RLock(), threading.Event()
+    sent = False  # a SafeStateHung was raised: one that has not landed is withdrawn at the end
 
     def bark() -> None:
+        nonlocal sent
         wait_s = wall_s
         while not done.wait(wait_s):
             with lock:
@@ -69,6 +71,7 @@ def safe_state_watchdog(timeout_ns: int) -> Iterator[None]:
                     return
                 clk.hung = True  # every other use of the clock fails at once from now on
                 clock.async_raise(ident, SafeStateHung)
+                sent = True
             wait_s = 1.0
 
     threading.Thread(target=bark, name="hil-safe-watchdog", daemon=True).start()
@@ -80,7 +83,8 @@ def safe_state_watchdog(timeout_ns: int) -> Iterator[None]:
             try:
                 with lock:
                     done.set()
-                    clock.async_raise(ident, None)  # one not raised yet never will be
+                    if sent:  # one not raised yet never will be (a withdrawal costs a thread)
+                        clock.async_raise(ident, None)
                 break
             except SafeStateHung as e:
                 landed = e
