@@ -29,7 +29,8 @@ class DioFace:
         self.port = port
         self.host = host
         self.on_input = on_input
-        self.errors: list[str] = []
+        self.errors: list[str] = []  # the last ERRORS_KEPT reasons of the levels refused
+        self.refused = 0  # how many in all (`hil drive` reports them as they come)
         with host.lock:
             drive = host.drive
             for n in range(1, N_DO + 1):
@@ -61,6 +62,7 @@ class DioFace:
             else:
                 return
         except (ValueError, KeyError) as exc:  # e.g. DI11 on the wire: not a terminal
+            self.refused += 1
             self.errors.append(f"{line}: {exc}")
             del self.errors[:-ERRORS_KEPT]
             return

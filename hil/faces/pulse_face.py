@@ -28,7 +28,8 @@ class PulseFace:
         self.port = port
         self.host = host
         self.wiring = dict(DEFAULT_WIRING if wiring is None else wiring)
-        self.errors: list[str] = []
+        self.errors: list[str] = []  # the last ERRORS_KEPT reasons of the segments refused
+        self.refused = 0  # how many in all (`hil drive` reports them as they come)
         self._oab_total = 0
         with host.lock:
             pt = host.drive.pulse
@@ -70,6 +71,7 @@ class PulseFace:
                 data["freq"], data["direction"], data["count"], form=data["form"],
                 logic=data["logic"], total=data.get("total"))
         except ValueError as e:
+            self.refused += 1
             self.errors.append(str(e))
             del self.errors[:-ERRORS_KEPT]
 

@@ -15,6 +15,7 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from hil.bench.bench import load_bench
 from hil.bench.yamlio import PlanFileError
@@ -185,6 +186,20 @@ def _inputs(values: list[str]) -> dict[int, bool]:
     return out
 
 
+def report_refusals(now: dict[str, tuple[int, str]], reported: dict[str, int],
+                    stream: Any) -> None:
+    """One line on `stream` per kind of input refused since the last call (`reported` keeps
+    the counts printed): a PLC or harness whose messages a pulse or DI/DO face drops sees
+    why, where a CANopen or Modbus face would answer on the wire. At most one line per kind
+    per call (the run loop calls it every 0.2 s), so a flood costs a line per kind."""
+    for what, (n, last) in now.items():
+        new = n - reported.get(what, 0)
+        if new > 0:
+            reported[what] = n
+            print(f"hil drive: refused {new} {what} ({n} in all); last: {last}",
+                  file=stream, flush=True)
+
+
 def main(args: argparse.Namespace) -> int:
     if not (args.can or args.rs485 or args.dio or args.pulse):
         print("hil drive: give at least one of --can, --rs485, --dio, --pulse", file=sys.stderr)
@@ -236,6 +251,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil drive: {exc}", file=sys.stderr)
         return 1
     control = None
+    reported: dict[str, int] = {}  # refusals printed so far, per kind
     try:
         if args.control == "stdio":
 
@@ -245,6 +261,7 @@ def main(args: argparse.Namespace) -> int:
             control.start()
         failed = None
         while not stop.wait(0.2):
+            report_refusals(stack.refusals(), reported, sys.stderr)
             failed = getattr(getattr(stack, "host", None), "model_failed", None)
             if failed is not None:  # its outputs froze: end, so the runner sees it died
                 print(f"hil drive: the model failed ({type(failed).__name__}: {failed}); "
@@ -253,6 +270,7 @@ def main(args: argparse.Namespace) -> int:
     finally:
         if control is not None:
             control.close()
+        report_refusals(stack.refusals(), reported, sys.stderr)
         stack.stop()
         print("hil drive: stopped", flush=True)
     return 1 if failed is not None else 0

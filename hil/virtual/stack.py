@@ -286,6 +286,21 @@ class VirtualDriveStack:
         host.start()
         self._closers.append(host.stop)
 
+    def refusals(self) -> dict[str, tuple[int, str]]:
+        """What the pulse and DI/DO faces refused so far, without an answer on the wire (a
+        CANopen or Modbus face answers with an abort or an exception): {what: (how many in
+        all, the last reason)}. `hil drive` prints them as they come."""
+        out: dict[str, tuple[int, str]] = {}
+        for what, obj in ((f"malformed message(s) on the pulse line {self.spec.pulse}",
+                           self.pulse_port),
+                          ("pulse segment(s) the drive refused", self.pulse_face),
+                          ("DI/DO level(s) the drive refused", self.dio_face)):
+            n = getattr(obj, "refused", 0)
+            if n:
+                errors = getattr(obj, "errors", None) or [""]
+                out[what] = (n, errors[-1])
+        return out
+
     def stop(self) -> None:
         """Close faces and transports (newest first) and save retained state."""
         while self._closers:
