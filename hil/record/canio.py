@@ -27,25 +27,42 @@ def frame_from_json(obj: dict, timestamp: float, channel: Any) -> can.Message:
     type allows), which a reader skips and counts as a message of the wrong shape: a
     candump line `-01#00`, say, or a BLF writer's struct.error."""
     data = bytes.fromhex(obj.get("data", ""))
-    fd = bool(obj.get("fd", False))
-    dlc = int(obj.get("dlc", len(data)))
+    fd = _flag(obj, "fd")
+    dlc = _int(obj, "dlc", len(data))
     if not fd and dlc > 8 and len(data) == 8:  # a classic frame's raw DLC 9-15 (SocketCAN's
         dlc = 8  # CC_LEN8_DLC) carries 8 bytes: kept as such
     return can.Message(
         timestamp=timestamp,
-        arbitration_id=int(obj["id"]),
-        is_extended_id=bool(obj.get("ext", False)),
-        is_remote_frame=bool(obj.get("rtr", False)),
-        is_error_frame=bool(obj.get("err", False)),
+        arbitration_id=_int(obj, "id"),
+        is_extended_id=_flag(obj, "ext"),
+        is_remote_frame=_flag(obj, "rtr"),
+        is_error_frame=_flag(obj, "err"),
         is_fd=fd,
-        bitrate_switch=bool(obj.get("brs", False)),
-        error_state_indicator=bool(obj.get("esi", False)),
+        bitrate_switch=_flag(obj, "brs"),
+        error_state_indicator=_flag(obj, "esi"),
         dlc=dlc,
         data=data,
         channel=channel,
         is_rx=obj.get("dir", "rx") != "tx",
         check=True,
     )
+
+
+def _flag(obj: dict, key: str) -> bool:
+    """A frame's flag as the recorder writes it, true or false (absent: false). A text or a
+    number is refused: "false" would read as true, and the frame as another kind of frame."""
+    v = obj.get(key, False)
+    if type(v) is not bool:
+        raise ValueError(f"{key} {v!r}: not true or false")
+    return v
+
+
+def _int(obj: dict, key: str, default: int | None = None) -> int:
+    """A frame's identifier or DLC: an integer (not 1.5, not true)."""
+    v = obj[key] if default is None else obj.get(key, default)
+    if type(v) is not int:
+        raise ValueError(f"{key} {v!r}: not an integer")
+    return v
 
 
 def can_buses(rec: Recording) -> list[str]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import io
 import re
+import struct
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -130,17 +131,41 @@ def write_candump(feed: Callable[[Callable[[str, can.Message], None]], Any], out
     return n
 
 
-def _write_can(fmt: str, target: Any, feed: Callable[[Callable[[str, can.Message], None]], Any]
-               ) -> int:
+#: frames a format's python-can writer drops with only a warning on its logger (TRCWriter):
+#: counted here as not exported (helper-137: an export of a recording with guarding RTRs
+#: said every frame was written)
+CANNOT_CARRY = {"trc": (("is_error_frame", "error frames"), ("is_remote_frame", "remote frames"),
+                        ("is_fd", "CAN FD frames"))}
+
+
+def _write_can(fmt: str, target: Any, feed: Callable[[Callable[[str, can.Message], None]], Any],
+               left_out: dict[str, int] | None = None) -> int:
     """Write what `feed(on_frame)` hands over with python-can's writer for `fmt` (asc, blf,
-    csv, trc, mf4) to `target`."""
+    csv, trc, mf4) to `target`; returns the frames written. A frame the format cannot carry
+    (`CANNOT_CARRY`, a time BLF cannot encode) is not written and counted in `left_out`
+    ({why: how many})."""
     writer = {"asc": can.ASCWriter, "blf": can.BLFWriter, "csv": can.CSVWriter,
               "trc": can.TRCWriter, "mf4": can.MF4Writer}[fmt](target)
+    cannot = CANNOT_CARRY.get(fmt, ())
+    left = {} if left_out is None else left_out
     n = 0
 
     def on_frame(_bus: str, msg: can.Message) -> None:
         nonlocal n
-        writer.on_message_received(msg)
+        for attr, what in cannot:
+            if getattr(msg, attr):
+                why = f"python-can's {fmt.upper()} writer cannot carry {what}"
+                left[why] = left.get(why, 0) + 1
+                return
+        times = (getattr(writer, "start_timestamp", None), getattr(writer, "stop_timestamp", None))
+        try:
+            writer.on_message_received(msg)
+        except (struct.error, OverflowError):  # BLF: a time out of its range
+            if hasattr(writer, "stop_timestamp"):  # the file's start and end times stay those
+                writer.start_timestamp, writer.stop_timestamp = times  # of the frames written
+            why = f"the {fmt.upper()} format cannot carry their times"
+            left[why] = left.get(why, 0) + 1
+            return
         n += 1
 
     try:
@@ -163,12 +188,17 @@ def main(args: argparse.Namespace) -> int:
         # the recording's buses and state first (a bad --bus or file is said before any
         # output exists), then its frames a message at a time: never held whole
         head = Recording.survey(args.file)
-        bus_topics(head, args.bus)
+        buses = bus_topics(head, args.bus)
     except (RecordingError, ValueError) as exc:
         print(f"hil export: {exc}", file=sys.stderr)
         return 2
     if empty := before_channels(head.truncated, head.corrupt, len(head.channels())):
         print(f"hil export: {args.file}: {empty}: nothing to export", file=sys.stderr)
+        return 2
+    if not buses:  # no empty file for a recording without CAN traffic (helper-137)
+        print(f"hil export: {args.file}: no CAN bus recorded"
+              f"{' before its damage' if head.truncated else ''}: nothing to export",
+              file=sys.stderr)
         return 2
     if head.truncated:
         print(
@@ -182,6 +212,7 @@ def main(args: argparse.Namespace) -> int:
         stream_can(args.file, args.bus, on_frame, time=args.time, head=head)
 
     to_stdout = output == STDOUT
+    left_out: dict[str, int] = {}
     try:
         if fmt == "candump":
             if to_stdout:
@@ -192,10 +223,10 @@ def main(args: argparse.Namespace) -> int:
                     n = write_candump(feed, f)
         elif to_stdout:
             n = _write_can(fmt, _KeepOpen(sys.stdout.buffer, encoding="utf-8",
-                                          write_through=True), feed)
+                                          write_through=True), feed, left_out)
         else:
             with atomic_path(output) as tmp:  # a failed export leaves the old file
-                n = _write_can(fmt, str(tmp), feed)
+                n = _write_can(fmt, str(tmp), feed, left_out)
     except (RecordingError, ValueError) as exc:  # the file changed since its first read
         print(f"hil export: {exc}", file=sys.stderr)
         return 2
@@ -205,5 +236,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"hil export: cannot write {output}: {exc}", file=sys.stderr)
         return 2
     where = "stdout" if to_stdout else output
+    for why, k in left_out.items():
+        print(f"hil export: {k:,} frame(s) not exported: {why}", file=sys.stderr)
     print(f"{n:,} frames -> {where} ({fmt})", file=sys.stderr if to_stdout else sys.stdout)
     return 0
