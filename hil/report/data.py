@@ -381,6 +381,8 @@ def _load_run(path: str | Path, *, truth: bool = True,
     return data
 
 
+# what a timing verdict's status can be (hil.timing.checker.Verdict)
+VERDICT_STATUSES = frozenset({"pass", "fail", "inconclusive", "skipped"})
 # what a plan run's `hil.result` status can be (hil.plan.runner), and what the report adds
 PLAN_STATUSES = frozenset({"pass", "fail", "error", "skipped", "aborted", "inconclusive",
                            "incomplete", "unknown"})
@@ -402,11 +404,19 @@ def _reconcile_status(data: RunData) -> None:
     step = next((s for s in data.steps if s.status in ("fail", "error")
                  and not s.message.startswith("cut short")), None)
     verdict = next((v for v in data.verdicts if v.get("status") == "fail"), None)
+    odd = next((v for v in data.verdicts if v.get("status") not in VERDICT_STATUSES), None)
     if step is not None:
         why = f"step {step.index + 1} {step.label} {step.status}"
     elif verdict is not None:
         why = (f"timing verdict {verdict.get('spec', '?')}: {verdict.get('constraint', '?')} "
                "fail")
+    elif odd is not None:  # "FAIL", "failed", "maybe": no checker wrote it (helper-137)
+        data.status_note = (
+            f"the recording's result says {said}, but timing verdict {odd.get('spec', '?')}: "
+            f"{odd.get('constraint', '?')} has the status {str(odd.get('status'))[:40]!r}, "
+            f"not one of {', '.join(sorted(VERDICT_STATUSES))}")
+        data.status = "error"
+        return
     else:
         return
     data.status_note = f"the recording's result says {said}, but {why}"
