@@ -499,6 +499,38 @@ def _resync(data: bytes | FileBytes, start: int, n: int) -> int | None:
     return None
 
 
+def _starts_record(data: bytes | FileBytes, at: int, n: int) -> int | None:
+    """The end of a record that could start at `at` (a known opcode, its length within the
+    file), else None."""
+    head = data[at : at + 9]
+    if len(head) < 9:
+        return None
+    op, ln = _REC.unpack_from(head, 0)
+    end = at + 9 + ln
+    return end if 0 < op <= max(Opcode) and end <= n else None
+
+
+def _after_zeros(data: bytes | FileBytes, off: int, n: int) -> int | None:
+    """Where reading goes on past a run of zeroed bytes at `off` inside a file (a block the
+    disk lost, index records zeroed): the first non-zero byte when a record starts there and
+    another (or the file's closing magic) right after it, so that the metadata and chunks
+    after the zeros are kept (helper-137: a repair kept none of them); else the next whole
+    chunk record (`_resync`). None when nothing whole follows."""
+    z = off
+    while z < n:
+        buf = data[z : z + 65536]
+        rest = buf.lstrip(b"\0")
+        z += len(buf) - len(rest)
+        if rest:
+            break
+    if z < n:
+        end = _starts_record(data, z, n)
+        if end is not None and (data[end : end + 8] == MAGIC
+                                or _starts_record(data, end, n) is not None):
+            return z
+    return _resync(data, off + 1, n)
+
+
 def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
          chunks: bool = True, past_damage: bool = False) -> Scan:
     """Read every complete record of `data`; stop at the first broken one and say where.
@@ -521,13 +553,19 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             break
         op, ln = _REC.unpack_from(head, 0)
         if op == 0:  # no MCAP record has opcode 0: zeroed or foreign bytes
-            out.error = f"record with opcode 0x00 (invalid) at offset {off}"
-            out.error_offset = off
+            text = f"record with opcode 0x00 (invalid) at offset {off}"
             # zeros to the end (as far as looked) are a tail the file system never filled
             # after a crash, a cut like a killed run's; anything else is damage
-            out.corrupt = any(data[off : off + 65536])
-            if out.corrupt:
-                out.cut_log_ns = _after_read(out)
+            corrupt = any(data[off : off + 65536])
+            if out.error is None:  # the first damage is the one said (`error`)
+                out.error, out.error_offset, out.corrupt = text, off, corrupt
+                if corrupt:
+                    out.cut_log_ns = _after_read(out)
+            nxt = _after_zeros(data, off, n) if past_damage and corrupt else None
+            if nxt is not None:  # zeroed bytes inside the file: whole records follow
+                out.skipped.append(f"{text}; whole records follow at offset {nxt}")
+                off = nxt
+                continue
             break
         end = off + 9 + ln
         if end > n:

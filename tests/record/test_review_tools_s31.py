@@ -5,13 +5,15 @@ helper-137)."""
 from __future__ import annotations
 
 import json
+import struct
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from rec_helpers import copy_mcap, plan_recording
+from rec_helpers import T0, copy_mcap, plan_recording
 
 from hil.cli import main as hil
+from hil.record.recorder import Recorder
 
 pytestmark = pytest.mark.virtual_time
 
@@ -50,3 +52,42 @@ def test_a_pass_result_over_a_verdict_status_no_check_gives_is_an_error(emgs, tm
     assert err is not None and f"has the status {status!r}" in err.get("message")
     page = (tmp_path / "v.html").read_text(encoding="utf-8")
     assert "b-error" in page and "result says pass, but timing verdict emgs" in page
+
+
+def _records(data: bytes) -> list[tuple[int, int, int]]:
+    """(offset, opcode, length) of each record of an MCAP file's data section and after."""
+    out, off = [], 8
+    while off + 9 <= len(data) - 8:
+        op, ln = struct.unpack_from("<BQ", data, off)
+        out.append((off, op, ln))
+        off += 9 + ln
+    return out
+
+
+def test_repair_reads_on_past_zeroed_records(tmp_path, capsys) -> None:
+    """The message-index records after a chunk zeroed (141 bytes, no message touched):
+    `--repair` kept the messages before them only, and not the result and close metadata
+    written after them (helper-137)."""
+    p = tmp_path / "a.mcap"
+    with Recorder(p, chunk_size=2048) as rec:
+        for k in range(300):
+            rec.dio("io", f"DI{k % 8 + 1}", bool(k & 1), T0 + k * 1_000_000, None)
+        rec.add_metadata("hil.result", {"status": "pass"})
+    data = bytearray(p.read_bytes())
+    recs = _records(bytes(data))
+    first_chunk = next(i for i, r in enumerate(recs) if r[1] == 0x06)
+    zeroed = [r for r in recs[first_chunk + 1:] if r[1] == 0x07]  # its message indexes
+    k = first_chunk + 1
+    while recs[k][1] == 0x07:
+        off, _op, ln = recs[k]
+        data[off:off + 9 + ln] = bytes(9 + ln)
+        k += 1
+    assert zeroed and sum(1 for r in recs if r[1] == 0x06) > 2  # chunks follow the zeros
+    bad = tmp_path / "zeroed.mcap"
+    bad.write_bytes(bytes(data))
+    out = tmp_path / "fixed.mcap"
+    assert hil(["inspect", str(bad), "--repair", str(out)]) == 0
+    assert "repaired: 300 messages" in capsys.readouterr().out
+    assert hil(["inspect", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "messages: 300" in said and "hil.result" in said
