@@ -352,6 +352,29 @@ def _write_svg(args: argparse.Namespace, target: Path, text: str) -> bool:
     return True
 
 
+def _counts(judged: dict[str, int]) -> str:
+    return ", ".join(f"{n} {k}" for k, n in sorted(judged.items())) or "nothing"
+
+
+def _not_as_judged(run: dict, spec: Spec, vs: list[Verdict], src: Any,
+                   bind: dict) -> str | None:
+    """Why a re-made plan check does not judge what the run's own verdicts say it judged
+    (the same pass, fail and inconclusive counts), else None. helper-137: a recording
+    without its SON input passed, the run's pass turned "not applicable"."""
+    got: dict[str, int] = {}
+    for v in vs:
+        if v.status != "skipped":
+            got[v.status] = got.get(v.status, 0) + 1
+    if "judged" not in run or got == run["judged"]:
+        return None
+    recorded = set(src.topics())
+    gone = [m for m in missing_data(spec, src, bind)
+            if m.split(" on ", 1)[-1].split(" field ")[0] not in recorded]
+    return (f"step {int(run['step']) + 1} spec {spec.id}: the run judged "
+            f"{_counts(run['judged'])}, this check {_counts(got)}"
+            + (f" (not in the recording: signal {'; '.join(gone)})" if gone else ""))
+
+
 def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: dict,
             consts: dict, res: dict, incomplete: list[str]) -> int:
     """Re-judge every `check_timing` step of a plan recording on what the run had seen by then,
@@ -390,6 +413,8 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
                    constants=(run["constants"] | consts) or None, resolution=res)
         vs = occurrences_since(vs, run["since_ns"])
         verdicts.extend(vs)
+        if (why := _not_as_judged(run, spec, vs, src, step_bind)) is not None:
+            incomplete.append(why)
         if out_dir is not None and not _write_svg(
                 args, out_dir / f"{stem}.svg", svg(spec, src, vs, step_params, step_bind)):
             return 2

@@ -915,7 +915,12 @@ def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
             seen[key] = {"plan": v.get("plan"), "step": v["step"], "spec": v["spec"],
                          "binding": v.get("binding") or {}, "params": v.get("check_params") or {},
                          "constants": v.get("check_constants") or {},
-                         "since_ns": v.get("check_since_ns"), "until_ns": v["check_until_ns"]}
+                         "since_ns": v.get("check_since_ns"), "until_ns": v["check_until_ns"],
+                         "judged": {}}
+        status = v.get("status")  # what the run judged: a re-check must judge the same
+        if status != "skipped":
+            judged = seen[key]["judged"]
+            judged[str(status)] = judged.get(str(status), 0) + 1
     if damaged and hasattr(source, "bad_messages"):  # counted: `hil check` is incomplete
         source.bad_messages += damaged
     return list(seen.values())

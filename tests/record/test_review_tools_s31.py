@@ -91,3 +91,46 @@ def test_repair_reads_on_past_zeroed_records(tmp_path, capsys) -> None:
     assert hil(["inspect", str(out)]) == 0
     said = capsys.readouterr().out
     assert "messages: 300" in said and "hil.result" in said
+
+
+def _without(src: Path, dst: Path, topic: str) -> Path:
+    """`src` copied to `dst` without `topic`'s channel and messages (metadata kept)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        r = make_reader(f)
+        w = Writer(g)
+        w.start(profile="", library="test")
+        ids: dict[int, int] = {}
+        sids: dict[int, int] = {}
+        for schema, ch, msg in r.iter_messages(log_time_order=False):
+            if ch.topic == topic:
+                continue
+            if schema is not None and schema.id not in sids:
+                sids[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+            if ch.id not in ids:
+                ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding,
+                                                sids.get(schema.id, 0) if schema else 0,
+                                                dict(ch.metadata))
+            w.add_message(ids[ch.id], log_time=msg.log_time, publish_time=msg.publish_time,
+                          data=msg.data)
+        f.seek(0)
+        for m in make_reader(f).iter_metadata():
+            w.add_metadata(m.name, dict(m.metadata))
+        w.finish()
+    return dst
+
+
+def test_check_is_incomplete_when_a_plan_check_no_longer_judges_what_the_run_did(
+        tmp_path, capsys) -> None:
+    """The SON input's topic gone: the run's "SON accepted after the P2.009 filter" pass
+    became "not applicable" and `hil check` passed without a word (helper-137)."""
+    rec = plan_recording(tmp_path, "servo_on_off_brake")
+    assert hil(["check", str(rec)]) == 0
+    capsys.readouterr()
+    bad = _without(rec, tmp_path / "no_di1.mcap", "/dio/drive1/DI1")
+    assert hil(["check", str(bad)]) == 4
+    err = capsys.readouterr().err
+    assert "spec servo_on_brake: the run judged 3 pass, this check 1 pass" in err
+    assert "not in the recording: signal SON: no data on /dio/drive1/DI1" in err
