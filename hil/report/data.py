@@ -12,7 +12,7 @@ from typing import Any
 
 from hil.record import topics
 from hil.record.reader import Recording, decode, decode_record, repaired_cut
-from hil.timing.source import MISSING_FIELD, ColumnTable
+from hil.timing.source import MISSING_FIELD, ColumnTable, verdict_shape
 
 
 @dataclass
@@ -126,7 +126,6 @@ def dut_text(dut: dict[str, str]) -> str:
 
 
 _STEP_TEXT = ("step", "kind", "drive", "file", "status", "message", "event")
-_VERDICT_PAIRS = ("window_ms", "uncertainty_ms")
 
 
 def _number(x: Any) -> bool:
@@ -139,32 +138,6 @@ def _step_shape(msg: dict) -> None:
     for k in _STEP_TEXT:
         if msg.get(k) is not None and not isinstance(msg[k], str):
             raise TypeError(f"/plan/steps field {k!r} is {type(msg[k]).__name__}, not text")
-
-
-def _verdict_shape(msg: dict) -> None:
-    """TypeError for a /timing/verdicts record the page cannot show: a status text, spec
-    and constraint texts where given; occurrence and step whole numbers; a window and an
-    uncertainty as two numbers (a bound may be null); a measured value a number."""
-    if not isinstance(msg.get("status"), str):  # required (hil.TimingVerdict); spec and
-        raise TypeError("verdict field 'status' is missing or not text")  # constraint are not
-    for k in ("spec", "constraint", "message", "kind", "source"):
-        if msg.get(k) is not None and not isinstance(msg[k], str):
-            raise TypeError(f"verdict field {k!r} is not text")
-    for k in ("occurrence", "step"):
-        x = msg.get(k)
-        if x is not None and (type(x) is not int):
-            raise TypeError(f"verdict field {k!r} is not a whole number")
-    for k in _VERDICT_PAIRS:
-        x = msg.get(k)
-        if x is not None and not (isinstance(x, list) and len(x) == 2
-                                  and all(v is None or _number(v) for v in x)):
-            raise TypeError(f"verdict field {k!r} is not a pair of numbers")
-    for k in ("measured_ms", "t_ns", "from_ns"):
-        if msg.get(k) is not None and not _number(msg[k]):
-            raise TypeError(f"verdict field {k!r} is not a number")
-    for k in ("binding", "check_params", "check_constants"):
-        if msg.get(k) is not None and not isinstance(msg[k], dict):
-            raise TypeError(f"verdict field {k!r} is not an object")
 
 
 def _is_bus(topic: str) -> bool:
@@ -310,7 +283,7 @@ def _load_run(path: str | Path, *, truth: bool = True,
                 sd.message = msg.get("message") or ""
                 sd.duration_ns = int(msg.get("duration_ns") or 0)
         elif kind == topics.TIMING_VERDICTS:
-            _verdict_shape(msg)
+            verdict_shape(msg)
             data.verdicts.append({**msg, "_t": lt})
         elif kind == topics.SAFETY:
             data.safety.append({**msg, "_t": lt})

@@ -31,6 +31,7 @@ from hil.fileio import dumps_strict, write_text_atomic
 from hil.record import topics
 from hil.record.reader import Recording, decode_record, virtual_bench
 from hil.report.html import CSS
+from hil.timing.source import verdict_shape
 from hil.units import MS
 from hil.yamlio import load_yaml_text
 
@@ -139,12 +140,13 @@ def load_side(path: str | Path) -> Side:
                 side.starts.setdefault(idx, lt)
                 side.labels[idx] = str(msg.get("step", ""))
         elif topic == topics.TIMING_VERDICTS:
+            verdict_shape(msg)  # a measured "150" compared as nothing (helper-137)
             key = (msg.get("spec"), msg.get("constraint"), msg.get("occurrence"))
             side.verdicts[key] = msg
         elif topic.startswith("/dio/"):
-            if type(msg.get("level")) is not bool and msg.get("level") not in (0, 1):
-                shapeless[0] += 1  # {} or "false": no level (it read as a True edge, or
-                return  # vanished, with exit 0: helper-129)
+            if type(msg.get("level")) is not bool:
+                shapeless[0] += 1  # {}, "false" or 1: no level (it read as a True edge, or
+                return  # vanished, with exit 0: helper-129; `hil check` refuses 1 too)
             line = topic.split("/")[3]
             func, inverted = line_func.get(line, ("", False))
             name = f"{line} {func}".strip()

@@ -881,6 +881,48 @@ def recorded_specs(meta: Mapping[str, Mapping[str, str]]) -> tuple[list[str], di
     return [str(s) for s in specs], {str(k): str(v) for k, v in binding.items()}
 
 
+_VERDICT_PAIRS = ("window_ms", "uncertainty_ms")
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def verdict_shape(msg: dict) -> None:
+    """TypeError for a /timing/verdicts record of a wrong shape (a page cannot show it, a
+    diff cannot compare it, a re-check cannot trust it): a status text, spec
+    and constraint texts where given; occurrence and step whole numbers; a window and an
+    uncertainty as two numbers (a bound may be null); a measured value a number."""
+    if not isinstance(msg.get("status"), str):  # required (hil.TimingVerdict); spec and
+        raise TypeError("verdict field 'status' is missing or not text")  # constraint are not
+    for k in ("spec", "constraint", "message", "kind", "source"):
+        if msg.get(k) is not None and not isinstance(msg[k], str):
+            raise TypeError(f"verdict field {k!r} is not text")
+    for k in ("occurrence", "step"):
+        x = msg.get(k)
+        if x is not None and (type(x) is not int):
+            raise TypeError(f"verdict field {k!r} is not a whole number")
+    for k in _VERDICT_PAIRS:
+        x = msg.get(k)
+        if x is not None and not (isinstance(x, list) and len(x) == 2
+                                  and all(v is None or _is_number(v) for v in x)):
+            raise TypeError(f"verdict field {k!r} is not a pair of numbers")
+    for k in ("measured_ms", "t_ns", "from_ns"):
+        if msg.get(k) is not None and not _is_number(msg[k]):
+            raise TypeError(f"verdict field {k!r} is not a number")
+    for k in ("binding", "check_params", "check_constants"):
+        if msg.get(k) is not None and not isinstance(msg[k], dict):
+            raise TypeError(f"verdict field {k!r} is not an object")
+
+
+def _shaped(v: Any) -> bool:
+    try:
+        verdict_shape(v)
+    except TypeError:
+        return False
+    return True
+
+
 def _check_record(v: Any) -> bool:
     """A `/timing/verdicts` message a re-check can use: the shapes its recorder writes."""
     def whole(x: Any) -> bool:
@@ -902,7 +944,8 @@ def recorded_checks(source: MemorySource) -> list[dict[str, Any]]:
     seen: dict[tuple, dict[str, Any]] = {}
     damaged = 0
     for _t, v in source.messages(topics.TIMING_VERDICTS):
-        if not _check_record(v):  # not a check step's verdict, or a damaged one: skipped
+        if not _check_record(v) or not _shaped(v):  # not a check step's verdict, or a
+            # damaged one: skipped
             if isinstance(v, dict) and "check_until_ns" in v:  # a check step's, damaged
                 if not damaged:
                     logging.getLogger("hil.record").warning(

@@ -134,3 +134,26 @@ def test_check_is_incomplete_when_a_plan_check_no_longer_judges_what_the_run_did
     err = capsys.readouterr().err
     assert "spec servo_on_brake: the run judged 3 pass, this check 1 pass" in err
     assert "not in the recording: signal SON: no data on /dio/drive1/DI1" in err
+
+
+@pytest.mark.parametrize("change", [{"measured_ms": "150"}, {"window_ms": "wide"},
+                                    {"occurrence": "first"}])
+def test_a_verdict_of_a_wrong_shape_is_counted_by_check_and_diff(emgs, tmp_path, capsys,
+                                                                  change):
+    """`hil diff` compared a measured "150" as nothing ("0 verdicts measured differently",
+    exit 0) and `hil check` took such a record in silence (helper-137)."""
+    bad = copy_mcap(emgs, tmp_path / "v.mcap", _first_changed(
+        "/timing/verdicts", lambda o: o | change if o.get("status") == "pass" else None))
+    assert hil(["diff", str(emgs), str(bad), "-o", str(tmp_path / "d.html")]) == 4
+    assert "wrong shape" in capsys.readouterr().err
+    assert hil(["check", str(bad)]) == 4
+    assert "/timing/verdicts message(s) of a wrong shape" in capsys.readouterr().err
+
+
+def test_diff_takes_a_level_of_1_as_no_level(tmp_path, capsys) -> None:
+    """`hil check` refuses {"level": 1} as "not a level"; `hil diff` read it as true."""
+    rec = plan_recording(tmp_path, "servo_on_off_brake")
+    bad = copy_mcap(rec, tmp_path / "b.mcap", _first_changed(
+        "/dio/drive1/DO6", lambda o: o | {"level": 1} if o.get("level") is True else None))
+    assert hil(["diff", str(rec), str(bad), "-o", str(tmp_path / "d.html")]) == 4
+    assert "wrong shape" in capsys.readouterr().err
