@@ -132,6 +132,21 @@ def _number(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool)
 
 
+TEXT_KEPT = 4096  # characters of one text a page shows (a step message, a log line)
+
+
+def clip(text: str) -> str:
+    """`text`, or its first TEXT_KEPT characters and how many more there were: a recording
+    whose messages hold 10 MB texts (1000:1 under zstd) made a 140 MB page (helper-137)."""
+    if len(text) <= TEXT_KEPT:
+        return text
+    return f"{text[:TEXT_KEPT]}… ({len(text) - TEXT_KEPT:,} more characters not shown)"
+
+
+def _clipped(msg: dict) -> dict:
+    return {k: clip(v) if type(v) is str else v for k, v in msg.items()}
+
+
 def _step_shape(msg: dict) -> None:
     """TypeError for a /plan/steps record the page cannot show (a reader skips and counts
     it as a message of the wrong shape): a text field that is not text."""
@@ -270,7 +285,7 @@ def _load_run(path: str | Path, *, truth: bool = True,
             _step_shape(msg)
             t_plan = lt if t_plan is None else min(t_plan, lt)
             idx = int(msg.get("index") if msg.get("index") is not None else -1)
-            sd = steps.setdefault(idx, StepData(idx, str(msg.get("step", ""))))
+            sd = steps.setdefault(idx, StepData(idx, clip(str(msg.get("step", "")))))
             sd.kind = msg.get("kind", sd.kind) or sd.kind
             sd.line = int(msg.get("line") or sd.line or 0)
             sd.drive = msg.get("drive", sd.drive) or sd.drive
@@ -280,15 +295,15 @@ def _load_run(path: str | Path, *, truth: bool = True,
             else:
                 sd.t_end = lt
                 sd.status = msg.get("status") or sd.status
-                sd.message = msg.get("message") or ""
+                sd.message = clip(msg.get("message") or "")
                 sd.duration_ns = int(msg.get("duration_ns") or 0)
         elif kind == topics.TIMING_VERDICTS:
             verdict_shape(msg)
-            data.verdicts.append({**msg, "_t": lt})
+            data.verdicts.append({**_clipped(msg), "_t": lt})
         elif kind == topics.SAFETY:
-            data.safety.append({**msg, "_t": lt})
+            data.safety.append({**_clipped(msg), "_t": lt})
         elif kind == topics.LOG:
-            data.logs.append({**msg, "_t": lt})
+            data.logs.append({**_clipped(msg), "_t": lt})
         else:  # params
             d = topic.split("/")[2]
             data.params.setdefault(d, {}).update(msg.get("values") or {})

@@ -157,3 +157,17 @@ def test_diff_takes_a_level_of_1_as_no_level(tmp_path, capsys) -> None:
         "/dio/drive1/DO6", lambda o: o | {"level": 1} if o.get("level") is True else None))
     assert hil(["diff", str(rec), str(bad), "-o", str(tmp_path / "d.html")]) == 4
     assert "wrong shape" in capsys.readouterr().err
+
+
+def test_the_page_shows_a_long_text_clipped(emgs, tmp_path) -> None:
+    """A 2 MB step message (zstd keeps it in a few kB) was put whole on the page: a 79 kB
+    file gave a 140 MB page and 600 MB of memory (helper-137)."""
+    huge = "x" * 2_000_000
+    bad = copy_mcap(emgs, tmp_path / "big.mcap", _first_changed(
+        "/plan/steps", lambda o: o | {"message": huge} if o.get("event") == "end" else None))
+    assert bad.stat().st_size < 200_000
+    out = tmp_path / "big.html"
+    assert hil(["report", str(bad), "-o", str(out)]) == 0
+    page = out.read_text(encoding="utf-8")
+    assert len(page) < 500_000
+    assert "1,995,904 more characters not shown" in page
