@@ -71,6 +71,10 @@ def summarise(rec: Recording, gaps: int = 3,
     elif rec.truncated:
         why = rec.error or "no footer/summary (the writer did not finish: killed run?)"
         lines.append(f"TRUNCATED: {why}; everything before it is readable")
+    elif rec._scan.index_error:  # whole in order, but its summary points elsewhere
+        lines.append(f"INDEX DAMAGED: {rec._scan.index_error}: every message reads in order, "
+                     "but a reader that follows the index (Foxglove) fails on it; --repair "
+                     "writes a copy with a new index")
     else:
         lines.append("complete: footer and summary present")
     lines += [f"DAMAGED attachment {bad}: left out" for bad in rec.bad_attachments[:10]]

@@ -343,6 +343,10 @@ class Scan:
     bad_attachments: list[str] = field(default_factory=list)
     #: the latest log time of any message read (chunk headers' end times, loose messages)
     last_log_ns: int | None = None
+    #: why the summary's pointers (the footer's summary offsets, a chunk index's chunk
+    #: offset) do not point where they say, in a file otherwise whole: its messages read in
+    #: order, but an indexed reader (Foxglove, `mcap` with its index) fails on it
+    index_error: str | None = None
     #: a file cut short with no damage (a killed run): the cut chunk's first log time, when
     #: its header was there to read, else just after the last message read (every message
     #: logged before it was read)
@@ -546,6 +550,7 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
         raise ValueError("not an MCAP file (bad magic at offset 0)")
     off = 8
     n = len(data)
+    summary_at: int | None = None
     while off < n:
         head = data[off : off + 9]
         if len(head) < 9:
@@ -646,6 +651,12 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                     out.attachments.append(a)
             elif op == Opcode.DATA_END:
                 out.has_data_end = True
+                summary_at = end  # the summary, if any, starts right after data end
+            elif op == Opcode.CHUNK_INDEX and out.index_error is None:
+                (at,) = struct.unpack_from("<Q", rec, 16)  # message start/end time first
+                if data[at : at + 1] != bytes([Opcode.CHUNK]):
+                    out.index_error = (f"the chunk index at offset {off} points to offset "
+                                       f"{at}, where no chunk starts")
             elif op == Opcode.STATISTICS:  # chunk_count after message, schema, channel,
                 (out.stated_chunks,) = struct.unpack_from("<I", rec, 22)  # attachment and
                 # metadata counts (MCAP spec, Statistics)
@@ -659,6 +670,13 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                     out.error_offset = end + 8
                     out.corrupt = True
                 out.has_footer = True
+                s_start, s_offsets = struct.unpack_from("<QQ", rec, 0)
+                if out.index_error is None and s_start and (
+                        s_start != summary_at or not s_start <= s_offsets <= off):
+                    out.index_error = (
+                        f"the footer says the summary starts at offset {s_start} and its "
+                        f"offsets at {s_offsets}; the summary starts at "
+                        f"{summary_at if summary_at is not None else '?'}")
                 break
         except Exception as exc:  # a broken record ends the readable part
             what = "chunk" if op == Opcode.CHUNK else f"record (opcode 0x{op:02x})"

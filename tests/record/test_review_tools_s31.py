@@ -171,3 +171,28 @@ def test_the_page_shows_a_long_text_clipped(emgs, tmp_path) -> None:
     page = out.read_text(encoding="utf-8")
     assert len(page) < 500_000
     assert "1,995,904 more characters not shown" in page
+
+
+def test_inspect_says_when_the_summary_points_elsewhere(emgs, tmp_path, capsys) -> None:
+    """A footer whose summary offset is wrong, or a chunk index pointing where no chunk
+    starts: `hil inspect` said "complete" of files an indexed reader fails on (helper-137)."""
+    data = emgs.read_bytes()
+    foot = len(data) - 8 - 20  # footer body: summary_start, summary_offset_start, crc
+    bad = tmp_path / "footer.mcap"
+    bad.write_bytes(data[:foot] + (12345).to_bytes(8, "little") + data[foot + 8:])
+    assert hil(["inspect", str(bad)]) == 0
+    assert "INDEX DAMAGED: the footer says the summary starts at offset 12345" in (
+        capsys.readouterr().out)
+    ci = next(off for off, op, _ln in _records(data) if op == 0x08)  # a chunk index
+    bad2 = tmp_path / "chunkidx.mcap"
+    at = ci + 9 + 16  # its chunk_start_offset
+    bad2.write_bytes(data[:at] + (999_999).to_bytes(8, "little") + data[at + 8:])
+    assert hil(["inspect", str(bad2)]) == 0
+    assert "points to offset 999999, where no chunk starts" in capsys.readouterr().out
+    fixed = tmp_path / "fixed.mcap"
+    assert hil(["inspect", str(bad), "--repair", str(fixed)]) == 0
+    capsys.readouterr()
+    assert hil(["inspect", str(fixed)]) == 0
+    assert "complete: footer and summary present" in capsys.readouterr().out
+    assert hil(["inspect", str(emgs)]) == 0
+    assert "complete: footer and summary present" in capsys.readouterr().out
