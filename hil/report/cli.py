@@ -28,7 +28,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def _refuse_clobber(args: argparse.Namespace) -> None:
     """No output may be a recording it reads, nor another output of the same call."""
     pages = [args.output or Path(r).with_suffix(".html") for r in args.recording]
-    outs = [("-o", p) for p in pages]
+    # a page no -o named is the default one beside its recording: said as such
+    outs = [("-o" if args.output else f"page of {r}", p)
+            for r, p in zip(args.recording, pages, strict=True)]
     outs += [(flag, v) for flag, v in (("--junit", args.junit), ("--index", args.index)) if v]
     for flag, out in outs:
         refuse_input(out, args.recording, flag)
@@ -37,7 +39,11 @@ def _refuse_clobber(args: argparse.Namespace) -> None:
     for i, (flag, out) in enumerate(outs):
         for other_flag, other in outs[i + 1:]:
             if same_file(out, other):
-                raise FileProblem(f"{other_flag} {other}: is also the {flag} output")
+                if flag.startswith("page of") and other_flag.startswith("page of"):
+                    raise FileProblem(f"{other}: the page of two recordings given "  # one
+                                      f"({flag[8:]} and {other_flag[8:]}: one file twice?)")
+                what = f"the {flag}" if flag.startswith("page of") else f"the {flag} output"
+                raise FileProblem(f"{other_flag} {other}: is also {what}")
 
 
 def main(args: argparse.Namespace) -> int:

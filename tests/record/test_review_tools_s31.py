@@ -196,3 +196,13 @@ def test_inspect_says_when_the_summary_points_elsewhere(emgs, tmp_path, capsys) 
     assert "complete: footer and summary present" in capsys.readouterr().out
     assert hil(["inspect", str(emgs)]) == 0
     assert "complete: footer and summary present" in capsys.readouterr().out
+
+
+def test_report_of_one_recording_given_twice_says_so(emgs, tmp_path, capsys) -> None:
+    """It said "-o x.html: is also the -o output" where no -o was given (helper-137)."""
+    assert hil(["report", str(emgs), str(emgs)]) == 2
+    err = capsys.readouterr().err
+    assert " -o " not in err and "the page of two recordings given" in err
+    assert "one file twice?" in err
+    assert hil(["report", str(emgs), "--index", str(emgs.with_suffix(".html"))]) == 2
+    assert f"is also the page of {emgs}" in capsys.readouterr().err
