@@ -90,10 +90,18 @@ def summarise(rec: Recording, gaps: int = 3,
     else:
         lines.append("messages: 0")
     lines.append("channels:")
+    per_topic: dict[str, int] = {}
     for c in rec.channels():
+        per_topic[c.topic] = per_topic.get(c.topic, 0) + 1
+    shown_topics: set[str] = set()
+    for c in rec.channels():
+        if c.topic in shown_topics:  # another writer's second channel of one topic: the
+            continue  # topic's messages are counted once, with the channels said
+        shown_topics.add(c.topic)
         ts = times.get(c.topic, array("Q"))
         src = c.metadata.get("publish_time_source", "?")
-        lines.append(f"  {c.topic:<32} {len(ts):>9,}  {c.schema:<20} publish_time: {src}")
+        many = f"  ({per_topic[c.topic]} channels of this topic)" if per_topic[c.topic] > 1 else ""
+        lines.append(f"  {c.topic:<32} {len(ts):>9,}  {c.schema:<20} publish_time: {src}{many}")
         if len(ts) > 1 and gaps > 0:
             ts = sorted(ts)
             worst = heapq.nlargest(gaps, ((b - a, a) for a, b in itertools.pairwise(ts)))

@@ -206,3 +206,23 @@ def test_report_of_one_recording_given_twice_says_so(emgs, tmp_path, capsys) -> 
     assert "one file twice?" in err
     assert hil(["report", str(emgs), "--index", str(emgs.with_suffix(".html"))]) == 2
     assert f"is also the page of {emgs}" in capsys.readouterr().err
+
+
+def test_inspect_counts_a_topic_of_two_channels_once(tmp_path, capsys) -> None:
+    """Another writer's two channels of one topic, one of them empty, were each listed with
+    the topic's whole count (helper-137)."""
+    from mcap.writer import Writer
+
+    p = tmp_path / "dup.mcap"
+    with open(p, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="test")
+        sid = w.register_schema("hil.DioLevel", "jsonschema", b"{}")
+        a = w.register_channel("/dio/io/DI1", "json", sid)
+        w.register_channel("/dio/io/DI1", "json", sid)  # a second channel, no message
+        for k in range(3):
+            w.add_message(a, log_time=k, publish_time=k, data=b'{"level": true}')
+        w.finish()
+    assert hil(["inspect", str(p)]) == 0
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if "/dio/io/DI1" in ln]
+    assert len(rows) == 1 and " 3  " in rows[0] and "(2 channels of this topic)" in rows[0]
