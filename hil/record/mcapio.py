@@ -551,6 +551,7 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
     off = 8
     n = len(data)
     summary_at: int | None = None
+    chunk_at: set[int] = set()  # where each chunk record starts (a chunk index points there)
     while off < n:
         head = data[off : off + 9]
         if len(head) < 9:
@@ -600,6 +601,7 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
             break
         if op == Opcode.CHUNK:
             out.chunk_count += 1
+            chunk_at.add(off)
         if not chunks and op in _IN_CHUNKS:
             off = end
             continue
@@ -654,7 +656,7 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                 summary_at = end  # the summary, if any, starts right after data end
             elif op == Opcode.CHUNK_INDEX and out.index_error is None:
                 (at,) = struct.unpack_from("<Q", rec, 16)  # message start/end time first
-                if data[at : at + 1] != bytes([Opcode.CHUNK]):
+                if at not in chunk_at:  # (not read from the file: the reading stays in order)
                     out.index_error = (f"the chunk index at offset {off} points to offset "
                                        f"{at}, where no chunk starts")
             elif op == Opcode.STATISTICS:  # chunk_count after message, schema, channel,
@@ -671,8 +673,8 @@ def scan(data: bytes | FileBytes, sink: ChunkSink | None = None, *,
                     out.corrupt = True
                 out.has_footer = True
                 s_start, s_offsets = struct.unpack_from("<QQ", rec, 0)
-                if out.index_error is None and s_start and (
-                        s_start != summary_at or not s_start <= s_offsets <= off):
+                if out.index_error is None and s_start and (  # 0: none (MCAP spec)
+                        s_start != summary_at or (s_offsets and not s_start <= s_offsets <= off)):
                     out.index_error = (
                         f"the footer says the summary starts at offset {s_start} and its "
                         f"offsets at {s_offsets}; the summary starts at "

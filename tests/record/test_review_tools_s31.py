@@ -226,3 +226,24 @@ def test_inspect_counts_a_topic_of_two_channels_once(tmp_path, capsys) -> None:
     assert hil(["inspect", str(p)]) == 0
     rows = [ln for ln in capsys.readouterr().out.splitlines() if "/dio/io/DI1" in ln]
     assert len(rows) == 1 and " 3  " in rows[0] and "(2 channels of this topic)" in rows[0]
+
+
+@pytest.mark.parametrize("options", [{}, {"use_summary_offsets": False},
+                                     {"use_chunking": False, "use_summary_offsets": False},
+                                     {"use_statistics": False, "repeat_channels": False}])
+def test_inspect_calls_the_mcap_writers_own_files_complete(tmp_path, capsys, options) -> None:
+    """A summary with no offset section (its footer offset 0, as the MCAP spec allows) was
+    called INDEX DAMAGED (helper-138)."""
+    from mcap.writer import Writer
+
+    p = tmp_path / "w.mcap"
+    with open(p, "wb") as f:
+        w = Writer(f, **options)
+        w.start(profile="", library="test")
+        sid = w.register_schema("hil.DioLevel", "jsonschema", b"{}")
+        a = w.register_channel("/dio/io/DI1", "json", sid)
+        for k in range(3):
+            w.add_message(a, log_time=k, publish_time=k, data=b'{"level": true}')
+        w.finish()
+    assert hil(["inspect", str(p)]) == 0
+    assert "complete: footer and summary present" in capsys.readouterr().out
