@@ -399,6 +399,7 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
         print(f"hil check: {e}", file=sys.stderr)
         return 2
     read = read_plan(specs, [dict(run["binding"]) | binding for run in runs])
+    overridden = bool(binding or params or consts or res) or args.time != "publish"
     for run, spec, stem in zip(runs, specs, stems, strict=True):
         until = int(run["until_ns"])
         if until not in cache:  # only the latest read is kept: memory of one, not of each
@@ -413,7 +414,9 @@ def _as_run(args: argparse.Namespace, runs: list[dict], binding: dict, params: d
                    constants=(run["constants"] | consts) or None, resolution=res)
         vs = occurrences_since(vs, run["since_ns"])
         verdicts.extend(vs)
-        if (why := _not_as_judged(run, spec, vs, src, step_bind)) is not None:
+        # as the run judged it: only when nothing was asked to be judged otherwise (a
+        # --param, --const, --bind, --resolution or --time may change a verdict on purpose)
+        if not overridden and (why := _not_as_judged(run, spec, vs, src, step_bind)):
             incomplete.append(why)
         if out_dir is not None and not _write_svg(
                 args, out_dir / f"{stem}.svg", svg(spec, src, vs, step_params, step_bind)):

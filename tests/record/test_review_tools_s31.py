@@ -247,3 +247,26 @@ def test_inspect_calls_the_mcap_writers_own_files_complete(tmp_path, capsys, opt
         w.finish()
     assert hil(["inspect", str(p)]) == 0
     assert "complete: footer and summary present" in capsys.readouterr().out
+
+
+def test_check_with_an_override_is_not_incomplete_for_judging_otherwise(tmp_path,
+                                                                        capsys) -> None:
+    """A --param asks for other verdicts on purpose: the new "as the run judged" rule made
+    `hil check --param P2.009=2` of a run that failed at P2.009 = 5 incomplete (exit 4)
+    where every verdict passed (helper-138)."""
+    from hil.bench.bench import load_bench
+    from hil.paths import plans_dir
+    from hil.plan.plan import load_plan
+    from hil.plan.runner import run_plan
+
+    text = (plans_dir() / "emgs.yaml").read_text(encoding="utf-8")
+    plan = tmp_path / "emgs_strict.yaml"
+    plan.write_text(text.replace("name: emgs", "name: emgs_strict").replace(
+        "  - check_timing: emgs", "  - check_timing: {spec: emgs, params: {P2.009: 5}}"),
+        encoding="utf-8")
+    res = run_plan(load_plan(plan), load_bench(None), tmp_path, reports=False)
+    assert res.status == "fail"
+    assert hil(["check", res.recording]) == 1
+    capsys.readouterr()
+    assert hil(["check", res.recording, "--param", "P2.009=2"]) == 0
+    assert "incomplete" not in capsys.readouterr().err
