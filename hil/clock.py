@@ -86,13 +86,17 @@ def _settle_async_flag() -> None:
     def take() -> None:
         try:
             ready.set()
-            while True:
+            end = time.monotonic() + 5.0  # never for ever (its caller cut before the raise)
+            while time.monotonic() < end:
                 time.sleep(0.001)  # the exception lands as the loop runs Python again
         except _Settle:
             pass
 
     sink = threading.Thread(target=take, name="hil-async-settle", daemon=True)
-    sink.start()
+    try:
+        sink.start()
+    except RuntimeError:  # interpreter shutdown (3.12): no thread; nothing runs on anyway
+        return
     ready.wait()
     ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(sink.ident),
                                                ctypes.py_object(_Settle))

@@ -36,3 +36,12 @@ def test_a_stack_counts_the_segments_its_drive_refused() -> None:
     finally:
         plc.close()
         stack.stop()
+
+
+def test_a_long_reason_is_clipped() -> None:
+    """A reason quotes the peer's field: a 5 MB `freq` made a 5 MB stderr line, on the pipe
+    a runner shares with the drive's control replies (helper-138)."""
+    out = io.StringIO()
+    report_refusals({"pulse thing(s)": (1, "freq " + "9" * 5_000_000)}, {}, out)
+    line = out.getvalue()
+    assert len(line) < 1000 and "more)" in line

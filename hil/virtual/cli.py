@@ -7,6 +7,7 @@ Prints a line containing `ready` once every face answers; stops cleanly on SIGIN
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
@@ -186,6 +187,9 @@ def _inputs(values: list[str]) -> dict[int, bool]:
     return out
 
 
+REASON_SHOWN = 300  # characters of a refusal's reason `hil drive` prints (helper-138)
+
+
 def report_refusals(now: dict[str, tuple[int, str]], reported: dict[str, int],
                     stream: Any) -> None:
     """One line on `stream` per kind of input refused since the last call (`reported` keeps
@@ -196,6 +200,8 @@ def report_refusals(now: dict[str, tuple[int, str]], reported: dict[str, int],
         new = n - reported.get(what, 0)
         if new > 0:
             reported[what] = n
+            if len(last) > REASON_SHOWN:  # a reason quotes the peer's field: a 5 MB `freq`
+                last = f"{last[:REASON_SHOWN]}… ({len(last) - REASON_SHOWN:,} more)"
             print(f"hil drive: refused {new} {what} ({n} in all); last: {last}",
                   file=stream, flush=True)
 
@@ -270,7 +276,8 @@ def main(args: argparse.Namespace) -> int:
     finally:
         if control is not None:
             control.close()
-        report_refusals(stack.refusals(), reported, sys.stderr)
         stack.stop()
+        with contextlib.suppress(OSError, ValueError):  # stderr gone with the runner
+            report_refusals(stack.refusals(), reported, sys.stderr)
         print("hil drive: stopped", flush=True)
     return 1 if failed is not None else 0
