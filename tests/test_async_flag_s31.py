@@ -69,6 +69,14 @@ def test_a_plan_runs_under_cprofile_to_its_end(tmp_path) -> None:
     assert "status pass True" in out
 
 
+def _started(target) -> threading.Thread:
+    th = threading.Thread(target=target, daemon=True)
+    th.start()
+    while not th.ident:
+        pass
+    return th
+
+
 def test_a_withdrawn_exception_is_not_raised() -> None:
     """The withdrawal itself still works: raised at a thread blocked in a C-level wait,
     then withdrawn before it ran Python again, it never lands."""
@@ -80,10 +88,7 @@ def test_a_withdrawn_exception_is_not_raised() -> None:
         except BaseException as exc:  # what landed is the result
             landed.append(exc)
 
-    th = threading.Thread(target=target, daemon=True)
-    th.start()
-    while not th.ident:
-        pass
+    th = _started(target)
     clock.async_raise(th.ident, KeyboardInterrupt)
     clock.async_raise(th.ident, None)
     go.set()
@@ -101,10 +106,7 @@ def test_a_raised_exception_still_lands() -> None:
         except KeyboardInterrupt as exc:
             landed.append(exc)
 
-    th = threading.Thread(target=target, daemon=True)
-    th.start()
-    while not th.ident:
-        pass
+    th = _started(target)
     clock.async_raise(th.ident, KeyboardInterrupt)
     th.join(5)
     stop.set()

@@ -85,12 +85,28 @@ def make(path):
     return path
 
 
+def first_changed(topic_wanted: str, change):
+    """A `copy_mcap` message hook changing the first message of `topic_wanted` that
+    `change(obj)` accepts (returns the new object, or None to pass it by)."""
+    done = []
+
+    def message(topic: str, data: bytes, lt: int) -> tuple[bytes, int]:
+        if topic == topic_wanted and not done:
+            new = change(json.loads(data))
+            if new is not None:
+                done.append(1)
+                return json.dumps(new).encode(), lt
+        return data, lt
+    return message
+
+
 def copy_mcap(src, dst, message=None, *, metadata=None, attachment=None,
-              compression=None):
+              compression=None, drop=()):
     """`src` copied to `dst` with the `mcap` library's writer (another writer than hil's):
     each message through `message(topic, data, log_time) -> (data, log_time)` (None: as it
     is), the metadata `metadata` added (a name given replaces the original's record), and
-    `attachment` (name, bytes) as a YAML attachment."""
+    `attachment` (name, bytes) as a YAML attachment; the topics in `drop` left out, their
+    channels too."""
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer
 
@@ -101,6 +117,8 @@ def copy_mcap(src, dst, message=None, *, metadata=None, attachment=None,
         ids: dict[int, int] = {}
         sids: dict[int, int] = {}
         for schema, ch, msg in r.iter_messages(log_time_order=False):
+            if ch.topic in drop:
+                continue
             if schema is not None and schema.id not in sids:
                 sids[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
             if ch.id not in ids:
@@ -121,6 +139,22 @@ def copy_mcap(src, dst, message=None, *, metadata=None, attachment=None,
             w.add_attachment(0, 0, attachment[0], "application/yaml", attachment[1])
         w.finish()
     return dst
+
+
+def dio_mcap(path, *, channels: int = 1, messages: int = 3, **writer_options):
+    """A small MCAP of another writer (the `mcap` library's, with `writer_options`):
+    `messages` DI1 levels on the first of `channels` channels of topic /dio/io/DI1."""
+    from mcap.writer import Writer
+
+    with open(path, "wb") as f:
+        w = Writer(f, **writer_options)
+        w.start(profile="", library="test")
+        sid = w.register_schema("hil.DioLevel", "jsonschema", b"{}")
+        ids = [w.register_channel("/dio/io/DI1", "json", sid) for _ in range(channels)]
+        for k in range(messages):
+            w.add_message(ids[0], log_time=k, publish_time=k, data=b'{"level": true}')
+        w.finish()
+    return path
 
 
 def plan_recording(out, name: str):

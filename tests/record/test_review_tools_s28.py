@@ -10,7 +10,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from rec_helpers import copy_mcap, plan_recording
+from rec_helpers import copy_mcap, first_changed, plan_recording
 
 from hil.bench.bench import load_bench
 from hil.cli import main as hil
@@ -39,21 +39,6 @@ def _junit(tmp_path: Path, rec: Path) -> ET.Element:
     return ET.parse(out).getroot()
 
 
-def _first_changed(topic_wanted: str, change):
-    """A `copy_mcap` message hook changing the first message of `topic_wanted` that
-    `change(obj)` accepts (returns the new object, or None to pass it by)."""
-    done = []
-
-    def message(topic: str, data: bytes, lt: int) -> tuple[bytes, int]:
-        if topic == topic_wanted and not done:
-            new = change(json.loads(data))
-            if new is not None:
-                done.append(1)
-                return json.dumps(new).encode(), lt
-        return data, lt
-    return message
-
-
 def test_a_result_status_no_run_gives_is_an_error_not_a_pass(emgs, tmp_path):
     bad = copy_mcap(emgs, tmp_path / "status.mcap",
                     metadata={"hil.result": _result(emgs) | {"status": "not-a-number"}})
@@ -70,7 +55,7 @@ def test_a_pass_result_over_a_failing_step_is_reported_failed(emgs, tmp_path):
         return obj | {"status": "fail"} if obj.get("event") == "end" and obj.get(
             "index", -1) >= 0 else None
 
-    bad = copy_mcap(emgs, tmp_path / "step.mcap", _first_changed("/plan/steps", fail))
+    bad = copy_mcap(emgs, tmp_path / "step.mcap", first_changed("/plan/steps", fail))
     assert _result(bad)["status"] == "pass"
     suite = _junit(tmp_path, bad)
     assert suite.get("failures") == "1"
@@ -79,7 +64,7 @@ def test_a_pass_result_over_a_failing_step_is_reported_failed(emgs, tmp_path):
 
 
 def test_a_pass_result_over_a_failing_verdict_is_reported_failed(emgs, tmp_path):
-    bad = copy_mcap(emgs, tmp_path / "verdict.mcap", _first_changed(
+    bad = copy_mcap(emgs, tmp_path / "verdict.mcap", first_changed(
         "/timing/verdicts", lambda o: o | {"status": "fail"} if o.get("status") == "pass"
         else None))
     suite = _junit(tmp_path, bad)
@@ -147,7 +132,7 @@ def test_the_index_names_the_first_failing_step_not_end_of_plan(emgs, tmp_path):
         return obj | {"status": "fail", "message": "made to fail"} if obj.get(
             "event") == "end" and obj.get("index") == 2 else None
 
-    bad = copy_mcap(emgs, tmp_path / "idx.mcap", _first_changed("/plan/steps", fail),
+    bad = copy_mcap(emgs, tmp_path / "idx.mcap", first_changed("/plan/steps", fail),
                     metadata={"hil.result": _result(emgs) | {"status": "fail"}})
     assert _result(bad)["reason"] == "end of plan"
     index = tmp_path / "index.html"

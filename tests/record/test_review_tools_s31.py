@@ -4,13 +4,12 @@ helper-137)."""
 
 from __future__ import annotations
 
-import json
 import struct
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from rec_helpers import T0, copy_mcap, plan_recording
+from rec_helpers import T0, copy_mcap, dio_mcap, first_changed, plan_recording
 
 from hil.cli import main as hil
 from hil.record.recorder import Recorder
@@ -24,24 +23,11 @@ def emgs(tmp_path_factory) -> Path:
     return plan_recording(tmp_path_factory.mktemp("emgs"), "emgs")
 
 
-def _first_changed(topic_wanted: str, change):
-    done = []
-
-    def message(topic: str, data: bytes, lt: int) -> tuple[bytes, int]:
-        if topic == topic_wanted and not done:
-            new = change(json.loads(data))
-            if new is not None:
-                done.append(1)
-                return json.dumps(new).encode(), lt
-        return data, lt
-    return message
-
-
 @pytest.mark.parametrize("status", ["FAIL", "failed", "maybe"])
 def test_a_pass_result_over_a_verdict_status_no_check_gives_is_an_error(emgs, tmp_path,
                                                                           status):
     """The page said PASS over a verdict table counting "1 FAIL"; the JUnit said pass."""
-    bad = copy_mcap(emgs, tmp_path / "v.mcap", _first_changed(
+    bad = copy_mcap(emgs, tmp_path / "v.mcap", first_changed(
         "/timing/verdicts", lambda o: o | {"status": status} if o.get("status") == "pass"
         else None))
     out = tmp_path / "v.xml"
@@ -93,35 +79,6 @@ def test_repair_reads_on_past_zeroed_records(tmp_path, capsys) -> None:
     assert "messages: 300" in said and "hil.result" in said
 
 
-def _without(src: Path, dst: Path, topic: str) -> Path:
-    """`src` copied to `dst` without `topic`'s channel and messages (metadata kept)."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
-    with open(src, "rb") as f, open(dst, "wb") as g:
-        r = make_reader(f)
-        w = Writer(g)
-        w.start(profile="", library="test")
-        ids: dict[int, int] = {}
-        sids: dict[int, int] = {}
-        for schema, ch, msg in r.iter_messages(log_time_order=False):
-            if ch.topic == topic:
-                continue
-            if schema is not None and schema.id not in sids:
-                sids[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
-            if ch.id not in ids:
-                ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding,
-                                                sids.get(schema.id, 0) if schema else 0,
-                                                dict(ch.metadata))
-            w.add_message(ids[ch.id], log_time=msg.log_time, publish_time=msg.publish_time,
-                          data=msg.data)
-        f.seek(0)
-        for m in make_reader(f).iter_metadata():
-            w.add_metadata(m.name, dict(m.metadata))
-        w.finish()
-    return dst
-
-
 def test_check_is_incomplete_when_a_plan_check_no_longer_judges_what_the_run_did(
         tmp_path, capsys) -> None:
     """The SON input's topic gone: the run's "SON accepted after the P2.009 filter" pass
@@ -129,7 +86,7 @@ def test_check_is_incomplete_when_a_plan_check_no_longer_judges_what_the_run_did
     rec = plan_recording(tmp_path, "servo_on_off_brake")
     assert hil(["check", str(rec)]) == 0
     capsys.readouterr()
-    bad = _without(rec, tmp_path / "no_di1.mcap", "/dio/drive1/DI1")
+    bad = copy_mcap(rec, tmp_path / "no_di1.mcap", drop={"/dio/drive1/DI1"})
     assert hil(["check", str(bad)]) == 4
     err = capsys.readouterr().err
     assert "spec servo_on_brake: the run judged 3 pass, this check 1 pass" in err
@@ -142,7 +99,7 @@ def test_a_verdict_of_a_wrong_shape_is_counted_by_check_and_diff(emgs, tmp_path,
                                                                   change):
     """`hil diff` compared a measured "150" as nothing ("0 verdicts measured differently",
     exit 0) and `hil check` took such a record in silence (helper-137)."""
-    bad = copy_mcap(emgs, tmp_path / "v.mcap", _first_changed(
+    bad = copy_mcap(emgs, tmp_path / "v.mcap", first_changed(
         "/timing/verdicts", lambda o: o | change if o.get("status") == "pass" else None))
     assert hil(["diff", str(emgs), str(bad), "-o", str(tmp_path / "d.html")]) == 4
     assert "wrong shape" in capsys.readouterr().err
@@ -153,7 +110,7 @@ def test_a_verdict_of_a_wrong_shape_is_counted_by_check_and_diff(emgs, tmp_path,
 def test_diff_takes_a_level_of_1_as_no_level(tmp_path, capsys) -> None:
     """`hil check` refuses {"level": 1} as "not a level"; `hil diff` read it as true."""
     rec = plan_recording(tmp_path, "servo_on_off_brake")
-    bad = copy_mcap(rec, tmp_path / "b.mcap", _first_changed(
+    bad = copy_mcap(rec, tmp_path / "b.mcap", first_changed(
         "/dio/drive1/DO6", lambda o: o | {"level": 1} if o.get("level") is True else None))
     assert hil(["diff", str(rec), str(bad), "-o", str(tmp_path / "d.html")]) == 4
     assert "wrong shape" in capsys.readouterr().err
@@ -163,7 +120,7 @@ def test_the_page_shows_a_long_text_clipped(emgs, tmp_path) -> None:
     """A 2 MB step message (zstd keeps it in a few kB) was put whole on the page: a 79 kB
     file gave a 140 MB page and 600 MB of memory (helper-137)."""
     huge = "x" * 2_000_000
-    bad = copy_mcap(emgs, tmp_path / "big.mcap", _first_changed(
+    bad = copy_mcap(emgs, tmp_path / "big.mcap", first_changed(
         "/plan/steps", lambda o: o | {"message": huge} if o.get("event") == "end" else None))
     assert bad.stat().st_size < 200_000
     out = tmp_path / "big.html"
@@ -211,18 +168,7 @@ def test_report_of_one_recording_given_twice_says_so(emgs, tmp_path, capsys) -> 
 def test_inspect_counts_a_topic_of_two_channels_once(tmp_path, capsys) -> None:
     """Another writer's two channels of one topic, one of them empty, were each listed with
     the topic's whole count (helper-137)."""
-    from mcap.writer import Writer
-
-    p = tmp_path / "dup.mcap"
-    with open(p, "wb") as f:
-        w = Writer(f)
-        w.start(profile="", library="test")
-        sid = w.register_schema("hil.DioLevel", "jsonschema", b"{}")
-        a = w.register_channel("/dio/io/DI1", "json", sid)
-        w.register_channel("/dio/io/DI1", "json", sid)  # a second channel, no message
-        for k in range(3):
-            w.add_message(a, log_time=k, publish_time=k, data=b'{"level": true}')
-        w.finish()
+    p = dio_mcap(tmp_path / "dup.mcap", channels=2)
     assert hil(["inspect", str(p)]) == 0
     rows = [ln for ln in capsys.readouterr().out.splitlines() if "/dio/io/DI1" in ln]
     assert len(rows) == 1 and " 3  " in rows[0] and "(2 channels of this topic)" in rows[0]
@@ -234,17 +180,7 @@ def test_inspect_counts_a_topic_of_two_channels_once(tmp_path, capsys) -> None:
 def test_inspect_calls_the_mcap_writers_own_files_complete(tmp_path, capsys, options) -> None:
     """A summary with no offset section (its footer offset 0, as the MCAP spec allows) was
     called INDEX DAMAGED (helper-138)."""
-    from mcap.writer import Writer
-
-    p = tmp_path / "w.mcap"
-    with open(p, "wb") as f:
-        w = Writer(f, **options)
-        w.start(profile="", library="test")
-        sid = w.register_schema("hil.DioLevel", "jsonschema", b"{}")
-        a = w.register_channel("/dio/io/DI1", "json", sid)
-        for k in range(3):
-            w.add_message(a, log_time=k, publish_time=k, data=b'{"level": true}')
-        w.finish()
+    p = dio_mcap(tmp_path / "w.mcap", **options)
     assert hil(["inspect", str(p)]) == 0
     assert "complete: footer and summary present" in capsys.readouterr().out
 
