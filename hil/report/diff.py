@@ -8,7 +8,8 @@ before vs after a change), aligned step by step.
 * **Edges** per signal (`/dio/<drive>/<line>` levels, ground-truth booleans and CiA 402
   states of `/drive/<drive>/state`), paired by signal, new value and order: delta in ms.
 * **Timing verdicts** side by side (measured ms of each spec/constraint/occurrence).
-* **State sequences**: CiA 402 states and statuswords in order, where they differ.
+* **State sequences**: CiA 402 states, statuswords and active alarms in order, where they
+  differ.
 * **Explanations**: signatures of model options (`SIGNATURES`), each an interval between two
   events measured in both recordings; a difference names the options that would explain it
   and estimates their size.
@@ -165,6 +166,12 @@ def load_side(path: str | Path) -> Side:
                     shown = _word(msg[f]) if f == "statusword" else str(msg[f])
                     if not seq or seq[-1] != shown:
                         seq.append(shown)
+            alarms = msg.get("alarms")
+            if isinstance(alarms, list):  # AL500 in one run only (helper-137)
+                seq = states.setdefault(f"{d} alarms", [])
+                shown = ", ".join(map(str, alarms)) or "none"
+                if not seq or seq[-1] != shown:
+                    seq.append(shown)
         elif topic.startswith("/drive/") and topic.endswith("/params"):
             side.params.update(msg.get("values") or {})
         elif topic.startswith("/canopen/") and "statusword" in msg:  # a real drive's TPDO

@@ -206,3 +206,15 @@ def test_check_with_an_override_is_not_incomplete_for_judging_otherwise(tmp_path
     capsys.readouterr()
     assert hil(["check", res.recording, "--param", "P2.009=2"]) == 0
     assert "incomplete" not in capsys.readouterr().err
+
+
+def test_diff_compares_the_active_alarms(emgs, tmp_path, capsys) -> None:
+    """An alarm in one run only gave "0 state sequence(s) differ" (helper-137)."""
+    bad = copy_mcap(emgs, tmp_path / "al.mcap", first_changed(
+        "/drive/drive1/state", lambda o: o | {"alarms": ["AL500"]} if o.get("alarms") == []
+        else None))
+    assert hil(["diff", str(emgs), str(bad), "-o", str(tmp_path / "d.html")]) == 0
+    out = capsys.readouterr().out
+    assert "1 state sequence(s) differ" in out
+    page = (tmp_path / "d.html").read_text(encoding="utf-8")
+    assert "drive1 alarms" in page and "AL500" in page
