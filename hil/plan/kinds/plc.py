@@ -97,7 +97,10 @@ def _drv(v: Checker, text: Any, line: int, where: str, chained: bool) -> Drv:
     if _REG.match(value):
         reg = _register(v, value, line, where, 32, 32)
         return Drv(m.group(1), m.group(2), reg, m.group(4), chained)
-    return Drv(m.group(1), m.group(2), float(value), m.group(4), chained)
+    stroke = float(value)
+    if not abs(stroke) <= 1e12:  # 309 digits and more are inf as a float (helper-139)
+        raise v.err(line, where, f"{text[:60]!r}: a stroke within ±1e12")
+    return Drv(m.group(1), m.group(2), stroke, m.group(4), chained)
 
 
 TIME_UNIT_NS = 10 * 1_000_000  # TIME counts 0.01 s (001:42)
