@@ -23,6 +23,7 @@ from hil.plan.runner import output_stems, run_plans, summary_table, timing_specs
 from hil.plan.select import ExprError, select
 from hil.report.index import write_index
 from hil.report.junit import write_junit
+from hil.terminal import terminal_lines, terminal_text
 
 BENCH_ENV = "HIL_BENCH"  # like labgrid's LG_ENV: the bench file when --bench is not given
 LOG_LEVELS = ("debug", "info", "warning", "error", "critical")
@@ -230,7 +231,7 @@ def main(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2 if not (args.keyword or args.marker) else 5
     if args.list:
-        print(_listing(plans))
+        print(terminal_lines(_listing(plans)))
         return 0
     out = Path(args.out)
     if (why := dir_problem(out)) is not None:
@@ -275,7 +276,7 @@ def _check_each(plans: list, bench: Bench, *, say_ok: bool) -> int:
             failed += 1
             continue
         if say_ok:
-            print(f"{p.path}: ok ({len(p.steps)} steps)")
+            print(terminal_text(f"{p.path}: ok ({len(p.steps)} steps)"))
     return failed
 
 
@@ -284,7 +285,7 @@ def _summarise(results: list, out: Path, selected: int) -> None:
     recordings = [r.recording for r in results if r.recording and Path(r.recording).exists()]
     write_junit(recordings, out / "junit.xml")
     if results:
-        print(summary_table(results))
+        print(terminal_lines(summary_table(results)))
     if len(results) < selected:
         print(f"interrupted: {len(results)} of {selected} plans ran", file=sys.stderr)
     print(f"index: {write_index(recordings, out / 'index.html')}")

@@ -17,6 +17,7 @@ from typing import Any, TextIO
 from hil.plan.events import Listener, Note, PlanEnded, PlanStarted, StepEnded, StepStarted
 from hil.report.html import write_html
 from hil.report.junit import write_junit
+from hil.terminal import terminal_lines
 
 PASS, SKIPPED = "pass", "skipped"
 
@@ -94,7 +95,7 @@ class StepLines(Listener):
         self.stream = stream
 
     def _w(self, text: str) -> None:
-        print(text, file=self.stream or sys.stderr, flush=True)
+        print(terminal_lines(text), file=self.stream or sys.stderr, flush=True)
 
     def plan_started(self, e: PlanStarted) -> None:
         of = f"[{e.index}/{e.total}] " if e.total > 1 else ""

@@ -22,6 +22,7 @@ from rich.progress import (
 )
 
 from hil.plan.events import Listener, Note, PlanEnded, PlanStarted, StepEnded, StepStarted
+from hil.terminal import terminal_lines, terminal_text
 
 
 def _fmt(seconds: float) -> str:
@@ -65,13 +66,14 @@ class RunProgress(Listener):
             self._progress.start()
             self._task = self._progress.add_task("run", total=self.total_steps, plan="",
                                                  step="")
-        self._progress.update(self._task, plan=f"plan {e.index}/{e.total} {e.plan.name}",
+        self._progress.update(self._task, plan=terminal_text(
+            f"plan {e.index}/{e.total} {e.plan.name}"),
                               step="")
 
     def step_started(self, e: StepStarted) -> None:
         if self._progress is not None:
             label = e.result.label if len(e.result.label) <= 40 else e.result.label[:37] + "..."
-            self._progress.update(self._task, step=f"· {label}")
+            self._progress.update(self._task, step=terminal_text(f"· {label}"))
 
     def step_ended(self, e: StepEnded) -> None:
         self.done_steps += 1
@@ -99,6 +101,7 @@ class RunProgress(Listener):
             self._progress.update(self._task, completed=self.done_steps)
 
     def _print(self, text: str) -> None:
+        text = terminal_lines(text)  # a plan's or step's name holds no escape sequence
         if self._progress is not None:
             self._progress.console.print(text, highlight=False, markup=False)
         else:

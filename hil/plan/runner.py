@@ -49,6 +49,7 @@ from hil.plan.safety import SafeReport, go_safe_watched
 from hil.plan.session import BenchError, Session, open_session
 from hil.record.recorder import Recorder
 from hil.report.data import forget as forget_report
+from hil.terminal import terminal_text
 from hil.timing.registry import SpecRegistry, load_specs
 
 __all__ = ["Cancelled", "PlanResult", "StepContext", "StepFailed", "StepResult", "run_plan",
@@ -649,8 +650,9 @@ def summary_table(results: list[PlanResult]) -> str:
         n_ok = sum(1 for s in r.steps if s.status == PASS)
         vs = [v for s in r.steps for v in s.verdicts if v.get("status") != "skipped"]
         v_ok = sum(1 for v in vs if v.get("status") == "pass")
-        rows.append((r.plan, r.status.upper(), f"{n_ok}/{len(r.steps)}", f"{v_ok}/{len(vs)}",
-                     f"{r.duration_ns / 1e9:.2f} s", r.recording))
+        rows.append((terminal_text(r.plan), r.status.upper(), f"{n_ok}/{len(r.steps)}",
+                     f"{v_ok}/{len(vs)}", f"{r.duration_ns / 1e9:.2f} s",
+                     terminal_text(r.recording, limit=1 << 62)))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
              for row in rows]
