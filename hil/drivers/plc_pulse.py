@@ -874,7 +874,7 @@ class PulseMaster:
                     except BaseException:
                         self.status.drvz = ""  # no homing runs any more: none completed
                         raise
-                    self._transition_after(s, left)
+                    self._transition_after(s, max(0.0, (deadline - clock.monotonic_ns()) / S))
                 else:
                     self._transition_after(s, left)
                 if self._abort:
@@ -978,8 +978,8 @@ class PulseMaster:
                                f"s left at its start), {self.status.remaining} pulses short")
         if cut and ext:
             self._report("ext")  # the remaining pulses are abandoned (001:42-44)
-        if not cut:
-            self._transition_after(last, left)
+        if not cut:  # the WAIT after a move has what the move left of the program's time
+            self._transition_after(last, max(0.0, left - (clock.monotonic_ns() - t0) / S))
 
     def _transition_after(self, s: Step, left: float) -> None:
         """WAIT time / line, EXT as WAIT once the pulses are done (001:42-44)."""

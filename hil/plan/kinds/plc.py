@@ -321,6 +321,12 @@ class PlcProgram(StepKind):
         if not cc.drive.pulse:
             raise cc.err(f"drive {cc.dname} has no pulse line (bench `pulse:`)")
 
+    def own_timeout_ns(self, step: Step, bench: Any) -> int | None:
+        """The program's timeout, written or its 60 s default: a program that runs out of it
+        fails saying where, before the step's watchdog (the bench's 60 s step timeout had
+        fired at the same instant, a harness error, helper-139)."""
+        return self.args.timeout
+
     def run(self, ctx: StepContext, step: Step, d: DriveIO) -> Outcome:
         a = self.args
         plc = d.plc(a.axis, a.slice_ms)
