@@ -572,8 +572,10 @@ def _drive_dio(v: Checker, spec: DriveSpec, d: LDict, where: str,
 
 
 _PULSE_SOURCES = ("DOG", "NL", "PL")
-_X_RE = re.compile(r"^X[0-9]{1,3}\Z")
-_Y_RE = re.compile(r"^Y[0-9]{1,3}\Z")
+# a PLC's inputs and outputs X0-X255, Y0-Y255, written as the pulse line names them (no
+# leading zero: `X00` names no line the bench drives, docs/pulse.md)
+_X_RE = re.compile(r"^X(0|[1-9][0-9]?|1[0-9][0-9]|2[0-4][0-9]|25[0-5])\Z")
+_Y_RE = re.compile(r"^Y(0|[1-9][0-9]?|1[0-9][0-9]|2[0-4][0-9]|25[0-5])\Z")
 
 
 def _drive_pulse(v: Checker, spec: DriveSpec, d: LDict, where: str,
@@ -602,8 +604,12 @@ def _drive_pulse(v: Checker, spec: DriveSpec, d: LDict, where: str,
                 out[str(k)] = val
             else:
                 raise v.err(m.kline(k), join(fld, str(k)),
-                            f"{k}: {val!r}: DOG/NL/PL take a PLC input X<n>, a PLC output "
-                            "Y<n> takes a drive input DI1-DI10")
+                            f"{k}: {val!r}: DOG/NL/PL take a PLC input X0-X255, a PLC "
+                            "output Y0-Y255 takes a drive input DI1-DI10")
+            other = next((o for o, ov in out.items() if ov == val and o != k), None)
+            if other is not None:  # one line, one source (helper-139: NL and DOG on X0)
+                raise v.err(m.kline(k), join(fld, str(k)),
+                            f"{k}: {val} is {other}'s already: one source a line")
         spec.pulse_wiring = out
 
 
