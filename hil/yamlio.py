@@ -111,8 +111,14 @@ def _prescan(text: str, file: str, error: type[FileError],
     """Depth and alias limits on the event stream (PyYAML's parser does not recurse)."""
     max_depth = limit("HIL_YAML_MAX_DEPTH", 64)
     max_aliases = limit("HIL_YAML_MAX_ALIASES", 100)
-    depth = aliases = 0
+    max_nodes = limit("HIL_YAML_MAX_NODES", 100_000)
+    depth = aliases = nodes = 0
     for ev in yaml.parse(text, Loader=loader):
+        if isinstance(ev, yaml.ScalarEvent | yaml.MappingStartEvent | yaml.SequenceStartEvent):
+            nodes += 1  # as written, before any alias: refused here, before a node tree
+            if nodes > max_nodes:  # of them is built (helper-139: 33 s and 378 MB to refuse
+                raise error(file, ev.start_mark.line + 1, "(yaml)",  # a 520 000-value list)
+                            f"more than {max_nodes} values (HIL_YAML_MAX_NODES)")
         if isinstance(ev, yaml.MappingStartEvent | yaml.SequenceStartEvent):
             depth += 1
             if depth > max_depth:

@@ -235,3 +235,14 @@ def test_an_alias_chain_deeper_than_the_limit_is_an_error_not_a_crash() -> None:
         lines.append(f"a{k}: &a{k} " + "[" * 60 + inner + "]" * 60)
     with pytest.raises(FileError, match="nested deeper than 64 levels once aliases"):
         load_yaml_text("\n".join(lines) + "\n", "chain.yaml")
+
+
+def test_a_long_list_is_refused_as_written_not_as_an_alias_bomb(tmp_path):
+    """100 001 values with no alias: refused by the event scan before a node tree is built,
+    and not called an alias bomb (helper-139: 33 s and 378 MB for a 520 000-value cam
+    table, then "an alias bomb?")."""
+    p = tmp_path / "long.yaml"
+    p.write_text("name: long\nsteps:\n  - wait: 1ms\nx: [" + ",".join(["1"] * 100_001) + "]\n")
+    e = _refused(p)
+    assert "more than 100000 values (HIL_YAML_MAX_NODES)" in e.problem, e
+    assert "alias" not in e.problem and e.line == 4
