@@ -1018,7 +1018,11 @@ class GroupExpect(StepKind):
                     raise v.err(m.kline(k), join(where, k), "[low, high]")
                 out[k] = (float(r[0]), float(r[1]))
         if "missed" in m:
-            out["missed"] = int(_num(v, m, "missed", where, 0, 1e9))
+            n = m["missed"]  # a count of cycles: 0.5 had been taken as 0 (helper-139)
+            if not isinstance(n, int) or isinstance(n, bool) or not 0 <= n <= 10**9:
+                raise v.err(m.kline("missed"), join(where, "missed"),
+                            f"{n!r}: a whole count of cycles, 0 or more")
+            out["missed"] = n
         for k in ("rdy_same_cycle", "arrived_same_cycle"):
             if k in m:
                 out[k] = _flag(v, m, k, where)
@@ -1031,6 +1035,10 @@ class GroupExpect(StepKind):
         for k in ("held", "heartbeat_lost"):
             if k in m:
                 out[k] = _flag(v, m, k, where)
+        if len(out) == 1:  # axes alone: an expectation of nothing passes whatever happened
+            raise v.err(line, where, "nothing to expect: give position, write_position, "
+                        "pg_position, capture_position, peak_acc, missed, status, held, "
+                        "heartbeat_lost, rdy_same_cycle or arrived_same_cycle")
         return GroupExpectArgs(**out)
 
     def check(self, cc: CheckContext) -> None:
