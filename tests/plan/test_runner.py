@@ -229,6 +229,7 @@ def test_ctrl_c_during_a_step_waits_for_the_step_to_end_before_the_safe_state():
     """An outside probe: a SIGINT that lands inside Python 3.11's `Thread.join` marks the
     still-running step thread as stopped, so `join` said the step had ended and the safe
     state ran beside it. The step here ignores its cancel for 0.4 s after the interrupt."""
+    import gc
     import os
     import signal
     import threading
@@ -244,9 +245,20 @@ def test_ctrl_c_during_a_step_waits_for_the_step_to_end_before_the_safe_state():
         ended.set()
 
     steps = StepThread()
-    threading.Timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
-    with pytest.raises(KeyboardInterrupt):
-        steps.run(step, 30_000_000_000, cancel, watch=lambda: None)
+    # no collection in the window: a KeyboardInterrupt raised while the collector ran a
+    # weakref callback in this thread (threading's WeakSet of threads) was "ignored" and
+    # never reached `run` (a CI run, session 31); the timer is held and joined for the same
+    # reason (its last reference dropped here would run such a callback)
+    gc.collect()
+    gc.disable()
+    timer = threading.Timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT))
+    try:
+        timer.start()
+        with pytest.raises(KeyboardInterrupt):
+            steps.run(step, 30_000_000_000, cancel, watch=lambda: None)
+    finally:
+        gc.enable()
+        timer.join()
     assert cancel.is_set()
     assert ended.is_set()  # `run` joined the step before it let the interrupt through
     assert steps.join(0.1)
