@@ -352,6 +352,14 @@ def _write_svg(args: argparse.Namespace, target: Path, text: str) -> bool:
     return True
 
 
+def _unrecorded(spec: Spec, source: Any, bind: dict) -> list[str]:
+    """`missing_data`'s lines for the signals whose topic is not in the recording at all
+    ("SON: no data on /dio/drive1/DI1 field level")."""
+    recorded = set(source.topics())
+    return [m for m in missing_data(spec, source, bind)
+            if m.split(" on ", 1)[-1].split(" field ")[0] not in recorded]
+
+
 def _counts(judged: dict[str, int]) -> str:
     return ", ".join(f"{n} {k}" for k, n in sorted(judged.items())) or "nothing"
 
@@ -367,9 +375,7 @@ def _not_as_judged(run: dict, spec: Spec, vs: list[Verdict], src: Any,
             got[v.status] = got.get(v.status, 0) + 1
     if "judged" not in run or got == run["judged"]:
         return None
-    recorded = set(src.topics())
-    gone = [m for m in missing_data(spec, src, bind)
-            if m.split(" on ", 1)[-1].split(" field ")[0] not in recorded]
+    gone = _unrecorded(spec, src, bind)
     return (f"step {int(run['step']) + 1} spec {spec.id}: the run judged "
             f"{_counts(run['judged'])}, this check {_counts(got)}"
             + (f" (not in the recording: signal {'; '.join(gone)})" if gone else ""))
@@ -519,11 +525,9 @@ def main(args: argparse.Namespace) -> int:
         if args.spec and not _judged(vs):  # a spec the user asked for must judge something
             incomplete.append(_why_nothing(spec, vs, source, bind))
         elif args.spec and not why:  # judged, but a signal may read a topic never recorded
-            recorded = set(source.topics())
-            for m in missing_data(spec, source, bind):
-                if m.split(" on ", 1)[-1].split(" field ")[0] not in recorded:
-                    print(f"hil check: note: spec {spec.id}: signal {m} (a topic not in "
-                          "the recording: its verdicts read it as never true)", file=sys.stderr)
+            for m in _unrecorded(spec, source, bind):
+                print(f"hil check: note: spec {spec.id}: signal {m} (a topic not in "
+                      "the recording: its verdicts read it as never true)", file=sys.stderr)
         if out_dir is not None and not _write_svg(
                 args, out_dir / f"{spec.id}.svg", svg(spec, source, vs, params, bind)):
             return 2

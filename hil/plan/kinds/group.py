@@ -185,9 +185,8 @@ def _group_in_force(cc: CheckContext) -> list[str] | None:
                 axes = s.args.axes
             elif s.kind == "group_stop":
                 axes = None
-        at[0] = axes  # a step not among them: the group in force after the last (as before)
         _IN_FORCE[:] = [steps, at]
-    return _IN_FORCE[1].get(id(cc.step), _IN_FORCE[1].get(0))
+    return _IN_FORCE[1].get(id(cc.step))  # (the checked step is always one of the plan's)
 
 
 def _check_axes(cc: CheckContext, names: list[str], field: str) -> None:
