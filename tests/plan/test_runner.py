@@ -271,3 +271,54 @@ def test_long_durations_in_step_labels_are_not_in_e_notation():
 
     plan = loads_plan("name: p\nsteps:\n  - wait: 3000s\n  - wait: 2.5ms\n", "p.yaml")
     assert [describe(s) for s in plan.steps] == ["wait 3000000ms", "wait 2.5ms"]
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the point
+def test_a_ctrl_c_the_collector_swallowed_still_stops_the_plan_at_once(tmp_path, monkeypatch):
+    """Session 31's CI: a SIGINT whose KeyboardInterrupt was raised inside a weakref callback
+    the collector ran in the main thread was printed as "ignored", and the plan ran its
+    remaining steps before `hil run` stopped. Here the signal arrives inside such a callback
+    while a step runs; the step is cut and the next one never runs."""
+    import signal
+    import time
+    import weakref
+
+    from hil.bench.bench import load_bench
+    from hil.plan.context import Outcome
+    from hil.plan.kinds.waits import Wait
+    from hil.plan.plan import loads_plan
+    from hil.plan.runner import run_plan
+    from hil.plan.session import Session
+
+    ran: list[float] = []
+
+    def slow(self, ctx, step, d):  # a step that keeps the run's thread waiting in wall time
+        ran.append(time.monotonic())
+        time.sleep(1.0)
+        return Outcome("waited")
+
+    class Token:
+        pass
+
+    fired: list[bool] = []
+    alive = Session.check_alive
+
+    def check_alive(self) -> None:
+        if ran and not fired:  # once, while the first step runs: the signal lands in the
+            fired.append(True)  # callback, and its exception is printed as ignored
+            token = Token()
+            ref = weakref.ref(token, lambda _r: signal.raise_signal(signal.SIGINT))
+            del token
+            assert ref() is None
+        alive(self)
+
+    monkeypatch.setattr(Wait, "run", slow)
+    monkeypatch.setattr(Session, "check_alive", check_alive)
+    plan = loads_plan("name: p\nsteps:\n  - wait: 1s\n  - wait: 1s\n  - wait: 1s\n", "p.yaml")
+    with pytest.raises(KeyboardInterrupt) as ei:
+        run_plan(plan, load_bench(None), tmp_path, reports=False)
+    assert fired
+    res = ei.value.plan_result
+    assert len(ran) == 1, "a step ran after the interrupt"
+    assert res.steps[0].status == "error" and "interrupted" in res.steps[0].message
+    assert [r.status for r in res.steps[1:]] == ["skipped", "skipped"]
