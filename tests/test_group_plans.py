@@ -375,7 +375,11 @@ def test_group_steps_refuse_hostile_values_with_file_line() -> None:
              "group_command.par.4"),
             ("group_command: {axis: axis1, code: 2.0, par: {3: 100}}", "group_command.code"),
             ("group_cam: {axis: axis2, master: axis1, table: [0, 1], scale: 0}",
-             "group_cam.scale")):
+             "group_cam.scale"),
+            # helper-139: `group:` refused a drive named twice, the others took it
+            ("group_move: {axes: [axis1, axis1], by: 1000}", "group_move.axes[1]"),
+            ("group_expect: {axes: [axis2, axis1, axis2], missed: 0}",
+             "group_expect.axes[2]")):
         plan = ("name: p\nsteps:\n  - group: {axes: [axis1, axis2], cycle: 2ms}\n"
                 f"  - {step}\n")
         with pytest.raises(PlanFileError) as ei:
@@ -790,3 +794,17 @@ def test_the_group_refuses_a_cycle_its_plan_check_refuses() -> None:
     with pytest.raises(ValueError, match="SYNC 1-10 ms"):
         AxisGroup(None, [ServoAxis("a1", 1)], 0.0005, sdo_write=lambda *a: None)
     AxisGroup(None, [ServoAxis("a1", 1)], 0.001, sdo_write=lambda *a: None)
+
+
+def test_the_default_consumer_time_is_at_most_what_heartbeat_timeout_may_say() -> None:
+    """helper-139: `heartbeat: 65000ms` made a 130 s consumer time, twice what a given
+    `heartbeat_timeout` (16-bit ms, as CiA 301's 1016h) may be."""
+    def consumer(hb: float, cycle: float = 0.002) -> float | None:
+        return AxisGroup(None, [ServoAxis("a1", 1)], cycle, sdo_write=lambda *a: None,
+                         heartbeat_s=hb).heartbeat_timeout_s
+
+    assert consumer(0.020) == pytest.approx(0.040)  # twice the producer time
+    assert consumer(0.001, 0.010) == pytest.approx(0.021)  # it + 2 cycles when longer
+    assert consumer(40.0) == pytest.approx(65.535)
+    assert consumer(65.0) == pytest.approx(65.535)
+    assert consumer(65.535) == pytest.approx(65.535 + 0.004)  # never below it + 2 cycles

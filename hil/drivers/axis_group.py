@@ -42,6 +42,7 @@ from hil.transport.sim import frame_bits
 RAMP_TYPES = (0, 1, 2, 3)
 PEAK = {3: 1.0, 2: math.pi / 2, 1: 2.0}  # peak acceleration / Acc of each shape (004:226)
 SYNC_ID = 0x80
+MAX_CONSUMER_S = 65.535  # a consumer heartbeat time is 16 bits of ms (CiA 301 1016h)
 GEAR_SETTLE_S = 0.1  # engaged time before the gear judge takes its reference
 MIN_TRAVEL = 1000  # increments of follower travel before a ratio is measured
 I32_MIN, I32_MAX = -(1 << 31), (1 << 31) - 1  # 60C1h sub 1 (L19059-19070)
@@ -858,10 +859,12 @@ class AxisGroup:
         self.cycle_bits = _bits(SYNC_ID, 0) + sum(
             _bits(0x200 + a.node, _RX.size) + _bits(0x180 + a.node, _TX.size) for a in axes)
         # heartbeat: each axis produces it (1017h), the group consumes it (CiA 301); the
-        # consumer time defaults to twice the producer time, at least it + 2 cycles
+        # consumer time defaults to twice the producer time, at most 65535 ms (the largest
+        # a 1016h entry or `heartbeat_timeout:` holds), at least it + 2 cycles
         self.heartbeat_s = heartbeat_s
         self.heartbeat_timeout_s = heartbeat_timeout_s or (
-            max(2 * heartbeat_s, heartbeat_s + 2 * cycle_s) if heartbeat_s else None)
+            max(min(2 * heartbeat_s, MAX_CONSUMER_S), heartbeat_s + 2 * cycle_s)
+            if heartbeat_s else None)
         self._cyclic: Cyclic | None = None
         self.held: list[str] = []  # followers holding: their master is lost or faulted
         self.cams: dict[int, list[float]] = {0: [], 1: []}  # CamTab 0/1 (004:232)

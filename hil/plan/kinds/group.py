@@ -116,6 +116,10 @@ def _axes(v: Checker, m: Any, where: str) -> list[str]:
     seq = v.seq(m["axes"], m.kline("axes"), join(where, "axes"))
     if not seq or not all(isinstance(x, str) for x in seq):
         raise v.err(m.kline("axes"), join(where, "axes"), "a list of drive names")
+    for i, x in enumerate(seq):  # as `group:` does: one command or expectation per axis
+        if x in seq[:i]:
+            raise v.err(seq.item_lines[i], join(where, f"axes[{i}]"),
+                        f"{x!r} is named twice: each drive once")
     return [str(x) for x in seq]
 
 
