@@ -47,8 +47,8 @@ if TYPE_CHECKING:
 
 _STEP_KEYS = {"SPD", "DRV", "DRVC", "DRVZ", "WAIT", "ACT", "EXT", "GOTO"}
 _X = re.compile(r"^[XMY](0|[1-9][0-9]{0,3})\Z")  # X00 / Y08 name no line: refused
-_DRV = re.compile(r"^\s*(ABS|ADR)\s*,\s*([+-]?)\s*,\s*(-?[0-9]+(?:\.[0-9]+)?|[A-Za-z]{1,2}[0-9]+)"
-                  r"\s*,\s*(Ut|Ps)\s*\Z")
+_DRV = re.compile(r"^ *(ABS|ADR) *, *([+-]?) *, *(-?[0-9]+(?:\.[0-9]+)?|[A-Za-z]{1,2}[0-9]+)"
+                  r" *, *(Ut|Ps) *\Z")  # spaces only: no tab or newline
 # meant as a register (R1000, r1000, DR1000, R10000, R0500): checked by operand_register
 _REG = re.compile(r"^[A-Za-z]{1,2}[0-9]+\Z")
 _LINE_MAX = {"X": 255, "Y": 255, "M": 1911}  # 001:42
