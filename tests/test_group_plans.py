@@ -316,6 +316,19 @@ steps:
     # CamLine is in bytes (004:258): 8 is the second value
     assert bad[0].index == 2 and "COMMAND 6 refused: CamLine 8 (value 1) + CamLen 5 past the " \
         "3 values written to CamTab 0" in bad[0].message, bad[0].message
+    # helper-139: a negative CamLine was refused as if CamLen were wrong
+    for par, why in (("6: -8, 7: 2", "CamLine -8: the start of the cam in its table"),
+                     ("6: 0, 7: 1", "CamLen 1: a cam needs 2 points")):
+        plan = loads_plan(f"""name: badcam
+steps:
+  - group: {{axes: [axis1, axis2], cycle: 2ms}}
+  - group_cam_table: {{tab: 0, line: 0, values: [0, 100, 400]}}
+  - group_command: {{axis: axis2, code: 6, par: {{0: 0, 1: 1, 2: 2, 3: 1, 4: 1, {par}}}}}
+  - group_stop: {{}}
+""", "badcam.yaml")
+        res = run_plan(plan, load_bench(GROUP_BENCH), tmp_path / par[:5].replace(" ", ""))
+        bad = [s for s in res.steps if s.status != "pass"]
+        assert bad and f"COMMAND 6 refused: {why}" in bad[0].message, bad[0].message if bad else res
     with pytest.raises(PlanFileError, match=r"p\.yaml:4: steps\[1\]\.group_cam_table\.tab: 2"):
         check_plan(loads_plan("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms}\n"
                               "  - group_cam_table: {tab: 2, values: [0, 1]}\n", "p.yaml"),

@@ -678,9 +678,11 @@ class ServoAxis:
         line = line_bytes // 8
         if int(p[2]) not in (2, 3):
             raise CommandError(f"Par2 {p[2]:g}: 1 gear, 2 return cam, 3 incremental cam")
-        if length < 2 or line < 0:
-            raise CommandError(f"CamLine {line_bytes}, CamLen {length}: a cam needs 2 points "
-                               "or more")
+        if line < 0:
+            raise CommandError(f"CamLine {line_bytes}: the start of the cam in its table, "
+                               "in bytes, 0 or more")
+        if length < 2:
+            raise CommandError(f"CamLen {length}: a cam needs 2 points or more")
         mem = cams.get(tab, [])
         if line + length > len(mem):
             raise CommandError(f"CamLine {line_bytes} (value {line}) + CamLen {length} past the "
