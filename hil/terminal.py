@@ -1,8 +1,9 @@
 """Text from a file (a spec, a recording) made safe where it is shown: a terminal gets no
-escape sequence, an XML file no character XML 1.0 forbids."""
+escape sequence, an XML file or a page no character XML 1.0 forbids."""
 
 from __future__ import annotations
 
+import html
 import re
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
@@ -22,6 +23,12 @@ def terminal_text(text: object, limit: int = TEXT_MAX) -> str:
 def xml_text(text: object) -> str:
     """The characters XML 1.0 cannot carry shown as \\xNN (a JUnit file stays well-formed)."""
     return _NOT_XML.sub(lambda m: f"\\x{ord(m.group()):02x}", str(text))
+
+
+def html_text(text: object, quote: bool = True) -> str:
+    """`html.escape` of `xml_text`: a page shows a control character as \\xNN too (a raw
+    ESC from a plan name is no character HTML allows)."""
+    return html.escape(xml_text(text), quote)
 
 
 def terminal_lines(text: str) -> str:

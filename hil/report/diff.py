@@ -20,7 +20,6 @@ All times are the sources' own (publish time: model clock, adapter time), as the
 from __future__ import annotations
 
 import difflib
-import html
 import json
 import re
 import statistics
@@ -32,6 +31,7 @@ from hil.fileio import dumps_strict, write_text_atomic
 from hil.record import topics
 from hil.record.reader import Recording, decode_record, virtual_bench
 from hil.report.html import CSS
+from hil.terminal import html_text
 from hil.timing.source import verdict_shape
 from hil.units import MS
 from hil.yamlio import load_yaml_text
@@ -479,7 +479,7 @@ def diff(a_path: str | Path, b_path: str | Path) -> dict:
 
 
 # --- HTML -----------------------------------------------------------------------------------
-esc = html.escape
+esc = html_text  # control characters as \xNN, then HTML-escaped
 
 
 def _n(x: Any) -> str:

@@ -9,7 +9,6 @@ the safe-state actions, the bus log of each failing step, parameters, bench and 
 
 from __future__ import annotations
 
-import html
 import json
 import os
 from collections.abc import Mapping
@@ -23,6 +22,7 @@ from hil.record import topics
 from hil.record.reader import virtual_bench
 from hil.report.data import RunData, TruthSamples, bus_around, bus_log, load_run
 from hil.report.latch_html import LATCH_SPEC, latch_html
+from hil.terminal import html_text
 from hil.timing.checker import Verdict, context, spec_topics, state_fields
 from hil.timing.registry import load_specs
 from hil.timing.render import decimate, main_lanes, nice_ticks, svg
@@ -57,7 +57,7 @@ function(r){r.style.display=(!q||r.textContent.toLowerCase().indexOf(q)>=0)?'':'
 document.addEventListener('click',function(e){var d=e.target.closest('.diagram');
 if(d&&!e.target.closest('details')){d.classList.toggle('zoom');}});
 """
-esc = html.escape
+esc = html_text  # control characters as \xNN, then HTML-escaped
 
 
 def _status(s: str) -> str:

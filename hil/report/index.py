@@ -7,7 +7,6 @@ relative to the index, so the directory can be archived or served as it is.
 
 from __future__ import annotations
 
-import html
 import json
 import os
 from collections import Counter
@@ -18,8 +17,9 @@ from hil.fileio import write_text_atomic
 from hil.record.reader import RecordingError
 from hil.report.data import RunData, load_run, started_ns
 from hil.report.html import CSS, run_info_table
+from hil.terminal import html_text
 
-esc = html.escape
+esc = html_text  # control characters as \xNN, then HTML-escaped
 INDEX_CSS = """
 .bar{height:10px;border-radius:5px;background:#b00020;margin:0.5em 0 1em}
 .bar>div{height:10px;border-radius:5px;background:#176f2c}
