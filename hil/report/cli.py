@@ -25,8 +25,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "every recording (status, verdicts, duration, links)")
 
 
+def _no_place_beside(recording: str) -> str | None:
+    """Why the default page cannot go beside `recording` (None: it can): a name under /dev or
+    /proc (`/dev/stdin`, `/dev/fd/3`, a pipe) is no folder of a recording's own."""
+    parent = Path(recording).parent.absolute()
+    if parent.parts[1:2] in (("dev",), ("proc",)):
+        return f"{recording}: a stream, not a file in a folder of its own; give -o FILE.html"
+    return None
+
+
 def _refuse_clobber(args: argparse.Namespace) -> None:
     """No output may be a recording it reads, nor another output of the same call."""
+    if not args.output:
+        for r in args.recording:
+            if (why := _no_place_beside(r)) is not None:
+                raise FileProblem(why)
     pages = [args.output or Path(r).with_suffix(".html") for r in args.recording]
     # a page no -o named is the default one beside its recording: said as such
     outs = [("-o" if args.output else f"page of {r}", p)

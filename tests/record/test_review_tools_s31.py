@@ -218,3 +218,25 @@ def test_diff_compares_the_active_alarms(emgs, tmp_path, capsys) -> None:
     assert "1 state sequence(s) differ" in out
     page = (tmp_path / "d.html").read_text(encoding="utf-8")
     assert "drive1 alarms" in page and "AL500" in page
+
+
+def test_report_of_a_stream_asks_for_o_and_writes_nothing_in_dev(emgs, tmp_path) -> None:
+    """`hil report /dev/stdin < a.mcap` wrote its page as /dev/stdin.html (helper-137): the
+    default page goes beside the recording, and /dev is no recording's folder."""
+    import subprocess
+    import sys
+
+    def report(*extra: str) -> subprocess.CompletedProcess:
+        with emgs.open("rb") as f:
+            return subprocess.run([sys.executable, "-m", "hil.cli", "report", "/dev/stdin",
+                                   *extra], stdin=f, capture_output=True, text=True,
+                                  timeout=120)
+
+    Path("/dev/stdin.html").unlink(missing_ok=True)
+    out = report()
+    assert out.returncode == 2 and "give -o FILE.html" in out.stderr, out.stderr
+    assert not Path("/dev/stdin.html").exists()
+    page = tmp_path / "s.html"
+    out = report("-o", str(page))
+    assert out.returncode == 0, out.stderr
+    assert "emgs" in page.read_text(encoding="utf-8")
