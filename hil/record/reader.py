@@ -54,6 +54,7 @@ def decode_record(data: bytes | dict, topic: str) -> dict:
 # on, that message is skipped and counted (`Recording.bad_messages`), the read goes on
 BAD_MESSAGE = (ValueError, TypeError, KeyError, AttributeError, IndexError, OverflowError,
                RecursionError)
+I64_MAX = (1 << 63) - 1  # the largest time (ns) a timeline of signed 64-bit stamps holds
 
 
 _progress_text: str | None = None
@@ -169,7 +170,11 @@ class Recording:
                 take(topic, lt, pt, data)
             except BAD_MESSAGE as exc:
                 if not bad["n"]:
-                    bad["first"] = f"{topic} at log time {lt}: {type(exc).__name__}: {exc}"[:200]
+                    why = f"{type(exc).__name__}: {exc}"
+                    if isinstance(exc, OverflowError) and max(lt, pt) > I64_MAX:
+                        why = (f"a {'publish' if pt > I64_MAX else 'log'} time of "
+                               f"{max(lt, pt)} ns, past the 2^63 - 1 ns a timeline holds")
+                    bad["first"] = f"{topic} at log time {lt}: {why}"[:200]
                 bad["n"] += 1
 
         if _skip_bad:  # a command reading a file it did not write (else: the caller's error)

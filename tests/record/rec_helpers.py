@@ -101,12 +101,12 @@ def first_changed(topic_wanted: str, change):
 
 
 def copy_mcap(src, dst, message=None, *, metadata=None, attachment=None,
-              compression=None, drop=()):
+              compression=None, drop=(), publish=None):
     """`src` copied to `dst` with the `mcap` library's writer (another writer than hil's):
     each message through `message(topic, data, log_time) -> (data, log_time)` (None: as it
     is), the metadata `metadata` added (a name given replaces the original's record), and
     `attachment` (name, bytes) as a YAML attachment; the topics in `drop` left out, their
-    channels too."""
+    channels too; `publish(topic, publish_time) -> publish_time` changes publish times."""
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer
 
@@ -128,7 +128,8 @@ def copy_mcap(src, dst, message=None, *, metadata=None, attachment=None,
             data, lt = msg.data, msg.log_time
             if message is not None:
                 data, lt = message(ch.topic, data, lt)
-            w.add_message(ids[ch.id], log_time=lt, publish_time=msg.publish_time, data=data)
+            pt = msg.publish_time if publish is None else publish(ch.topic, msg.publish_time)
+            w.add_message(ids[ch.id], log_time=lt, publish_time=pt, data=data)
         f.seek(0)
         for m in make_reader(f).iter_metadata():
             if m.name not in (metadata or {}):

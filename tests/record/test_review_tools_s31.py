@@ -240,3 +240,23 @@ def test_report_of_a_stream_asks_for_o_and_writes_nothing_in_dev(emgs, tmp_path)
     out = report("-o", str(page))
     assert out.returncode == 0, out.stderr
     assert "emgs" in page.read_text(encoding="utf-8")
+
+
+def test_a_time_past_2_63_is_named_as_such_when_skipped(emgs, tmp_path, caplog) -> None:
+    """A publish time of 2^63 + 5 was skipped by `hil check` with Python's "int too big to
+    convert" as the reason (helper-137)."""
+    n = {"left": 2}
+
+    def huge(topic: str, pt: int) -> int:
+        if topic == "/dio/drive1/DO6" and n["left"]:
+            n["left"] -= 1
+            return pt if n["left"] else 2**63 + 5
+        return pt
+
+    bad = copy_mcap(emgs, tmp_path / "h.mcap", publish=huge)
+    assert n["left"] == 0
+    with caplog.at_level("WARNING"):
+        hil(["check", str(bad)])
+    text = caplog.text
+    assert "a publish time of 9223372036854775813 ns, past the 2^63 - 1 ns" in text, text
+    assert "int too big" not in text
