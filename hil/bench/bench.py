@@ -27,7 +27,15 @@ from hil.bench.yamlio import (
     text_number_hint,
 )
 from hil.paths import fixture
-from hil.profile.dio import DI_PARAMS, DI_SYMBOLS, DO_PARAMS, DO_SYMBOLS, N_DO, N_PHYSICAL_DI
+from hil.profile.dio import (
+    DEFAULT_PULSE_WIRING,
+    DI_PARAMS,
+    DI_SYMBOLS,
+    DO_PARAMS,
+    DO_SYMBOLS,
+    N_DO,
+    N_PHYSICAL_DI,
+)
 from hil.protocol import modbus as mb
 from hil.transport.urls import TransportUrlError, parse_url
 
@@ -512,6 +520,7 @@ def _drive(v: Checker, name: str, d: LDict, where: str, virtual: bool, can: dict
     if not (spec.can or spec.rs485 or spec.dio or spec.pulse):
         raise v.err(d.line, where, "a drive needs at least one of can, rs485, dio, pulse")
     _drive_lines(v, spec, d, where, virtual)
+    _pulse_outputs_free(v, spec, d, where, virtual)
     if "params" in d:
         spec.params = _params(v, d["params"], d.kline("params"), join(where, "params"),
                               virtual=virtual)
@@ -611,6 +620,28 @@ def _drive_pulse(v: Checker, spec: DriveSpec, d: LDict, where: str,
                 raise v.err(m.kline(k), join(fld, str(k)),
                             f"{k}: {val} is {other}'s already: one source a line")
         spec.pulse_wiring = out
+
+
+def _pulse_outputs_free(v: Checker, spec: DriveSpec, d: LDict, where: str,
+                        virtual: bool) -> None:
+    """A PLC output `Y<n>` drives a DI line no `wiring:` function takes: the harness drives
+    those itself, and two drivers on one line fight (the last edge of either wins). A virtual
+    bench's pulse line without `pulse_wiring:` has the defaults (CLR Y8 on DI2)."""
+    taken = {w.line: f for f, w in spec.di.items()}
+    if spec.pulse_wiring is not None:
+        m = d["pulse_wiring"]
+        for k, val in spec.pulse_wiring.items():
+            if k.startswith("Y") and val in taken:
+                raise v.err(m.kline(k), join(join(where, "pulse_wiring"), k),
+                            f"{k}: {val} carries {taken[val]} in `wiring:` (the harness drives "
+                            "it): two drivers on one line; give the PLC output a line of its own")
+    elif spec.pulse and virtual:
+        for k, val in DEFAULT_PULSE_WIRING.items():
+            if k.startswith("Y") and val in taken:
+                raise v.err(d.kline("pulse"), join(where, "pulse"),
+                            f"the pulse line's default wiring puts the PLC's {k} on {val}, "
+                            f"which carries {taken[val]} in `wiring:`: two drivers on one "
+                            f"line; give `pulse_wiring:` with {k} on a line of its own")
 
 
 def _drive_lines(v: Checker, spec: DriveSpec, d: LDict, where: str, virtual: bool) -> None:

@@ -15,10 +15,9 @@ from __future__ import annotations
 from typing import Any
 
 from hil.faces import ERRORS_KEPT
+from hil.profile.dio import DEFAULT_PULSE_WIRING
 
-# Seed 001's example 3 (001:120): DOG X0, PG0 X4 (here the OZ messages), CLR Y8; the
-# stroke limits on X1 / X2; CLR drives DI2, the factory CCLR input (P2.011 = 0x0104, L1866).
-DEFAULT_WIRING: dict[str, str] = {"DOG": "X0", "NL": "X1", "PL": "X2", "Y8": "DI2"}
+DEFAULT_WIRING = DEFAULT_PULSE_WIRING  # seed 001's example 3 (hil.profile.dio)
 
 
 class PulseFace:

@@ -119,6 +119,10 @@ DI_PARAMS = (
 )  # fmt: skip
 DO_PARAMS = ("P2.018", "P2.019", "P2.020", "P2.021", "P2.022", "P2.041")
 N_PHYSICAL_DI = 10  # DI1-DI10, the physical inputs (VDI11-13 are virtual)
+# A PLC's pulse line on a virtual bench without `pulse_wiring:`, from seed 001's example 3
+# (001:120): DOG X0, PG0 X4 (here the OZ messages), CLR Y8; the stroke limits on X1 / X2;
+# CLR drives DI2, the factory CCLR input (P2.011 = 0x0104, L1866).
+DEFAULT_PULSE_WIRING: dict[str, str] = {"DOG": "X0", "NL": "X1", "PL": "X2", "Y8": "DI2"}
 N_DI = len(DI_PARAMS)  # 13 incl. VDI11-13
 N_DO = len(DO_PARAMS)
 
