@@ -5,9 +5,13 @@ hil/plan/parallel.py)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 from hil.bench.bench import CLOCKS, Bench, line_warnings, load_bench, with_clock
@@ -19,7 +23,13 @@ from hil.plan.parallel import jobs_from_arg, parallel_blocker, run_parallel, usa
 from hil.plan.plan import Plan, bench_constant_warnings, check_plan, find_plans, load_plan
 from hil.plan.plansdir import choose_plans_dir
 from hil.plan.progress import RunProgress
-from hil.plan.runner import output_stems, run_plans, summary_table, timing_specs
+from hil.plan.runner import (
+    output_stems,
+    run_plans,
+    signal_text,
+    summary_table,
+    timing_specs,
+)
 from hil.plan.select import ExprError, select
 from hil.report.index import write_index
 from hil.report.junit import write_junit
@@ -179,6 +189,49 @@ def _jobs(args: argparse.Namespace, bench: Bench, n_plans: int) -> int:
 
 
 def main(args: argparse.Namespace) -> int:
+    with _sigterm_as_ctrl_c():
+        return _main(args)
+
+
+@contextlib.contextmanager
+def _sigterm_as_ctrl_c() -> Iterator[None]:
+    """SIGTERM stops `hil run` as Ctrl-C does everywhere, not only while a plan runs (a
+    plan, and `-j`, put their own handlers in place meanwhile): between plans and while the
+    run's files are written it had killed the process outright (exit -15, helper-140)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(signal_text(signum))
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """A Ctrl-C or SIGTERM while the run's junit.xml, summary and index.html are written
+    waits until they are, then stops the run (exit 130): they had been left half done."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list[int] = []
+    sigs = (signal.SIGINT, signal.SIGTERM)
+    old = {s: signal.signal(s, lambda signum, frame: got.append(signum)) for s in sigs}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if got:
+        raise KeyboardInterrupt(signal_text(got[0]))
+
+
+def _main(args: argparse.Namespace) -> int:
     _logging(args)
     try:
         if args.jobs is not None:
@@ -254,12 +307,14 @@ def main(args: argparse.Namespace) -> int:
                                     listeners=_listeners(args, plans))
         except KeyboardInterrupt as e:  # the run's junit.xml and index.html say what ran,
             # the stopped plan aborted: a previous run's files must not stand for this one
-            _summarise(getattr(e, "results", []), out, len(plans))
+            with contextlib.suppress(KeyboardInterrupt), _signals_held():
+                _summarise(getattr(e, "results", []), out, len(plans))
             raise
     except PlanFileError as e:
         print(f"hil run: {e}", file=sys.stderr)
         return 2
-    _summarise(results, out, len(plans))
+    with _signals_held():
+        _summarise(results, out, len(plans))
     return 0 if all(r.passed for r in results) else 1
 
 

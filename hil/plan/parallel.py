@@ -30,6 +30,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,7 +39,14 @@ from typing import Any
 from hil.bench.bench import GATEWAY, Bench, load_bench, with_clock
 from hil.plan.events import Listener, Note, Notifier, PlanEnded, PlanStarted, StepEnded
 from hil.plan.plan import Plan, check_plan, load_plan
-from hil.plan.runner import PlanResult, output_stems, run_plan, signal_text, timing_specs
+from hil.plan.runner import (
+    SELF_SENT,
+    PlanResult,
+    output_stems,
+    run_plan,
+    signal_text,
+    timing_specs,
+)
 from hil.report.data import RunData, keep_summary, kept_summary
 
 __all__ = ["jobs_from_arg", "parallel_blocker", "run_parallel"]
@@ -111,6 +119,9 @@ def _worker_init(log_level: int) -> None:
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, mark)
+    # the worker started with them blocked (`_stopping_held`): one that came while it
+    # imported is taken now, by `mark`
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     threading.Thread(target=_orphan_watch, args=(os.getppid(),), name="hil-orphan-watch",
                      daemon=True).start()
 
@@ -125,7 +136,9 @@ def _orphan_watch(parent: int, period_s: float = 0.2) -> None:
     while os.getppid() == parent:
         time.sleep(period_s)
     log.warning("hil run (pid %d) is gone: stopping this worker (pid %d)", parent, os.getpid())
-    _stop_requested = _stop_requested or True
+    why = f"SIGINT (hil run, pid {parent}, is gone)"
+    _stop_requested = _stop_requested or why
+    SELF_SENT[signal.SIGINT] = why  # the record says so, not "Ctrl-C"
     os.kill(os.getpid(), signal.SIGINT)  # a running plan stops; an idle worker is marked
     end = time.monotonic() + STOP_GRACE_S
     while _busy.is_set() and time.monotonic() < end:
@@ -228,13 +241,16 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
                                   initializer=_worker_init,
                                   initargs=(logging.getLogger().getEffectiveLevel(),))
     try:
-        for _ in range(min(jobs, len(plans))):  # one submit each starts a worker
-            pool.submit(_warm_up)
+        with _stopping_held():  # one submit each starts a worker
+            for _ in range(min(jobs, len(plans))):
+                pool.submit(_warm_up)
         specs = timing_specs()
         for p in plans:
             check_plan(p, bench, specs)
     except BaseException:
-        pool.shutdown(wait=True, cancel_futures=True)
+        # the workers' warm-ups are left to run: a worker stopped while it was starting
+        # (its queues gone before it had read them) printed a traceback (helper-140)
+        pool.shutdown(wait=True)
         raise
     events = Notifier(listeners)
     stems = output_stems(plans)
@@ -291,6 +307,23 @@ def run_parallel(plans: list[Plan], bench: Bench, out_dir: Path, *, jobs: int,
 
 
 _received = signal.SIGINT  # the signal that stopped the run, passed on to the workers
+STOP_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
+
+
+@contextlib.contextmanager
+def _stopping_held() -> Iterator[None]:
+    """SIGINT and SIGTERM blocked while workers are started: a new process inherits the
+    mask, so a Ctrl-C while it imports waits until `_worker_init` has its handlers (it had
+    printed the workers' KeyboardInterrupt tracebacks, helper-140). Here, one that came
+    meanwhile is delivered as the block ends."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _as_interrupt(signum: int, frame: Any) -> None:

@@ -99,8 +99,16 @@ def timing_specs(extra_dirs: list[Path] | None = None) -> SpecRegistry:
 # --- the runner ---------------------------------------------------------------------------
 
 
+# Why this process sent itself a signal (a `-j` worker whose `hil run` died): the handler
+# that takes it names the stop so, once, instead of "SIGINT (Ctrl-C)" (helper-140)
+SELF_SENT: dict[int, str] = {}
+
+
 def signal_text(signum: int) -> str:
-    """How a stop by `signum` is named on the record: "SIGINT (Ctrl-C)", "SIGTERM"."""
+    """How a stop by `signum` is named on the record: "SIGINT (Ctrl-C)", "SIGTERM", or the
+    cause this process gave a signal it sent itself (`SELF_SENT`)."""
+    if (why := SELF_SENT.pop(signum, None)) is not None:
+        return why
     try:
         name = signal.Signals(signum).name
     except ValueError:
@@ -134,9 +142,12 @@ class Interrupts:
     NOTICE = (b"\nhil: making the bench safe and closing the recording; further Ctrl-C is "
               b"ignored until that is done\n")
 
-    def __init__(self, clk: Any = None) -> None:
+    def __init__(self, clk: Any = None, *, hold: bool = False) -> None:
         self.count = 0
         self.shield = False
+        # a signal is only counted, and raised by `release` (or `raise_lost`): the short
+        # stretches that must end whole (a recording's opening, a step's end record)
+        self.hold = hold
         self.cause = ""  # the signal that stopped the run ("SIGINT (Ctrl-C)", "SIGTERM")
         self.clk = clk
         self._old: dict[int, Any] = {}
@@ -153,6 +164,8 @@ class Interrupts:
         self.count += 1
         if self.count == 1 and not self.shield:
             self.cause = signal_text(signum)
+            if self.hold:
+                return
             exc = KeyboardInterrupt(self.cause)
             defer = getattr(self.clk, "defer_interrupt", None)
             if defer is None or not defer(exc):
@@ -211,6 +224,11 @@ class Interrupts:
         fixture test's deferred interrupt (`clk`): the clock raises that one itself."""
         if self.count and not self.shield and self.clk is None:
             raise KeyboardInterrupt(self.cause or "Ctrl-C / SIGTERM")
+
+    def release(self) -> None:
+        """End a `hold`; a signal that came during it is raised now (`raise_lost`)."""
+        self.hold = False
+        self.raise_lost()
 
     def drop_pending(self) -> None:
         """Before the safe state: a deferred exception not raised yet is dropped from the
@@ -299,24 +317,27 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
     run)."""
     specs = specs if specs is not None else timing_specs()
     check_plan(plan, bench, specs)
-    # in virtual time (short runs, messages in memory anyway for the checks) the reports
-    # take the recorder's mirror; a real-time run's reports read the file
-    res, rec, stem = _open_recording(plan, bench, out_dir, stem,
-                                     mirror=reports and bench.clock == "virtual")
-    events = Notifier([StepRecords(), *(listeners or [])]
-                      + ([Reports(out_dir, stem)] if reports else []))
-    events.emit(PlanStarted(plan, bench, index, total, rec))
-    t_start = time.monotonic_ns()
-    tmp = contextlib.ExitStack()
-    cancel = threading.Event()
-    steps = StepThread()
-    session: Session | None = None
-    ctx: StepContext | None = None
-    interrupted: BaseException | None = None
-    reason = "end of plan"
-    with Interrupts() as intr:
+    # a signal while the recording is opened and announced waits until it is (`release`):
+    # a Ctrl-C there had left a 0-byte .mcap (helper-140)
+    with Interrupts(hold=True) as intr:
+        # in virtual time (short runs, messages in memory anyway for the checks) the reports
+        # take the recorder's mirror; a real-time run's reports read the file
+        res, rec, stem = _open_recording(plan, bench, out_dir, stem,
+                                         mirror=reports and bench.clock == "virtual")
+        events = Notifier([StepRecords(), *(listeners or [])]
+                          + ([Reports(out_dir, stem)] if reports else []))
+        events.emit(PlanStarted(plan, bench, index, total, rec))
+        t_start = time.monotonic_ns()
+        tmp = contextlib.ExitStack()
+        cancel = threading.Event()
+        steps = StepThread()
+        session: Session | None = None
+        ctx: StepContext | None = None
+        interrupted: BaseException | None = None
+        reason = "end of plan"
         try:
             try:
+                intr.release()  # a signal that came while the recording opened stops it here
                 why = stop() if stop is not None else None
                 if why:  # the signal's name where `stop` knows it (`interrupt_cause`)
                     raise KeyboardInterrupt(why if isinstance(why, str)
@@ -334,7 +355,7 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
                 if plan.params:
                     _initial_params(ctx, plan)
                 _apply_plan_wiring(ctx, plan)
-                reason = _steps(ctx, plan, res, events, allow_inconclusive, intr.raise_lost)
+                reason = _steps(ctx, plan, res, events, allow_inconclusive, intr)
             except Exception as e:
                 res.status, res.error = ERROR, f"{type(e).__name__}: {e}"
                 reason = f"error: {res.error}"
@@ -588,17 +609,28 @@ def _initial_params(ctx: StepContext, plan: Plan) -> None:
 
 
 def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
-           allow_inconclusive: bool, lost: Callable[[], None] = lambda: None) -> str:
-    """The plan's steps in order; `lost()` raises a signal's interrupt that never reached
-    the run (`Interrupts.raise_lost`), before each step and while one runs."""
+           allow_inconclusive: bool, intr: Interrupts | None = None) -> str:
+    """The plan's steps in order. With `intr`: a signal's interrupt that never reached the
+    run is raised before each step and while one runs (`Interrupts.raise_lost`), and one
+    that comes as a step ends waits until its end is recorded (`hold`, helper-140: the end
+    record of a step that had passed was lost)."""
+    intr = intr or Interrupts()
+    try:
+        return _each_step(ctx, plan, res, events, allow_inconclusive, intr)
+    finally:
+        intr.hold = False
+
+
+def _each_step(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
+               allow_inconclusive: bool, intr: Interrupts) -> str:
     rec = ctx.rec
 
     def watch() -> None:
-        lost()
+        intr.raise_lost()
         ctx.session.check_alive()
 
     for s, r in zip(plan.steps, res.steps, strict=True):
-        lost()
+        intr.release()
         d = ctx.drive(s)
         events.emit(StepStarted(plan, s, r, d.name, rec))
         t0 = clock.monotonic_ns()  # steps last in bench time (virtual on a virtual clock)
@@ -616,6 +648,7 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
             ctx.session.check_alive()  # a virtual bench: only while its drive processes live
             outcome = ctx.steps.run(lambda s=s, d=d: s.action.run(ctx, s, d), timeout,
                                     ctx.cancel, watch=watch)
+            intr.hold = True  # until the step's end is recorded
             r.message, r.verdicts = outcome.text, outcome.verdicts
             ctx.session.check_lease()
             ctx.session.check_alive()
@@ -653,6 +686,7 @@ def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
                     later.message = f"not run: step {s.index + 1} {r.status}"
                 _record_skipped(ctx, plan, res, events)
                 return f"step {s.index + 1} ({r.label}) {r.status}: {r.message}"
+    intr.release()  # a signal as the last step ended: the plan was interrupted after all
     return "end of plan"
 
 

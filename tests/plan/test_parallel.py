@@ -309,5 +309,37 @@ def test_kill_9_of_hil_run_stops_its_orphaned_workers_and_closes_the_recordings(
     for name in ("hold_a", "hold_b"):
         rec = Recording.open(out / f"{name}.mcap")
         assert not rec.truncated and not rec.corrupt, rec.error
-        assert rec.metadata()["hil.result"]["status"] == "aborted"
+        result = rec.metadata()["hil.result"]
+        assert result["status"] == "aborted"
+        # helper-140: the reason said "interrupted (SIGINT (Ctrl-C))"; nobody pressed it
+        assert f"hil run, pid {proc.pid}, is gone" in result["reason"], result
+        assert "Ctrl-C" not in result["reason"]
         assert [m for *_t, m in rec.messages("/safety")], f"{name}: no safe-state record"
+
+
+def test_a_ctrl_c_while_the_workers_start_prints_no_traceback(tmp_path):
+    """helper-140: a Ctrl-C while `-j 2`'s workers imported printed their KeyboardInterrupt
+    tracebacks (17 of 39 trials). Here each worker is signalled as its interpreter starts
+    (a sitecustomize, before any of hil is imported), and so is `hil run`: the workers take
+    it once their handlers are in place, and the run stops with exit 130, no traceback."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(
+        "import os, signal, sys\n"
+        "if '--multiprocessing-fork' in sys.argv:  # a spawned worker, starting\n"
+        "    try:  # the first worker up: one Ctrl-C reaches `hil run` too\n"
+        f"        os.close(os.open({str(site / 'once')!r}, os.O_CREAT | os.O_EXCL))\n"
+        "        os.kill(os.getppid(), signal.SIGINT)\n"
+        "    except FileExistsError:\n"
+        "        pass\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(site), *filter(None, [os.environ.get("PYTHONPATH")])]))
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "hil.cli", "run", "emgs", "param_access",
+                          "sto_both", "--out", str(out), "-j", "2", "-q"], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 130, (run.returncode, run.stderr[-3000:])
+    assert "KeyboardInterrupt" not in run.stderr and "Traceback" not in run.stderr, \
+        run.stderr[-3000:]
+    assert "hil: interrupted" in run.stderr

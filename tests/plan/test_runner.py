@@ -322,3 +322,63 @@ def test_a_ctrl_c_the_collector_swallowed_still_stops_the_plan_at_once(tmp_path,
     assert len(ran) == 1, "a step ran after the interrupt"
     assert res.steps[0].status == "error" and "interrupted" in res.steps[0].message
     assert [r.status for r in res.steps[1:]] == ["skipped", "skipped"]
+
+
+def test_a_ctrl_c_as_a_step_ends_keeps_its_end_on_the_record(tmp_path, monkeypatch):
+    """helper-140: a SIGINT that landed as a passing step's end was being recorded (between
+    its result and its `StepEnded`) left the step with a start and no end on /plan/steps, and
+    "skipped" in the JUnit, though it had passed. It waits until the end is recorded, and
+    the plan stops before the next step."""
+    import os
+    import signal
+
+    from hil.bench.bench import load_bench
+    from hil.plan import listeners
+    from hil.plan.plan import loads_plan
+    from hil.plan.runner import run_plan
+
+    ended = listeners.StepRecords.step_ended
+
+    def step_ended(self, e):
+        if e.step.index == 0:
+            os.kill(os.getpid(), signal.SIGINT)  # the handler runs here, at once
+        return ended(self, e)
+
+    monkeypatch.setattr(listeners.StepRecords, "step_ended", step_ended)
+    plan = loads_plan("name: p\nsteps:\n  - wait: 1ms\n  - wait: 1ms\n", "p.yaml")
+    with pytest.raises(KeyboardInterrupt) as ei:
+        run_plan(plan, load_bench(None), tmp_path, reports=False)
+    res = ei.value.plan_result
+    assert [r.status for r in res.steps] == ["pass", "skipped"]
+    ends = [(m["index"], m["status"]) for *_x, m in Recording.open(res.recording).messages(
+        [T.PLAN_STEPS]) if m.get("event") == "end" and m.get("index", -1) >= 0]
+    assert ends == [(0, "pass"), (1, "skipped")]
+
+
+def test_a_ctrl_c_while_the_recording_opens_leaves_a_readable_one(tmp_path, monkeypatch):
+    """helper-140: a SIGINT as the plan's recording was being created left a 0-byte .mcap
+    (`hil inspect`: bad magic). The recording is opened whole first; then the plan stops,
+    saying the bench was not up yet."""
+    import os
+    import signal
+
+    from hil.bench.bench import load_bench
+    from hil.plan import runner
+    from hil.plan.plan import loads_plan
+
+    described = runner.record_bench
+
+    def record_bench(*a, **kw):
+        os.kill(os.getpid(), signal.SIGINT)
+        return described(*a, **kw)
+
+    monkeypatch.setattr(runner, "record_bench", record_bench)
+    plan = loads_plan("name: p\nsteps:\n  - wait: 1ms\n", "p.yaml")
+    with pytest.raises(KeyboardInterrupt) as ei:
+        runner.run_plan(plan, load_bench(None), tmp_path, reports=False)
+    rec = Recording.open(ei.value.plan_result.recording)
+    assert not rec.truncated and not rec.corrupt
+    safety = [m for *_x, m in rec.messages([T.SAFETY])]
+    assert [m["action"] for m in safety] == ["safe_state_not_confirmed"]
+    assert "not up yet" in safety[0]["detail"]
+    assert ei.value.plan_result.status == "aborted"
