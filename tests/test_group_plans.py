@@ -820,4 +820,15 @@ def test_the_default_consumer_time_is_at_most_what_heartbeat_timeout_may_say() -
     assert consumer(0.001, 0.010) == pytest.approx(0.021)  # it + 2 cycles when longer
     assert consumer(40.0) == pytest.approx(65.535)
     assert consumer(65.0) == pytest.approx(65.535)
-    assert consumer(65.535) == pytest.approx(65.535 + 0.004)  # never below it + 2 cycles
+    # a producer time whose + 2 cycles passes 65535 ms is refused by the plan check
+    # (helper-141: no `heartbeat_timeout` could be given with it, and the default passed it)
+    bench = load_bench(GROUP_BENCH)
+    for hb, ok in (("65531ms", True), ("65532ms", False), ("65535ms", False)):
+        text = ("name: p\nsteps:\n  - group: {axes: [axis1], cycle: 2ms, "
+                f"heartbeat: {hb}}}\n")
+        if ok:
+            check_plan(loads_plan(text, "p.yaml"), bench)
+        else:
+            with pytest.raises(PlanFileError, match=r"p\.yaml:3: steps\[0\]\.group\.heartbeat: "
+                               r"whole ms, 1 ~ 65535 less 2 cycles"):
+                check_plan(loads_plan(text, "p.yaml"), bench)

@@ -220,8 +220,16 @@ def _signals_held() -> Iterator[None]:
         yield
         return
     got: list[int] = []
+
+    def held(signum: int, frame: object) -> None:
+        if not got:  # said once: a slow index must not look hung (helper-141)
+            with contextlib.suppress(OSError):
+                os.write(2, b"\nhil: writing the run's junit.xml and index.html; stopping "
+                         b"after that\n")
+        got.append(signum)
+
     sigs = (signal.SIGINT, signal.SIGTERM)
-    old = {s: signal.signal(s, lambda signum, frame: got.append(signum)) for s in sigs}
+    old = {s: signal.signal(s, held) for s in sigs}
     try:
         yield
     finally:

@@ -402,7 +402,9 @@ def _run_plan(plan: Plan, bench: Bench, out_dir: Path, *,
             events.emit(PlanEnded(plan, res, index, total,
                                   ctx.live if ctx is not None else None))
     if interrupted is None and intr.requested:
-        interrupted = KeyboardInterrupt("signal while the bench was made safe")
+        # a signal the plan's end took in (its safe state, a failed step's end record):
+        # named as it came (helper-141: a SIGTERM there was called a signal)
+        interrupted = KeyboardInterrupt(intr.cause or "signal while the bench was made safe")
     if interrupted is not None:
         with contextlib.suppress(AttributeError):
             interrupted.plan_result = res  # type: ignore[attr-defined]  # for `-j N` workers
@@ -654,14 +656,19 @@ def _each_step(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
             ctx.session.check_alive()
             r.status = PASS
         except Inconclusive as e:
+            intr.hold = True  # a failed step's end is recorded too (helper-141)
             r.status, r.message, r.verdicts = INCONCLUSIVE, str(e), e.verdicts
         except StepFailed as e:
+            intr.hold = True  # a failed step's end is recorded too (helper-141)
             r.status, r.message, r.verdicts = FAIL, str(e), e.verdicts
         except (TimeoutError, Cancelled) as e:
+            intr.hold = True  # a failed step's end is recorded too (helper-141)
             r.status, r.message = ERROR, str(e) or "cancelled"
         except BenchError as e:
+            intr.hold = True  # a failed step's end is recorded too (helper-141)
             r.status, r.message = ERROR, str(e)
         except Exception as e:
+            intr.hold = True  # a failed step's end is recorded too (helper-141)
             r.status, r.message = ERROR, f"{type(e).__name__}: {e}"
         except BaseException as e:  # this step ran and was cut (Ctrl-C, pytest-timeout's
             r.status = ERROR        # Failed): it ends on the record too

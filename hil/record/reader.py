@@ -172,8 +172,9 @@ class Recording:
                 if not bad["n"]:
                     why = f"{type(exc).__name__}: {exc}"
                     if isinstance(exc, OverflowError) and max(lt, pt) > I64_MAX:
-                        why = (f"a {'publish' if pt > I64_MAX else 'log'} time of "
-                               f"{max(lt, pt)} ns, past the 2^63 - 1 ns a timeline holds")
+                        which, t = ("publish", pt) if pt > I64_MAX else ("log", lt)
+                        why = (f"a {which} time of {t} ns, past the 2^63 - 1 ns a timeline "
+                               "holds")
                     bad["first"] = f"{topic} at log time {lt}: {why}"[:200]
                 bad["n"] += 1
 

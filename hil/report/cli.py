@@ -6,6 +6,8 @@ Exit 0 written, 2 bad input (usage, unreadable recording) or write error.
 from __future__ import annotations
 
 import argparse
+import os
+import stat
 import sys
 from pathlib import Path
 
@@ -26,10 +28,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _no_place_beside(recording: str) -> str | None:
-    """Why the default page cannot go beside `recording` (None: it can): a name under /dev or
-    /proc (`/dev/stdin`, `/dev/fd/3`, a pipe) is no folder of a recording's own."""
+    """Why the default page cannot go beside `recording` (None: it can): a pipe or a device,
+    or a name in /dev, /dev/fd or /proc (`/dev/stdin` of a file) is no folder of a
+    recording's own (/dev/shm is: a tmpfs)."""
     parent = Path(recording).parent.absolute()
-    if parent.parts[1:2] in (("dev",), ("proc",)):
+    stream = parent in (Path("/dev"), Path("/dev/fd")) or parent.parts[1:2] == ("proc",)
+    try:
+        stream = stream or not stat.S_ISREG(os.stat(recording).st_mode)
+    except OSError:  # not there: the reader says so
+        pass
+    if stream:
         return f"{recording}: a stream, not a file in a folder of its own; give -o FILE.html"
     return None
 

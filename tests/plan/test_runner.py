@@ -292,9 +292,9 @@ def test_a_ctrl_c_the_collector_swallowed_still_stops_the_plan_at_once(tmp_path,
 
     ran: list[float] = []
 
-    def slow(self, ctx, step, d):  # a step that keeps the run's thread waiting in wall time
-        ran.append(time.monotonic())
-        time.sleep(1.0)
+    def slow(self, ctx, step, d):  # a step that keeps the run's thread waiting in wall time,
+        ran.append(time.monotonic())  # 20 s unless cancelled (helper-141: a 1 s one could end
+        ctx.cancel.wait(20.0)  # before a loaded host's second look)
         return Outcome("waited")
 
     class Token:
@@ -315,16 +315,18 @@ def test_a_ctrl_c_the_collector_swallowed_still_stops_the_plan_at_once(tmp_path,
     monkeypatch.setattr(Wait, "run", slow)
     monkeypatch.setattr(Session, "check_alive", check_alive)
     plan = loads_plan("name: p\nsteps:\n  - wait: 1s\n  - wait: 1s\n  - wait: 1s\n", "p.yaml")
+    t0 = time.monotonic()
     with pytest.raises(KeyboardInterrupt) as ei:
         run_plan(plan, load_bench(None), tmp_path, reports=False)
-    assert fired
+    assert fired and time.monotonic() - t0 < 15, "the step ran on to its end"
     res = ei.value.plan_result
     assert len(ran) == 1, "a step ran after the interrupt"
     assert res.steps[0].status == "error" and "interrupted" in res.steps[0].message
     assert [r.status for r in res.steps[1:]] == ["skipped", "skipped"]
 
 
-def test_a_ctrl_c_as_a_step_ends_keeps_its_end_on_the_record(tmp_path, monkeypatch):
+@pytest.mark.parametrize("fails", [False, True])
+def test_a_ctrl_c_as_a_step_ends_keeps_its_end_on_the_record(tmp_path, monkeypatch, fails):
     """helper-140: a SIGINT that landed as a passing step's end was being recorded (between
     its result and its `StepEnded`) left the step with a start and no end on /plan/steps, and
     "skipped" in the JUnit, though it had passed. It waits until the end is recorded, and
@@ -345,14 +347,23 @@ def test_a_ctrl_c_as_a_step_ends_keeps_its_end_on_the_record(tmp_path, monkeypat
         return ended(self, e)
 
     monkeypatch.setattr(listeners.StepRecords, "step_ended", step_ended)
+    if fails:  # helper-141: a failed step's end was not held
+        from hil.plan.kinds.waits import Wait
+
+        def fail(self, ctx, step, d):
+            raise StepFailed("it failed")
+
+        monkeypatch.setattr(Wait, "run", fail)
     plan = loads_plan("name: p\nsteps:\n  - wait: 1ms\n  - wait: 1ms\n", "p.yaml")
     with pytest.raises(KeyboardInterrupt) as ei:
         run_plan(plan, load_bench(None), tmp_path, reports=False)
-    res = ei.value.plan_result
-    assert [r.status for r in res.steps] == ["pass", "skipped"]
-    ends = [(m["index"], m["status"]) for *_x, m in Recording.open(res.recording).messages(
+    assert str(ei.value).startswith("SIGINT"), str(ei.value)  # named as it came
+    res = getattr(ei.value, "plan_result", None)
+    first = "fail" if fails else "pass"
+    rec = res.recording if res else str(tmp_path / "p.mcap")
+    ends = [(m["index"], m["status"]) for *_x, m in Recording.open(rec).messages(
         [T.PLAN_STEPS]) if m.get("event") == "end" and m.get("index", -1) >= 0]
-    assert ends == [(0, "pass"), (1, "skipped")]
+    assert ends == [(0, first), (1, "skipped")]
 
 
 def test_a_ctrl_c_while_the_recording_opens_leaves_a_readable_one(tmp_path, monkeypatch):

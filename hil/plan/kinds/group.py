@@ -357,9 +357,12 @@ class Group(StepKind):
                         "state exactly (L17218, L19089-19113): 2ms and 2.5ms can, 1.001ms "
                         "cannot") from None
         hb = v.duration(m, "heartbeat", where, 0) if "heartbeat" in m else 0
-        if "heartbeat" in m and (not MS <= hb <= 65535 * MS or hb % MS):
+        # the group's consumer time is at least `heartbeat` + 2 cycles and at most 65535 ms
+        if "heartbeat" in m and (not MS <= hb <= 65535 * MS - 2 * cycle or hb % MS):
             raise v.err(m.kline("heartbeat"), join(where, "heartbeat"),
-                        "whole ms, 1 ~ 65535 (1017h, the producer time of each axis)")
+                        "whole ms, 1 ~ 65535 less 2 cycles (1017h, the producer time of each "
+                        "axis; the group's consumer time, at least it + 2 cycles, is at most "
+                        "65535 ms)")
         hb_to = 0
         if "heartbeat_timeout" in m:
             if not hb:
