@@ -627,21 +627,21 @@ def _pulse_outputs_free(v: Checker, spec: DriveSpec, d: LDict, where: str,
     """A PLC output `Y<n>` drives a DI line no `wiring:` function takes: the harness drives
     those itself, and two drivers on one line fight (the last edge of either wins). A virtual
     bench's pulse line without `pulse_wiring:` has the defaults (CLR Y8 on DI2)."""
+    given = spec.pulse_wiring is not None
+    wiring = spec.pulse_wiring if given else (
+        DEFAULT_PULSE_WIRING if spec.pulse and virtual else {})
     taken = {w.line: f for f, w in spec.di.items()}
-    if spec.pulse_wiring is not None:
-        m = d["pulse_wiring"]
-        for k, val in spec.pulse_wiring.items():
-            if k.startswith("Y") and val in taken:
-                raise v.err(m.kline(k), join(join(where, "pulse_wiring"), k),
-                            f"{k}: {val} carries {taken[val]} in `wiring:` (the harness drives "
-                            "it): two drivers on one line; give the PLC output a line of its own")
-    elif spec.pulse and virtual:
-        for k, val in DEFAULT_PULSE_WIRING.items():
-            if k.startswith("Y") and val in taken:
-                raise v.err(d.kline("pulse"), join(where, "pulse"),
-                            f"the pulse line's default wiring puts the PLC's {k} on {val}, "
-                            f"which carries {taken[val]} in `wiring:`: two drivers on one "
-                            f"line; give `pulse_wiring:` with {k} on a line of its own")
+    for k, val in wiring.items():
+        if not (k.startswith("Y") and val in taken):
+            continue
+        if given:
+            raise v.err(d["pulse_wiring"].kline(k), join(join(where, "pulse_wiring"), k),
+                        f"{k}: {val} carries {taken[val]} in `wiring:` (the harness drives "
+                        "it): two drivers on one line; give the PLC output a line of its own")
+        raise v.err(d.kline("pulse"), join(where, "pulse"),
+                    f"the pulse line's default wiring puts the PLC's {k} on {val}, which "
+                    f"carries {taken[val]} in `wiring:`: two drivers on one line; give "
+                    f"`pulse_wiring:` with {k} on a line of its own")
 
 
 def _drive_lines(v: Checker, spec: DriveSpec, d: LDict, where: str, virtual: bool) -> None:

@@ -17,8 +17,6 @@ from typing import Any
 from hil.faces import ERRORS_KEPT
 from hil.profile.dio import DEFAULT_PULSE_WIRING
 
-DEFAULT_WIRING = DEFAULT_PULSE_WIRING  # seed 001's example 3 (hil.profile.dio)
-
 
 class PulseFace:
     """Connects a `PulsePort(role="drive")` to a `Drive` owned by a `DriveHost`."""
@@ -26,7 +24,7 @@ class PulseFace:
     def __init__(self, port: Any, host: Any, wiring: dict[str, str] | None = None) -> None:
         self.port = port
         self.host = host
-        self.wiring = dict(DEFAULT_WIRING if wiring is None else wiring)
+        self.wiring = dict(DEFAULT_PULSE_WIRING if wiring is None else wiring)
         self.errors: list[str] = []  # the last ERRORS_KEPT reasons of the segments refused
         self.refused = 0  # how many in all (`hil drive` reports them as they come)
         self._oab_total = 0

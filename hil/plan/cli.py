@@ -24,6 +24,7 @@ from hil.plan.plan import Plan, bench_constant_warnings, check_plan, find_plans,
 from hil.plan.plansdir import choose_plans_dir
 from hil.plan.progress import RunProgress
 from hil.plan.runner import (
+    Interrupts,
     output_stems,
     run_plans,
     signal_text,
@@ -216,27 +217,10 @@ def _sigterm_as_ctrl_c() -> Iterator[None]:
 def _signals_held() -> Iterator[None]:
     """A Ctrl-C or SIGTERM while the run's junit.xml, summary and index.html are written
     waits until they are, then stops the run (exit 130): they had been left half done."""
-    if threading.current_thread() is not threading.main_thread():
+    with Interrupts(hold=True, held=b"\nhil: writing the run's junit.xml and index.html; "
+                    b"stopping after that\n") as intr:
         yield
-        return
-    got: list[int] = []
-
-    def held(signum: int, frame: object) -> None:
-        if not got:  # said once: a slow index must not look hung (helper-141)
-            with contextlib.suppress(OSError):
-                os.write(2, b"\nhil: writing the run's junit.xml and index.html; stopping "
-                         b"after that\n")
-        got.append(signum)
-
-    sigs = (signal.SIGINT, signal.SIGTERM)
-    old = {s: signal.signal(s, held) for s in sigs}
-    try:
-        yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-    if got:
-        raise KeyboardInterrupt(signal_text(got[0]))
+    intr.release()
 
 
 def _main(args: argparse.Namespace) -> int:

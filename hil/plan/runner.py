@@ -142,12 +142,14 @@ class Interrupts:
     NOTICE = (b"\nhil: making the bench safe and closing the recording; further Ctrl-C is "
               b"ignored until that is done\n")
 
-    def __init__(self, clk: Any = None, *, hold: bool = False) -> None:
+    def __init__(self, clk: Any = None, *, hold: bool = False, held: bytes = b"") -> None:
         self.count = 0
         self.shield = False
         # a signal is only counted, and raised by `release` (or `raise_lost`): the short
-        # stretches that must end whole (a recording's opening, a step's end record)
+        # stretches that must end whole (a recording's opening, a step's end record); `held`
+        # is said on stderr when one comes then (a stretch that may take a while)
         self.hold = hold
+        self.held = held
         self.cause = ""  # the signal that stopped the run ("SIGINT (Ctrl-C)", "SIGTERM")
         self.clk = clk
         self._old: dict[int, Any] = {}
@@ -165,11 +167,16 @@ class Interrupts:
         if self.count == 1 and not self.shield:
             self.cause = signal_text(signum)
             if self.hold:
+                if self.held:
+                    with contextlib.suppress(OSError):
+                        os.write(2, self.held)
                 return
             exc = KeyboardInterrupt(self.cause)
             defer = getattr(self.clk, "defer_interrupt", None)
             if defer is None or not defer(exc):
                 raise exc
+            return
+        if self.hold and self.held:  # said once already; no bench is going safe here
             return
         with contextlib.suppress(OSError):
             os.write(2, self.NOTICE)
@@ -611,20 +618,11 @@ def _initial_params(ctx: StepContext, plan: Plan) -> None:
 
 
 def _steps(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
-           allow_inconclusive: bool, intr: Interrupts | None = None) -> str:
-    """The plan's steps in order. With `intr`: a signal's interrupt that never reached the
-    run is raised before each step and while one runs (`Interrupts.raise_lost`), and one
-    that comes as a step ends waits until its end is recorded (`hold`, helper-140: the end
-    record of a step that had passed was lost)."""
-    intr = intr or Interrupts()
-    try:
-        return _each_step(ctx, plan, res, events, allow_inconclusive, intr)
-    finally:
-        intr.hold = False
-
-
-def _each_step(ctx: StepContext, plan: Plan, res: PlanResult, events: Notifier,
-               allow_inconclusive: bool, intr: Interrupts) -> str:
+           allow_inconclusive: bool, intr: Interrupts) -> str:
+    """The plan's steps in order. A signal's interrupt that never reached the run is raised
+    before each step and while one runs (`Interrupts.raise_lost`), and one that comes as a
+    step ends waits until its end is recorded (`hold`, helper-140: the end record of a step
+    that had passed was lost; after a failed step the plan's end names it)."""
     rec = ctx.rec
 
     def watch() -> None:

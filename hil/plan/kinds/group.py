@@ -335,14 +335,7 @@ class Group(StepKind):
         v.keys(m, {"axes", "cycle", "heartbeat", "heartbeat_timeout"}, where)
         if "axes" not in m:
             raise v.err(line, where, "needs `axes:` (drive names)")
-        axes = v.seq(m["axes"], m.kline("axes"), join(where, "axes"))
-        names = []
-        for i, a in enumerate(axes):
-            if not isinstance(a, str):
-                raise v.err(axes.item_lines[i], join(where, f"axes[{i}]"), "a drive name")
-            names.append(a)
-        if not names or len(set(names)) != len(names):
-            raise v.err(m.kline("axes"), join(where, "axes"), "one or more distinct drives")
+        names = _axes(v, m, where)  # drive names, each once (as every group step's)
         cycle = v.duration(m, "cycle", where, 2 * MS)
         if not MS <= cycle <= 10 * MS:
             raise v.err(m.kline("cycle"), join(where, "cycle"),
